@@ -1,0 +1,63 @@
+"""The ``rhbl`` console script: one argparse front end that dispatches to subcommands.
+
+Each subcommand lives in its own module, which defines ``add_arguments(parser)`` and
+``main(args) -> int``. Modules are imported only when their command runs, so ``rhbl --help``
+stays fast and a heavy import (zenoh, pymunk, matplotlib) is paid only by the command using it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+__all__ = ["COMMANDS", "main"]
+
+# name -> (module, one-line help). Order is the order shown by ``rhbl --help``.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "demo": ("lab.demo", "run the whole loop as separate processes: teach, learn, drive, report"),
+    "server": ("server.cli", "run the simulator server (Player-like position2d + laser over zenoh)"),
+    "teacher": ("client.teacher", "demonstrate: a scripted expert or keyboard teleop drives the robot"),
+    "learner": ("client.learner", "learn a hypersphere tree from the teacher's demonstrations"),
+    "controller": ("client.controller", "drive the robot with a learned tree"),
+    "train": ("lab.harness", "in-process: a scripted teacher demonstrates on a world, write a tree"),
+    "evaluate": ("lab.evaluate", "in-process: run a tree (and the teacher) from a world's start poses"),
+    "experiment": ("lab.experiment", "repeat train-then-evaluate over seeds; the paper's Table I"),
+    "example": ("lab.example", "a small end-to-end example of the learner on synthetic data"),
+}
+
+
+def _top_parser() -> argparse.ArgumentParser:
+    width = max(len(n) for n in COMMANDS)
+    lines = "\n".join(f"  {n:<{width}}  {h}" for n, (_, h) in COMMANDS.items())
+    parser = argparse.ArgumentParser(
+        prog="rhbl",
+        description="Recursive, Hyperspherical Behavioral Learning for a Player-style robot over zenoh.",
+        epilog=f"commands:\n{lines}\n\nRun 'rhbl COMMAND --help' for a command's options.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("command", choices=list(COMMANDS), metavar="COMMAND", help="see below")
+    parser.add_argument("args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+    return parser
+
+
+def build_parser(command: str) -> argparse.ArgumentParser:
+    """The argparse parser of one subcommand (used by ``main`` and by tests)."""
+    module_name, help_text = COMMANDS[command]
+    module = importlib.import_module(module_name)
+    parser = argparse.ArgumentParser(prog=f"rhbl {command}", description=help_text)
+    module.add_arguments(parser)
+    parser.set_defaults(_main=module.main)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    top = _top_parser().parse_args(argv[:1] if argv and not argv[0].startswith("-") else argv)
+    parser = build_parser(top.command)
+    args = parser.parse_args(argv[1:])
+    return int(args._main(args) or 0)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
