@@ -1,0 +1,1 @@
+"""(package: see docs/architecture.md)"""
