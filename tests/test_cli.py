@@ -1,0 +1,45 @@
+"""The ``rhbl`` front end: every command is reachable and has a truthful --help."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from lab.cli import COMMANDS, build_parser, main
+
+
+def test_top_level_help_lists_every_command(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    for name in COMMANDS:
+        assert name in out
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_each_command_builds_its_parser(command):
+    parser = build_parser(command)
+    assert parser.prog == f"rhbl {command}"
+    assert parser.format_help().strip()
+
+
+def test_unknown_command_is_a_clear_usage_error():
+    proc = subprocess.run(
+        [sys.executable, "-m", "lab.cli", "fly"], capture_output=True, text=True, timeout=60
+    )
+    assert proc.returncode == 2
+    assert "invalid choice: 'fly'" in proc.stderr
+
+
+def test_wrong_option_names_the_option():
+    proc = subprocess.run(
+        [sys.executable, "-m", "lab.cli", "example", "--no-such-flag"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2
+    assert "--no-such-flag" in proc.stderr
