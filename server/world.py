@@ -1,0 +1,559 @@
+"""The simulated world: world files, pymunk physics, a differential-drive robot, odometry, laser.
+
+Pure and deterministic: no zenoh, no clocks, no threads. The zenoh node (``server.node``) and the
+in-process harness (``lab``) both drive the same :class:`World`::
+
+    spec = load_world(server.world_path("room"))
+    world = World(spec, robots=1, seed=0)
+    world.set_command(0, 0.3, 0.0)
+    world.step(0.1)
+    ranges = world.scan(0)          # float32, LASER.count beams, ranges[0] at the robot's right
+
+Conventions (docs/protocol.md): SI units, x forward, y left, angles counter-clockwise, yaw in
+(-pi, pi].
+
+Robot model. A Pioneer 3DX (0.511 x 0.4 m) is modelled for collisions as a circle of radius
+``ROBOT.radius`` = 0.25 m (between its half width and half length), a dynamic pymunk body whose
+velocity is set to the commanded (vx, va) at every physics substep; walls are static segments.
+Contact handling, chosen deliberately (the prototype's dominant failure was a robot pinned against
+a wall): the physics removes the part of the motion that would go into the wall, so the robot never
+passes through a wall; contacts are frictionless, so a robot driving at a wall at an angle slides
+along it (like a bumper scraping); turning in place and backing away always work. ``stall`` is true
+after a step in which the robot touched a wall (or another robot) while its command pushed into it.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pymunk
+
+__all__ = [
+    "LASER",
+    "ROBOT",
+    "Goal",
+    "LaserSpec",
+    "RobotSpec",
+    "Wall",
+    "World",
+    "WorldError",
+    "WorldSpec",
+    "load_world",
+    "parse_world",
+    "wrap_angle",
+]
+
+TASKS = ("wall-following", "maze")
+
+
+def wrap_angle(a: float) -> float:
+    """Wrap an angle in radians into (-pi, pi]."""
+    a = math.fmod(a, 2.0 * math.pi)
+    if a <= -math.pi:
+        a += 2.0 * math.pi
+    elif a > math.pi:
+        a -= 2.0 * math.pi
+    return a
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """Pioneer 3DX-like differential-drive robot (collision shape: a circle of ``radius``)."""
+
+    length: float = 0.511
+    width: float = 0.4
+    radius: float = 0.25
+    max_vx: float = 0.5  # m/s
+    max_va: float = math.radians(100.0)  # rad/s
+    mass: float = 9.0  # kg (only matters robot against robot)
+
+
+@dataclass(frozen=True)
+class LaserSpec:
+    """SICK-like laser at the robot's centre, facing forward: 360 beams over 180 degrees."""
+
+    count: int = 360
+    min_angle: float = -math.pi / 2.0
+    max_angle: float = math.pi / 2.0
+    max_range: float = 8.0
+    offset: float = 0.0  # m ahead of the robot's centre (0: at the centre)
+
+    @property
+    def resolution(self) -> float:
+        return (self.max_angle - self.min_angle) / (self.count - 1)
+
+    def bearings(self) -> np.ndarray:
+        """Bearing of each beam in the robot frame (rad), ``min_angle + i * resolution``."""
+        return self.min_angle + np.arange(self.count, dtype=np.float64) * self.resolution
+
+
+ROBOT = RobotSpec()
+LASER = LaserSpec()
+
+
+class WorldError(ValueError):
+    """A world file is missing, unreadable or malformed (the message names file and key)."""
+
+
+@dataclass(frozen=True)
+class Wall:
+    points: tuple[tuple[float, float], ...]
+    closed: bool = False
+
+    def segments(self) -> list[tuple[float, float, float, float]]:
+        pts = list(self.points)
+        if self.closed and len(pts) > 2:
+            pts.append(pts[0])
+        return [(a[0], a[1], b[0], b[1]) for a, b in zip(pts[:-1], pts[1:], strict=True)]
+
+
+@dataclass(frozen=True)
+class Goal:
+    center: tuple[float, float]
+    radius: float
+
+
+@dataclass(frozen=True)
+class WorldSpec:
+    """A parsed world file. ``pose`` is the default start; ``starts`` extra start poses."""
+
+    name: str
+    task: str
+    pose: tuple[float, float, float]
+    starts: tuple[tuple[float, float, float], ...] = ()
+    walls: tuple[Wall, ...] = ()
+    goal: Goal | None = None
+    path: Path | None = None
+    extra: dict[str, Any] = field(default_factory=dict, compare=False)
+
+    @property
+    def start_poses(self) -> list[tuple[float, float, float]]:
+        """``[pose] + starts``, duplicates removed, in order."""
+        out: list[tuple[float, float, float]] = []
+        for p in (self.pose, *self.starts):
+            if p not in out:
+                out.append(p)
+        return out
+
+    def segments(self) -> np.ndarray:
+        """All wall segments as an (S, 4) float64 array of x0, y0, x1, y1."""
+        segs = [s for w in self.walls for s in w.segments()]
+        return np.asarray(segs, dtype=np.float64).reshape(-1, 4)
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        """(xmin, ymin, xmax, ymax) of all walls."""
+        s = self.segments()
+        xs = np.concatenate([s[:, 0], s[:, 2]])
+        ys = np.concatenate([s[:, 1], s[:, 3]])
+        return float(xs.min()), float(ys.min()), float(xs.max()), float(ys.max())
+
+
+# ---------------------------------------------------------------------------------- loading
+
+
+def _err(src: str, key: str, expected: str, got: Any) -> WorldError:
+    return WorldError(f"{src}: key '{key}': expected {expected}, got {got!r}")
+
+
+def _number(src: str, key: str, v: Any) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise _err(src, key, "a finite number", v)
+    return float(v)
+
+
+def _vec(src: str, key: str, v: Any, n: int, what: str) -> tuple[float, ...]:
+    if not isinstance(v, list) or len(v) != n:
+        raise _err(src, key, f"{what} (a list of {n} numbers)", v)
+    return tuple(_number(src, f"{key}[{i}]", x) for i, x in enumerate(v))
+
+
+def _point_segment_distance(p: np.ndarray, segs: np.ndarray) -> np.ndarray:
+    a = segs[:, 0:2]
+    e = segs[:, 2:4] - a
+    ee = np.einsum("ij,ij->i", e, e)
+    t = np.clip(np.einsum("ij,ij->i", p - a, e) / np.where(ee > 0, ee, 1.0), 0.0, 1.0)
+    d = a + t[:, None] * e - p
+    return np.sqrt(np.einsum("ij,ij->i", d, d))
+
+
+def parse_world(data: dict[str, Any], source: str = "<world>", path: Path | None = None) -> WorldSpec:
+    """Validate a world mapping (as read from TOML) into a :class:`WorldSpec`."""
+    src = source
+    if not isinstance(data, dict):
+        raise _err(src, "<top>", "a table", data)
+    name = data.get("name", Path(source).stem)
+    if not isinstance(name, str) or not name:
+        raise _err(src, "name", "a non-empty string", name)
+    task = data.get("task", "wall-following")
+    if task not in TASKS:
+        raise _err(src, "task", f"one of {list(TASKS)}", task)
+    robot = data.get("robot")
+    if not isinstance(robot, dict):
+        raise _err(src, "robot", "a [robot] table with pose = [x, y, yaw]", robot)
+    if "pose" not in robot:
+        raise _err(src, "robot.pose", "[x, y, yaw] (m, m, rad)", None)
+    pose = _vec(src, "robot.pose", robot["pose"], 3, "[x, y, yaw] in m, m, rad")
+    starts_raw = robot.get("starts", [])
+    if not isinstance(starts_raw, list):
+        raise _err(src, "robot.starts", "a list of [x, y, yaw] poses", starts_raw)
+    starts = tuple(
+        _vec(src, f"robot.starts[{i}]", s, 3, "[x, y, yaw] in m, m, rad")
+        for i, s in enumerate(starts_raw)
+    )
+    walls_raw = data.get("walls")
+    if not isinstance(walls_raw, list) or not walls_raw:
+        raise _err(src, "walls", "at least one [[walls]] table with points = [[x, y], ...]", walls_raw)
+    walls = []
+    for i, w in enumerate(walls_raw):
+        key = f"walls[{i}]"
+        if not isinstance(w, dict):
+            raise _err(src, key, "a table with points = [[x, y], ...]", w)
+        pts_raw = w.get("points")
+        if not isinstance(pts_raw, list) or len(pts_raw) < 2:
+            raise _err(src, f"{key}.points", "a list of at least 2 [x, y] points", pts_raw)
+        pts = tuple(
+            _vec(src, f"{key}.points[{j}]", p, 2, "[x, y] in m") for j, p in enumerate(pts_raw)
+        )
+        closed = w.get("closed", False)
+        if not isinstance(closed, bool):
+            raise _err(src, f"{key}.closed", "true or false", closed)
+        walls.append(Wall(points=pts, closed=closed))  # type: ignore[arg-type]
+    goal = None
+    goal_raw = data.get("goal")
+    if goal_raw is not None:
+        if not isinstance(goal_raw, dict):
+            raise _err(src, "goal", "a [goal] table with center and radius", goal_raw)
+        center = _vec(src, "goal.center", goal_raw.get("center"), 2, "[x, y] in m")
+        radius = _number(src, "goal.radius", goal_raw.get("radius"))
+        if radius <= 0:
+            raise _err(src, "goal.radius", "a positive number (m)", radius)
+        goal = Goal(center=center, radius=radius)  # type: ignore[arg-type]
+    if task == "maze" and goal is None:
+        raise _err(src, "goal", "a [goal] table (required for task = 'maze')", None)
+    known = {"name", "task", "robot", "walls", "goal"}
+    spec = WorldSpec(
+        name=name,
+        task=task,
+        pose=pose,  # type: ignore[arg-type]
+        starts=starts,  # type: ignore[arg-type]
+        walls=tuple(walls),
+        goal=goal,
+        path=path,
+        extra={k: v for k, v in data.items() if k not in known},
+    )
+    segs = spec.segments()
+    for key, p in [("robot.pose", pose)] + [(f"robot.starts[{i}]", s) for i, s in enumerate(starts)]:
+        d = float(_point_segment_distance(np.asarray(p[:2]), segs).min())
+        if d <= ROBOT.radius:
+            raise _err(
+                src, key, f"a pose at least {ROBOT.radius} m (robot radius) from every wall",
+                f"{list(p)} at {d:.3f} m from a wall",
+            )
+    return spec
+
+
+def load_world(path: str | Path) -> WorldSpec:
+    """Read and validate a TOML world file. Raises :class:`WorldError` naming file and key."""
+    p = Path(path)
+    try:
+        with p.open("rb") as f:
+            data = tomllib.load(f)
+    except FileNotFoundError:
+        raise WorldError(f"{p}: world file not found") from None
+    except tomllib.TOMLDecodeError as e:
+        raise WorldError(f"{p}: not valid TOML: {e}") from None
+    except OSError as e:
+        raise WorldError(f"{p}: cannot read: {e}") from None
+    return parse_world(data, source=str(p), path=p)
+
+
+# ---------------------------------------------------------------------------------- simulation
+
+_WALL_RADIUS = 0.02  # m, physics half-thickness of a wall segment (the laser sees the centre line)
+_MAX_SUBSTEP = 0.025  # s
+
+
+class _Robot:
+    __slots__ = ("body", "shape", "cmd", "odom", "stall", "vel", "last")
+
+    def __init__(self, space: pymunk.Space, pose: tuple[float, float, float]) -> None:
+        self.body = pymunk.Body(ROBOT.mass, float("inf"), body_type=pymunk.Body.DYNAMIC)
+        self.body.position = (pose[0], pose[1])
+        self.body.angle = pose[2]
+        self.shape = pymunk.Circle(self.body, ROBOT.radius)
+        self.shape.friction = 0.0
+        self.shape.elasticity = 0.0
+        space.add(self.body, self.shape)
+        self.cmd = (0.0, 0.0)
+        self.odom = [pose[0], pose[1], wrap_angle(pose[2])]
+        self.stall = False
+        self.vel = (0.0, 0.0, 0.0)
+        self.last = (pose[0], pose[1], pose[2])
+
+
+class World:
+    """A world with ``robots`` robots. Deterministic for a given seed and command sequence."""
+
+    def __init__(
+        self,
+        spec: WorldSpec,
+        robots: int = 1,
+        seed: int = 0,
+        range_noise: float = 0.0,
+        odom_noise: float = 0.0,
+    ) -> None:
+        if robots < 1:
+            raise ValueError(f"robots must be >= 1, got {robots}")
+        if range_noise < 0 or odom_noise < 0:
+            raise ValueError("range_noise and odom_noise must be >= 0")
+        self.spec = spec
+        self.n_robots = int(robots)
+        self.seed = int(seed)
+        self.range_noise = float(range_noise)
+        self.odom_noise = float(odom_noise)
+        segs = spec.segments()
+        self._segs = segs
+        self._seg_ax = segs[:, 0].copy()
+        self._seg_ay = segs[:, 1].copy()
+        self._seg_bx = segs[:, 2].copy()
+        self._seg_by = segs[:, 3].copy()
+        self._seg_ex = self._seg_bx - self._seg_ax
+        self._seg_ey = self._seg_by - self._seg_ay
+        ee = self._seg_ex**2 + self._seg_ey**2
+        self._seg_ee = np.where(ee > 0, ee, 1.0)
+        self._bearings = LASER.bearings()
+        self.reset()
+
+    # -- lifecycle --------------------------------------------------------------------------
+
+    def reset(
+        self,
+        poses: list[tuple[float, float, float]] | None = None,
+        seed: int | None = None,
+    ) -> None:
+        """Rebuild the physics with robots at ``poses`` (default: the spec's start poses)."""
+        if seed is not None:
+            self.seed = int(seed)
+        if poses is None:
+            starts = self.spec.start_poses
+            poses = [starts[i % len(starts)] for i in range(self.n_robots)]
+        if len(poses) != self.n_robots:
+            raise ValueError(f"reset needs {self.n_robots} poses, got {len(poses)}")
+        self._rng = np.random.default_rng(self.seed)
+        space = pymunk.Space()
+        space.gravity = (0.0, 0.0)
+        space.collision_slop = 0.001
+        space.iterations = 10
+        # correct any overlap at once (pymunk's default leaves a substep's worth of penetration)
+        space.collision_bias = 1e-60
+        for x0, y0, x1, y1 in self._segs:
+            seg = pymunk.Segment(space.static_body, (x0, y0), (x1, y1), _WALL_RADIUS)
+            seg.friction = 0.0
+            seg.elasticity = 0.0
+            space.add(seg)
+        self._space = space
+        self._robots = []
+        for p in poses:
+            if len(p) != 3 or not all(math.isfinite(float(v)) for v in p):
+                raise ValueError(f"a pose is (x, y, yaw) of finite numbers, got {p!r}")
+            self._robots.append(_Robot(space, (float(p[0]), float(p[1]), float(p[2]))))
+        self.time = 0.0
+        self.steps = 0
+
+    # -- commands ---------------------------------------------------------------------------
+
+    def set_command(self, i: int, vx: float, va: float) -> None:
+        """Command robot ``i``; clamped to ``ROBOT`` limits. Non-finite values raise ValueError."""
+        vx = float(vx)
+        va = float(va)
+        if not (math.isfinite(vx) and math.isfinite(va)):
+            raise ValueError(f"velocity command must be finite, got vx={vx!r}, va={va!r}")
+        vx = min(max(vx, -ROBOT.max_vx), ROBOT.max_vx)
+        va = min(max(va, -ROBOT.max_va), ROBOT.max_va)
+        self._robots[i].cmd = (vx, va)
+
+    def command(self, i: int) -> tuple[float, float]:
+        return self._robots[i].cmd
+
+    def stop(self, i: int) -> None:
+        self._robots[i].cmd = (0.0, 0.0)
+
+    # -- stepping ---------------------------------------------------------------------------
+
+    def step(self, dt: float) -> None:
+        """Advance ``dt`` sim seconds (physics substeps of at most 25 ms)."""
+        if not (dt > 0 and math.isfinite(dt)):
+            raise ValueError(f"dt must be a positive finite number, got {dt!r}")
+        n = max(1, math.ceil(dt / _MAX_SUBSTEP - 1e-9))
+        h = dt / n
+        robots = self._robots
+        for r in robots:
+            r.stall = False
+            x, y = r.body.position
+            r.last = (x, y, r.body.angle)
+        space = self._space
+        for _ in range(n):
+            for r in robots:
+                b = r.body
+                vx, va = r.cmd
+                a = b.angle
+                b.velocity = (vx * math.cos(a), vx * math.sin(a))
+                b.angular_velocity = va
+            space.step(h)
+        for r in robots:
+            self._update_odometry(r, dt)
+            self._check_stall(r)
+        self.time += dt
+        self.steps += 1
+
+    def _update_odometry(self, r: _Robot, dt: float) -> None:
+        # the step's motion as a rigid transform in the robot's frame at the step's start,
+        # composed onto the odometry pose: exact without noise, whatever the path was
+        b = r.body
+        x, y = b.position
+        a = b.angle
+        px, py, pa = r.last
+        dxw, dyw = x - px, y - py
+        c, s = math.cos(pa), math.sin(pa)
+        dxr = c * dxw + s * dyw
+        dyr = -s * dxw + c * dyw
+        da = a - pa
+        r.vel = (dxr / dt, dyr / dt, da / dt)
+        if self.odom_noise > 0.0:
+            k = self.odom_noise
+            nz = self._rng.normal(0.0, 1.0, 3)
+            dist = math.hypot(dxr, dyr)
+            dxr += k * dist * nz[0]
+            dyr += k * dist * nz[1]
+            da += k * (abs(da) + 0.2 * dist) * nz[2]
+        o = r.odom
+        c, s = math.cos(o[2]), math.sin(o[2])
+        o[0] += c * dxr - s * dyr
+        o[1] += s * dxr + c * dyr
+        o[2] = wrap_angle(o[2] + da)
+
+    def _check_stall(self, r: _Robot) -> None:
+        vx, _ = r.cmd
+        if vx == 0.0:
+            return
+        b = r.body
+        cmd_dir = (vx * math.cos(b.angle), vx * math.sin(b.angle))
+        hit = False
+
+        def visit(arb: pymunk.Arbiter) -> None:
+            nonlocal hit
+            n = arb.normal
+            if arb.shapes[0] is not r.shape:
+                n = -n
+            # n points from the robot towards what it touches
+            if cmd_dir[0] * n.x + cmd_dir[1] * n.y > 1e-6:
+                hit = True
+
+        b.each_arbiter(visit)
+        if not hit:
+            # a contact the solver already separated: check penetration geometrically
+            for info in self._space.shape_query(r.shape):
+                cps = info.contact_point_set
+                if cps is None or not cps.points:
+                    continue
+                n = cps.normal  # from the robot's shape towards the other shape
+                if cmd_dir[0] * n.x + cmd_dir[1] * n.y > 1e-6:
+                    hit = True
+                    break
+        r.stall = hit
+
+    # -- observation ------------------------------------------------------------------------
+
+    def pose(self, i: int) -> tuple[float, float, float]:
+        """True pose (x, y, yaw) of robot ``i``."""
+        b = self._robots[i].body
+        x, y = b.position
+        return (float(x), float(y), wrap_angle(float(b.angle)))
+
+    def odom(self, i: int) -> tuple[float, float, float]:
+        """Odometry pose of robot ``i`` (integrated from its start pose, optionally noisy)."""
+        o = self._robots[i].odom
+        return (float(o[0]), float(o[1]), float(o[2]))
+
+    def set_odom(self, i: int, pose: tuple[float, float, float]) -> None:
+        if len(pose) != 3 or not all(math.isfinite(float(v)) for v in pose):
+            raise ValueError(f"odometry pose is (x, y, yaw) of finite numbers, got {pose!r}")
+        self._robots[i].odom = [float(pose[0]), float(pose[1]), wrap_angle(float(pose[2]))]
+
+    def reset_odom(self, i: int) -> None:
+        self.set_odom(i, (0.0, 0.0, 0.0))
+
+    def velocity(self, i: int) -> tuple[float, float, float]:
+        """Actual mean velocity (vx, vy, va) of robot ``i`` over the last step, in its frame."""
+        return self._robots[i].vel
+
+    def stall(self, i: int) -> bool:
+        """True if robot ``i`` pushed into a wall or robot during the last step."""
+        return self._robots[i].stall
+
+    def at_goal(self, i: int) -> bool:
+        """True if robot ``i``'s centre is inside the goal circle (False without a goal)."""
+        g = self.spec.goal
+        if g is None:
+            return False
+        x, y, _ = self.pose(i)
+        return math.hypot(x - g.center[0], y - g.center[1]) <= g.radius
+
+    def scan(self, i: int) -> np.ndarray:
+        """Ray-cast robot ``i``'s laser: float32 ranges, ``ranges[0]`` at ``LASER.min_angle``."""
+        x, y, yaw = self.pose(i)
+        ox = x + LASER.offset * math.cos(yaw)
+        oy = y + LASER.offset * math.sin(yaw)
+        max_r = LASER.max_range
+        ang = self._bearings + yaw
+        dc = np.cos(ang)
+        ds = np.sin(ang)
+        # segments: cull those wholly behind the laser or out of range
+        ax = self._seg_ax - ox
+        ay = self._seg_ay - oy
+        bx = self._seg_bx - ox
+        by = self._seg_by - oy
+        fx, fy = math.cos(yaw), math.sin(yaw)
+        ex, ey = self._seg_ex, self._seg_ey
+        ee = self._seg_ee
+        t = np.clip(-(ax * ex + ay * ey) / ee, 0.0, 1.0)
+        nx = ax + t * ex
+        ny = ay + t * ey
+        keep = ((ax * fx + ay * fy >= 0) | (bx * fx + by * fy >= 0)) & (nx * nx + ny * ny < max_r * max_r)
+        if keep.any():
+            ax, ay, ex, ey = ax[keep], ay[keep], ex[keep], ey[keep]
+            # (S, beams) layout: the reduction runs over the short first axis
+            with np.errstate(divide="ignore", invalid="ignore"):
+                inv = 1.0 / (np.multiply.outer(ey, dc) - np.multiply.outer(ex, ds))
+                tr = ((ax * ey - ay * ex)[:, None]) * inv
+                u = (np.multiply.outer(ax, ds) - np.multiply.outer(ay, dc)) * inv
+                bad = u < 0.0
+                bad |= u > 1.0
+                bad |= tr <= 0.0
+                tr[bad] = max_r
+            ranges = tr.min(axis=0)
+            np.minimum(ranges, max_r, out=ranges)
+        else:
+            ranges = np.full(LASER.count, max_r, dtype=np.float64)
+        if self.n_robots > 1:
+            ranges = self._scan_robots(i, ox, oy, dc, ds, ranges)
+        if self.range_noise > 0.0:
+            ranges = ranges + self._rng.normal(0.0, self.range_noise, LASER.count)
+            np.clip(ranges, 0.0, max_r, out=ranges)
+        return ranges.astype(np.float32)
+
+    def _scan_robots(self, i, ox, oy, dc, ds, ranges):
+        others = [self._robots[j].body.position for j in range(self.n_robots) if j != i]
+        q = np.asarray([(p[0] - ox, p[1] - oy) for p in others], dtype=np.float64)
+        b = np.multiply.outer(dc, q[:, 0]) + np.multiply.outer(ds, q[:, 1])
+        disc = b * b - (np.einsum("ij,ij->i", q, q) - ROBOT.radius**2)
+        with np.errstate(invalid="ignore"):
+            t = b - np.sqrt(disc)
+        ok = (disc >= 0) & (t > 0)
+        t = np.where(ok, t, LASER.max_range)
+        return np.minimum(ranges, t.min(axis=1))
