@@ -181,7 +181,9 @@ def _point_segment_distance(p: np.ndarray, segs: np.ndarray) -> np.ndarray:
     return np.sqrt(np.einsum("ij,ij->i", d, d))
 
 
-def parse_world(data: dict[str, Any], source: str = "<world>", path: Path | None = None) -> WorldSpec:
+def parse_world(
+    data: dict[str, Any], source: str = "<world>", path: Path | None = None
+) -> WorldSpec:
     """Validate a world mapping (as read from TOML) into a :class:`WorldSpec`."""
     src = source
     if not isinstance(data, dict):
@@ -207,7 +209,9 @@ def parse_world(data: dict[str, Any], source: str = "<world>", path: Path | None
     )
     walls_raw = data.get("walls")
     if not isinstance(walls_raw, list) or not walls_raw:
-        raise _err(src, "walls", "at least one [[walls]] table with points = [[x, y], ...]", walls_raw)
+        raise _err(
+            src, "walls", "at least one [[walls]] table with points = [[x, y], ...]", walls_raw
+        )
     walls = []
     for i, w in enumerate(walls_raw):
         key = f"walls[{i}]"
@@ -247,11 +251,15 @@ def parse_world(data: dict[str, Any], source: str = "<world>", path: Path | None
         extra={k: v for k, v in data.items() if k not in known},
     )
     segs = spec.segments()
-    for key, p in [("robot.pose", pose)] + [(f"robot.starts[{i}]", s) for i, s in enumerate(starts)]:
+    for key, p in [("robot.pose", pose)] + [
+        (f"robot.starts[{i}]", s) for i, s in enumerate(starts)
+    ]:
         d = float(_point_segment_distance(np.asarray(p[:2]), segs).min())
         if d <= ROBOT.radius:
             raise _err(
-                src, key, f"a pose at least {ROBOT.radius} m (robot radius) from every wall",
+                src,
+                key,
+                f"a pose at least {ROBOT.radius} m (robot radius) from every wall",
                 f"{list(p)} at {d:.3f} m from a wall",
             )
     return spec
@@ -524,7 +532,9 @@ class World:
         t = np.clip(-(ax * ex + ay * ey) / ee, 0.0, 1.0)
         nx = ax + t * ex
         ny = ay + t * ey
-        keep = ((ax * fx + ay * fy >= 0) | (bx * fx + by * fy >= 0)) & (nx * nx + ny * ny < max_r * max_r)
+        keep = ((ax * fx + ay * fy >= 0) | (bx * fx + by * fy >= 0)) & (
+            nx * nx + ny * ny < max_r * max_r
+        )
         if keep.any():
             ax, ay, ex, ey = ax[keep], ay[keep], ex[keep], ey[keep]
             # (S, beams) layout: the reduction runs over the short first axis
