@@ -1,0 +1,339 @@
+"""An append-only journal of labeled demonstration vectors: the learner never loses one.
+
+The learner appends every labeled vector (the scan it answers, the features, the label) to a
+journal next to its snapshot (``<snapshot>.journal``) *before* learning from it, and writes
+snapshots that record how many journal records they include. A learner killed at any moment
+(even SIGKILL) is rebuilt on restart from the last snapshot plus the journal records after it.
+
+File format (little-endian)::
+
+    frame   := length:uint32  crc32(payload):uint32  payload[length]
+    frame 0 := the header, a msgpack map {"kind": "rhbl-journal", "format": 1, "lineage": str, ...}
+    frame i := record i-1, a msgpack map {"i", "scan", "ts", "label", "yaw", "ranges", "x"}
+               (ranges and x as float32 bytes)
+
+Durability: each record is written with one unbuffered ``os.write`` (it is in the kernel's page
+cache when ``append`` returns, so it survives the process being killed) and ``os.fsync``'d at most
+``fsync_interval`` seconds later (default 1 s) and on ``sync``/``close`` (so a power cut loses at
+most the last second). Recovery: a short frame at the end of the file (a write cut off by a crash)
+is a *torn tail*: it is reported and truncated. A CRC mismatch or undecodable frame anywhere is
+*corruption*: ``JournalCorruptError`` names the file, frame and offset, and nothing is dropped
+silently.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import struct
+import time
+import uuid
+import zlib
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import msgpack
+import numpy as np
+
+__all__ = [
+    "FORMAT",
+    "Journal",
+    "JournalCorruptError",
+    "JournalError",
+    "JournalRecord",
+    "journal_path",
+]
+
+log = logging.getLogger(__name__)
+
+FORMAT = 1
+KIND = "rhbl-journal"
+_FRAME = struct.Struct("<II")
+_MAX_FRAME = 64 * 1024 * 1024
+
+
+class JournalError(Exception):
+    """A journal cannot be created, opened or appended to."""
+
+
+class JournalCorruptError(JournalError):
+    """A journal holds a damaged frame that is not a torn tail (never dropped silently)."""
+
+
+@dataclass(frozen=True)
+class JournalRecord:
+    """One labeled vector: the scan it answers, its features and the demonstrated label."""
+
+    index: int
+    scan_id: int
+    ts: float
+    label: str
+    ranges: np.ndarray  # float32 raw laser ranges (lets a tree be relearned with other features)
+    yaw: float
+    features: np.ndarray  # float32 feature vector as extracted when it was learned
+
+    def to_payload(self) -> dict:
+        return {
+            "i": int(self.index),
+            "scan": int(self.scan_id),
+            "ts": float(self.ts),
+            "label": str(self.label),
+            "yaw": float(self.yaw),
+            "ranges": np.asarray(self.ranges, dtype="<f4").tobytes(),
+            "x": np.asarray(self.features, dtype="<f4").tobytes(),
+        }
+
+    @classmethod
+    def from_payload(cls, p: Mapping) -> JournalRecord:
+        return cls(
+            index=int(p["i"]),
+            scan_id=int(p["scan"]),
+            ts=float(p["ts"]),
+            label=str(p["label"]),
+            yaw=float(p["yaw"]),
+            ranges=np.frombuffer(p["ranges"], dtype="<f4"),
+            features=np.frombuffer(p["x"], dtype="<f4"),
+        )
+
+
+def journal_path(snapshot: str | os.PathLike) -> Path:
+    """Where the journal of a snapshot lives: beside it, ``<snapshot>.journal``."""
+    return Path(f"{os.fspath(snapshot)}.journal")
+
+
+def _frame(payload: bytes) -> bytes:
+    return _FRAME.pack(len(payload), zlib.crc32(payload)) + payload
+
+
+class Journal:
+    """An open journal: ``append`` records, iterate ``records(start)``; use as a context manager.
+
+    Create with ``Journal.create(path, header)`` (fails if the file exists) or open an existing
+    one with ``Journal.open(path)`` (validates every frame, truncates a torn tail).
+    """
+
+    def __init__(self, path: Path, fd: int, header: dict, offsets: list[int], end: int,
+                 fsync_interval: float, truncated: int = 0):
+        self.path = path
+        self._fd = fd
+        self.header = header
+        self._offsets = offsets  # file offset of each record's frame
+        self._end = end
+        self.fsync_interval = float(fsync_interval)
+        self._last_sync = time.monotonic()
+        self._dirty = False
+        self.truncated_bytes = truncated  # bytes of a torn tail removed by open()
+
+    # ---- construction -------------------------------------------------------------------
+    @classmethod
+    def create(cls, path: str | os.PathLike, header: Mapping | None = None, *,
+               fsync_interval: float = 1.0) -> Journal:
+        """A new, empty journal whose header holds ``header`` plus a fresh ``lineage`` id."""
+        path = Path(path)
+        head = {"kind": KIND, "format": FORMAT, "lineage": uuid.uuid4().hex,
+                "created": time.time()}
+        head.update(dict(header or {}))
+        data = _frame(msgpack.packb(head, use_bin_type=True))
+        # the header is written to a temporary file and linked into place, so a journal file
+        # never exists without a whole header
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        try:
+            tfd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+            try:
+                os.write(tfd, data)
+                os.fsync(tfd)
+            finally:
+                os.close(tfd)
+            try:
+                os.link(tmp, path)
+            except FileExistsError:
+                raise JournalError(f"journal {path} already exists; open it instead") from None
+            finally:
+                os.unlink(tmp)
+            fd = os.open(path, os.O_RDWR | os.O_APPEND)
+        except JournalError:
+            raise
+        except OSError as exc:
+            raise JournalError(f"cannot create journal {path}: {exc}") from exc
+        _fsync_dir(path)
+        return cls(path, fd, head, [], len(data), fsync_interval)
+
+    @classmethod
+    def open(cls, path: str | os.PathLike, *, fsync_interval: float = 1.0,
+             readonly: bool = False) -> Journal:
+        """Open an existing journal for appending (or reading), after validating every frame."""
+        path = Path(path)
+        try:
+            fd = os.open(path, os.O_RDONLY if readonly else (os.O_RDWR | os.O_APPEND))
+        except FileNotFoundError:
+            raise JournalError(f"journal {path} does not exist") from None
+        except OSError as exc:
+            raise JournalError(f"cannot open journal {path}: {exc}") from exc
+        try:
+            header, offsets, end, size = _scan(path, fd)
+            truncated = size - end
+            if truncated:
+                if readonly:
+                    log.warning("journal %s: torn last record (%d bytes) ignored (read-only)",
+                                path, truncated)
+                else:
+                    log.warning("journal %s: torn last record (%d bytes at offset %d, a write "
+                                "cut off by a crash) truncated; %d records kept",
+                                path, truncated, end, len(offsets))
+                    os.ftruncate(fd, end)
+                    os.fsync(fd)
+        except BaseException:
+            os.close(fd)
+            raise
+        return cls(path, fd, header, offsets, end, fsync_interval, truncated)
+
+    # ---- reading ------------------------------------------------------------------------
+    @property
+    def lineage(self) -> str:
+        return str(self.header.get("lineage", ""))
+
+    def __len__(self) -> int:
+        return len(self._offsets)
+
+    def records(self, start: int = 0) -> Iterator[JournalRecord]:
+        """Records ``start``, ``start + 1``, ... (re-read from the file, CRC-checked)."""
+        if start < 0 or start > len(self._offsets):
+            raise JournalError(f"journal {self.path} has {len(self._offsets)} records; "
+                               f"cannot start at record {start}")
+        if start == len(self._offsets):
+            return
+        with open(self.path, "rb") as f:
+            f.seek(self._offsets[start])
+            for i in range(start, len(self._offsets)):
+                payload = _read_frame(f, self.path, i + 1, self._offsets[i])
+                yield JournalRecord.from_payload(_unpack(payload, self.path, i + 1,
+                                                         self._offsets[i]))
+
+    # ---- writing ------------------------------------------------------------------------
+    def append(self, scan_id: int, ts: float, label: str, ranges, yaw: float,
+               features) -> int:
+        """Append one labeled vector; returns its index. Durable against a killed process
+        on return; fsync'd within ``fsync_interval`` seconds."""
+        index = len(self._offsets)
+        rec = JournalRecord(index, scan_id, ts, label, ranges, yaw, features)
+        data = _frame(msgpack.packb(rec.to_payload(), use_bin_type=True))
+        n = os.write(self._fd, data)
+        while n < len(data):  # a short write (rare: disk full / signal): finish or fail loudly
+            n += os.write(self._fd, data[n:])
+        self._offsets.append(self._end)
+        self._end += len(data)
+        self._dirty = True
+        if time.monotonic() - self._last_sync >= self.fsync_interval:
+            self.sync()
+        return index
+
+    def sync(self) -> None:
+        """fsync the journal now (called at the fsync cadence, on snapshots and on close)."""
+        if self._dirty and self._fd >= 0:
+            os.fsync(self._fd)
+            self._dirty = False
+        self._last_sync = time.monotonic()
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            try:
+                self.sync()
+            finally:
+                os.close(self._fd)
+                self._fd = -1
+
+    def __enter__(self) -> Journal:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"Journal({str(self.path)!r}, records={len(self)}, lineage={self.lineage!r})"
+
+
+# ---- helpers --------------------------------------------------------------------------------
+def _fsync_dir(path: Path) -> None:
+    try:
+        dfd = os.open(path.parent if str(path.parent) else ".", os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(dfd)
+    except OSError:
+        pass
+    finally:
+        os.close(dfd)
+
+
+def _unpack(payload: bytes, path: Path, frame: int, offset: int) -> dict:
+    try:
+        obj = msgpack.unpackb(payload, raw=False)
+    except Exception as exc:  # msgpack raises several types
+        raise JournalCorruptError(
+            f"journal {path}: frame {frame} at offset {offset} passes its CRC but does not "
+            f"decode ({exc})") from exc
+    if not isinstance(obj, dict):
+        raise JournalCorruptError(
+            f"journal {path}: frame {frame} at offset {offset} is not a map")
+    return obj
+
+
+def _read_frame(f, path: Path, frame: int, offset: int) -> bytes:
+    head = f.read(_FRAME.size)
+    if len(head) < _FRAME.size:
+        raise JournalCorruptError(f"journal {path}: frame {frame} at offset {offset} is missing")
+    length, crc = _FRAME.unpack(head)
+    payload = f.read(length)
+    if len(payload) < length or zlib.crc32(payload) != crc:
+        raise JournalCorruptError(
+            f"journal {path}: frame {frame} at offset {offset} fails its CRC check")
+    return payload
+
+
+def _scan(path: Path, fd: int) -> tuple[dict, list[int], int, int]:
+    """Validate every frame: (header, record offsets, end of the last whole frame, file size)."""
+    size = os.fstat(fd).st_size
+    offsets: list[int] = []
+    header: dict | None = None
+    with open(fd, "rb", closefd=False) as f:
+        f.seek(0)
+        pos = 0
+        frame = 0
+        while pos < size:
+            head = f.read(_FRAME.size)
+            if len(head) < _FRAME.size:
+                break  # torn frame header
+            length, crc = _FRAME.unpack(head)
+            if length > _MAX_FRAME:
+                raise JournalCorruptError(
+                    f"journal {path}: frame {frame} at offset {pos} claims {length} bytes "
+                    f"(limit {_MAX_FRAME}); the file is damaged")
+            payload = f.read(length)
+            if len(payload) < length:
+                break  # torn payload: the last write was cut off
+            if zlib.crc32(payload) != crc:
+                raise JournalCorruptError(
+                    f"journal {path}: frame {frame} at offset {pos} fails its CRC check "
+                    f"({size - pos} bytes from there to the end); the file is damaged. Nothing "
+                    f"was dropped: move the file aside or truncate it at offset {pos} yourself")
+            obj = _unpack(payload, path, frame, pos)
+            if frame == 0:
+                if obj.get("kind") != KIND:
+                    raise JournalCorruptError(f"{path} is not an rhbl journal (no header)")
+                if obj.get("format") != FORMAT:
+                    raise JournalError(f"journal {path} has format {obj.get('format')!r}; "
+                                       f"this version reads format {FORMAT}")
+                header = obj
+            else:
+                if obj.get("i") != frame - 1:
+                    raise JournalCorruptError(
+                        f"journal {path}: frame {frame} at offset {pos} holds record "
+                        f"{obj.get('i')!r}, expected {frame - 1}")
+                offsets.append(pos)
+            pos += _FRAME.size + length
+            frame += 1
+    if header is None:
+        raise JournalCorruptError(f"journal {path} has no complete header ({size} bytes)")
+    return header, offsets, pos, size
