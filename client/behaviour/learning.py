@@ -1,0 +1,235 @@
+"""Learning from demonstration: features + labels -> a hypersphere tree, with its metadata.
+
+The zenoh learner process and the in-process harness both use exactly this code path.
+
+    learner = DemonstrationLearner(FEATURES["wall"], DEFAULT_ACTIONS, task="wall-following",
+                                   spawn="winner")           # **tree_params go to the classifier
+    learned = learner.observe(ranges, yaw, label)            # -> bool (learned or skipped)
+    learner.classifier                                        # rhbl.HypersphereClassifier
+    learner.predict(ranges, yaw) -> action name               # what a controller drives
+    learner.metadata() -> {"features", "actions", "task", "provenance", "tree_params", "learning"}
+    learner.save(path)
+    learner = DemonstrationLearner.resume(path)               # continue training a snapshot
+    controller = Policy-like: TreePolicy.load(path, features=None) (checks compatibility)
+    check_compatible(meta, features, actions=None)            # IncompatibleSnapshotError if not
+
+Sample selection (``stride``, ``min_delta``) decides which observations are offered to the tree;
+the tree itself spawns only on a label conflict (the paper's rule).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import logging
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from .actions import DEFAULT_ACTIONS, ActionSet
+from .features import FeatureSpec
+
+__all__ = [
+    "DemonstrationLearner",
+    "IncompatibleSnapshotError",
+    "TreePolicy",
+    "check_compatible",
+    "load_snapshot",
+]
+
+log = logging.getLogger(__name__)
+
+
+class IncompatibleSnapshotError(ValueError):
+    """A snapshot was trained with other features or actions than the ones in use."""
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+
+
+def check_compatible(meta: Mapping | None, features: FeatureSpec | Mapping | None = None,
+                     actions: ActionSet | Mapping | None = None) -> None:
+    """Raise ``IncompatibleSnapshotError`` naming the difference when ``meta`` (a snapshot's
+    metadata) was trained with other features or actions than ``features`` / ``actions``."""
+    if not meta or "features" not in meta or "actions" not in meta:
+        raise IncompatibleSnapshotError(
+            "snapshot has no 'features'/'actions' metadata: it was not written by "
+            "DemonstrationLearner, so its inputs are unknown")
+    if features is not None:
+        want = features.to_dict() if isinstance(features, FeatureSpec) else dict(features)
+        have = FeatureSpec.from_dict(meta["features"]).to_dict()
+        want = FeatureSpec.from_dict(want).to_dict()
+        if have != want:
+            diff = {k: (have.get(k), want.get(k)) for k in set(have) | set(want)
+                    if have.get(k) != want.get(k)}
+            raise IncompatibleSnapshotError(
+                "snapshot was trained with other features: "
+                + "; ".join(f"{k}: snapshot {a!r} != requested {b!r}" for k, (a, b) in sorted(diff.items())))
+    if actions is not None:
+        want_a = actions if isinstance(actions, ActionSet) else ActionSet.from_dict(actions)
+        have_a = ActionSet.from_dict(meta["actions"])
+        if have_a != want_a:
+            raise IncompatibleSnapshotError(
+                f"snapshot was trained with other actions: snapshot {have_a!r} != requested {want_a!r}")
+
+
+def load_snapshot(path: str | Path):
+    """(classifier, features, actions, metadata) of a snapshot written by this module."""
+    from rhbl import load
+
+    clf = load(path)
+    meta = dict(clf.metadata or {})
+    check_compatible(meta)
+    return clf, FeatureSpec.from_dict(meta["features"]), ActionSet.from_dict(meta["actions"]), meta
+
+
+class DemonstrationLearner:
+    """Turns (scan, yaw, teacher label) triples into a hypersphere tree.
+
+    ``stride``: offer every n-th observation (1 = all, the paper's dense stream).
+    ``min_delta``: skip an observation whose features moved less than this (max-norm) from the
+    last offered one while its label is unchanged (a robot standing still adds nothing).
+    ``**tree_params`` go to ``rhbl.HypersphereClassifier`` (spawn, distance, min_radius, max_nodes...).
+    """
+
+    def __init__(self, features: FeatureSpec, actions: ActionSet = DEFAULT_ACTIONS, *,
+                 task: str | None = None, stride: int = 1, min_delta: float = 0.0,
+                 classifier=None, parent: str | None = None, provenance: Mapping | None = None,
+                 **tree_params):
+        from rhbl import HypersphereClassifier
+
+        if stride < 1:
+            raise ValueError(f"stride must be >= 1, got {stride}")
+        self.features = features
+        self.actions = actions
+        self.task = task
+        self.stride = int(stride)
+        self.min_delta = float(min_delta)
+        self.tree_params = dict(tree_params)
+        if classifier is None:
+            tree_params.setdefault("default_label", actions.names[0])
+            classifier = HypersphereClassifier(**tree_params)
+        self.classifier = classifier
+        prov = dict(provenance or {})
+        self.vectors = int(prov.get("vectors", 0))        # observations offered to the tree
+        self.seen = int(prov.get("seen", 0))              # observations received
+        self.sessions = list(prov.get("sessions", []))
+        self.parent = parent if parent is not None else prov.get("parent")
+        self.created = prov.get("created", _now())
+        self._count = 0
+        self._last_x: np.ndarray | None = None
+        self._last_label: str | None = None
+        self.session: dict = {}
+
+    # -- learning --
+    def observe(self, ranges, yaw: float, label: str) -> bool:
+        """Offer one labelled observation; True when it reached the tree."""
+        if label not in self.actions:
+            raise ValueError(f"label {label!r} is not an action of this learner: {self.actions.names}")
+        self.seen += 1
+        self._count += 1
+        if (self._count - 1) % self.stride:
+            return False
+        x = self.features.extract(ranges, yaw)
+        if (self.min_delta > 0 and self._last_x is not None and label == self._last_label
+                and float(np.max(np.abs(x - self._last_x))) < self.min_delta):
+            return False
+        self._last_x, self._last_label = x, label
+        self.classifier.partial_fit(x.reshape(1, -1), [label])
+        self.vectors += 1
+        return True
+
+    def observe_vector(self, x: np.ndarray, label: str) -> bool:
+        """Offer an already extracted feature vector (no sample selection)."""
+        self.classifier.partial_fit(np.asarray(x, dtype=np.float64).reshape(1, -1), [label])
+        self.vectors += 1
+        self.seen += 1
+        return True
+
+    # -- using --
+    def predict(self, ranges, yaw: float = 0.0) -> str:
+        if self.vectors == 0:
+            return self.actions.names[0]
+        return str(self.classifier.predict_one(self.features.extract(ranges, yaw)))
+
+    @property
+    def nodes(self) -> int:
+        return int(getattr(self.classifier, "node_count_", 0) or 0) if self.vectors else 1
+
+    @property
+    def height(self) -> int:
+        return int(getattr(self.classifier, "height_", 0) or 0) if self.vectors else 0
+
+    def metadata(self) -> dict:
+        prov = {
+            "vectors": self.vectors,
+            "seen": self.seen,
+            "created": self.created,
+            "saved": _now(),
+            "parent": self.parent,
+            "sessions": self.sessions + ([self.session] if self.session else []),
+        }
+        return {
+            "features": self.features.to_dict(),
+            "actions": self.actions.to_dict(),
+            "task": self.task,
+            "provenance": prov,
+            "tree_params": {k: v for k, v in self.tree_params.items()
+                            if isinstance(v, str | int | float | bool | type(None))},
+            "learning": {"stride": self.stride, "min_delta": self.min_delta},
+        }
+
+    def save(self, path: str | Path) -> Path:
+        path = Path(path)
+        if path.parent and not path.parent.exists():
+            path.parent.mkdir(parents=True, exist_ok=True)
+        self.classifier.save(str(path), metadata=self.metadata())
+        return path
+
+    @classmethod
+    def resume(cls, path: str | Path, features: FeatureSpec | None = None,
+               actions: ActionSet | None = None) -> DemonstrationLearner:
+        """Continue training a snapshot (features/actions come from its metadata; if given they
+        must match it)."""
+        clf, feats, acts, meta = load_snapshot(path)
+        check_compatible(meta, features, actions)
+        learning = meta.get("learning", {}) or {}
+        tree_params = meta.get("tree_params", {}) or {}
+        learner = cls(feats, acts, task=meta.get("task"), classifier=clf,
+                      stride=int(learning.get("stride", 1)),
+                      min_delta=float(learning.get("min_delta", 0.0)),
+                      parent=str(path), provenance=meta.get("provenance"), **tree_params)
+        learner.parent = str(path)
+        return learner
+
+    from_snapshot = resume
+
+
+class TreePolicy:
+    """A learned controller: ``act(ranges, pose) -> action name`` from a tree and its features."""
+
+    def __init__(self, classifier, features: FeatureSpec, actions: ActionSet,
+                 metadata: Mapping | None = None):
+        self.classifier = classifier
+        self.features = features
+        self.actions = actions
+        self.metadata = dict(metadata or {})
+
+    @classmethod
+    def load(cls, path: str | Path, features: FeatureSpec | None = None,
+             actions: ActionSet | None = None) -> TreePolicy:
+        clf, feats, acts, meta = load_snapshot(path)
+        check_compatible(meta, features, actions)
+        return cls(clf, feats, acts, meta)
+
+    @classmethod
+    def from_learner(cls, learner: DemonstrationLearner) -> TreePolicy:
+        return cls(learner.classifier, learner.features, learner.actions, learner.metadata())
+
+    def reset(self) -> None:
+        pass
+
+    def act(self, ranges, pose) -> str:
+        yaw = float(pose[2]) if pose is not None else 0.0
+        return str(self.classifier.predict_one(self.features.extract(ranges, yaw)))

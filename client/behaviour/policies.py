@@ -1,0 +1,269 @@
+"""Scripted experts (teachers) and perturbed demonstrations.
+
+    policy = make_policy("wall-following")     # or "maze"
+    policy.reset()
+    name = policy.act(ranges, pose)            # ranges: 360-beam float32 scan, ranges[0] at -90 deg
+                                               # (robot's right); pose: odometry (x, y, yaw)
+    demo = Demonstrator(policy, perturb=0.2, rng=np.random.default_rng(0))
+    label, executed = demo.step(ranges, pose)  # label: the expert's choice; executed: what to drive
+
+Experts see only the scan and the odometry heading (they run in a process that sees zenoh data,
+never the map). They are SMOOTH like a human's key presses: the continuous steering command has
+hysteresis and every label is held for a minimum dwell, so the label stream does not flicker
+(which also keeps trees small).
+
+``WallFollower(side="right")`` follows the wall on the robot's right at about ``target`` metres.
+``MazeTeacher`` solves a tiered maze: it follows the left wall while right-directional and the right
+wall while left-directional (the paper's heading feature tells the learner which), which takes every
+tier's outlet in turn and never re-enters a visited tier.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .actions import DEFAULT_ACTIONS, ActionSet
+
+__all__ = [
+    "Policy",
+    "WallFollower",
+    "MazeTeacher",
+    "Demonstrator",
+    "make_policy",
+    "scan_points",
+    "side_wall_distance",
+    "TASKS",
+]
+
+TASKS = ("wall-following", "maze")
+
+
+def _bearings(count: int, fov_deg: float = 180.0) -> np.ndarray:
+    half = math.radians(fov_deg) / 2.0
+    return np.linspace(-half, half, count)
+
+
+_BEARING_CACHE: dict[tuple[int, float], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+
+def _trig(count: int, fov_deg: float = 180.0):
+    key = (count, fov_deg)
+    t = _BEARING_CACHE.get(key)
+    if t is None:
+        b = _bearings(count, fov_deg)
+        t = (b, np.cos(b), np.sin(b))
+        _BEARING_CACHE[key] = t
+    return t
+
+
+def scan_points(ranges, fov_deg: float = 180.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(bearings, x, y) of every beam's end point in the robot frame (x forward, y left)."""
+    r = np.asarray(ranges, dtype=np.float64)
+    b, c, s = _trig(r.size, fov_deg)
+    return b, r * c, r * s
+
+
+def side_wall_distance(ranges, side: str = "right", fov_deg: float = 180.0,
+                       sector_deg: float = 60.0) -> float:
+    """Distance to the nearest wall point on one side: the minimum range over the beams within
+    ``sector_deg`` of that side's perpendicular (-90 deg for right, +90 for left)."""
+    r = np.asarray(ranges, dtype=np.float64)
+    n = r.size
+    k = int(round(sector_deg / fov_deg * (n - 1)))
+    part = r[: k + 1] if side == "right" else r[n - 1 - k:]
+    return float(part.min())
+
+
+class Policy:
+    """Base of the scripted experts: ``reset()`` and ``act(ranges, pose) -> action name``."""
+
+    task = ""
+
+    def __init__(self, actions: ActionSet = DEFAULT_ACTIONS):
+        self.actions = actions
+
+    def reset(self) -> None:  # pragma: no cover - trivial
+        pass
+
+    def act(self, ranges, pose) -> str:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+class WallFollower(Policy):
+    """Follow the wall on ``side`` (default the robot's right) at about ``target`` metres.
+
+    Steering: the nearest wall point on the followed side and ahead gives the distance d and the
+    wall's angle alpha (0 when parallel, > 0 when the robot heads into it); a command
+    w = k_d (target - d) + k_a alpha (for the right side; mirrored for the left) plus a front term
+    is discretised into the five actions with hysteresis and a minimum dwell.
+    """
+
+    task = "wall-following"
+
+    def __init__(self, side: str = "right", target: float = 0.6, k_d: float = 2.0,
+                 k_a: float = 1.6, front_stop: float = 0.45, front_slow: float = 0.9,
+                 lost: float = 1.7, on: float = 0.45, off: float = 0.2, dwell: int = 3,
+                 robot_half_width: float = 0.26, fov_deg: float = 180.0,
+                 actions: ActionSet = DEFAULT_ACTIONS):
+        super().__init__(actions)
+        if side not in ("right", "left"):
+            raise ValueError(f"side must be 'right' or 'left', got {side!r}")
+        self.side = side
+        self.target, self.k_d, self.k_a = target, k_d, k_a
+        self.front_stop, self.front_slow, self.lost = front_stop, front_slow, lost
+        self.on, self.off, self.dwell = on, off, dwell
+        self.half_width = robot_half_width
+        self.fov = fov_deg
+        self.reset()
+
+    def reset(self) -> None:
+        self._label = "fwd"
+        self._held = 0
+
+    # -- the continuous expert, always for the RIGHT side (the left side mirrors the scan) --
+    def _command(self, r: np.ndarray) -> tuple[float, float]:
+        """(w, front): desired turn rate sign/magnitude (> 0 = left) and front clearance."""
+        b, c, s = _trig(r.size, self.fov)
+        x, y = r * c, r * s
+        # clearance straight ahead in the robot's swept corridor
+        ahead = (x > 0.0) & (np.abs(y) < self.half_width)
+        front = float(x[ahead].min()) if ahead.any() else float(r.max())
+        # nearest point on the right side and ahead-right (bearings -90 .. +20 deg)
+        sel = b <= math.radians(20.0)
+        i = int(np.argmin(np.where(sel, r, np.inf)))
+        d = float(r[i])
+        alpha = float(b[i]) + math.pi / 2.0  # 0 when the wall's foot is at -90 deg (parallel)
+        # no wall in reach: arc right to find one
+        w = -1.0 if d > self.lost else self.k_d * (self.target - d) + self.k_a * alpha
+        if front < self.front_slow:
+            w = max(w, 0.0) + (self.front_slow - front) * 3.0
+        return w, front
+
+    def _discretise(self, w: float, front: float) -> str:
+        cur = self._label
+        if front < self.front_stop or (w > 2.0 and front < self.front_slow):
+            want = "rot-left"
+        elif cur in ("fwd-left", "rot-left"):
+            want = cur if w > self.off else ("fwd-right" if w < -self.on else "fwd")
+            if want == "rot-left" and front >= self.front_slow and w < 1.2:
+                want = "fwd-left"
+        elif cur in ("fwd-right", "rot-right"):
+            want = "fwd-right" if w < -self.off else ("fwd-left" if w > self.on else "fwd")
+        else:
+            want = "fwd-left" if w > self.on else ("fwd-right" if w < -self.on else "fwd")
+        return want
+
+    def act(self, ranges, pose=None) -> str:
+        r = np.asarray(ranges, dtype=np.float64)
+        if self.side == "left":
+            r = r[::-1]
+        w, front = self._command(r)
+        want = self._discretise(w, front)
+        urgent = front < self.front_stop
+        if want != self._label and (self._held >= self.dwell or urgent):
+            self._label, self._held = want, 0
+        self._held += 1
+        name = self._label
+        if self.side == "left":
+            name = self.actions.mirror(name)
+        return name
+
+
+class MazeTeacher(Policy):
+    """Tiered-maze expert from the scan and heading only.
+
+    While right-directional (cos(yaw) >= 0) it follows the wall on its LEFT, while
+    left-directional the wall on its RIGHT. In a tiered maze whose tiers alternate direction this
+    hugs the side where the next tier's inlet opens, so it leaves each tier by its outlet.
+    ``up`` = "left" reverses the convention for mazes that climb the other way.
+    """
+
+    task = "maze"
+
+    def __init__(self, up: str = "left", target: float = 0.55, actions: ActionSet = DEFAULT_ACTIONS,
+                 **kw):
+        super().__init__(actions)
+        self.up = up
+        self._left = WallFollower(side="left", target=target, actions=actions, **kw)
+        self._right = WallFollower(side="right", target=target, actions=actions, **kw)
+        self.reset()
+
+    def reset(self) -> None:
+        self._left.reset()
+        self._right.reset()
+        self._side: str | None = None
+
+    def act(self, ranges, pose) -> str:
+        yaw = float(pose[2]) if pose is not None else 0.0
+        rightward = math.cos(yaw) >= 0.0
+        side = ("left" if rightward else "right") if self.up == "left" else (
+            "right" if rightward else "left")
+        if side != self._side:
+            # hand the dwell state over so the label stream stays smooth across the switch
+            src = self._left if self._side == "left" else self._right
+            dst = self._left if side == "left" else self._right
+            if self._side is not None:
+                mirrored = self.actions.mirror(src._label)
+                dst._label, dst._held = (mirrored if side != self._side else src._label), src._held
+            self._side = side
+        follower = self._left if side == "left" else self._right
+        return follower.act(ranges, pose)
+
+
+def make_policy(task: str, actions: ActionSet = DEFAULT_ACTIONS, **kw) -> Policy:
+    """The scripted expert of a world's task: "wall-following" or "maze"."""
+    if task == "wall-following":
+        return WallFollower(actions=actions, **kw)
+    if task == "maze":
+        return MazeTeacher(actions=actions, **kw)
+    raise ValueError(f"no scripted teacher for task {task!r}; known: {', '.join(TASKS)}")
+
+
+class Demonstrator:
+    """Perturbed demonstrations (noise injection, like DART).
+
+    ``step(ranges, pose) -> (label, executed)``: ``label`` is always the expert's choice; about
+    ``perturb`` of the time ``executed`` is a random action held for ``hold`` seconds (uniform in
+    the given range), so the learner also sees how to recover from off-path states. A perturbation
+    ends early when any beam is closer than ``safety`` metres.
+    """
+
+    def __init__(self, policy: Policy, perturb: float = 0.2, rng=None,
+                 hold: tuple[float, float] = (0.5, 1.5), dt: float = 0.1, safety: float = 0.35):
+        if not 0.0 <= perturb < 1.0:
+            raise ValueError(f"perturb must be in [0, 1), got {perturb}")
+        self.policy = policy
+        self.perturb = perturb
+        self.rng = rng if rng is not None else np.random.default_rng()
+        self.hold = hold
+        self.dt = dt
+        self.safety = safety
+        mean_steps = (hold[0] + hold[1]) / 2.0 / dt
+        self._p_start = perturb / max(1e-9, (1.0 - perturb)) / mean_steps if perturb > 0 else 0.0
+        self.reset()
+
+    def reset(self) -> None:
+        self.policy.reset()
+        self._left = 0
+        self._action: str | None = None
+
+    @property
+    def perturbing(self) -> bool:
+        return self._left > 0
+
+    def step(self, ranges, pose) -> tuple[str, str]:
+        label = self.policy.act(ranges, pose)
+        if self._left > 0 and float(np.min(ranges)) < self.safety:
+            self._left = 0
+        if self._left == 0 and self._p_start > 0 and self.rng.random() < self._p_start \
+                and float(np.min(ranges)) >= self.safety:
+            names = self.policy.actions.names
+            self._action = names[int(self.rng.integers(len(names)))]
+            lo, hi = self.hold
+            self._left = max(1, int(round(self.rng.uniform(lo, hi) / self.dt)))
+        if self._left > 0:
+            self._left -= 1
+            return label, self._action  # type: ignore[return-value]
+        return label, label
