@@ -1,1 +1,24 @@
-"""(package: see docs/architecture.md)"""
+"""Recursive, Hyperspherical Behavioral Learning: the hypersphere tree and its snapshots.
+
+```python
+from rhbl import HypersphereClassifier, load
+clf = HypersphereClassifier(default_label="fwd").fit(X, y)
+clf.predict_one(x); clf.save("tree.rhbl"); clf2 = load("tree.rhbl")
+```
+See ``docs/rhbl.md``. This package imports only numpy and msgpack.
+"""
+
+from ._errors import NotFittedError, RhblError, SnapshotError
+from .classifier import HypersphereClassifier
+from .snapshot import FORMAT, VERSION, load, loads
+
+__all__ = [
+    "FORMAT",
+    "VERSION",
+    "HypersphereClassifier",
+    "NotFittedError",
+    "RhblError",
+    "SnapshotError",
+    "load",
+    "loads",
+]

@@ -1,0 +1,676 @@
+"""The hypersphere tree of Recursive, Hyperspherical Behavioral Learning (RHBL).
+
+The paper's algorithm (sections 3-5), in its default configuration:
+
+* Inputs are vectors in ``[0, 1]^n``. A sphere ``(c, r)`` encloses ``x`` iff ``d(x, c) <= r``,
+  where ``d`` is the *squared* Euclidean distance by default (``distance="euclidean"`` uses the
+  plain Euclidean distance, the variant section 5 compares against). The root has centre
+  ``[0.5] * n``, radius ``n / 4`` (``sqrt(n) / 2`` for the Euclidean variant: the distance to
+  the furthest corner) and the default label.
+* Training on ``(x, a)``: descend from the root through every sphere that encloses ``x``; a
+  sphere that encloses ``x`` but none of whose children do (a *candidate*) and whose label
+  differs from ``a`` spawns a child with centre ``x``, radius ``r_parent - d(x, c_parent)``
+  and label ``a``. One vector can spawn several children.
+* Classification: among the spheres that enclose ``x`` and whose ancestors all enclose ``x``,
+  the smallest radius wins; ties go to the deepest, then to the earliest created.
+
+Decisions where the paper is silent (see ``docs/rhbl.md``):
+
+* One inclusive test ``d <= r + eps`` everywhere; a child's radius is clamped at 0 (a sphere of
+  radius 0 encloses only its centre, within ``eps``).
+* A vector within ``eps`` of the centre of the sphere that would spawn, with a conflicting
+  label, relabels that sphere in place instead of spawning an identical copy (this bounds a
+  vector repeated with alternating labels to a fixed number of spheres).
+* NaN or infinite values raise ``ValueError``; values outside ``[0, 1]`` raise ``ValueError``
+  unless ``clip=True``, which clips them into the cube.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+
+from ._errors import NotFittedError
+
+__all__ = ["HypersphereClassifier"]
+
+log = logging.getLogger(__name__)
+
+_DISTANCES = ("squared", "euclidean")
+_SPAWNS = ("all", "winner")
+_PARAMS = (
+    "default_label",
+    "distance",
+    "spawn",
+    "min_radius",
+    "max_nodes",
+    "max_depth",
+    "clip",
+    "eps",
+)
+# Above this many nodes the batch path descends the tree level by level instead of testing
+# every (query, sphere) pair; the single-query path always tests every sphere at once.
+_DENSE_BATCH_MAX_NODES = 64
+_CHUNK_PAIRS = 1 << 21
+
+
+def _plain_label(label: Any) -> Any:
+    """A label as a plain Python ``str`` or ``int`` (numpy scalars are converted)."""
+    if isinstance(label, np.generic):
+        label = label.item()
+    if isinstance(label, str | int):
+        return label
+    raise ValueError(f"labels must be str or int, got {label!r} of type {type(label).__name__}")
+
+
+def _label_array(labels: list[Any]) -> np.ndarray:
+    """A numpy array of labels that keeps their type (str array, int array, else object)."""
+    if labels and all(isinstance(v, str) for v in labels):
+        return np.array(labels, dtype=str)
+    if labels and all(isinstance(v, int) and not isinstance(v, bool) for v in labels):
+        try:
+            return np.array(labels, dtype=np.int64)
+        except OverflowError:
+            pass
+    out = np.empty(len(labels), dtype=object)
+    out[:] = labels
+    return out
+
+
+class HypersphereClassifier:
+    """A tree of labelled hyperspheres grown one demonstration at a time (RHBL).
+
+    Follows scikit-learn's estimator contract: ``__init__`` only stores parameters, learned
+    attributes end in ``_``, ``fit``/``partial_fit`` return ``self``.
+
+    Parameters
+    ----------
+    default_label:
+        The root's label (the paper's default behaviour). ``None`` uses the first training label.
+    distance:
+        ``"squared"`` (the paper: squared Euclidean distance for radii and enclosure) or
+        ``"euclidean"`` (the variant of section 5, for ablation).
+    spawn:
+        ``"all"`` (the paper, literal): every candidate with a conflicting label spawns a child.
+        ``"winner"``: only the candidate that classification would choose spawns, when its
+        label differs (much smaller trees).
+    min_radius:
+        Do not spawn spheres whose radius would be smaller than this (0 = no limit). A vector
+        whose spawn is suppressed is counted in ``n_skipped_``.
+    max_nodes:
+        Cap on the number of spheres (root included); ``None`` = no cap. Once reached, the tree
+        stops growing (relabelling in place still happens) and suppressed spawns are counted.
+    max_depth:
+        Do not spawn spheres deeper than this (root depth 0); ``None`` = no limit.
+    clip:
+        ``False`` (default): values outside ``[0, 1]`` raise ``ValueError``. ``True``: clip them.
+    eps:
+        Tolerance of the inclusive enclosure test ``d <= r + eps`` and of "coincides with a
+        centre" (``d <= eps``).
+
+    Learned attributes: ``n_features_in_``, ``classes_`` (labels in order of first appearance,
+    the default label first), ``node_count_``, ``height_`` (edges; a lone root has height 0),
+    ``n_seen_`` (vectors trained on), ``n_skipped_`` (vectors with a spawn suppressed by
+    ``min_radius``/``max_nodes``/``max_depth``), ``n_relabelled_`` (in-place relabels).
+    ``metadata`` is a free dict saved in snapshots.
+    """
+
+    def __init__(
+        self,
+        default_label: str | int | None = None,
+        *,
+        distance: str = "squared",
+        spawn: str = "all",
+        min_radius: float = 0.0,
+        max_nodes: int | None = None,
+        max_depth: int | None = None,
+        clip: bool = False,
+        eps: float = 1e-9,
+    ) -> None:
+        self.default_label = default_label
+        self.distance = distance
+        self.spawn = spawn
+        self.min_radius = min_radius
+        self.max_nodes = max_nodes
+        self.max_depth = max_depth
+        self.clip = clip
+        self.eps = eps
+        self.metadata: dict[str, Any] = {}
+
+    # ------------------------------------------------------------------ parameters
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """The constructor parameters (scikit-learn contract)."""
+        return {name: getattr(self, name) for name in _PARAMS}
+
+    def set_params(self, **params: Any) -> HypersphereClassifier:
+        """Set constructor parameters; growth limits apply from the next ``partial_fit``."""
+        for name, value in params.items():
+            if name not in _PARAMS:
+                raise ValueError(f"invalid parameter {name!r}; allowed: {', '.join(_PARAMS)}")
+            setattr(self, name, value)
+        return self
+
+    def _check_params(self) -> None:
+        if self.distance not in _DISTANCES:
+            raise ValueError(f"distance must be one of {_DISTANCES}, got {self.distance!r}")
+        if self.spawn not in _SPAWNS:
+            raise ValueError(f"spawn must be one of {_SPAWNS}, got {self.spawn!r}")
+        if not (isinstance(self.min_radius, int | float) and self.min_radius >= 0):
+            raise ValueError(f"min_radius must be a number >= 0, got {self.min_radius!r}")
+        if self.max_nodes is not None and (
+            not isinstance(self.max_nodes, int | np.integer) or self.max_nodes < 1
+        ):
+            raise ValueError(f"max_nodes must be None or an int >= 1, got {self.max_nodes!r}")
+        if self.max_depth is not None and (
+            not isinstance(self.max_depth, int | np.integer) or self.max_depth < 0
+        ):
+            raise ValueError(f"max_depth must be None or an int >= 0, got {self.max_depth!r}")
+        if not (isinstance(self.eps, int | float) and 0 <= self.eps < 0.5):
+            raise ValueError(f"eps must be a number in [0, 0.5), got {self.eps!r}")
+        if self.default_label is not None:
+            _plain_label(self.default_label)
+
+    # ------------------------------------------------------------------ state
+    def _is_fitted(self) -> bool:
+        return getattr(self, "_n", 0) > 0
+
+    def _check_fitted(self) -> None:
+        if not self._is_fitted():
+            raise NotFittedError(
+                "this HypersphereClassifier is not fitted yet: call fit or partial_fit first"
+            )
+
+    def _init_tree(self, n_features: int, root_label: Any) -> None:
+        self._check_params()
+        if n_features < 1:
+            raise ValueError(f"need at least one feature, got {n_features}")
+        self.n_features_in_ = int(n_features)
+        self._tree_distance = self.distance
+        self._euclid = self.distance == "euclidean"
+        self._labels: list[Any] = []
+        self._label_index: dict[Any, int] = {}
+        cap = 64
+        self._centers = np.empty((cap, n_features), dtype=np.float64)
+        self._radii = np.empty(cap, dtype=np.float64)
+        self._parent = np.empty(cap, dtype=np.int64)
+        self._depth = np.empty(cap, dtype=np.int64)
+        self._label = np.empty(cap, dtype=np.int64)
+        self._children: list[list[int]] = []
+        self._child_arr: list[np.ndarray | None] = []
+        self._n = 0
+        self.height_ = 0
+        self.n_seen_ = 0
+        self.n_skipped_ = 0
+        self.n_relabelled_ = 0
+        root_radius = math.sqrt(n_features) / 2 if self._euclid else n_features / 4
+        self._add_node(np.full(n_features, 0.5), root_radius, -1, self._intern(root_label))
+
+    def _intern(self, label: Any) -> int:
+        label = _plain_label(label)
+        idx = self._label_index.get(label)
+        if idx is None:
+            idx = len(self._labels)
+            self._labels.append(label)
+            self._label_index[label] = idx
+            self._label_values = _label_array(self._labels)
+        return idx
+
+    def _add_node(self, center: np.ndarray, radius: float, parent: int, label: int) -> int:
+        i = self._n
+        if i == len(self._radii):
+            cap = 2 * i
+            for name in ("_centers", "_radii", "_parent", "_depth", "_label"):
+                old = getattr(self, name)
+                new = np.empty((cap,) + old.shape[1:], dtype=old.dtype)
+                new[:i] = old[:i]
+                setattr(self, name, new)
+        self._centers[i] = center
+        self._radii[i] = radius
+        self._parent[i] = parent
+        depth = 0 if parent < 0 else int(self._depth[parent]) + 1
+        self._depth[i] = depth
+        self._label[i] = label
+        self._children.append([])
+        self._child_arr.append(None)
+        if parent >= 0:
+            self._children[parent].append(i)
+            self._child_arr[parent] = None
+        self._n = i + 1
+        if depth > self.height_:
+            self.height_ = depth
+        self._layout = None
+        return i
+
+    @property
+    def node_count_(self) -> int:
+        """Number of spheres, root included."""
+        self._check_fitted()
+        return self._n
+
+    @property
+    def classes_(self) -> np.ndarray:
+        """Labels in order of first appearance (the root's label first)."""
+        self._check_fitted()
+        return self._label_values.copy()
+
+    # ------------------------------------------------------------------ input checks
+    def _check_X(self, X: Any, what: str = "X") -> np.ndarray:
+        try:
+            X = np.asarray(X, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{what} must be numeric: {exc}") from None
+        if X.ndim != 2:
+            raise ValueError(f"{what} must be 2-D (m, n_features), got shape {X.shape}")
+        n = getattr(self, "n_features_in_", None)
+        if self._is_fitted() and X.shape[1] != n:
+            raise ValueError(f"{what} has {X.shape[1]} features, the tree expects {n}")
+        if X.size == 0:
+            return X
+        if not np.isfinite(X).all():
+            row, col = np.argwhere(~np.isfinite(X))[0]
+            raise ValueError(f"{what}[{row}, {col}] is {X[row, col]}: values must be finite")
+        if self.clip:
+            return np.clip(X, 0.0, 1.0)
+        if X.min() < 0.0 or X.max() > 1.0:
+            row, col = np.argwhere((X < 0.0) | (X > 1.0))[0]
+            raise ValueError(
+                f"{what}[{row}, {col}] = {X[row, col]!r} is outside [0, 1] "
+                "(scale the features, or pass clip=True to clip)"
+            )
+        return X
+
+    def _check_x(self, x: Any) -> np.ndarray:
+        """One query vector: the fast path used by ``predict_one``."""
+        x = np.asarray(x, dtype=np.float64)
+        if x.shape != (self.n_features_in_,):
+            x = x.reshape(-1) if x.ndim == 2 and x.shape[0] == 1 else x
+            if x.shape != (self.n_features_in_,):
+                raise ValueError(
+                    f"x must have shape ({self.n_features_in_},), got {np.shape(x)}"
+                )
+        lo = x.min()
+        hi = x.max()
+        if lo >= 0.0 and hi <= 1.0:
+            return x
+        if not np.isfinite(x).all():
+            raise ValueError(f"x contains {x[~np.isfinite(x)][0]}: values must be finite")
+        if self.clip:
+            return np.clip(x, 0.0, 1.0)
+        bad = int(np.argmax((x < 0.0) | (x > 1.0)))
+        raise ValueError(
+            f"x[{bad}] = {x[bad]!r} is outside [0, 1] (scale the features, or pass clip=True)"
+        )
+
+    # ------------------------------------------------------------------ training
+    def fit(self, X: Any, y: Iterable[Any], classes: Iterable[Any] | None = None):
+        """Grow a fresh tree on ``(X, y)``, vectors in order. Returns ``self``."""
+        self._n = 0
+        return self.partial_fit(X, y, classes=classes)
+
+    def partial_fit(self, X: Any, y: Iterable[Any], classes: Iterable[Any] | None = None):
+        """Extend the tree with ``(X, y)``, one vector at a time in order. Returns ``self``.
+
+        ``classes`` optionally registers labels up front (scikit-learn compatibility); unseen
+        labels are added as they appear anyway.
+        """
+        self._check_params()
+        fitted = self._is_fitted()
+        if fitted and self.distance != self._tree_distance:
+            raise ValueError(
+                f"distance={self.distance!r} but the tree was grown with {self._tree_distance!r}"
+            )
+        X = self._check_X(X)
+        y = list(np.asarray(y, dtype=object).reshape(-1)) if not isinstance(y, list) else y
+        if len(y) != X.shape[0]:
+            raise ValueError(f"X has {X.shape[0]} rows but y has {len(y)} labels")
+        y_idx_src = [_plain_label(v) for v in y]
+        if not fitted:
+            root = self.default_label
+            if root is None:
+                if not y_idx_src:
+                    raise ValueError("default_label=None needs at least one training label")
+                root = y_idx_src[0]
+            self._init_tree(X.shape[1], root)
+        if classes is not None:
+            for c in classes:
+                self._intern(c)
+        for x, label in zip(X, y_idx_src, strict=True):
+            self._learn(x, self._intern(label))
+        return self
+
+    def learn_one(self, x: Any, label: Any) -> int:
+        """Train on one vector. Returns the number of spheres spawned or relabelled (0 = no change).
+
+        The tree must exist already (after a ``fit``/``partial_fit``, possibly on zero rows).
+        """
+        self._check_fitted()
+        self._check_params()
+        x = self._check_X(np.asarray(x, dtype=np.float64).reshape(1, -1))[0]
+        return self._learn(x, self._intern(label))
+
+    def _dist_rows(self, idx: np.ndarray, x: np.ndarray) -> np.ndarray:
+        diff = self._centers[idx] - x
+        d = np.einsum("ij,ij->i", diff, diff)
+        return np.sqrt(d, out=d) if self._euclid else d
+
+    def _dist_one(self, i: int, x: np.ndarray) -> float:
+        diff = self._centers[i] - x
+        d = float(np.dot(diff, diff))
+        return math.sqrt(d) if self._euclid else d
+
+    def _candidates(self, x: np.ndarray) -> list[int]:
+        """Spheres that enclose ``x`` (through enclosing ancestors) but none of whose children do."""
+        eps = self.eps
+        radii = self._radii
+        stack = [0]
+        out: list[int] = []
+        while stack:
+            node = stack.pop()
+            kids = self._children[node]
+            if kids:
+                arr = self._child_arr[node]
+                if arr is None:
+                    arr = self._child_arr[node] = np.array(kids, dtype=np.int64)
+                d = self._dist_rows(arr, x)
+                enc = arr[d <= radii[arr] + eps]
+                if enc.size:
+                    # reversed so that the stack visits children in creation order
+                    stack.extend(enc[::-1].tolist())
+                    continue
+            out.append(node)
+        return out
+
+    def _winner_of(self, nodes: list[int]) -> int:
+        radii = self._radii
+        depth = self._depth
+        return min(nodes, key=lambda i: (radii[i], -depth[i], i))
+
+    def _learn(self, x: np.ndarray, a: int) -> int:
+        self.n_seen_ += 1
+        cands = self._candidates(x)
+        if self.spawn == "winner":
+            w = self._winner_of(cands)
+            targets = [w] if self._label[w] != a else []
+        else:
+            targets = [c for c in cands if self._label[c] != a]
+        if not targets:
+            return 0
+        eps = self.eps
+        changes = 0
+        skipped = False
+        for p in targets:
+            d = self._dist_one(p, x)
+            if d <= eps:
+                self._label[p] = a  # coincides with the centre: relabel in place
+                self.n_relabelled_ += 1
+                self._layout = None
+                changes += 1
+                continue
+            r = max(float(self._radii[p]) - d, 0.0)
+            if (
+                (self.min_radius and r < self.min_radius)
+                or (self.max_nodes is not None and self._n >= self.max_nodes)
+                or (self.max_depth is not None and self._depth[p] + 1 > self.max_depth)
+            ):
+                skipped = True
+                continue
+            self._add_node(x, r, p, a)
+            changes += 1
+        if skipped:
+            self.n_skipped_ += 1
+        return changes
+
+    # ------------------------------------------------------------------ inference layout
+    def _build_layout(self) -> dict[str, np.ndarray]:
+        """Pre-order arrays for vectorised classification (rebuilt lazily after a change)."""
+        n = self._n
+        order = np.empty(n, dtype=np.int64)
+        end = np.empty(n, dtype=np.int64)
+        children = self._children
+        # iterative pre-order DFS, children in creation order
+        pos = 0
+        stack = [(0, False)]
+        while stack:
+            node, done = stack.pop()
+            if done:
+                end[node] = pos
+                continue
+            order[pos] = node
+            pos += 1
+            stack.append((node, True))
+            for c in reversed(children[node]):
+                stack.append((c, False))
+        posof = np.empty(n, dtype=np.int64)
+        posof[order] = np.arange(n)
+        radii = self._radii[:n]
+        depth = self._depth[:n]
+        # tie-break rank: smallest radius, then deepest, then earliest created
+        by_rank = np.lexsort((np.arange(n), -depth, radii))
+        rank = np.empty(n, dtype=np.int64)
+        rank[by_rank] = np.arange(n)
+        lay: dict[str, Any] = {}
+        lay["order"] = order
+        lay["centers"] = np.ascontiguousarray(self._centers[order])
+        lay["centers_t"] = np.ascontiguousarray(lay["centers"].T)
+        lay["reach"] = radii[order] + self.eps
+        lay["end"] = end[order]  # end position of each pre-order node's subtree
+        lay["ar"] = np.arange(n)
+        lay["rank"] = rank[order]
+        lay["rank_pos"] = posof[by_rank]  # rank -> pre-order position
+        lay["label"] = self._label[:n][order]
+        lay["big"] = np.int64(n)
+        # children in CSR form, in pre-order positions, for the batch descent
+        counts = np.array([len(children[i]) for i in order], dtype=np.int64)
+        flat = [posof[c] for i in order for c in children[i]]
+        lay["child_count"] = counts
+        lay["child_start"] = np.concatenate(([0], np.cumsum(counts)[:-1])).astype(np.int64)
+        lay["child_flat"] = np.array(flat, dtype=np.int64)
+        self._layout = lay
+        return lay
+
+    def _get_layout(self) -> dict[str, np.ndarray]:
+        lay = self._layout
+        return lay if lay is not None else self._build_layout()
+
+    def _winner_pos_one(self, x: np.ndarray, lay: dict[str, np.ndarray]) -> int:
+        diff = lay["centers"] - x
+        d = np.einsum("ij,ij->i", diff, diff)
+        if self._euclid:
+            np.sqrt(d, out=d)
+        bad = d > lay["reach"]
+        # a node is excluded if it or an ancestor does not enclose x: in pre-order, that is
+        # when some bad node at or before it has a subtree end beyond it
+        reach_end = np.maximum.accumulate(lay["end"] * bad)
+        key = np.where(reach_end > lay["ar"], lay["big"], lay["rank"])
+        return int(lay["rank_pos"][key.min()])
+
+    # ------------------------------------------------------------------ prediction
+    def predict_one(self, x: Any) -> Any:
+        """The label of one vector (the fast path for controllers). Returns a plain str/int."""
+        self._check_fitted()
+        x = self._check_x(x)
+        lay = self._get_layout()
+        return self._labels[lay["label"][self._winner_pos_one(x, lay)]]
+
+    def predict(self, X: Any) -> np.ndarray:
+        """Labels of the rows of ``X`` as a numpy array."""
+        self._check_fitted()
+        X = self._check_X(X)
+        return self._label_values[self._predict_index(X)]
+
+    def _predict_index(self, X: np.ndarray) -> np.ndarray:
+        """Label indices of the rows of a checked ``X``."""
+        lay = self._get_layout()
+        pos = self._winner_pos_batch(X, lay)
+        return lay["label"][pos]
+
+    def _winner_pos_batch(self, X: np.ndarray, lay: dict[str, np.ndarray]) -> np.ndarray:
+        m = X.shape[0]
+        n_nodes = self._n
+        if m == 0:
+            return np.zeros(0, dtype=np.int64)
+        if n_nodes <= _DENSE_BATCH_MAX_NODES:
+            return self._winner_pos_dense(X, lay)
+        return self._winner_pos_descent(X, lay)
+
+    def _winner_pos_dense(self, X: np.ndarray, lay: dict[str, np.ndarray]) -> np.ndarray:
+        """Every (query, sphere) pair at once, in chunks of queries."""
+        n_nodes = self._n
+        ct = lay["centers_t"]
+        out = np.empty(X.shape[0], dtype=np.int64)
+        step = max(1, _CHUNK_PAIRS // max(n_nodes, 1))
+        for s in range(0, X.shape[0], step):
+            Q = X[s : s + step]
+            d = np.zeros((Q.shape[0], n_nodes))
+            for k in range(ct.shape[0]):
+                t = Q[:, k, None] - ct[k]
+                t *= t
+                d += t
+            if self._euclid:
+                np.sqrt(d, out=d)
+            bad = d > lay["reach"]
+            reach_end = np.maximum.accumulate(lay["end"] * bad, axis=1)
+            key = np.where(reach_end > lay["ar"], lay["big"], lay["rank"])
+            out[s : s + step] = lay["rank_pos"][key.min(axis=1)]
+        return out
+
+    def _winner_pos_descent(self, X: np.ndarray, lay: dict[str, np.ndarray]) -> np.ndarray:
+        """Descend level by level, testing only children of enclosing spheres."""
+        m = X.shape[0]
+        C = lay["centers"]
+        reach = lay["reach"]
+        rank = lay["rank"]
+        cstart = lay["child_start"]
+        ccount = lay["child_count"]
+        cflat = lay["child_flat"]
+        best = np.full(m, rank[0], dtype=np.int64)
+        q = np.arange(m)
+        nodes = np.zeros(m, dtype=np.int64)
+        while q.size:
+            cnt = ccount[nodes]
+            keep = cnt > 0
+            if not keep.all():
+                q = q[keep]
+                nodes = nodes[keep]
+                cnt = cnt[keep]
+                if not q.size:
+                    break
+            total = int(cnt.sum())
+            csum = np.cumsum(cnt)
+            qq = np.repeat(q, cnt)
+            idx = np.repeat(cstart[nodes] - (csum - cnt), cnt)
+            idx += np.arange(total)
+            cc = cflat[idx]
+            diff = X[qq] - C[cc]
+            d = np.einsum("ij,ij->i", diff, diff)
+            if self._euclid:
+                np.sqrt(d, out=d)
+            enc = d <= reach[cc]
+            q = qq[enc]
+            nodes = cc[enc]
+            np.minimum.at(best, q, rank[nodes])
+        return lay["rank_pos"][best]
+
+    def decision_path(self, x: Any) -> list[dict[str, Any]]:
+        """The spheres from the root to the winning sphere for ``x``.
+
+        Each entry: ``index`` (creation order, root 0), ``depth``, ``radius``, ``label``,
+        ``center`` (list of floats) and ``distance`` (from ``x`` to the centre, in the tree's
+        distance units). The last entry's label is ``predict_one(x)``.
+        """
+        self._check_fitted()
+        x = self._check_x(x)
+        lay = self._get_layout()
+        node = int(lay["order"][self._winner_pos_one(x, lay)])
+        path = []
+        while node >= 0:
+            path.append(
+                {
+                    "index": node,
+                    "depth": int(self._depth[node]),
+                    "radius": float(self._radii[node]),
+                    "label": self._labels[self._label[node]],
+                    "center": self._centers[node].tolist(),
+                    "distance": self._dist_one(node, x),
+                }
+            )
+            node = int(self._parent[node])
+        return path[::-1]
+
+    def label_counts(self) -> dict[Any, int]:
+        """Number of spheres per label (every known label, root included)."""
+        self._check_fitted()
+        counts = np.bincount(self._label[: self._n], minlength=len(self._labels))
+        return {label: int(c) for label, c in zip(self._labels, counts, strict=True)}
+
+    def score(self, X: Any, y: Iterable[Any]) -> float:
+        """Mean accuracy of ``predict(X)`` against ``y``."""
+        self._check_fitted()
+        X = self._check_X(X)
+        y = [_plain_label(v) for v in np.asarray(y, dtype=object).reshape(-1)]
+        if len(y) != X.shape[0]:
+            raise ValueError(f"X has {X.shape[0]} rows but y has {len(y)} labels")
+        if not y:
+            return float("nan")
+        want = np.array([self._label_index.get(v, -1) for v in y], dtype=np.int64)
+        return float(np.mean(self._predict_index(X) == want))
+
+    # ------------------------------------------------------------------ inspection
+    def tree_arrays(self) -> dict[str, np.ndarray]:
+        """Copies of the sphere data in creation order: centers, radii, parent, depth, label."""
+        self._check_fitted()
+        n = self._n
+        return {
+            "centers": self._centers[:n].copy(),
+            "radii": self._radii[:n].copy(),
+            "parent": self._parent[:n].copy(),
+            "depth": self._depth[:n].copy(),
+            "label": self._label[:n].copy(),
+        }
+
+    def tree_equal(self, other: Any, *, metadata: bool = False) -> bool:
+        """True if ``other`` has the same parameters, labels and spheres (exactly)."""
+        if not isinstance(other, HypersphereClassifier):
+            return False
+        if self.get_params() != other.get_params():
+            return False
+        if self._is_fitted() != other._is_fitted():
+            return False
+        if metadata and self.metadata != other.metadata:
+            return False
+        if not self._is_fitted():
+            return True
+        if (
+            self.n_features_in_ != other.n_features_in_
+            or self._n != other._n
+            or self._labels != other._labels
+            or [type(v) for v in self._labels] != [type(v) for v in other._labels]
+            or (self.n_seen_, self.n_skipped_, self.n_relabelled_)
+            != (other.n_seen_, other.n_skipped_, other.n_relabelled_)
+        ):
+            return False
+        a, b = self.tree_arrays(), other.tree_arrays()
+        return all(np.array_equal(a[k], b[k]) for k in a)
+
+    def __repr__(self) -> str:
+        params = self.get_params()
+        defaults = HypersphereClassifier().get_params()
+        shown = ", ".join(f"{k}={v!r}" for k, v in params.items() if v != defaults[k])
+        return f"HypersphereClassifier({shown})"
+
+    # ------------------------------------------------------------------ snapshots
+    def save(self, path: Any, metadata: dict[str, Any] | None = None) -> None:
+        """Write a msgpack snapshot atomically. ``metadata`` updates ``self.metadata`` first."""
+        from .snapshot import save
+
+        save(self, path, metadata=metadata)
+
+    def to_bytes(self, metadata: dict[str, Any] | None = None) -> bytes:
+        """The snapshot as bytes (what ``save`` writes)."""
+        from .snapshot import dumps
+
+        return dumps(self, metadata=metadata)
