@@ -20,6 +20,7 @@ Every problem while loading raises :class:`SnapshotError` naming the file and th
 
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 from pathlib import Path
@@ -105,10 +106,8 @@ def save(clf: HypersphereClassifier, path: Any, metadata: dict[str, Any] | None 
             os.fsync(fh.fileno())
         os.replace(tmp, path)
     except BaseException:
-        try:
+        with contextlib.suppress(OSError):
             os.unlink(tmp)
-        except OSError:
-            pass
         raise
     try:  # make the rename durable; best effort (not every platform can open a folder)
         dfd = os.open(folder, os.O_RDONLY)
