@@ -1,0 +1,226 @@
+"""Behaviour metrics: pure functions over a recorded trajectory (no simulator, no zenoh).
+
+The in-process evaluator and the zenoh demo (from recorded server state messages) compute the same
+numbers with these functions. Inputs are plain sequences: ``poses`` (N, 3) of (x, y, yaw) true
+poses, ``stalls`` (N,) bools, ``actions`` (N,) action names, ``side`` (N,) distance in metres from
+the robot to the nearest wall on the followed side at each step, ``dt`` the step in seconds.
+
+    collisions(stalls) -> int                         # stall onsets (False -> True transitions)
+    distance(poses) -> float                          # metres travelled (sum of step lengths)
+    side_distance(ranges, side="right", sector_deg=60.0) -> float
+                                                      # nearest wall on one side of a 180-deg scan
+    wall_band_fraction(side, lo=0.3, hi=1.2) -> float # fraction of steps with lo <= side <= hi
+    goal_reached(poses, goal, dt) -> (bool | None, float | None)
+                                                      # goal = ((x, y), radius) or None
+    oscillations(actions, a="rot-left", b="rot-right") -> int
+                                                      # a/b alternations (runs of the same action
+                                                      # count once; other actions break the chain)
+    oscillation_loops(actions, poses, dt, min_alternations=4, window_s=6.0) -> list[dict]
+                                                      # where loops happened: {"step", "time",
+                                                      #  "pose": [x, y, yaw], "alternations"}
+    teacher_agreement(actions, teacher_actions) -> float | None
+    progress_stuck(poses, dt, window_s=30.0, min_progress=0.5) -> bool
+    wall_success(m, teacher_distance, band=0.8, ratio=0.7) -> bool
+    maze_success(m) -> bool
+    episode_metrics(poses, stalls, actions, dt, side=None, goal=None, teacher_actions=None,
+                    start=None) -> dict               # every per-episode field of evaluate's JSON
+    summarize(values) -> {"mean", "std", "min", "max", "n"}
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+__all__ = [
+    "BAND",
+    "collisions",
+    "distance",
+    "episode_metrics",
+    "goal_reached",
+    "maze_success",
+    "oscillation_loops",
+    "oscillations",
+    "progress_stuck",
+    "side_distance",
+    "summarize",
+    "teacher_agreement",
+    "wall_band_fraction",
+    "wall_success",
+]
+
+BAND = (0.3, 1.2)
+
+
+def collisions(stalls: Sequence[bool]) -> int:
+    """Number of stall onsets: a step that stalls after one that did not (or the first step)."""
+    s = np.asarray(stalls, dtype=bool)
+    if s.size == 0:
+        return 0
+    return int(s[0]) + int(np.count_nonzero(s[1:] & ~s[:-1]))
+
+
+def distance(poses) -> float:
+    """Metres travelled: the sum of the straight lines between consecutive poses."""
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3) if len(poses) else np.zeros((0, 3))
+    if len(p) < 2:
+        return 0.0
+    return float(np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1])).sum())
+
+
+def side_distance(ranges, side: str = "right", sector_deg: float = 60.0,
+                  fov_deg: float = 180.0) -> float:
+    """Nearest wall on one side: min range over the beams within ``sector_deg`` of that side's
+    edge of a ``fov_deg`` scan (ranges[0] is the robot's right)."""
+    r = np.asarray(ranges, dtype=np.float64)
+    k = int(round(sector_deg / fov_deg * (r.size - 1)))
+    part = r[: k + 1] if side == "right" else r[r.size - 1 - k:]
+    return float(part.min())
+
+
+def wall_band_fraction(side: Sequence[float], lo: float = BAND[0], hi: float = BAND[1]) -> float:
+    """Fraction of steps whose followed-side wall distance lies in [lo, hi]."""
+    d = np.asarray(side, dtype=np.float64)
+    if d.size == 0:
+        return 0.0
+    return float(np.count_nonzero((d >= lo) & (d <= hi)) / d.size)
+
+
+def goal_reached(poses, goal, dt: float) -> tuple[bool | None, float | None]:
+    """(reached, time of the first step inside the goal circle); (None, None) without a goal.
+    ``goal`` is ((x, y), radius) or any object with ``center`` and ``radius``."""
+    if goal is None:
+        return None, None
+    if hasattr(goal, "center"):
+        (gx, gy), radius = goal.center, goal.radius
+    else:
+        (gx, gy), radius = goal
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    if len(p) == 0:
+        return False, None
+    inside = np.hypot(p[:, 0] - gx, p[:, 1] - gy) <= radius
+    if not inside.any():
+        return False, None
+    i = int(np.argmax(inside))
+    return True, round((i + 1) * dt, 6)
+
+
+def _runs(actions: Sequence[str]) -> list[tuple[str, int]]:
+    """(action, first step) of each run of equal consecutive actions."""
+    out: list[tuple[str, int]] = []
+    for i, a in enumerate(actions):
+        if not out or out[-1][0] != a:
+            out.append((a, i))
+    return out
+
+
+def oscillations(actions: Sequence[str], a: str = "rot-left", b: str = "rot-right") -> int:
+    """Number of direct a<->b switches (a run of a followed immediately by a run of b, or the
+    reverse). A robot that rotates left, then right, then left has 2."""
+    runs = _runs(actions)
+    return sum(1 for (p, _), (q, _) in zip(runs, runs[1:], strict=False) if {p, q} == {a, b})
+
+
+def oscillation_loops(actions: Sequence[str], poses, dt: float, min_alternations: int = 4,
+                      window_s: float = 6.0, a: str = "rot-left", b: str = "rot-right") -> list[dict]:
+    """Where rotate-left/rotate-right loops happened: groups of at least ``min_alternations``
+    a<->b switches each within ``window_s`` of the previous. Each loop gives the step, time and
+    pose where it began (pass that pose to ``rhbl train --resume ... --start``)."""
+    runs = _runs(actions)
+    switches = [runs[k + 1][1] for k in range(len(runs) - 1) if {runs[k][0], runs[k + 1][0]} == {a, b}]
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3) if len(poses) else np.zeros((0, 3))
+    loops: list[dict] = []
+    group: list[int] = []
+    gap = max(1, int(round(window_s / dt)))
+
+    def flush():
+        if len(group) >= min_alternations:
+            step = max(0, group[0] - 1)
+            pose = [round(float(v), 3) for v in p[step]] if len(p) > step else None
+            loops.append({"step": step, "time": round(step * dt, 3), "pose": pose,
+                          "alternations": len(group)})
+
+    for s in switches:
+        if group and s - group[-1] > gap:
+            flush()
+            group = []
+        group.append(s)
+    flush()
+    return loops
+
+
+def teacher_agreement(actions: Sequence[str], teacher_actions: Sequence[str] | None) -> float | None:
+    """Fraction of steps on which the teacher would have chosen the learner's action."""
+    if teacher_actions is None:
+        return None
+    n = min(len(actions), len(teacher_actions))
+    if n == 0:
+        return None
+    same = sum(1 for x, y in zip(actions[:n], teacher_actions[:n], strict=True) if x == y)
+    return same / n
+
+
+def progress_stuck(poses, dt: float, window_s: float = 30.0, min_progress: float = 0.5) -> bool:
+    """True when some ``window_s`` window moved the robot less than ``min_progress`` metres from
+    where the window began (the prototype's 'never < 0.5 m of progress in 30 s')."""
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3) if len(poses) else np.zeros((0, 3))
+    w = int(round(window_s / dt))
+    if len(p) <= w:
+        return False
+    xy = p[:, :2]
+    for s in range(0, len(p) - w, max(1, w // 6)):
+        seg = xy[s: s + w + 1]
+        if np.hypot(*(seg - seg[0]).T).max() < min_progress:
+            return True
+    return False
+
+
+def wall_success(m: dict, teacher_distance: float | None, band: float = 0.8,
+                 ratio: float = 0.7) -> bool:
+    """Wall following succeeds: no collision, wall band fraction >= ``band`` and distance at
+    least ``ratio`` of the teacher's from the same start."""
+    ok = m["collisions"] == 0 and m["wall_band_fraction"] >= band
+    if teacher_distance is not None:
+        ok = ok and m["distance"] >= ratio * teacher_distance
+    return bool(ok)
+
+
+def maze_success(m: dict) -> bool:
+    """Maze succeeds: goal reached with no collision (within the episode's time)."""
+    return bool(m["goal_reached"]) and m["collisions"] == 0
+
+
+def episode_metrics(poses, stalls, actions, dt: float, side=None, goal=None,
+                    teacher_actions=None, start=None, band=BAND) -> dict:
+    """Every per-episode field of ``rhbl evaluate --json`` (except ``success``)."""
+    reached, t_goal = goal_reached(poses, goal, dt)
+    if reached:
+        # the episode is judged up to the goal: count stalls before it only
+        k = int(round(t_goal / dt))
+        stalls, actions = list(stalls)[:k], list(actions)[:k]
+    n = len(actions)
+    return {
+        "start": [round(float(v), 4) for v in start] if start is not None else None,
+        "seconds": round(len(poses) * dt, 6),
+        "collisions": collisions(stalls),
+        "distance": round(distance(poses), 4),
+        "wall_band_fraction": round(wall_band_fraction(side, *band), 4) if side is not None else None,
+        "goal_reached": reached,
+        "time_to_goal": t_goal,
+        "oscillations": oscillations(actions),
+        "oscillation_loops": oscillation_loops(actions, poses, dt),
+        "teacher_agreement": (round(v, 4) if (v := teacher_agreement(
+            actions, None if teacher_actions is None else list(teacher_actions)[:n])) is not None else None),
+        "stuck": progress_stuck(poses, dt),
+    }
+
+
+def summarize(values: Sequence[float]) -> dict:
+    v = np.asarray([x for x in values if x is not None and not (isinstance(x, float) and math.isnan(x))],
+                   dtype=np.float64)
+    if v.size == 0:
+        return {"mean": None, "std": None, "min": None, "max": None, "n": 0}
+    return {"mean": float(v.mean()), "std": float(v.std()), "min": float(v.min()),
+            "max": float(v.max()), "n": int(v.size)}
