@@ -1,0 +1,447 @@
+"""Message types of the rhbl protocol (docs/protocol.md): dataclasses with ``encode()`` /
+``decode()``. ``decode`` validates every field it reads (type, length, finiteness), the protocol
+version and the payload size, and raises :class:`DecodeError` naming the field.
+
+Field names on the wire are exactly the ones in docs/protocol.md; extra fields are allowed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from protocol.codec import (
+    MAX_PAYLOAD,
+    PROTOCOL_VERSION,
+    DecodeError,
+    ProtocolError,
+    get_bool,
+    get_bytes,
+    get_float,
+    get_int,
+    get_opt,
+    get_str,
+    get_vec,
+    pack,
+    unpack,
+)
+
+__all__ = [
+    "COMMAND_MAX_PAYLOAD",
+    "PROTOCOL_VERSION",
+    "Ack",
+    "DecodeError",
+    "DriverState",
+    "Geometry",
+    "LaserConfig",
+    "MotorPower",
+    "Nack",
+    "ProtocolError",
+    "Scan",
+    "SetOdom",
+    "State",
+    "TeacherAction",
+    "TreeNotice",
+    "VelCmd",
+]
+
+COMMAND_MAX_PAYLOAD = 64 * 1024  # bytes: commands and requests are small
+_MAX_BEAMS = 100_000
+
+
+class _Message:
+    WHAT: ClassVar[str] = "message"
+    MAX_SIZE: ClassVar[int] = MAX_PAYLOAD
+
+    def to_map(self) -> dict[str, Any]:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    @classmethod
+    def from_map(cls, m: dict[str, Any]):  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def encode(self) -> bytes:
+        return pack(self.to_map())
+
+    @classmethod
+    def decode(cls, data: Any, max_size: int | None = None):
+        m = unpack(data, cls.WHAT, cls.MAX_SIZE if max_size is None else max_size)
+        return cls.from_map(m)
+
+
+def _opt_vec3(m, name, what):
+    return get_opt(m, name, get_vec, what, 3)
+
+
+@dataclass
+class State(_Message):
+    """Position2d state: ``pos`` is the odometry pose [x, y, yaw], ``vel`` [vx, vy, va] in the
+    robot frame, ``stall`` true if the robot pushed into an obstacle during the last tick,
+    ``driver`` the command source driving (``""``: none), ``truth`` the true pose (simulation)."""
+
+    WHAT: ClassVar[str] = "state"
+    ts: float
+    seq: int
+    pos: tuple[float, float, float]
+    vel: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    stall: bool = False
+    driver: str = ""
+    truth: tuple[float, float, float] | None = None
+
+    def to_map(self):
+        m = {
+            "ts": float(self.ts),
+            "seq": int(self.seq),
+            "pos": [float(x) for x in self.pos],
+            "vel": [float(x) for x in self.vel],
+            "stall": bool(self.stall),
+            "driver": str(self.driver),
+        }
+        if self.truth is not None:
+            m["truth"] = [float(x) for x in self.truth]
+        return m
+
+    @classmethod
+    def from_map(cls, m):
+        w = cls.WHAT
+        return cls(
+            ts=get_float(m, "ts", w),
+            seq=get_int(m, "seq", w, minimum=0),
+            pos=get_vec(m, "pos", w, 3),
+            vel=get_vec(m, "vel", w, 3),
+            stall=get_bool(m, "stall", w),
+            driver=get_opt(m, "driver", get_str, w, default=""),
+            truth=_opt_vec3(m, "truth", w),
+        )
+
+
+@dataclass
+class Scan(_Message):
+    """A laser scan. ``ranges`` float32, ``ranges[0]`` at ``min_angle`` (the robot's right),
+    counter-clockwise; bearing(i) = min_angle + i * resolution. ``pose`` the odometry pose at
+    the scan, ``truth`` the true pose (simulation)."""
+
+    WHAT: ClassVar[str] = "scan"
+    ts: float
+    id: int
+    ranges: np.ndarray
+    pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    min_angle: float = -np.pi / 2
+    max_angle: float = np.pi / 2
+    resolution: float = np.pi / 359
+    max_range: float = 8.0
+    truth: tuple[float, float, float] | None = None
+
+    @property
+    def count(self) -> int:
+        return int(len(self.ranges))
+
+    def bearings(self) -> np.ndarray:
+        return self.min_angle + np.arange(self.count) * self.resolution
+
+    def to_map(self):
+        m = {
+            "ts": float(self.ts),
+            "id": int(self.id),
+            "min_angle": float(self.min_angle),
+            "max_angle": float(self.max_angle),
+            "resolution": float(self.resolution),
+            "max_range": float(self.max_range),
+            "ranges": np.ascontiguousarray(self.ranges, dtype="<f4").tobytes(),
+            "pose": [float(x) for x in self.pose],
+        }
+        if self.truth is not None:
+            m["truth"] = [float(x) for x in self.truth]
+        return m
+
+    @classmethod
+    def from_map(cls, m):
+        w = cls.WHAT
+        raw = get_bytes(m, "ranges", w)
+        if len(raw) % 4 or not 0 < len(raw) // 4 <= _MAX_BEAMS:
+            raise DecodeError(
+                f"{w}: field 'ranges': expected 1..{_MAX_BEAMS} little-endian float32 values, "
+                f"got {len(raw)} bytes"
+            )
+        ranges = np.frombuffer(raw, dtype="<f4").astype(np.float32)
+        if not np.isfinite(ranges).all():
+            raise DecodeError(f"{w}: field 'ranges': expected finite values, got NaN or infinity")
+        return cls(
+            ts=get_float(m, "ts", w),
+            id=get_int(m, "id", w, minimum=0),
+            ranges=ranges,
+            pose=get_vec(m, "pose", w, 3),
+            min_angle=get_float(m, "min_angle", w),
+            max_angle=get_float(m, "max_angle", w),
+            resolution=get_float(m, "resolution", w),
+            max_range=get_float(m, "max_range", w),
+            truth=_opt_vec3(m, "truth", w),
+        )
+
+
+@dataclass
+class VelCmd(_Message):
+    """A velocity command: ``vel`` [vx, vy, va] (m/s, m/s, rad/s; vy is ignored by a
+    differential drive), ``state`` motors on, ``source`` who commands (``teacher``,
+    ``controller``, ...), ``scan_id`` the scan this command answers (lock-step), optional."""
+
+    WHAT: ClassVar[str] = "cmd/vel"
+    MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
+    vx: float = 0.0
+    va: float = 0.0
+    vy: float = 0.0
+    state: bool = True
+    source: str = ""
+    scan_id: int | None = None
+    ts: float | None = None
+
+    def to_map(self):
+        m = {
+            "vel": [float(self.vx), float(self.vy), float(self.va)],
+            "state": bool(self.state),
+            "source": str(self.source),
+        }
+        if self.scan_id is not None:
+            m["scan_id"] = int(self.scan_id)
+        if self.ts is not None:
+            m["ts"] = float(self.ts)
+        return m
+
+    @classmethod
+    def from_map(cls, m):
+        w = cls.WHAT
+        vx, vy, va = get_vec(m, "vel", w, 3)
+        return cls(
+            vx=vx,
+            va=va,
+            vy=vy,
+            state=get_bool(m, "state", w),
+            source=get_opt(m, "source", get_str, w, default=""),
+            scan_id=get_opt(m, "scan_id", get_int, w, minimum=0),
+            ts=get_opt(m, "ts", get_float, w),
+        )
+
+
+@dataclass
+class DriverState(_Message):
+    """Which command source drives a robot (``source`` ``""``: none), published on
+    ``driver_key``; ``priority`` of that source; ``ts`` sim time."""
+
+    WHAT: ClassVar[str] = "driver"
+    source: str
+    ts: float = 0.0
+    priority: int = 0
+
+    def to_map(self):
+        return {"source": self.source, "ts": float(self.ts), "priority": int(self.priority)}
+
+    @classmethod
+    def from_map(cls, m):
+        w = cls.WHAT
+        return cls(
+            source=get_str(m, "source", w),
+            ts=get_float(m, "ts", w),
+            priority=get_int(m, "priority", w),
+        )
+
+
+@dataclass
+class TeacherAction(_Message):
+    """The teacher's label for a scan: ``action`` name (e.g. ``fwd-left``), ``scan_id``."""
+
+    WHAT: ClassVar[str] = "teacher/action"
+    MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
+    scan_id: int
+    action: str
+    source: str = "teacher"
+    ts: float = 0.0
+    executed: str | None = None  # the action actually executed (perturbed demonstrations)
+
+    def to_map(self):
+        m = {
+            "scan_id": int(self.scan_id),
+            "action": self.action,
+            "source": self.source,
+            "ts": float(self.ts),
+        }
+        if self.executed is not None:
+            m["executed"] = self.executed
+        return m
+
+    @classmethod
+    def from_map(cls, m):
+        w = cls.WHAT
+        return cls(
+            scan_id=get_int(m, "scan_id", w, minimum=0),
+            action=get_str(m, "action", w),
+            source=get_opt(m, "source", get_str, w, default=""),
+            ts=get_opt(m, "ts", get_float, w, default=0.0),
+            executed=get_opt(m, "executed", get_str, w),
+        )
+
+
+@dataclass
+class TreeNotice(_Message):
+    """A learner's "tree updated" notice: size of the tree and the snapshot to fetch."""
+
+    WHAT: ClassVar[str] = "learner/notice"
+    seq: int
+    nodes: int
+    height: int
+    vectors: int = 0
+    snapshot_id: str = ""
+    ts: float = 0.0
+
+    def to_map(self):
+        return {
+            "seq": int(self.seq),
+            "nodes": int(self.nodes),
+            "height": int(self.height),
+            "vectors": int(self.vectors),
+            "snapshot_id": self.snapshot_id,
+            "ts": float(self.ts),
+        }
+
+    @classmethod
+    def from_map(cls, m):
+        w = cls.WHAT
+        return cls(
+            seq=get_int(m, "seq", w, minimum=0),
+            nodes=get_int(m, "nodes", w, minimum=0),
+            height=get_int(m, "height", w, minimum=0),
+            vectors=get_opt(m, "vectors", get_int, w, minimum=0, default=0),
+            snapshot_id=get_opt(m, "snapshot_id", get_str, w, default=""),
+            ts=get_opt(m, "ts", get_float, w, default=0.0),
+        )
+
+
+@dataclass
+class Geometry(_Message):
+    """Reply to ``get_geom``: device ``pose`` [x, y, yaw] on the robot, ``size`` [length,
+    width] (m); for position2d also the collision ``radius``."""
+
+    WHAT: ClassVar[str] = "geom"
+    pose: tuple[float, float, float]
+    size: tuple[float, float]
+    radius: float | None = None
+
+    def to_map(self):
+        m = {"pose": [float(x) for x in self.pose], "size": [float(x) for x in self.size]}
+        if self.radius is not None:
+            m["radius"] = float(self.radius)
+        return m
+
+    @classmethod
+    def from_map(cls, m):
+        w = cls.WHAT
+        return cls(
+            pose=get_vec(m, "pose", w, 3),
+            size=get_vec(m, "size", w, 2),
+            radius=get_opt(m, "radius", get_float, w),
+        )
+
+
+@dataclass
+class LaserConfig(_Message):
+    """Reply to the laser's ``get_config``."""
+
+    WHAT: ClassVar[str] = "laser config"
+    min_angle: float
+    max_angle: float
+    resolution: float
+    max_range: float
+    count: int
+    rate: float = 10.0
+
+    def to_map(self):
+        return {
+            "min_angle": float(self.min_angle),
+            "max_angle": float(self.max_angle),
+            "resolution": float(self.resolution),
+            "max_range": float(self.max_range),
+            "count": int(self.count),
+            "rate": float(self.rate),
+        }
+
+    @classmethod
+    def from_map(cls, m):
+        w = cls.WHAT
+        return cls(
+            min_angle=get_float(m, "min_angle", w),
+            max_angle=get_float(m, "max_angle", w),
+            resolution=get_float(m, "resolution", w),
+            max_range=get_float(m, "max_range", w),
+            count=get_int(m, "count", w, minimum=1),
+            rate=get_float(m, "rate", w),
+        )
+
+
+@dataclass
+class SetOdom(_Message):
+    """Request payload of ``set_odom``: the new odometry ``pose`` [x, y, yaw]."""
+
+    WHAT: ClassVar[str] = "set_odom"
+    MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
+    pose: tuple[float, float, float]
+
+    def to_map(self):
+        return {"pose": [float(x) for x in self.pose]}
+
+    @classmethod
+    def from_map(cls, m):
+        return cls(pose=get_vec(m, "pose", cls.WHAT, 3))
+
+
+@dataclass
+class MotorPower(_Message):
+    """Request payload of ``motor_power``: ``state`` true to enable the motors."""
+
+    WHAT: ClassVar[str] = "motor_power"
+    MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
+    state: bool
+
+    def to_map(self):
+        return {"state": bool(self.state)}
+
+    @classmethod
+    def from_map(cls, m):
+        return cls(state=get_bool(m, "state", cls.WHAT))
+
+
+@dataclass
+class Ack(_Message):
+    """A successful reply without data (``ok`` true); ``info`` optional free text."""
+
+    WHAT: ClassVar[str] = "ack"
+    info: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def to_map(self):
+        m = dict(self.extra)
+        m.update({"ok": True, "info": self.info})
+        return m
+
+    @classmethod
+    def from_map(cls, m):
+        w = cls.WHAT
+        if m.get("ok") is not True:
+            raise DecodeError(f"{w}: field 'ok': expected true, got {m.get('ok')!r}")
+        extra = {k: v for k, v in m.items() if k not in ("v", "ok", "info")}
+        return cls(info=get_opt(m, "info", get_str, w, default=""), extra=extra)
+
+
+@dataclass
+class Nack(_Message):
+    """A refused request, sent as a zenoh error reply: ``reason`` says why."""
+
+    WHAT: ClassVar[str] = "nack"
+    reason: str
+
+    def to_map(self):
+        return {"ok": False, "reason": self.reason}
+
+    @classmethod
+    def from_map(cls, m):
+        return cls(reason=get_str(m, "reason", cls.WHAT, max_len=4096))
