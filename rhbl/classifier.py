@@ -292,9 +292,9 @@ class HypersphereClassifier:
                 raise ValueError(
                     f"x must have shape ({self.n_features_in_},), got {np.shape(x)}"
                 )
-        lo = x.min()
-        hi = x.max()
-        if lo >= 0.0 and hi <= 1.0:
+        xs = x.tolist()
+        total = sum(xs)
+        if min(xs) >= 0.0 and max(xs) <= 1.0 and total == total:  # NaN fails total == total
             return x
         if not np.isfinite(x).all():
             raise ValueError(f"x contains {x[~np.isfinite(x)][0]}: values must be finite")
@@ -425,7 +425,7 @@ class HypersphereClassifier:
         return changes
 
     # ------------------------------------------------------------------ inference layout
-    def _build_layout(self) -> dict[str, np.ndarray]:
+    def _build_layout(self) -> dict[str, Any]:
         """Pre-order arrays for vectorised classification (rebuilt lazily after a change)."""
         n = self._n
         order = np.empty(n, dtype=np.int64)
@@ -454,8 +454,7 @@ class HypersphereClassifier:
         rank[by_rank] = np.arange(n)
         lay: dict[str, Any] = {}
         lay["order"] = order
-        lay["centers"] = np.ascontiguousarray(self._centers[order])
-        lay["centers_t"] = np.ascontiguousarray(lay["centers"].T)
+        lay["centers_t"] = np.ascontiguousarray(self._centers[order].T)
         lay["reach"] = radii[order] + self.eps
         lay["end"] = end[order]  # end position of each pre-order node's subtree
         lay["ar"] = np.arange(n)
@@ -463,22 +462,35 @@ class HypersphereClassifier:
         lay["rank_pos"] = posof[by_rank]  # rank -> pre-order position
         lay["label"] = self._label[:n][order]
         lay["big"] = np.int64(n)
-        # children in CSR form, in pre-order positions, for the batch descent
-        counts = np.array([len(children[i]) for i in order], dtype=np.int64)
-        flat = [posof[c] for i in order for c in children[i]]
-        lay["child_count"] = counts
-        lay["child_start"] = np.concatenate(([0], np.cumsum(counts)[:-1])).astype(np.int64)
-        lay["child_flat"] = np.array(flat, dtype=np.int64)
+        # per pre-order position: children positions, their centres (transposed) and reach
+        ct_all = lay["centers_t"]
+        reach = lay["reach"]
+        kids: list[np.ndarray | None] = []
+        kids_ct: list[np.ndarray | None] = []
+        kids_reach: list[np.ndarray | None] = []
+        for i in order.tolist():
+            if children[i]:
+                k = posof[children[i]]
+                kids.append(k)
+                kids_ct.append(np.ascontiguousarray(ct_all[:, k]))
+                kids_reach.append(reach[k])
+            else:
+                kids.append(None)
+                kids_ct.append(None)
+                kids_reach.append(None)
+        lay["kids"] = kids
+        lay["kids_ct"] = kids_ct
+        lay["kids_reach"] = kids_reach
         self._layout = lay
         return lay
 
-    def _get_layout(self) -> dict[str, np.ndarray]:
+    def _get_layout(self) -> dict[str, Any]:
         lay = self._layout
         return lay if lay is not None else self._build_layout()
 
-    def _winner_pos_one(self, x: np.ndarray, lay: dict[str, np.ndarray]) -> int:
-        diff = lay["centers"] - x
-        d = np.einsum("ij,ij->i", diff, diff)
+    def _winner_pos_one(self, x: np.ndarray, lay: dict[str, Any]) -> int:
+        diff = lay["centers_t"] - x[:, None]
+        d = np.einsum("ij,ij->j", diff, diff)
         if self._euclid:
             np.sqrt(d, out=d)
         bad = d > lay["reach"]
@@ -508,7 +520,7 @@ class HypersphereClassifier:
         pos = self._winner_pos_batch(X, lay)
         return lay["label"][pos]
 
-    def _winner_pos_batch(self, X: np.ndarray, lay: dict[str, np.ndarray]) -> np.ndarray:
+    def _winner_pos_batch(self, X: np.ndarray, lay: dict[str, Any]) -> np.ndarray:
         m = X.shape[0]
         n_nodes = self._n
         if m == 0:
@@ -517,7 +529,7 @@ class HypersphereClassifier:
             return self._winner_pos_dense(X, lay)
         return self._winner_pos_descent(X, lay)
 
-    def _winner_pos_dense(self, X: np.ndarray, lay: dict[str, np.ndarray]) -> np.ndarray:
+    def _winner_pos_dense(self, X: np.ndarray, lay: dict[str, Any]) -> np.ndarray:
         """Every (query, sphere) pair at once, in chunks of queries."""
         n_nodes = self._n
         ct = lay["centers_t"]
@@ -538,41 +550,44 @@ class HypersphereClassifier:
             out[s : s + step] = lay["rank_pos"][key.min(axis=1)]
         return out
 
-    def _winner_pos_descent(self, X: np.ndarray, lay: dict[str, np.ndarray]) -> np.ndarray:
-        """Descend level by level, testing only children of enclosing spheres."""
+    def _winner_pos_descent(self, X: np.ndarray, lay: dict[str, Any]) -> np.ndarray:
+        """Descend sphere by sphere, carrying the queries each sphere encloses.
+
+        Only the children of spheres that enclose some query are tested, and a query's
+        coordinates are gathered once per enclosing sphere (not once per tested child).
+        """
         m = X.shape[0]
-        C = lay["centers"]
-        reach = lay["reach"]
         rank = lay["rank"]
-        cstart = lay["child_start"]
-        ccount = lay["child_count"]
-        cflat = lay["child_flat"]
+        kids_of = lay["kids"]
+        kids_ct = lay["kids_ct"]
+        kids_reach = lay["kids_reach"]
         best = np.full(m, rank[0], dtype=np.int64)
-        q = np.arange(m)
-        nodes = np.zeros(m, dtype=np.int64)
-        while q.size:
-            cnt = ccount[nodes]
-            keep = cnt > 0
-            if not keep.all():
-                q = q[keep]
-                nodes = nodes[keep]
-                cnt = cnt[keep]
-                if not q.size:
-                    break
-            total = int(cnt.sum())
-            csum = np.cumsum(cnt)
-            qq = np.repeat(q, cnt)
-            idx = np.repeat(cstart[nodes] - (csum - cnt), cnt)
-            idx += np.arange(total)
-            cc = cflat[idx]
-            diff = X[qq] - C[cc]
-            d = np.einsum("ij,ij->i", diff, diff)
-            if self._euclid:
+        stack = [(0, np.arange(m), np.ascontiguousarray(X.T))]
+        euclid = self._euclid
+        while stack:
+            node, q, xt = stack.pop()
+            kids = kids_of[node]
+            if kids is None:
+                continue
+            ct = kids_ct[node]
+            d = np.subtract.outer(ct[0], xt[0])
+            d *= d
+            for k in range(1, ct.shape[0]):
+                t = np.subtract.outer(ct[k], xt[k])
+                t *= t
+                d += t
+            if euclid:
                 np.sqrt(d, out=d)
-            enc = d <= reach[cc]
-            q = qq[enc]
-            nodes = cc[enc]
-            np.minimum.at(best, q, rank[nodes])
+            enc = d <= kids_reach[node][:, None]
+            hit = enc.any(axis=1)
+            for j in np.flatnonzero(hit).tolist():
+                mask = enc[j]
+                qj = q[mask]
+                c = int(kids[j])
+                rc = rank[c]
+                cur = best[qj]
+                best[qj] = np.minimum(cur, rc)
+                stack.append((c, qj, xt[:, mask]))
         return lay["rank_pos"][best]
 
     def decision_path(self, x: Any) -> list[dict[str, Any]]:
