@@ -1,0 +1,317 @@
+"""The shipped router security (docker/zenoh/router.json5) on loopback, with real zenoh sessions.
+
+A Python session in router mode (docker/router_standin.py) runs the very config file the compose
+router uses, with secrets freshly made by scripts/gen-dev-secrets.sh in a temporary directory.
+Clients use the generated per-role configs, as the processes do with ``--zenoh-config``.
+Every wait is bounded.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import socket
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+zenoh = pytest.importorskip("zenoh")
+from protocol import keys  # noqa: E402
+
+pytestmark = pytest.mark.integration
+
+ROOT = Path(__file__).resolve().parents[2]
+ROUTER_CONFIG = ROOT / "docker" / "zenoh" / "router.json5"
+GEN_SECRETS = ROOT / "scripts" / "gen-dev-secrets.sh"
+ROLES = ("server", "teacher", "learner", "controller")
+ROBOT = "r0"
+SETTLE = 0.3  # s: how long a message that should NOT arrive is given to arrive
+
+
+def _load_standin():
+    spec = importlib.util.spec_from_file_location("router_standin", ROOT / "docker" / "router_standin.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def secrets(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("secrets")
+    env = {"PATH": "/usr/bin:/bin:/usr/local/bin", "SECRETS_PREFIX": str(out), "FORCE": "1"}
+    subprocess.run(["bash", str(GEN_SECRETS), str(out)], check=True, env=env, capture_output=True, timeout=60)
+    return out
+
+
+def _users(secrets: Path) -> dict[str, str]:
+    lines = (secrets / "users.txt").read_text().splitlines()
+    return dict(line.split(":", 1) for line in lines if line)
+
+
+def _client_config(secrets: Path, port: int, role: str | None = "teacher", **change) -> zenoh.Config:
+    """The generated ``<role>.json5`` (or a bare config), pointed at the router, then changed."""
+    if role is None:
+        config = zenoh.Config()
+        config.insert_json5("transport/link/tls/root_ca_certificate", json.dumps(str(secrets / "ca.pem")))
+    else:
+        config = zenoh.Config.from_file(str(secrets / f"{role}.json5"))
+    config.insert_json5("mode", '"client"')
+    config.insert_json5("connect/endpoints", json.dumps([f"tls/localhost:{port}"]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    for key, value in change.items():
+        config.insert_json5(key.replace("__", "/"), json.dumps(value))
+    return config
+
+
+def _refused(config: zenoh.Config) -> bool:
+    try:
+        session = zenoh.open(config)
+    except zenoh.ZError:
+        return True
+    session.close()
+    return False
+
+
+@pytest.fixture(scope="module")
+def router(secrets):
+    standin = _load_standin()
+    port = _free_port()
+    session = standin.open_router(ROUTER_CONFIG, secrets, [f"tls/127.0.0.1:{port}"])
+    yield port
+    session.close()
+
+
+@pytest.fixture(scope="module")
+def sessions(secrets, router):
+    opened = {role: zenoh.open(_client_config(secrets, router, role)) for role in ROLES}
+    yield opened
+    for session in opened.values():
+        session.close()
+
+
+class Inbox:
+    """Collects (subscriber, key, payload) from callback subscribers; bounded waits."""
+
+    def __init__(self):
+        self.items: list[tuple[str, str, bytes]] = []
+        self.cond = threading.Condition()
+
+    def handler(self, who: str):
+        def on_sample(sample):
+            with self.cond:
+                self.items.append((who, str(sample.key_expr), sample.payload.to_bytes()))
+                self.cond.notify_all()
+
+        return on_sample
+
+    def wait_for(self, item, timeout: float = 3.0) -> bool:
+        deadline = time.monotonic() + timeout
+        with self.cond:
+            while item not in self.items:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self.cond.wait(left)
+            return True
+
+
+def _subscribe(sessions, inbox, who, key):
+    return sessions[who].declare_subscriber(key, inbox.handler(who))
+
+
+# ---- authentication ------------------------------------------------------------------------
+
+
+def test_authorised_client_is_accepted(secrets, router):
+    with zenoh.open(_client_config(secrets, router, "teacher")) as session:
+        assert str(session.zid())
+
+
+def test_client_without_the_ca_is_refused(secrets, router):
+    config = _client_config(secrets, router, "teacher")
+    config.insert_json5("transport/link/tls/root_ca_certificate", "null")
+    assert _refused(config)
+
+
+def test_client_trusting_another_ca_is_refused(secrets, router, tmp_path):
+    other = tmp_path / "other"
+    env = {"PATH": "/usr/bin:/bin:/usr/local/bin", "SECRETS_PREFIX": str(other)}
+    subprocess.run(["bash", str(GEN_SECRETS), str(other)], check=True, env=env, capture_output=True, timeout=60)
+    # a router certificate made by a different CA (e.g. an impostor) is not trusted either
+    assert _refused(_client_config(other, router, "teacher"))
+
+
+def test_wrong_password_is_refused(secrets, router):
+    config = _client_config(secrets, router, "teacher", transport__auth__usrpwd__password="not-it")
+    assert _refused(config)
+
+
+def test_unknown_user_is_refused(secrets, router):
+    password = _users(secrets)["teacher"]
+    config = _client_config(
+        secrets, router, None, transport__auth__usrpwd__user="admin", transport__auth__usrpwd__password=password
+    )
+    assert _refused(config)
+
+
+def test_anonymous_client_is_refused(secrets, router):
+    assert _refused(_client_config(secrets, router, None))
+
+
+def test_plain_tcp_is_refused(secrets, router):
+    config = _client_config(secrets, router, "teacher")
+    config.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{router}"]))
+    assert _refused(config)
+
+
+def test_mutual_tls_requires_a_client_certificate(secrets):
+    standin = _load_standin()
+    port = _free_port()
+    mtls = ["transport/link/tls/enable_mtls:true"]
+    with standin.open_router(ROUTER_CONFIG, secrets, [f"tls/127.0.0.1:{port}"], mtls):
+        with zenoh.open(_client_config(secrets, port, "learner")) as session:
+            assert str(session.zid())
+        no_cert = _client_config(secrets, port, "learner")
+        no_cert.insert_json5("transport/link/tls/enable_mtls", "false")
+        assert _refused(no_cert)
+
+
+# ---- access control --------------------------------------------------------------------------
+
+
+def test_learner_cannot_publish_commands_teacher_and_controller_can(sessions):
+    inbox = Inbox()
+    sub = _subscribe(sessions, inbox, "server", keys.cmd_vel_subscription(ROBOT))
+    time.sleep(SETTLE)
+    teacher_key = keys.cmd_vel_key(ROBOT, source="teacher")
+    controller_key = keys.cmd_vel_key(ROBOT, source="controller")
+    plain_key = keys.cmd_vel_key(ROBOT)
+    denied = [
+        ("learner", teacher_key),
+        ("learner", controller_key),
+        ("learner", plain_key),
+        ("teacher", controller_key),  # a teacher cannot pose as the controller
+        ("controller", teacher_key),  # nor the controller as the teacher
+        ("teacher", plain_key),  # the key without a source is closed on the secured router
+        ("controller", plain_key),
+    ]
+    for who, key in denied:
+        sessions[who].put(key, f"denied:{who}".encode())
+    sessions["teacher"].put(teacher_key, b"teacher")
+    sessions["controller"].put(controller_key, b"controller")
+    try:
+        assert inbox.wait_for(("server", teacher_key, b"teacher"))
+        assert inbox.wait_for(("server", controller_key, b"controller"))
+        time.sleep(SETTLE)
+        leaked = [item for item in inbox.items if item[2].startswith(b"denied:")]
+        assert leaked == []
+    finally:
+        sub.undeclare()
+
+
+def test_sensor_data_flows_to_authorised_readers_only_from_the_server(sessions):
+    inbox = Inbox()
+    readers = ("teacher", "learner", "controller")
+    subs = [_subscribe(sessions, inbox, who, f"rhbl/{ROBOT}/*/*/data/**") for who in readers]
+    time.sleep(SETTLE)
+    for who in ("teacher", "learner", "controller"):  # forged sensor data
+        sessions[who].put(keys.scan_key(ROBOT), f"forged:{who}".encode())
+    sessions["server"].put(keys.scan_key(ROBOT), b"scan")
+    sessions["server"].put(keys.state_key(ROBOT), b"state")
+    sessions["server"].put(keys.driver_key(ROBOT), b"driver")
+    try:
+        for who in readers:
+            for key, payload in [
+                (keys.scan_key(ROBOT), b"scan"),
+                (keys.state_key(ROBOT), b"state"),
+                (keys.driver_key(ROBOT), b"driver"),
+            ]:
+                assert inbox.wait_for((who, key, payload)), (who, key)
+        time.sleep(SETTLE)
+        # a forger's own subscriber sees its own put locally; nobody else may
+        leaked = [(who, p) for who, _, p in inbox.items if p.startswith(b"forged:") and p != f"forged:{who}".encode()]
+        assert leaked == []
+    finally:
+        for sub in subs:
+            sub.undeclare()
+
+
+def test_only_the_teacher_labels_demonstrations(sessions):
+    inbox = Inbox()
+    sub = _subscribe(sessions, inbox, "learner", keys.teacher_action_key(ROBOT))
+    time.sleep(SETTLE)
+    for who in ("controller", "server"):
+        sessions[who].put(keys.teacher_action_key(ROBOT), f"forged:{who}".encode())
+    sessions["teacher"].put(keys.teacher_action_key(ROBOT), b"label")
+    try:
+        assert inbox.wait_for(("learner", keys.teacher_action_key(ROBOT), b"label"))
+        time.sleep(SETTLE)
+        assert [p for _, _, p in inbox.items if p.startswith(b"forged:")] == []
+    finally:
+        sub.undeclare()
+
+
+def _ask(session, key) -> list[bytes]:
+    return [reply.ok.payload.to_bytes() for reply in session.get(key, timeout=1.5) if reply.ok]
+
+
+def test_requests_are_answered_by_the_server_mutating_ones_not_for_the_learner(sessions):
+    geom, odom = keys.request_key(ROBOT, "laser", "get_geom"), keys.request_key(ROBOT, "position2d", "set_odom")
+    queryables = [
+        sessions["server"].declare_queryable(key, lambda q: q.reply(q.key_expr, b"ack")) for key in (geom, odom)
+    ]
+    forged = sessions["teacher"].declare_queryable(
+        keys.request_key(ROBOT, "laser", "get_config"), lambda q: q.reply(q.key_expr, b"forged")
+    )
+    time.sleep(SETTLE)
+    try:
+        for who in ("teacher", "learner", "controller"):
+            assert _ask(sessions[who], geom) == [b"ack"], who
+        assert _ask(sessions["teacher"], odom) == [b"ack"]
+        assert _ask(sessions["learner"], odom) == []
+        # only the server answers device requests
+        assert _ask(sessions["controller"], keys.request_key(ROBOT, "laser", "get_config")) == []
+    finally:
+        forged.undeclare()
+        for q in queryables:
+            q.undeclare()
+
+
+def test_learner_snapshot_and_notices_reach_the_controller(sessions):
+    inbox = Inbox()
+    sub = _subscribe(sessions, inbox, "controller", keys.learner_notice_key(ROBOT))
+    snap = sessions["learner"].declare_queryable(
+        keys.learner_snapshot_key(ROBOT), lambda q: q.reply(q.key_expr, b"tree")
+    )
+    time.sleep(SETTLE)
+    sessions["teacher"].put(keys.learner_notice_key(ROBOT), b"forged:teacher")
+    sessions["learner"].put(keys.learner_notice_key(ROBOT), b"notice")
+    try:
+        assert inbox.wait_for(("controller", keys.learner_notice_key(ROBOT), b"notice"))
+        assert _ask(sessions["controller"], keys.learner_snapshot_key(ROBOT)) == [b"tree"]
+        time.sleep(SETTLE)
+        assert [p for _, _, p in inbox.items if p.startswith(b"forged:")] == []
+    finally:
+        snap.undeclare()
+        sub.undeclare()
+
+
+def test_liveliness_is_shared_between_authorised_roles(sessions):
+    token = sessions["teacher"].liveliness().declare_token(keys.alive_key("teacher", "t1"))
+    try:
+        deadline = time.monotonic() + 3.0
+        seen: list[str] = []
+        while time.monotonic() < deadline and keys.alive_key("teacher", "t1") not in seen:
+            seen = [str(r.ok.key_expr) for r in sessions["server"].liveliness().get("rhbl/alive/**", timeout=1.0) if r.ok]
+        assert keys.alive_key("teacher", "t1") in seen
+    finally:
+        token.undeclare()
