@@ -32,7 +32,9 @@ SETTLE = 0.3  # s: how long a message that should NOT arrive is given to arrive
 
 
 def _load_standin():
-    spec = importlib.util.spec_from_file_location("router_standin", ROOT / "docker" / "router_standin.py")
+    spec = importlib.util.spec_from_file_location(
+        "router_standin", ROOT / "docker" / "router_standin.py"
+    )
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -48,7 +50,9 @@ def _free_port() -> int:
 def secrets(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("secrets")
     env = {"PATH": "/usr/bin:/bin:/usr/local/bin", "SECRETS_PREFIX": str(out), "FORCE": "1"}
-    subprocess.run(["bash", str(GEN_SECRETS), str(out)], check=True, env=env, capture_output=True, timeout=60)
+    subprocess.run(
+        ["bash", str(GEN_SECRETS), str(out)], check=True, env=env, capture_output=True, timeout=60
+    )
     return out
 
 
@@ -57,11 +61,15 @@ def _users(secrets: Path) -> dict[str, str]:
     return dict(line.split(":", 1) for line in lines if line)
 
 
-def _client_config(secrets: Path, port: int, role: str | None = "teacher", **change) -> zenoh.Config:
+def _client_config(
+    secrets: Path, port: int, role: str | None = "teacher", **change
+) -> zenoh.Config:
     """The generated ``<role>.json5`` (or a bare config), pointed at the router, then changed."""
     if role is None:
         config = zenoh.Config()
-        config.insert_json5("transport/link/tls/root_ca_certificate", json.dumps(str(secrets / "ca.pem")))
+        config.insert_json5(
+            "transport/link/tls/root_ca_certificate", json.dumps(str(secrets / "ca.pem"))
+        )
     else:
         config = zenoh.Config.from_file(str(secrets / f"{role}.json5"))
     config.insert_json5("mode", '"client"')
@@ -145,7 +153,9 @@ def test_client_without_the_ca_is_refused(secrets, router):
 def test_client_trusting_another_ca_is_refused(secrets, router, tmp_path):
     other = tmp_path / "other"
     env = {"PATH": "/usr/bin:/bin:/usr/local/bin", "SECRETS_PREFIX": str(other)}
-    subprocess.run(["bash", str(GEN_SECRETS), str(other)], check=True, env=env, capture_output=True, timeout=60)
+    subprocess.run(
+        ["bash", str(GEN_SECRETS), str(other)], check=True, env=env, capture_output=True, timeout=60
+    )
     # a router certificate made by a different CA (e.g. an impostor) is not trusted either
     assert _refused(_client_config(other, router, "teacher"))
 
@@ -158,7 +168,11 @@ def test_wrong_password_is_refused(secrets, router):
 def test_unknown_user_is_refused(secrets, router):
     password = _users(secrets)["teacher"]
     config = _client_config(
-        secrets, router, None, transport__auth__usrpwd__user="admin", transport__auth__usrpwd__password=password
+        secrets,
+        router,
+        None,
+        transport__auth__usrpwd__user="admin",
+        transport__auth__usrpwd__password=password,
     )
     assert _refused(config)
 
@@ -238,7 +252,11 @@ def test_sensor_data_flows_to_authorised_readers_only_from_the_server(sessions):
                 assert inbox.wait_for((who, key, payload)), (who, key)
         time.sleep(SETTLE)
         # a forger's own subscriber sees its own put locally; nobody else may
-        leaked = [(who, p) for who, _, p in inbox.items if p.startswith(b"forged:") and p != f"forged:{who}".encode()]
+        leaked = [
+            (who, p)
+            for who, _, p in inbox.items
+            if p.startswith(b"forged:") and p != f"forged:{who}".encode()
+        ]
         assert leaked == []
     finally:
         for sub in subs:
@@ -265,9 +283,13 @@ def _ask(session, key) -> list[bytes]:
 
 
 def test_requests_are_answered_by_the_server_mutating_ones_not_for_the_learner(sessions):
-    geom, odom = keys.request_key(ROBOT, "laser", "get_geom"), keys.request_key(ROBOT, "position2d", "set_odom")
+    geom, odom = (
+        keys.request_key(ROBOT, "laser", "get_geom"),
+        keys.request_key(ROBOT, "position2d", "set_odom"),
+    )
     queryables = [
-        sessions["server"].declare_queryable(key, lambda q: q.reply(q.key_expr, b"ack")) for key in (geom, odom)
+        sessions["server"].declare_queryable(key, lambda q: q.reply(q.key_expr, b"ack"))
+        for key in (geom, odom)
     ]
     forged = sessions["teacher"].declare_queryable(
         keys.request_key(ROBOT, "laser", "get_config"), lambda q: q.reply(q.key_expr, b"forged")
@@ -311,7 +333,11 @@ def test_liveliness_is_shared_between_authorised_roles(sessions):
         deadline = time.monotonic() + 3.0
         seen: list[str] = []
         while time.monotonic() < deadline and keys.alive_key("teacher", "t1") not in seen:
-            seen = [str(r.ok.key_expr) for r in sessions["server"].liveliness().get("rhbl/alive/**", timeout=1.0) if r.ok]
+            seen = [
+                str(r.ok.key_expr)
+                for r in sessions["server"].liveliness().get("rhbl/alive/**", timeout=1.0)
+                if r.ok
+            ]
         assert keys.alive_key("teacher", "t1") in seen
     finally:
         token.undeclare()
