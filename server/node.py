@@ -1,0 +1,374 @@
+"""The zenoh node of the simulator: publishes state and scans, takes commands and requests.
+
+One :class:`ServerNode` owns a :class:`server.world.World` and a zenoh session. ``run()`` ticks
+at a fixed rate in sim time (``rate`` Hz): each tick applies the arbitrated commands, steps the
+world by ``1/rate`` s and publishes every robot's state and scan. Pacing:
+
+- real time (``speedup=1``) or N times real time (``speedup=N``), or as fast as possible
+  (``speedup=0``);
+- lock-step (``lockstep=True``): after publishing scan ``k`` the next tick starts only when every
+  robot got a command answering scan ``k`` (``scan_id == k``) from its driving source (from any
+  source when none holds it), or after ``lockstep_timeout`` real seconds.
+
+Everything arriving from the network is validated; a bad message is dropped with a log line
+and counted in ``counters`` (never raised, never applied).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import threading
+import time
+from collections import Counter
+from collections.abc import Sequence
+from typing import Any
+
+import zenoh
+
+from protocol import keys
+from protocol.codec import DecodeError
+from protocol.messages import (
+    COMMAND_MAX_PAYLOAD,
+    Ack,
+    DriverState,
+    Geometry,
+    LaserConfig,
+    MotorPower,
+    Nack,
+    Scan,
+    SetOdom,
+    State,
+    VelCmd,
+)
+from server.arbiter import Arbiter, priority_of
+from server.world import LASER, ROBOT, World
+
+__all__ = ["ServerNode"]
+
+log = logging.getLogger(__name__)
+
+_LASER_SIZE = (0.156, 0.155)  # m, a SICK LMS200's footprint
+_DRIVER_REPEAT = 1.0  # s sim time between repeated driver messages
+
+
+class _RobotIO:
+    def __init__(self, name: str, index: int, watchdog: float) -> None:
+        self.name = name
+        self.index = index
+        self.arbiter = Arbiter(timeout=watchdog)
+        self.motors = True
+        self.answers: dict[str, int] = {}  # source -> last scan_id it answered
+        self.scan_id = 0  # id of the last published scan
+        self.seq = 0
+        self.driver = ""
+        self.driver_sent = -math.inf
+        self.pubs: dict[str, Any] = {}
+
+
+class ServerNode:
+    """Serve ``world`` over ``session`` for robots named ``names`` (one per world robot)."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        world: World,
+        names: Sequence[str] | None = None,
+        rate: float = 10.0,
+        speedup: float = 1.0,
+        lockstep: bool = False,
+        lockstep_timeout: float = 1.0,
+        watchdog: float = 0.5,
+        ident: str = "sim",
+    ) -> None:
+        if names is None:
+            names = [keys.robot_name(i) for i in range(world.n_robots)]
+        names = list(names)
+        if len(names) != world.n_robots or len(set(names)) != len(names):
+            raise ValueError(f"need {world.n_robots} distinct robot names, got {names}")
+        for n in names:
+            keys.check_chunk(n, "robot name")
+        if not (rate > 0 and math.isfinite(rate)):
+            raise ValueError(f"rate must be a positive number of Hz, got {rate!r}")
+        if not (speedup >= 0 and math.isfinite(speedup)):
+            raise ValueError(f"speedup must be >= 0 (0: as fast as possible), got {speedup!r}")
+        if not lockstep_timeout > 0:
+            raise ValueError(f"lockstep timeout must be > 0 s, got {lockstep_timeout!r}")
+        self.session = session
+        self.world = world
+        self.rate = float(rate)
+        self.dt = 1.0 / self.rate
+        self.speedup = float(speedup)
+        self.lockstep = bool(lockstep)
+        self.lockstep_timeout = float(lockstep_timeout)
+        self.watchdog = float(watchdog)
+        self.ident = keys.check_chunk(ident, "server ident")
+        self.counters: Counter[str] = Counter()
+        self.ticks = 0
+        self.lockstep_timeouts = 0
+        self._cond = threading.Condition()
+        self._stop = threading.Event()
+        self._robots = [_RobotIO(n, i, self.watchdog) for i, n in enumerate(names)]
+        self._by_name = {r.name: r for r in self._robots}
+        self._decls: list[Any] = []
+        self._declare()
+
+    # -- zenoh declarations ---------------------------------------------------------------
+
+    def _declare(self) -> None:
+        s = self.session
+        for r in self._robots:
+            r.pubs["state"] = s.declare_publisher(keys.state_key(r.name))
+            r.pubs["scan"] = s.declare_publisher(keys.scan_key(r.name))
+            r.pubs["driver"] = s.declare_publisher(keys.driver_key(r.name))
+            self._decls.append(
+                s.declare_subscriber(
+                    keys.cmd_vel_subscription(r.name),
+                    lambda sample, r=r: self._on_cmd(r, sample),
+                )
+            )
+            for iface, name in [
+                ("position2d", "get_geom"),
+                ("position2d", "set_odom"),
+                ("position2d", "reset_odom"),
+                ("position2d", "motor_power"),
+                ("laser", "get_geom"),
+                ("laser", "get_config"),
+            ]:
+                self._decls.append(
+                    s.declare_queryable(
+                        keys.request_key(r.name, iface, name),
+                        lambda q, r=r, iface=iface, name=name: self._on_query(r, iface, name, q),
+                    )
+                )
+        self._decls.append(
+            s.liveliness().declare_subscriber(f"{keys.PREFIX}/alive/**", self._on_liveliness)
+        )
+        self._token = s.liveliness().declare_token(keys.alive_key("server", self.ident))
+
+    def close(self) -> None:
+        """Undeclare everything (the session stays open; its owner closes it)."""
+        self._stop.set()
+        for d in self._decls:
+            with contextlib.suppress(Exception):  # already gone with the session
+                d.undeclare()
+        self._decls.clear()
+        with contextlib.suppress(Exception):
+            self._token.undeclare()
+
+    # -- input ------------------------------------------------------------------------------
+
+    def _reject(self, what: str, reason: str) -> None:
+        self.counters[what] += 1
+        self.counters["rejected"] += 1
+        n = self.counters[what]
+        if n <= 10 or n % 100 == 0:
+            log.warning("rejected %s (%d so far): %s", what, n, reason)
+
+    def _on_cmd(self, r: _RobotIO, sample: zenoh.Sample) -> None:
+        try:
+            payload = sample.payload.to_bytes()
+            key = str(sample.key_expr)
+            msg = VelCmd.decode(payload, max_size=COMMAND_MAX_PAYLOAD)
+            key_source = keys.source_of_cmd_key(key)
+            if key_source is not None and key_source != msg.source:
+                self._reject(
+                    "cmd",
+                    f"{key}: field 'source' {msg.source!r} does not match the key's "
+                    f"source {key_source!r}",
+                )
+                return
+            with self._cond:
+                now = self.world.time
+                r.arbiter.offer(msg.source, msg.vx, msg.va, msg.state, now)
+                if msg.scan_id is not None:
+                    r.answers[msg.source] = msg.scan_id
+                self.counters["cmd"] += 1
+                self._cond.notify_all()
+        except DecodeError as e:
+            self._reject("cmd", f"{sample.key_expr}: {e}")
+        except Exception as e:  # never let a message kill the node
+            self._reject("cmd", f"{sample.key_expr}: unexpected {type(e).__name__}: {e}")
+
+    def _on_liveliness(self, sample: zenoh.Sample) -> None:
+        try:
+            if sample.kind != zenoh.SampleKind.DELETE:
+                return
+            parts = str(sample.key_expr).split("/")
+            if len(parts) < 4:
+                return
+            role = parts[2]
+            with self._cond:
+                for r in self._robots:
+                    r.arbiter.release_role(role)
+                self._cond.notify_all()
+            log.info("liveliness token %s gone: released role %r", sample.key_expr, role)
+        except Exception as e:
+            log.warning("liveliness sample not understood: %s", e)
+
+    def _on_query(self, r: _RobotIO, iface: str, name: str, query: zenoh.Query) -> None:
+        try:
+            reply = self._answer(r, iface, name, query)
+            query.reply(query.key_expr, reply.encode())
+            self.counters["request"] += 1
+        except (DecodeError, ValueError) as e:
+            self.counters["request_nack"] += 1
+            self._reject("request", f"{iface}/{name}: {e}")
+            try:
+                query.reply_err(Nack(reason=str(e)).encode())
+            except Exception as e2:
+                log.warning("could not send NACK: %s", e2)
+        except Exception as e:
+            self._reject("request", f"{iface}/{name}: unexpected {type(e).__name__}: {e}")
+            with contextlib.suppress(Exception):
+                query.reply_err(Nack(reason=f"internal error: {type(e).__name__}").encode())
+
+    def _answer(self, r: _RobotIO, iface: str, name: str, query: zenoh.Query):
+        payload = query.payload.to_bytes() if query.payload is not None else b""
+        if len(payload) > COMMAND_MAX_PAYLOAD:
+            raise DecodeError(f"{name}: payload of {len(payload)} bytes exceeds the limit")
+        i = r.index
+        if iface == "laser":
+            if name == "get_geom":
+                return Geometry(pose=(LASER.offset, 0.0, 0.0), size=_LASER_SIZE)
+            return LaserConfig(
+                min_angle=LASER.min_angle,
+                max_angle=LASER.max_angle,
+                resolution=LASER.resolution,
+                max_range=LASER.max_range,
+                count=LASER.count,
+                rate=self.rate,
+            )
+        if name == "get_geom":
+            return Geometry(
+                pose=(0.0, 0.0, 0.0), size=(ROBOT.length, ROBOT.width), radius=ROBOT.radius
+            )
+        if name == "set_odom":
+            if not payload:
+                raise DecodeError("set_odom: missing payload, expected {v, pose: [x, y, yaw]}")
+            msg = SetOdom.decode(payload)
+            with self._cond:
+                self.world.set_odom(i, msg.pose)
+            return Ack(info="odometry set")
+        if name == "reset_odom":
+            with self._cond:
+                self.world.reset_odom(i)
+            return Ack(info="odometry reset to (0, 0, 0)")
+        if name == "motor_power":
+            if not payload:
+                raise DecodeError("motor_power: missing payload, expected {v, state: bool}")
+            msg = MotorPower.decode(payload)
+            with self._cond:
+                r.motors = msg.state
+            return Ack(info=f"motors {'on' if msg.state else 'off'}")
+        raise ValueError(f"unknown request {iface}/{name}")  # pragma: no cover
+
+    # -- the loop ---------------------------------------------------------------------------
+
+    def stop(self) -> None:
+        self._stop.set()
+        with self._cond:
+            self._cond.notify_all()
+
+    @property
+    def stopped(self) -> bool:
+        return self._stop.is_set()
+
+    def _publish(self) -> None:
+        w = self.world
+        ts = w.time
+        for r in self._robots:
+            i = r.index
+            r.seq += 1
+            r.scan_id += 1
+            pos = w.odom(i)
+            truth = w.pose(i)
+            r.pubs["state"].put(
+                State(
+                    ts=ts,
+                    seq=r.seq,
+                    pos=pos,
+                    vel=w.velocity(i),
+                    stall=w.stall(i),
+                    driver=r.driver,
+                    truth=truth,
+                ).encode()
+            )
+            r.pubs["scan"].put(
+                Scan(
+                    ts=ts,
+                    id=r.scan_id,
+                    ranges=w.scan(i),
+                    pose=pos,
+                    min_angle=LASER.min_angle,
+                    max_angle=LASER.max_angle,
+                    resolution=LASER.resolution,
+                    max_range=LASER.max_range,
+                    truth=truth,
+                ).encode()
+            )
+
+    def _apply_commands(self) -> None:
+        now = self.world.time
+        for r in self._robots:
+            vx, va, driver = r.arbiter.command(now)
+            if not r.motors:
+                vx = va = 0.0
+            self.world.set_command(r.index, vx, va)
+            if driver != r.driver or now - r.driver_sent >= _DRIVER_REPEAT:
+                if driver != r.driver:
+                    log.info("%s: driver %r -> %r", r.name, r.driver, driver)
+                r.driver = driver
+                r.driver_sent = now
+                r.pubs["driver"].put(
+                    DriverState(source=driver, ts=now, priority=priority_of(driver)).encode()
+                )
+
+    def _answered(self) -> bool:
+        now = self.world.time
+        for r in self._robots:
+            h = r.arbiter.driver(now)
+            if h is None or r.answers.get(h.source) != r.scan_id:
+                return False
+        return True
+
+    def tick(self) -> None:
+        """One tick: apply arbitrated commands, step, publish."""
+        with self._cond:
+            self._apply_commands()
+            self.world.step(self.dt)
+            self.ticks += 1
+            self._publish()
+
+    def run(self, duration: float | None = None) -> None:
+        """Tick until :meth:`stop` (or ``duration`` sim seconds). Publishes the initial state
+        and scan first (so a lock-step client has a scan to answer)."""
+        with self._cond:
+            self._publish()
+        period = self.dt / self.speedup if self.speedup > 0 else 0.0
+        next_t = time.monotonic() + period
+        end = None if duration is None else self.world.time + duration - 1e-9
+        while not self._stop.is_set():
+            if end is not None and self.world.time >= end:
+                break
+            if self.lockstep:
+                deadline = time.monotonic() + self.lockstep_timeout
+                with self._cond:
+                    while not self._stop.is_set() and not self._answered():
+                        left = deadline - time.monotonic()
+                        if left <= 0:
+                            self.lockstep_timeouts += 1
+                            break
+                        self._cond.wait(min(left, 0.1))
+            elif period > 0:
+                delay = next_t - time.monotonic()
+                if delay > 0:
+                    if self._stop.wait(delay):
+                        break
+                elif delay < -1.0:  # far behind (suspended?): do not try to catch up
+                    next_t = time.monotonic()
+                next_t += period
+            if self._stop.is_set():
+                break
+            self.tick()
