@@ -1,0 +1,385 @@
+"""``rhbl learner``: grow a hypersphere tree from a teacher's demonstrations over zenoh.
+
+Pairs every ``TeacherAction`` label with exactly the scan it answers (by scan id, whichever
+arrives first), appends the labeled vector to the journal ``<out>.journal`` (flushed before it is
+learned) and learns it with ``client.behaviour.learning.DemonstrationLearner`` (the in-process
+harness's code path). Snapshots are written atomically every ``--snapshot-every`` seconds when the
+tree changed and on exit; each records how many journal records it includes, so a killed learner
+restarted with the same command rebuilds exactly (last snapshot + the journal records after it).
+
+It publishes a ``TreeNotice`` on ``rhbl/<robot>/learner/notice`` after each snapshot and answers
+queries on ``rhbl/<robot>/learner/snapshot`` with the latest snapshot's bytes.
+
+    rhbl learner --features wall --out tree.rhbl                 # new tree (or continue tree.rhbl)
+    rhbl learner --resume tree.rhbl --out tree2.rhbl             # extend a tree: a new lineage
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import queue
+import signal
+import time
+from collections import OrderedDict
+from pathlib import Path
+
+import numpy as np
+
+from client._process import (
+    EXIT_USAGE,
+    Context,
+    ProcessError,
+    ScanWatch,
+    add_process_arguments,
+    run,
+    wait_for_server,
+)
+from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
+from client.behaviour.features import FEATURES, FeatureSpec
+from client.behaviour.learning import (
+    DemonstrationLearner,
+    IncompatibleSnapshotError,
+    check_compatible,
+    load_snapshot,
+)
+from client.journal import Journal, JournalError, journal_path
+from protocol import keys
+from protocol.messages import Scan, TeacherAction, TreeNotice
+
+__all__ = ["LearnerCore", "add_arguments", "main", "TASK_OF_FEATURES"]
+
+log = logging.getLogger(__name__)
+
+TASK_OF_FEATURES = {"wall": "wall-following", "maze": "maze"}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_process_arguments(parser)
+    parser.add_argument("--features", choices=sorted(FEATURES),
+                        help="feature specification (required for a new tree; checked against "
+                             "the tree when continuing or resuming)")
+    parser.add_argument("--out", required=True, metavar="PATH",
+                        help="snapshot path; the journal is PATH.journal. If they exist the "
+                             "learner continues them (after a crash: snapshot + journal)")
+    parser.add_argument("--resume", metavar="SNAPSHOT",
+                        help="extend an existing tree: start a new lineage at --out from it "
+                             "(its path is recorded as the parent in the provenance)")
+    parser.add_argument("--task", default=None,
+                        help="task stored in the metadata (default: from --features)")
+    parser.add_argument("--spawn", choices=["winner", "all"], default="winner",
+                        help="tree growth rule: 'all' = the paper's literal rule, 'winner' = "
+                             "spawn under the winning sphere only (smaller trees; default)")
+    parser.add_argument("--stride", type=int, default=1, help="learn every n-th labeled vector")
+    parser.add_argument("--min-delta", type=float, default=0.0,
+                        help="skip a vector that moved less than this with an unchanged label")
+    parser.add_argument("--max-nodes", type=int, default=None, help="cap on the tree size")
+    parser.add_argument("--snapshot-every", type=float, default=2.0, metavar="SECONDS",
+                        help="write a snapshot this often (wall time) when the tree changed")
+    parser.add_argument("--fsync-interval", type=float, default=1.0, metavar="SECONDS",
+                        help="fsync the journal at most this long after an append (default 1)")
+    parser.add_argument("--match-timeout", type=float, default=2.0, metavar="SECONDS",
+                        help="a label whose scan has not arrived after this is dropped and counted")
+    parser.add_argument("--scan-buffer", type=int, default=512,
+                        help="how many recent unlabeled scans are kept for pairing")
+
+
+# ---- the learning core (no zenoh: testable on its own) --------------------------------------
+class LearnerCore:
+    """Snapshot + journal + DemonstrationLearner: ``learn`` a labeled scan, ``snapshot``."""
+
+    def __init__(self, out: str | os.PathLike, features: str | None = None,
+                 resume: str | None = None, task: str | None = None,
+                 tree_params: dict | None = None, stride: int = 1, min_delta: float = 0.0,
+                 fsync_interval: float = 1.0, actions: ActionSet = DEFAULT_ACTIONS):
+        self.out = Path(out)
+        self.jpath = journal_path(self.out)
+        self.out.parent.mkdir(parents=True, exist_ok=True)
+        spec = FEATURES[features] if features else None
+        self.replayed = 0
+        if self.jpath.exists():
+            self.journal = Journal.open(self.jpath, fsync_interval=fsync_interval)
+            self.learner, self.applied = self._recover(spec, resume)
+        else:
+            if self.out.exists() and (resume is None or Path(resume).resolve() != self.out.resolve()):
+                raise ProcessError(
+                    f"{self.out} exists but has no journal {self.jpath.name}: it was not written "
+                    f"by a learner. Extend it with --resume {self.out} --out NEW_PATH", EXIT_USAGE)
+            if resume is not None:
+                learner = _resume(resume, spec)
+                parent = str(Path(resume).resolve())
+            else:
+                if spec is None:
+                    raise ProcessError("a new tree needs --features (wall or maze)", EXIT_USAGE)
+                params = {"spawn": "winner", **(tree_params or {})}
+                learner = DemonstrationLearner(
+                    spec, actions, task=task or TASK_OF_FEATURES.get(features or ""),
+                    stride=stride, min_delta=min_delta, **params)
+                parent = None
+            header = {"parent": parent, "meta": learner.metadata()}
+            self.journal = Journal.create(self.jpath, header, fsync_interval=fsync_interval)
+            self.learner, self.applied = learner, 0
+            log.info("new tree lineage %s at %s%s", self.journal.lineage, self.out,
+                     f" (extending {parent})" if parent else "")
+        self.learner.parent = self.journal.header.get("parent")
+        self.saved_applied = self.applied if self.out.exists() else -1
+        self.seq = 0
+
+    @property
+    def features(self) -> FeatureSpec:
+        return self.learner.features
+
+    @property
+    def actions(self) -> ActionSet:
+        return self.learner.actions
+
+    def _recover(self, spec: FeatureSpec | None, resume: str | None):
+        header = self.journal.header
+        lineage = self.journal.lineage
+        parent = header.get("parent")
+        if resume is not None and (parent is None
+                                   or Path(parent).resolve() != Path(resume).resolve()):
+            raise ProcessError(
+                f"{self.out} already holds a tree lineage ({'extending ' + parent if parent else 'a new tree'}"
+                f"), not one extending {resume}: choose another --out", EXIT_USAGE)
+        try:
+            check_compatible(header.get("meta"), spec)
+        except IncompatibleSnapshotError as exc:
+            raise ProcessError(f"cannot continue {self.out}: {exc}", EXIT_USAGE) from exc
+        start = 0
+        learner = None
+        if self.out.exists():
+            _clf, _f, _a, meta = load_snapshot(self.out)
+            j = (meta.get("provenance") or {}).get("journal") or {}
+            if j.get("lineage") == lineage:
+                learner = _resume(self.out, None)
+                start = int(j.get("records", 0))
+            elif parent is None or Path(parent).resolve() != self.out.resolve():
+                raise ProcessError(
+                    f"snapshot {self.out} does not belong to journal {self.jpath} (lineage "
+                    f"{j.get('lineage')!r} != {lineage!r}); move one of them aside", EXIT_USAGE)
+        if learner is None:  # killed before its first snapshot: start where the lineage started
+            if parent is not None:
+                learner = _resume(parent, None)
+            else:
+                meta = header["meta"]
+                learning = meta.get("learning") or {}
+                learner = DemonstrationLearner(
+                    FeatureSpec.from_dict(meta["features"]), ActionSet.from_dict(meta["actions"]),
+                    task=meta.get("task"), stride=int(learning.get("stride", 1)),
+                    min_delta=float(learning.get("min_delta", 0.0)),
+                    **(meta.get("tree_params") or {}))
+        if start > len(self.journal):
+            raise ProcessError(
+                f"snapshot {self.out} includes {start} journal records but {self.jpath} holds "
+                f"only {len(self.journal)}: the journal lost records", EXIT_USAGE)
+        t0 = time.monotonic()
+        for rec in self.journal.records(start):
+            learner.observe(rec.ranges, rec.yaw, rec.label)
+            self.replayed += 1
+        log.info("recovered lineage %s: snapshot held %d journal records, replayed %d more in "
+                 "%.2f s (%d nodes)", lineage, start, self.replayed, time.monotonic() - t0,
+                 learner.nodes)
+        return learner, len(self.journal)
+
+    def learn(self, scan_id: int, ts: float, ranges, yaw: float, label: str) -> bool:
+        """Journal (flushed) then learn one labeled scan; True when it reached the tree."""
+        x = self.learner.features.extract(ranges, yaw)
+        self.journal.append(scan_id, ts, label, ranges, yaw, x.astype(np.float32))
+        learned = self.learner.observe(ranges, yaw, label)
+        self.applied += 1
+        return learned
+
+    @property
+    def dirty(self) -> bool:
+        """Labeled vectors not in the snapshot yet (and a tree to write: an empty one is not)."""
+        return self.applied != self.saved_applied and self.learner.vectors > 0
+
+    def metadata(self) -> dict:
+        meta = self.learner.metadata()
+        prov = meta["provenance"]
+        prov["journal"] = {"path": self.jpath.name, "lineage": self.journal.lineage,
+                           "records": self.applied}
+        prov["labeled"] = self.applied
+        prov["time"] = time.time()
+        return meta
+
+    def snapshot(self) -> bytes:
+        """Write the snapshot atomically (journal fsync'd first); returns its bytes."""
+        self.journal.sync()
+        self.learner.classifier.save(str(self.out), metadata=self.metadata())
+        self.saved_applied = self.applied
+        self.seq += 1
+        return self.out.read_bytes()
+
+    def close(self) -> None:
+        self.journal.close()
+
+
+def _resume(path, spec: FeatureSpec | None) -> DemonstrationLearner:
+    try:
+        return DemonstrationLearner.resume(path, spec)
+    except IncompatibleSnapshotError as exc:
+        raise ProcessError(f"cannot extend {path}: {exc}", EXIT_USAGE) from exc
+    except FileNotFoundError as exc:
+        raise ProcessError(f"snapshot {path} does not exist", EXIT_USAGE) from exc
+    except Exception as exc:  # rhbl.SnapshotError and friends
+        raise ProcessError(f"cannot load snapshot {path}: {exc}", EXIT_USAGE) from exc
+
+
+# ---- the process --------------------------------------------------------------------------
+class _Stop:
+    """SIGINT/SIGTERM set a flag; the loop finishes the vector at hand, snapshots and exits."""
+
+    def __init__(self):
+        self.flag = False
+
+    def __call__(self, signum, _frame):
+        self.flag = True
+
+
+def main(args: argparse.Namespace) -> int:
+    return run("learner", args, _body)
+
+
+def _body(ctx: Context) -> int:
+    args = ctx.args
+    stop = _Stop()
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
+    try:
+        core = LearnerCore(
+            args.out, features=args.features, resume=args.resume, task=args.task,
+            tree_params={"spawn": args.spawn,
+                         **({"max_nodes": args.max_nodes} if args.max_nodes else {})},
+            stride=args.stride, min_delta=args.min_delta, fsync_interval=args.fsync_interval)
+    except JournalError as exc:
+        raise ProcessError(f"learner: {exc}") from exc
+    session, robot = ctx.session, ctx.robot
+    events: queue.SimpleQueue = queue.SimpleQueue()
+    latest = {"bytes": core.out.read_bytes() if core.out.exists() else None}
+    notice_pub = session.declare_publisher(keys.learner_notice_key(robot))
+    snap_key = keys.learner_snapshot_key(robot)
+
+    def on_query(query):
+        data = latest["bytes"]
+        try:
+            if data is None:
+                query.reply_err(b"no snapshot yet")
+            else:
+                query.reply(snap_key, data)
+        except Exception as exc:  # noqa: BLE001 - the querier went away
+            log.debug("snapshot reply failed: %s", exc)
+
+    scan_k = keys.scan_key(robot)
+    subs = [
+        session.declare_subscriber(scan_k, lambda s: events.put((0, s.payload.to_bytes()))),
+        session.declare_subscriber(keys.teacher_action_key(robot),
+                                   lambda s: events.put((1, s.payload.to_bytes()))),
+    ]
+    queryable = session.declare_queryable(snap_key, on_query)
+    if core.dirty:
+        latest["bytes"] = core.snapshot()
+    log.info("learning: features %s, %d vectors so far, %d nodes; snapshot %s",
+             core.features.to_dict()["beams"], core.applied, core.learner.nodes, core.out)
+
+    if not stop.flag:
+        try:
+            wait_for_server(ctx)
+        except SystemExit:
+            stop.flag = True
+    watch = ScanWatch("learner", scan_k, stale=3.0).start()
+    scans: OrderedDict[int, Scan] = OrderedDict()
+    pending: dict[int, tuple[TeacherAction, float]] = {}
+    stats = {"learned": 0, "paired": 0, "unmatched": 0, "bad": 0, "rejected": 0}
+    last_snap = time.monotonic()
+    last_log = last_snap
+
+    def publish_notice():
+        latest["bytes"] = core.snapshot()
+        note = TreeNotice(seq=core.seq, nodes=core.learner.nodes, height=core.learner.height,
+                          vectors=core.applied, snapshot_id=f"{core.journal.lineage}:{core.applied}",
+                          ts=time.time())
+        notice_pub.put(note.encode())
+
+    def learn(scan: Scan, act: TeacherAction):
+        if act.action not in core.actions:
+            stats["rejected"] += 1
+            log.warning("label %r for scan %d is not an action of this tree %s: dropped",
+                        act.action, act.scan_id, core.actions.names)
+            return
+        stats["paired"] += 1
+        if core.learn(scan.id, scan.ts, scan.ranges, float(scan.pose[2]), act.action):
+            stats["learned"] += 1
+
+    try:
+        while not stop.flag:
+            try:
+                kind, data = events.get(timeout=0.1)
+            except queue.Empty:
+                kind = None
+            if kind == 0:
+                watch.seen()
+                try:
+                    scan = Scan.decode(data)
+                except Exception as exc:  # noqa: BLE001 - DecodeError
+                    stats["bad"] += 1
+                    log.warning("dropped a malformed scan: %s", exc)
+                    scan = None
+                if scan is not None:
+                    hit = pending.pop(scan.id, None)
+                    if hit is not None:
+                        learn(scan, hit[0])
+                    else:
+                        scans[scan.id] = scan
+                        while len(scans) > args.scan_buffer:
+                            scans.popitem(last=False)
+            elif kind == 1:
+                try:
+                    act = TeacherAction.decode(data)
+                except Exception as exc:  # noqa: BLE001
+                    stats["bad"] += 1
+                    log.warning("dropped a malformed teacher action: %s", exc)
+                    act = None
+                if act is not None:
+                    scan = scans.pop(act.scan_id, None)
+                    if scan is not None:
+                        learn(scan, act)
+                    else:
+                        pending[act.scan_id] = (act, time.monotonic())
+            now = time.monotonic()
+            if pending and (kind is None or len(pending) > 64):
+                old = [k for k, (_, t) in pending.items() if now - t > args.match_timeout]
+                for k in old:
+                    del pending[k]
+                if old:
+                    stats["unmatched"] += len(old)
+                    log.warning("%d labels matched no scan within %.1f s (scan ids %s...): "
+                                "dropped; %d so far", len(old), args.match_timeout, old[:3],
+                                stats["unmatched"])
+            if core.dirty and now - last_snap >= args.snapshot_every:
+                publish_notice()
+                last_snap = now
+            if now - last_log >= 5.0:
+                last_log = now
+                log.info("vectors %d (learned %d this run), nodes %d, height %d, unmatched %d",
+                         core.applied, stats["learned"], core.learner.nodes,
+                         core.learner.height, stats["unmatched"])
+    finally:
+        watch.stop()
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        for s in subs:
+            s.undeclare()
+        try:
+            if core.dirty:
+                publish_notice()
+            log.info("stopped: %d labeled vectors (%d this run, %d learned, %d unmatched "
+                     "labels, %d malformed), %d nodes, height %d; snapshot %s",
+                     core.applied, stats["paired"], stats["learned"], stats["unmatched"],
+                     stats["bad"], core.learner.nodes, core.learner.height, core.out)
+        finally:
+            queryable.undeclare()
+            core.close()
+    return 0
