@@ -85,11 +85,10 @@ def to_dict(clf: HypersphereClassifier, metadata: dict[str, Any] | None = None) 
 def dumps(clf: HypersphereClassifier, metadata: dict[str, Any] | None = None, *,
           source: str = "<bytes>") -> bytes:
     """The snapshot of ``clf`` as msgpack bytes."""
+    clf._check_fitted()
     try:
         return msgpack.packb(to_dict(clf, metadata), default=_default, use_bin_type=True)
     except (TypeError, ValueError, OverflowError) as exc:
-        if isinstance(exc, SnapshotError):
-            raise
         raise SnapshotError(source, f"cannot serialise the snapshot: {exc}") from exc
 
 

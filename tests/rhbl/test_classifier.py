@@ -1,0 +1,250 @@
+"""API contract, degenerate inputs and growth options of HypersphereClassifier."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import rhbl
+from rhbl import HypersphereClassifier, NotFittedError
+from rhbl import classifier as clfmod
+
+
+def synthetic(m=400, n=5, seed=0, k=5):
+    rng = np.random.default_rng(seed)
+    X = rng.random((m, n))
+    protos = rng.random((k, n))
+    y = np.argmin(((X[:, None, :] - protos) ** 2).sum(-1), axis=1)
+    names = np.array(["fwd", "fwd-left", "rot-left", "fwd-right", "rot-right"][:k])
+    return X, names[y]
+
+
+def test_exports():
+    assert set(rhbl.__all__) >= {"HypersphereClassifier", "load", "SnapshotError", "NotFittedError"}
+
+
+def test_rhbl_imports_nothing_of_ours():
+    code = (
+        "import sys, rhbl; bad = [m for m in ('protocol', 'server', 'client', 'lab') "
+        "if m in sys.modules]; assert not bad, bad"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_not_fitted():
+    clf = HypersphereClassifier(default_label="fwd")
+    for call in (
+        lambda: clf.predict([[0.5] * 5]),
+        lambda: clf.predict_one([0.5] * 5),
+        lambda: clf.decision_path([0.5] * 5),
+        lambda: clf.label_counts(),
+        lambda: clf.node_count_,
+        lambda: clf.save("/nonexistent/x"),
+    ):
+        with pytest.raises(NotFittedError, match="not fitted"):
+            call()
+    with pytest.raises(ValueError):
+        clf.predict([[0.5] * 5])
+    assert getattr(clf, "node_count_", None) is None  # AttributeError subclass
+
+
+def test_fit_predict_score_and_attributes():
+    X, y = synthetic()
+    clf = HypersphereClassifier(default_label="fwd")
+    assert clf.fit(X, y) is clf
+    assert clf.n_features_in_ == 5
+    assert clf.classes_[0] == "fwd"
+    assert set(clf.classes_) == set(y)
+    pred = clf.predict(X)
+    assert isinstance(pred, np.ndarray) and pred.shape == (len(X),)
+    assert clf.score(X, y) > 0.8  # later spheres can overrule earlier vectors
+    assert sum(clf.label_counts().values()) == clf.node_count_
+    assert clf.n_seen_ == len(X)
+    assert clf.height_ >= 1
+    # fit starts afresh; partial_fit extends
+    n = clf.node_count_
+    assert clf.partial_fit(X[:10], y[:10]) is clf
+    assert clf.node_count_ >= n
+    assert clf.fit(X[:1], y[:1]).node_count_ <= 2
+
+
+def test_int_labels_keep_their_type():
+    X, y = synthetic(100)
+    yi = np.unique(y, return_inverse=True)[1]
+    clf = HypersphereClassifier(default_label=0).fit(X, yi)
+    assert clf.predict(X).dtype == np.int64
+    assert type(clf.predict_one(X[0])) is int
+    assert all(type(k) is int for k in clf.label_counts())
+    with pytest.raises(ValueError, match="str or int"):
+        clf.partial_fit(X[:1], [1.5])
+
+
+def test_default_label_none_uses_first_label():
+    clf = HypersphereClassifier().fit([[0.2, 0.2], [0.8, 0.8]], ["x", "y"])
+    assert clf.classes_.tolist() == ["x", "y"]
+    assert clf.node_count_ == 2
+
+
+def test_predict_one_matches_predict_and_paths():
+    X, y = synthetic(600, n=6, seed=3)
+    clf = HypersphereClassifier(default_label="fwd").fit(X, y)
+    Q = np.random.default_rng(9).random((500, 6))
+    batch = clf.predict(Q)
+    assert [clf.predict_one(q) for q in Q] == batch.tolist()
+    lay = clf._get_layout()
+    dense = clf._label_values[lay["label"][clf._winner_pos_dense(Q, lay)]]
+    assert dense.tolist() == batch.tolist()
+    for q in Q[:20]:
+        path = clf.decision_path(q)
+        assert path[0]["index"] == 0 and path[-1]["label"] == clf.predict_one(q)
+        assert [p["depth"] for p in path] == list(range(len(path)))
+        assert all(p["distance"] <= p["radius"] + clf.eps for p in path)
+
+
+def test_input_validation():
+    clf = HypersphereClassifier(default_label="a").fit([[0.5, 0.5]], ["b"])
+    with pytest.raises(ValueError, match=r"outside \[0, 1\].*clip=True"):
+        clf.partial_fit([[1.5, 0.5]], ["a"])
+    with pytest.raises(ValueError, match=r"outside \[0, 1\]"):
+        clf.predict([[0.5, -0.1]])
+    with pytest.raises(ValueError, match=r"outside \[0, 1\]"):
+        clf.predict_one([0.5, -0.1])
+    for bad in (np.nan, np.inf):
+        with pytest.raises(ValueError, match="finite"):
+            clf.partial_fit([[bad, 0.5]], ["a"])
+        with pytest.raises(ValueError, match="finite"):
+            clf.predict_one([0.5, bad])
+        with pytest.raises(ValueError, match="finite"):
+            clf.predict([[0.5, bad]])
+    with pytest.raises(ValueError, match="features"):
+        clf.predict([[0.5, 0.5, 0.5]])
+    with pytest.raises(ValueError, match="shape"):
+        clf.predict_one([0.5, 0.5, 0.5])
+    with pytest.raises(ValueError, match="rows"):
+        clf.partial_fit([[0.5, 0.5]], ["a", "b"])
+    with pytest.raises(ValueError, match="2-D"):
+        clf.predict([0.5, 0.5])
+    n = clf.node_count_
+    assert clf.node_count_ == n  # failed calls changed nothing
+
+
+def test_clip_option():
+    clf = HypersphereClassifier(default_label="a", clip=True).fit([[1.7, -3.0]], ["b"])
+    assert clf.tree_arrays()["centers"][1].tolist() == [1.0, 0.0]
+    assert clf.predict_one([2.0, -1.0]) == "b"
+    assert clf.predict([[2.0, -1.0]]).tolist() == ["b"]
+    with pytest.raises(ValueError, match="finite"):
+        clf.predict_one([np.nan, 0.0])
+
+
+def test_coinciding_vector_relabels_in_place():
+    clf = HypersphereClassifier(default_label="d").fit([[0.2, 0.7]], ["a"])
+    clf.partial_fit([[0.2, 0.7]], ["b"])
+    assert clf.node_count_ == 2
+    assert clf.n_relabelled_ == 1
+    assert clf.predict_one([0.2, 0.7]) == "b"
+    # within eps counts as the same centre
+    clf.partial_fit([[0.2 + 1e-12, 0.7]], ["c"])
+    assert clf.node_count_ == 2 and clf.predict_one([0.2, 0.7]) == "c"
+
+
+def test_root_centre_relabels_the_root():
+    clf = HypersphereClassifier(default_label="d").fit([[0.5, 0.5]], ["a"])
+    assert clf.node_count_ == 1
+    assert clf.predict_one([0.0, 1.0]) == "a"
+
+
+@pytest.mark.parametrize("spawn", ["all", "winner"])
+@pytest.mark.parametrize("distance", ["squared", "euclidean"])
+def test_alternating_labels_do_not_grow(spawn, distance):
+    X, y = synthetic(200, seed=1)
+    clf = HypersphereClassifier(default_label="fwd", spawn=spawn, distance=distance).fit(X, y)
+    n0 = clf.node_count_
+    x = np.array([[0.31, 0.62, 0.5, 0.11, 0.9]])
+    for i in range(1000):
+        label = "fwd-left" if i % 2 else "rot-right"
+        clf.partial_fit(x, [label])
+        assert clf.predict_one(x[0]) == label
+    assert clf.node_count_ <= n0 + 2 * clf.height_ + 2
+    assert clf.n_relabelled_ >= 998
+
+
+def test_zero_radius_sphere():
+    # (0, 0) is on the root's boundary: the child has radius exactly 0.5 - 0.5 = 0
+    clf = HypersphereClassifier(default_label="d").fit([[0.0, 0.0]], ["a"])
+    assert clf.tree_arrays()["radii"].tolist() == [0.5, 0.0]
+    assert clf.predict_one([0.0, 0.0]) == "a"
+    assert clf.predict_one([1e-3, 0.0]) == "d"
+    # a zero-radius sphere can be relabelled but never gets children (nothing else fits)
+    clf.partial_fit([[0.0, 0.0]], ["b"])
+    assert clf.node_count_ == 2 and clf.predict_one([0.0, 0.0]) == "b"
+
+
+def test_min_radius_max_nodes_max_depth():
+    X, y = synthetic(500, seed=2)
+    free = HypersphereClassifier(default_label="fwd").fit(X, y)
+    capped = HypersphereClassifier(default_label="fwd", max_nodes=50).fit(X, y)
+    assert capped.node_count_ == 50 < free.node_count_
+    assert capped.n_skipped_ > 0
+    small = HypersphereClassifier(default_label="fwd", min_radius=0.05).fit(X, y)
+    assert small.tree_arrays()["radii"][1:].min() >= 0.05
+    assert small.n_skipped_ > 0
+    shallow = HypersphereClassifier(default_label="fwd", max_depth=3).fit(X, y)
+    assert shallow.height_ <= 3
+    winner = HypersphereClassifier(default_label="fwd", spawn="winner").fit(X, y)
+    assert winner.node_count_ < free.node_count_
+    # raising the cap later lets the tree grow again
+    capped.set_params(max_nodes=None).partial_fit(X, y)
+    assert capped.node_count_ > 50
+
+
+def test_params_contract():
+    clf = HypersphereClassifier("fwd", spawn="winner", max_nodes=10)
+    params = clf.get_params()
+    assert params["default_label"] == "fwd" and params["spawn"] == "winner"
+    assert HypersphereClassifier(**params).get_params() == params
+    with pytest.raises(ValueError, match="invalid parameter"):
+        clf.set_params(colour="red")
+    for bad in ({"distance": "manhattan"}, {"spawn": "some"}, {"min_radius": -1},
+                {"max_nodes": 0}, {"max_depth": -1}, {"eps": -1.0}):
+        with pytest.raises(ValueError):
+            HypersphereClassifier("a", **bad).fit([[0.5]], ["a"])
+    fitted = HypersphereClassifier("a").fit([[0.1]], ["b"])
+    with pytest.raises(ValueError, match="grown with"):
+        fitted.set_params(distance="euclidean").partial_fit([[0.2]], ["a"])
+    assert "spawn='winner'" in repr(clf)
+
+
+def test_learn_one_reports_changes():
+    clf = HypersphereClassifier("d").fit(np.zeros((0, 2)), [])
+    assert clf.learn_one([0.2, 0.2], "a") == 1
+    assert clf.learn_one([0.2, 0.2], "a") == 0
+    assert clf.learn_one([0.2, 0.2], "b") == 1  # relabel
+
+
+def test_batch_paths_agree_on_small_and_large_trees(monkeypatch):
+    X, y = synthetic(300, n=4, seed=5)
+    Q = np.random.default_rng(1).random((300, 4))
+    for spawn in ("all", "winner"):
+        clf = HypersphereClassifier("fwd", spawn=spawn).fit(X, y)
+        a = clf.predict(Q)
+        monkeypatch.setattr(clfmod, "_DENSE_BATCH_MAX_NODES", 10**9)
+        b = clf.predict(Q)
+        monkeypatch.setattr(clfmod, "_DENSE_BATCH_MAX_NODES", 0)
+        c = clf.predict(Q)
+        monkeypatch.undo()
+        assert a.tolist() == b.tolist() == c.tolist()
+    assert clf.predict(np.zeros((0, 4))).shape == (0,)
+
+
+def test_training_speed_thousands_of_vectors():
+    import time
+
+    X, y = synthetic(3000, n=5, seed=4)
+    t = time.perf_counter()
+    clf = HypersphereClassifier("fwd").fit(X, y)
+    assert time.perf_counter() - t < 20  # seconds, not minutes (usually well under 1 s)
+    assert clf.node_count_ > 100
