@@ -29,8 +29,11 @@ PREFIX = "rhbl"
 _CHUNK = re.compile(r"^[A-Za-z0-9_.\-]+$")
 
 
-def check_chunk(value: str, what: str = "name") -> str:
-    """Return ``value`` if it is a valid single key chunk, else raise ValueError."""
+def check_chunk(value: str, what: str = "name", wildcard: bool = False) -> str:
+    """Return ``value`` if it is a valid single key chunk, else raise ValueError. With
+    ``wildcard``, ``*`` and ``**`` are accepted too (for subscriptions and queries)."""
+    if wildcard and value in ("*", "**"):
+        return value
     if not isinstance(value, str) or not _CHUNK.match(value):
         raise ValueError(
             f"{what} must be a non-empty key chunk of letters, digits, '_', '-', '.', got {value!r}"
@@ -118,5 +121,7 @@ def learner_snapshot_key(robot: str = "r0") -> str:
 
 
 def alive_key(role: str, ident: str) -> str:
-    """Liveliness token of a process: ``rhbl/alive/<role>/<ident>``."""
-    return f"{PREFIX}/alive/{check_chunk(role, 'role')}/{check_chunk(ident, 'ident')}"
+    """Liveliness token of a process: ``rhbl/alive/<role>/<ident>`` (``*``/``**`` allowed, to
+    query or subscribe, e.g. ``alive_key("server", "*")``)."""
+    role = check_chunk(role, "role", wildcard=True)
+    return f"{PREFIX}/alive/{role}/{check_chunk(ident, 'ident', wildcard=True)}"

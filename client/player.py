@@ -1,0 +1,360 @@
+"""A Player-like client library over zenoh (DESIGN.md section 4, docs/protocol.md).
+
+::
+
+    from client.player import PlayerClient
+    from protocol.session import make_config
+
+    with PlayerClient(make_config(connect=["tcp/127.0.0.1:7447"]), robot="r0",
+                      source="controller") as client:
+        pos, laser = client.position2d, client.laser
+        while client.read(timeout=1.0):
+            if laser[0] < 0.5:                    # the beam at the robot's right
+                pos.set_speed(0.0, 0.5)
+            else:
+                pos.set_speed(0.3, 0.0)
+
+``read()`` blocks until the server published a new tick (a scan; a state if no laser proxy is
+used) and refreshes every proxy from the latest messages; in between, proxies do not change.
+Messages are decoded as they arrive (a few microseconds) and only the latest is kept, so a slow
+reader never stalls the session.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from typing import Any
+
+import numpy as np
+import zenoh
+
+from protocol import keys
+from protocol.codec import DecodeError, ProtocolError
+from protocol.messages import (
+    Ack,
+    DriverState,
+    Geometry,
+    LaserConfig,
+    MotorPower,
+    Nack,
+    Scan,
+    SetOdom,
+    State,
+    VelCmd,
+)
+from protocol.session import make_config
+
+__all__ = ["LaserProxy", "PlayerClient", "Position2dProxy", "RequestError"]
+
+log = logging.getLogger(__name__)
+
+
+class RequestError(ProtocolError):
+    """A request got a NACK (``reason``), no reply, or a malformed reply."""
+
+
+class PlayerClient:
+    """A connection to the robot ``robot`` of a ``rhbl server``.
+
+    ``config`` is a ``zenoh.Config`` (default: a client of ``tcp/127.0.0.1:7447``), or pass an
+    open ``session`` to share it. ``source`` names this client in its commands (``teacher``,
+    ``controller``, ...; the server's arbitration rule uses it); with ``per_source_key`` the
+    commands go to ``.../cmd/vel/<source>``.
+    """
+
+    def __init__(
+        self,
+        config: zenoh.Config | None = None,
+        robot: str = "r0",
+        source: str = "client",
+        session: zenoh.Session | None = None,
+        index: int = 0,
+        per_source_key: bool = True,
+    ) -> None:
+        self.robot = keys.check_chunk(robot, "robot")
+        self.source = source
+        self.index = index
+        self._own_session = session is None
+        self.session = session if session is not None else zenoh.open(config or make_config())
+        self._cond = threading.Condition()
+        self._latest: dict[str, Any] = {}
+        self._arrived: dict[str, int] = {"state": 0, "scan": 0}
+        self._read_mark = 0
+        self._proxies: list[_Proxy] = []
+        self._subs: dict[str, Any] = {}
+        self.dropped = 0
+        cmd_key = keys.cmd_vel_key(robot, index, source if per_source_key and source else None)
+        self._cmd_pub = self.session.declare_publisher(cmd_key)
+        self._position2d: Position2dProxy | None = None
+        self._laser: LaserProxy | None = None
+
+    # -- subscriptions ----------------------------------------------------------------------
+
+    def _subscribe(self, kind: str) -> None:
+        if kind in self._subs:
+            return
+        key, cls = {
+            "state": (keys.state_key(self.robot, self.index), State),
+            "scan": (keys.scan_key(self.robot, self.index), Scan),
+            "driver": (keys.driver_key(self.robot, self.index), DriverState),
+        }[kind]
+
+        def on_sample(sample: zenoh.Sample, kind=kind, cls=cls) -> None:
+            try:
+                msg = cls.decode(sample.payload.to_bytes())
+            except DecodeError as e:
+                self.dropped += 1
+                if self.dropped <= 10 or self.dropped % 100 == 0:
+                    log.warning("dropped a %s message (%d so far): %s", kind, self.dropped, e)
+                return
+            with self._cond:
+                self._latest[kind] = msg
+                if kind in self._arrived:
+                    self._arrived[kind] += 1
+                self._cond.notify_all()
+
+        self._subs[kind] = self.session.declare_subscriber(key, on_sample)
+
+    def _tick_kind(self) -> str:
+        return "scan" if "scan" in self._subs else "state"
+
+    # -- Player API -------------------------------------------------------------------------
+
+    @property
+    def position2d(self) -> Position2dProxy:
+        if self._position2d is None:
+            self._position2d = Position2dProxy(self)
+        return self._position2d
+
+    @property
+    def laser(self) -> LaserProxy:
+        if self._laser is None:
+            self._laser = LaserProxy(self)
+        return self._laser
+
+    def read(self, timeout: float | None = 1.0) -> bool:
+        """Wait for a new tick (at most ``timeout`` s) and refresh every proxy.
+
+        Returns True when new data arrived, False on timeout (proxies then keep old values)."""
+        kind = self._tick_kind()
+        with self._cond:
+            ok = self._cond.wait_for(lambda: self._arrived[kind] > self._read_mark, timeout)
+            if ok:
+                self._read_mark = self._arrived[kind]
+            latest = dict(self._latest)
+        if ok:
+            for p in self._proxies:
+                p._refresh(latest)
+        return bool(ok)
+
+    def peek(self) -> bool:
+        """Refresh the proxies from what has arrived, without waiting; True if anything new."""
+        return self.read(timeout=0.0)
+
+    def driver(self) -> str | None:
+        """The command source driving the robot, from the server's driver messages (None: not
+        known yet, ``""``: nobody)."""
+        self._subscribe("driver")
+        with self._cond:
+            msg = self._latest.get("driver")
+        return None if msg is None else msg.source
+
+    def send_command(
+        self, vx: float, va: float, state: bool = True, scan_id: int | None = None
+    ) -> None:
+        """Publish a velocity command (prefer :meth:`Position2dProxy.set_speed`)."""
+        if not (math.isfinite(vx) and math.isfinite(va)):
+            raise ValueError(f"speeds must be finite, got vx={vx!r}, va={va!r}")
+        msg = VelCmd(vx=vx, va=va, state=state, source=self.source, scan_id=scan_id)
+        self._cmd_pub.put(msg.encode())
+
+    def request(
+        self, iface: str, name: str, payload: bytes | None = None, timeout: float = 2.0
+    ) -> bytes:
+        """Send a request and return the reply payload; raise :class:`RequestError` on a NACK
+        (with its reason) or when nobody answers within ``timeout`` s."""
+        key = keys.request_key(self.robot, iface, name, self.index)
+        replies = self.session.get(key, payload=payload, timeout=timeout)
+        for reply in replies:
+            if reply.ok is not None:
+                return reply.ok.payload.to_bytes()
+            raw = reply.err.payload.to_bytes()
+            try:
+                reason = Nack.decode(raw).reason
+            except DecodeError:
+                reason = raw[:200].decode("utf-8", "replace")
+            raise RequestError(f"{key}: NACK: {reason}")
+        raise RequestError(f"{key}: no reply within {timeout} s (is the server up?)")
+
+    def wait_for_server(self, timeout: float = 5.0) -> bool:
+        """Wait until the robot's first state arrived (True) or ``timeout`` s passed."""
+        self._subscribe("state")
+        with self._cond:
+            return bool(self._cond.wait_for(lambda: "state" in self._latest, timeout))
+
+    def close(self) -> None:
+        for s in self._subs.values():
+            try:
+                s.undeclare()
+            except Exception:  # the session may be closed already
+                log.debug("undeclare failed", exc_info=True)
+        self._subs.clear()
+        try:
+            self._cmd_pub.undeclare()
+        except Exception:
+            log.debug("undeclare failed", exc_info=True)
+        if self._own_session:
+            self.session.close()
+
+    def __enter__(self) -> PlayerClient:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class _Proxy:
+    KINDS: tuple[str, ...] = ()
+
+    def __init__(self, client: PlayerClient) -> None:
+        self.client = client
+        for k in self.KINDS:
+            client._subscribe(k)
+        client._proxies.append(self)
+
+    def _refresh(self, latest: dict[str, Any]) -> None:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self in self.client._proxies:
+            self.client._proxies.remove(self)
+
+
+class Position2dProxy(_Proxy):
+    """The robot base: odometry pose ``x``, ``y``, ``yaw``; velocity ``vx``, ``vy``, ``va``;
+    ``stall``; ``set_speed(vx, va)``; geometry and odometry requests."""
+
+    KINDS = ("state",)
+
+    def __init__(self, client: PlayerClient) -> None:
+        super().__init__(client)
+        self.state: State | None = None
+        self._geom: Geometry | None = None
+
+    def _refresh(self, latest):
+        if "state" in latest:
+            self.state = latest["state"]
+
+    def _field(self, name: str, index: int | None = None, default: Any = 0.0):
+        if self.state is None:
+            return default
+        v = getattr(self.state, name)
+        return v if index is None else v[index]
+
+    x = property(lambda self: self._field("pos", 0))
+    y = property(lambda self: self._field("pos", 1))
+    yaw = property(lambda self: self._field("pos", 2))
+    vx = property(lambda self: self._field("vel", 0))
+    vy = property(lambda self: self._field("vel", 1))
+    va = property(lambda self: self._field("vel", 2))
+    stall = property(lambda self: bool(self._field("stall", default=False)))
+    ts = property(lambda self: self._field("ts"))
+    seq = property(lambda self: self._field("seq", default=0))
+    driver = property(lambda self: self._field("driver", default=""))
+
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        return (self.x, self.y, self.yaw)
+
+    @property
+    def truth(self) -> tuple[float, float, float] | None:
+        """The true pose (a simulation extra), None if not known."""
+        return None if self.state is None else self.state.truth
+
+    def set_speed(self, vx: float, va: float, scan_id: int | None = None) -> None:
+        """Command forward speed ``vx`` (m/s) and turn rate ``va`` (rad/s, counter-clockwise).
+        The command names the last read scan (for lock-step) unless ``scan_id`` is given."""
+        if scan_id is None and self.client._laser is not None:
+            scan_id = self.client._laser.id if self.client._laser.scan is not None else None
+        self.client.send_command(vx, va, True, scan_id)
+
+    def stop(self) -> None:
+        self.set_speed(0.0, 0.0)
+
+    def set_motor_enable(self, state: bool) -> None:
+        self.client.request("position2d", "motor_power", MotorPower(state=bool(state)).encode())
+
+    def get_geom(self) -> Geometry:
+        if self._geom is None:
+            self._geom = Geometry.decode(self.client.request("position2d", "get_geom"))
+        return self._geom
+
+    @property
+    def size(self) -> tuple[float, float]:
+        return self.get_geom().size
+
+    def set_odom(self, x: float, y: float, yaw: float) -> None:
+        Ack.decode(self.client.request("position2d", "set_odom", SetOdom((x, y, yaw)).encode()))
+
+    def reset_odom(self) -> None:
+        Ack.decode(self.client.request("position2d", "reset_odom"))
+
+
+class LaserProxy(_Proxy):
+    """The laser: ``ranges`` (float32 array, ``ranges[0]`` at ``min_angle``, the robot's right),
+    ``count``, indexing, ``min_angle``, ``max_angle``, ``resolution``, ``max_range``,
+    ``bearings``, the scan ``id`` and the odometry ``pose`` at the scan."""
+
+    KINDS = ("scan",)
+
+    def __init__(self, client: PlayerClient) -> None:
+        super().__init__(client)
+        self.scan: Scan | None = None
+
+    def _refresh(self, latest):
+        if "scan" in latest:
+            self.scan = latest["scan"]
+
+    @property
+    def ranges(self) -> np.ndarray:
+        return self.scan.ranges if self.scan is not None else np.zeros(0, dtype=np.float32)
+
+    @property
+    def count(self) -> int:
+        return 0 if self.scan is None else self.scan.count
+
+    def __len__(self) -> int:
+        return self.count
+
+    def __getitem__(self, i):
+        return self.ranges[i]
+
+    def _meta(self, name: str, default: float = 0.0):
+        return default if self.scan is None else getattr(self.scan, name)
+
+    min_angle = property(lambda self: self._meta("min_angle"))
+    max_angle = property(lambda self: self._meta("max_angle"))
+    resolution = property(lambda self: self._meta("resolution"))
+    max_range = property(lambda self: self._meta("max_range"))
+    id = property(lambda self: self._meta("id", 0))
+    ts = property(lambda self: self._meta("ts"))
+    pose = property(lambda self: self._meta("pose", (0.0, 0.0, 0.0)))
+
+    @property
+    def bearings(self) -> np.ndarray:
+        """Bearing (rad, robot frame, counter-clockwise) of every beam."""
+        return self.min_angle + np.arange(self.count) * self.resolution
+
+    def bearing(self, i: int) -> float:
+        return self.min_angle + i * self.resolution
+
+    def get_config(self) -> LaserConfig:
+        return LaserConfig.decode(self.client.request("laser", "get_config"))
+
+    def get_geom(self) -> Geometry:
+        return Geometry.decode(self.client.request("laser", "get_geom"))
