@@ -1,0 +1,258 @@
+"""In-process harness: ``rhbl train``. No zenoh: steps ``server.world.World`` directly at 10 Hz.
+
+One step: scan -> (teacher label | tree prediction) -> world.set_command -> world.step(dt), with
+the same feature, action, policy and learning code the zenoh processes run.
+
+    spec = load_world(path)
+    learner = make_learner(spec.task, spawn="winner")             # or DemonstrationLearner(...)
+    traj = train(spec, learner, seconds=300, seed=0)               # the scripted teacher demonstrates
+    traj = run(spec, TreePolicy.from_learner(learner), pose, seconds=120, teacher=make_policy(...))
+    traj.poses, traj.stalls, traj.actions, traj.side, traj.teacher_actions, traj.dt
+
+``rhbl train --world PATH --seconds S --out SNAPSHOT [--resume SNAPSHOT] [--start x,y,yaw]
+[--seed N] [--perturb P] [--spawn all|winner] ...`` writes the snapshot with its metadata.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
+from client.behaviour.features import FEATURES, FeatureSpec
+from client.behaviour.learning import DemonstrationLearner, TreePolicy
+from client.behaviour.policies import Demonstrator, make_policy
+from lab import metrics
+from server.world import World, WorldSpec, load_world
+
+__all__ = [
+    "DT",
+    "TRAINING",
+    "Trajectory",
+    "add_arguments",
+    "followed_side",
+    "main",
+    "make_learner",
+    "parse_pose",
+    "resolve_world",
+    "run",
+    "train",
+]
+
+log = logging.getLogger(__name__)
+
+DT = 0.1  # 10 Hz, as the processes run
+
+# Default training recipe per task (docs/experiments.md says how it was chosen).
+TRAINING: dict[str, dict] = {
+    "wall-following": {"features": "wall", "perturb": 0.2, "seconds": 300.0,
+                       "tree": {"spawn": "winner"}, "stride": 1, "min_delta": 0.0},
+    "maze": {"features": "maze", "perturb": 0.2, "seconds": 300.0,
+             "tree": {"spawn": "winner"}, "stride": 1, "min_delta": 0.0},
+}
+
+
+def followed_side(task: str) -> str | None:
+    return "right" if task == "wall-following" else None
+
+
+def resolve_world(path_or_name: str) -> WorldSpec:
+    p = Path(path_or_name)
+    if not p.exists():
+        import server
+
+        if hasattr(server, "world_path"):
+            p = Path(server.world_path(path_or_name))
+        else:  # pragma: no cover
+            p = Path(__file__).resolve().parent.parent / "server" / "worlds" / f"{path_or_name}.toml"
+    return load_world(p)
+
+
+def parse_pose(text: str) -> tuple[float, float, float]:
+    try:
+        vals = tuple(float(v) for v in text.replace(" ", "").split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"pose must be x,y,yaw numbers, got {text!r}") from exc
+    if len(vals) != 3:
+        raise argparse.ArgumentTypeError(f"pose must be x,y,yaw (3 numbers), got {text!r}")
+    return vals  # type: ignore[return-value]
+
+
+@dataclass
+class Trajectory:
+    dt: float
+    start: tuple[float, float, float]
+    poses: list = field(default_factory=list)
+    stalls: list = field(default_factory=list)
+    actions: list = field(default_factory=list)       # what was executed
+    labels: list = field(default_factory=list)        # teacher labels (training) or []
+    teacher_actions: list = field(default_factory=list)  # teacher's choice on these states
+    side: list = field(default_factory=list)          # followed-side wall distance
+    learned: int = 0
+    wall_time: float = 0.0
+
+    def metrics(self, goal=None) -> dict:
+        return metrics.episode_metrics(
+            self.poses, self.stalls, self.actions, self.dt,
+            side=self.side if self.side else None, goal=goal,
+            teacher_actions=self.teacher_actions or None, start=self.start)
+
+
+def make_learner(task: str, features: FeatureSpec | str | None = None,
+                 actions: ActionSet = DEFAULT_ACTIONS, stride: int | None = None,
+                 min_delta: float | None = None, **tree_params) -> DemonstrationLearner:
+    """A learner with the task's default recipe; keyword arguments override it."""
+    recipe = TRAINING.get(task, TRAINING["wall-following"])
+    if features is None:
+        features = recipe["features"]
+    if isinstance(features, str):
+        features = FEATURES[features]
+    params = dict(recipe["tree"])
+    params.update(tree_params)
+    return DemonstrationLearner(
+        features, actions, task=task,
+        stride=recipe["stride"] if stride is None else stride,
+        min_delta=recipe["min_delta"] if min_delta is None else min_delta,
+        **params)
+
+
+def _step_world(world: World, traj: Trajectory, actions: ActionSet, name: str, side: str | None,
+                ranges) -> None:
+    vx, va = actions[name]
+    world.set_command(0, vx, va)
+    world.step(traj.dt)
+    traj.actions.append(name)
+    traj.poses.append(world.pose(0))
+    traj.stalls.append(world.stall(0))
+    if side is not None:
+        traj.side.append(metrics.side_distance(ranges, side))
+
+
+def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: int = 0,
+          perturb: float | None = None, start: tuple[float, float, float] | None = None,
+          range_noise: float = 0.0, odom_noise: float = 0.0, dt: float = DT,
+          policy=None) -> Trajectory:
+    """The world's scripted teacher drives from ``start`` (default the world's pose) for
+    ``seconds`` while ``learner`` observes every step."""
+    task = spec.task
+    recipe = TRAINING.get(task, TRAINING["wall-following"])
+    perturb = recipe["perturb"] if perturb is None else perturb
+    policy = policy or make_policy(task, actions=learner.actions)
+    rng = np.random.default_rng(seed)
+    demo = Demonstrator(policy, perturb=perturb, rng=rng, dt=dt)
+    start = tuple(start) if start is not None else tuple(spec.pose)
+    world = World(spec, robots=1, seed=seed, range_noise=range_noise, odom_noise=odom_noise)
+    world.reset(poses=[start])
+    traj = Trajectory(dt=dt, start=start)
+    side = followed_side(task)
+    t0 = time.perf_counter()
+    for _ in range(int(round(seconds / dt))):
+        ranges = world.scan(0)
+        odom = world.odom(0)
+        label, executed = demo.step(ranges, odom)
+        traj.labels.append(label)
+        if learner.observe(ranges, odom[2], label):
+            traj.learned += 1
+        _step_world(world, traj, learner.actions, executed, side, ranges)
+    traj.wall_time = time.perf_counter() - t0
+    learner.session = {"world": spec.name, "world_path": str(spec.path) if spec.path else None,
+                       "seconds": seconds, "seed": seed, "perturb": perturb,
+                       "start": list(start), "range_noise": range_noise, "odom_noise": odom_noise,
+                       "vectors": traj.learned}
+    return traj
+
+
+def run(spec: WorldSpec, driver, start, seconds: float, seed: int = 0, teacher=None,
+        range_noise: float = 0.0, odom_noise: float = 0.0, dt: float = DT,
+        stop_at_goal: bool = True) -> Trajectory:
+    """Drive ``driver`` (anything with ``act(ranges, pose)``: a TreePolicy or a scripted policy)
+    from ``start`` for ``seconds``; ``teacher`` (optional) is asked what it would do on each
+    state (teacher agreement). Stops at the goal, when the world has one."""
+    actions = getattr(driver, "actions", DEFAULT_ACTIONS)
+    world = World(spec, robots=1, seed=seed, range_noise=range_noise, odom_noise=odom_noise)
+    start = tuple(float(v) for v in start)
+    world.reset(poses=[start])
+    driver.reset()
+    if teacher is not None:
+        teacher.reset()
+    traj = Trajectory(dt=dt, start=start)
+    side = followed_side(spec.task)
+    t0 = time.perf_counter()
+    for _ in range(int(round(seconds / dt))):
+        ranges = world.scan(0)
+        odom = world.odom(0)
+        name = driver.act(ranges, odom)
+        if teacher is not None:
+            traj.teacher_actions.append(teacher.act(ranges, odom))
+        _step_world(world, traj, actions, name, side, ranges)
+        if stop_at_goal and spec.goal is not None and world.at_goal(0):
+            break
+    traj.wall_time = time.perf_counter() - t0
+    return traj
+
+
+# ------------------------------------------------------------------------------------- CLI
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--world", required=True, help="world file (or a shipped world's name)")
+    parser.add_argument("--seconds", type=float, default=None,
+                        help="sim seconds of demonstration (default: the task's recipe, 300)")
+    parser.add_argument("--out", required=True, help="snapshot to write")
+    parser.add_argument("--resume", default=None,
+                        help="continue training this snapshot (a corrective demonstration)")
+    parser.add_argument("--start", type=parse_pose, default=None,
+                        help="start pose x,y,yaw (default: the world's pose); use the pose of an "
+                             "oscillation loop reported by 'rhbl evaluate --json'")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--perturb", type=float, default=None,
+                        help="fraction of time a random action is executed (default 0.2)")
+    parser.add_argument("--features", choices=sorted(FEATURES), default=None,
+                        help="feature spec (default: the task's)")
+    parser.add_argument("--spawn", choices=["all", "winner"], default=None,
+                        help="spawn rule (default: winner; 'all' is the paper's literal rule)")
+    parser.add_argument("--distance", choices=["squared", "euclidean"], default=None)
+    parser.add_argument("--min-radius", type=float, default=None)
+    parser.add_argument("--max-nodes", type=int, default=None)
+    parser.add_argument("--stride", type=int, default=None, help="learn every n-th step")
+    parser.add_argument("--range-noise", type=float, default=0.0)
+    parser.add_argument("--odom-noise", type=float, default=0.0)
+
+
+def _tree_overrides(args) -> dict:
+    out = {}
+    for key in ("spawn", "distance", "min_radius", "max_nodes"):
+        v = getattr(args, key, None)
+        if v is not None:
+            out[key] = v
+    return out
+
+
+def main(args) -> int:
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    spec = resolve_world(args.world)
+    if args.resume:
+        learner = DemonstrationLearner.resume(
+            args.resume, features=FEATURES[args.features] if args.features else None)
+    else:
+        learner = make_learner(spec.task, features=args.features, stride=args.stride,
+                               **_tree_overrides(args))
+    seconds = args.seconds if args.seconds is not None else TRAINING.get(
+        spec.task, TRAINING["wall-following"])["seconds"]
+    traj = train(spec, learner, seconds, seed=args.seed, perturb=args.perturb, start=args.start,
+                 range_noise=args.range_noise, odom_noise=args.odom_noise)
+    out = learner.save(args.out)
+    m = traj.metrics()
+    print(f"trained on {spec.name} ({spec.task}) for {seconds:g} s from {list(traj.start)}: "
+          f"{traj.learned} vectors learned, tree {learner.nodes} nodes, height {learner.height}; "
+          f"teacher collisions {m['collisions']}; {traj.wall_time:.1f} s wall time")
+    print(f"wrote {out}")
+    return 0
+
+
+__all__ += ["TreePolicy"]
