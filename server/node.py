@@ -174,7 +174,7 @@ class ServerNode:
             key_source = keys.source_of_cmd_key(key)
             if key_source is not None and key_source != msg.source:
                 self._reject(
-                    "cmd",
+                    "cmd_source",
                     f"{key}: field 'source' {msg.source!r} does not match the key's "
                     f"source {key_source!r}",
                 )

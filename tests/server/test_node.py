@@ -1,0 +1,317 @@
+"""The real ``rhbl server`` process over real zenoh sessions on loopback."""
+
+from __future__ import annotations
+
+import math
+import signal
+import threading
+import time
+
+import msgpack
+import numpy as np
+import pytest
+import zenoh
+
+from protocol import keys
+from protocol.messages import (
+    Ack,
+    DriverState,
+    Geometry,
+    LaserConfig,
+    Nack,
+    Scan,
+    SetOdom,
+    State,
+    VelCmd,
+)
+
+pytestmark = pytest.mark.integration
+
+
+class Listener:
+    """Latest state/scan/driver of robot r0, and a count of states."""
+
+    def __init__(self, session: zenoh.Session, robot: str = "r0") -> None:
+        self.cond = threading.Condition()
+        self.state: State | None = None
+        self.scan: Scan | None = None
+        self.driver: str | None = None
+        self.states = 0
+        self._subs = [
+            session.declare_subscriber(keys.state_key(robot), self._on_state),
+            session.declare_subscriber(keys.scan_key(robot), self._on_scan),
+            session.declare_subscriber(keys.driver_key(robot), self._on_driver),
+        ]
+
+    def _on_state(self, s):
+        m = State.decode(s.payload.to_bytes())
+        with self.cond:
+            self.state = m
+            self.states += 1
+            self.cond.notify_all()
+
+    def _on_scan(self, s):
+        m = Scan.decode(s.payload.to_bytes())
+        with self.cond:
+            self.scan = m
+            self.cond.notify_all()
+
+    def _on_driver(self, s):
+        m = DriverState.decode(s.payload.to_bytes())
+        with self.cond:
+            self.driver = m.source
+            self.cond.notify_all()
+
+    def wait(self, pred, timeout=5.0):
+        with self.cond:
+            assert self.cond.wait_for(pred, timeout), "condition not met in time"
+
+    def next_scan(self, timeout=5.0) -> Scan:
+        with self.cond:
+            last = self.scan.id if self.scan else -1
+            assert self.cond.wait_for(lambda: self.scan and self.scan.id > last, timeout)
+            return self.scan
+
+
+def drive(session, robot="r0", source="controller", vx=0.0, va=0.0, scan_id=None, state=True):
+    session.put(
+        keys.cmd_vel_key(robot, source=source),
+        VelCmd(vx=vx, va=va, source=source, scan_id=scan_id, state=state).encode(),
+    )
+
+
+def request(session, iface, name, payload=None, robot="r0"):
+    replies = list(session.get(keys.request_key(robot, iface, name), payload=payload, timeout=3.0))
+    assert replies, f"no reply to {iface}/{name}"
+    return replies[0]
+
+
+@pytest.fixture(scope="module")
+def corridor(start_module_server):
+    return start_module_server("corridor", "--watchdog", "0.5")
+
+
+@pytest.fixture
+def session(corridor, client_config):
+    with zenoh.open(client_config(corridor.endpoint)) as s:
+        yield s
+
+
+def test_scan_geometry_on_the_wire(session):
+    lis = Listener(session)
+    scan = lis.next_scan()
+    assert scan.count == 360
+    assert scan.min_angle == pytest.approx(-math.pi / 2)
+    assert scan.max_angle == pytest.approx(math.pi / 2)
+    assert scan.resolution == pytest.approx(math.pi / 359)
+    assert scan.max_range == 8.0
+    assert scan.ranges.dtype == np.float32
+    x, y, yaw = scan.truth
+    # right wall y = 0 at bearing -90 deg (beam 0), left wall y = 2 at +90 deg (beam 359)
+    assert scan.ranges[0] == pytest.approx(y, abs=0.01)
+    assert scan.ranges[359] == pytest.approx(2.0 - y, abs=0.01)
+    # straight ahead the end wall is 9 m away: beyond max range
+    if x < 1.5:
+        assert scan.ranges[179] == 8.0 and scan.ranges[180] == 8.0
+
+
+def test_requests_answer_and_nack(session):
+    g = Geometry.decode(request(session, "position2d", "get_geom").ok.payload.to_bytes())
+    assert g.size == pytest.approx((0.511, 0.4)) and g.radius == pytest.approx(0.25)
+    c = LaserConfig.decode(request(session, "laser", "get_config").ok.payload.to_bytes())
+    assert (c.count, c.max_range, c.rate) == (360, 8.0, 10.0)
+    Geometry.decode(request(session, "laser", "get_geom").ok.payload.to_bytes())
+    r = request(session, "position2d", "set_odom", SetOdom((5.0, -1.0, 0.5)).encode())
+    Ack.decode(r.ok.payload.to_bytes())
+    lis = Listener(session)
+    lis.wait(lambda: lis.state and abs(lis.state.pos[0] - 5.0) < 0.1 and lis.state.pos[1] < -0.9)
+    Ack.decode(request(session, "position2d", "reset_odom").ok.payload.to_bytes())
+    lis.wait(lambda: lis.state and abs(lis.state.pos[0]) < 0.1)
+    # NACKs: error replies with a reason
+    for payload in [None, b"\xc1garbage", msgpack.packb({"v": 1, "pose": [1, 2]})]:
+        r = request(session, "position2d", "set_odom", payload)
+        assert r.err is not None
+        assert "pose" in Nack.decode(r.err.payload.to_bytes()).reason or payload is not None
+    r = request(session, "position2d", "motor_power", msgpack.packb({"v": 1, "state": "on"}))
+    assert "state" in Nack.decode(r.err.payload.to_bytes()).reason
+
+
+def test_drive_forward_then_watchdog_stops(session):
+    lis = Listener(session)
+    lis.wait(lambda: lis.state is not None)
+    lis.wait(lambda: lis.state.vel[0] == 0.0)  # stopped (watchdog) before we start
+    x0 = lis.state.truth[0]
+    o0 = lis.state.pos[0]
+    t0 = lis.state.ts
+    while True:  # drive 1 s of sim time at 0.4 m/s, one command per tick
+        scan = lis.next_scan()
+        if scan.ts - t0 >= 1.0:
+            break
+        drive(session, vx=0.4, scan_id=scan.id)
+    lis.wait(lambda: lis.state.ts >= scan.ts)
+    moved = lis.state.truth[0] - x0
+    assert 0.3 <= moved <= 0.5  # about 1 s at 0.4 m/s (+- a tick of latency)
+    assert lis.state.pos[0] - o0 == pytest.approx(moved, abs=1e-6)  # odometry = truth, no noise
+    assert lis.driver == "controller" and lis.state.driver == "controller"
+    # no more commands: within the 0.5 s watchdog (+ a tick) the robot stops
+    t_last = lis.state.ts
+    lis.wait(lambda: lis.state.ts >= t_last + 0.8)
+    assert lis.state.vel == (0.0, 0.0, 0.0)
+    assert lis.state.driver == ""
+    stopped_at = lis.state.truth[0]
+    assert stopped_at - x0 < moved + 0.4 * 0.7
+
+
+HOSTILE = [
+    b"",
+    b"\xff\xfe garbage",
+    msgpack.packb([1, 2, 3]),
+    msgpack.packb({"v": 1}),
+    msgpack.packb({"v": 99, "vel": [0.5, 0, 0], "state": True}),
+    msgpack.packb({"v": 1, "vel": [float("nan"), 0, 0], "state": True}),
+    msgpack.packb({"v": 1, "vel": [float("inf"), 0, 0], "state": True}),
+    msgpack.packb({"v": 1, "vel": [0.5, 0], "state": True}),
+    msgpack.packb({"v": 1, "vel": ["0.5", 0, 0], "state": True}),
+    msgpack.packb({"v": 1, "vel": [0.5, 0, 0], "state": "yes"}),
+    msgpack.packb({"v": 1, "vel": [0.5, 0, 0], "state": True, "source": 7}),
+    msgpack.packb({"v": 1, "vel": [0.5, 0, 0], "state": True, "pad": b"x" * 100_000}),
+    msgpack.packb({"v": True, "vel": [0.5, 0, 0], "state": True}),
+]
+
+
+def test_hostile_messages_are_survived(session, corridor):
+    lis = Listener(session)
+    lis.wait(lambda: lis.state is not None and lis.state.vel == (0.0, 0.0, 0.0))
+    pose0 = lis.state.truth
+    n0 = lis.states
+    for _ in range(3):
+        for payload in HOSTILE:
+            session.put(keys.cmd_vel_key("r0"), payload)
+            session.put(keys.cmd_vel_key("r0", source="controller"), payload)
+        # a valid message on a per-source key that names another source: impersonation
+        session.put(
+            keys.cmd_vel_key("r0", source="controller"),
+            VelCmd(vx=0.5, source="teacher").encode(),
+        )
+    # requests with hostile payloads on every queryable
+    for iface, name in [("position2d", "set_odom"), ("position2d", "motor_power")]:
+        for payload in HOSTILE[:4]:
+            assert request(session, iface, name, payload or None).err is not None
+    time.sleep(0.6)
+    assert lis.states >= n0 + 4  # kept publishing
+    assert lis.state.truth == pytest.approx(pose0, abs=1e-9)  # never moved
+    assert lis.state.vel == (0.0, 0.0, 0.0)
+    assert corridor.proc.poll() is None
+    assert corridor.wait_for_line("rejected cmd")
+    assert "source 'controller'" in corridor.output()
+
+
+def test_robots_arbitration_hand_over(start_server, client_config):
+    srv = start_server("corridor", "--watchdog", "1.5", speedup=2)
+    with (
+        zenoh.open(client_config(srv.endpoint)) as ctl,
+        zenoh.open(client_config(srv.endpoint)) as teacher,
+    ):
+        lis = Listener(ctl)
+        stop = threading.Event()
+
+        def controller():
+            while not stop.is_set():
+                drive(ctl, source="controller", va=0.3)
+                time.sleep(0.05)
+
+        th = threading.Thread(target=controller, daemon=True)
+        th.start()
+        try:
+            lis.wait(lambda: lis.driver == "controller")
+            lis.wait(lambda: lis.state.vel[2] > 0.25)
+            # the teacher overrides while it keeps commanding
+            token = teacher.liveliness().declare_token(keys.alive_key("teacher", "t1"))
+            for _ in range(10):
+                drive(teacher, source="teacher", va=-0.3)
+                time.sleep(0.05)
+            lis.wait(lambda: lis.driver == "teacher" and lis.state.vel[2] < -0.25)
+            assert lis.state.driver == "teacher"
+            # the teacher stops commanding: after the 1.5 s (sim) timeout the controller drives
+            t_stop = lis.state.ts
+            lis.wait(lambda: lis.driver == "controller", timeout=5.0)
+            assert lis.state.ts - t_stop >= 1.0
+            # the teacher again, then its liveliness token disappears: released at once
+            for _ in range(5):
+                drive(teacher, source="teacher", va=-0.3)
+                time.sleep(0.05)
+            lis.wait(lambda: lis.driver == "teacher")
+            t_gone = lis.state.ts
+            token.undeclare()
+            lis.wait(lambda: lis.driver == "controller", timeout=3.0)
+            assert lis.state.ts - t_gone < 1.0  # well before the 1.5 s timeout
+        finally:
+            stop.set()
+            th.join()
+
+
+def test_lockstep_drive_into_wall_sets_stall_and_stops(start_server, client_config):
+    srv = start_server("corridor", lockstep=True)
+    with zenoh.open(client_config(srv.endpoint)) as s:
+        lis = Listener(s)
+        scan = lis.next_scan()
+        t_start = time.monotonic()
+        ticks = 0
+        stalled_x = None
+        while ticks < 400:
+            drive(s, vx=0.5, scan_id=scan.id)
+            scan = lis.next_scan()
+            ticks += 1
+            with lis.cond:
+                st = lis.state
+            if st.stall:
+                stalled_x = st.truth[0]
+                break
+        rate = ticks / (time.monotonic() - t_start)
+        assert stalled_x is not None, "never stalled"
+        # the wall is at x = 10: robot radius 0.25 + wall half-thickness 0.02
+        assert stalled_x == pytest.approx(10.0 - 0.27, abs=0.03)
+        assert rate > 30, f"lock-step ran only {rate:.0f} ticks/s"
+        for _ in range(20):  # keep pushing: stays stalled, does not pass through
+            drive(s, vx=0.5, scan_id=scan.id)
+            scan = lis.next_scan()
+        assert lis.state.stall and lis.state.truth[0] < 10.0 - 0.24
+        for _ in range(5):  # backing away works
+            drive(s, vx=-0.3, scan_id=scan.id)
+            scan = lis.next_scan()
+        assert not lis.state.stall and lis.state.truth[0] < stalled_x - 0.05
+
+
+def test_lockstep_keeps_ticking_when_nobody_commands(start_server, client_config):
+    srv = start_server("corridor", "--lockstep-timeout", "0.1", lockstep=True)
+    with zenoh.open(client_config(srv.endpoint)) as s:
+        lis = Listener(s)
+        a = lis.next_scan(timeout=5).id
+        time.sleep(1.0)
+        b = lis.next_scan(timeout=5).id
+        assert 4 <= b - a <= 15
+
+
+def test_sigint_ends_cleanly_within_a_second(start_server):
+    srv = start_server("corridor")
+    t = time.monotonic()
+    rc = srv.stop(signal.SIGINT)
+    assert time.monotonic() - t < 1.5
+    assert rc == 0
+    assert "stopped after" in srv.output()
+
+
+def test_bad_world_is_a_clear_error(tmp_path):
+    import subprocess
+    import sys
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text('name = "x"\n[robot]\npose = [1, 2]\n')
+    proc = subprocess.run(
+        [sys.executable, "-m", "lab.cli", "server", "--world", str(bad)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2
+    assert "bad.toml" in proc.stderr and "robot.pose" in proc.stderr
