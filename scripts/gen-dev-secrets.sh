@@ -12,7 +12,9 @@
 #   SECRETS_PREFIX  directory the generated <role>.json5 files point at
 #                   (default /run/secrets: where compose mounts them inside the containers)
 #   DAYS            certificate lifetime in days (default 365)
+#   EXTRA_SANS      more EXTRA_SAN values, space-separated (used by the compose `secrets` service)
 #   FORCE=1         overwrite an existing OUT_DIR's files
+#   KEEP=1          if OUT_DIR already holds secrets, keep them and exit 0 (idempotent start-up)
 #
 # These are development secrets: for a real robot, make the CA offline and keep its key there.
 set -euo pipefail
@@ -25,18 +27,24 @@ prefix="${SECRETS_PREFIX:-/run/secrets}"
 days="${DAYS:-365}"
 
 command -v openssl >/dev/null || { echo "gen-dev-secrets: openssl is required" >&2; exit 2; }
+if [[ -e "$out/ca.pem" && "${KEEP:-0}" == 1 ]]; then
+    echo "gen-dev-secrets: keeping the secrets already in $out"
+    exit 0
+fi
 if [[ -e "$out/ca.pem" && "${FORCE:-0}" != 1 ]]; then
     echo "gen-dev-secrets: $out already holds secrets (set FORCE=1 to overwrite)" >&2
     exit 1
 fi
 mkdir -p "$out"
-chmod 700 "$out"
+chmod 700 "$out" 2>/dev/null || true
 umask 077
 tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"' EXIT
 
 sans="DNS:router,DNS:localhost,IP:127.0.0.1"
-for san in "$@"; do sans="$sans,$san"; done
+# shellcheck disable=SC2206
+extra=(${EXTRA_SANS:-})
+for san in "$@" "${extra[@]}"; do sans="$sans,$san"; done
 
 # --- CA -------------------------------------------------------------------------------
 openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:P-256 -nodes -sha256 \
