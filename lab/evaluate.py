@@ -1,0 +1,147 @@
+"""``rhbl evaluate``: run a learned tree (and, as a baseline, the scripted teacher) from each start
+pose of a world and measure how well it behaves (metrics in ``lab.metrics``).
+
+    report = evaluate(spec, policy, episodes=K, seconds=S, seed=N, range_noise=0, odom_noise=0)
+    report["learner"][k], report["teacher"][k]   per-episode metrics (start, seconds, collisions,
+        distance, wall_band_fraction, goal_reached, time_to_goal, oscillations, oscillation_loops,
+        teacher_agreement, stuck, success)
+    report["success_rate"], report["teacher_success_rate"], report["tree"] = {"nodes", "height"}
+
+Success: wall following = no collision, wall band fraction >= 0.8 and distance >= 70% of the
+teacher's from the same start; maze = goal reached with no collision within S.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from client.behaviour.learning import TreePolicy
+from client.behaviour.policies import make_policy
+from lab import metrics
+from lab.harness import DT, resolve_world, run
+from server.world import WorldSpec
+
+__all__ = ["DEFAULT_SECONDS", "add_arguments", "evaluate", "format_table", "main"]
+
+DEFAULT_SECONDS = {"wall-following": 120.0, "maze": 240.0}
+
+
+def _success(task: str, m: dict, teacher_m: dict | None) -> bool:
+    if task == "maze":
+        return metrics.maze_success(m)
+    return metrics.wall_success(m, teacher_m["distance"] if teacher_m else None)
+
+
+def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
+             seconds: float | None = None, seed: int = 0, range_noise: float = 0.0,
+             odom_noise: float = 0.0, keep_paths: bool = False, dt: float = DT) -> dict:
+    """Run ``policy`` and the world's teacher from the start poses (cycled over ``episodes``)."""
+    task = spec.task
+    starts = spec.start_poses
+    episodes = len(starts) if episodes is None else int(episodes)
+    seconds = DEFAULT_SECONDS.get(task, 120.0) if seconds is None else float(seconds)
+    learner_eps, teacher_eps, paths = [], [], {"teacher": [], "learner": []}
+    for k in range(episodes):
+        start = starts[k % len(starts)]
+        ep_seed = seed * 1000 + k
+        tt = run(spec, make_policy(task, actions=policy.actions), start, seconds, seed=ep_seed,
+                 range_noise=range_noise, odom_noise=odom_noise, dt=dt)
+        tm = tt.metrics(spec.goal)
+        tm["success"] = _success(task, tm, None)
+        lt = run(spec, policy, start, seconds, seed=ep_seed, teacher=make_policy(task, actions=policy.actions),
+                 range_noise=range_noise, odom_noise=odom_noise, dt=dt)
+        lm = lt.metrics(spec.goal)
+        lm["success"] = _success(task, lm, tm)
+        learner_eps.append(lm)
+        teacher_eps.append(tm)
+        if keep_paths:
+            paths["teacher"].append(tt.poses)
+            paths["learner"].append(lt.poses)
+    clf = policy.classifier
+    rate = sum(e["success"] for e in learner_eps) / max(1, len(learner_eps))
+    report = {
+        "world": spec.name,
+        "world_path": str(spec.path) if spec.path else None,
+        "task": task,
+        "episodes": episodes,
+        "seconds": seconds,
+        "seed": seed,
+        "range_noise": range_noise,
+        "odom_noise": odom_noise,
+        "learner": learner_eps,
+        "teacher": teacher_eps,
+        "success": [e["success"] for e in learner_eps],
+        "success_rate": rate,
+        "teacher_success_rate": sum(e["success"] for e in teacher_eps) / max(1, len(teacher_eps)),
+        "tree": {"nodes": int(clf.node_count_), "height": int(clf.height_)},
+        "loops": [dict(loop, episode=k) for k, e in enumerate(learner_eps)
+                  for loop in e["oscillation_loops"]],
+    }
+    if keep_paths:
+        report["_paths"] = paths
+    return report
+
+
+def format_table(report: dict) -> str:
+    rows = [f"world {report['world']} ({report['task']}), {report['episodes']} episodes of "
+            f"{report['seconds']:g} s, tree {report['tree']['nodes']} nodes, height {report['tree']['height']}",
+            f"{'ep':>2} {'start':>22} | {'who':7} {'ok':>3} {'coll':>4} {'dist m':>7} {'band':>5} "
+            f"{'goal s':>6} {'osc':>4} {'agree':>5}"]
+    for k, (lm, tm) in enumerate(zip(report["learner"], report["teacher"], strict=True)):
+        start = ",".join(f"{v:g}" for v in lm["start"])
+        for who, m in (("learner", lm), ("teacher", tm)):
+            band = "" if m["wall_band_fraction"] is None else f"{m['wall_band_fraction']:.2f}"
+            goal = "" if m["time_to_goal"] is None else f"{m['time_to_goal']:.1f}"
+            agree = "" if m["teacher_agreement"] is None else f"{m['teacher_agreement']:.2f}"
+            rows.append(f"{k:>2} {start if who == 'learner' else '':>22} | {who:7} "
+                        f"{'yes' if m['success'] else 'no':>3} {m['collisions']:>4} "
+                        f"{m['distance']:>7.1f} {band:>5} {goal:>6} {m['oscillations']:>4} {agree:>5}")
+    rows.append(f"success rate: learner {report['success_rate']:.0%}, teacher "
+                f"{report['teacher_success_rate']:.0%}")
+    for loop in report["loops"]:
+        x, y, yaw = loop["pose"]
+        rows.append(f"rotate-left/rotate-right loop in episode {loop['episode']} at t={loop['time']:g} s; "
+                    f"correct it with: rhbl train --resume TREE --start {x:g},{y:g},{yaw:g} ...")
+    return "\n".join(rows)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--world", required=True, help="world file (or a shipped world's name)")
+    parser.add_argument("--tree", required=True, help="snapshot written by 'rhbl train'")
+    parser.add_argument("--episodes", type=int, default=None,
+                        help="episodes, cycling over the world's start poses (default: one per pose)")
+    parser.add_argument("--seconds", type=float, default=None,
+                        help="sim seconds per episode (default 120 wall following, 240 maze)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--range-noise", type=float, default=0.0, help="laser noise (server option)")
+    parser.add_argument("--odom-noise", type=float, default=0.0, help="odometry noise (server option)")
+    parser.add_argument("--json", default=None, help="write the full report here")
+    parser.add_argument("--plot", default=None, help="draw world and paths to this PNG")
+    parser.add_argument("--spheres", default=None, metavar="I,J",
+                        help="with --plot: also draw the tree's spheres projected on features I,J")
+
+
+def main(args) -> int:
+    spec = resolve_world(args.world)
+    policy = TreePolicy.load(args.tree)
+    report = evaluate(spec, policy, episodes=args.episodes, seconds=args.seconds, seed=args.seed,
+                      range_noise=args.range_noise, odom_noise=args.odom_noise,
+                      keep_paths=bool(args.plot))
+    paths = report.pop("_paths", None)
+    print(format_table(report))
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(report, indent=1))
+        print(f"wrote {args.json}")
+    if args.plot:
+        from lab.plot import plot_paths
+
+        dims = tuple(int(v) for v in args.spheres.split(",")) if args.spheres else (0, 1)
+        plot_paths(spec, paths, args.plot,
+                   title=f"{spec.name}: teacher (blue) and learned robot (red), "
+                         f"success {report['success_rate']:.0%}",
+                   spheres=policy.classifier if args.spheres else None, dims=dims)
+        print(f"wrote {args.plot}")
+    return 0
