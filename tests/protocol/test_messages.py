@@ -1,0 +1,162 @@
+"""protocol: keys, messages and the codec's validation."""
+
+from __future__ import annotations
+
+import contextlib
+import math
+
+import msgpack
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from protocol import PROTOCOL_VERSION, DecodeError, ProtocolError, keys
+from protocol.messages import (
+    Ack,
+    DriverState,
+    Geometry,
+    LaserConfig,
+    MotorPower,
+    Nack,
+    Scan,
+    SetOdom,
+    State,
+    TeacherAction,
+    TreeNotice,
+    VelCmd,
+)
+
+
+def test_keys_are_the_public_contract():
+    assert keys.state_key("r0") == "rhbl/r0/position2d/0/data/state"
+    assert keys.scan_key("r1") == "rhbl/r1/laser/0/data/scan"
+    assert keys.cmd_vel_key() == "rhbl/r0/position2d/0/cmd/vel"
+    assert keys.cmd_vel_key("r0", source="teacher") == "rhbl/r0/position2d/0/cmd/vel/teacher"
+    assert keys.source_of_cmd_key("rhbl/r0/position2d/0/cmd/vel/teacher") == "teacher"
+    assert keys.source_of_cmd_key("rhbl/r0/position2d/0/cmd/vel") is None
+    assert keys.driver_key("r0") == "rhbl/r0/position2d/0/data/driver"
+    assert keys.request_key("r0", "laser", "get_config") == "rhbl/r0/laser/0/req/get_config"
+    assert keys.teacher_action_key("r0") == "rhbl/r0/teacher/action"
+    assert keys.learner_notice_key("r0") == "rhbl/r0/learner/notice"
+    assert keys.learner_snapshot_key("r0") == "rhbl/r0/learner/snapshot"
+    assert keys.alive_key("teacher", "t1") == "rhbl/alive/teacher/t1"
+    assert keys.alive_key("server", "*") == "rhbl/alive/server/*"
+    assert keys.robot_name(3) == "r3"
+    for bad in ["", "a/b", "*", "r 0", "x?"]:
+        with pytest.raises(ValueError, match="robot"):
+            keys.state_key(bad)
+
+
+def _roundtrip(msg):
+    out = type(msg).decode(msg.encode())
+    assert msgpack.unpackb(msg.encode())["v"] == PROTOCOL_VERSION
+    return out
+
+
+def test_roundtrips():
+    s = State(
+        ts=1.5,
+        seq=3,
+        pos=(1.0, 2.0, 0.5),
+        vel=(0.1, 0.0, -0.2),
+        stall=True,
+        driver="teacher",
+        truth=(1.0, 2.0, 0.5),
+    )
+    assert _roundtrip(s) == s
+    r = np.linspace(0, 8, 360).astype(np.float32)
+    sc = _roundtrip(Scan(ts=2.0, id=7, ranges=r, pose=(1.0, 2.0, 3.0)))
+    assert sc.ranges.dtype == np.float32 and np.array_equal(sc.ranges, r) and sc.count == 360
+    assert sc.bearings()[0] == pytest.approx(-math.pi / 2)
+    raw = msgpack.unpackb(Scan(ts=0.0, id=1, ranges=r).encode())
+    assert raw["ranges"] == r.astype("<f4").tobytes()  # little-endian float32 bytes
+    c = VelCmd(vx=0.3, va=-0.1, source="controller", scan_id=9, ts=1.0)
+    assert _roundtrip(c) == c
+    assert msgpack.unpackb(c.encode())["vel"] == [0.3, 0.0, -0.1]
+    for m in [
+        DriverState(source="teacher", ts=1.0, priority=2),
+        TeacherAction(scan_id=4, action="fwd-left", source="teacher", ts=0.4, executed="fwd"),
+        TreeNotice(seq=1, nodes=53, height=12, vectors=900, snapshot_id="abc:900", ts=1.0),
+        Geometry(pose=(0.0, 0.0, 0.0), size=(0.511, 0.4), radius=0.25),
+        LaserConfig(min_angle=-1.5, max_angle=1.5, resolution=0.01, max_range=8.0, count=301),
+        SetOdom(pose=(1.0, 2.0, 3.0)),
+        MotorPower(state=False),
+        Ack(info="ok"),
+        Nack(reason="no"),
+    ]:
+        assert _roundtrip(m) == m
+
+
+def test_extra_fields_allowed_and_optional_fields_default():
+    m = msgpack.packb({"v": 1, "vel": [0.1, 0, 0.2], "state": True, "whatever": [1, 2]})
+    c = VelCmd.decode(m)
+    assert (c.vx, c.va, c.source, c.scan_id) == (0.1, 0.2, "", None)
+
+
+@pytest.mark.parametrize(
+    "payload, field",
+    [
+        ({"vel": [0.1, 0, 0], "state": True}, "'v'"),
+        ({"v": 2, "vel": [0.1, 0, 0], "state": True}, "version"),
+        ({"v": 1, "state": True}, "'vel'"),
+        ({"v": 1, "vel": [0.1, 0], "state": True}, "'vel'"),
+        ({"v": 1, "vel": [math.nan, 0, 0], "state": True}, "'vel'"),
+        ({"v": 1, "vel": [0, math.inf, 0], "state": True}, "'vel'"),
+        ({"v": 1, "vel": [0, "x", 0], "state": True}, "'vel'"),
+        ({"v": 1, "vel": [0, 0, 0], "state": 1}, "'state'"),
+        ({"v": 1, "vel": [0, 0, 0], "state": True, "scan_id": -1}, "'scan_id'"),
+        ({"v": 1, "vel": [0, 0, 0], "state": True, "scan_id": 1.5}, "'scan_id'"),
+        ({"v": 1, "vel": [0, 0, 0], "state": True, "source": "x" * 1000}, "'source'"),
+    ],
+)
+def test_decode_names_the_bad_field(payload, field):
+    with pytest.raises(DecodeError, match=field):
+        VelCmd.decode(msgpack.packb(payload))
+
+
+def test_decode_rejects_garbage_size_and_bad_ranges():
+    assert issubclass(DecodeError, ProtocolError)
+    with pytest.raises(DecodeError, match="msgpack"):
+        VelCmd.decode(b"\xc1\xc1")
+    with pytest.raises(DecodeError, match="map"):
+        VelCmd.decode(msgpack.packb([1, 2]))
+    with pytest.raises(DecodeError, match="limit"):
+        VelCmd.decode(b"\x00" * 100_000)
+    with pytest.raises(DecodeError, match="bytes"):
+        VelCmd.decode("text")
+    good = msgpack.unpackb(Scan(ts=0.0, id=1, ranges=np.ones(10, np.float32)).encode())
+    for bad in [b"abc", b"", np.array([np.nan], "<f4").tobytes(), [1.0, 2.0]]:
+        m = dict(good, ranges=bad)
+        with pytest.raises(DecodeError, match="ranges"):
+            Scan.decode(msgpack.packb(m, use_bin_type=True))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.binary(max_size=300))
+def test_random_bytes_only_ever_raise_decode_error(data):
+    for cls in (VelCmd, State, Scan, TeacherAction, SetOdom):
+        with contextlib.suppress(DecodeError):
+            cls.decode(data)
+
+
+values = st.recursive(
+    st.none()
+    | st.booleans()
+    | st.integers()
+    | st.floats()
+    | st.text(max_size=5)
+    | st.binary(max_size=8),
+    lambda c: st.lists(c, max_size=4) | st.dictionaries(st.text(max_size=6), c, max_size=4),
+    max_leaves=12,
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.dictionaries(st.sampled_from(["v", "vel", "state", "source", "scan_id", "ts"]), values))
+def test_random_maps_only_ever_raise_decode_error(m):
+    try:
+        c = VelCmd.decode(msgpack.packb(m, use_bin_type=True))
+    except DecodeError:
+        return
+    assert all(math.isfinite(x) for x in (c.vx, c.vy, c.va))
