@@ -143,7 +143,7 @@ def test_random_bytes_only_ever_raise_decode_error(data):
 values = st.recursive(
     st.none()
     | st.booleans()
-    | st.integers()
+    | st.integers(-(2**63), 2**64 - 1)
     | st.floats()
     | st.text(max_size=5)
     | st.binary(max_size=8),
