@@ -13,9 +13,12 @@ hysteresis and every label is held for a minimum dwell, so the label stream does
 (which also keeps trees small).
 
 ``WallFollower(side="right")`` follows the wall on the robot's right at about ``target`` metres.
-``MazeTeacher`` solves a tiered maze: it follows the left wall while right-directional and the right
-wall while left-directional (the paper's heading feature tells the learner which), which takes every
-tier's outlet in turn and never re-enters a visited tier.
+``MazeTeacher`` solves a tiered maze by keeping its right hand on the wall (scan only), which takes
+every tier's outlet in turn and never re-enters a visited tier.
+
+Both handle: an open followed side (a convex corner, a fin's tip, an opening: arc towards it even
+with a wall ahead), a wall ahead (turn away), and no wall in reach (drive straight until one is
+ahead, then turn so that it ends up on the followed side).
 """
 
 from __future__ import annotations
@@ -104,9 +107,9 @@ class WallFollower(Policy):
 
     def __init__(self, side: str = "right", target: float = 0.6, k_d: float = 2.0,
                  k_a: float = 1.6, front_stop: float = 0.45, front_slow: float = 0.9,
-                 lost: float = 1.7, on: float = 0.45, off: float = 0.2, dwell: int = 3,
-                 robot_half_width: float = 0.26, fov_deg: float = 180.0,
-                 actions: ActionSet = DEFAULT_ACTIONS):
+                 lost: float = 1.2, on: float = 0.45, off: float = 0.2, dwell: int = 3,
+                 robot_half_width: float = 0.26, fov_deg: float = 180.0, sector_deg: float = -40.0,
+                 max_arc: int = 60, actions: ActionSet = DEFAULT_ACTIONS):
         super().__init__(actions)
         if side not in ("right", "left"):
             raise ValueError(f"side must be 'right' or 'left', got {side!r}")
@@ -116,33 +119,56 @@ class WallFollower(Policy):
         self.on, self.off, self.dwell = on, off, dwell
         self.half_width = robot_half_width
         self.fov = fov_deg
+        self.sector = math.radians(sector_deg)
+        self.max_arc = max_arc
         self.reset()
 
     def reset(self) -> None:
         self._label = "fwd"
         self._held = 0
+        self._lost = self.max_arc + 1  # until a wall is found, search straight ahead
 
     # -- the continuous expert, always for the RIGHT side (the left side mirrors the scan) --
-    def _command(self, r: np.ndarray) -> tuple[float, float]:
-        """(w, front): desired turn rate sign/magnitude (> 0 = left) and front clearance."""
+    def _command(self, r: np.ndarray) -> tuple[float, float, bool]:
+        """(w, front, lost): desired turn (> 0 = left), front clearance, and whether the
+        followed wall has ended / is out of reach."""
         b, c, s = _trig(r.size, self.fov)
         x, y = r * c, r * s
         # clearance straight ahead in the robot's swept corridor
         ahead = (x > 0.0) & (np.abs(y) < self.half_width)
         front = float(x[ahead].min()) if ahead.any() else float(r.max())
-        # nearest point on the right side and ahead-right (bearings -90 .. +20 deg)
-        sel = b <= math.radians(20.0)
+        # nearest point on the right side (bearings -90 .. sector_deg); walls ahead are the
+        # front term's business, so an opening on the followed side is taken even with a wall ahead
+        sel = b <= self.sector
         i = int(np.argmin(np.where(sel, r, np.inf)))
         d = float(r[i])
         alpha = float(b[i]) + math.pi / 2.0  # 0 when the wall's foot is at -90 deg (parallel)
-        # no wall in reach: arc right to find one
-        w = -1.0 if d > self.lost else self.k_d * (self.target - d) + self.k_a * alpha
+        # the followed wall ended (nothing beside the robot: a convex corner, a fin's tip, an
+        # opening) or no wall in reach: arc towards the followed side, whatever lies ahead
+        beside = float(r[b <= -math.pi / 2.0 + math.radians(15.0)].min())
+        if d > self.lost or beside > self.lost:
+            return -1.0, front, True
+        w = self.k_d * (self.target - d) + self.k_a * alpha
         if front < self.front_slow:
             w = max(w, 0.0) + (self.front_slow - front) * 3.0
-        return w, front
+        return w, front, False
 
-    def _discretise(self, w: float, front: float) -> str:
+    def _discretise(self, w: float, front: float, lost: bool = False) -> str:
         cur = self._label
+        if cur in ("rot-left", "rot-right") and front < self.front_slow:
+            # committed: keep rotating the same way until the way ahead is clear (a human does
+            # not dither between rotate-left and rotate-right in a tight spot)
+            return cur
+        if lost and self._lost > self.max_arc:
+            # no wall for a long time (open space, or a start far from walls): drive straight
+            # until one is ahead, then turn so that it ends up on the followed side
+            if front < self.front_stop:
+                return "rot-left"
+            return "fwd-left" if front < self.front_slow else "fwd"
+        if lost:
+            # the followed wall ended (a convex corner, a fin's tip, an opening): turn towards
+            # it, in place when something is close ahead
+            return "rot-right" if front < self.front_stop else "fwd-right"
         if front < self.front_stop or (w > 2.0 and front < self.front_slow):
             want = "rot-left"
         elif cur in ("fwd-left", "rot-left"):
@@ -159,8 +185,9 @@ class WallFollower(Policy):
         r = np.asarray(ranges, dtype=np.float64)
         if self.side == "left":
             r = r[::-1]
-        w, front = self._command(r)
-        want = self._discretise(w, front)
+        w, front, lost = self._command(r)
+        self._lost = self._lost + 1 if lost else 0
+        want = self._discretise(w, front, lost)
         urgent = front < self.front_stop
         if want != self._label and (self._held >= self.dwell or urgent):
             self._label, self._held = want, 0
@@ -171,45 +198,22 @@ class WallFollower(Policy):
         return name
 
 
-class MazeTeacher(Policy):
-    """Tiered-maze expert from the scan and heading only.
+class MazeTeacher(WallFollower):
+    """Tiered-maze expert from the scan only: a right-wall follower tuned for 2 m corridors.
 
-    While right-directional (cos(yaw) >= 0) it follows the wall on its LEFT, while
-    left-directional the wall on its RIGHT. In a tiered maze whose tiers alternate direction this
-    hugs the side where the next tier's inlet opens, so it leaves each tier by its outlet.
-    ``up`` = "left" reverses the convention for mazes that climb the other way.
+    In a tiered maze (every tier one inlet and one outlet) keeping the right hand on the wall takes
+    every tier's outlet in turn and never re-enters a visited tier, wherever the openings are and
+    however many tiers there are. The learner still gets the paper's heading feature (0.33/0.66),
+    which separates the tiers' two travel directions in feature space. (An earlier teacher that
+    switched walls with the heading failed at the openings, where the heading flips: see
+    docs/experiments.md.)
     """
 
     task = "maze"
 
-    def __init__(self, up: str = "left", target: float = 0.55, actions: ActionSet = DEFAULT_ACTIONS,
-                 **kw):
-        super().__init__(actions)
-        self.up = up
-        self._left = WallFollower(side="left", target=target, actions=actions, **kw)
-        self._right = WallFollower(side="right", target=target, actions=actions, **kw)
-        self.reset()
-
-    def reset(self) -> None:
-        self._left.reset()
-        self._right.reset()
-        self._side: str | None = None
-
-    def act(self, ranges, pose) -> str:
-        yaw = float(pose[2]) if pose is not None else 0.0
-        rightward = math.cos(yaw) >= 0.0
-        side = ("left" if rightward else "right") if self.up == "left" else (
-            "right" if rightward else "left")
-        if side != self._side:
-            # hand the dwell state over so the label stream stays smooth across the switch
-            src = self._left if self._side == "left" else self._right
-            dst = self._left if side == "left" else self._right
-            if self._side is not None:
-                mirrored = self.actions.mirror(src._label)
-                dst._label, dst._held = (mirrored if side != self._side else src._label), src._held
-            self._side = side
-        follower = self._left if side == "left" else self._right
-        return follower.act(ranges, pose)
+    def __init__(self, target: float = 0.55, actions: ActionSet = DEFAULT_ACTIONS, **kw):
+        kw.setdefault("side", "right")
+        super().__init__(target=target, actions=actions, **kw)
 
 
 def make_policy(task: str, actions: ActionSet = DEFAULT_ACTIONS, **kw) -> Policy:
