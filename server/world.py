@@ -463,16 +463,6 @@ class World:
                 hit = True
 
         b.each_arbiter(visit)
-        if not hit:
-            # a contact the solver already separated: check penetration geometrically
-            for info in self._space.shape_query(r.shape):
-                cps = info.contact_point_set
-                if cps is None or not cps.points:
-                    continue
-                n = cps.normal  # from the robot's shape towards the other shape
-                if cmd_dir[0] * n.x + cmd_dir[1] * n.y > 1e-6:
-                    hit = True
-                    break
         r.stall = hit
 
     # -- observation ------------------------------------------------------------------------
@@ -519,8 +509,8 @@ class World:
         oy = y + LASER.offset * math.sin(yaw)
         max_r = LASER.max_range
         ang = self._bearings + yaw
-        dc = np.cos(ang)
-        ds = np.sin(ang)
+        dc = np.cos(ang).astype(np.float32)
+        ds = np.sin(ang).astype(np.float32)
         # segments: cull those wholly behind the laser or out of range
         ax = self._seg_ax - ox
         ay = self._seg_ay - oy
@@ -536,7 +526,10 @@ class World:
             nx * nx + ny * ny < max_r * max_r
         )
         if keep.any():
-            ax, ay, ex, ey = ax[keep], ay[keep], ex[keep], ey[keep]
+            # float32 for the (segments x beams) work: about 20% faster, ample for ranges <= 8 m
+            f4 = np.float32
+            ax, ay = ax[keep].astype(f4), ay[keep].astype(f4)
+            ex, ey = ex[keep].astype(f4), ey[keep].astype(f4)
             # (S, beams) layout: the reduction runs over the short first axis
             with np.errstate(divide="ignore", invalid="ignore"):
                 inv = 1.0 / (np.multiply.outer(ey, dc) - np.multiply.outer(ex, ds))
@@ -547,15 +540,15 @@ class World:
                 bad |= tr <= 0.0
                 tr[bad] = max_r
             ranges = tr.min(axis=0)
-            np.minimum(ranges, max_r, out=ranges)
+            np.minimum(ranges, np.float32(max_r), out=ranges)
         else:
-            ranges = np.full(LASER.count, max_r, dtype=np.float64)
+            ranges = np.full(LASER.count, max_r, dtype=np.float32)
         if self.n_robots > 1:
             ranges = self._scan_robots(i, ox, oy, dc, ds, ranges)
         if self.range_noise > 0.0:
             ranges = ranges + self._rng.normal(0.0, self.range_noise, LASER.count)
             np.clip(ranges, 0.0, max_r, out=ranges)
-        return ranges.astype(np.float32)
+        return ranges.astype(np.float32, copy=False)
 
     def _scan_robots(self, i, ox, oy, dc, ds, ranges):
         others = [self._robots[j].body.position for j in range(self.n_robots) if j != i]
@@ -566,4 +559,4 @@ class World:
             t = b - np.sqrt(disc)
         ok = (disc >= 0) & (t > 0)
         t = np.where(ok, t, LASER.max_range)
-        return np.minimum(ranges, t.min(axis=1))
+        return np.minimum(ranges, t.min(axis=1)).astype(np.float32)
