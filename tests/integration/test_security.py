@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import os
 import socket
 import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -341,3 +343,39 @@ def test_liveliness_is_shared_between_authorised_roles(sessions):
         assert keys.alive_key("teacher", "t1") in seen
     finally:
         token.undeclare()
+
+
+# ---- the remote teacher's messages -----------------------------------------------------------
+
+
+def _teacher(secrets: Path, port: int, config: Path | None = None, timeout: float = 60):
+    argv = [
+        sys.executable, "-m", "lab.cli", "teacher",
+        "--connect", f"tls/localhost:{port}",
+        "--zenoh-config", str(config or secrets / "teacher.json5"),
+        "--wait-server", "1", "--seconds", "1",
+    ]  # fmt: skip
+    env = dict(os.environ, RUST_LOG="off")
+    return subprocess.run(argv, capture_output=True, text=True, timeout=timeout, env=env)
+
+
+def test_remote_teacher_says_when_the_router_is_unreachable(secrets):
+    run = _teacher(secrets, _free_port())
+    assert run.returncode == 3, run.stderr
+    assert "connection refused" in run.stderr and "router" in run.stderr
+
+
+def test_remote_teacher_says_when_credentials_are_refused(secrets, router, tmp_path):
+    text = (secrets / "teacher.json5").read_text()
+    password = _users(secrets)["teacher"]
+    bad = tmp_path / "teacher.json5"
+    bad.write_text(text.replace(password, "not-the-password"))
+    run = _teacher(secrets, router, bad)
+    assert run.returncode == 3, run.stderr
+    assert "refused the zenoh session" in run.stderr and "credentials" in run.stderr
+
+
+def test_remote_teacher_says_when_the_server_is_not_up(secrets, router):
+    run = _teacher(secrets, router)
+    assert run.returncode == 4, run.stderr
+    assert "server is not up" in run.stderr
