@@ -56,6 +56,8 @@ _PARAMS = (
 # every (query, sphere) pair; the single-query path always tests every sphere at once.
 _DENSE_BATCH_MAX_NODES = 64
 _CHUNK_PAIRS = 1 << 21
+# the batch descent tests a whole subtree at once when queries x subtree size is at most this
+_DENSE_SUBTREE_PAIRS = 16384
 
 
 def _plain_label(label: Any) -> Any:
@@ -481,6 +483,25 @@ class HypersphereClassifier:
         lay["kids"] = kids
         lay["kids_ct"] = kids_ct
         lay["kids_reach"] = kids_reach
+        # for the batch filter: centres row-major, their squared norms, and the band of
+        # rounding error of the expanded squared distance around each child's reach
+        n_feat = self.n_features_in_
+        tol = 16 * 2.0**-53 * (n_feat * n_feat + 4 * n_feat)
+        lay["kids_c"] = [None if k is None else np.ascontiguousarray(k.T) for k in kids_ct]
+        lay["kids_cc"] = [None if k is None else np.einsum("ij,ij->j", k, k) for k in kids_ct]
+        lo_l: list[np.ndarray | None] = []
+        hi_l: list[np.ndarray | None] = []
+        for r in kids_reach:
+            if r is None:
+                lo_l.append(None)
+                hi_l.append(None)
+                continue
+            lim = r * r if self._euclid else r
+            band = tol + (8 * 2.0**-53 * lim if self._euclid else 0.0)
+            lo_l.append(lim - band)
+            hi_l.append(lim + band)
+        lay["kids_lo"] = lo_l
+        lay["kids_hi"] = hi_l
         self._layout = lay
         return lay
 
@@ -550,44 +571,89 @@ class HypersphereClassifier:
             out[s : s + step] = lay["rank_pos"][key.min(axis=1)]
         return out
 
+    def _winner_rank_dense(self, xt: np.ndarray, lay: dict[str, Any], lo: int, hi: int):
+        """Best tie-break rank of each query (columns of ``xt``) within pre-order [lo, hi).
+
+        The sphere at ``lo`` must enclose every query (it is their subtree's root).
+        """
+        ct = lay["centers_t"][:, lo:hi]
+        d = np.subtract.outer(xt[0], ct[0])
+        d *= d
+        for k in range(1, ct.shape[0]):
+            t = np.subtract.outer(xt[k], ct[k])
+            t *= t
+            d += t
+        if self._euclid:
+            np.sqrt(d, out=d)
+        bad = d > lay["reach"][lo:hi]
+        reach_end = np.maximum.accumulate(lay["end"][lo:hi] * bad, axis=1)
+        key = np.where(reach_end > lay["ar"][lo:hi], lay["big"], lay["rank"][lo:hi])
+        return key.min(axis=1)
+
     def _winner_pos_descent(self, X: np.ndarray, lay: dict[str, Any]) -> np.ndarray:
         """Descend sphere by sphere, carrying the queries each sphere encloses.
 
-        Only the children of spheres that enclose some query are tested, and a query's
-        coordinates are gathered once per enclosing sphere (not once per tested child).
+        Only the children of spheres that enclose some query are tested. Children are tested
+        against many queries at once with a matrix product (the expanded form of the squared
+        distance) as a *filter*: every (query, child) pair whose expanded distance lies within
+        a rounding-error band of the radius is recomputed exactly as ``sum((x - c)**2)``, so
+        the answers are exactly those of the direct form. Small subtrees with few queries are
+        tested all at once with the direct form.
         """
         m = X.shape[0]
         rank = lay["rank"]
         kids_of = lay["kids"]
-        kids_ct = lay["kids_ct"]
+        kids_c = lay["kids_c"]
+        kids_cc = lay["kids_cc"]
+        kids_lo = lay["kids_lo"]
+        kids_hi = lay["kids_hi"]
         kids_reach = lay["kids_reach"]
-        best = np.full(m, rank[0], dtype=np.int64)
-        stack = [(0, np.arange(m), np.ascontiguousarray(X.T))]
+        end = lay["end"]
         euclid = self._euclid
+        dense_pairs = _DENSE_SUBTREE_PAIRS
+        XT = np.ascontiguousarray(X.T)
+        XX = np.einsum("ij,ij->i", X, X)
+        best = np.full(m, rank[0], dtype=np.int64)
+        stack: list[tuple[int, np.ndarray | None]] = [(0, None)]
         while stack:
-            node, q, xt = stack.pop()
-            kids = kids_of[node]
-            if kids is None:
+            node, q = stack.pop()
+            if q is None:
+                q = np.arange(m)
+                xt, xx = XT, XX
+            else:
+                xt = XT[:, q]
+                xx = XX[q]
+            stop = int(end[node])
+            if stop - node == 1:  # a leaf (only the root can get here)
                 continue
-            ct = kids_ct[node]
-            d = np.subtract.outer(ct[0], xt[0])
-            d *= d
-            for k in range(1, ct.shape[0]):
-                t = np.subtract.outer(ct[k], xt[k])
-                t *= t
-                d += t
-            if euclid:
-                np.sqrt(d, out=d)
-            enc = d <= kids_reach[node][:, None]
-            hit = enc.any(axis=1)
-            for j in np.flatnonzero(hit).tolist():
-                mask = enc[j]
-                qj = q[mask]
+            if q.size * (stop - node) <= dense_pairs:
+                # few queries and a small subtree: test all of it at once
+                sub = self._winner_rank_dense(xt, lay, node, stop)
+                best[q] = np.minimum(best[q], sub)
+                continue
+            d = np.einsum("kn,nq->kq", kids_c[node], xt)  # (no BLAS threads)
+            d *= -2.0
+            d += kids_cc[node][:, None]
+            d += xx
+            enc = d <= kids_lo[node][:, None]
+            maybe = d <= kids_hi[node][:, None]
+            if not np.array_equal(enc, maybe):
+                jj, ii = np.nonzero(maybe & ~enc)
+                ct = lay["kids_ct"][node]
+                exact = (ct[0][jj] - xt[0][ii]) ** 2
+                for k in range(1, ct.shape[0]):
+                    exact += (ct[k][jj] - xt[k][ii]) ** 2
+                if euclid:
+                    np.sqrt(exact, out=exact)
+                ok = exact <= kids_reach[node][jj]
+                enc[jj[ok], ii[ok]] = True
+            kids = kids_of[node]
+            for j in np.flatnonzero(enc.any(axis=1)).tolist():
+                qj = q[enc[j]]
                 c = int(kids[j])
-                rc = rank[c]
-                cur = best[qj]
-                best[qj] = np.minimum(cur, rc)
-                stack.append((c, qj, xt[:, mask]))
+                best[qj] = np.minimum(best[qj], rank[c])
+                if kids_of[c] is not None:
+                    stack.append((c, qj))
         return lay["rank_pos"][best]
 
     def decision_path(self, x: Any) -> list[dict[str, Any]]:

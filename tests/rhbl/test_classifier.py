@@ -235,8 +235,10 @@ def test_batch_paths_agree_on_small_and_large_trees(monkeypatch):
         b = clf.predict(Q)
         monkeypatch.setattr(clfmod, "_DENSE_BATCH_MAX_NODES", 0)
         c = clf.predict(Q)
+        monkeypatch.setattr(clfmod, "_DENSE_SUBTREE_PAIRS", 0)  # filter + exact recheck only
+        d = clf.predict(Q)
         monkeypatch.undo()
-        assert a.tolist() == b.tolist() == c.tolist()
+        assert a.tolist() == b.tolist() == c.tolist() == d.tolist()
     assert clf.predict(np.zeros((0, 4))).shape == (0,)
 
 
@@ -248,3 +250,17 @@ def test_training_speed_thousands_of_vectors():
     clf = HypersphereClassifier("fwd").fit(X, y)
     assert time.perf_counter() - t < 20  # seconds, not minutes (usually well under 1 s)
     assert clf.node_count_ > 100
+
+
+@pytest.mark.parametrize("distance", ["squared", "euclidean"])
+def test_batch_filter_exact_on_boundaries(monkeypatch, distance):
+    # grid points sit exactly on many sphere boundaries (including radius-0 spheres)
+    g = np.linspace(0, 1, 5)
+    grid = np.array(np.meshgrid(g, g, g)).reshape(3, -1).T
+    rng = np.random.default_rng(3)
+    y = rng.choice(["a", "b", "c"], len(grid))
+    clf = HypersphereClassifier("a", distance=distance).fit(grid[rng.permutation(len(grid))], y)
+    monkeypatch.setattr(clfmod, "_DENSE_BATCH_MAX_NODES", 0)
+    monkeypatch.setattr(clfmod, "_DENSE_SUBTREE_PAIRS", 0)
+    Q = np.vstack([grid, (grid[:-1] + grid[1:]) / 2])
+    assert clf.predict(Q).tolist() == [clf.predict_one(q) for q in Q]

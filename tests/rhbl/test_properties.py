@@ -11,6 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rhbl import HypersphereClassifier, loads
+from rhbl import classifier as clfmod
 
 EPS = 1e-9
 SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -92,7 +93,16 @@ def test_matches_naive_reference(data, distance, spawn):
     np.testing.assert_allclose(t["radii"], [nd["r"] for nd in ref.nodes], rtol=0, atol=1e-12)
     assert [clf.classes_[i] for i in t["label"]] == [nd["label"] for nd in ref.nodes]
     Q = np.vstack([X, np.random.default_rng(0).random((30, X.shape[1]))])
-    assert clf.predict(Q).tolist() == [ref.predict(q) for q in Q.tolist()]
+    want = [ref.predict(q) for q in Q.tolist()]
+    assert clf.predict(Q).tolist() == want
+    assert [clf.predict_one(q) for q in Q] == want
+    # the batch descent with its matrix-product filter, forced even on small trees
+    old = clfmod._DENSE_BATCH_MAX_NODES, clfmod._DENSE_SUBTREE_PAIRS
+    clfmod._DENSE_BATCH_MAX_NODES = clfmod._DENSE_SUBTREE_PAIRS = 0
+    try:
+        assert clf.predict(Q).tolist() == want
+    finally:
+        clfmod._DENSE_BATCH_MAX_NODES, clfmod._DENSE_SUBTREE_PAIRS = old
 
 
 @SETTINGS
