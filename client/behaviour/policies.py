@@ -125,7 +125,7 @@ class WallFollower(Policy):
 
     def reset(self) -> None:
         self._label = "fwd"
-        self._held = 0
+        self._held = self.dwell  # the first choice is free
         self._lost = self.max_arc + 1  # until a wall is found, search straight ahead
 
     # -- the continuous expert, always for the RIGHT side (the left side mirrors the scan) --

@@ -1,0 +1,147 @@
+"""Action set, features, scripted teachers, perturbed demonstrations, learner snapshots."""
+
+import numpy as np
+import pytest
+
+from client.behaviour.actions import DEFAULT_ACTIONS, ActionError, ActionSet
+from client.behaviour.features import (
+    FEATURES,
+    HEADING_LEFT,
+    HEADING_RIGHT,
+    FeatureError,
+    FeatureSpec,
+)
+from client.behaviour.learning import (
+    DemonstrationLearner,
+    IncompatibleSnapshotError,
+    TreePolicy,
+    check_compatible,
+)
+from client.behaviour.policies import Demonstrator, MazeTeacher, WallFollower, make_policy
+
+
+def test_action_set_defaults_roundtrip_and_errors():
+    assert DEFAULT_ACTIONS.names == ("fwd", "fwd-left", "rot-left", "fwd-right", "rot-right")
+    assert all(v != (0.0, 0.0) for v in DEFAULT_ACTIONS.values())  # never stands still
+    assert ActionSet.from_dict(DEFAULT_ACTIONS.to_dict()) == DEFAULT_ACTIONS
+    assert DEFAULT_ACTIONS.mirror("fwd-left") == "fwd-right"
+    assert DEFAULT_ACTIONS["rot-left"][1] > 0 > DEFAULT_ACTIONS["rot-right"][1]
+    with pytest.raises(ActionError, match="unknown action 'jump'"):
+        DEFAULT_ACTIONS["jump"]
+    with pytest.raises(ActionError, match="stands still"):
+        ActionSet({"stop": (0.0, 0.0)})
+
+
+def test_features_beams_clamp_scale_heading():
+    spec = FEATURES["wall"]
+    r = np.full(360, 8.0, dtype=np.float32)
+    r[0] = 0.5  # right
+    assert spec.beam_indices() == [0, 45, 90, 135, 180]
+    r[180] = 1.0  # the 90-deg beam (straight ahead)
+    x = spec.extract(r, 0.0)
+    assert x.shape == (5,)
+    assert x[0] == pytest.approx(0.25)  # 0.5 m / 2.0
+    assert x[4] == pytest.approx(0.5)
+    assert np.all((x >= 0) & (x <= 1))
+    maze = FEATURES["maze"]
+    assert maze.extract(r, 0.1)[-1] == HEADING_RIGHT
+    assert maze.extract(r, 3.0)[-1] == HEADING_LEFT
+    assert FeatureSpec.from_dict(maze.to_dict()) == maze
+    win = FeatureSpec(beams=(10.0,), window=10.0)
+    assert win.extract(r, 0.0)[0] == pytest.approx(0.25)  # min over 0..20 deg sees the 0.5 m
+    with pytest.raises(FeatureError, match="outside"):
+        FeatureSpec(beams=(200.0,))
+    with pytest.raises(FeatureError, match="exceed 1"):
+        FeatureSpec(beams=(0.0,), clamp=3.0, scale=2.0)
+
+
+def _corridor_scan(right: float, left: float) -> np.ndarray:
+    b = np.linspace(-np.pi / 2, np.pi / 2, 360)
+    with np.errstate(divide="ignore"):
+        r = np.where(b < 0, right / np.abs(np.sin(b)), left / np.abs(np.sin(b)))
+    return np.minimum(np.nan_to_num(r, posinf=8.0), 8.0).astype(np.float32)
+
+
+def test_wall_follower_steers_towards_the_target_distance():
+    p = make_policy("wall-following")
+    assert isinstance(p, WallFollower)
+    assert p.act(_corridor_scan(0.6, 1.4), (0, 0, 0)) == "fwd"
+    p.reset()
+    assert p.act(_corridor_scan(0.3, 1.7), (0, 0, 0)) in ("fwd-left", "rot-left")
+    p.reset()
+    assert p.act(_corridor_scan(1.1, 0.9), (0, 0, 0)) == "fwd-right"
+    # a wall close ahead: rotate left, away from the followed side
+    p.reset()
+    assert p.act(np.full(360, 0.35, dtype=np.float32), (0, 0, 0)) == "rot-left"
+
+
+def test_wall_follower_is_smooth_minimum_dwell():
+    p = WallFollower(dwell=3)
+    near, far = _corridor_scan(0.3, 1.7), _corridor_scan(1.1, 0.9)
+    labels = [p.act(near if i % 2 else far, (0, 0, 0)) for i in range(12)]
+    switches = sum(a != b for a, b in zip(labels, labels[1:], strict=False))
+    assert switches <= 4  # a bang-bang expert would switch on every step
+
+
+def test_maze_teacher_and_unknown_task():
+    assert isinstance(make_policy("maze"), MazeTeacher)
+    with pytest.raises(ValueError, match="no scripted teacher"):
+        make_policy("dance")
+
+
+def test_demonstrator_labels_with_the_expert_while_perturbing():
+    rng = np.random.default_rng(1)
+    demo = Demonstrator(make_policy("wall-following"), perturb=0.5, rng=rng)
+    scan = _corridor_scan(0.6, 1.4)
+    pairs = [demo.step(scan, (0, 0, 0)) for _ in range(400)]
+    assert all(label == "fwd" for label, _ in pairs)
+    executed = [e for _, e in pairs]
+    off = sum(e != "fwd" for e in executed) / len(executed)
+    assert 0.15 < off < 0.7
+    # perturbations are held (0.5-1.5 s), not single-step flicker
+    runs = sum(a != b for a, b in zip(executed, executed[1:], strict=False))
+    assert runs < 0.3 * len(executed)
+    calm = Demonstrator(make_policy("wall-following"), perturb=0.0)
+    assert all(e == lab for lab, e in (calm.step(scan, (0, 0, 0)) for _ in range(50)))
+
+
+def test_learner_observe_save_resume_and_compatibility(tmp_path):
+    learner = DemonstrationLearner(FEATURES["wall"], DEFAULT_ACTIONS, task="wall-following",
+                                   spawn="winner")
+    near, far = _corridor_scan(0.3, 1.7), _corridor_scan(1.1, 0.9)
+    for _ in range(5):
+        assert learner.observe(near, 0.0, "fwd-left")
+        assert learner.observe(far, 0.0, "fwd-right")
+    assert learner.predict(near, 0.0) == "fwd-left"
+    assert learner.predict(far, 0.0) == "fwd-right"
+    meta = learner.metadata()
+    assert set(meta) >= {"features", "actions", "task", "provenance"}
+    assert meta["provenance"]["vectors"] == 10
+    path = learner.save(tmp_path / "t.rhbl")
+    again = DemonstrationLearner.resume(path)
+    assert again.features == FEATURES["wall"] and again.actions == DEFAULT_ACTIONS
+    assert again.parent == str(path)
+    assert again.predict(far, 0.0) == "fwd-right"
+    again.observe(near, 0.0, "rot-left")
+    assert again.vectors == 11
+    policy = TreePolicy.load(path)
+    assert policy.act(near, (0, 0, 0)) == "fwd-left"
+    check_compatible(meta, FEATURES["wall"], DEFAULT_ACTIONS)
+    with pytest.raises(IncompatibleSnapshotError, match="other features"):
+        check_compatible(meta, FEATURES["maze"])
+    with pytest.raises(IncompatibleSnapshotError, match="other features"):
+        TreePolicy.load(path, features=FEATURES["maze"])
+    with pytest.raises(IncompatibleSnapshotError, match="no 'features'"):
+        check_compatible({}, FEATURES["wall"])
+    with pytest.raises(ValueError, match="not an action"):
+        learner.observe(near, 0.0, "jump")
+
+
+def test_learner_sample_selection():
+    learner = DemonstrationLearner(FEATURES["wall"], DEFAULT_ACTIONS, stride=2)
+    scan = _corridor_scan(0.6, 1.4)
+    got = [learner.observe(scan, 0.0, "fwd") for _ in range(6)]
+    assert got == [True, False, True, False, True, False]
+    dedup = DemonstrationLearner(FEATURES["wall"], DEFAULT_ACTIONS, min_delta=0.01)
+    assert [dedup.observe(scan, 0.0, "fwd") for _ in range(3)] == [True, False, False]
+    assert dedup.observe(scan, 0.0, "fwd-left")  # a new label is always offered

@@ -1,0 +1,69 @@
+"""rhbl train / evaluate / experiment end to end on a small world (quick)."""
+
+import json
+
+import pytest
+
+from client.behaviour.learning import TreePolicy, load_snapshot
+from lab.cli import main as cli
+from lab.evaluate import evaluate
+from lab.harness import make_learner, parse_pose, resolve_world, train
+
+CORRIDOR = "corridor"
+
+
+def test_train_then_evaluate_cli(tmp_path, capsys):
+    tree = tmp_path / "t.rhbl"
+    assert cli(["train", "--world", CORRIDOR, "--seconds", "40", "--out", str(tree), "--seed", "1"]) == 0
+    assert tree.exists()
+    out_json, png = tmp_path / "e.json", tmp_path / "e.png"
+    assert cli(["evaluate", "--world", CORRIDOR, "--tree", str(tree), "--episodes", "2",
+                "--seconds", "20", "--json", str(out_json), "--plot", str(png),
+                "--spheres", "0,1"]) == 0
+    rep = json.loads(out_json.read_text())
+    assert png.stat().st_size > 1000
+    assert len(rep["learner"]) == 2 and len(rep["teacher"]) == 2
+    for ep in rep["learner"] + rep["teacher"]:
+        for key in ("start", "seconds", "collisions", "distance", "wall_band_fraction",
+                    "goal_reached", "time_to_goal", "oscillations", "teacher_agreement", "success"):
+            assert key in ep
+        assert ep["goal_reached"] is None  # no goal in a wall-following world
+    assert 0.0 <= rep["success_rate"] <= 1.0
+    assert rep["tree"]["nodes"] >= 1 and rep["tree"]["height"] >= 0
+    assert "success rate" in capsys.readouterr().out
+
+
+def test_resume_with_a_corrective_start(tmp_path):
+    first = tmp_path / "a.rhbl"
+    second = tmp_path / "b.rhbl"
+    assert cli(["train", "--world", CORRIDOR, "--seconds", "10", "--out", str(first)]) == 0
+    assert cli(["train", "--world", CORRIDOR, "--seconds", "10", "--out", str(second),
+                "--resume", str(first), "--start", "5,1,3.1416"]) == 0
+    _, _, _, meta = load_snapshot(second)
+    prov = meta["provenance"]
+    assert prov["parent"] == str(first)
+    assert prov["vectors"] == 200
+    assert prov["sessions"][-1]["start"] == [5.0, 1.0, 3.1416]
+
+
+def test_parse_pose():
+    assert parse_pose("1,2,-0.5") == (1.0, 2.0, -0.5)
+    with pytest.raises(Exception, match="x,y,yaw"):
+        parse_pose("1,2")
+
+
+def test_maze_episode_stops_at_goal_and_reports_time():
+    spec = resolve_world("maze")
+    learner = make_learner("maze")
+    train(spec, learner, 20.0, seed=0)
+    rep = evaluate(spec, TreePolicy.from_learner(learner), episodes=1, seconds=5.0)
+    ep = rep["teacher"][0]
+    assert ep["goal_reached"] is False and ep["time_to_goal"] is None  # 5 s is too short
+    assert ep["wall_band_fraction"] is None
+
+
+def test_experiment_cli_small(capsys):
+    assert cli(["experiment", "wall-following", "--trials", "1", "--train-seconds", "20",
+                "--seconds", "10", "--episodes", "1", "--eval-world", "none"]) == 0
+    out = capsys.readouterr().out
+    assert "Table I" in out and "53.4" in out
