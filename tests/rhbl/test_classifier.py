@@ -168,7 +168,9 @@ def test_alternating_labels_do_not_grow(spawn, distance):
         label = "fwd-left" if i % 2 else "rot-right"
         clf.partial_fit(x, [label])
         assert clf.predict_one(x[0]) == label
-    assert clf.node_count_ <= n0 + 2 * clf.height_ + 2
+        if i == 1:
+            n2 = clf.node_count_  # the first two passes may spawn, then only relabels
+    assert n0 <= n2 == clf.node_count_
     assert clf.n_relabelled_ >= 998
 
 
