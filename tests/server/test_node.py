@@ -224,7 +224,7 @@ def test_robots_arbitration_hand_over(start_server, client_config):
         th.start()
         try:
             lis.wait(lambda: lis.driver == "controller")
-            lis.wait(lambda: lis.state.vel[2] > 0.25)
+            lis.wait(lambda: lis.state is not None and lis.state.vel[2] > 0.25)
             # the teacher overrides while it keeps commanding
             token = teacher.liveliness().declare_token(keys.alive_key("teacher", "t1"))
             for _ in range(10):
