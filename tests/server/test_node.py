@@ -315,3 +315,20 @@ def test_bad_world_is_a_clear_error(tmp_path):
     )
     assert proc.returncode == 2
     assert "bad.toml" in proc.stderr and "robot.pose" in proc.stderr
+
+
+def test_several_robots_each_under_their_own_prefix(start_server, client_config):
+    srv = start_server("room", robots=2, speedup=2)
+    with zenoh.open(client_config(srv.endpoint)) as s:
+        l0, l1 = Listener(s, "r0"), Listener(s, "r1")
+        l0.wait(lambda: l0.state is not None)
+        l1.wait(lambda: l1.state is not None)
+        assert l0.state.truth != l1.state.truth
+        p0 = l0.state.truth
+        t0 = l1.state.ts
+        while l1.state.ts < t0 + 1.0:
+            drive(s, robot="r1", va=0.5)
+            time.sleep(0.02)
+        assert l1.state.vel[2] == pytest.approx(0.5, abs=1e-6)
+        assert l0.state.truth == pytest.approx(p0)
+        assert l0.state.driver == "" and l1.state.driver == "controller"
