@@ -50,9 +50,9 @@ DT = 0.1  # 10 Hz, as the processes run
 
 # Default training recipe per task (docs/experiments.md says how it was chosen).
 TRAINING: dict[str, dict] = {
-    "wall-following": {"features": "wall", "perturb": 0.2, "seconds": 300.0,
+    "wall-following": {"features": "wall", "perturb": 0.05, "seconds": 300.0,
                        "tree": {"spawn": "winner"}, "stride": 1, "min_delta": 0.0},
-    "maze": {"features": "maze", "perturb": 0.2, "seconds": 300.0,
+    "maze": {"features": "maze", "perturb": 0.05, "seconds": 300.0,
              "tree": {"spawn": "winner"}, "stride": 1, "min_delta": 0.0},
 }
 

@@ -1,0 +1,58 @@
+"""Tree size against success: the trade-off study of docs/experiments.md.
+
+    python benchmarks/bench_experiment.py [--trials 3] [--task wall-following] [--json out.json]
+
+Each row trains on the task's shipped world with one recipe (spawn rule, teacher style,
+perturbation, sample stride) for ``--trials`` seeds and evaluates from every start pose.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+from lab.experiment import run_experiment
+
+ROWS = [
+    # name, teacher, spawn, perturb, stride
+    ("paper literal, bang-bang teacher", "bangbang", "all", 0.0, 1),
+    ("paper literal, smooth teacher", "smooth", "all", 0.05, 1),
+    ("winner, bang-bang teacher", "bangbang", "winner", 0.05, 1),
+    ("winner, smooth teacher (default)", "smooth", "winner", 0.05, 1),
+    ("winner, smooth, no perturbation", "smooth", "winner", 0.0, 1),
+    ("winner, smooth, perturb 0.2", "smooth", "winner", 0.2, 1),
+    ("winner, smooth, 2 Hz samples", "smooth", "winner", 0.05, 5),
+    ("winner, smooth, 1 Hz samples", "smooth", "winner", 0.05, 10),
+]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--trials", type=int, default=3)
+    ap.add_argument("--task", default="wall-following", choices=["wall-following", "maze"])
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args()
+    out = []
+    print(f"{'recipe':36} {'success':>8} {'min':>5} {'nodes':>7} {'height':>6} {'collisions':>10}")
+    for name, teacher, spawn, perturb, stride in ROWS:
+        t0 = time.perf_counter()
+        res = run_experiment(args.task, trials=args.trials, eval_worlds=[], teacher=teacher,
+                             perturb=perturb, stride=stride, spawn=spawn)
+        s = res["summary"]
+        w = next(iter(s["worlds"].values()))
+        row = {"recipe": name, "teacher": teacher, "spawn": spawn, "perturb": perturb,
+               "stride": stride, "success": w["success_rate"]["mean"], "success_min": w["success_rate"]["min"],
+               "nodes": s["nodes"]["mean"], "height": s["height"]["mean"], "collisions": w["collisions"],
+               "seconds": round(time.perf_counter() - t0, 1)}
+        out.append(row)
+        print(f"{name:36} {row['success']:>8.1%} {row['success_min']:>5.0%} {row['nodes']:>7.0f} "
+              f"{row['height']:>6.1f} {row['collisions']:>10}", flush=True)
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(out, fh, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
