@@ -12,7 +12,15 @@ import argparse
 import json
 import time
 
+from client.behaviour.features import FeatureSpec
 from lab.experiment import run_experiment
+
+BEAMS = [
+    ("wall side 0-90 deg (default)", (0.0, 22.5, 45.0, 67.5, 90.0)),
+    ("even 0-180 deg (paper figure)", (0.0, 45.0, 90.0, 135.0, 180.0)),
+    ("right side 0-60 deg", (0.0, 15.0, 30.0, 45.0, 60.0)),
+    ("0-120 deg", (0.0, 30.0, 60.0, 90.0, 120.0)),
+]
 
 ROWS = [
     # name, teacher, spawn, perturb, stride
@@ -32,8 +40,25 @@ def main() -> int:
     ap.add_argument("--trials", type=int, default=3)
     ap.add_argument("--task", default="wall-following", choices=["wall-following", "maze"])
     ap.add_argument("--json", default=None)
+    ap.add_argument("--study", default="tradeoff", choices=["tradeoff", "beams"])
     args = ap.parse_args()
     out = []
+    if args.study == "beams":
+        print(f"{'beams':32} {'success':>8} {'min':>5} {'nodes':>7} {'height':>6} {'collisions':>10}")
+        for name, beams in BEAMS:
+            res = run_experiment(args.task, trials=args.trials, eval_worlds=[],
+                                 features=FeatureSpec(beams=beams))
+            s = res["summary"]
+            w = next(iter(s["worlds"].values()))
+            out.append({"beams": list(beams), "success": w["success_rate"]["mean"],
+                        "nodes": s["nodes"]["mean"], "height": s["height"]["mean"]})
+            print(f"{name:32} {w['success_rate']['mean']:>8.1%} {w['success_rate']['min']:>5.0%} "
+                  f"{s['nodes']['mean']:>7.0f} {s['height']['mean']:>6.1f} {w['collisions']:>10}",
+                  flush=True)
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump(out, fh, indent=1)
+        return 0
     print(f"{'recipe':36} {'success':>8} {'min':>5} {'nodes':>7} {'height':>6} {'collisions':>10}")
     for name, teacher, spawn, perturb, stride in ROWS:
         t0 = time.perf_counter()
