@@ -81,6 +81,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fsync the journal at most this long after an append (default 1)")
     parser.add_argument("--match-timeout", type=float, default=2.0, metavar="SECONDS",
                         help="a label whose scan has not arrived after this is dropped and counted")
+    parser.add_argument("--drain", type=float, default=5.0, metavar="SECONDS",
+                        help="on SIGINT/SIGTERM, keep learning what already arrived for at most "
+                             "this long before the final snapshot (default 5)")
     parser.add_argument("--scan-buffer", type=int, default=512,
                         help="how many recent unlabeled scans are kept for pairing")
 
@@ -295,6 +298,7 @@ def _body(ctx: Context) -> int:
     stats = {"learned": 0, "paired": 0, "unmatched": 0, "bad": 0, "rejected": 0}
     last_snap = time.monotonic()
     last_log = last_snap
+    last_id = -1
 
     def publish_notice():
         latest["bytes"] = core.snapshot()
@@ -313,12 +317,22 @@ def _body(ctx: Context) -> int:
         if core.learn(scan.id, scan.ts, scan.ranges, float(scan.pose[2]), act.action):
             stats["learned"] += 1
 
+    drain_until = None  # after a stop request: finish what already arrived, then exit
     try:
-        while not stop.flag:
+        while True:
+            if stop.flag and drain_until is None:
+                drain_until = time.monotonic() + args.drain
+                log.info("stopping: learning what already arrived (up to %.1f s)", args.drain)
             try:
-                kind, data = events.get(timeout=0.1)
+                kind, data = events.get(timeout=0.1 if drain_until is None else 0.05)
             except queue.Empty:
                 kind = None
+                if drain_until is not None:
+                    break  # quiet: everything that arrived is learned
+            if drain_until is not None and time.monotonic() > drain_until:
+                log.warning("stopping with %d messages not processed (drain limit)",
+                            events.qsize())
+                break
             if kind == 0:
                 watch.seen()
                 try:
@@ -327,7 +341,12 @@ def _body(ctx: Context) -> int:
                     stats["bad"] += 1
                     log.warning("dropped a malformed scan: %s", exc)
                     scan = None
+                if scan is not None and scan.id <= last_id:
+                    log.info("scan ids restarted (%d after %d): the server restarted; "
+                             "forgetting %d unlabeled scans", scan.id, last_id, len(scans))
+                    scans.clear()
                 if scan is not None:
+                    last_id = scan.id
                     hit = pending.pop(scan.id, None)
                     if hit is not None:
                         learn(scan, hit[0])
@@ -375,6 +394,7 @@ def _body(ctx: Context) -> int:
         try:
             if core.dirty:
                 publish_notice()
+            stats["unmatched"] += len(pending)
             log.info("stopped: %d labeled vectors (%d this run, %d learned, %d unmatched "
                      "labels, %d malformed), %d nodes, height %d; snapshot %s",
                      core.applied, stats["paired"], stats["learned"], stats["unmatched"],

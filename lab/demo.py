@@ -1,0 +1,535 @@
+"""``rhbl demo``: the whole learning-from-demonstration loop as separate OS processes on loopback.
+
+The demo is the rendezvous (a zenoh session in router mode on a free loopback port, the role a
+zenohd plays in compose); every child connects to it as a client:
+
+1. ``rhbl learner`` (the tree and its journal go into the output folder);
+2. ``rhbl server --lockstep`` (the scenario's world) and ``rhbl teacher --seconds T``: the scripted
+   teacher demonstrates for T sim seconds while the learner learns; the teacher then exits and
+   the learner is stopped (SIGINT: final snapshot);
+3. ``rhbl controller --tree <snapshot>`` drives from each of the world's start poses for D sim
+   seconds (the server is restarted at each start pose, a world file with that pose);
+4. the demo computes metrics (``lab.metrics``) over what it recorded from the server's scans,
+   states and commands, draws the teacher's path beside the learned robot's (``lab.plot``), prints
+   a table like the paper's Table I and writes everything into the output folder.
+
+Children are killed by PID on every exit path; the exit status is non-zero if any child failed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import datetime as _dt
+import json
+import logging
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["SCENARIOS", "add_arguments", "main", "free_port"]
+
+log = logging.getLogger(__name__)
+
+# scenario -> world, feature spec, teacher policy; sim seconds per phase
+SCENARIOS: dict[str, dict] = {
+    "wall-following": {"world": "room", "features": "wall", "policy": "wall-follower",
+                       "teach": 300.0, "drive": 120.0},
+    "maze": {"world": "maze", "features": "maze", "policy": "maze",
+             "teach": 300.0, "drive": 240.0},
+}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--scenario", choices=list(SCENARIOS), default="wall-following")
+    parser.add_argument("--out", metavar="DIR", default=None,
+                        help="output folder (default: rhbl-out/<timestamp>-<scenario>)")
+    parser.add_argument("--world", default=None, help="world file or name (default: the scenario's)")
+    parser.add_argument("--teach-seconds", type=float, default=None, metavar="S",
+                        help="sim seconds the teacher demonstrates (default: 300)")
+    parser.add_argument("--drive-seconds", type=float, default=None, metavar="S",
+                        help="sim seconds the learned robot drives from each start pose "
+                             "(default: 120 wall following, 240 maze)")
+    parser.add_argument("--starts", type=int, default=None, metavar="N",
+                        help="drive from the first N start poses only (default: all)")
+    parser.add_argument("--speedup", type=float, default=None, metavar="N",
+                        help="run the server N times real time instead of lock-step (0: as fast "
+                             "as possible)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the teacher's perturbations")
+    parser.add_argument("--timeout", type=float, default=600.0, metavar="SECONDS",
+                        help="give up (and fail) after this much wall time")
+    parser.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+# ---- children ------------------------------------------------------------------------------
+class DemoError(Exception):
+    pass
+
+
+@dataclass
+class Child:
+    """One child process (its own session and process group), logging into the output folder."""
+
+    name: str
+    argv: list[str]
+    logdir: Path
+    proc: subprocess.Popen | None = None
+    rc: int | None = None
+    expected_stop: bool = False
+
+    def start(self) -> Child:
+        self.logfile = self.logdir / f"{self.name}.log"
+        f = open(self.logfile, "ab")  # noqa: SIM115 - kept open by the child
+        f.write(f"$ {' '.join(self.argv)}\n".encode())
+        f.flush()
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        self.proc = subprocess.Popen(self.argv, stdout=f, stderr=subprocess.STDOUT, env=env,
+                                     start_new_session=True)
+        f.close()
+        return self
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid if self.proc else -1
+
+    def poll(self) -> int | None:
+        if self.proc is not None and self.rc is None:
+            self.rc = self.proc.poll()
+        return self.rc
+
+    def wait(self, timeout: float) -> int | None:
+        if self.proc is None:
+            return None
+        try:
+            self.rc = self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            return None
+        return self.rc
+
+    def stop(self, timeout: float = 10.0) -> int | None:
+        """SIGINT, then SIGTERM, then SIGKILL (by PID), waiting ``timeout`` for each."""
+        if self.proc is None or self.poll() is not None:
+            return self.rc
+        self.expected_stop = True
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.proc.pid, sig)
+            if self.wait(timeout if sig != signal.SIGKILL else 5.0) is not None:
+                if sig != signal.SIGINT:
+                    log.warning("%s needed %s", self.name, sig.name)
+                    self.rc = self.rc if sig == signal.SIGTERM else -9
+                return self.rc
+        return self.rc
+
+    def tail(self, n: int = 15) -> str:
+        try:
+            lines = self.logfile.read_text(errors="replace").splitlines()
+        except OSError:
+            return ""
+        return "\n".join("    " + ln for ln in lines[-n:])
+
+
+def _rhbl(*args: str) -> list[str]:
+    return [sys.executable, "-m", "lab.cli", *args]
+
+
+# ---- recording -----------------------------------------------------------------------------
+@dataclass
+class Episode:
+    kind: str  # "teacher" | "learner"
+    start: tuple[float, float, float]
+    ts: list = field(default_factory=list)
+    poses: list = field(default_factory=list)
+    side: list = field(default_factory=list)
+    ids: list = field(default_factory=list)
+    stalls: dict = field(default_factory=dict)  # ts -> stall
+    cmds: dict = field(default_factory=dict)  # scan id -> (source, vx, va)
+
+    @property
+    def sim_time(self) -> float:
+        return (self.ts[-1] - self.ts[0]) if len(self.ts) > 1 else 0.0
+
+
+class Recorder:
+    """Records the server's scans, states and commands into the current episode (callbacks
+    of a few microseconds: the heavier work happens after the run)."""
+
+    def __init__(self, session, robot: str):
+        from protocol import keys
+
+        self.episode: Episode | None = None
+        self.lock = threading.Lock()
+        self.notice: dict = {}
+        self.subs = [
+            session.declare_subscriber(keys.scan_key(robot), self._on_scan),
+            session.declare_subscriber(keys.state_key(robot), self._on_state),
+            session.declare_subscriber(keys.cmd_vel_subscription(robot), self._on_cmd),
+            session.declare_subscriber(keys.learner_notice_key(robot), self._on_notice),
+        ]
+
+    def _on_scan(self, sample) -> None:
+        from lab.metrics import side_distance
+        from protocol.messages import Scan
+
+        ep = self.episode
+        if ep is None:
+            return
+        try:
+            s = Scan.decode(sample.payload.to_bytes())
+        except Exception:  # noqa: BLE001
+            return
+        with self.lock:
+            if ep is self.episode:
+                ep.ts.append(s.ts)
+                ep.poses.append(s.truth if s.truth is not None else s.pose)
+                ep.side.append(side_distance(s.ranges))
+                ep.ids.append(s.id)
+
+    def _on_state(self, sample) -> None:
+        from protocol.messages import State
+
+        ep = self.episode
+        if ep is None:
+            return
+        try:
+            st = State.decode(sample.payload.to_bytes())
+        except Exception:  # noqa: BLE001
+            return
+        ep.stalls[round(st.ts, 6)] = bool(st.stall)
+
+    def _on_cmd(self, sample) -> None:
+        from protocol.messages import VelCmd
+
+        ep = self.episode
+        if ep is None:
+            return
+        try:
+            c = VelCmd.decode(sample.payload.to_bytes())
+        except Exception:  # noqa: BLE001
+            return
+        if c.scan_id is not None:
+            ep.cmds[c.scan_id] = (c.source, c.vx, c.va)
+
+    def _on_notice(self, sample) -> None:
+        from protocol.messages import TreeNotice
+
+        try:
+            n = TreeNotice.decode(sample.payload.to_bytes())
+        except Exception:  # noqa: BLE001
+            return
+        self.notice = {"nodes": n.nodes, "height": n.height, "vectors": n.vectors}
+
+    def begin(self, kind: str, start) -> Episode:
+        with self.lock:
+            self.episode = Episode(kind, tuple(start))
+            return self.episode
+
+    def end(self) -> None:
+        with self.lock:
+            self.episode = None
+
+    def close(self) -> None:
+        for s in self.subs:
+            with contextlib.suppress(Exception):
+                s.undeclare()
+
+
+def _episode_metrics(ep: Episode, actions, goal, dt: float) -> dict:
+    from lab.metrics import episode_metrics
+
+    names = {tuple(v): k for k, v in actions.items()}
+    acts, stalls = [], []
+    for ts, sid in zip(ep.ts, ep.ids, strict=True):
+        cmd = ep.cmds.get(sid)
+        acts.append(names.get((cmd[1], cmd[2]), "none") if cmd else "none")
+        stalls.append(ep.stalls.get(round(ts, 6), False))
+    m = episode_metrics(np.asarray(ep.poses).reshape(-1, 3), stalls, acts, dt, side=ep.side,
+                        goal=goal, start=ep.start)
+    return m
+
+
+# ---- the demo ------------------------------------------------------------------------------
+def _world_with_pose(src: Path, pose, dst: Path) -> Path:
+    """A copy of a world file whose default pose is ``pose`` (a server is started per start)."""
+    text = src.read_text()
+    new = f"pose = [{pose[0]!r}, {pose[1]!r}, {pose[2]!r}]"
+    text2, n = re.subn(r"(?m)^pose\s*=\s*\[[^\]]*\]", new, text, count=1)
+    if n != 1:
+        raise DemoError(f"cannot set the start pose in {src}: no 'pose = [...]' line")
+    dst.write_text(text2)
+    return dst
+
+
+class Demo:
+    def __init__(self, args: argparse.Namespace):
+        from lab.harness import resolve_world
+
+        self.args = args
+        self.sc = dict(SCENARIOS[args.scenario])
+        self.spec = resolve_world(args.world or self.sc["world"])
+        stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+        self.out = Path(args.out or Path("rhbl-out") / f"{stamp}-{args.scenario}")
+        self.out.mkdir(parents=True, exist_ok=True)
+        (self.out / "logs").mkdir(exist_ok=True)
+        self.port = free_port()
+        self.endpoint = f"tcp/127.0.0.1:{self.port}"
+        self.children: list[Child] = []
+        self.failures: list[str] = []
+        self.t0 = time.monotonic()
+        self.tree = self.out / "tree.rhbl"
+        self.teach = args.teach_seconds if args.teach_seconds is not None else self.sc["teach"]
+        self.drive = args.drive_seconds if args.drive_seconds is not None else self.sc["drive"]
+
+    # -- helpers --
+    def say(self, msg: str) -> None:
+        if not self.args.quiet:
+            print(f"[{time.monotonic() - self.t0:6.1f}s] {msg}", flush=True)
+
+    def child(self, name: str, *args: str) -> Child:
+        c = Child(name, _rhbl(*args, "--connect", self.endpoint), self.out / "logs").start()
+        self.children.append(c)
+        return c
+
+    def deadline_check(self) -> None:
+        if time.monotonic() - self.t0 > self.args.timeout:
+            raise DemoError(f"the demo took longer than --timeout {self.args.timeout:g} s")
+
+    def check_alive(self, *cs: Child) -> None:
+        for c in cs:
+            if c.poll() is not None and not c.expected_stop:
+                raise DemoError(f"{c.name} (pid {c.pid}) exited early with status {c.rc}:\n"
+                                f"{c.tail()}")
+
+    def wait_token(self, role: str, child: Child, timeout: float = 30.0) -> None:
+        """Until ``child`` declared its liveliness token (its subscriptions are in place)."""
+        from protocol import keys
+
+        key = keys.alive_key(role, f"r0-{child.pid}")
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            self.check_alive(child)
+            if any(r.ok is not None for r in self.session.liveliness().get(key, timeout=1.0)):
+                return
+            time.sleep(0.05)
+        raise DemoError(f"{child.name} (pid {child.pid}) did not come up within {timeout:g} s:\n"
+                        f"{child.tail()}")
+
+    def start_server(self, pose, tag: str) -> Child:
+        world = _world_with_pose(self.spec.path, pose, self.out / "logs" / f"world-{tag}.toml")
+        pace = (["--speedup", f"{self.args.speedup:g}"] if self.args.speedup is not None
+                else ["--lockstep", "--lockstep-timeout", "0.5"])
+        return self.child(f"server-{tag}", "server", "--mode", "client", "--world", str(world),
+                          *pace)
+
+    def wait_episode(self, ep: Episode, seconds: float, what: str, *cs: Child,
+                     until_exit: Child | None = None) -> None:
+        """Until ``seconds`` of sim time were recorded (or ``until_exit`` exits, or the goal)."""
+        goal = self.spec.goal
+        next_note = time.monotonic()
+        first_scan_by = time.monotonic() + 20.0
+        while True:
+            self.deadline_check()
+            if until_exit is not None and until_exit.poll() is not None:
+                if until_exit.rc != 0:
+                    raise DemoError(f"{until_exit.name} failed with status {until_exit.rc}:\n"
+                                    f"{until_exit.tail()}")
+                return
+            self.check_alive(*cs)
+            t = ep.sim_time
+            if not ep.ts and time.monotonic() > first_scan_by:
+                raise DemoError(f"{what}: no scan from the server within 20 s")
+            if until_exit is None and t >= seconds:
+                return
+            if goal is not None and ep.poses and until_exit is None:
+                x, y, _ = ep.poses[-1]
+                if np.hypot(x - goal.center[0], y - goal.center[1]) <= goal.radius:
+                    self.say(f"{what}: goal reached at {t:.0f} s")
+                    return
+            if time.monotonic() >= next_note:
+                n = self.sc_notice()
+                self.say(f"{what}: sim {t:5.0f}/{seconds:g} s{n}")
+                next_note = time.monotonic() + 2.0
+            time.sleep(0.05)
+
+    def sc_notice(self) -> str:
+        n = self.rec.notice
+        return (f", tree {n['nodes']} nodes, height {n['height']}, {n['vectors']} vectors"
+                if n else "")
+
+    # -- phases --
+    def run(self) -> int:
+        import zenoh
+
+        from protocol.session import make_config
+
+        a = self.args
+        self.say(f"rhbl demo: scenario {a.scenario}, world {self.spec.name}, output {self.out}")
+        self.say(f"rendezvous (router) on {self.endpoint}; children log into {self.out / 'logs'}")
+        with zenoh.open(make_config(mode="router", listen=[self.endpoint])) as session:
+            self.session = session
+            self.rec = Recorder(session, "r0")
+            try:
+                return self._phases()
+            finally:
+                self.rec.close()
+
+    def _phases(self) -> int:
+        from client.behaviour.learning import load_snapshot
+
+        a, sc = self.args, self.sc
+        # 1. learner, server, teacher
+        learner = self.child("learner", "learner", "--features", sc["features"], "--out",
+                             str(self.tree), "--wait-server", "60", "--snapshot-every", "1")
+        self.wait_token("learner", learner)  # no demonstration before the learner listens
+        start = tuple(self.spec.pose)
+        server = self.start_server(start, "teach")
+        ep_teacher = self.rec.begin("teacher", start)
+        teacher = self.child("teacher", "teacher", "--policy", sc["policy"], "--seconds",
+                             f"{self.teach:g}", "--seed", str(a.seed), "--wait-server", "30")
+        self.say(f"teaching: {sc['policy']} teacher demonstrates {self.teach:g} s of sim time "
+                 f"from {start} (pids: server {server.pid}, learner {learner.pid}, teacher "
+                 f"{teacher.pid})")
+        self.wait_episode(ep_teacher, self.teach, "teaching", server, learner, until_exit=teacher)
+        self.rec.end()
+        self.say(f"teacher done ({ep_teacher.sim_time:.0f} s sim); stopping the learner (SIGINT: "
+                 f"final snapshot)")
+        rc = learner.stop(timeout=30)
+        if rc != 0:
+            raise DemoError(f"learner exited with status {rc}:\n{learner.tail()}")
+        server.stop()
+        if not self.tree.exists():
+            raise DemoError(f"the learner wrote no snapshot at {self.tree}")
+        clf, _features, actions, meta = load_snapshot(self.tree)
+        prov = meta.get("provenance") or {}
+        self.say(f"learned tree: {clf.node_count_} nodes, height {clf.height_}, "
+                 f"{prov.get('vectors')} demonstration vectors -> {self.tree}")
+
+        # 2. the learned robot from each start pose
+        starts = self.spec.start_poses[: a.starts] if a.starts else self.spec.start_poses
+        controller = self.child("controller", "controller", "--tree", str(self.tree),
+                                "--wait-server", "60")
+        learned: list[Episode] = []
+        for k, pose in enumerate(starts):
+            server = self.start_server(pose, f"drive{k}")
+            ep = self.rec.begin("learner", pose)
+            self.wait_episode(ep, self.drive, f"learned robot, start {k + 1}/{len(starts)}",
+                              server, controller)
+            self.rec.end()
+            server.stop()
+            learned.append(ep)
+        controller.stop()
+        if controller.rc not in (0, None):
+            raise DemoError(f"controller exited with status {controller.rc}:\n{controller.tail()}")
+
+        # 3. report
+        return self.report(clf, actions, meta, ep_teacher, learned)
+
+    def report(self, clf, actions, meta, ep_teacher: Episode, learned: list[Episode]) -> int:
+        from lab.plot import plot_paths
+
+        dt = 0.1
+        goal = self.spec.goal
+        tm = _episode_metrics(ep_teacher, actions, goal, dt)
+        lms = [_episode_metrics(ep, actions, goal, dt) for ep in learned]
+        prov = meta.get("provenance") or {}
+        picture = plot_paths(
+            self.spec,
+            {"teacher": np.asarray(ep_teacher.poses).reshape(-1, 3),
+             "learner": [np.asarray(ep.poses).reshape(-1, 3) for ep in learned]},
+            self.out / "paths.png",
+            title=f"{self.args.scenario}: teacher (blue) and learned robot (red)")
+        wall_time = time.monotonic() - self.t0
+        summary = {
+            "scenario": self.args.scenario, "world": self.spec.name,
+            "tree": {"nodes": int(clf.node_count_), "height": int(clf.height_),
+                     "vectors": prov.get("vectors"), "labeled": prov.get("labeled"),
+                     "path": str(self.tree)},
+            "teacher": tm, "learned": lms, "wall_time": round(wall_time, 1),
+            "teach_seconds": self.teach, "drive_seconds": self.drive,
+        }
+        (self.out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
+        np.savez_compressed(
+            self.out / "trajectories.npz",
+            **{f"{ep.kind}{k}_{f}": np.asarray(getattr(ep, f))
+               for k, ep in enumerate([ep_teacher, *learned])
+               for f in ("ts", "poses", "side", "ids")},
+            **{f"{ep.kind}{k}_stalls": np.asarray([ep.stalls.get(round(t, 6), False)
+                                                   for t in ep.ts])
+               for k, ep in enumerate([ep_teacher, *learned])})
+        print()
+        print(f"Table I (paper) -- {self.args.scenario}, learned over zenoh by separate processes")
+        print("| scenario | nodes | tree height | demonstration vectors |")
+        print("|---|---|---|---|")
+        print(f"| {self.args.scenario} | {clf.node_count_} | {clf.height_} | "
+              f"{prov.get('vectors')} |")
+        print()
+        print("What the robots did (sim seconds per episode; band = time with the right-hand "
+              "wall within 0.3-1.2 m)")
+        print("| driver | start (x, y, yaw) | seconds | collisions | distance m | in band | goal |")
+        print("|---|---|---|---|---|---|---|")
+        for name, m in [("teacher", tm)] + [("learned", m) for m in lms]:
+            band = m["wall_band_fraction"]
+            goal_s = ("-" if m["goal_reached"] is None else
+                      (f"yes, {m['time_to_goal']:.0f} s" if m["goal_reached"] else "no"))
+            st = ", ".join(f"{v:.2f}" for v in (m["start"] or []))
+            print(f"| {name} | ({st}) | {m['seconds']:.0f} | {m['collisions']} | "
+                  f"{m['distance']:.1f} | {'-' if band is None else f'{100 * band:.0f}%'} | "
+                  f"{goal_s} |")
+        print()
+        print(f"output: {self.out}  (tree.rhbl, tree.rhbl.journal, paths.png, summary.json, "
+              f"logs/)")
+        print(f"picture: {picture}")
+        print(f"wall time {wall_time:.1f} s")
+        return 0
+
+    def cleanup(self) -> None:
+        for c in reversed(self.children):
+            if c.poll() is None:
+                c.stop(timeout=5)
+
+
+def main(args: argparse.Namespace) -> int:
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(message)s")
+    demo = Demo(args)
+    old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+
+    def _stop(signum, _frame):
+        raise SystemExit(128 + signum)
+
+    signal.signal(signal.SIGTERM, _stop)
+    rc = 1
+    try:
+        rc = demo.run()
+    except DemoError as exc:
+        print(f"rhbl demo FAILED: {exc}", file=sys.stderr, flush=True)
+        rc = 1
+    except (KeyboardInterrupt, SystemExit) as exc:
+        print("rhbl demo interrupted", file=sys.stderr, flush=True)
+        rc = exc.code if isinstance(exc, SystemExit) and isinstance(exc.code, int) else 130
+    finally:
+        demo.cleanup()
+        for s, h in old.items():
+            signal.signal(s, h)
+    bad = [c for c in demo.children
+           if c.rc not in (0, None) and not (c.expected_stop and c.rc in (0, -2, 130))]
+    if bad and rc == 0:
+        for c in bad:
+            print(f"rhbl demo: {c.name} (pid {c.pid}) exited with status {c.rc}:\n{c.tail()}",
+                  file=sys.stderr)
+        rc = 1
+    return rc
