@@ -249,7 +249,7 @@ class Recorder:
                 s.undeclare()
 
 
-def _episode_metrics(ep: Episode, actions, goal, dt: float) -> dict:
+def _episode_metrics(ep: Episode, actions, goal, dt: float, side: str | None) -> dict:
     from lab.metrics import episode_metrics
 
     names = {tuple(v): k for k, v in actions.items()}
@@ -258,8 +258,8 @@ def _episode_metrics(ep: Episode, actions, goal, dt: float) -> dict:
         cmd = ep.cmds.get(sid)
         acts.append(names.get((cmd[1], cmd[2]), "none") if cmd else "none")
         stalls.append(ep.stalls.get(round(ts, 6), False))
-    m = episode_metrics(np.asarray(ep.poses).reshape(-1, 3), stalls, acts, dt, side=ep.side,
-                        goal=goal, start=ep.start)
+    m = episode_metrics(np.asarray(ep.poses).reshape(-1, 3), stalls, acts, dt,
+                        side=ep.side if side else None, goal=goal, start=ep.start)
     return m
 
 
@@ -444,8 +444,11 @@ class Demo:
 
         dt = 0.1
         goal = self.spec.goal
-        tm = _episode_metrics(ep_teacher, actions, goal, dt)
-        lms = [_episode_metrics(ep, actions, goal, dt) for ep in learned]
+        from lab.harness import followed_side
+
+        side = followed_side(self.spec.task)
+        tm = _episode_metrics(ep_teacher, actions, goal, dt, side)
+        lms = [_episode_metrics(ep, actions, goal, dt, side) for ep in learned]
         prov = meta.get("provenance") or {}
         picture = plot_paths(
             self.spec,

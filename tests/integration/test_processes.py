@@ -1,0 +1,210 @@
+"""The real teacher, learner and controller processes over zenoh on loopback (lock-step server).
+
+One module-scoped server; the tests run in order and share the learner's output folder:
+the tree grows and its snapshot loads; a learner killed with SIGKILL mid-lineage and restarted has
+lost no labeled vector (its rebuilt tree equals the journal replayed in-process); the controller
+drives without collision; ``--from-learner --follow`` swaps trees; ``--resume`` extends a tree.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+zenoh = pytest.importorskip("zenoh")
+
+from client.behaviour.learning import DemonstrationLearner, load_snapshot  # noqa: E402
+from client.journal import Journal, journal_path  # noqa: E402
+from protocol import keys  # noqa: E402
+from protocol.messages import State, VelCmd  # noqa: E402
+from protocol.session import make_config  # noqa: E402
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(180)]
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+class Proc:
+    def __init__(self, name: str, endpoint: str, *args: str, logdir: Path):
+        self.name = name
+        self.log = logdir / f"{name}-{time.monotonic_ns()}.log"
+        argv = [sys.executable, "-m", "lab.cli", *args, "--connect", endpoint]
+        with open(self.log, "wb") as f:
+            self.proc = subprocess.Popen(argv, stdout=f, stderr=subprocess.STDOUT, cwd=ROOT,
+                                         start_new_session=True,
+                                         env={**os.environ, "PYTHONUNBUFFERED": "1"})
+
+    def text(self) -> str:
+        return self.log.read_text(errors="replace")
+
+    def wait(self, timeout: float = 60.0) -> int:
+        try:
+            return self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.kill()
+            raise AssertionError(f"{self.name} did not finish in {timeout} s:\n{self.text()}") from None
+
+    def stop(self, sig=signal.SIGINT, timeout: float = 30.0) -> int:
+        if self.proc.poll() is None:
+            os.kill(self.proc.pid, sig)
+        return self.wait(timeout)
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            os.kill(self.proc.pid, signal.SIGKILL)
+            self.proc.wait(10)
+
+
+@pytest.fixture(scope="module")
+def env(start_module_server, tmp_path_factory):
+    srv = start_module_server("room", lockstep=True)
+    tmp = tmp_path_factory.mktemp("processes")
+    procs: list[Proc] = []
+
+    def start(name, *args):
+        p = Proc(name, srv.endpoint, *args, logdir=tmp)
+        procs.append(p)
+        return p
+
+    with zenoh.open(make_config(mode="client", connect=[srv.endpoint])) as session:
+        yield {"srv": srv, "tmp": tmp, "start": start, "session": session}
+        for p in procs:
+            p.kill()
+
+
+def _wait_token(session, role: str, proc: Proc, timeout: float = 30.0) -> None:
+    key = keys.alive_key(role, f"r0-{proc.proc.pid}")
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        assert proc.proc.poll() is None, f"{proc.name} exited:\n{proc.text()}"
+        if any(r.ok is not None for r in session.liveliness().get(key, timeout=1.0)):
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"no liveliness token {key}:\n{proc.text()}")
+
+
+def _teach(env, seconds: float, seed: int = 0) -> int:
+    t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--seconds",
+                     str(seconds), "--seed", str(seed))
+    assert t.wait(60) == 0, t.text()
+    line = [ln for ln in t.text().splitlines() if "teacher stopped after" in ln][-1]
+    return int(line.split("after ")[1].split()[0])
+
+
+def _journal_len(out: Path) -> int:
+    with Journal.open(journal_path(out), readonly=True) as j:
+        return len(j)
+
+
+def _wait_journal(out: Path, n: int, timeout: float = 20.0) -> None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if journal_path(out).exists() and _journal_len(out) >= n:
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"journal has {_journal_len(out)} records, expected {n}")
+
+
+def test_learner_grows_a_tree_and_survives_sigkill(env):
+    out = env["tmp"] / "tree.rhbl"
+    args = ("learner", "--features", "wall", "--out", str(out), "--snapshot-every", "0.3")
+    learner = env["start"]("learner", *args)
+    _wait_token(env["session"], "learner", learner)
+    n1 = _teach(env, 40)
+    _wait_journal(out, n1)
+    time.sleep(0.8)  # a periodic snapshot is written
+    clf, _f, _a, meta = load_snapshot(out)
+    assert clf.node_count_ > 5
+    assert meta["provenance"]["labeled"] >= 1
+
+    # SIGKILL: no final snapshot; the journal holds every labeled vector
+    learner.kill()
+    assert _journal_len(out) == n1
+    learner = env["start"]("learner", *args)
+    _wait_token(env["session"], "learner", learner)
+    assert "recovered lineage" in learner.text()
+    n2 = _teach(env, 15, seed=1)
+    _wait_journal(out, n1 + n2)
+    assert learner.stop() == 0, learner.text()
+
+    clf, _f, _a, meta = load_snapshot(out)
+    prov = meta["provenance"]
+    assert prov["labeled"] == n1 + n2 == prov["journal"]["records"]
+    assert "unmatched labels" in learner.text() and " 0 unmatched" in learner.text()
+    # the tree equals every journaled vector learned in one go, in-process
+    from client.behaviour.features import FEATURES
+
+    ref = DemonstrationLearner(FEATURES["wall"], task="wall-following", spawn="winner")
+    with Journal.open(journal_path(out), readonly=True) as j:
+        for rec in j.records():
+            ref.observe(rec.ranges, rec.yaw, rec.label)
+    assert ref.classifier.tree_equal(clf)
+
+
+def test_controller_drives_without_collision(env):
+    out = env["tmp"] / "tree.rhbl"
+    session = env["session"]
+    stalls, cmds = [], []
+    subs = [
+        session.declare_subscriber(keys.state_key("r0"), lambda s: stalls.append(
+            State.decode(s.payload.to_bytes()).stall)),
+        session.declare_subscriber(keys.cmd_vel_key("r0", source="controller"), lambda s: cmds.append(
+            VelCmd.decode(s.payload.to_bytes()))),
+    ]
+    c = env["start"]("controller", "controller", "--tree", str(out), "--seconds", "30")
+    assert c.wait(60) == 0, c.text()
+    for s in subs:
+        s.undeclare()
+    assert len(cmds) >= 250, c.text()
+    assert all(m.source == "controller" and m.scan_id is not None for m in cmds)
+    assert not any(stalls), "the learned robot collided"
+
+
+def test_controller_follows_the_learner(env):
+    out = env["tmp"] / "follow.rhbl"
+    learner = env["start"]("learner", "learner", "--features", "wall", "--out", str(out),
+                           "--snapshot-every", "0.2")
+    _wait_token(env["session"], "learner", learner)
+    _teach(env, 5)
+    _wait_journal(out, 40)
+    time.sleep(0.5)
+    c = env["start"]("controller", "controller", "--from-learner", "--follow")
+    _wait_token(env["session"], "controller", c)
+    _teach(env, 20, seed=2)  # the teacher outranks the controller while it demonstrates
+    end = time.monotonic() + 20
+    while "swapped in a newer tree" not in c.text() and time.monotonic() < end:
+        time.sleep(0.1)
+    assert "swapped in a newer tree" in c.text(), c.text()
+    assert c.stop() == 0
+    assert learner.stop() == 0
+
+
+def test_resume_extends_a_tree(env):
+    base = env["tmp"] / "tree.rhbl"
+    out = env["tmp"] / "tree2.rhbl"
+    clf0, _f, _a, meta0 = load_snapshot(base)
+    learner = env["start"]("learner", "learner", "--resume", str(base), "--out", str(out))
+    _wait_token(env["session"], "learner", learner)
+    n = _teach(env, 10, seed=3)
+    _wait_journal(out, n)
+    assert learner.stop() == 0, learner.text()
+    clf, _f, _a, meta = load_snapshot(out)
+    prov = meta["provenance"]
+    assert prov["parent"] == str(base.resolve())
+    assert prov["vectors"] == meta0["provenance"]["vectors"] + n
+    assert clf.node_count_ >= clf0.node_count_
+    # the parent is untouched
+    assert load_snapshot(base)[0].tree_equal(clf0)
+
+
+def test_processes_exit_cleanly_on_sigterm(env):
+    t = env["start"]("teacher", "teacher", "--policy", "wall-follower")
+    _wait_token(env["session"], "teacher", t)
+    assert t.stop(signal.SIGTERM) == 0, t.text()
+    assert "Traceback" not in t.text()
