@@ -508,7 +508,11 @@ class Demo:
 
 def main(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(message)s")
-    demo = Demo(args)
+    try:
+        demo = Demo(args)
+    except (OSError, ValueError) as exc:  # WorldError, FileNotFoundError, ...
+        print(f"rhbl demo FAILED: {exc}", file=sys.stderr, flush=True)
+        return 2
     old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
 
     def _stop(signum, _frame):

@@ -1,0 +1,50 @@
+"""``rhbl demo`` end to end, shortened: every process starts, the table and the files appear."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(180)]
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_short_demo(tmp_path):
+    out = tmp_path / "demo"
+    r = subprocess.run(
+        [sys.executable, "-m", "lab.cli", "demo", "--out", str(out), "--teach-seconds", "60",
+         "--drive-seconds", "20", "--starts", "2", "--quiet"],
+        cwd=ROOT, capture_output=True, text=True, timeout=150)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "| wall-following |" in r.stdout and "demonstration vectors" in r.stdout
+    for name in ("tree.rhbl", "tree.rhbl.journal", "paths.png", "summary.json",
+                 "trajectories.npz", "logs/learner.log", "logs/teacher.log",
+                 "logs/controller.log"):
+        assert (out / name).exists(), name
+    s = json.loads((out / "summary.json").read_text())
+    assert s["tree"]["nodes"] > 1 and s["tree"]["vectors"] >= 590
+    assert len(s["learned"]) == 2 and all(m["seconds"] >= 19 for m in s["learned"])
+
+
+def test_demo_fails_loudly(tmp_path):
+    r = subprocess.run(
+        [sys.executable, "-m", "lab.cli", "demo", "--out", str(tmp_path / "d"),
+         "--world", "no-such-world"], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "no-such-world" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_demo_exits_nonzero_when_a_child_fails(tmp_path):
+    out = tmp_path / "d"
+    out.mkdir()
+    (out / "tree.rhbl").write_bytes(b"not a tree")  # the learner refuses to overwrite it
+    r = subprocess.run(
+        [sys.executable, "-m", "lab.cli", "demo", "--out", str(out), "--quiet"],
+        cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "learner" in r.stderr and "exited early with status 2" in r.stderr
+    assert "has no journal" in r.stderr
