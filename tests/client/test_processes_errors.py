@@ -1,0 +1,108 @@
+"""The processes report clearly: router unreachable, credentials refused, server not up,
+a tree that does not fit, scans that stop. Each runs a real process for a second or two."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+zenoh = pytest.importorskip("zenoh")
+
+from client._process import EXIT_NO_SERVER, EXIT_UNREACHABLE, EXIT_USAGE  # noqa: E402
+from protocol.session import make_config  # noqa: E402
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _run(*args, timeout=60):
+    return subprocess.run([sys.executable, "-m", "lab.cli", *args], cwd=ROOT,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def test_unreachable_router_names_the_endpoint(free_port):
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    r = _run("teacher", "--connect", ep)
+    assert r.returncode == EXIT_UNREACHABLE
+    assert ep in r.stderr and "connection refused" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_refused_credentials(free_port, tmp_path):
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    users = tmp_path / "users.txt"
+    users.write_text("teacher:right\n")
+    cfg = make_config(mode="router", listen=[ep])
+    cfg.insert_json5("transport/auth/usrpwd", json.dumps(
+        {"user": "router", "password": "x", "dictionary_file": str(users)}))
+    client = tmp_path / "teacher.json5"
+    client.write_text(json.dumps({
+        "mode": "client", "connect": {"endpoints": [ep]},
+        "scouting": {"multicast": {"enabled": False}},
+        "transport": {"auth": {"usrpwd": {"user": "teacher", "password": "wrong"}}}}))
+    with zenoh.open(cfg):
+        r = _run("teacher", "--zenoh-config", str(client))
+    assert r.returncode == EXIT_UNREACHABLE
+    assert "refused the zenoh session" in r.stderr and "credentials" in r.stderr
+
+
+def test_server_not_up(free_port):
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    with zenoh.open(make_config(mode="router", listen=[ep])):
+        r = _run("controller", "--connect", ep, "--tree", "x.rhbl", "--wait-server", "1")
+        assert r.returncode == EXIT_USAGE and "No such file" in r.stderr
+        r = _run("teacher", "--connect", ep, "--wait-server", "1.5")
+    assert r.returncode == EXIT_NO_SERVER, r.stderr
+    assert "the server is not up" in r.stderr and "rhbl/r0/laser/0/data/scan" in r.stderr
+
+
+def _tree(tmp_path, features="wall") -> Path:
+    from client.behaviour.features import FEATURES
+    from client.behaviour.learning import DemonstrationLearner
+
+    learner = DemonstrationLearner(FEATURES[features], task="t")
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        learner.observe(rng.uniform(0.2, 3, 360).astype(np.float32), 0.0,
+                        str(rng.choice(["fwd", "rot-left"])))
+    return learner.save(tmp_path / "t.rhbl")
+
+
+def test_controller_refuses_a_tree_with_other_features(start_server, tmp_path):
+    srv = start_server("room", speedup=1)
+    r = _run("controller", "--connect", srv.endpoint, "--tree", str(_tree(tmp_path)),
+             "--features", "maze")
+    assert r.returncode == EXIT_USAGE
+    assert "other features" in r.stderr and "beams" in r.stderr
+
+
+def test_controller_reports_when_scans_stop(start_server, tmp_path):
+    srv = start_server("room", speedup=1)
+    log = tmp_path / "c.log"
+    with open(log, "wb") as f:
+        p = subprocess.Popen([sys.executable, "-m", "lab.cli", "controller", "--connect",
+                              srv.endpoint, "--tree", str(_tree(tmp_path))], stdout=f,
+                             stderr=subprocess.STDOUT, cwd=ROOT, start_new_session=True,
+                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        end = time.monotonic() + 30
+        while "server is up" not in log.read_text() and time.monotonic() < end:
+            time.sleep(0.1)
+        srv.stop()
+        end = time.monotonic() + 10
+        while "not commanding" not in log.read_text() and time.monotonic() < end:
+            time.sleep(0.1)
+        assert "no scan on rhbl/r0/laser/0/data/scan" in log.read_text()
+        os.kill(p.pid, signal.SIGTERM)
+        assert p.wait(20) == 0
+    finally:
+        if p.poll() is None:
+            os.kill(p.pid, signal.SIGKILL)
+            p.wait(5)
