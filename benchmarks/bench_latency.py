@@ -1,0 +1,190 @@
+"""Sense-to-act latency across processes, beside the raw zenoh round trip measured in the same run.
+
+Topology as in the demo: this process plays the server (a zenoh session in router mode listening
+on loopback); the others connect to it as clients.
+
+- raw: a scan-sized payload published here, echoed back by a child process (``--echo``) that
+  does nothing else: the transport's round trip with two Python callbacks.
+- sense-to-act: a real ``Scan`` (a 360-beam scan of the room world) published on the robot's scan
+  key, answered by a real ``rhbl controller`` process (a tree trained in-process for 120 s of the
+  room) with a ``VelCmd`` carrying that scan's id: decode, features, ``predict_one``, encode,
+  publish, through the same router.
+
+One message in flight at a time, the two kinds interleaved. Prints p50/p99 and the ratio
+(target: sense-to-act p50 within 3x of the raw round trip).
+
+    python benchmarks/bench_latency.py [--n 1000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import zenoh
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from protocol import keys  # noqa: E402
+from protocol.messages import Scan, VelCmd  # noqa: E402
+from protocol.session import make_config  # noqa: E402
+
+PING, PONG = "bench/ping", "bench/pong"
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def echo(endpoint: str) -> int:
+    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(SystemExit(0)))
+    with zenoh.open(make_config(mode="client", connect=[endpoint])) as s:
+        pub = s.declare_publisher(PONG, express=True)
+        sub = s.declare_subscriber(PING, zenoh.handlers.RingChannel(1))
+        try:
+            while True:
+                sample = sub.handler.recv()
+                pub.put(sample.payload.to_bytes())
+        except SystemExit:
+            pass
+    return 0
+
+
+def _train_tree(path: Path) -> None:
+    from lab.harness import make_learner, resolve_world, train
+
+    spec = resolve_world("room")
+    learner = make_learner(spec.task)
+    train(spec, learner, seconds=120.0, seed=0)
+    learner.save(path)
+
+
+def _pct(a) -> tuple[float, float]:
+    a = np.asarray(a) * 1e6
+    return float(np.percentile(a, 50)), float(np.percentile(a, 99))
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=1000, help="round trips of each kind")
+    ap.add_argument("--echo", metavar="ENDPOINT", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.echo:
+        return echo(args.echo)
+
+    from lab.harness import resolve_world
+    from server.world import World
+
+    tmp = Path(tempfile.mkdtemp(prefix="rhbl-bench-"))
+    tree = tmp / "tree.rhbl"
+    _train_tree(tree)
+    world = World(resolve_world("room"))
+    ranges = world.scan(0)
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    robot = "r0"
+    children: list[subprocess.Popen] = []
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    got = threading.Event()
+    box: dict = {}
+
+    def on_pong(sample):
+        box["t"] = time.perf_counter()
+        got.set()
+
+    def on_cmd(sample):
+        t = time.perf_counter()
+        cmd = VelCmd.decode(sample.payload.to_bytes())
+        if cmd.scan_id == box.get("want"):
+            box["t"] = t
+            got.set()
+
+    with zenoh.open(make_config(mode="router", listen=[endpoint])) as s:
+        scan_pub = s.declare_publisher(keys.scan_key(robot), express=True)
+        ping_pub = s.declare_publisher(PING, express=True)
+        subs = [s.declare_subscriber(PONG, on_pong),
+                s.declare_subscriber(keys.cmd_vel_key(robot, source="controller"), on_cmd)]
+        try:
+            children.append(subprocess.Popen([sys.executable, __file__, "--echo", endpoint],
+                                             env=env, start_new_session=True))
+            children.append(subprocess.Popen(
+                [sys.executable, "-m", "lab.cli", "controller", "--tree", str(tree), "--connect",
+                 endpoint, "--log-level", "WARNING"], env=env, cwd=ROOT, start_new_session=True))
+            sid = 0
+
+            def scan_payload(i: int) -> bytes:
+                return Scan(ts=i * 0.1, id=i, ranges=ranges, pose=(3.0, 0.7, 0.0)).encode()
+
+            size = len(scan_payload(1))
+
+            def one_scan() -> float | None:
+                nonlocal sid
+                sid += 1
+                box["want"] = sid
+                data = scan_payload(sid)
+                got.clear()
+                t0 = time.perf_counter()
+                scan_pub.put(data)
+                return (box["t"] - t0) if got.wait(1.0) else None
+
+            def one_ping() -> float | None:
+                data = os.urandom(size)
+                box.pop("want", None)
+                got.clear()
+                t0 = time.perf_counter()
+                ping_pub.put(data)
+                return (box["t"] - t0) if got.wait(1.0) else None
+
+            # warm up: both children answering
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline and (one_scan() is None or one_ping() is None):
+                time.sleep(0.05)
+            for _ in range(50):
+                one_scan(), one_ping()
+            raw, s2a, lost = [], [], 0
+            for _ in range(args.n):
+                a, b = one_ping(), one_scan()
+                lost += (a is None) + (b is None)
+                if a is not None:
+                    raw.append(a)
+                if b is not None:
+                    s2a.append(b)
+        finally:
+            for sub in subs:
+                sub.undeclare()
+            for c in children:
+                if c.poll() is None:
+                    os.kill(c.pid, signal.SIGTERM)
+            for c in children:
+                try:
+                    c.wait(10)
+                except subprocess.TimeoutExpired:
+                    os.kill(c.pid, signal.SIGKILL)
+    r50, r99 = _pct(raw)
+    c50, c99 = _pct(s2a)
+    from rhbl import load
+
+    nodes = load(tree).node_count_
+    print(f"payload {size} bytes (360-beam scan), {args.n} round trips each, one in flight; "
+          f"tree {nodes} nodes; lost {lost}")
+    print("| path | p50 us | p99 us |")
+    print("|---|---|---|")
+    print(f"| raw zenoh round trip (echo process) | {r50:.0f} | {r99:.0f} |")
+    print(f"| scan -> rhbl controller -> command | {c50:.0f} | {c99:.0f} |")
+    print(f"ratio p50 {c50 / r50:.2f}x (target <= 3x), p99 {c99 / r99:.2f}x")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
