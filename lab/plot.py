@@ -93,22 +93,29 @@ def draw_spheres(ax, clf, dims=(0, 1), feature_names=None, max_spheres: int = 30
 
 
 def plot_paths(world, paths: dict, out, title: str | None = None, spheres=None, dims=(0, 1),
-               feature_names=None) -> Path:
+               feature_names=None, overlay: bool = False) -> Path:
+    """One panel per driver, side by side like the paper's figures 3 and 4 ((a) the teacher's
+    path, (b) the learned robot's), or every path on one panel with ``overlay=True``; a sphere
+    panel is appended when ``spheres`` is given."""
     out = Path(out)
-    ncols = 1 + (spheres is not None)
-    fig, axes = plt.subplots(1, ncols, figsize=(7 * ncols, 6), squeeze=False)
-    ax = axes[0][0]
-    draw_world(ax, world)
-    for k, (name, ps) in enumerate(paths.items()):
-        color = COLORS.get(name, _LABEL_COLORS[k % len(_LABEL_COLORS)])
-        runs = ps if (len(ps) and np.ndim(ps[0]) == 2) else [ps]
-        for j, p in enumerate(runs):
-            draw_path(ax, p, label=name if j == 0 else None, color=color)
-    ax.legend(fontsize=8, loc="best")
+    groups = [dict(paths)] if overlay else [{name: ps} for name, ps in paths.items()] or [{}]
+    ncols = len(groups) + (spheres is not None)
+    fig, axes = plt.subplots(1, ncols, figsize=(6.5 * ncols, 6), squeeze=False)
+    for g, (ax, group) in enumerate(zip(axes[0], groups, strict=False)):
+        draw_world(ax, world)
+        for k, (name, ps) in enumerate(group.items()):
+            color = COLORS.get(name, _LABEL_COLORS[(g + k) % len(_LABEL_COLORS)])
+            runs = ps if (len(ps) and np.ndim(ps[0]) == 2) else [ps]
+            for j, p in enumerate(runs):
+                draw_path(ax, p, label=name if j == 0 else None, color=color)
+        if group:
+            ax.legend(fontsize=8, loc="best")
+        if not overlay and len(groups) > 1:
+            ax.set_title(f"({chr(ord('a') + g)}) {next(iter(group))}")
     if title:
-        ax.set_title(title)
+        fig.suptitle(title)
     if spheres is not None:
-        draw_spheres(axes[0][1], spheres, dims=dims, feature_names=feature_names)
+        draw_spheres(axes[0][-1], spheres, dims=dims, feature_names=feature_names)
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
