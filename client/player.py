@@ -41,12 +41,14 @@ from protocol.messages import (
     Nack,
     Scan,
     SetOdom,
+    SetPose,
+    SimPose,
     State,
     VelCmd,
 )
 from protocol.session import make_config
 
-__all__ = ["LaserProxy", "PlayerClient", "Position2dProxy", "RequestError"]
+__all__ = ["LaserProxy", "PlayerClient", "Position2dProxy", "RequestError", "SimulationProxy"]
 
 log = logging.getLogger(__name__)
 
@@ -89,6 +91,7 @@ class PlayerClient:
         self._cmd_pub = self.session.declare_publisher(cmd_key)
         self._position2d: Position2dProxy | None = None
         self._laser: LaserProxy | None = None
+        self._simulation: SimulationProxy | None = None
 
     # -- subscriptions ----------------------------------------------------------------------
 
@@ -134,6 +137,17 @@ class PlayerClient:
             self._laser = LaserProxy(self)
         return self._laser
 
+    @property
+    def simulation(self) -> SimulationProxy:
+        """The simulator's sim-only requests (Player's ``simulation`` interface)."""
+        if self._simulation is None:
+            self._simulation = SimulationProxy(self)
+        return self._simulation
+
+    def set_pose(self, x: float, y: float, yaw: float, reset_odom: bool = True) -> Ack:
+        """Teleport the robot (simulation only); see :meth:`SimulationProxy.set_pose2d`."""
+        return self.simulation.set_pose2d(x, y, yaw, reset_odom=reset_odom)
+
     def read(self, timeout: float | None = 1.0) -> bool:
         """Wait for a new tick (at most ``timeout`` s) and refresh every proxy.
 
@@ -174,8 +188,10 @@ class PlayerClient:
         self, iface: str, name: str, payload: bytes | None = None, timeout: float = 2.0
     ) -> bytes:
         """Send a request and return the reply payload; raise :class:`RequestError` on a NACK
-        (with its reason) or when nobody answers within ``timeout`` s."""
-        key = keys.request_key(self.robot, iface, name, self.index)
+        (with its reason) or when nobody answers within ``timeout`` s. ``iface`` ``"sim"``
+        names a simulation-only request (``rhbl/<robot>/sim/req/<name>``)."""
+        key = (keys.sim_request_key(self.robot, name) if iface == "sim"
+               else keys.request_key(self.robot, iface, name, self.index))
         replies = self.session.get(key, payload=payload, timeout=timeout)
         for reply in replies:
             if reply.ok is not None:
@@ -358,3 +374,30 @@ class LaserProxy(_Proxy):
 
     def get_geom(self) -> Geometry:
         return Geometry.decode(self.client.request("laser", "get_geom"))
+
+
+class SimulationProxy:
+    """Simulation-only requests (Player/Stage's ``simulation`` interface): teleport the robot
+    and read its true pose. Refused (:class:`RequestError`) by a secured router unless this
+    client's credentials may use ``rhbl/*/sim/req/**`` (docs/deployment.md)."""
+
+    def __init__(self, client: PlayerClient) -> None:
+        self.client = client
+
+    def set_pose2d(self, x: float, y: float, yaw: float, reset_odom: bool = True,
+                   timeout: float = 2.0) -> Ack:
+        """Teleport the robot to the true pose (x, y, yaw) if it is free: velocity zeroed,
+        stall cleared, odometry set to the pose when ``reset_odom``. The reply's ``extra``
+        holds ``pose``, ``scan_id`` (the first scan taken at the new pose) and ``ts``.
+        A pose in a wall (or outside the world) is refused: :class:`RequestError` with the
+        server's reason."""
+        msg = SetPose((float(x), float(y), float(yaw)), reset_odom=bool(reset_odom))
+        return Ack.decode(self.client.request("sim", "set_pose", msg.encode(), timeout=timeout))
+
+    def get_pose2d(self, timeout: float = 2.0) -> tuple[float, float, float]:
+        """The true pose (x, y, yaw) in the world frame."""
+        return self.get_pose(timeout).pose
+
+    def get_pose(self, timeout: float = 2.0) -> SimPose:
+        """The true pose, the odometry and the sim time (:class:`SimPose`)."""
+        return SimPose.decode(self.client.request("sim", "get_pose", timeout=timeout))

@@ -20,6 +20,7 @@ __all__ = [
     "request_key",
     "robot_name",
     "scan_key",
+    "sim_request_key",
     "source_of_cmd_key",
     "state_key",
     "teacher_action_key",
@@ -100,6 +101,16 @@ def request_key(
     check_chunk(iface, "iface")
     check_chunk(name, "request name")
     return f"{_dev(robot, iface, index)}/req/{name}"
+
+
+def sim_request_key(robot: str = "r0", name: str = "set_pose") -> str:
+    """A simulation-only request (queryable) ``rhbl/<robot>/sim/req/<name>``: ``set_pose``,
+    ``get_pose`` (Player's ``simulation`` interface). Outside the device tree on purpose: the
+    secured router grants ``rhbl/*/*/*/req/**`` (device requests) and ``rhbl/*/sim/req/**``
+    (teleporting the robot) to different roles."""
+    check_chunk(robot, "robot")
+    check_chunk(name, "request name")
+    return f"{PREFIX}/{robot}/sim/req/{name}"
 
 
 def teacher_action_key(robot: str = "r0") -> str:

@@ -41,6 +41,8 @@ __all__ = [
     "ProtocolError",
     "Scan",
     "SetOdom",
+    "SetPose",
+    "SimPose",
     "State",
     "TeacherAction",
     "TreeNotice",
@@ -392,6 +394,55 @@ class SetOdom(_Message):
     @classmethod
     def from_map(cls, m):
         return cls(pose=get_vec(m, "pose", cls.WHAT, 3))
+
+
+@dataclass
+class SetPose(_Message):
+    """Request payload of the sim-only ``set_pose``: teleport the robot to the true ``pose``
+    [x, y, yaw] (world frame); ``reset_odom`` (default true) also sets the odometry to it."""
+
+    WHAT: ClassVar[str] = "set_pose"
+    MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
+    pose: tuple[float, float, float]
+    reset_odom: bool = True
+
+    def to_map(self):
+        return {"pose": [float(x) for x in self.pose], "reset_odom": bool(self.reset_odom)}
+
+    @classmethod
+    def from_map(cls, m):
+        w = cls.WHAT
+        return cls(
+            pose=get_vec(m, "pose", w, 3),
+            reset_odom=get_opt(m, "reset_odom", get_bool, w, default=True),
+        )
+
+
+@dataclass
+class SimPose(_Message):
+    """Reply to the sim-only ``get_pose``: the true ``pose`` [x, y, yaw], the odometry ``odom``
+    and the sim time ``ts`` of the last published tick."""
+
+    WHAT: ClassVar[str] = "sim pose"
+    pose: tuple[float, float, float]
+    odom: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ts: float = 0.0
+
+    def to_map(self):
+        return {
+            "pose": [float(x) for x in self.pose],
+            "odom": [float(x) for x in self.odom],
+            "ts": float(self.ts),
+        }
+
+    @classmethod
+    def from_map(cls, m):
+        w = cls.WHAT
+        return cls(
+            pose=get_vec(m, "pose", w, 3),
+            odom=get_opt(m, "odom", get_vec, w, 3, default=(0.0, 0.0, 0.0)),
+            ts=get_opt(m, "ts", get_float, w, default=0.0),
+        )
 
 
 @dataclass

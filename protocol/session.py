@@ -137,13 +137,15 @@ def _endpoints(values: list[str] | None) -> list[str]:
 def config_from_args(args: argparse.Namespace) -> zenoh.Config:
     """The zenoh config of parsed ``add_zenoh_arguments`` flags. Defaults (when neither the
     flag nor a config file gives endpoints): the ``default_listen``/``default_connect`` given to
-    ``add_zenoh_arguments``, and a client with no endpoint connects to ``DEFAULT_ENDPOINT``."""
+    ``add_zenoh_arguments`` (``default_listen`` not in client mode: ``rhbl server --mode client``
+    must not grab the default port), and a client with no endpoint connects to
+    ``DEFAULT_ENDPOINT``."""
     listen = _endpoints(getattr(args, "listen", None))
     connect = _endpoints(getattr(args, "connect", None))
     mode = getattr(args, "mode", "client")
     config_file = getattr(args, "zenoh_config", None)
     if config_file is None:
-        if not listen:
+        if not listen and mode != "client":  # a client connects; it does not listen
             listen = list(getattr(args, "_zenoh_default_listen", []))
         if not connect:
             connect = list(getattr(args, "_zenoh_default_connect", []))

@@ -39,6 +39,8 @@ from protocol.messages import (
     Nack,
     Scan,
     SetOdom,
+    SetPose,
+    SimPose,
     State,
     VelCmd,
 )
@@ -142,6 +144,13 @@ class ServerNode:
                         lambda q, r=r, iface=iface, name=name: self._on_query(r, iface, name, q),
                     )
                 )
+            for name in ("set_pose", "get_pose"):  # simulation-only requests
+                self._decls.append(
+                    s.declare_queryable(
+                        keys.sim_request_key(r.name, name),
+                        lambda q, r=r, name=name: self._on_query(r, "sim", name, q),
+                    )
+                )
         self._decls.append(
             s.liveliness().declare_subscriber(f"{keys.PREFIX}/alive/**", self._on_liveliness)
         )
@@ -229,6 +238,8 @@ class ServerNode:
         if len(payload) > COMMAND_MAX_PAYLOAD:
             raise DecodeError(f"{name}: payload of {len(payload)} bytes exceeds the limit")
         i = r.index
+        if iface == "sim":
+            return self._answer_sim(r, name, payload)
         if iface == "laser":
             if name == "get_geom":
                 return Geometry(pose=(LASER.offset, 0.0, 0.0), size=_LASER_SIZE)
@@ -264,6 +275,31 @@ class ServerNode:
             return Ack(info=f"motors {'on' if msg.state else 'off'}")
         raise ValueError(f"unknown request {iface}/{name}")  # pragma: no cover
 
+    def _answer_sim(self, r: _RobotIO, name: str, payload: bytes):
+        i = r.index
+        if name == "get_pose":
+            with self._cond:
+                return SimPose(pose=self.world.pose(i), odom=self.world.odom(i),
+                               ts=self.world.time)
+        if name == "set_pose":
+            if not payload:
+                raise DecodeError(
+                    "set_pose: missing payload, expected {v, pose: [x, y, yaw], reset_odom: bool}"
+                )
+            msg = SetPose.decode(payload)
+            with self._cond:
+                self.world.set_pose(i, msg.pose, reset_odom=msg.reset_odom)  # ValueError: NACK
+                # publish the new pose at once (same ts, next scan id): clients see it without
+                # waiting for a tick, and in lock-step the next tick waits for answers to it
+                self._publish([r])
+                self._cond.notify_all()
+                pose, scan_id, ts = self.world.pose(i), r.scan_id, self.world.time
+            self.counters["set_pose"] += 1
+            log.info("%s: set_pose to (%.3f, %.3f, %.3f)%s", r.name, *pose,
+                     ", odometry reset" if msg.reset_odom else "")
+            return Ack(info="pose set", extra={"pose": list(pose), "scan_id": scan_id, "ts": ts})
+        raise ValueError(f"unknown request sim/{name}")  # pragma: no cover
+
     # -- the loop ---------------------------------------------------------------------------
 
     def stop(self) -> None:
@@ -275,10 +311,10 @@ class ServerNode:
     def stopped(self) -> bool:
         return self._stop.is_set()
 
-    def _publish(self) -> None:
+    def _publish(self, robots: Sequence[_RobotIO] | None = None) -> None:
         w = self.world
         ts = w.time
-        for r in self._robots:
+        for r in self._robots if robots is None else robots:
             i = r.index
             r.seq += 1
             r.scan_id += 1

@@ -486,6 +486,52 @@ class World:
     def reset_odom(self, i: int) -> None:
         self.set_odom(i, (0.0, 0.0, 0.0))
 
+    def pose_problem(self, i: int, pose: tuple[float, float, float]) -> str | None:
+        """Why robot ``i`` cannot be placed at ``pose`` (None: it can). A pose must be finite,
+        inside the walls' bounding box, more than the robot radius from every wall (the rule
+        for start poses) and not overlap another robot."""
+        if len(pose) != 3 or not all(math.isfinite(float(v)) for v in pose):
+            return f"a pose is (x, y, yaw) of finite numbers, got {pose!r}"
+        x, y = float(pose[0]), float(pose[1])
+        x0, y0, x1, y1 = self.spec.bounds()
+        if not (x0 < x < x1 and y0 < y < y1):
+            return (f"({x:.3f}, {y:.3f}) is outside the world "
+                    f"(walls span x {x0:g}..{x1:g}, y {y0:g}..{y1:g})")
+        d = float(_point_segment_distance(np.asarray([x, y]), self._segs).min())
+        if d <= ROBOT.radius:
+            return (f"({x:.3f}, {y:.3f}) is {d:.3f} m from a wall: not free (the robot's "
+                    f"radius is {ROBOT.radius} m)")
+        for j, r in enumerate(self._robots):
+            if j == i:
+                continue
+            ox, oy = r.body.position
+            dd = math.hypot(x - ox, y - oy)
+            if dd < 2 * ROBOT.radius:
+                return f"({x:.3f}, {y:.3f}) overlaps robot {j} ({dd:.3f} m away)"
+        return None
+
+    def set_pose(self, i: int, pose: tuple[float, float, float], reset_odom: bool = True) -> None:
+        """Teleport robot ``i`` to the true ``pose`` (simulation only): zero velocity and
+        command, clear stall; with ``reset_odom`` the odometry becomes ``pose`` too. Raises
+        ValueError (saying why) if the pose is not free (:meth:`pose_problem`)."""
+        problem = self.pose_problem(i, pose)
+        if problem is not None:
+            raise ValueError(problem)
+        x, y, yaw = float(pose[0]), float(pose[1]), wrap_angle(float(pose[2]))
+        r = self._robots[i]
+        b = r.body
+        b.position = (x, y)
+        b.angle = yaw
+        b.velocity = (0.0, 0.0)
+        b.angular_velocity = 0.0
+        self._space.reindex_shapes_for_body(b)
+        r.cmd = (0.0, 0.0)
+        r.stall = False
+        r.vel = (0.0, 0.0, 0.0)
+        r.last = (x, y, yaw)
+        if reset_odom:
+            r.odom = [x, y, yaw]
+
     def velocity(self, i: int) -> tuple[float, float, float]:
         """Actual mean velocity (vx, vy, va) of robot ``i`` over the last step, in its frame."""
         return self._robots[i].vel

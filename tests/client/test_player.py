@@ -68,6 +68,29 @@ def test_requests_and_nack(server, client_config):
             pos.set_speed(float("nan"), 0.0)
 
 
+def test_simulation_proxy_sets_and_gets_the_pose(server, client_config):
+    with PlayerClient(client_config(server.endpoint), source="controller") as c:
+        pos, laser, sim = c.position2d, c.laser, c.simulation
+        assert c.read(timeout=5.0)
+        ack = sim.set_pose2d(6.0, 1.4, math.pi)
+        assert ack.extra["scan_id"] > laser.id
+        while laser.id < ack.extra["scan_id"]:
+            assert c.read(timeout=5.0)
+        for _ in range(10):  # the state may land just after its scan: at most a tick later
+            if pos.truth == pytest.approx((6.0, 1.4, math.pi)):
+                break
+            c.read(timeout=1.0)
+        assert pos.truth == pytest.approx((6.0, 1.4, math.pi)) and pos.pose == pytest.approx(pos.truth)
+        assert pos.vx == 0.0 and not pos.stall
+        assert sim.get_pose2d() == pytest.approx((6.0, 1.4, math.pi))
+        c.set_pose(2.0, 1.0, 0.0, reset_odom=False)
+        assert sim.get_pose2d() == pytest.approx((2.0, 1.0, 0.0))
+        assert sim.get_pose().odom[0] == pytest.approx(6.0)
+        with pytest.raises(RequestError, match="NACK.*from a wall"):
+            sim.set_pose2d(5.0, 1.9, 0.0)
+        assert sim.get_pose2d() == pytest.approx((2.0, 1.0, 0.0))
+
+
 def test_read_times_out_without_server():
     from protocol.session import make_config
 

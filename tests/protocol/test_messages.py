@@ -21,6 +21,8 @@ from protocol.messages import (
     Nack,
     Scan,
     SetOdom,
+    SetPose,
+    SimPose,
     State,
     TeacherAction,
     TreeNotice,
@@ -160,3 +162,21 @@ def test_random_maps_only_ever_raise_decode_error(m):
     except DecodeError:
         return
     assert all(math.isfinite(x) for x in (c.vx, c.vy, c.va))
+
+
+def test_sim_requests_keys_and_set_pose_validation():
+    assert keys.sim_request_key("r0", "set_pose") == "rhbl/r0/sim/req/set_pose"
+    assert keys.sim_request_key("r1", "get_pose") == "rhbl/r1/sim/req/get_pose"
+    with pytest.raises(ValueError):
+        keys.sim_request_key("r0", "a/b")
+    m = SetPose.decode(SetPose((1.0, 2.0, 0.5), reset_odom=False).encode())
+    assert m.pose == (1.0, 2.0, 0.5) and m.reset_odom is False
+    assert SetPose.decode(msgpack.packb({"v": 1, "pose": [1, 2, 3]})).reset_odom is True
+    for bad in ([1, 2], [1, 2, 3, 4], [float("nan"), 0, 0], [0, float("inf"), 0], ["1", 0, 0],
+                [True, 0, 0], None):
+        with pytest.raises(DecodeError, match="pose"):
+            SetPose.decode(msgpack.packb({"v": 1, "pose": bad}))
+    with pytest.raises(DecodeError, match="reset_odom"):
+        SetPose.decode(msgpack.packb({"v": 1, "pose": [1, 2, 3], "reset_odom": "yes"}))
+    p = SimPose.decode(SimPose((1.0, 2.0, 3.0), odom=(0.0, 0.0, 0.0), ts=4.5).encode())
+    assert (p.pose, p.odom, p.ts) == ((1.0, 2.0, 3.0), (0.0, 0.0, 0.0), 4.5)

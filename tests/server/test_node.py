@@ -21,6 +21,8 @@ from protocol.messages import (
     Nack,
     Scan,
     SetOdom,
+    SetPose,
+    SimPose,
     State,
     VelCmd,
 )
@@ -332,3 +334,78 @@ def test_several_robots_each_under_their_own_prefix(start_server, client_config)
         assert l1.state.vel[2] == pytest.approx(0.5, abs=1e-6)
         assert l0.state.truth == pytest.approx(p0)
         assert l0.state.driver == "" and l1.state.driver == "controller"
+
+
+def sim_request(session, name, payload=None, robot="r0"):
+    replies = list(session.get(keys.sim_request_key(robot, name), payload=payload, timeout=3.0))
+    assert replies, f"no reply to sim/{name}"
+    return replies[0]
+
+
+def test_sim_set_pose_teleports_and_resets_odometry(start_server, client_config):
+    srv = start_server("corridor", "--lockstep-timeout", "0.2", lockstep=True)
+    with zenoh.open(client_config(srv.endpoint)) as session:
+        lis = Listener(session)
+        lis.next_scan()
+        # drive a little so velocity and odometry are not trivial, then teleport
+        for _ in range(5):
+            drive(session, vx=0.5, scan_id=lis.scan.id)
+            lis.next_scan()
+        r = sim_request(session, "set_pose", SetPose((7.0, 1.5, math.pi / 2)).encode())
+        ack = Ack.decode(r.ok.payload.to_bytes())
+        assert ack.extra["pose"] == pytest.approx([7.0, 1.5, math.pi / 2])
+        sid = ack.extra["scan_id"]
+        # the fresh scan at the new pose, before any tick
+        lis.wait(lambda: lis.scan is not None and lis.scan.id >= sid)
+        with lis.cond:
+            scan, state = lis.scan, lis.state
+        assert scan.id == sid and scan.truth == pytest.approx((7.0, 1.5, math.pi / 2))
+        assert scan.pose == pytest.approx(scan.truth)  # odometry == truth after the reset
+        assert state.vel == (0.0, 0.0, 0.0) and state.stall is False
+        # facing the left wall (y = 2) 0.5 m ahead: the beams straight ahead see it
+        assert scan.ranges[179] == pytest.approx(0.5, abs=0.01)
+        p = SimPose.decode(sim_request(session, "get_pose").ok.payload.to_bytes())
+        assert p.pose == pytest.approx((7.0, 1.5, math.pi / 2)) and p.odom == pytest.approx(p.pose)
+        # reset_odom false: the truth moves, the odometry does not
+        r = sim_request(session, "set_pose",
+                        msgpack.packb({"v": 1, "pose": [3, 1, 0], "reset_odom": False}))
+        assert r.ok is not None
+        p = SimPose.decode(sim_request(session, "get_pose").ok.payload.to_bytes())
+        assert p.pose == pytest.approx((3.0, 1.0, 0.0)) and p.odom[0] == pytest.approx(7.0)
+        # after the teleport the robot drives on from there
+        for _ in range(5):
+            drive(session, vx=0.5, scan_id=lis.scan.id)
+            lis.next_scan()
+        assert 3.1 < lis.scan.truth[0] < 3.4
+
+
+def test_sim_set_pose_nacks_and_survives_hostile_payloads(session, corridor):
+    lis = Listener(session)
+    lis.wait(lambda: lis.state is not None)
+    pose0 = SimPose.decode(sim_request(session, "get_pose").ok.payload.to_bytes()).pose
+    refused = {
+        "in a wall": SetPose((5.0, 0.1, 0.0)).encode(),
+        "on a wall": SetPose((0.0, 1.0, 0.0)).encode(),
+        "outside": SetPose((50.0, 1.0, 0.0)).encode(),
+        "nan": msgpack.packb({"v": 1, "pose": [float("nan"), 1, 0]}),
+        "inf": msgpack.packb({"v": 1, "pose": [1, 1, float("inf")]}),
+        "short": msgpack.packb({"v": 1, "pose": [1, 1]}),
+        "long": msgpack.packb({"v": 1, "pose": [1, 1, 0, 0]}),
+        "strings": msgpack.packb({"v": 1, "pose": ["1", 1, 0]}),
+        "reset not bool": msgpack.packb({"v": 1, "pose": [1, 1, 0], "reset_odom": 1}),
+        "version": msgpack.packb({"v": 2, "pose": [1, 1, 0]}),
+        "huge": msgpack.packb({"v": 1, "pose": [1, 1, 0], "pad": b"x" * 100_000}),
+        "none": None,
+    }
+    for payload in [*refused.values(), *HOSTILE[:4]]:
+        r = sim_request(session, "set_pose", payload or None)
+        assert r.err is not None, payload
+    reason = Nack.decode(sim_request(session, "set_pose", refused["in a wall"]).err
+                         .payload.to_bytes()).reason
+    assert "from a wall" in reason and "not free" in reason
+    assert "outside" in Nack.decode(sim_request(session, "set_pose", refused["outside"]).err
+                                    .payload.to_bytes()).reason
+    time.sleep(0.3)
+    p = SimPose.decode(sim_request(session, "get_pose").ok.payload.to_bytes())
+    assert p.pose == pytest.approx(pose0, abs=1e-6)  # never moved
+    assert corridor.proc.poll() is None

@@ -254,3 +254,24 @@ def test_parse_world_mapping():
         }
     )
     assert len(spec.segments()) == 3 and spec.task == "wall-following"
+
+
+def test_set_pose_teleports_and_refuses_walls(corridor):
+    w = World(corridor, robots=2)
+    w.set_command(0, 0.5, 0.0)
+    w.step(0.5)
+    w.set_pose(0, (6.0, 1.2, math.pi), reset_odom=True)
+    assert w.pose(0) == pytest.approx((6.0, 1.2, math.pi))
+    assert w.odom(0) == pytest.approx(w.pose(0))
+    assert w.command(0) == (0.0, 0.0) and w.velocity(0) == (0.0, 0.0, 0.0)
+    assert not w.stall(0)
+    w.step(0.1)  # the zeroed command holds it in place
+    assert w.pose(0) == pytest.approx((6.0, 1.2, math.pi), abs=1e-6)
+    w.set_pose(0, (4.0, 1.0, 0.0), reset_odom=False)
+    assert w.odom(0)[0] == pytest.approx(6.0, abs=1e-6)
+    for pose, why in [((5.0, 0.2, 0.0), "from a wall"), ((20.0, 1.0, 0.0), "outside"),
+                      ((float("nan"), 1.0, 0.0), "finite"),
+                      (w.pose(1), "overlaps robot 1")]:
+        with pytest.raises(ValueError, match=why):
+            w.set_pose(0, pose)
+    assert w.pose(0) == pytest.approx((4.0, 1.0, 0.0))
