@@ -310,6 +310,24 @@ def test_requests_are_answered_by_the_server_mutating_ones_not_for_the_learner(s
             q.undeclare()
 
 
+def test_only_teacher_may_teleport_every_role_may_read_the_true_pose(sessions):
+    set_pose, get_pose = keys.sim_request_key(ROBOT, "set_pose"), keys.sim_request_key(ROBOT, "get_pose")
+    queryables = [
+        sessions["server"].declare_queryable(key, lambda q: q.reply(q.key_expr, b"ack"))
+        for key in (set_pose, get_pose)
+    ]
+    time.sleep(SETTLE)
+    try:
+        assert _ask(sessions["teacher"], set_pose) == [b"ack"]
+        assert _ask(sessions["learner"], set_pose) == []
+        assert _ask(sessions["controller"], set_pose) == []
+        for who in ("teacher", "learner", "controller"):
+            assert _ask(sessions[who], get_pose) == [b"ack"], who
+    finally:
+        for q in queryables:
+            q.undeclare()
+
+
 def test_learner_snapshot_and_notices_reach_the_controller(sessions):
     inbox = Inbox()
     sub = _subscribe(sessions, inbox, "controller", keys.learner_notice_key(ROBOT))
