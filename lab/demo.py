@@ -8,7 +8,8 @@ zenohd plays in compose); every child connects to it as a client:
    teacher demonstrates for T sim seconds while the learner learns; the teacher then exits and
    the learner is stopped (SIGINT: final snapshot);
 3. ``rhbl controller --tree <snapshot>`` drives from each of the world's start poses for D sim
-   seconds (the server is restarted at each start pose, a world file with that pose);
+   seconds: the same server keeps running and the demo teleports the robot to each start pose
+   with the sim-only ``set_pose`` request (``rhbl/r0/sim/req/set_pose``, odometry reset too);
 4. the demo computes metrics (``lab.metrics``) over what it recorded from the server's scans,
    states and commands, draws the teacher's path beside the learned robot's (``lab.plot``), prints
    a table like the paper's Table I and writes everything into the output folder.
@@ -24,7 +25,6 @@ import datetime as _dt
 import json
 import logging
 import os
-import re
 import signal
 import socket
 import subprocess
@@ -175,6 +175,7 @@ class Recorder:
         self.episode: Episode | None = None
         self.lock = threading.Lock()
         self.notice: dict = {}
+        self.sources: dict[str, int] = {}  # commands seen per source (recording or not)
         self.subs = [
             session.declare_subscriber(keys.scan_key(robot), self._on_scan),
             session.declare_subscriber(keys.state_key(robot), self._on_state),
@@ -216,13 +217,12 @@ class Recorder:
         from protocol.messages import VelCmd
 
         ep = self.episode
-        if ep is None:
-            return
         try:
             c = VelCmd.decode(sample.payload.to_bytes())
         except Exception:  # noqa: BLE001
             return
-        if c.scan_id is not None:
+        self.sources[c.source] = self.sources.get(c.source, 0) + 1
+        if ep is not None and c.scan_id is not None:
             ep.cmds[c.scan_id] = (c.source, c.vx, c.va)
 
     def _on_notice(self, sample) -> None:
@@ -238,6 +238,18 @@ class Recorder:
         with self.lock:
             self.episode = Episode(kind, tuple(start))
             return self.episode
+
+    def trim(self, ep: Episode, first_id: int) -> None:
+        """Forget what ``ep`` recorded before scan ``first_id`` (scans of the old pose that
+        arrived between ``begin`` and a teleport)."""
+        with self.lock:
+            keep = [k for k, i in enumerate(ep.ids) if i >= first_id]
+            for f in ("ts", "poses", "side", "ids"):
+                col = getattr(ep, f)
+                setattr(ep, f, [col[k] for k in keep])
+            ep.cmds = {i: c for i, c in ep.cmds.items() if i >= first_id}
+            if ep.ts:
+                ep.stalls = {t: v for t, v in ep.stalls.items() if t >= round(ep.ts[0], 6)}
 
     def end(self) -> None:
         with self.lock:
@@ -264,17 +276,6 @@ def _episode_metrics(ep: Episode, actions, goal, dt: float, side: str | None) ->
 
 
 # ---- the demo ------------------------------------------------------------------------------
-def _world_with_pose(src: Path, pose, dst: Path) -> Path:
-    """A copy of a world file whose default pose is ``pose`` (a server is started per start)."""
-    text = src.read_text()
-    new = f"pose = [{pose[0]!r}, {pose[1]!r}, {pose[2]!r}]"
-    text2, n = re.subn(r"(?m)^pose\s*=\s*\[[^\]]*\]", new, text, count=1)
-    if n != 1:
-        raise DemoError(f"cannot set the start pose in {src}: no 'pose = [...]' line")
-    dst.write_text(text2)
-    return dst
-
-
 class Demo:
     def __init__(self, args: argparse.Namespace):
         from lab.harness import resolve_world
@@ -329,12 +330,38 @@ class Demo:
         raise DemoError(f"{child.name} (pid {child.pid}) did not come up within {timeout:g} s:\n"
                         f"{child.tail()}")
 
-    def start_server(self, pose, tag: str) -> Child:
-        world = _world_with_pose(self.spec.path, pose, self.out / "logs" / f"world-{tag}.toml")
+    def start_server(self) -> Child:
+        """One server for the whole demo, at the world's own start pose."""
         pace = (["--speedup", f"{self.args.speedup:g}"] if self.args.speedup is not None
                 else ["--lockstep", "--lockstep-timeout", "0.5"])
-        return self.child(f"server-{tag}", "server", "--mode", "client", "--world", str(world),
-                          *pace)
+        return self.child("server", "server", "--mode", "client", "--world",
+                          str(self.spec.path), *pace)
+
+    def wait_commands(self, source: str, *cs: Child, timeout: float = 60.0) -> None:
+        """Until a command of ``source`` went through the rendezvous (the process drives)."""
+        deadline = time.monotonic() + timeout
+        while not self.rec.sources.get(source):
+            self.deadline_check()
+            self.check_alive(*cs)
+            if time.monotonic() > deadline:
+                raise DemoError(f"no command from the {source} within {timeout:g} s:\n"
+                                f"{cs[-1].tail() if cs else ''}")
+            time.sleep(0.05)
+
+    def teleport(self, pose, *cs: Child) -> int:
+        """Put the robot at ``pose`` (sim-only set_pose; odometry reset); returns the id of the
+        first scan taken there."""
+        from client.player import RequestError
+
+        self.check_alive(*cs)
+        for attempt in range(3):
+            try:
+                ack = self.sim.set_pose2d(*pose, reset_odom=True, timeout=5.0)
+                return int(ack.extra["scan_id"])
+            except RequestError as exc:
+                if "NACK" in str(exc) or attempt == 2:
+                    raise DemoError(f"cannot put the robot at {tuple(pose)}: {exc}") from exc
+        raise AssertionError("unreachable")  # pragma: no cover
 
     def wait_episode(self, ep: Episode, seconds: float, what: str, *cs: Child,
                      until_exit: Child | None = None) -> None:
@@ -380,8 +407,11 @@ class Demo:
         a = self.args
         self.say(f"rhbl demo: scenario {a.scenario}, world {self.spec.name}, output {self.out}")
         self.say(f"rendezvous (router) on {self.endpoint}; children log into {self.out / 'logs'}")
+        from client.player import PlayerClient
+
         with zenoh.open(make_config(mode="router", listen=[self.endpoint])) as session:
             self.session = session
+            self.sim = PlayerClient(session=session, robot="r0", source="demo").simulation
             self.rec = Recorder(session, "r0")
             try:
                 return self._phases()
@@ -397,7 +427,7 @@ class Demo:
                              str(self.tree), "--wait-server", "60", "--snapshot-every", "1")
         self.wait_token("learner", learner)  # no demonstration before the learner listens
         start = tuple(self.spec.pose)
-        server = self.start_server(start, "teach")
+        server = self.start_server()
         ep_teacher = self.rec.begin("teacher", start)
         teacher = self.child("teacher", "teacher", "--policy", sc["policy"], "--seconds",
                              f"{self.teach:g}", "--seed", str(a.seed), "--wait-server", "30")
@@ -411,7 +441,6 @@ class Demo:
         rc = learner.stop(timeout=30)
         if rc != 0:
             raise DemoError(f"learner exited with status {rc}:\n{learner.tail()}")
-        server.stop()
         if not self.tree.exists():
             raise DemoError(f"the learner wrote no snapshot at {self.tree}")
         clf, _features, actions, meta = load_snapshot(self.tree)
@@ -423,16 +452,17 @@ class Demo:
         starts = self.spec.start_poses[: a.starts] if a.starts else self.spec.start_poses
         controller = self.child("controller", "controller", "--tree", str(self.tree),
                                 "--wait-server", "60")
+        self.wait_commands("controller", server, controller)
         learned: list[Episode] = []
         for k, pose in enumerate(starts):
-            server = self.start_server(pose, f"drive{k}")
             ep = self.rec.begin("learner", pose)
+            self.rec.trim(ep, self.teleport(pose, server, controller))
             self.wait_episode(ep, self.drive, f"learned robot, start {k + 1}/{len(starts)}",
                               server, controller)
             self.rec.end()
-            server.stop()
             learned.append(ep)
         controller.stop()
+        server.stop()
         if controller.rc not in (0, None):
             raise DemoError(f"controller exited with status {controller.rc}:\n{controller.tail()}")
 
