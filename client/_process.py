@@ -8,11 +8,14 @@
   on every path (an unclosed session with callback subscribers hangs the interpreter at exit).
 - ``wait_for_server(ctx)``: waits for the first scan of the robot, logging what it waits for,
   and fails with a message naming the endpoint and the key when the server is not up.
+- ``wait_for_learner(ctx, timeout)``: waits for a learner's liveliness token of the robot
+  (``rhbl/alive/learner/<robot>-*``; a learner declares it once its label subscription is in
+  place), logging what it waits for, and fails with EXIT_NO_LEARNER when none appears.
 - ``ScanWatch``: a background thread that logs when scans stop arriving and when they resume.
 
 Exit codes: 0 ok (also after SIGINT/SIGTERM), 1 failure, 2 usage/bad input (a snapshot that does
 not fit, ...), 3 the router/server endpoint is unreachable or refused the session, 4 the server is
-not up (no scans of the robot).
+not up (no scans of the robot), 5 no learner is up (the teacher, unless ``--no-wait-learner``).
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ from protocol.session import add_zenoh_arguments, config_from_args
 
 __all__ = [
     "EXIT_FAILURE",
+    "EXIT_NO_LEARNER",
     "EXIT_NO_SERVER",
     "EXIT_OK",
     "EXIT_UNREACHABLE",
@@ -49,6 +53,7 @@ __all__ = [
     "add_process_arguments",
     "open_session",
     "run",
+    "wait_for_learner",
     "wait_for_server",
 ]
 
@@ -59,6 +64,7 @@ EXIT_FAILURE = 1
 EXIT_USAGE = 2
 EXIT_UNREACHABLE = 3
 EXIT_NO_SERVER = 4
+EXIT_NO_LEARNER = 5
 
 
 class ProcessError(Exception):
@@ -80,6 +86,14 @@ class Context:
     robot: str
     endpoints: list[str] = field(default_factory=list)
     token: Any = None  # the liveliness token (kept referenced for the session's lifetime)
+
+    def declare_token(self) -> None:
+        """Declare the liveliness token ``rhbl/alive/<role>/<ident>`` (once). ``run(...,
+        early_token=False)`` leaves it to the body, to declare when the process is ready (the
+        learner: after its label subscription, so the token means "ready to receive")."""
+        if self.token is None:
+            self.token = self.session.liveliness().declare_token(
+                keys.alive_key(self.role, self.ident))
 
 
 def add_process_arguments(parser: argparse.ArgumentParser) -> None:
@@ -238,6 +252,51 @@ def wait_for_server(ctx: Context, timeout: float | None = None) -> None:
     log.info("server is up: scans arrive on %s", key)
 
 
+def learners_alive(session: zenoh.Session, robot: str, timeout: float = 1.0) -> list[str]:
+    """Key expressions of the liveliness tokens of the learners of ``robot`` now visible."""
+    found = []
+    try:
+        for reply in session.liveliness().get(keys.alive_key("learner", "*"), timeout=timeout):
+            if reply.ok is not None:
+                key = str(reply.ok.key_expr)
+                if key.rsplit("/", 1)[-1].startswith(f"{robot}-"):
+                    found.append(key)
+    except Exception as exc:  # noqa: BLE001 - treated as "none yet"
+        log.debug("liveliness query failed: %s", exc)
+    return found
+
+
+def wait_for_learner(ctx: Context, timeout: float | None = None) -> list[str]:
+    """Block until a learner of the robot holds its liveliness token (it then receives labels);
+    ProcessError(EXIT_NO_LEARNER) after ``timeout`` s (0 = wait forever). Logs every few
+    seconds while waiting. Returns the learners' token keys."""
+    timeout = ctx.args.wait_learner_timeout if timeout is None else timeout
+    want = f"{keys.alive_key('learner', '*')[:-1]}{ctx.robot}-<pid>"
+    t0 = time.monotonic()
+    found = learners_alive(ctx.session, ctx.robot, timeout=0.5)
+    if not found:
+        log.info("%s: waiting for a learner (liveliness token %s) before demonstrating, so no "
+                 "label is lost; --no-wait-learner to demonstrate without one", ctx.role, want)
+    next_note = t0 + 3.0
+    while not found:
+        now = time.monotonic()
+        if timeout and now - t0 >= timeout:
+            where = ", ".join(ctx.endpoints) or "the local zenoh network"
+            raise ProcessError(
+                f"{ctx.role}: no learner is up: no liveliness token {want} within {timeout:g} s "
+                f"via {where}. Start `rhbl learner --robot {ctx.robot}` (it may start later: "
+                f"raise --wait-learner-timeout, 0 = wait forever), or pass --no-wait-learner to "
+                f"demonstrate without recording.", EXIT_NO_LEARNER)
+        if now >= next_note:
+            log.info("%s: still waiting for a learner (%s; %.0f s%s)", ctx.role, want, now - t0,
+                     f" of {timeout:g}" if timeout else "")
+            next_note = now + 3.0
+        time.sleep(0.2)
+        found = learners_alive(ctx.session, ctx.robot, timeout=0.5)
+    log.info("learner is up: %s", ", ".join(found))
+    return found
+
+
 class ScanWatch:
     """Logs (once) when no scan has arrived for ``stale`` seconds, and when scans resume.
 
@@ -279,8 +338,10 @@ class ScanWatch:
 
 
 # ---- the main wrapper ---------------------------------------------------------------------
-def run(role: str, args: argparse.Namespace, body: Callable[[Context], int | None]) -> int:
-    """Run a process body with logging, signals, a session and a liveliness token."""
+def run(role: str, args: argparse.Namespace, body: Callable[[Context], int | None],
+        early_token: bool = True) -> int:
+    """Run a process body with logging, signals, a session and a liveliness token (declared
+    before ``body`` runs, or by the body with ``ctx.declare_token()`` if not ``early_token``)."""
     setup_logging(role, getattr(args, "log_level", "INFO"))
     install_signal_handlers()
     session = None
@@ -292,8 +353,9 @@ def run(role: str, args: argparse.Namespace, body: Callable[[Context], int | Non
         session, endpoints = open_session(config, role)
         robot = getattr(args, "robot", "r0")
         ident = f"{robot}-{os.getpid()}"
-        token = session.liveliness().declare_token(keys.alive_key(role, ident))
-        ctx = Context(role, ident, args, session, robot, endpoints, token)
+        ctx = Context(role, ident, args, session, robot, endpoints)
+        if early_token:
+            ctx.declare_token()
         log.info("%s up (robot %s, pid %d, zid %s)", role, robot, os.getpid(), session.zid())
         return int(body(ctx) or EXIT_OK)
     except ProcessError as exc:

@@ -243,7 +243,9 @@ class _Stop:
 
 
 def main(args: argparse.Namespace) -> int:
-    return run("learner", args, _body)
+    # the token is declared by the body once the label subscription is in place: a teacher
+    # that waits for it (rhbl teacher) then loses no label
+    return run("learner", args, _body, early_token=False)
 
 
 def _body(ctx: Context) -> int:
@@ -282,6 +284,7 @@ def _body(ctx: Context) -> int:
                                    lambda s: events.put((1, s.payload.to_bytes()))),
     ]
     queryable = session.declare_queryable(snap_key, on_query)
+    ctx.declare_token()  # after the subscriptions: the token means "ready to receive labels"
     if core.dirty:
         latest["bytes"] = core.snapshot()
     log.info("learning: features %s, %d vectors so far, %d nodes; snapshot %s",

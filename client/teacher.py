@@ -8,6 +8,11 @@ the action executed, which differs while a perturbation runs).
     rhbl teacher --policy wall-follower --seconds 300     # scripted, perturbed demonstrations
     rhbl teacher --policy maze
     rhbl teacher --policy keyboard                        # a person at a terminal (arrows/WASD)
+    rhbl teacher --policy keyboard --no-wait-learner      # pure teleop, nobody records
+
+Nothing demonstrated is lost: before its first label the teacher waits (``--wait-learner-timeout``,
+30 s; 0 = forever) for a learner's liveliness token ``rhbl/alive/learner/<robot>-<pid>``, which
+a learner declares only once it subscribes to the labels; with no learner it exits with status 5.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from client._process import (
     ScanWatch,
     add_process_arguments,
     run,
+    wait_for_learner,
     wait_for_server,
 )
 from client.behaviour.actions import DEFAULT_ACTIONS
@@ -53,6 +59,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(labels stay the expert's; 0 = off; default 0.05, the training "
                              "recipe measured in docs/experiments.md)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the perturbations")
+    parser.add_argument("--no-wait-learner", dest="wait_learner", action="store_false",
+                        help="demonstrate without waiting for a learner (e.g. pure teleop); "
+                             "labels published while no learner listens are lost")
+    parser.add_argument("--wait-learner-timeout", type=float, default=30.0, metavar="SECONDS",
+                        help="how long to wait for a learner's liveliness token before "
+                             "demonstrating; then exit with status 5 (0 = wait forever, "
+                             "logging every few seconds; default: 30)")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -89,6 +102,14 @@ def _loop(ctx: Context, demo) -> int:
     scan_k = keys.scan_key(robot)
     sub = session.declare_subscriber(scan_k, zenoh.handlers.RingChannel(1))
     wait_for_server(ctx)
+    if args.wait_learner:
+        wait_for_learner(ctx)
+        # a scan kept from before the learner subscribed never reached it: its label could not
+        # be paired. Drop it and start with the next scan.
+        while sub.handler.try_recv() is not None:
+            pass
+    else:
+        log.info("not waiting for a learner (--no-wait-learner): labels go to whoever listens")
     watch = ScanWatch("teacher", scan_k, stale=1.0).start()
     actions = DEFAULT_ACTIONS
     t0 = None
@@ -112,6 +133,8 @@ def _loop(ctx: Context, demo) -> int:
             if label is None:  # keyboard: nothing pressed yet
                 continue
             vx, va = actions[executed]
+            if n == 0:
+                log.info("first label: scan %d, %s", scan.id, label)
             cmd_pub.put(VelCmd(vx=vx, va=va, source=SOURCE, scan_id=scan.id, ts=scan.ts).encode())
             act_pub.put(TeacherAction(scan_id=scan.id, action=label, source=SOURCE, ts=scan.ts,
                                       executed=executed).encode())

@@ -21,6 +21,7 @@ zenoh = pytest.importorskip("zenoh")
 
 from client.behaviour.learning import DemonstrationLearner, load_snapshot  # noqa: E402
 from client.journal import Journal, journal_path  # noqa: E402
+from client.player import PlayerClient  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import State, VelCmd  # noqa: E402
 from protocol.session import make_config  # noqa: E402
@@ -109,6 +110,47 @@ def _wait_journal(out: Path, n: int, timeout: float = 20.0) -> None:
             return
         time.sleep(0.05)
     raise AssertionError(f"journal has {_journal_len(out)} records, expected {n}")
+
+
+def test_teacher_waits_for_a_learner_and_no_label_is_lost(env):
+    sim = PlayerClient(session=env["session"], source="test").simulation
+    start = sim.get_pose2d()  # put back at the end: the later tests drive from the start pose
+    # no learner: a bounded wait, then a clear message and exit status 5
+    t = env["start"]("teacher", "teacher", "--policy", "wall-follower",
+                     "--wait-learner-timeout", "1.5")
+    assert t.wait(30) == 5, t.text()
+    assert "no learner is up" in t.text() and "--no-wait-learner" in t.text()
+    assert "first label" not in t.text()
+
+    # a teacher started before the learner waits, saying so, and demonstrates once it is up
+    out = env["tmp"] / "first.rhbl"
+    t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--seconds", "5",
+                     "--wait-learner-timeout", "60")
+    end = time.monotonic() + 30
+    while "waiting for a learner" not in t.text() and time.monotonic() < end:
+        assert t.proc.poll() is None, t.text()
+        time.sleep(0.1)
+    assert "waiting for a learner" in t.text(), t.text()
+    time.sleep(1.0)
+    assert t.proc.poll() is None and "first label" not in t.text(), t.text()
+    learner = env["start"]("learner", "learner", "--features", "wall", "--out", str(out))
+    assert t.wait(60) == 0, t.text()
+    first = int(t.text().split("first label: scan ")[1].split(",")[0])
+    n = int([ln for ln in t.text().splitlines() if "teacher stopped after" in ln][-1]
+            .split("after ")[1].split()[0])
+    _wait_journal(out, n)
+    assert learner.stop() == 0, learner.text()
+    with Journal.open(journal_path(out), readonly=True) as j:
+        records = list(j.records())
+    assert records[0].scan_id == first, (first, [r.scan_id for r in records[:3]])
+    assert len(records) == n  # every label the teacher published is in the journal
+
+    # pure teleop: --no-wait-learner demonstrates with nobody recording
+    t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--seconds", "2",
+                     "--no-wait-learner")
+    assert t.wait(30) == 0, t.text()
+    assert "first label" in t.text()
+    sim.set_pose2d(*start)
 
 
 def test_learner_grows_a_tree_and_survives_sigkill(env):
