@@ -46,7 +46,9 @@ def run_trial(task: str, seed: int, world: str | None = None, train_seconds: flo
               eval_seconds: float | None = None, episodes: int | None = None,
               eval_worlds: list[str] = (), perturb: float | None = None, teacher: str = "smooth",
               features: str | None = None, stride: int | None = None, range_noise: float = 0.0,
-              odom_noise: float = 0.0, train_noise: bool = False, **tree_params) -> dict:
+              odom_noise: float = 0.0, train_noise: bool = False, starts: str | None = None,
+              segment: float | None = None, random_segment: float | None = None,
+              turn: float | None = None, consistent: bool | None = None, **tree_params) -> dict:
     spec = resolve_world(world or WORLD[task])
     learner = make_learner(task, features=features, stride=stride, **tree_params)
     seconds = train_seconds or TRAINING[task]["seconds"]
@@ -54,7 +56,8 @@ def run_trial(task: str, seed: int, world: str | None = None, train_seconds: flo
     t0 = time.perf_counter()
     train(spec, learner, seconds, seed=seed, perturb=perturb, policy=policy,
           range_noise=range_noise if train_noise else 0.0,
-          odom_noise=odom_noise if train_noise else 0.0)
+          odom_noise=odom_noise if train_noise else 0.0, starts=starts, segment=segment,
+          random_starts=random_segment, turn=turn, consistent=consistent)
     t_train = time.perf_counter() - t0
     tree = TreePolicy.from_learner(learner)
     out = {"seed": seed, "nodes": learner.nodes, "height": learner.height,
@@ -133,6 +136,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--features", choices=sorted(FEATURES), default=None)
     parser.add_argument("--stride", type=int, default=None)
     parser.add_argument("--spawn", choices=["all", "winner"], default=None)
+    parser.add_argument("--starts", choices=["default", "world"], default=None)
+    parser.add_argument("--segment", type=float, default=None)
+    parser.add_argument("--random-segment", type=float, default=None)
+    parser.add_argument("--consistent", action="store_true", default=None)
     parser.add_argument("--range-noise", type=float, default=0.0)
     parser.add_argument("--odom-noise", type=float, default=0.0)
     parser.add_argument("--train-noise", action="store_true",
@@ -155,7 +162,9 @@ def main(args) -> int:
                              episodes=args.episodes, eval_worlds=ev, perturb=args.perturb,
                              teacher=args.teacher, features=args.features, stride=args.stride,
                              range_noise=args.range_noise, odom_noise=args.odom_noise,
-                             train_noise=args.train_noise, **tree)
+                             train_noise=args.train_noise, starts=args.starts,
+                             segment=args.segment, random_segment=args.random_segment,
+                             consistent=args.consistent, **tree)
         results[task] = res
         print(f"\n{task}: {args.trials} trials")
         print(format_worlds(res))

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,8 +53,12 @@ DT = 0.1  # 10 Hz, as the processes run
 TRAINING: dict[str, dict] = {
     "wall-following": {"features": "wall", "perturb": 0.05, "seconds": 300.0,
                        "tree": {"spawn": "winner"}, "stride": 1, "min_delta": 0.0},
-    "maze": {"features": "maze", "perturb": 0.05, "seconds": 300.0,
-             "tree": {"spawn": "winner"}, "stride": 1, "min_delta": 0.0},
+    # one training run = a demonstration from each start pose of the world (each until the goal),
+    # then from poses near the teacher's path with the heading turned by up to 0.6 rad, each for
+    # 60 s or until the goal
+    "maze": {"features": "maze-right", "perturb": 0.05, "seconds": 900.0,
+             "tree": {"spawn": "winner"}, "stride": 1, "min_delta": 0.0,
+             "starts": "world", "segment": 240.0, "random_segment": 0.25, "turn": 0.6},
 }
 
 
@@ -93,6 +98,7 @@ class Trajectory:
     labels: list = field(default_factory=list)        # teacher labels (training) or []
     teacher_actions: list = field(default_factory=list)  # teacher's choice on these states
     side: list = field(default_factory=list)          # followed-side wall distance
+    segments: list = field(default_factory=list)      # start pose of each demonstration
     learned: int = 0
     wall_time: float = 0.0
 
@@ -133,36 +139,117 @@ def _step_world(world: World, traj: Trajectory, actions: ActionSet, name: str, s
         traj.side.append(metrics.side_distance(ranges, side))
 
 
+def _clearance(segs: np.ndarray, x: float, y: float) -> float:
+    """Distance from (x, y) to the nearest wall segment."""
+    if len(segs) == 0:
+        return float("inf")
+    a = segs[:, 0:2]
+    e = segs[:, 2:4] - a
+    ee = np.einsum("ij,ij->i", e, e)
+    p = np.array([x, y])
+    t = np.clip(np.einsum("ij,ij->i", p - a, e) / np.where(ee > 0, ee, 1.0), 0.0, 1.0)
+    d = a + t[:, None] * e - p
+    return float(np.sqrt(np.einsum("ij,ij->i", d, d)).min())
+
+
+def sample_pose(spec: WorldSpec, visited, rng, jitter: float = 0.3, turn: float = math.pi,
+                clearance: float = 0.45, tries: int = 50) -> tuple[float, float, float] | None:
+    """A fresh demonstration start near a pose the teacher already visited (so it lies in the
+    reachable free space of any world, no map-specific code): position jittered by ``jitter``
+    metres (normal), heading turned by up to +/- ``turn`` rad (uniform; pi = any heading), at
+    least ``clearance`` metres from every wall. None when no such pose was found."""
+    if not len(visited):
+        return None
+    segs = spec.segments()
+    for _ in range(tries):
+        x, y, yaw = visited[int(rng.integers(len(visited)))]
+        x += float(rng.normal(0.0, jitter))
+        y += float(rng.normal(0.0, jitter))
+        yaw += float(rng.uniform(-turn, turn))
+        yaw = math.atan2(math.sin(yaw), math.cos(yaw))
+        if _clearance(segs, x, y) >= clearance:
+            return (round(x, 3), round(y, 3), round(yaw, 4))
+    return None
+
+
+def demonstration_starts(spec: WorldSpec, starts: str = "world") -> list[tuple[float, float, float]]:
+    """The fixed part of a training run's schedule: ``"default"`` = the world's pose only,
+    ``"world"`` = every start pose of the world (default pose first)."""
+    if starts == "default":
+        return [tuple(spec.pose)]
+    if starts == "world":
+        return [tuple(p) for p in spec.start_poses]
+    raise ValueError(f"starts must be 'default' or 'world', got {starts!r}")
+
+
 def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: int = 0,
           perturb: float | None = None, start: tuple[float, float, float] | None = None,
           range_noise: float = 0.0, odom_noise: float = 0.0, dt: float = DT,
-          policy=None) -> Trajectory:
-    """The world's scripted teacher drives from ``start`` (default the world's pose) for
-    ``seconds`` while ``learner`` observes every step."""
+          policy=None, starts: str | None = None, segment: float | None = None,
+          random_starts: float | None = None, turn: float | None = None,
+          consistent: bool | None = None) -> Trajectory:
+    """One training run: the world's scripted teacher demonstrates for ``seconds`` (sim time, in
+    total) while ``learner`` observes every step.
+
+    The run is a sequence of demonstrations (the teacher restarts; the tree keeps growing):
+    first one from each pose of ``starts`` ("world": every start pose of the world, "default":
+    its default pose), each until the goal (maze) or ``segment`` seconds; the rest of the time
+    from poses sampled near the teacher's earlier path (``sample_pose``: jittered position,
+    heading turned by up to ``turn`` rad), each for ``segment * random_starts`` seconds or until
+    the goal. ``start`` given: a single demonstration from there (a corrective one)."""
     task = spec.task
     recipe = TRAINING.get(task, TRAINING["wall-following"])
     perturb = recipe["perturb"] if perturb is None else perturb
+    starts = recipe.get("starts", "default") if starts is None else starts
+    segment = recipe.get("segment", seconds) if segment is None else segment
+    random_starts = recipe.get("random_segment", 1.0) if random_starts is None else random_starts
+    turn = recipe.get("turn", math.pi) if turn is None else turn
+    consistent = recipe.get("consistent", False) if consistent is None else consistent
     policy = policy or make_policy(task, actions=learner.actions)
     rng = np.random.default_rng(seed)
     demo = Demonstrator(policy, perturb=perturb, rng=rng, dt=dt)
-    start = tuple(start) if start is not None else tuple(spec.pose)
+    fixed = [tuple(start)] if start is not None else demonstration_starts(spec, starts)
+    if start is not None:
+        segment = seconds
     world = World(spec, robots=1, seed=seed, range_noise=range_noise, odom_noise=odom_noise)
-    world.reset(poses=[start])
-    traj = Trajectory(dt=dt, start=start)
+    first = fixed[0]
+    traj = Trajectory(dt=dt, start=first)
     side = followed_side(task)
+    total = int(round(seconds / dt))
+    done = 0
     t0 = time.perf_counter()
-    for _ in range(int(round(seconds / dt))):
-        ranges = world.scan(0)
-        odom = world.odom(0)
-        label, executed = demo.step(ranges, odom)
-        traj.labels.append(label)
-        if learner.observe(ranges, odom[2], label):
-            traj.learned += 1
-        _step_world(world, traj, learner.actions, executed, side, ranges)
+    k = 0
+    while done < total:
+        if k < len(fixed) or random_starts <= 0:
+            pose, limit = fixed[k % len(fixed)], segment
+        else:
+            pose = sample_pose(spec, traj.poses, rng, turn=turn) or fixed[k % len(fixed)]
+            limit = segment * random_starts
+        world.reset(poses=[pose], seed=seed * 1000 + k)
+        demo.reset()
+        if k > 0 and hasattr(policy, "resume_following"):
+            policy.resume_following()
+        traj.segments.append(list(pose))
+        steps = min(total - done, max(1, int(round(limit / dt))))
+        for _ in range(steps):
+            ranges = world.scan(0)
+            odom = world.odom(0)
+            label, executed = demo.step(ranges, odom)
+            traj.labels.append(label)
+            if (not consistent or demo.consistent) and learner.observe(ranges, odom[2], label):
+                traj.learned += 1
+            _step_world(world, traj, learner.actions, executed, side, ranges)
+            done += 1
+            if spec.goal is not None and world.at_goal(0):
+                break
+        k += 1
     traj.wall_time = time.perf_counter() - t0
     learner.session = {"world": spec.name, "world_path": str(spec.path) if spec.path else None,
                        "seconds": seconds, "seed": seed, "perturb": perturb,
-                       "start": list(start), "range_noise": range_noise, "odom_noise": odom_noise,
+                       "start": list(first), "starts": starts if start is None else "given",
+                       "demonstrations": len(traj.segments), "segment": segment,
+                       "consistent": consistent,
+                       "range_noise": range_noise, "odom_noise": odom_noise,
                        "vectors": traj.learned}
     return traj
 
@@ -220,6 +307,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-radius", type=float, default=None)
     parser.add_argument("--max-nodes", type=int, default=None)
     parser.add_argument("--stride", type=int, default=None, help="learn every n-th step")
+    parser.add_argument("--starts", choices=["default", "world"], default=None,
+                        help="demonstrate from the world's default pose only, or from each of its "
+                             "start poses in turn (default: the task's recipe)")
+    parser.add_argument("--segment", type=float, default=None,
+                        help="sim seconds per demonstration before the teacher restarts")
+    parser.add_argument("--random-segment", type=float, default=None,
+                        help="after the start poses: demonstrations from poses near the teacher's "
+                             "path, each this fraction of --segment (0: cycle the start poses)")
+    parser.add_argument("--consistent", action="store_true", default=None,
+                        help="learn only labels that do not depend on the teacher's memory")
     parser.add_argument("--range-noise", type=float, default=0.0)
     parser.add_argument("--odom-noise", type=float, default=0.0)
 
@@ -245,11 +342,14 @@ def main(args) -> int:
     seconds = args.seconds if args.seconds is not None else TRAINING.get(
         spec.task, TRAINING["wall-following"])["seconds"]
     traj = train(spec, learner, seconds, seed=args.seed, perturb=args.perturb, start=args.start,
-                 range_noise=args.range_noise, odom_noise=args.odom_noise)
+                 range_noise=args.range_noise, odom_noise=args.odom_noise,
+                 starts=getattr(args, "starts", None), segment=getattr(args, "segment", None),
+                 random_starts=getattr(args, "random_segment", None),
+                 consistent=getattr(args, "consistent", None))
     out = learner.save(args.out)
     m = traj.metrics()
     print(f"trained on {spec.name} ({spec.task}) for {seconds:g} s from {list(traj.start)}: "
-          f"{traj.learned} vectors learned, tree {learner.nodes} nodes, height {learner.height}; "
+          f"{len(traj.segments)} demonstrations, {traj.learned} vectors learned, tree {learner.nodes} nodes, height {learner.height}; "
           f"teacher collisions {m['collisions']}; {traj.wall_time:.1f} s wall time")
     print(f"wrote {out}")
     return 0

@@ -124,7 +124,13 @@ class FeatureSpec:
 
 # "wall": five beams concentrated on the followed (right) side, see docs/experiments.md.
 # "maze": five symmetric beams plus the paper's left/right-directional heading value.
+# "maze-right": the maze recipe's default (docs/experiments.md): five beams 0-120 deg from the
+# right edge, each the minimum over +/- 10 deg, no heading. The maze teacher is a right-hand
+# wall follower, so its labels do not depend on the heading; the heading value tied each tier's
+# travel direction to the training maze's layout and failed on mazes whose openings alternate
+# the other way.
 FEATURES: dict[str, FeatureSpec] = {
     "wall": FeatureSpec(beams=(0.0, 22.5, 45.0, 67.5, 90.0)),
     "maze": FeatureSpec(beams=(0.0, 45.0, 90.0, 135.0, 180.0), heading="lr"),
+    "maze-right": FeatureSpec(beams=(0.0, 30.0, 60.0, 90.0, 120.0), window=10.0),
 }

@@ -109,7 +109,8 @@ class WallFollower(Policy):
                  k_a: float = 1.6, front_stop: float = 0.45, front_slow: float = 0.9,
                  lost: float = 1.2, on: float = 0.45, off: float = 0.2, dwell: int = 3,
                  robot_half_width: float = 0.26, fov_deg: float = 180.0, sector_deg: float = -40.0,
-                 max_arc: int = 60, actions: ActionSet = DEFAULT_ACTIONS):
+                 max_arc: int = 60, search: float | None = None,
+                 actions: ActionSet = DEFAULT_ACTIONS):
         super().__init__(actions)
         if side not in ("right", "left"):
             raise ValueError(f"side must be 'right' or 'left', got {side!r}")
@@ -121,17 +122,26 @@ class WallFollower(Policy):
         self.fov = fov_deg
         self.sector = math.radians(sector_deg)
         self.max_arc = max_arc
+        self.search = search
         self.reset()
 
     def reset(self) -> None:
         self._label = "fwd"
         self._held = self.dwell  # the first choice is free
         self._lost = self.max_arc + 1  # until a wall is found, search straight ahead
+        self._far = False
+
+    def resume_following(self) -> None:
+        """After a restart during a training run: treat a missing wall as a wall that just ended
+        (arc towards it), as in the middle of a demonstration, instead of searching straight
+        ahead; otherwise the same scan would get two labels depending on the teacher's memory."""
+        self._lost = 0
 
     # -- the continuous expert, always for the RIGHT side (the left side mirrors the scan) --
     def _command(self, r: np.ndarray) -> tuple[float, float, bool]:
         """(w, front, lost): desired turn (> 0 = left), front clearance, and whether the
-        followed wall has ended / is out of reach."""
+        followed wall has ended / is out of reach. Sets ``self._far``: nothing within
+        ``search`` metres on the followed half of the scan (open space)."""
         b, c, s = _trig(r.size, self.fov)
         x, y = r * c, r * s
         # clearance straight ahead in the robot's swept corridor
@@ -146,6 +156,7 @@ class WallFollower(Policy):
         # the followed wall ended (nothing beside the robot: a convex corner, a fin's tip, an
         # opening) or no wall in reach: arc towards the followed side, whatever lies ahead
         beside = float(r[b <= -math.pi / 2.0 + math.radians(15.0)].min())
+        self._far = self.search is not None and float(r[b <= 0.0].min()) > self.search
         if d > self.lost or beside > self.lost:
             return -1.0, front, True
         w = self.k_d * (self.target - d) + self.k_a * alpha
@@ -159,9 +170,10 @@ class WallFollower(Policy):
             # committed: keep rotating the same way until the way ahead is clear (a human does
             # not dither between rotate-left and rotate-right in a tight spot)
             return cur
-        if lost and self._lost > self.max_arc:
-            # no wall for a long time (open space, or a start far from walls): drive straight
-            # until one is ahead, then turn so that it ends up on the followed side
+        if lost and (self._far or self._lost > self.max_arc):
+            # nothing within ``search`` on the followed half (open space, a start far from walls:
+            # a reactive test the learner's clamped beams can see) or no wall for a long time:
+            # drive straight until one is ahead, then turn so that it ends up on the followed side
             if front < self.front_stop:
                 return "rot-left"
             return "fwd-left" if front < self.front_slow else "fwd"
@@ -180,6 +192,23 @@ class WallFollower(Policy):
         else:
             want = "fwd-left" if w > self.on else ("fwd-right" if w < -self.on else "fwd")
         return want
+
+    def reactive(self, ranges) -> str:
+        """The label this expert gives the scan with no history (no hysteresis, dwell, committed
+        rotation or lost-wall memory): a pure function of the scan. Where ``act`` agrees with it
+        the label is learnable by a reactive tree; where it does not, the label came from the
+        expert's memory (the same scan gets other labels at other times)."""
+        r = np.asarray(ranges, dtype=np.float64)
+        if self.side == "left":
+            r = r[::-1]
+        w, front, lost = self._command(r)
+        if lost:
+            name = "rot-right" if front < self.front_stop else "fwd-right"
+        elif front < self.front_stop or (w > 2.0 and front < self.front_slow):
+            name = "rot-left"
+        else:
+            name = "fwd-left" if w > self.on else ("fwd-right" if w < -self.on else "fwd")
+        return self.actions.mirror(name) if self.side == "left" else name
 
     def act(self, ranges, pose=None) -> str:
         r = np.asarray(ranges, dtype=np.float64)
@@ -252,6 +281,7 @@ class Demonstrator:
         self.policy.reset()
         self._left = 0
         self._action: str | None = None
+        self.consistent = True
 
     @property
     def perturbing(self) -> bool:
@@ -259,6 +289,12 @@ class Demonstrator:
 
     def step(self, ranges, pose) -> tuple[str, str]:
         label = self.policy.act(ranges, pose)
+        reactive = getattr(self.policy, "reactive", None)
+        # True when the label is a function of the scan alone (see WallFollower.reactive)
+        # (rotations are always kept: a committed rotation in a tight spot is how the expert
+        # gets out, and dropping it leaves the learner pinned)
+        self.consistent = (reactive is None or label.startswith("rot")
+                           or reactive(ranges) == label)
         if self._left > 0 and float(np.min(ranges)) < self.safety:
             self._left = 0
         if self._left == 0 and self._p_start > 0 and self.rng.random() < self._p_start \

@@ -1,0 +1,50 @@
+"""One training run = several demonstrations (start poses, then poses near the teacher's path)."""
+
+import math
+
+import numpy as np
+
+from client.behaviour.features import FEATURES
+from client.behaviour.policies import Demonstrator, make_policy
+from lab.harness import _clearance, make_learner, resolve_world, sample_pose, train
+
+
+def test_world_starts_then_sampled_poses():
+    spec = resolve_world("corridor")
+    learner = make_learner(spec.task)
+    traj = train(spec, learner, 60, seed=1, starts="world", segment=10, random_starts=0.5)
+    n_fixed = len(spec.start_poses)
+    assert [tuple(p) for p in traj.segments[:n_fixed]] == [tuple(p) for p in spec.start_poses]
+    assert len(traj.segments) > n_fixed  # the rest of the time: sampled poses
+    assert len(traj.labels) == 600
+    assert learner.session["demonstrations"] == len(traj.segments)
+
+
+def test_explicit_start_is_one_demonstration():
+    spec = resolve_world("corridor")
+    learner = make_learner(spec.task)
+    traj = train(spec, learner, 20, seed=0, start=spec.start_poses[-1], starts="world", segment=5)
+    assert traj.segments == [list(spec.start_poses[-1])]
+
+
+def test_sample_pose_is_clear_of_walls():
+    spec = resolve_world("maze")
+    rng = np.random.default_rng(0)
+    visited = [(1.0, 1.1, 0.0), (5.0, 3.3, math.pi)]
+    segs = spec.segments()
+    for _ in range(20):
+        p = sample_pose(spec, visited, rng, turn=0.6)
+        assert p is not None and _clearance(segs, p[0], p[1]) >= 0.45
+    assert sample_pose(spec, [], rng) is None
+
+
+def test_maze_recipe_features_and_reactive_labels():
+    assert FEATURES["maze-right"].dim == 5 and FEATURES["maze-right"].heading is None
+    teacher = make_policy("wall-following")
+    demo = Demonstrator(teacher, perturb=0.0)
+    scan = np.full(360, 0.6, dtype=np.float32)
+    for _ in range(5):
+        demo.step(scan, (0.0, 0.0, 0.0))
+    # the reactive label is a pure function of the scan
+    assert teacher.reactive(scan) == make_policy("wall-following").reactive(scan)
+    assert isinstance(demo.consistent, bool)
