@@ -131,6 +131,7 @@ def target_run(args) -> bool:
     knn = KNeighborsClassifier(n_neighbors=1).fit(Xtr, ytr)
     rows = Q[: args.single]
     s_tree = median_latency_us(clf.predict_one, rows)
+    s_row = median_latency_us(lambda r: clf.predict(r.reshape(1, -1)), rows)
     s_knn = median_latency_us(lambda r: knn.predict(r.reshape(1, -1)), rows)
     b_tree = best_of(lambda: clf.predict(Q), args.repeat)
     b_knn = best_of(lambda: knn.predict(Q), args.repeat)
@@ -138,13 +139,39 @@ def target_run(args) -> bool:
           f"(height {clf.height_}) from {used} vectors; 1-NN on the same {used} vectors")
     ok1 = s_knn / s_tree >= 50
     ok2 = b_knn / b_tree >= 1
-    print(f"single-query predict: rhbl {s_tree:.1f} us, 1-NN {s_knn:.1f} us -> "
-          f"{s_knn / s_tree:.1f}x faster (target >= 50x): {'PASS' if ok1 else 'FAIL'}")
+    print(f"single-query predict_one: rhbl {s_tree:.1f} us, 1-NN {s_knn:.1f} us -> "
+          f"{s_knn / s_tree:.1f}x faster (target >= 50x, goal >= 100x): "
+          f"{'PASS' if ok1 else 'FAIL'}")
+    print(f"single-query predict (1 row): rhbl {s_row:.1f} us -> {s_knn / s_row:.1f}x faster")
     print(f"batch predict of {len(Q)}: rhbl {b_tree * 1e3:.1f} ms, 1-NN {b_knn * 1e3:.1f} ms -> "
-          f"{b_knn / b_tree:.2f}x (target >= 1x): {'PASS' if ok2 else 'FAIL'}")
+          f"{b_knn / b_tree:.2f}x (target >= 1x, goal >= 2x): {'PASS' if ok2 else 'FAIL'}")
     print(f"accuracy on held-out: rhbl {clf.score(Xte, yte):.3f}, "
           f"1-NN {np.mean(knn.predict(Xte) == yte):.3f}")
     return ok1 and ok2
+
+
+def scaling_run(args) -> None:
+    """Single-query latency and training cost against tree size (6 features, literal)."""
+    sizes = (400, 5000) if args.quick else (400, 5000, 50000)
+    X, y = synthetic(80000, 6, seed=7)
+    Q = queries(synthetic(2000, 6, seed=8)[0], 20000, seed=9)
+    print("\n== scaling: 6 features, literal trees grown vector by vector (learn_one)")
+    print(f"{'spheres':>8} {'height':>6} {'vectors':>8} {'train us/vector':>16} "
+          f"{'predict_one us':>15} {'batch us/query':>15}")
+    clf = HypersphereClassifier("fwd")
+    clf.fit(np.zeros((0, 6)), [])
+    used = 0
+    for size in sizes:
+        t = time.perf_counter()
+        start = used
+        while clf.node_count_ < size and used < len(X):
+            clf.learn_one(X[used], y[used])
+            used += 1
+        train = (time.perf_counter() - t) / max(used - start, 1)
+        single = median_latency_us(clf.predict_one, Q[: args.single])
+        batch = best_of(lambda: clf.predict(Q), 1) / len(Q)
+        print(f"{clf.node_count_:>8} {clf.height_:>6} {used:>8} {train * 1e6:>16.0f} "
+              f"{single:>15.1f} {batch * 1e6:>15.2f}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -163,6 +190,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{sys.version.split()[0]}; single = median of {args.single} one-row calls, "
           f"batch = {n_batch} queries (best of {args.repeat})")
     ok = target_run(args)
+    scaling_run(args)
 
     sets = [("synthetic 5 features, 5 actions", *synthetic(m_syn, 5, seed=1), "fwd")]
     for name in ("iris", "wine", "breast-cancer"):

@@ -245,6 +245,7 @@ class HypersphereClassifier:
         if depth > self.height_:
             self.height_ = depth
         self._layout = None
+        self._one = None
         return i
 
     @property
@@ -410,6 +411,7 @@ class HypersphereClassifier:
                 self._label[p] = a  # coincides with the centre: relabel in place
                 self.n_relabelled_ += 1
                 self._layout = None
+                self._one = None
                 changes += 1
                 continue
             r = max(float(self._radii[p]) - d, 0.0)
@@ -509,30 +511,83 @@ class HypersphereClassifier:
         lay = self._layout
         return lay if lay is not None else self._build_layout()
 
-    def _winner_pos_one(self, x: np.ndarray, lay: dict[str, Any]) -> int:
-        diff = lay["centers_t"] - x[:, None]
-        d = np.einsum("ij,ij->j", diff, diff)
-        if self._euclid:
+    def _build_one(self) -> tuple:
+        """Creation-order arrays for single queries (rebuilt lazily after a change).
+
+        Creation order has every parent before its children, so no tree walk is needed.
+        """
+        n = self._n
+        ct = np.ascontiguousarray(self._centers[:n].T)
+        reach = self._radii[:n] + self.eps
+        # tie-break rank: smallest radius, then deepest, then earliest created
+        by_rank = np.lexsort((np.arange(n), -self._depth[:n], self._radii[:n]))
+        rank = np.empty(n, dtype=np.int64)
+        rank[by_rank] = np.arange(n)
+        one = (
+            ct,
+            reach,
+            np.empty_like(ct),  # scratch: differences
+            np.empty(n),  # scratch: distances
+            np.empty(n, dtype=bool),  # scratch: enclosure mask
+            self._parent[:n].tolist(),
+            rank.tolist(),
+            by_rank.tolist(),  # rank -> node
+            n,
+            self._euclid,
+        )
+        self._one = one
+        return one
+
+    def _winner_one(self, x: np.ndarray) -> int:
+        """The winning sphere (creation index) for one checked query vector.
+
+        Every sphere is tested at once (one vectorised ``sum((x - c)**2)`` over the features,
+        in feature order); the few enclosing spheres are then walked in creation order in
+        Python: a sphere is reachable iff it encloses ``x`` and its parent is reachable.
+        """
+        one = self._one
+        if one is None:
+            one = self._build_one()
+        ct, reach, buf, d, enc, parent, rank, by_rank, best, euclid = one
+        np.subtract(ct, x[:, None], out=buf)
+        np.multiply(buf, buf, out=buf)
+        np.add.reduce(buf, axis=0, out=d)
+        if euclid:
             np.sqrt(d, out=d)
-        bad = d > lay["reach"]
-        # a node is excluded if it or an ancestor does not enclose x: in pre-order, that is
-        # when some bad node at or before it has a subtree end beyond it
-        reach_end = np.maximum.accumulate(lay["end"] * bad)
-        key = np.where(reach_end > lay["ar"], lay["big"], lay["rank"])
-        return int(lay["rank_pos"][key.min()])
+        np.less_equal(d, reach, out=enc)
+        ok = {-1}
+        for i in np.flatnonzero(enc).tolist():
+            if parent[i] in ok:
+                ok.add(i)
+                r = rank[i]
+                if r < best:
+                    best = r
+        return by_rank[best]
 
     # ------------------------------------------------------------------ prediction
     def predict_one(self, x: Any) -> Any:
         """The label of one vector (the fast path for controllers). Returns a plain str/int."""
         self._check_fitted()
         x = self._check_x(x)
-        lay = self._get_layout()
-        return self._labels[lay["label"][self._winner_pos_one(x, lay)]]
+        return self._labels[self._label[self._winner_one(x)]]
 
     def predict(self, X: Any) -> np.ndarray:
         """Labels of the rows of ``X`` as a numpy array."""
         self._check_fitted()
+        if (
+            type(X) is np.ndarray
+            and X.shape == (1, self.n_features_in_)
+            and X.dtype == np.float64
+        ):
+            # one row: the single-query path (only for valid rows; others get the full
+            # checks and their error messages below)
+            xs = X[0].tolist()
+            total = sum(xs)
+            if min(xs) >= 0.0 and max(xs) <= 1.0 and total == total:
+                return self._label_values[[self._label[self._winner_one(X[0])]]]
         X = self._check_X(X)
+        if X.shape[0] == 1:
+            return self._label_values[[self._label[self._winner_one(X[0])]]]
         return self._label_values[self._predict_index(X)]
 
     def _predict_index(self, X: np.ndarray) -> np.ndarray:
@@ -665,8 +720,7 @@ class HypersphereClassifier:
         """
         self._check_fitted()
         x = self._check_x(x)
-        lay = self._get_layout()
-        node = int(lay["order"][self._winner_pos_one(x, lay)])
+        node = self._winner_one(x)
         path = []
         while node >= 0:
             path.append(

@@ -248,4 +248,5 @@ def from_dict(doc: Any, *, source: str = "<dict>") -> HypersphereClassifier:
     clf.n_seen_, clf.n_skipped_, clf.n_relabelled_ = seen, skipped, relabelled
     clf.metadata = metadata
     clf._layout = None
+    clf._one = None
     return clf

@@ -266,3 +266,31 @@ def test_batch_filter_exact_on_boundaries(monkeypatch, distance):
     monkeypatch.setattr(clfmod, "_DENSE_SUBTREE_PAIRS", 0)
     Q = np.vstack([grid, (grid[:-1] + grid[1:]) / 2])
     assert clf.predict(Q).tolist() == [clf.predict_one(q) for q in Q]
+
+
+def test_one_row_predict_checks_like_batch():
+    clf = HypersphereClassifier("a").fit([[0.2, 0.2], [0.8, 0.8]], ["b", "c"])
+    for bad, match in (([[1.5, 0.5]], r"X\[0, 0\] = .*1.5.* is outside"),
+                       ([[0.5, np.nan]], r"X\[0, 1\] is nan"),
+                       ([[0.5]], "has 1 features")):
+        with pytest.raises(ValueError, match=match):
+            clf.predict(np.array(bad))
+    one = clf.predict(np.array([[0.8, 0.8]]))
+    assert one.tolist() == ["c"] and one.dtype == clf.predict(np.array([[0.8, 0.8]] * 2)).dtype
+    one[0] = "z"  # a copy, not a view of the classes
+    assert clf.predict([[0.8, 0.8]]).tolist() == ["c"]
+    assert clf.predict(np.array([[0.8, 0.8]], dtype=np.float32)).tolist() == ["c"]
+    clipped = HypersphereClassifier("a", clip=True).fit([[0.0, 0.0]], ["b"])
+    assert clipped.predict(np.array([[-0.5, -1.0]])).tolist() == ["b"]
+
+
+def test_single_query_cache_follows_training():
+    X, y = synthetic(200, n=3, seed=2)
+    clf = HypersphereClassifier("fwd").fit(X[:100], y[:100])
+    q = X[150]
+    clf.predict_one(q)  # builds the cache
+    clf.partial_fit(X[100:], y[100:])
+    fresh = HypersphereClassifier("fwd").fit(X, y)
+    assert clf.predict_one(q) == fresh.predict_one(q) == clf.predict([q])[0]
+    clf.learn_one(q, "rot-left")  # spawn or relabel in place
+    assert clf.predict_one(q) == "rot-left"

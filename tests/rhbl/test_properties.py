@@ -96,6 +96,9 @@ def test_matches_naive_reference(data, distance, spawn):
     want = [ref.predict(q) for q in Q.tolist()]
     assert clf.predict(Q).tolist() == want
     assert [clf.predict_one(q) for q in Q] == want
+    # the one-row fast path of predict, and the winner itself
+    assert [clf.predict(q[None, :]).tolist() for q in Q] == [[w] for w in want]
+    assert [clf.decision_path(q)[-1]["index"] for q in Q] == [ref.winner(q) for q in Q.tolist()]
     # the batch descent with its matrix-product filter, forced even on small trees
     old = clfmod._DENSE_BATCH_MAX_NODES, clfmod._DENSE_SUBTREE_PAIRS
     clfmod._DENSE_BATCH_MAX_NODES = clfmod._DENSE_SUBTREE_PAIRS = 0
