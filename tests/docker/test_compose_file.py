@@ -208,7 +208,7 @@ def test_gen_dev_secrets(tmp_path):
     out = tmp_path / "s"
     run = _gen(out, "DNS:robot.example.org", EXTRA_SANS="IP:192.0.2.7")
     assert run.returncode == 0, run.stderr
-    roles = ("server", "teacher", "learner", "controller")
+    roles = ("server", "teacher", "learner", "controller", "operator")
     for name in ("ca", "router", *roles):
         assert (out / f"{name}.pem").is_file() and (out / f"{name}.key").is_file()
     users = dict(ln.split(":", 1) for ln in (out / "users.txt").read_text().splitlines())
