@@ -202,7 +202,7 @@ class HypersphereClassifier:
         self._depth = np.empty(cap, dtype=np.int64)
         self._label = np.empty(cap, dtype=np.int64)
         self._children: list[list[int]] = []
-        self._child_arr: list[np.ndarray | None] = []
+        self._ct: np.ndarray | None = None  # (features, capacity) centres for the training scan
         self._n = 0
         self.height_ = 0
         self.n_seen_ = 0
@@ -231,16 +231,21 @@ class HypersphereClassifier:
                 new[:i] = old[:i]
                 setattr(self, name, new)
         self._centers[i] = center
+        ct = self._ct
+        if ct is not None:
+            if ct.shape[1] <= i:
+                new = np.empty((ct.shape[0], len(self._radii)), dtype=np.float64)
+                new[:, :i] = ct[:, :i]
+                self._ct = ct = new
+            ct[:, i] = center
         self._radii[i] = radius
         self._parent[i] = parent
         depth = 0 if parent < 0 else int(self._depth[parent]) + 1
         self._depth[i] = depth
         self._label[i] = label
         self._children.append([])
-        self._child_arr.append(None)
         if parent >= 0:
             self._children[parent].append(i)
-            self._child_arr[parent] = None
         self._n = i + 1
         if depth > self.height_:
             self.height_ = depth
@@ -355,37 +360,47 @@ class HypersphereClassifier:
         x = self._check_X(np.asarray(x, dtype=np.float64).reshape(1, -1))[0]
         return self._learn(x, self._intern(label))
 
-    def _dist_rows(self, idx: np.ndarray, x: np.ndarray) -> np.ndarray:
-        diff = self._centers[idx] - x
-        d = np.einsum("ij,ij->i", diff, diff)
-        return np.sqrt(d, out=d) if self._euclid else d
-
     def _dist_one(self, i: int, x: np.ndarray) -> float:
         diff = self._centers[i] - x
         d = float(np.dot(diff, diff))
         return math.sqrt(d) if self._euclid else d
 
-    def _candidates(self, x: np.ndarray) -> list[int]:
-        """Spheres that enclose ``x`` (through enclosing ancestors) but none of whose children do."""
-        eps = self.eps
-        radii = self._radii
-        stack = [0]
-        out: list[int] = []
-        while stack:
-            node = stack.pop()
-            kids = self._children[node]
-            if kids:
-                arr = self._child_arr[node]
-                if arr is None:
-                    arr = self._child_arr[node] = np.array(kids, dtype=np.int64)
-                d = self._dist_rows(arr, x)
-                enc = arr[d <= radii[arr] + eps]
-                if enc.size:
-                    # reversed so that the stack visits children in creation order
-                    stack.extend(enc[::-1].tolist())
-                    continue
-            out.append(node)
-        return out
+    def _scan(self, x: np.ndarray) -> tuple[np.ndarray, list[int], list[int]]:
+        """Distances from ``x`` to every centre, and the spheres reachable through enclosing
+        ancestors, in creation order, with their parents.
+
+        The arithmetic is exactly that of the single-query path (``_winner_one``): one
+        ``sum((c - x)**2)`` over the features in feature order and the test ``d <= r + eps``,
+        so training and prediction always agree on which spheres enclose a vector.
+        """
+        n = self._n
+        ct = self._ct
+        if ct is None:
+            ct = self._ct = np.ascontiguousarray(self._centers.T)
+        buf = np.subtract(ct[:, :n], x[:, None])
+        np.multiply(buf, buf, out=buf)
+        d = np.add.reduce(buf, axis=0)
+        if self._euclid:
+            np.sqrt(d, out=d)
+        enc = np.flatnonzero(d <= self._radii[:n] + self.eps)
+        ok = {-1}
+        reach: list[int] = []
+        parents: list[int] = []
+        for i, p in zip(enc.tolist(), self._parent[enc].tolist(), strict=True):
+            if p in ok:
+                ok.add(i)
+                reach.append(i)
+                parents.append(p)
+        return d, reach, parents
+
+    def _candidates(self, reach: list[int], parents: list[int]) -> list[int]:
+        """Reachable spheres none of whose children are reachable, in the order of a
+        depth-first search that visits children in creation order (the paper's traversal)."""
+        inner = set(parents)
+        path: dict[int, tuple[int, ...]] = {-1: ()}
+        for i, p in zip(reach, parents, strict=True):
+            path[i] = path[p] + (i,)
+        return sorted((i for i in reach if i not in inner), key=path.__getitem__)
 
     def _winner_of(self, nodes: list[int]) -> int:
         radii = self._radii
@@ -394,7 +409,8 @@ class HypersphereClassifier:
 
     def _learn(self, x: np.ndarray, a: int) -> int:
         self.n_seen_ += 1
-        cands = self._candidates(x)
+        d_all, reach, parents = self._scan(x)
+        cands = self._candidates(reach, parents)
         if self.spawn == "winner":
             w = self._winner_of(cands)
             targets = [w] if self._label[w] != a else []
@@ -406,7 +422,7 @@ class HypersphereClassifier:
         changes = 0
         skipped = False
         for p in targets:
-            d = self._dist_one(p, x)
+            d = float(d_all[p])
             if d <= eps:
                 self._label[p] = a  # coincides with the centre: relabel in place
                 self.n_relabelled_ += 1

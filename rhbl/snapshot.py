@@ -242,7 +242,7 @@ def from_dict(doc: Any, *, source: str = "<dict>") -> HypersphereClassifier:
         full[:n] = arr
         setattr(clf, name, full)
     clf._children = children
-    clf._child_arr = [None] * n
+    clf._ct = None
     clf._n = n
     clf.height_ = int(depth.max())
     clf.n_seen_, clf.n_skipped_, clf.n_relabelled_ = seen, skipped, relabelled
