@@ -153,8 +153,23 @@ class PlayerClient:
 
         Returns True when new data arrived, False on timeout (proxies then keep old values)."""
         kind = self._tick_kind()
+
+        def fresh() -> bool:
+            return self._arrived[kind] > self._read_mark
+
+        def in_step() -> bool:
+            # the server publishes a tick's State and Scan with the same ``ts``; they may land in
+            # either order, so a read waits (within ``timeout``) until both are of one tick
+            if not fresh():
+                return False
+            state, scan = self._latest.get("state"), self._latest.get("scan")
+            if "state" in self._subs and "scan" in self._subs:
+                return state is not None and scan is not None and state.ts >= scan.ts
+            return True
+
         with self._cond:
-            ok = self._cond.wait_for(lambda: self._arrived[kind] > self._read_mark, timeout)
+            self._cond.wait_for(in_step, timeout)
+            ok = fresh()
             if ok:
                 self._read_mark = self._arrived[kind]
             latest = dict(self._latest)
