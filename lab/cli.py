@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 __all__ = ["COMMANDS", "main"]
@@ -56,7 +57,17 @@ def main(argv: list[str] | None = None) -> int:
     top = _top_parser().parse_args(argv[:1] if argv and not argv[0].startswith("-") else argv)
     parser = build_parser(top.command)
     args = parser.parse_args(argv[1:])
-    return int(args._main(args) or 0)
+    try:
+        return int(args._main(args) or 0)
+    except KeyboardInterrupt:
+        return 130
+    except (OSError, ValueError) as exc:
+        # bad input (a missing or corrupt world, snapshot or journal, a wrong value): one clear
+        # line naming what was wrong, exit code 2 like argparse; RHBL_DEBUG=1 shows the traceback
+        if os.environ.get("RHBL_DEBUG"):
+            raise
+        print(f"rhbl {top.command}: error: {exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

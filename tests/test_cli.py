@@ -43,3 +43,24 @@ def test_wrong_option_names_the_option():
     )
     assert proc.returncode == 2
     assert "--no-such-flag" in proc.stderr
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["train", "--world", "no-such-world", "--out", "{tmp}/t.rhbl"], "no-such-world"),
+        (["evaluate", "--world", "corridor", "--tree", "{tmp}/garbage.rhbl"], "garbage.rhbl"),
+        (["evaluate", "--world", "{tmp}/bad.toml", "--tree", "{tmp}/garbage.rhbl"], "robot.pose"),
+    ],
+)
+def test_bad_input_is_one_clear_line_not_a_traceback(tmp_path, argv, needle):
+    (tmp_path / "garbage.rhbl").write_bytes(b"not a snapshot")
+    (tmp_path / "bad.toml").write_text('name = "x"\ntask = "wall-following"\n[robot]\npose = [1, 1]\n')
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    proc = subprocess.run(
+        [sys.executable, "-m", "lab.cli", *argv], capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert proc.stderr.startswith(f"rhbl {argv[0]}: error: ")
+    assert needle in proc.stderr
