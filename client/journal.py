@@ -23,6 +23,7 @@ silently.
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import struct
@@ -123,6 +124,7 @@ class Journal:
         self.fsync_interval = float(fsync_interval)
         self._last_sync = time.monotonic()
         self._dirty = False
+        self._torn = False  # a failed append may have left a partial frame after _end
         self.truncated_bytes = truncated  # bytes of a torn tail removed by open()
 
     # ---- construction -------------------------------------------------------------------
@@ -215,18 +217,48 @@ class Journal:
                features) -> int:
         """Append one labeled vector; returns its index. Durable against a killed process
         on return; fsync'd within ``fsync_interval`` seconds."""
+        if self._fd < 0:
+            raise JournalError(f"journal {self.path} is closed")
         index = len(self._offsets)
         rec = JournalRecord(index, scan_id, ts, label, ranges, yaw, features)
         data = _frame(msgpack.packb(rec.to_payload(), use_bin_type=True))
-        n = os.write(self._fd, data)
-        while n < len(data):  # a short write (rare: disk full / signal): finish or fail loudly
-            n += os.write(self._fd, data[n:])
+        if self._torn:  # a failed append left bytes that a retry could not remove yet
+            self._rollback(None)
+        try:
+            n = os.write(self._fd, data)
+            while n < len(data):  # a short write (disk full / signal): finish or fail loudly
+                w = os.write(self._fd, data[n:])
+                if w <= 0:
+                    raise OSError(errno.ENOSPC, "short write")
+                n += w
+        except OSError as exc:
+            # a partial frame must not stay in the file: the next append would land after it
+            # and the journal would no longer open (CRC error in the middle)
+            self._torn = True
+            self._rollback(exc)
+            raise JournalError(f"cannot append record {index} to journal {self.path}: {exc} "
+                               f"(nothing was written; append it again)") from exc
         self._offsets.append(self._end)
         self._end += len(data)
         self._dirty = True
         if time.monotonic() - self._last_sync >= self.fsync_interval:
-            self.sync()
+            try:
+                self.sync()
+            except OSError as exc:  # the record is written (survives a kill); fsync retried
+                log.warning("journal %s: fsync failed (%s); retried at the next append, "
+                            "snapshot or close", self.path, exc)
         return index
+
+    def _rollback(self, cause: OSError | None) -> None:
+        """Cut the file back to the end of the last whole record (after a failed append)."""
+        try:
+            os.ftruncate(self._fd, self._end)
+        except OSError as exc:
+            raise JournalError(
+                f"journal {self.path}: cannot remove a partly written record at offset "
+                f"{self._end} ({exc}{'; after: ' + str(cause) if cause else ''}); nothing is "
+                f"appended until it can") from exc
+        self._torn = False
 
     def sync(self) -> None:
         """fsync the journal now (called at the fsync cadence, on snapshots and on close)."""

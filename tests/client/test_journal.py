@@ -140,3 +140,52 @@ def _writer(path: str, n: int, ready) -> None:  # pragma: no cover - runs in a c
         _fill(j, 1, start=k)
         k += 1
         time.sleep(0.0005)
+
+
+def test_disk_full_mid_append_leaves_no_partial_record(tmp_path, monkeypatch):
+    """A write cut short by ENOSPC is cut back out: the append can be retried and the journal
+    still opens with every record (before: a partial frame stayed in the middle -> corrupt)."""
+    import errno
+
+    from client import journal as jmod
+
+    p = tmp_path / "t.journal"
+    j = Journal.create(p)
+    _fill(j, 2)
+    real_write = os.write
+    calls = {"n": 0}
+
+    def full_disk(fd, data):
+        calls["n"] += 1
+        if calls["n"] == 1:
+            return real_write(fd, bytes(data)[:7])  # a short write...
+        raise OSError(errno.ENOSPC, "No space left on device")  # ...then the disk is full
+
+    monkeypatch.setattr(jmod.os, "write", full_disk)
+    with pytest.raises(JournalError, match="No space left"):
+        _fill(j, 1, start=2)
+    monkeypatch.setattr(jmod.os, "write", real_write)
+    assert len(j) == 2
+    _fill(j, 1, start=2)  # the retry (space freed)
+    assert [r.index for r in j.records()] == [0, 1, 2]
+    j.close()
+    with Journal.open(p) as again:
+        assert [r.index for r in again.records()] == [0, 1, 2] and again.truncated_bytes == 0
+
+
+def test_failed_fsync_after_a_written_record_does_not_fail_the_append(tmp_path, monkeypatch):
+    """The record is in the file: raising would make a caller append it a second time."""
+    from client import journal as jmod
+
+    p = tmp_path / "t.journal"
+    j = Journal.create(p, fsync_interval=0.0)
+
+    def bad_fsync(fd):
+        raise OSError(5, "Input/output error")
+
+    monkeypatch.setattr(jmod.os, "fsync", bad_fsync)
+    assert j.append(1, 0.0, "fwd", np.zeros(4, np.float32), 0.0, np.zeros(2, np.float32)) == 0
+    monkeypatch.undo()
+    j.close()
+    with Journal.open(p) as again:
+        assert len(again) == 1
