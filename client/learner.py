@@ -17,12 +17,13 @@ queries on ``rhbl/<robot>/learner/snapshot`` with the latest snapshot's bytes.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import os
 import queue
 import signal
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +38,7 @@ from client._process import (
     wait_for_server,
 )
 from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
-from client.behaviour.features import FEATURES, FeatureSpec
+from client.behaviour.features import FEATURES, FeatureError, FeatureSpec
 from client.behaviour.learning import (
     DemonstrationLearner,
     IncompatibleSnapshotError,
@@ -53,6 +54,10 @@ __all__ = ["LearnerCore", "add_arguments", "main", "TASK_OF_FEATURES"]
 log = logging.getLogger(__name__)
 
 TASK_OF_FEATURES = {"wall": "wall-following", "maze": "maze"}
+# labeled scans kept in memory while the journal cannot be written (disk full): about an hour
+# of demonstration at 10 Hz (~2 KB each); beyond that the oldest are dropped, counted and logged
+MAX_BACKLOG = 36_000
+_RETRY = 1.0  # s between attempts to write the journal again
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -187,7 +192,10 @@ class LearnerCore:
         return learner, len(self.journal)
 
     def learn(self, scan_id: int, ts: float, ranges, yaw: float, label: str) -> bool:
-        """Journal (flushed) then learn one labeled scan; True when it reached the tree."""
+        """Journal (flushed) then learn one labeled scan; True when it reached the tree.
+        Raises FeatureError (a scan the features cannot use: nothing written) or JournalError
+        (the journal cannot be written, e.g. disk full: nothing written, nothing learned; call
+        again later with the same vector)."""
         x = self.learner.features.extract(ranges, yaw)
         self.journal.append(scan_id, ts, label, ranges, yaw, x.astype(np.float32))
         learned = self.learner.observe(ranges, yaw, label)
@@ -286,7 +294,10 @@ def _body(ctx: Context) -> int:
     queryable = session.declare_queryable(snap_key, on_query)
     ctx.declare_token()  # after the subscriptions: the token means "ready to receive labels"
     if core.dirty:
-        latest["bytes"] = core.snapshot()
+        try:
+            latest["bytes"] = core.snapshot()
+        except OSError as exc:  # the journal holds every vector; retried while learning
+            log.error("cannot write snapshot %s (%s); retrying later", core.out, exc)
     log.info("learning: features %s, %d vectors so far, %d nodes; snapshot %s",
              core.features.to_dict()["beams"], core.applied, core.learner.nodes, core.out)
 
@@ -298,17 +309,62 @@ def _body(ctx: Context) -> int:
     watch = ScanWatch("learner", scan_k, stale=3.0).start()
     scans: OrderedDict[int, Scan] = OrderedDict()
     pending: dict[int, tuple[TeacherAction, float]] = {}
-    stats = {"learned": 0, "paired": 0, "unmatched": 0, "bad": 0, "rejected": 0}
+    stats = {"learned": 0, "paired": 0, "unmatched": 0, "bad": 0, "rejected": 0, "lost": 0}
     last_snap = time.monotonic()
     last_log = last_snap
     last_id = -1
+    # labeled scans waiting to be journaled (in order): empty unless the journal cannot be
+    # written (disk full); nothing is learned before it is journaled
+    backlog: deque[tuple[Scan, TeacherAction]] = deque()
+    jstate = {"retry_at": 0.0, "failures": 0}
 
-    def publish_notice():
-        latest["bytes"] = core.snapshot()
+    def publish_notice() -> bool:
+        try:
+            latest["bytes"] = core.snapshot()
+        except OSError as exc:  # disk full, ...: the journal still holds every vector
+            log.error("cannot write snapshot %s (%s); retrying in %.0f s (the journal holds "
+                      "every labeled vector)", core.out, exc, args.snapshot_every)
+            return False
         note = TreeNotice(seq=core.seq, nodes=core.learner.nodes, height=core.learner.height,
                           vectors=core.applied, snapshot_id=f"{core.journal.lineage}:{core.applied}",
                           ts=time.time())
         notice_pub.put(note.encode())
+        return True
+
+    def flush_backlog() -> None:
+        """Journal and learn the waiting labeled scans, in order, until the journal fails."""
+        while backlog:
+            scan, act = backlog[0]
+            try:
+                learned = core.learn(scan.id, scan.ts, scan.ranges, float(scan.pose[2]),
+                                     act.action)
+            except FeatureError as exc:  # a scan the features cannot use (bad input)
+                backlog.popleft()
+                stats["rejected"] += 1
+                log.warning("label %r for scan %d dropped: %s", act.action, scan.id, exc)
+                continue
+            except (JournalError, OSError) as exc:
+                jstate["retry_at"] = time.monotonic() + _RETRY
+                jstate["failures"] += 1
+                n = jstate["failures"]
+                if n <= 3 or n % 60 == 0:
+                    log.error("cannot write the journal (%s): %d labeled vectors kept in memory "
+                              "(at most %d), retrying every %.0f s; nothing is learned before "
+                              "it is journaled", exc, len(backlog), MAX_BACKLOG, _RETRY)
+                while len(backlog) > MAX_BACKLOG:
+                    backlog.popleft()
+                    stats["lost"] += 1
+                    if stats["lost"] <= 3 or stats["lost"] % 1000 == 0:
+                        log.error("journal still failing: dropped the oldest labeled vector "
+                                  "kept in memory (%d lost so far)", stats["lost"])
+                return
+            backlog.popleft()
+            if learned:
+                stats["learned"] += 1
+        if jstate["failures"]:
+            log.warning("the journal is writable again after %d failed attempts",
+                        jstate["failures"])
+            jstate["failures"] = 0
 
     def learn(scan: Scan, act: TeacherAction):
         if act.action not in core.actions:
@@ -317,15 +373,22 @@ def _body(ctx: Context) -> int:
                         act.action, act.scan_id, core.actions.names)
             return
         stats["paired"] += 1
-        if core.learn(scan.id, scan.ts, scan.ranges, float(scan.pose[2]), act.action):
-            stats["learned"] += 1
+        backlog.append((scan, act))
+        if len(backlog) == 1 or time.monotonic() >= jstate["retry_at"]:
+            flush_backlog()
 
     drain_until = None  # after a stop request: finish what already arrived, then exit
+    code = 0
     try:
         while True:
             if stop.flag and drain_until is None:
                 drain_until = time.monotonic() + args.drain
                 log.info("stopping: learning what already arrived (up to %.1f s)", args.drain)
+                # withdraw the token first: a teacher pauses instead of labelling into the void
+                if ctx.token is not None:
+                    with contextlib.suppress(Exception):
+                        ctx.token.undeclare()
+                    ctx.token = None
             try:
                 kind, data = events.get(timeout=0.1 if drain_until is None else 0.05)
             except queue.Empty:
@@ -371,6 +434,8 @@ def _body(ctx: Context) -> int:
                     else:
                         pending[act.scan_id] = (act, time.monotonic())
             now = time.monotonic()
+            if backlog and now >= jstate["retry_at"]:
+                flush_backlog()
             if pending and (kind is None or len(pending) > 64):
                 old = [k for k, (_, t) in pending.items() if now - t > args.match_timeout]
                 for k in old:
@@ -395,14 +460,27 @@ def _body(ctx: Context) -> int:
         for s in subs:
             s.undeclare()
         try:
-            if core.dirty:
-                publish_notice()
+            if backlog:
+                flush_backlog()
+            if backlog:
+                stats["lost"] += len(backlog)
+                log.error("%d labeled vectors could not be journaled (the journal is not "
+                          "writable) and are lost", len(backlog))
+            if stats["lost"]:
+                code = 1
+            if core.dirty and not publish_notice():
+                code = 1
             stats["unmatched"] += len(pending)
             log.info("stopped: %d labeled vectors (%d this run, %d learned, %d unmatched "
-                     "labels, %d malformed), %d nodes, height %d; snapshot %s",
-                     core.applied, stats["paired"], stats["learned"], stats["unmatched"],
-                     stats["bad"], core.learner.nodes, core.learner.height, core.out)
+                     "labels, %d malformed, %d rejected, %d lost), %d nodes, height %d; "
+                     "snapshot %s", core.applied, stats["paired"], stats["learned"],
+                     stats["unmatched"], stats["bad"], stats["rejected"], stats["lost"],
+                     core.learner.nodes, core.learner.height, core.out)
         finally:
             queryable.undeclare()
-            core.close()
-    return 0
+            try:
+                core.close()
+            except OSError as exc:
+                log.error("closing the journal %s failed: %s", core.jpath, exc)
+                code = 1
+    return code
