@@ -13,12 +13,18 @@ the action executed, which differs while a perturbation runs).
 Nothing demonstrated is lost: before its first label the teacher waits (``--wait-learner-timeout``,
 30 s; 0 = forever) for a learner's liveliness token ``rhbl/alive/learner/<robot>-<pid>``, which
 a learner declares only once it subscribes to the labels; with no learner it exits with status 5.
+When the last learner's token disappears while demonstrating (it stopped or crashed), the teacher
+pauses (no commands, no labels: the server's watchdog stops the robot) and waits for a learner the
+same way.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
+import threading
+import time
 
 import numpy as np
 import zenoh
@@ -101,13 +107,23 @@ def _loop(ctx: Context, demo) -> int:
                                         congestion_control=zenoh.CongestionControl.BLOCK)
     scan_k = keys.scan_key(robot)
     sub = session.declare_subscriber(scan_k, zenoh.handlers.RingChannel(1))
+    learners = _Learners(session, robot) if args.wait_learner else None
     wait_for_server(ctx)
-    if args.wait_learner:
-        wait_for_learner(ctx)
+
+    def wait_learner() -> None:
+        found = wait_for_learner(ctx)
+        end = time.monotonic() + 2.0  # the subscriber sees the token too (normally at once)
+        while not learners and time.monotonic() < end:
+            time.sleep(0.01)
+        if not learners:
+            learners.add(found)
         # a scan kept from before the learner subscribed never reached it: its label could not
         # be paired. Drop it and start with the next scan.
         while sub.handler.try_recv() is not None:
             pass
+
+    if learners is not None:
+        wait_learner()
     else:
         log.info("not waiting for a learner (--no-wait-learner): labels go to whoever listens")
     watch = ScanWatch("teacher", scan_k, stale=1.0).start()
@@ -115,6 +131,7 @@ def _loop(ctx: Context, demo) -> int:
     t0 = None
     n = 0
     perturbed = 0
+    bad = 0
     try:
         while True:
             sample = sub.handler.recv()
@@ -124,15 +141,31 @@ def _loop(ctx: Context, demo) -> int:
             except Exception as exc:  # noqa: BLE001 - DecodeError: count, log, keep running
                 log.warning("dropped a malformed scan: %s", exc)
                 continue
+            if learners is not None and not learners:
+                # the learner stopped or crashed: a label now would be lost. Pause (no command:
+                # the server's watchdog stops the robot) until a learner is up again.
+                log.warning("teacher: no learner of robot %s is up any more: pausing (no "
+                            "commands, no labels)", robot)
+                cmd_pub.put(VelCmd(vx=0.0, va=0.0, source=SOURCE, scan_id=scan.id,
+                                   ts=scan.ts).encode())  # stand still now, not after the watchdog
+                wait_learner()
+                continue
             if t0 is None:
                 t0 = scan.ts
             if args.seconds is not None and scan.ts - t0 >= args.seconds:
                 log.info("demonstrated %.1f s of sim time: done", scan.ts - t0)
                 break
-            label, executed = demo.step(scan.ranges, scan.pose)
+            try:
+                label, executed = demo.step(scan.ranges, scan.pose)
+                vx, va = actions[executed] if label is not None else (0.0, 0.0)
+            except Exception as exc:  # noqa: BLE001 - a scan the policy cannot use
+                bad += 1
+                if bad <= 10 or bad % 100 == 0:
+                    log.warning("scan %d not demonstrated (%d so far): %s: %s", scan.id, bad,
+                                type(exc).__name__, exc)
+                continue
             if label is None:  # keyboard: nothing pressed yet
                 continue
-            vx, va = actions[executed]
             if n == 0:
                 log.info("first label: scan %d, %s", scan.id, label)
             cmd_pub.put(VelCmd(vx=vx, va=va, source=SOURCE, scan_id=scan.id, ts=scan.ts).encode())
@@ -145,5 +178,41 @@ def _loop(ctx: Context, demo) -> int:
                          100.0 * perturbed / n)
     finally:
         watch.stop()
+        if learners is not None:
+            learners.close()
         log.info("teacher stopped after %d labels (%d perturbed)", n, perturbed)
     return 0
+
+
+class _Learners:
+    """The liveliness tokens of the robot's learners now up (``rhbl/alive/learner/<robot>-*``),
+    kept current by a liveliness subscriber (a callback of a few microseconds)."""
+
+    def __init__(self, session, robot: str):
+        self._prefix = f"{robot}-"
+        self._keys: set[str] = set()
+        self._lock = threading.Lock()
+        self._sub = session.liveliness().declare_subscriber(
+            keys.alive_key("learner", "*"), self._on_token, history=True)
+
+    def _on_token(self, sample) -> None:
+        key = str(sample.key_expr)
+        if not key.rsplit("/", 1)[-1].startswith(self._prefix):
+            return
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.DELETE:
+                self._keys.discard(key)
+            else:
+                self._keys.add(key)
+
+    def add(self, found) -> None:
+        with self._lock:
+            self._keys.update(found)
+
+    def __bool__(self) -> bool:
+        with self._lock:
+            return bool(self._keys)
+
+    def close(self) -> None:
+        with contextlib.suppress(Exception):  # the session is closing
+            self._sub.undeclare()

@@ -250,3 +250,42 @@ def test_processes_exit_cleanly_on_sigterm(env):
     _wait_token(env["session"], "teacher", t)
     assert t.stop(signal.SIGTERM) == 0, t.text()
     assert "Traceback" not in t.text()
+
+
+def test_teacher_pauses_while_no_learner_is_up(env):
+    """A learner stopped mid-demonstration: the teacher pauses (no commands, no labels) until a
+    learner is up again, so every label it published is in the journal."""
+    sim = PlayerClient(session=env["session"], source="test").simulation
+    start = sim.get_pose2d()
+    out = env["tmp"] / "pause.rhbl"
+    args = ("learner", "--features", "wall", "--out", str(out))
+    learner = env["start"]("learner", *args)
+    _wait_token(env["session"], "learner", learner)
+    t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--wait-learner-timeout",
+                     "60")
+    end = time.monotonic() + 30
+    while "first label" not in t.text() and time.monotonic() < end:
+        time.sleep(0.05)
+    assert "first label" in t.text(), t.text()
+    time.sleep(0.5)
+    assert learner.stop(signal.SIGTERM) == 0, learner.text()
+    end = time.monotonic() + 10
+    while "pausing" not in t.text() and time.monotonic() < end:
+        time.sleep(0.05)
+    assert "pausing" in t.text() and t.proc.poll() is None, t.text()
+    paused = _journal_len(out)
+    time.sleep(1.0)  # nobody records: nothing may be demonstrated now
+    learner = env["start"]("learner", *args)
+    _wait_token(env["session"], "learner", learner)
+    end = time.monotonic() + 10
+    while t.text().count("learner is up") < 2 and time.monotonic() < end:
+        time.sleep(0.05)
+    assert t.text().count("learner is up") == 2, t.text()
+    _wait_journal(out, paused + 20)  # demonstrating again
+    assert t.stop() == 0, t.text()
+    n = int([ln for ln in t.text().splitlines() if "teacher stopped after" in ln][-1]
+            .split("after ")[1].split()[0])
+    _wait_journal(out, n)
+    assert learner.stop() == 0, learner.text()
+    assert _journal_len(out) == n > paused > 0
+    sim.set_pose2d(*start)
