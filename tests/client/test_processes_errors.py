@@ -106,3 +106,53 @@ def test_controller_reports_when_scans_stop(start_server, tmp_path):
         if p.poll() is None:
             os.kill(p.pid, signal.SIGKILL)
             p.wait(5)
+
+
+def test_controller_survives_a_scan_its_tree_cannot_use(free_port, tmp_path):
+    """A well-formed scan with one beam (features need more): no command for it, a warning,
+    and the next good scan is answered (before: the controller died)."""
+    from protocol import keys
+    from protocol.messages import Scan, VelCmd
+
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    log = tmp_path / "c.log"
+    answered: list[int] = []
+    with zenoh.open(make_config(mode="router", listen=[ep])) as session:
+        session.declare_subscriber(keys.cmd_vel_key("r0", source="controller"),
+                                   lambda s: answered.append(
+                                       VelCmd.decode(s.payload.to_bytes()).scan_id))
+        pub = session.declare_publisher(keys.scan_key("r0"))
+        with open(log, "wb") as f:
+            p = subprocess.Popen([sys.executable, "-m", "lab.cli", "controller", "--connect", ep,
+                                  "--tree", str(_tree(tmp_path))], stdout=f,
+                                 stderr=subprocess.STDOUT, cwd=ROOT, start_new_session=True,
+                                 env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        try:
+            good = np.full(360, 2.0, np.float32)
+
+            def until(cond, what):
+                end = time.monotonic() + 30
+                while not cond() and time.monotonic() < end:
+                    assert p.poll() is None, log.read_text()
+                    time.sleep(0.05)
+                assert cond(), f"{what}:\n{log.read_text()}"
+
+            sid = 0
+            while not answered:  # the first scans also tell it the server is up
+                sid += 1
+                pub.put(Scan(ts=0.1 * sid, id=sid, ranges=good).encode())
+                assert p.poll() is None, log.read_text()
+                time.sleep(0.1)
+                assert sid < 300, log.read_text()
+            bad_id = sid + 1
+            pub.put(Scan(ts=0.1 * bad_id, id=bad_id, ranges=np.ones(1, np.float32)).encode())
+            until(lambda: "not answered" in log.read_text(), "the warning")
+            pub.put(Scan(ts=0.1 * (bad_id + 1), id=bad_id + 1, ranges=good).encode())
+            until(lambda: bad_id + 1 in answered, "the next scan answered")
+            assert bad_id not in answered and p.poll() is None
+            os.kill(p.pid, signal.SIGTERM)
+            assert p.wait(20) == 0, log.read_text()
+        finally:
+            if p.poll() is None:
+                os.kill(p.pid, signal.SIGKILL)
+                p.wait(5)
