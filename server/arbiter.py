@@ -13,12 +13,14 @@ command to stand still.
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 
 __all__ = ["PRIORITIES", "Arbiter", "Held", "role_of", "priority_of"]
 
 PRIORITIES: dict[str, int] = {"teacher": 2, "controller": 1}
+MAX_SOURCES = 64  # sources held at once; a flood of invented names evicts the least important
 _ROLE = re.compile(r"[-:.]")
 
 
@@ -44,17 +46,28 @@ class Held:
 class Arbiter:
     """Chooses which source's command drives one robot."""
 
-    def __init__(self, timeout: float = 0.5) -> None:
-        if not timeout > 0:
-            raise ValueError(f"command timeout must be > 0 s, got {timeout!r}")
+    def __init__(self, timeout: float = 0.5, max_sources: int = MAX_SOURCES) -> None:
+        if not (timeout > 0 and math.isfinite(timeout)):
+            raise ValueError(f"command timeout must be a finite number > 0 s, got {timeout!r}")
         self.timeout = float(timeout)
+        self.max_sources = int(max_sources)
         self._held: dict[str, Held] = {}
         self._seq = 0
 
     def offer(self, source: str, vx: float, va: float, state: bool, now: float) -> None:
-        """A command arrived from ``source`` at sim time ``now``."""
+        """A command arrived from ``source`` at sim time ``now``. At most ``max_sources`` are
+        held: a new one beyond that evicts the least important (lowest priority, oldest)."""
         self._seq += 1
+        if source not in self._held and len(self._held) >= self.max_sources:
+            self.expire(now)
+            if len(self._held) >= self.max_sources:
+                worst = min(self._held.values(), key=lambda h: (h.priority, h.seq))
+                del self._held[worst.source]
         self._held[source] = Held(source, vx, va, state, now, priority_of(source), self._seq)
+
+    def holds(self, source: str) -> bool:
+        """Whether ``source`` holds the robot (as of the last expiry)."""
+        return source in self._held
 
     def expire(self, now: float) -> None:
         """Drop sources whose last command is older than the timeout."""

@@ -207,9 +207,12 @@ class ServerNode:
             parts = str(sample.key_expr).split("/")
             if len(parts) < 4:
                 return
-            role = parts[2]
+            role, ident = parts[2], parts[3]
+            # a process's ident is "<robot>-<pid>": release only that robot's holds (every
+            # robot's when the ident names none of ours)
+            mine = [r for r in self._robots if ident.startswith(f"{r.name}-")] or self._robots
             with self._cond:
-                for r in self._robots:
+                for r in mine:
                     r.arbiter.release_role(role)
                 self._cond.notify_all()
             log.info("liveliness token %s gone: released role %r", sample.key_expr, role)
@@ -349,6 +352,8 @@ class ServerNode:
         now = self.world.time
         for r in self._robots:
             vx, va, driver = r.arbiter.command(now)
+            if len(r.answers) > 8:  # forget sources that hold the robot no more (bounded)
+                r.answers = {s: k for s, k in r.answers.items() if r.arbiter.holds(s)}
             if not r.motors:
                 vx = va = 0.0
             self.world.set_command(r.index, vx, va)

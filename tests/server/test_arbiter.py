@@ -50,3 +50,17 @@ def test_same_priority_most_recent_wins():
     assert a.command(0.0)[2] == "b"
     with pytest.raises(ValueError):
         Arbiter(timeout=0)
+
+
+def test_timeout_must_be_finite():
+    with pytest.raises(ValueError, match="finite"):
+        Arbiter(timeout=float("inf"))  # the watchdog would never stop the robot
+
+
+def test_a_flood_of_invented_sources_is_bounded_and_keeps_the_teacher():
+    a = Arbiter(timeout=0.5, max_sources=8)
+    a.offer("teacher", 0.2, 0.0, True, now=0.0)
+    for k in range(1000):
+        a.offer(f"x{k}", 0.5, 0.5, True, now=0.0)
+    assert len(a._held) <= 8 and a.holds("teacher")
+    assert a.command(0.1) == (0.2, 0.0, "teacher")
