@@ -78,11 +78,21 @@ class KeyboardPolicy:
 
     def _read(self) -> None:
         while not self._stop.is_set():
-            ready, _, _ = select.select([self._fd], [], [], 0.1)
-            if not ready:
-                continue
-            data = os.read(self._fd, 32).decode("utf-8", "replace")
-            for key in parse_keys(data):
+            try:
+                ready, _, _ = select.select([self._fd], [], [], 0.1)
+                if not ready:
+                    continue
+                raw = os.read(self._fd, 32)
+            except OSError as exc:  # the terminal went away (EIO, EBADF)
+                raw, why = b"", str(exc)
+            else:
+                why = "end of input"
+            if not raw:
+                # nobody can press a key any more: the held key must not keep driving
+                self.current = None
+                log.warning("teleop: the terminal is gone (%s): paused", why)
+                return
+            for key in parse_keys(raw.decode("utf-8", "replace")):
                 self.press(key)
 
     def press(self, key: str) -> None:
@@ -109,5 +119,8 @@ class KeyboardPolicy:
         if self._saved is not None:
             import termios
 
-            termios.tcsetattr(self._fd, termios.TCSADRAIN, self._saved)
+            try:
+                termios.tcsetattr(self._fd, termios.TCSADRAIN, self._saved)
+            except (termios.error, OSError) as exc:  # the terminal is gone: nothing to restore
+                log.debug("could not restore the terminal: %s", exc)
             self._saved = None
