@@ -346,12 +346,16 @@ def run(role: str, args: argparse.Namespace, body: Callable[[Context], int | Non
     install_signal_handlers()
     session = None
     try:
+        robot = getattr(args, "robot", "r0")
+        try:
+            keys.check_chunk(robot, "--robot")
+        except ValueError as exc:
+            raise ProcessError(f"{role}: {exc}", EXIT_USAGE) from exc
         try:
             config = config_from_args(args)
         except Exception as exc:  # noqa: BLE001 - bad flags or config file
             raise ProcessError(f"{role}: bad zenoh configuration: {exc}", EXIT_USAGE) from exc
         session, endpoints = open_session(config, role)
-        robot = getattr(args, "robot", "r0")
         ident = f"{robot}-{os.getpid()}"
         ctx = Context(role, ident, args, session, robot, endpoints)
         if early_token:

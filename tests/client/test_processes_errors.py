@@ -156,3 +156,9 @@ def test_controller_survives_a_scan_its_tree_cannot_use(free_port, tmp_path):
             if p.poll() is None:
                 os.kill(p.pid, signal.SIGKILL)
                 p.wait(5)
+
+
+def test_a_robot_name_that_is_not_a_key_chunk_is_bad_input():
+    r = _run("teacher", "--robot", "a/b", "--connect", "tcp/127.0.0.1:1")
+    assert r.returncode == EXIT_USAGE, r.stderr
+    assert "--robot must be" in r.stderr and "'a/b'" in r.stderr and "Traceback" not in r.stderr
