@@ -30,7 +30,8 @@ __all__ = ["PAPER", "TEACHERS", "add_arguments", "main", "run_experiment", "run_
 PAPER = {"wall-following": (53.4, 12.0), "maze": (412.5, 13.0)}
 WORLD = {"wall-following": "room", "maze": "maze"}
 # teacher styles: the default smooth one (hysteresis + 0.3 s minimum dwell) and a bang-bang one
-TEACHERS = {"smooth": {}, "bangbang": {"dwell": 1, "off": 0.45}}
+TEACHERS = {"reactive": {"style": "reactive"}, "smooth": {"style": "smooth"},
+            "bangbang": {"style": "smooth", "dwell": 1, "off": 0.45}}
 
 
 def _worlds_dir() -> Path:
@@ -44,20 +45,24 @@ def default_eval_worlds(task: str) -> list[str]:
 
 def run_trial(task: str, seed: int, world: str | None = None, train_seconds: float | None = None,
               eval_seconds: float | None = None, episodes: int | None = None,
-              eval_worlds: list[str] = (), perturb: float | None = None, teacher: str = "smooth",
+              eval_worlds: list[str] = (), perturb: float | None = None, teacher: str = "reactive",
               features: str | None = None, stride: int | None = None, range_noise: float = 0.0,
               odom_noise: float = 0.0, train_noise: bool = False, starts: str | None = None,
               segment: float | None = None, random_segment: float | None = None,
-              turn: float | None = None, consistent: bool | None = None, **tree_params) -> dict:
+              turn: float | None = None, consistent: bool | None = None,
+              rounds: int | None = None, round_seconds: float | None = None,
+              takeover: float | None = None, teacher_params: dict | None = None,
+              **tree_params) -> dict:
     spec = resolve_world(world or WORLD[task])
     learner = make_learner(task, features=features, stride=stride, **tree_params)
     seconds = train_seconds or TRAINING[task]["seconds"]
-    policy = make_policy(task, actions=learner.actions, **TEACHERS[teacher])
+    policy = make_policy(task, actions=learner.actions, **TEACHERS[teacher], **(teacher_params or {}))
     t0 = time.perf_counter()
     train(spec, learner, seconds, seed=seed, perturb=perturb, policy=policy,
           range_noise=range_noise if train_noise else 0.0,
           odom_noise=odom_noise if train_noise else 0.0, starts=starts, segment=segment,
-          random_starts=random_segment, turn=turn, consistent=consistent)
+          random_starts=random_segment, turn=turn, consistent=consistent, rounds=rounds,
+          round_seconds=round_seconds, takeover=takeover)
     t_train = time.perf_counter() - t0
     tree = TreePolicy.from_learner(learner)
     out = {"seed": seed, "nodes": learner.nodes, "height": learner.height,
@@ -132,7 +137,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="extra evaluation world (repeatable); default: server/worlds/eval-room*"
                              " or eval-maze*; 'none' for none")
     parser.add_argument("--perturb", type=float, default=None)
-    parser.add_argument("--teacher", choices=sorted(TEACHERS), default="smooth")
+    parser.add_argument("--teacher", choices=sorted(TEACHERS), default="reactive")
     parser.add_argument("--features", choices=sorted(FEATURES), default=None)
     parser.add_argument("--stride", type=int, default=None)
     parser.add_argument("--spawn", choices=["all", "winner"], default=None)
@@ -140,6 +145,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--segment", type=float, default=None)
     parser.add_argument("--random-segment", type=float, default=None)
     parser.add_argument("--consistent", action="store_true", default=None)
+    parser.add_argument("--rounds", type=int, default=None, help="corrective (DAgger) rounds")
+    parser.add_argument("--round-seconds", type=float, default=None)
+    parser.add_argument("--takeover", type=float, default=None)
     parser.add_argument("--range-noise", type=float, default=0.0)
     parser.add_argument("--odom-noise", type=float, default=0.0)
     parser.add_argument("--train-noise", action="store_true",
@@ -164,7 +172,8 @@ def main(args) -> int:
                              range_noise=args.range_noise, odom_noise=args.odom_noise,
                              train_noise=args.train_noise, starts=args.starts,
                              segment=args.segment, random_segment=args.random_segment,
-                             consistent=args.consistent, **tree)
+                             consistent=args.consistent, rounds=args.rounds,
+                             round_seconds=args.round_seconds, takeover=args.takeover, **tree)
         results[task] = res
         print(f"\n{task}: {args.trials} trials")
         print(format_worlds(res))

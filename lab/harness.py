@@ -51,14 +51,16 @@ DT = 0.1  # 10 Hz, as the processes run
 
 # Default training recipe per task (docs/experiments.md says how it was chosen).
 TRAINING: dict[str, dict] = {
-    "wall-following": {"features": "wall", "perturb": 0.05, "seconds": 300.0,
-                       "tree": {"spawn": "winner"}, "stride": 1, "min_delta": 0.0},
-    # one training run = a demonstration from each start pose of the world (each until the goal),
-    # then from poses near the teacher's path with the heading turned by up to 0.6 rad, each for
-    # 60 s or until the goal
-    "maze": {"features": "maze-right", "perturb": 0.05, "seconds": 900.0,
+    # reactive teacher; one demonstration from each start pose of the world, then corrective
+    # (DAgger) rounds: the tree drives from each start pose, the teacher labels every state
+    "wall-following": {"features": "wall", "perturb": 0.05, "seconds": 360.0,
+                       "tree": {"spawn": "winner"}, "stride": 1, "min_delta": 0.0,
+                       "starts": "world", "segment": 60.0, "random_segment": 0.0,
+                       "rounds": 3, "round_seconds": 60.0, "takeover": 0.3},
+    "maze": {"features": "wall", "perturb": 0.05, "seconds": 600.0,
              "tree": {"spawn": "winner"}, "stride": 1, "min_delta": 0.0,
-             "starts": "world", "segment": 240.0, "random_segment": 0.25, "turn": 0.6},
+             "starts": "world", "segment": 240.0, "random_segment": 0.0,
+             "rounds": 6, "round_seconds": 240.0, "takeover": 0.3},
 }
 
 
@@ -187,7 +189,8 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
           range_noise: float = 0.0, odom_noise: float = 0.0, dt: float = DT,
           policy=None, starts: str | None = None, segment: float | None = None,
           random_starts: float | None = None, turn: float | None = None,
-          consistent: bool | None = None) -> Trajectory:
+          consistent: bool | None = None, rounds: int | None = None,
+          round_seconds: float | None = None, takeover: float | None = None) -> Trajectory:
     """One training run: the world's scripted teacher demonstrates for ``seconds`` (sim time, in
     total) while ``learner`` observes every step.
 
@@ -196,7 +199,14 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
     its default pose), each until the goal (maze) or ``segment`` seconds; the rest of the time
     from poses sampled near the teacher's earlier path (``sample_pose``: jittered position,
     heading turned by up to ``turn`` rad), each for ``segment * random_starts`` seconds or until
-    the goal. ``start`` given: a single demonstration from there (a corrective one)."""
+    the goal. ``start`` given: a single demonstration from there (a corrective one).
+
+    ``rounds`` > 0 then adds corrective rounds (DAgger, the paper's "corrective demonstration"
+    automated): in each round the LEARNED tree drives from every start pose for
+    ``round_seconds`` (or until the goal) while the teacher labels every visited state, and the
+    tree learns those labels (it only grows where it disagrees). The teacher takes over the
+    wheels while any beam is closer than ``takeover`` metres (as the server's arbitration lets a
+    teacher override a controller), so a round never drives into a wall."""
     task = spec.task
     recipe = TRAINING.get(task, TRAINING["wall-following"])
     perturb = recipe["perturb"] if perturb is None else perturb
@@ -205,6 +215,9 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
     random_starts = recipe.get("random_segment", 1.0) if random_starts is None else random_starts
     turn = recipe.get("turn", math.pi) if turn is None else turn
     consistent = recipe.get("consistent", False) if consistent is None else consistent
+    rounds = int(recipe.get("rounds", 0) if rounds is None else rounds)
+    round_seconds = recipe.get("round_seconds", segment) if round_seconds is None else round_seconds
+    takeover = recipe.get("takeover", 0.0) if takeover is None else takeover
     policy = policy or make_policy(task, actions=learner.actions)
     rng = np.random.default_rng(seed)
     demo = Demonstrator(policy, perturb=perturb, rng=rng, dt=dt)
@@ -243,15 +256,61 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
             if spec.goal is not None and world.at_goal(0):
                 break
         k += 1
+    demo_vectors = traj.learned
+    round_stats = []
+    if start is not None:
+        rounds = 0  # a corrective demonstration from a given pose: no rounds
+    if rounds > 0:
+        round_stats = _corrective_rounds(spec, learner, policy, fixed, rounds, round_seconds,
+                                         takeover, seed, range_noise, odom_noise, dt, traj)
     traj.wall_time = time.perf_counter() - t0
     learner.session = {"world": spec.name, "world_path": str(spec.path) if spec.path else None,
                        "seconds": seconds, "seed": seed, "perturb": perturb,
                        "start": list(first), "starts": starts if start is None else "given",
                        "demonstrations": len(traj.segments), "segment": segment,
-                       "consistent": consistent,
+                       "consistent": consistent, "demonstration_vectors": demo_vectors,
+                       "rounds": rounds, "round_seconds": round_seconds if rounds else None,
+                       "takeover": takeover if rounds else None, "round_stats": round_stats,
                        "range_noise": range_noise, "odom_noise": odom_noise,
                        "vectors": traj.learned}
     return traj
+
+
+def _corrective_rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, poses, rounds: int,
+                       seconds: float, takeover: float, seed: int, range_noise: float,
+                       odom_noise: float, dt: float, traj: Trajectory) -> list[dict]:
+    """DAgger rounds (see ``train``): the tree drives, the teacher labels; per round the number
+    of steps, disagreements (learned labels that differed from the tree's choice) and takeovers."""
+    world = World(spec, robots=1, seed=seed, range_noise=range_noise, odom_noise=odom_noise)
+    tree = TreePolicy.from_learner(learner)
+    side = followed_side(spec.task)
+    stats = []
+    for r in range(rounds):
+        steps = disagree = took = 0
+        for k, pose in enumerate(poses):
+            world.reset(poses=[pose], seed=seed * 1000 + 500 + r * 50 + k)
+            policy.reset()
+            for _ in range(max(1, int(round(seconds / dt)))):
+                ranges = world.scan(0)
+                odom = world.odom(0)
+                label = policy.act(ranges, odom)
+                drive = tree.act(ranges, odom)
+                if drive != label:
+                    disagree += 1
+                if learner.observe(ranges, odom[2], label):
+                    traj.learned += 1
+                if takeover > 0 and float(np.min(ranges)) < takeover:
+                    drive = label
+                    took += 1
+                _step_world(world, traj, learner.actions, drive, side, ranges)
+                traj.labels.append(label)
+                steps += 1
+                if spec.goal is not None and world.at_goal(0):
+                    break
+        stats.append({"round": r + 1, "steps": steps, "disagreements": disagree, "takeovers": took,
+                      "nodes": learner.nodes})
+        log.debug("round %d: %s", r + 1, stats[-1])
+    return stats
 
 
 def run(spec: WorldSpec, driver, start, seconds: float, seed: int = 0, teacher=None,
@@ -317,6 +376,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "path, each this fraction of --segment (0: cycle the start poses)")
     parser.add_argument("--consistent", action="store_true", default=None,
                         help="learn only labels that do not depend on the teacher's memory")
+    parser.add_argument("--rounds", type=int, default=None,
+                        help="corrective (DAgger) rounds after the demonstration: the tree drives "
+                             "from every start pose, the teacher labels (default: the recipe's)")
+    parser.add_argument("--round-seconds", type=float, default=None,
+                        help="sim seconds per start pose in each corrective round")
+    parser.add_argument("--takeover", type=float, default=None,
+                        help="in corrective rounds the teacher drives while a beam is closer "
+                             "than this (m; 0 = never)")
     parser.add_argument("--range-noise", type=float, default=0.0)
     parser.add_argument("--odom-noise", type=float, default=0.0)
 
@@ -345,11 +412,13 @@ def main(args) -> int:
                  range_noise=args.range_noise, odom_noise=args.odom_noise,
                  starts=getattr(args, "starts", None), segment=getattr(args, "segment", None),
                  random_starts=getattr(args, "random_segment", None),
-                 consistent=getattr(args, "consistent", None))
+                 consistent=getattr(args, "consistent", None),
+                 rounds=getattr(args, "rounds", None), round_seconds=getattr(args, "round_seconds", None),
+                 takeover=getattr(args, "takeover", None))
     out = learner.save(args.out)
     m = traj.metrics()
     print(f"trained on {spec.name} ({spec.task}) for {seconds:g} s from {list(traj.start)}: "
-          f"{len(traj.segments)} demonstrations, {traj.learned} vectors learned, tree {learner.nodes} nodes, height {learner.height}; "
+          f"{len(traj.segments)} demonstrations + {learner.session.get('rounds', 0)} corrective rounds, {traj.learned} vectors learned, tree {learner.nodes} nodes, height {learner.height}; "
           f"teacher collisions {m['collisions']}; {traj.wall_time:.1f} s wall time")
     print(f"wrote {out}")
     return 0

@@ -130,7 +130,8 @@ class FeatureSpec:
 # travel direction to the training maze's layout and failed on mazes whose openings alternate
 # the other way.
 FEATURES: dict[str, FeatureSpec] = {
-    "wall": FeatureSpec(beams=(0.0, 22.5, 45.0, 67.5, 90.0)),
+    "wall": FeatureSpec(beams=(0.0, 22.5, 45.0, 67.5, 90.0), window=11.25),
+    "wall-ping": FeatureSpec(beams=(0.0, 22.5, 45.0, 67.5, 90.0)),
     "maze": FeatureSpec(beams=(0.0, 45.0, 90.0, 135.0, 180.0), heading="lr"),
     "maze-right": FeatureSpec(beams=(0.0, 30.0, 60.0, 90.0, 120.0), window=10.0),
 }

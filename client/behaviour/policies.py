@@ -35,6 +35,9 @@ __all__ = [
     "MazeTeacher",
     "Demonstrator",
     "make_policy",
+    "ReactiveFollower",
+    "ReactiveMazeTeacher",
+    "STYLES",
     "scan_points",
     "side_wall_distance",
     "TASKS",
@@ -245,12 +248,23 @@ class MazeTeacher(WallFollower):
         super().__init__(target=target, actions=actions, **kw)
 
 
-def make_policy(task: str, actions: ActionSet = DEFAULT_ACTIONS, **kw) -> Policy:
-    """The scripted expert of a world's task: "wall-following" or "maze"."""
+STYLES = ("reactive", "smooth")
+
+
+def make_policy(task: str, actions: ActionSet = DEFAULT_ACTIONS, style: str = "reactive",
+                **kw) -> Policy:
+    """The scripted expert of a world's task: "wall-following" or "maze".
+
+    ``style="reactive"`` (default): ``ReactiveFollower`` / ``ReactiveMazeTeacher``, labels a pure
+    function of the scan's sectors (docs/experiments.md: the learnable teacher).
+    ``style="smooth"``: the earlier history-dependent ``WallFollower`` / ``MazeTeacher``
+    (hysteresis, dwell, committed rotations, lost-wall memory)."""
+    if style not in STYLES:
+        raise ValueError(f"teacher style must be one of {STYLES}, got {style!r}")
     if task == "wall-following":
-        return WallFollower(actions=actions, **kw)
+        return (ReactiveFollower if style == "reactive" else WallFollower)(actions=actions, **kw)
     if task == "maze":
-        return MazeTeacher(actions=actions, **kw)
+        return (ReactiveMazeTeacher if style == "reactive" else MazeTeacher)(actions=actions, **kw)
     raise ValueError(f"no scripted teacher for task {task!r}; known: {', '.join(TASKS)}")
 
 
@@ -307,3 +321,94 @@ class Demonstrator:
             self._left -= 1
             return label, self._action  # type: ignore[return-value]
         return label, label
+
+
+class ReactiveFollower(Policy):
+    """A REACTIVE right-wall follower: every label is a pure function of the scan it is given,
+    computed through a feature spec's sector minima (so the learner, which sees the same
+    sectors, can represent the teacher exactly: the same feature vector never gets two labels).
+
+    Sectors (metres, each the minimum over its window of the 360-beam scan, clamped), for the
+    default spec (beams 0, 22.5, 45, 67.5, 90 deg from the right edge, window 11.25 deg, i.e.
+    contiguous sectors covering -90..+11 deg): ``R`` beside, ``RD`` right-behind-diagonal,
+    ``D`` diagonal ahead, ``FR`` ahead-right, ``F`` ahead.
+
+    A fixed partition, no hysteresis, dwell or counters:
+      blocked ahead (F < stop or FR < stop_fr)              -> rot-left
+      wall approaching ahead (F < slow or FR < slow_fr)      -> fwd-left
+      nothing beside (min(R, RD, D) > lost)                  -> fwd-right (arc towards the
+                                                               followed side: a convex corner,
+                                                               a fin's tip, an opening, no wall)
+      otherwise u = (near - target) + k_a (D - ratio * side) (distance error + angle proxy:
+      the diagonal sector reads ``ratio`` times the side distance along a parallel wall, less
+      when heading into the wall, more when heading away or when the wall ends ahead)
+                                        u > band -> fwd-right, u < -band -> fwd-left, else fwd
+    The left side (``side="left"``) mirrors the scan and the labels.
+    """
+
+    task = "wall-following"
+
+    def __init__(self, features=None, side: str = "right", target: float = 0.6,
+                 band: float = 0.08, k_a: float = 0.7, ratio: float = 1.2, cap: float = 0.3,
+                 stop: float = 0.45, stop_fr: float = 0.45, slow: float = 0.9,
+                 slow_fr: float = 0.7, lost: float = 1.2, open_d: float = 99.0,
+                 search: float = 1.7, actions: ActionSet = DEFAULT_ACTIONS):
+        super().__init__(actions)
+        from .features import FEATURES
+
+        self.features = features if features is not None else FEATURES["wall"]
+        if self.features.dim - (1 if self.features.heading else 0) < 5:
+            raise ValueError("ReactiveFollower needs a feature spec with >= 5 beams")
+        if side not in ("right", "left"):
+            raise ValueError(f"side must be 'right' or 'left', got {side!r}")
+        self.side = side
+        self.target, self.band, self.k_a, self.ratio = target, band, k_a, ratio
+        self.cap = cap
+        self.stop, self.stop_fr, self.slow, self.slow_fr = stop, stop_fr, slow, slow_fr
+        self.lost, self.open_d, self.search = lost, open_d, search
+
+    def sectors(self, ranges) -> np.ndarray:
+        """The first five sector minima in metres (R, RD, D, FR, F)."""
+        r = np.asarray(ranges)
+        if self.side == "left":
+            r = r[::-1]
+        f = self.features
+        return f.extract(r, 0.0)[:5] * f.scale
+
+    def decide(self, s) -> str:
+        """The label of sector minima ``s`` = (R, RD, D, FR, F) in metres (right side)."""
+        rr, rd, d, fr, f = (float(v) for v in s[:5])
+        if f < self.stop or fr < self.stop_fr:
+            return "rot-left"
+        near = min(rr, rd, d)
+        side = min(rr, rd)
+        opening = d > self.open_d and side <= self.lost
+        if (f < self.slow or fr < self.slow_fr) and not opening:
+            return "fwd-left"
+        if near > self.lost:
+            return "fwd" if self.lost < near < self.search else "fwd-right"
+        ang = min(max(d - self.ratio * side, -self.cap), self.cap)
+        u = (near - self.target) + self.k_a * ang
+        if u > self.band:
+            return "fwd-right"
+        if u < -self.band:
+            return "fwd-left"
+        return "fwd"
+
+    def label(self, ranges) -> str:
+        name = self.decide(self.sectors(ranges))
+        return self.actions.mirror(name) if self.side == "left" else name
+
+    reactive = label
+
+    def act(self, ranges, pose=None) -> str:
+        return self.label(ranges)
+
+
+class ReactiveMazeTeacher(ReactiveFollower):
+    """Tiered maze by the right-hand rule with the reactive follower (scan only, no heading)."""
+
+    task = "maze"
+
+    def __init__(self, target: float = 0.55, **kw):
+        super().__init__(target=target, **kw)

@@ -36,7 +36,8 @@ def test_train_then_evaluate_cli(tmp_path, capsys):
 def test_resume_with_a_corrective_start(tmp_path):
     first = tmp_path / "a.rhbl"
     second = tmp_path / "b.rhbl"
-    assert cli(["train", "--world", CORRIDOR, "--seconds", "10", "--out", str(first)]) == 0
+    assert cli(["train", "--world", CORRIDOR, "--seconds", "10", "--out", str(first),
+                "--rounds", "0"]) == 0
     assert cli(["train", "--world", CORRIDOR, "--seconds", "10", "--out", str(second),
                 "--resume", str(first), "--start", "5,1,3.1416"]) == 0
     _, _, _, meta = load_snapshot(second)

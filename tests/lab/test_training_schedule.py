@@ -12,7 +12,8 @@ from lab.harness import _clearance, make_learner, resolve_world, sample_pose, tr
 def test_world_starts_then_sampled_poses():
     spec = resolve_world("corridor")
     learner = make_learner(spec.task)
-    traj = train(spec, learner, 60, seed=1, starts="world", segment=10, random_starts=0.5)
+    traj = train(spec, learner, 60, seed=1, starts="world", segment=10, random_starts=0.5,
+                 rounds=0)
     n_fixed = len(spec.start_poses)
     assert [tuple(p) for p in traj.segments[:n_fixed]] == [tuple(p) for p in spec.start_poses]
     assert len(traj.segments) > n_fixed  # the rest of the time: sampled poses
@@ -48,3 +49,17 @@ def test_maze_recipe_features_and_reactive_labels():
     # the reactive label is a pure function of the scan
     assert teacher.reactive(scan) == make_policy("wall-following").reactive(scan)
     assert isinstance(demo.consistent, bool)
+
+
+def test_corrective_rounds_learner_drives_teacher_labels():
+    spec = resolve_world("corridor")
+    learner = make_learner(spec.task)
+    traj = train(spec, learner, 20, seed=0, starts="world", segment=10, random_starts=0.0,
+                 rounds=2, round_seconds=5, takeover=0.3)
+    n = len(spec.start_poses)
+    stats = learner.session["round_stats"]
+    assert [s["round"] for s in stats] == [1, 2]
+    assert all(s["steps"] == n * 50 for s in stats)
+    assert len(traj.labels) == 200 + 2 * n * 50
+    assert learner.session["demonstration_vectors"] < learner.vectors
+    assert learner.metadata()["provenance"]["sessions"][-1]["rounds"] == 2

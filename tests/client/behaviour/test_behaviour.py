@@ -17,7 +17,14 @@ from client.behaviour.learning import (
     TreePolicy,
     check_compatible,
 )
-from client.behaviour.policies import Demonstrator, MazeTeacher, WallFollower, make_policy
+from client.behaviour.policies import (
+    Demonstrator,
+    MazeTeacher,
+    ReactiveFollower,
+    ReactiveMazeTeacher,
+    WallFollower,
+    make_policy,
+)
 
 
 def test_action_set_defaults_roundtrip_and_errors():
@@ -62,8 +69,28 @@ def _corridor_scan(right: float, left: float) -> np.ndarray:
     return np.minimum(np.nan_to_num(r, posinf=8.0), 8.0).astype(np.float32)
 
 
-def test_wall_follower_steers_towards_the_target_distance():
+def test_reactive_teacher_is_the_default_and_a_pure_function_of_the_scan():
     p = make_policy("wall-following")
+    assert isinstance(p, ReactiveFollower)
+    assert isinstance(make_policy("maze"), ReactiveMazeTeacher)
+    assert p.act(_corridor_scan(0.6, 1.4), (0, 0, 0)) == "fwd"
+    assert p.act(_corridor_scan(0.3, 1.7), (0, 0, 0)) in ("fwd-left", "rot-left")
+    assert p.act(_corridor_scan(1.1, 0.9), (0, 0, 0)) == "fwd-right"
+    assert p.act(np.full(360, 0.35, dtype=np.float32), (0, 0, 0)) == "rot-left"
+    # no memory: the same scan always gets the same label, whatever came before
+    rng = np.random.default_rng(0)
+    scans = [_corridor_scan(float(a), float(b)) for a, b in rng.uniform(0.3, 2.0, (20, 2))]
+    first = [p.act(s, (0, 0, 0)) for s in scans]
+    assert [p.act(s, (0, 0, 0)) for s in reversed(scans)] == first[::-1]
+    # a function of the feature spec's sectors: equal feature vectors -> equal labels
+    x = p.features.extract(scans[0])
+    assert p.decide(x * p.features.scale) == first[0]
+    with pytest.raises(ValueError, match="teacher style"):
+        make_policy("wall-following", style="dance")
+
+
+def test_wall_follower_steers_towards_the_target_distance():
+    p = make_policy("wall-following", style="smooth")
     assert isinstance(p, WallFollower)
     assert p.act(_corridor_scan(0.6, 1.4), (0, 0, 0)) == "fwd"
     p.reset()
@@ -84,7 +111,7 @@ def test_wall_follower_is_smooth_minimum_dwell():
 
 
 def test_maze_teacher_and_unknown_task():
-    assert isinstance(make_policy("maze"), MazeTeacher)
+    assert isinstance(make_policy("maze", style="smooth"), MazeTeacher)
     with pytest.raises(ValueError, match="no scripted teacher"):
         make_policy("dance")
 
