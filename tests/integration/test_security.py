@@ -363,6 +363,70 @@ def test_liveliness_is_shared_between_authorised_roles(sessions):
         token.undeclare()
 
 
+def _alive_tokens(session, timeout: float = 1.0) -> set[str]:
+    return {
+        str(r.ok.key_expr)
+        for r in session.liveliness().get("rhbl/alive/**", timeout=timeout)
+        if r.ok is not None
+    }
+
+
+def test_each_role_declares_liveliness_tokens_only_under_its_own_key(secrets, router, sessions):
+    """A token under another role's key is dropped at the router: a controller cannot fake a
+    learner (the teacher would demonstrate to nobody) nor declare-and-drop a teacher token (the
+    server would release the teacher's hold on the robot). Each role's own token is seen."""
+    roles = (*ROLES, "operator")
+    declarers = dict(sessions, operator=zenoh.open(_client_config(secrets, router, "operator")))
+    # an observer of its own (a session's local tokens are visible to itself without the router)
+    observer = zenoh.open(_client_config(secrets, router, "server"))
+    events: list[tuple[str, str]] = []
+    lock = threading.Lock()
+
+    def on_change(sample):
+        with lock:
+            events.append((str(sample.kind), str(sample.key_expr)))
+
+    watch = observer.liveliness().declare_subscriber("rhbl/alive/**", on_change, history=True)
+    own = {role: keys.alive_key(role, f"acl-{role}") for role in roles}
+    forged = {
+        (who, keys.alive_key(role, f"forged-by-{who}"))
+        for who in roles
+        for role in roles
+        if role != who
+    }
+    forged.add(("controller", keys.alive_key("learner", f"{ROBOT}-1")))  # a learner of r0
+    tokens = []
+    try:
+        time.sleep(SETTLE)
+        for who, key in sorted(forged):
+            tokens.append(declarers[who].liveliness().declare_token(key))
+        for role in roles:
+            tokens.append(declarers[role].liveliness().declare_token(own[role]))
+        deadline = time.monotonic() + 3.0
+        seen: set[str] = set()
+        while time.monotonic() < deadline and not set(own.values()) <= seen:
+            seen = _alive_tokens(observer)
+        assert set(own.values()) <= seen, sorted(seen)
+        time.sleep(SETTLE)
+        seen = _alive_tokens(observer)
+        assert [key for _, key in forged if key in seen] == []
+        # ... and dropping them releases nothing: no appearance, no disappearance
+        for token in tokens[: len(forged)]:
+            token.undeclare()
+        time.sleep(SETTLE)
+        with lock:
+            leaked = [(kind, key) for kind, key in events if "forged" in key or key.endswith("-1")]
+            subscribed = {key for _, key in events}
+        assert leaked == []
+        assert set(own.values()) <= subscribed
+    finally:
+        for token in tokens[len(forged) :]:
+            token.undeclare()
+        watch.undeclare()
+        observer.close()
+        declarers["operator"].close()
+
+
 # ---- the remote teacher's messages -----------------------------------------------------------
 
 
