@@ -86,7 +86,7 @@ def _body(ctx: Context) -> int:
         demo = KeyboardPolicy(DEFAULT_ACTIONS)
     else:
         try:
-            policy = make_policy(POLICIES[args.policy], DEFAULT_ACTIONS)
+            policy = make_policy(POLICIES[args.policy], DEFAULT_ACTIONS, style="smooth")
         except ValueError as exc:
             raise ProcessError(f"teacher: {exc}", EXIT_USAGE) from exc
         demo = Demonstrator(policy, perturb=args.perturb, rng=np.random.default_rng(args.seed))
