@@ -27,7 +27,7 @@ import numpy as np
 from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
 from client.behaviour.features import FEATURES, FeatureSpec
 from client.behaviour.learning import DemonstrationLearner, TreePolicy
-from client.behaviour.policies import Demonstrator, make_policy
+from client.behaviour.policies import Demonstrator, make_policy, takes_over
 from lab import metrics
 from server.world import World, WorldSpec, load_world
 
@@ -299,7 +299,7 @@ def _corrective_rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, p
                     disagree += 1
                 if learner.observe(ranges, odom[2], label):
                     traj.learned += 1
-                if takeover > 0 and float(np.min(ranges)) < takeover:
+                if takes_over(ranges, takeover):
                     drive = label
                     took += 1
                 _step_world(world, traj, learner.actions, drive, side, ranges)

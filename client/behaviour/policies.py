@@ -41,6 +41,8 @@ __all__ = [
     "scan_points",
     "side_wall_distance",
     "TASKS",
+    "TAKEOVER",
+    "takes_over",
 ]
 
 TASKS = ("wall-following", "maze")
@@ -266,6 +268,16 @@ def make_policy(task: str, actions: ActionSet = DEFAULT_ACTIONS, style: str = "r
     if task == "maze":
         return (ReactiveMazeTeacher if style == "reactive" else MazeTeacher)(actions=actions, **kw)
     raise ValueError(f"no scripted teacher for task {task!r}; known: {', '.join(TASKS)}")
+
+
+TAKEOVER = 0.3  # m: the corrective rounds' takeover distance (docs/experiments.md)
+
+
+def takes_over(ranges, takeover: float = TAKEOVER) -> bool:
+    """Corrective (DAgger) rounds: the learned tree drives while the teacher labels every state;
+    the teacher takes the wheels for a scan when any beam is closer than ``takeover`` metres
+    (0 = never). The one rule of the in-process harness and of ``rhbl teacher --correct``."""
+    return takeover > 0 and float(np.min(ranges)) < takeover
 
 
 class Demonstrator:
