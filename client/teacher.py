@@ -7,6 +7,8 @@ the action executed, which differs while a perturbation runs).
 
     rhbl teacher --policy wall-follower --seconds 300     # scripted, perturbed demonstrations
     rhbl teacher --policy maze
+    rhbl teacher --policy wall-follower --correct         # watch and correct (the controller drives)
+    rhbl teacher --correct --demonstrate 60 --seconds 300 # demonstrate 60 s, then correct
     rhbl teacher --policy keyboard                        # a person at a terminal (arrows/WASD)
     rhbl teacher --policy keyboard --no-wait-learner      # pure teleop, nobody records
 
@@ -16,6 +18,15 @@ a learner declares only once it subscribes to the labels; with no learner it exi
 When the last learner's token disappears while demonstrating (it stopped or crashed), the teacher
 pauses (no commands, no labels: the server's watchdog stops the robot) and waits for a learner the
 same way.
+
+Correcting mode (``--correct``, the corrective (DAgger) rounds of the training recipe, Player
+style "the teacher watches and corrects"): the controller drives; for every scan the teacher
+publishes its label (the expert's choice, ``executed`` unset) but commands the robot only while
+``client.behaviour.policies.takes_over`` says so (any beam closer than ``--takeover`` m: the
+harness's rule), then with the label (``executed`` = the label). While it commands it also holds
+the liveliness token ``rhbl/alive/teacher/<robot>-<pid>-hold`` and withdraws it when it stops
+commanding: the server ends a teacher's hold when a teacher token disappears, so the controller
+drives again on the very next tick instead of after the watchdog timeout.
 """
 
 from __future__ import annotations
@@ -40,7 +51,7 @@ from client._process import (
     wait_for_server,
 )
 from client.behaviour.actions import DEFAULT_ACTIONS
-from client.behaviour.policies import Demonstrator, make_policy
+from client.behaviour.policies import STYLES, TAKEOVER, Demonstrator, make_policy, takes_over
 from protocol import keys
 from protocol.messages import Scan, TeacherAction, VelCmd
 
@@ -49,6 +60,7 @@ __all__ = ["POLICIES", "add_arguments", "main"]
 log = logging.getLogger(__name__)
 
 SOURCE = "teacher"
+CORRECT_QUEUE = 8  # scans kept for labelling in --correct mode (the oldest are dropped)
 # --policy name -> the behaviour package's task name
 POLICIES = {"wall-follower": "wall-following", "maze": "maze", "keyboard": None}
 
@@ -65,6 +77,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(labels stay the expert's; 0 = off; default 0.05, the training "
                              "recipe measured in docs/experiments.md)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the perturbations")
+    parser.add_argument("--style", choices=STYLES, default="reactive",
+                        help="scripted expert: 'reactive' (labels a function of the features; "
+                             "the training recipe, default) or 'smooth' (the earlier teacher with "
+                             "hysteresis and memory)")
+    parser.add_argument("--correct", action="store_true",
+                        help="watch and correct: label every scan but command the robot only "
+                             "while a beam is closer than --takeover (the controller drives "
+                             "otherwise); the corrective rounds of the training recipe")
+    parser.add_argument("--demonstrate", type=float, default=0.0, metavar="S",
+                        help="with --correct: demonstrate (drive) for the first S seconds of sim "
+                             "time, then correct (default 0)")
+    parser.add_argument("--takeover", type=float, default=TAKEOVER, metavar="M",
+                        help=f"with --correct: take over while any beam is closer than M metres "
+                             f"(0 = never; default {TAKEOVER:g}, the training recipe)")
     parser.add_argument("--no-wait-learner", dest="wait_learner", action="store_false",
                         help="demonstrate without waiting for a learner (e.g. pure teleop); "
                              "labels published while no learner listens are lost")
@@ -80,13 +106,18 @@ def main(args: argparse.Namespace) -> int:
 
 def _body(ctx: Context) -> int:
     args = ctx.args
+    if args.correct and args.policy == "keyboard":
+        raise ProcessError("teacher: --correct needs a scripted expert (--policy wall-follower "
+                           "or maze), not the keyboard", EXIT_USAGE)
+    if not (args.demonstrate >= 0 and args.takeover >= 0):
+        raise ProcessError("teacher: --demonstrate and --takeover must be >= 0", EXIT_USAGE)
     if args.policy == "keyboard":
         from client.keyboard import KeyboardPolicy
 
         demo = KeyboardPolicy(DEFAULT_ACTIONS)
     else:
         try:
-            policy = make_policy(POLICIES[args.policy], DEFAULT_ACTIONS, style="smooth")
+            policy = make_policy(POLICIES[args.policy], DEFAULT_ACTIONS, style=args.style)
         except ValueError as exc:
             raise ProcessError(f"teacher: {exc}", EXIT_USAGE) from exc
         demo = Demonstrator(policy, perturb=args.perturb, rng=np.random.default_rng(args.seed))
@@ -106,7 +137,11 @@ def _loop(ctx: Context, demo) -> int:
     act_pub = session.declare_publisher(keys.teacher_action_key(robot),
                                         congestion_control=zenoh.CongestionControl.BLOCK)
     scan_k = keys.scan_key(robot)
-    sub = session.declare_subscriber(scan_k, zenoh.handlers.RingChannel(1))
+    # the latest scan wins (a teacher never acts on a backlog); correcting, a short queue: the
+    # server does not wait for a teacher that does not drive, and every state the controller
+    # visits should get its label (a lock-step run only falls a scan or two behind)
+    sub = session.declare_subscriber(
+        scan_k, zenoh.handlers.RingChannel(CORRECT_QUEUE if args.correct else 1))
     learners = _Learners(session, robot) if args.wait_learner else None
     wait_for_server(ctx)
 
@@ -128,10 +163,13 @@ def _loop(ctx: Context, demo) -> int:
         log.info("not waiting for a learner (--no-wait-learner): labels go to whoever listens")
     watch = ScanWatch("teacher", scan_k, stale=1.0).start()
     actions = DEFAULT_ACTIONS
+    hold = _Hold(ctx) if args.correct else None
     t0 = None
     n = 0
     perturbed = 0
+    took = 0
     bad = 0
+    correcting = False
     try:
         while True:
             sample = sub.handler.recv()
@@ -155,9 +193,20 @@ def _loop(ctx: Context, demo) -> int:
             if args.seconds is not None and scan.ts - t0 >= args.seconds:
                 log.info("demonstrated %.1f s of sim time: done", scan.ts - t0)
                 break
+            if args.correct and not correcting and scan.ts - t0 >= args.demonstrate:
+                correcting = True
+                log.info("correcting from %.1f s of sim time: the controller drives, the teacher "
+                         "labels every scan and takes over while a beam is closer than %g m",
+                         scan.ts - t0, args.takeover)
             try:
-                label, executed = demo.step(scan.ranges, scan.pose)
-                vx, va = actions[executed] if label is not None else (0.0, 0.0)
+                if correcting:
+                    # the expert's choice on the state the controller put the robot in; the
+                    # wheels only when the harness's takeover rule says so
+                    label = demo.policy.act(scan.ranges, scan.pose)
+                    executed = label if takes_over(scan.ranges, args.takeover) else None
+                else:
+                    label, executed = demo.step(scan.ranges, scan.pose)
+                vx, va = actions[executed] if label is not None and executed else (0.0, 0.0)
             except Exception as exc:  # noqa: BLE001 - a scan the policy cannot use
                 bad += 1
                 if bad <= 10 or bad % 100 == 0:
@@ -168,20 +217,57 @@ def _loop(ctx: Context, demo) -> int:
                 continue
             if n == 0:
                 log.info("first label: scan %d, %s", scan.id, label)
-            cmd_pub.put(VelCmd(vx=vx, va=va, source=SOURCE, scan_id=scan.id, ts=scan.ts).encode())
+            if executed is not None:
+                if hold is not None:
+                    hold.acquire()  # before the command: the server may release at once
+                cmd_pub.put(VelCmd(vx=vx, va=va, source=SOURCE, scan_id=scan.id,
+                                   ts=scan.ts).encode())
+            elif hold is not None:
+                hold.release()  # the controller drives from the next tick on
             act_pub.put(TeacherAction(scan_id=scan.id, action=label, source=SOURCE, ts=scan.ts,
                                       executed=executed).encode())
             n += 1
-            perturbed += executed != label
+            if correcting:
+                took += executed is not None
+            else:
+                perturbed += executed != label
             if n % 500 == 0:
-                log.info("%d labels, %.0f s sim, %.0f%% perturbed", n, scan.ts - t0,
-                         100.0 * perturbed / n)
+                log.info("%d labels, %.0f s sim, %.0f%% perturbed, %d taken over", n,
+                         scan.ts - t0, 100.0 * perturbed / n, took)
     finally:
         watch.stop()
+        if hold is not None:
+            hold.release()
         if learners is not None:
             learners.close()
-        log.info("teacher stopped after %d labels (%d perturbed)", n, perturbed)
+        log.info("teacher stopped after %d labels (%d perturbed, %d taken over)", n, perturbed,
+                 took)
     return 0
+
+
+class _Hold:
+    """While the correcting teacher commands the robot it holds the liveliness token
+    ``rhbl/alive/teacher/<robot>-<pid>-hold``; withdrawing it makes the server end the teacher's
+    hold at once (docs/protocol.md section 6), so the controller drives on the next tick rather
+    than after the watchdog timeout (and a lock-step server does not wait for answers the
+    teacher no longer gives)."""
+
+    def __init__(self, ctx: Context):
+        self._session = ctx.session
+        self._key = keys.alive_key("teacher", f"{ctx.ident}-hold")
+        self._token = None
+        self.handbacks = 0
+
+    def acquire(self) -> None:
+        if self._token is None:
+            self._token = self._session.liveliness().declare_token(self._key)
+
+    def release(self) -> None:
+        if self._token is not None:
+            token, self._token = self._token, None
+            with contextlib.suppress(Exception):  # the session is closing
+                token.undeclare()
+            self.handbacks += 1
 
 
 class _Learners:

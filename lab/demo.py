@@ -3,13 +3,18 @@
 The demo is the rendezvous (a zenoh session in router mode on a free loopback port, the role a
 zenohd plays in compose); every child connects to it as a client:
 
-1. ``rhbl learner`` (the tree and its journal go into the output folder);
-2. ``rhbl server --lockstep`` (the scenario's world) and ``rhbl teacher --seconds T``: the scripted
-   teacher demonstrates for T sim seconds while the learner learns; the teacher then exits and
-   the learner is stopped (SIGINT: final snapshot);
-3. ``rhbl controller --tree <snapshot>`` drives from each of the world's start poses for D sim
-   seconds: the same server keeps running and the demo teleports the robot to each start pose
-   with the sim-only ``set_pose`` request (``rhbl/r0/sim/req/set_pose``, odometry reset too);
+It runs the training recipe of ``rhbl train`` (docs/experiments.md) over zenoh, with one server
+for the whole run; the demo teleports the robot to each of the world's start poses with the
+sim-only ``set_pose`` request (``rhbl/r0/sim/req/set_pose``, odometry reset too):
+
+1. ``rhbl learner`` (the tree and its journal go into the output folder), ``rhbl server
+   --lockstep`` (the scenario's world) and ``rhbl teacher``: the reactive teacher demonstrates
+   from each start pose for T sim seconds (or until the goal) while the learner learns;
+2. corrective rounds: ``rhbl controller --from-learner --follow`` drives with the learner's latest
+   tree while ``rhbl teacher --correct`` labels every scan and takes over near walls, from each
+   start pose, R times; then the teacher and the learner stop (SIGINT: final snapshot);
+3. ``rhbl controller --tree <snapshot>`` drives the final tree from each start pose for D sim
+   seconds (or until the goal);
 4. the demo computes metrics (``lab.metrics``) over what it recorded from the server's scans,
    states and commands, draws the teacher's path beside the learned robot's (``lab.plot``), prints
    a table like the paper's Table I and writes everything into the output folder.
@@ -40,12 +45,14 @@ __all__ = ["SCENARIOS", "add_arguments", "main", "free_port"]
 
 log = logging.getLogger(__name__)
 
-# scenario -> world, feature spec, teacher policy; sim seconds per phase
+# scenario -> world, feature spec, teacher policy; sim seconds per start pose in each phase
+# (demonstration, corrective round, evaluation; the maze's end at the goal) and rounds: the
+# recipe of `rhbl train` (lab.harness.TRAINING)
 SCENARIOS: dict[str, dict] = {
     "wall-following": {"world": "room", "features": "wall", "policy": "wall-follower",
-                       "teach": 300.0, "drive": 120.0},
-    "maze": {"world": "maze", "features": "maze", "policy": "maze",
-             "teach": 300.0, "drive": 240.0},
+                       "teach": 60.0, "rounds": 3, "round": 60.0, "drive": 120.0},
+    "maze": {"world": "maze", "features": "wall", "policy": "maze",
+             "teach": 240.0, "rounds": 6, "round": 240.0, "drive": 240.0},
 }
 
 
@@ -55,12 +62,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="output folder (default: rhbl-out/<timestamp>-<scenario>)")
     parser.add_argument("--world", default=None, help="world file or name (default: the scenario's)")
     parser.add_argument("--teach-seconds", type=float, default=None, metavar="S",
-                        help="sim seconds the teacher demonstrates (default: 300)")
+                        help="sim seconds the teacher demonstrates from each start pose (or until "
+                             "the goal; default: 60 wall following, 240 maze)")
+    parser.add_argument("--rounds", type=int, default=None, metavar="N",
+                        help="corrective rounds: the controller drives the latest tree from each "
+                             "start pose while the teacher labels and takes over near walls "
+                             "(default: 3 wall following, 6 maze; 0 = demonstrations only)")
+    parser.add_argument("--round-seconds", type=float, default=None, metavar="S",
+                        help="sim seconds per start pose in each corrective round (or until the "
+                             "goal; default: 60 wall following, 240 maze)")
     parser.add_argument("--drive-seconds", type=float, default=None, metavar="S",
-                        help="sim seconds the learned robot drives from each start pose "
+                        help="sim seconds the final tree drives from each start pose "
                              "(default: 120 wall following, 240 maze)")
     parser.add_argument("--starts", type=int, default=None, metavar="N",
-                        help="drive from the first N start poses only (default: all)")
+                        help="use the first N start poses only (default: all)")
+    parser.add_argument("--style", choices=["reactive", "smooth"], default="reactive",
+                        help="the teacher's style (default: reactive, the training recipe)")
     parser.add_argument("--speedup", type=float, default=None, metavar="N",
                         help="run the server N times real time instead of lock-step (0: as fast "
                              "as possible)")
@@ -151,14 +168,22 @@ def _rhbl(*args: str) -> list[str]:
 # ---- recording -----------------------------------------------------------------------------
 @dataclass
 class Episode:
-    kind: str  # "teacher" | "learner"
+    kind: str  # "teacher" | "round" | "learner"
     start: tuple[float, float, float]
+    round: int = 0
     ts: list = field(default_factory=list)
     poses: list = field(default_factory=list)
     side: list = field(default_factory=list)
     ids: list = field(default_factory=list)
     stalls: dict = field(default_factory=dict)  # ts -> stall
-    cmds: dict = field(default_factory=dict)  # scan id -> (source, vx, va)
+    cmds: dict = field(default_factory=dict)  # scan id -> (source, vx, va) (teacher's first)
+    drivers: dict = field(default_factory=dict)  # ts -> driving source (State.driver)
+    labels: int = 0  # teacher labels published while recording
+
+    @property
+    def teacher_ticks(self) -> int:
+        """Ticks the teacher drove (in a corrective round: took over)."""
+        return sum(1 for t in self.ts if self.drivers.get(round(t, 6)) == "teacher")
 
     @property
     def sim_time(self) -> float:
@@ -176,11 +201,13 @@ class Recorder:
         self.lock = threading.Lock()
         self.notice: dict = {}
         self.sources: dict[str, int] = {}  # commands seen per source (recording or not)
+        self.labels = 0  # teacher labels seen (recording or not)
         self.subs = [
             session.declare_subscriber(keys.scan_key(robot), self._on_scan),
             session.declare_subscriber(keys.state_key(robot), self._on_state),
             session.declare_subscriber(keys.cmd_vel_subscription(robot), self._on_cmd),
             session.declare_subscriber(keys.learner_notice_key(robot), self._on_notice),
+            session.declare_subscriber(keys.teacher_action_key(robot), self._on_label),
         ]
 
     def _on_scan(self, sample) -> None:
@@ -212,6 +239,13 @@ class Recorder:
         except Exception:  # noqa: BLE001
             return
         ep.stalls[round(st.ts, 6)] = bool(st.stall)
+        ep.drivers[round(st.ts, 6)] = st.driver
+
+    def _on_label(self, _sample) -> None:
+        self.labels += 1
+        ep = self.episode
+        if ep is not None:
+            ep.labels += 1
 
     def _on_cmd(self, sample) -> None:
         from protocol.messages import VelCmd
@@ -223,7 +257,10 @@ class Recorder:
             return
         self.sources[c.source] = self.sources.get(c.source, 0) + 1
         if ep is not None and c.scan_id is not None:
-            ep.cmds[c.scan_id] = (c.source, c.vx, c.va)
+            # the teacher outranks the controller (the server's arbitration)
+            old = ep.cmds.get(c.scan_id)
+            if old is None or old[0] != "teacher" or c.source == "teacher":
+                ep.cmds[c.scan_id] = (c.source, c.vx, c.va)
 
     def _on_notice(self, sample) -> None:
         from protocol.messages import TreeNotice
@@ -234,9 +271,9 @@ class Recorder:
             return
         self.notice = {"nodes": n.nodes, "height": n.height, "vectors": n.vectors}
 
-    def begin(self, kind: str, start) -> Episode:
+    def begin(self, kind: str, start, round_: int = 0) -> Episode:
         with self.lock:
-            self.episode = Episode(kind, tuple(start))
+            self.episode = Episode(kind, tuple(start), round_)
             return self.episode
 
     def trim(self, ep: Episode, first_id: int) -> None:
@@ -250,6 +287,7 @@ class Recorder:
             ep.cmds = {i: c for i, c in ep.cmds.items() if i >= first_id}
             if ep.ts:
                 ep.stalls = {t: v for t, v in ep.stalls.items() if t >= round(ep.ts[0], 6)}
+                ep.drivers = {t: v for t, v in ep.drivers.items() if t >= round(ep.ts[0], 6)}
 
     def end(self) -> None:
         with self.lock:
@@ -295,6 +333,11 @@ class Demo:
         self.tree = self.out / "tree.rhbl"
         self.teach = args.teach_seconds if args.teach_seconds is not None else self.sc["teach"]
         self.drive = args.drive_seconds if args.drive_seconds is not None else self.sc["drive"]
+        self.rounds = args.rounds if args.rounds is not None else self.sc["rounds"]
+        self.round_seconds = (args.round_seconds if args.round_seconds is not None
+                              else self.sc["round"])
+        if self.rounds < 0 or min(self.teach, self.drive, self.round_seconds) <= 0:
+            raise ValueError("--rounds must be >= 0 and the phase seconds > 0")
 
     # -- helpers --
     def say(self, msg: str) -> None:
@@ -393,6 +436,30 @@ class Demo:
                 next_note = time.monotonic() + 2.0
             time.sleep(0.05)
 
+    def wait_labels(self, *cs: Child, timeout: float = 60.0) -> None:
+        """Until a teacher label went through the rendezvous (the teacher labels)."""
+        n0 = self.rec.labels
+        deadline = time.monotonic() + timeout
+        while self.rec.labels <= n0:
+            self.deadline_check()
+            self.check_alive(*cs)
+            if time.monotonic() > deadline:
+                raise DemoError(f"no teacher label within {timeout:g} s:\n"
+                                f"{cs[-1].tail() if cs else ''}")
+            time.sleep(0.05)
+
+    def episodes(self, kind: str, starts, seconds: float, what: str, *cs: Child,
+                 round_: int = 0) -> list[Episode]:
+        """One episode from each start pose (teleported there), ``seconds`` or until the goal."""
+        out = []
+        for k, pose in enumerate(starts):
+            ep = self.rec.begin(kind, pose, round_)
+            self.rec.trim(ep, self.teleport(pose, *cs))
+            self.wait_episode(ep, seconds, f"{what}, start {k + 1}/{len(starts)}", *cs)
+            self.rec.end()
+            out.append(ep)
+        return out
+
     def sc_notice(self) -> str:
         n = self.rec.notice
         return (f", tree {n['nodes']} nodes, height {n['height']}, {n['vectors']} vectors"
@@ -422,22 +489,47 @@ class Demo:
         from client.behaviour.learning import load_snapshot
 
         a, sc = self.args, self.sc
-        # 1. learner, server, teacher
+        starts = self.spec.start_poses[: a.starts] if a.starts else self.spec.start_poses
+        # 1. learner, server, the teacher demonstrates from each start pose
         learner = self.child("learner", "learner", "--features", sc["features"], "--out",
-                             str(self.tree), "--wait-server", "60", "--snapshot-every", "1")
+                             str(self.tree), "--wait-server", "60", "--snapshot-every", "0.5")
         self.wait_token("learner", learner)  # no demonstration before the learner listens
-        start = tuple(self.spec.pose)
         server = self.start_server()
-        ep_teacher = self.rec.begin("teacher", start)
-        teacher = self.child("teacher", "teacher", "--policy", sc["policy"], "--seconds",
-                             f"{self.teach:g}", "--seed", str(a.seed), "--wait-server", "30")
-        self.say(f"teaching: {sc['policy']} teacher demonstrates {self.teach:g} s of sim time "
-                 f"from {start} (pids: server {server.pid}, learner {learner.pid}, teacher "
-                 f"{teacher.pid})")
-        self.wait_episode(ep_teacher, self.teach, "teaching", server, learner, until_exit=teacher)
-        self.rec.end()
-        self.say(f"teacher done ({ep_teacher.sim_time:.0f} s sim); stopping the learner (SIGINT: "
-                 f"final snapshot)")
+        teacher = self.child("teacher", "teacher", "--policy", sc["policy"], "--style", a.style,
+                             "--seed", str(a.seed), "--wait-server", "30")
+        self.say(f"teaching: the {a.style} {sc['policy']} teacher demonstrates from each of "
+                 f"{len(starts)} start poses, {self.teach:g} s of sim time each (pids: server "
+                 f"{server.pid}, learner {learner.pid}, teacher {teacher.pid})")
+        self.wait_labels(server, learner, teacher)
+        demos = self.episodes("teacher", starts, self.teach, "teaching", server, learner, teacher)
+        teacher.stop()
+        self.say(f"demonstrations done ({sum(ep.sim_time for ep in demos):.0f} s sim, "
+                 f"{sum(ep.labels for ep in demos)} labels){self.sc_notice()}")
+
+        # 2. corrective rounds: the controller drives the latest tree, the teacher corrects
+        rounds: list[Episode] = []
+        if self.rounds > 0:
+            follower = self.child("controller-follow", "controller", "--from-learner", "--follow",
+                                  "--wait-server", "60", "--query-timeout", "10")
+            self.wait_commands("controller", server, learner, follower)
+            corrector = self.child("teacher-correct", "teacher", "--policy", sc["policy"],
+                                   "--style", a.style, "--correct", "--wait-server", "30")
+            self.say(f"corrective rounds: the controller drives the learner's latest tree "
+                     f"(pid {follower.pid}), the teacher labels every scan and takes over near "
+                     f"walls (pid {corrector.pid}); {self.rounds} rounds x {len(starts)} starts, "
+                     f"{self.round_seconds:g} s each")
+            self.wait_labels(server, learner, follower, corrector)
+            for r in range(1, self.rounds + 1):
+                eps = self.episodes("round", starts, self.round_seconds, f"round {r}", server,
+                                    learner, follower, corrector, round_=r)
+                rounds.extend(eps)
+                took = sum(ep.teacher_ticks for ep in eps)
+                ticks = sum(len(ep.ts) for ep in eps)
+                self.say(f"round {r} done: {ticks} scans, {sum(ep.labels for ep in eps)} labels, "
+                         f"teacher took over {took} ticks{self.sc_notice()}")
+            corrector.stop()
+            follower.stop()
+        self.say("stopping the learner (SIGINT: final snapshot)")
         rc = learner.stop(timeout=30)
         if rc != 0:
             raise DemoError(f"learner exited with status {rc}:\n{learner.tail()}")
@@ -446,76 +538,99 @@ class Demo:
         clf, _features, actions, meta = load_snapshot(self.tree)
         prov = meta.get("provenance") or {}
         self.say(f"learned tree: {clf.node_count_} nodes, height {clf.height_}, "
-                 f"{prov.get('vectors')} demonstration vectors -> {self.tree}")
+                 f"{prov.get('vectors')} labeled vectors -> {self.tree}")
 
-        # 2. the learned robot from each start pose
-        starts = self.spec.start_poses[: a.starts] if a.starts else self.spec.start_poses
+        # 3. the final tree alone from each start pose
         controller = self.child("controller", "controller", "--tree", str(self.tree),
                                 "--wait-server", "60")
         self.wait_commands("controller", server, controller)
-        learned: list[Episode] = []
-        for k, pose in enumerate(starts):
-            ep = self.rec.begin("learner", pose)
-            self.rec.trim(ep, self.teleport(pose, server, controller))
-            self.wait_episode(ep, self.drive, f"learned robot, start {k + 1}/{len(starts)}",
-                              server, controller)
-            self.rec.end()
-            learned.append(ep)
+        learned = self.episodes("learner", starts, self.drive, "learned robot", server,
+                                controller)
         controller.stop()
         server.stop()
-        if controller.rc not in (0, None):
-            raise DemoError(f"controller exited with status {controller.rc}:\n{controller.tail()}")
+        for c in self.children:
+            if c.rc not in (0, None) and not (c.expected_stop and c.rc in (-2, 130)):
+                raise DemoError(f"{c.name} exited with status {c.rc}:\n{c.tail()}")
 
-        # 3. report
-        return self.report(clf, actions, meta, ep_teacher, learned)
+        # 4. report
+        return self.report(clf, actions, meta, demos, rounds, learned)
 
-    def report(self, clf, actions, meta, ep_teacher: Episode, learned: list[Episode]) -> int:
+    def report(self, clf, actions, meta, demos: list[Episode], rounds: list[Episode],
+               learned: list[Episode]) -> int:
+        from lab.harness import followed_side
         from lab.plot import plot_paths
 
         dt = 0.1
         goal = self.spec.goal
-        from lab.harness import followed_side
-
         side = followed_side(self.spec.task)
-        tm = _episode_metrics(ep_teacher, actions, goal, dt, side)
+        tms = [_episode_metrics(ep, actions, goal, dt, side) for ep in demos]
+        rms = [_episode_metrics(ep, actions, goal, dt, side) for ep in rounds]
         lms = [_episode_metrics(ep, actions, goal, dt, side) for ep in learned]
         prov = meta.get("provenance") or {}
+        paths = {"teacher": [np.asarray(ep.poses).reshape(-1, 3) for ep in demos]}
+        if rounds:
+            paths["corrective rounds"] = [np.asarray(ep.poses).reshape(-1, 3) for ep in rounds]
+        paths["learner"] = [np.asarray(ep.poses).reshape(-1, 3) for ep in learned]
         picture = plot_paths(
-            self.spec,
-            {"teacher": np.asarray(ep_teacher.poses).reshape(-1, 3),
-             "learner": [np.asarray(ep.poses).reshape(-1, 3) for ep in learned]},
-            self.out / "paths.png",
-            title=f"{self.args.scenario}: teacher (blue) and learned robot (red)")
+            self.spec, paths, self.out / "paths.png",
+            title=f"{self.args.scenario}: teacher, corrective rounds and the final tree")
+        per_round = []
+        for r in range(1, self.rounds + 1):
+            eps = [ep for ep in rounds if ep.round == r]
+            ms = [m for ep, m in zip(rounds, rms, strict=True) if ep.round == r]
+            ticks = sum(len(ep.ts) for ep in eps)
+            per_round.append({
+                "round": r, "episodes": len(eps), "seconds": round(sum(m["seconds"] for m in ms), 1),
+                "scans": ticks, "labels": sum(ep.labels for ep in eps),
+                "teacher_ticks": sum(ep.teacher_ticks for ep in eps),
+                "collisions": sum(m["collisions"] for m in ms),
+                "goals": (None if goal is None else sum(bool(m["goal_reached"]) for m in ms))})
         wall_time = time.monotonic() - self.t0
         summary = {
             "scenario": self.args.scenario, "world": self.spec.name,
             "tree": {"nodes": int(clf.node_count_), "height": int(clf.height_),
                      "vectors": prov.get("vectors"), "labeled": prov.get("labeled"),
                      "path": str(self.tree)},
-            "teacher": tm, "learned": lms, "wall_time": round(wall_time, 1),
-            "teach_seconds": self.teach, "drive_seconds": self.drive,
+            "teacher": tms, "rounds": per_round, "learned": lms,
+            "demonstration_labels": sum(ep.labels for ep in demos),
+            "wall_time": round(wall_time, 1), "teach_seconds": self.teach,
+            "rounds_count": self.rounds, "round_seconds": self.round_seconds,
+            "drive_seconds": self.drive, "style": self.args.style,
         }
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
+        eps = [*demos, *rounds, *learned]
         np.savez_compressed(
             self.out / "trajectories.npz",
             **{f"{ep.kind}{k}_{f}": np.asarray(getattr(ep, f))
-               for k, ep in enumerate([ep_teacher, *learned])
-               for f in ("ts", "poses", "side", "ids")},
+               for k, ep in enumerate(eps) for f in ("ts", "poses", "side", "ids")},
             **{f"{ep.kind}{k}_stalls": np.asarray([ep.stalls.get(round(t, 6), False)
                                                    for t in ep.ts])
-               for k, ep in enumerate([ep_teacher, *learned])})
+               for k, ep in enumerate(eps)})
         print()
         print(f"Table I (paper) -- {self.args.scenario}, learned over zenoh by separate processes")
         print("| scenario | nodes | tree height | demonstration vectors |")
         print("|---|---|---|---|")
         print(f"| {self.args.scenario} | {clf.node_count_} | {clf.height_} | "
               f"{prov.get('vectors')} |")
+        print(f"(labeled vectors: {summary['demonstration_labels']} demonstrated from "
+              f"{len(demos)} start poses + {prov.get('vectors', 0) - summary['demonstration_labels']}"
+              f" labeled in {self.rounds} corrective rounds)")
+        if per_round:
+            print()
+            print("Corrective rounds (the controller drives the latest tree; the teacher labels "
+                  "every scan and takes over while a beam is closer than 0.3 m)")
+            print("| round | sim seconds | scans | labels | teacher drove | collisions | goal |")
+            print("|---|---|---|---|---|---|---|")
+            for pr in per_round:
+                g = "-" if pr["goals"] is None else f"{pr['goals']}/{pr['episodes']}"
+                print(f"| {pr['round']} | {pr['seconds']:.0f} | {pr['scans']} | {pr['labels']} | "
+                      f"{pr['teacher_ticks']} ticks | {pr['collisions']} | {g} |")
         print()
         print("What the robots did (sim seconds per episode; band = time with the right-hand "
               "wall within 0.3-1.2 m)")
         print("| driver | start (x, y, yaw) | seconds | collisions | distance m | in band | goal |")
         print("|---|---|---|---|---|---|---|")
-        for name, m in [("teacher", tm)] + [("learned", m) for m in lms]:
+        for name, m in [("teacher", m) for m in tms] + [("learned", m) for m in lms]:
             band = m["wall_band_fraction"]
             goal_s = ("-" if m["goal_reached"] is None else
                       (f"yes, {m['time_to_goal']:.0f} s" if m["goal_reached"] else "no"))
@@ -523,7 +638,10 @@ class Demo:
             print(f"| {name} | ({st}) | {m['seconds']:.0f} | {m['collisions']} | "
                   f"{m['distance']:.1f} | {'-' if band is None else f'{100 * band:.0f}%'} | "
                   f"{goal_s} |")
+        ok = sum(1 for m in lms if m["collisions"] == 0 and m["goal_reached"] is not False)
         print()
+        print(f"learned robot: {ok}/{len(lms)} starts without collision"
+              f"{'' if goal is None else ' and reaching the goal'}")
         print(f"output: {self.out}  (tree.rhbl, tree.rhbl.journal, paths.png, summary.json, "
               f"logs/)")
         print(f"picture: {picture}")

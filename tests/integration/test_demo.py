@@ -1,4 +1,6 @@
-"""``rhbl demo`` end to end, shortened: every process starts, the table and the files appear."""
+"""``rhbl demo`` end to end, shortened: every process starts (the teacher demonstrates from two
+start poses, one corrective round with the correcting teacher and the following controller, the
+final tree drives), the tables and the files appear."""
 
 from __future__ import annotations
 
@@ -17,17 +19,26 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_short_demo(tmp_path):
     out = tmp_path / "demo"
     r = subprocess.run(
-        [sys.executable, "-m", "lab.cli", "demo", "--out", str(out), "--teach-seconds", "60",
-         "--drive-seconds", "20", "--starts", "2", "--quiet"],
+        [sys.executable, "-m", "lab.cli", "demo", "--out", str(out), "--teach-seconds", "30",
+         "--rounds", "1", "--round-seconds", "20", "--drive-seconds", "20", "--starts", "2",
+         "--quiet"],
         cwd=ROOT, capture_output=True, text=True, timeout=150)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "| wall-following |" in r.stdout and "demonstration vectors" in r.stdout
+    assert "Corrective rounds" in r.stdout and "What the robots did" in r.stdout
     for name in ("tree.rhbl", "tree.rhbl.journal", "paths.png", "summary.json",
                  "trajectories.npz", "logs/learner.log", "logs/teacher.log",
+                 "logs/teacher-correct.log", "logs/controller-follow.log",
                  "logs/controller.log"):
         assert (out / name).exists(), name
+    assert "correcting from" in (out / "logs/teacher-correct.log").read_text()
     s = json.loads((out / "summary.json").read_text())
-    assert s["tree"]["nodes"] > 1 and s["tree"]["vectors"] >= 590
+    assert len(s["teacher"]) == 2 and all(m["seconds"] >= 29 for m in s["teacher"])
+    assert s["demonstration_labels"] >= 590
+    (rnd,) = s["rounds"]
+    assert rnd["episodes"] == 2 and rnd["seconds"] >= 39 and rnd["labels"] >= 0.9 * rnd["scans"]
+    # the labels of both phases are in the tree
+    assert s["tree"]["nodes"] > 1 and s["tree"]["vectors"] >= s["demonstration_labels"] + 350
     assert len(s["learned"]) == 2 and all(m["seconds"] >= 19 for m in s["learned"])
 
 

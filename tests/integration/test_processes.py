@@ -2,8 +2,11 @@
 
 One module-scoped server; the tests run in order and share the learner's output folder:
 the tree grows and its snapshot loads; a learner killed with SIGKILL mid-lineage and restarted has
-lost no labeled vector (its rebuilt tree equals the journal replayed in-process); the controller
-drives without collision; ``--from-learner --follow`` swaps trees; ``--resume`` extends a tree.
+lost no labeled vector (its rebuilt tree equals the journal replayed in-process); after a
+corrective round (the controller drives, ``rhbl teacher --correct`` labels) the controller drives
+without collision; ``--from-learner --follow`` swaps trees; ``--resume`` extends a tree; in
+correcting mode every label is journaled while the controller drives and the teacher takes over
+near a wall.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 zenoh = pytest.importorskip("zenoh")
@@ -23,7 +27,7 @@ from client.behaviour.learning import DemonstrationLearner, load_snapshot  # noq
 from client.journal import Journal, journal_path  # noqa: E402
 from client.player import PlayerClient  # noqa: E402
 from protocol import keys  # noqa: E402
-from protocol.messages import State, VelCmd  # noqa: E402
+from protocol.messages import DriverState, State, TeacherAction, VelCmd  # noqa: E402
 from protocol.session import make_config  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(180)]
@@ -189,9 +193,31 @@ def test_learner_grows_a_tree_and_survives_sigkill(env):
     assert ref.classifier.tree_equal(clf)
 
 
+def _labels(t: Proc) -> int:
+    line = [ln for ln in t.text().splitlines() if "teacher stopped after" in ln][-1]
+    return int(line.split("after ")[1].split()[0])
+
+
 def test_controller_drives_without_collision(env):
-    out = env["tmp"] / "tree.rhbl"
+    """The recipe over zenoh: the demonstrated tree (tests above) plus one corrective round
+    (the controller drives the learner's latest tree, the teacher labels and takes over near
+    walls); then the corrected tree alone drives without collision."""
+    out = env["tmp"] / "tree.rhbl"  # the learner continues the lineage
     session = env["session"]
+    n0 = _journal_len(out)
+    learner = env["start"]("learner", "learner", "--features", "wall", "--out", str(out),
+                           "--snapshot-every", "0.3")
+    _wait_token(session, "learner", learner)
+    _wait_snapshot(session)
+    follow = env["start"]("controller", "controller", "--from-learner", "--follow")
+    _wait_token(session, "controller", follow)
+    t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--correct",
+                     "--seconds", "90")
+    assert t.wait(120) == 0, t.text()
+    _wait_journal(out, n0 + _labels(t))
+    assert "swapped in a newer tree" in follow.text(), follow.text()
+    assert follow.stop() == 0, follow.text()
+    assert learner.stop() == 0, learner.text()
     stalls, cmds = [], []
     subs = [
         session.declare_subscriber(keys.state_key("r0"), lambda s: stalls.append(
@@ -199,11 +225,11 @@ def test_controller_drives_without_collision(env):
         session.declare_subscriber(keys.cmd_vel_key("r0", source="controller"), lambda s: cmds.append(
             VelCmd.decode(s.payload.to_bytes()))),
     ]
-    c = env["start"]("controller", "controller", "--tree", str(out), "--seconds", "30")
-    assert c.wait(60) == 0, c.text()
+    c = env["start"]("controller", "controller", "--tree", str(out), "--seconds", "60")
+    assert c.wait(90) == 0, c.text()
     for s in subs:
         s.undeclare()
-    assert len(cmds) >= 250, c.text()
+    assert len(cmds) >= 550, c.text()
     assert all(m.source == "controller" and m.scan_id is not None for m in cmds)
     assert not any(stalls), "the learned robot collided"
 
@@ -289,3 +315,68 @@ def test_teacher_pauses_while_no_learner_is_up(env):
     assert learner.stop() == 0, learner.text()
     assert _journal_len(out) == n > paused > 0
     sim.set_pose2d(*start)
+
+
+def _wait_snapshot(session, timeout: float = 20.0) -> None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if any(r.ok is not None for r in session.get(keys.learner_snapshot_key("r0"), timeout=2.0)):
+            return
+        time.sleep(0.1)
+    raise AssertionError("the learner has no snapshot to give")
+
+
+def test_correcting_teacher_labels_while_the_controller_drives(env):
+    """``rhbl teacher --correct``: every scan gets a label (journaled) while the controller
+    drives; near a wall the teacher takes over with its label, then hands the robot back.
+    The controller's tree here only knows 'fwd', so it drives into walls."""
+    from client.behaviour.features import FEATURES
+
+    session = env["session"]
+    sim = PlayerClient(session=session, source="test").simulation
+    start = sim.get_pose2d()
+    fwd = DemonstrationLearner(FEATURES["wall"], task="wall-following", spawn="winner")
+    fwd.observe(np.full(360, 2.0, np.float32), 0.0, "fwd")
+    tree = fwd.save(env["tmp"] / "fwd.rhbl")
+    out = env["tmp"] / "correcting.rhbl"
+    learner = env["start"]("learner", "learner", "--features", "wall", "--out", str(out))
+    _wait_token(session, "learner", learner)
+    sim.set_pose2d(9.0, 0.7, 0.0)  # 3 m from the room's right wall, heading at it
+    drivers, labels, states = [], [], []
+    subs = [
+        session.declare_subscriber(keys.driver_key("r0"), lambda s: drivers.append(
+            DriverState.decode(s.payload.to_bytes()).source)),
+        session.declare_subscriber(keys.teacher_action_key("r0"), lambda s: labels.append(
+            TeacherAction.decode(s.payload.to_bytes()))),
+        session.declare_subscriber(keys.state_key("r0"), lambda s: states.append(
+            State.decode(s.payload.to_bytes()))),
+    ]
+    c = env["start"]("controller", "controller", "--tree", str(tree))
+    _wait_token(session, "controller", c)
+    t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--correct",
+                     "--seconds", "40")
+    assert t.wait(90) == 0, t.text()
+    n = _labels(t)
+    _wait_journal(out, n)
+    assert c.stop() == 0, c.text()
+    assert learner.stop() == 0, learner.text()
+    for sub in subs:
+        sub.undeclare()
+    sim.set_pose2d(*start)
+
+    took = int(t.text().split("taken over)")[0].rsplit(", ", 1)[1].split()[0])
+    assert 0 < took < n / 2, t.text()
+    # every label the teacher published is journaled, tied to its scan
+    with Journal.open(journal_path(out), readonly=True) as j:
+        records = list(j.records())
+    assert len(records) == n >= 350, (len(records), n)
+    mine = [lb for lb in labels if lb.source == "teacher"]
+    assert {r.scan_id for r in records} == {lb.scan_id for lb in mine}
+    # taking over: the command is the label; otherwise no command (executed unset)
+    over = [lb for lb in mine if lb.executed is not None]
+    assert len(over) == took and all(lb.executed == lb.action for lb in over)
+    assert any(lb.action.startswith("rot") or lb.action == "fwd-left" for lb in over)
+    # the controller drives most of the time; the teacher only near walls
+    ticks = [s.driver for s in states if s.driver]
+    assert ticks.count("controller") > 0.5 * len(ticks), ticks.count("teacher")
+    assert "teacher" in ticks and "teacher" in drivers and "controller" in drivers
