@@ -34,6 +34,29 @@ def _success(task: str, m: dict, teacher_m: dict | None) -> bool:
     return metrics.wall_success(m, teacher_m["distance"] if teacher_m else None)
 
 
+_TEACHER_CACHE: dict = {}
+
+
+def _teacher_episode(spec: WorldSpec, actions, start, seconds: float, seed: int,
+                     range_noise: float, odom_noise: float, dt: float):
+    """The scripted teacher's episode from ``start``. Without noise it does not depend on the
+    seed (and not on the tree), so it is computed once per world, start and length."""
+    key = None
+    if range_noise == 0.0 and odom_noise == 0.0:
+        key = (spec.name, str(spec.path), spec.walls, spec.goal, tuple(start), seconds, dt,
+               tuple(actions.names))
+        hit = _TEACHER_CACHE.get(key)
+        if hit is not None:
+            return hit
+    tt = run(spec, make_policy(spec.task, actions=actions), start, seconds, seed=seed,
+             range_noise=range_noise, odom_noise=odom_noise, dt=dt)
+    if key is not None:
+        if len(_TEACHER_CACHE) > 256:
+            _TEACHER_CACHE.clear()
+        _TEACHER_CACHE[key] = tt
+    return tt
+
+
 def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
              seconds: float | None = None, seed: int = 0, range_noise: float = 0.0,
              odom_noise: float = 0.0, keep_paths: bool = False, dt: float = DT) -> dict:
@@ -46,8 +69,8 @@ def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
     for k in range(episodes):
         start = starts[k % len(starts)]
         ep_seed = seed * 1000 + k
-        tt = run(spec, make_policy(task, actions=policy.actions), start, seconds, seed=ep_seed,
-                 range_noise=range_noise, odom_noise=odom_noise, dt=dt)
+        tt = _teacher_episode(spec, policy.actions, start, seconds, ep_seed, range_noise,
+                              odom_noise, dt)
         tm = tt.metrics(spec.goal)
         tm["success"] = _success(task, tm, None)
         lt = run(spec, policy, start, seconds, seed=ep_seed, teacher=make_policy(task, actions=policy.actions),

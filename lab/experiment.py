@@ -46,15 +46,18 @@ def default_eval_worlds(task: str) -> list[str]:
 def run_trial(task: str, seed: int, world: str | None = None, train_seconds: float | None = None,
               eval_seconds: float | None = None, episodes: int | None = None,
               eval_worlds: list[str] = (), perturb: float | None = None, teacher: str = "reactive",
-              features: str | None = None, stride: int | None = None, range_noise: float = 0.0,
+              features: str | None = None, stride: int | None = None,
+              min_delta: float | None = None, range_noise: float = 0.0,
               odom_noise: float = 0.0, train_noise: bool = False, starts: str | None = None,
               segment: float | None = None, random_segment: float | None = None,
               turn: float | None = None, consistent: bool | None = None,
               rounds: int | None = None, round_seconds: float | None = None,
-              takeover: float | None = None, teacher_params: dict | None = None,
+              takeover: float | None = None, round_free: int | None = None,
+              teacher_params: dict | None = None,
               **tree_params) -> dict:
     spec = resolve_world(world or WORLD[task])
-    learner = make_learner(task, features=features, stride=stride, **tree_params)
+    learner = make_learner(task, features=features, stride=stride, min_delta=min_delta,
+                           **tree_params)
     seconds = train_seconds or TRAINING[task]["seconds"]
     policy = make_policy(task, actions=learner.actions, **TEACHERS[teacher], **(teacher_params or {}))
     t0 = time.perf_counter()
@@ -62,7 +65,7 @@ def run_trial(task: str, seed: int, world: str | None = None, train_seconds: flo
           range_noise=range_noise if train_noise else 0.0,
           odom_noise=odom_noise if train_noise else 0.0, starts=starts, segment=segment,
           random_starts=random_segment, turn=turn, consistent=consistent, rounds=rounds,
-          round_seconds=round_seconds, takeover=takeover)
+          round_seconds=round_seconds, takeover=takeover, round_free=round_free)
     t_train = time.perf_counter() - t0
     tree = TreePolicy.from_learner(learner)
     out = {"seed": seed, "nodes": learner.nodes, "height": learner.height,
@@ -141,13 +144,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--features", choices=sorted(FEATURES), default=None)
     parser.add_argument("--stride", type=int, default=None)
     parser.add_argument("--spawn", choices=["all", "winner"], default=None)
-    parser.add_argument("--starts", choices=["default", "world"], default=None)
+    parser.add_argument("--starts", choices=["default", "world", "free"], default=None)
     parser.add_argument("--segment", type=float, default=None)
     parser.add_argument("--random-segment", type=float, default=None)
     parser.add_argument("--consistent", action="store_true", default=None)
     parser.add_argument("--rounds", type=int, default=None, help="corrective (DAgger) rounds")
     parser.add_argument("--round-seconds", type=float, default=None)
     parser.add_argument("--takeover", type=float, default=None)
+    parser.add_argument("--round-free", type=int, default=None,
+                        help="corrective rounds also drive from N random free-space poses")
     parser.add_argument("--range-noise", type=float, default=0.0)
     parser.add_argument("--odom-noise", type=float, default=0.0)
     parser.add_argument("--train-noise", action="store_true",
@@ -173,7 +178,8 @@ def main(args) -> int:
                              train_noise=args.train_noise, starts=args.starts,
                              segment=args.segment, random_segment=args.random_segment,
                              consistent=args.consistent, rounds=args.rounds,
-                             round_seconds=args.round_seconds, takeover=args.takeover, **tree)
+                             round_seconds=args.round_seconds, takeover=args.takeover,
+                             round_free=args.round_free, **tree)
         results[task] = res
         print(f"\n{task}: {args.trials} trials")
         print(format_worlds(res))

@@ -51,11 +51,12 @@ DT = 0.1  # 10 Hz, as the processes run
 
 # Default training recipe per task (docs/experiments.md says how it was chosen).
 TRAINING: dict[str, dict] = {
-    # reactive teacher; one demonstration from each start pose of the world, then corrective
-    # (DAgger) rounds: the tree drives from each start pose, the teacher labels every state
-    "wall-following": {"features": "wall", "perturb": 0.05, "seconds": 360.0,
+    # reactive teacher; one demonstration from each start pose of the world, then (room) 30 s
+    # demonstrations from random poses anywhere in the free space (random heading), then
+    # corrective (DAgger) rounds: the tree drives from each start pose, the teacher labels
+    "wall-following": {"features": "wall", "perturb": 0.05, "seconds": 600.0,
                        "tree": {"spawn": "winner"}, "stride": 1, "min_delta": 0.0,
-                       "starts": "world", "segment": 60.0, "random_segment": 0.0,
+                       "starts": "free", "segment": 60.0, "random_segment": 0.5,
                        "rounds": 3, "round_seconds": 60.0, "takeover": 0.3},
     "maze": {"features": "wall", "perturb": 0.05, "seconds": 600.0,
              "tree": {"spawn": "winner"}, "stride": 1, "min_delta": 0.0,
@@ -174,14 +175,43 @@ def sample_pose(spec: WorldSpec, visited, rng, jitter: float = 0.3, turn: float 
     return None
 
 
+def _inside(spec: WorldSpec, x: float, y: float) -> bool:
+    """True when (x, y) lies inside every closed wall polyline of the world (even-odd rule;
+    a world with no closed wall: inside its bounding box)."""
+    for w in spec.walls:
+        if not w.closed:
+            continue
+        inside = False
+        for x0, y0, x1, y1 in w.segments():
+            if (y0 > y) != (y1 > y) and x < x0 + (y - y0) * (x1 - x0) / (y1 - y0):
+                inside = not inside
+        if not inside:
+            return False
+    return True
+
+
+def free_pose(spec: WorldSpec, rng, clearance: float = 0.45,
+              tries: int = 200) -> tuple[float, float, float] | None:
+    """A demonstration start anywhere in the world's free space: position uniform over the
+    walls' bounding box, inside the closed walls and at least ``clearance`` metres from every
+    wall, heading uniform. Needs no map-specific code (any world file). None if none found."""
+    segs = spec.segments()
+    x0, y0, x1, y1 = spec.bounds()
+    for _ in range(tries):
+        x, y = float(rng.uniform(x0, x1)), float(rng.uniform(y0, y1))
+        if _clearance(segs, x, y) >= clearance and _inside(spec, x, y):
+            return (round(x, 3), round(y, 3), round(float(rng.uniform(-math.pi, math.pi)), 4))
+    return None
+
+
 def demonstration_starts(spec: WorldSpec, starts: str = "world") -> list[tuple[float, float, float]]:
     """The fixed part of a training run's schedule: ``"default"`` = the world's pose only,
     ``"world"`` = every start pose of the world (default pose first)."""
     if starts == "default":
         return [tuple(spec.pose)]
-    if starts == "world":
+    if starts in ("world", "free"):
         return [tuple(p) for p in spec.start_poses]
-    raise ValueError(f"starts must be 'default' or 'world', got {starts!r}")
+    raise ValueError(f"starts must be 'default', 'world' or 'free', got {starts!r}")
 
 
 def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: int = 0,
@@ -190,7 +220,8 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
           policy=None, starts: str | None = None, segment: float | None = None,
           random_starts: float | None = None, turn: float | None = None,
           consistent: bool | None = None, rounds: int | None = None,
-          round_seconds: float | None = None, takeover: float | None = None) -> Trajectory:
+          round_seconds: float | None = None, takeover: float | None = None,
+          round_free: int | None = None) -> Trajectory:
     """One training run: the world's scripted teacher demonstrates for ``seconds`` (sim time, in
     total) while ``learner`` observes every step.
 
@@ -218,6 +249,7 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
     rounds = int(recipe.get("rounds", 0) if rounds is None else rounds)
     round_seconds = recipe.get("round_seconds", segment) if round_seconds is None else round_seconds
     takeover = recipe.get("takeover", 0.0) if takeover is None else takeover
+    round_free = int(recipe.get("round_free", 0) if round_free is None else round_free)
     policy = policy or make_policy(task, actions=learner.actions)
     rng = np.random.default_rng(seed)
     demo = Demonstrator(policy, perturb=perturb, rng=rng, dt=dt)
@@ -236,7 +268,10 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
         if k < len(fixed) or random_starts <= 0:
             pose, limit = fixed[k % len(fixed)], segment
         else:
-            pose = sample_pose(spec, traj.poses, rng, turn=turn) or fixed[k % len(fixed)]
+            if starts == "free":
+                pose = free_pose(spec, rng) or fixed[k % len(fixed)]
+            else:
+                pose = sample_pose(spec, traj.poses, rng, turn=turn) or fixed[k % len(fixed)]
             limit = segment * random_starts
         world.reset(poses=[pose], seed=seed * 1000 + k)
         demo.reset()
@@ -262,7 +297,8 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
         rounds = 0  # a corrective demonstration from a given pose: no rounds
     if rounds > 0:
         round_stats = _corrective_rounds(spec, learner, policy, fixed, rounds, round_seconds,
-                                         takeover, seed, range_noise, odom_noise, dt, traj)
+                                         takeover, seed, range_noise, odom_noise, dt, traj,
+                                         free=round_free, rng=rng)
     traj.wall_time = time.perf_counter() - t0
     learner.session = {"world": spec.name, "world_path": str(spec.path) if spec.path else None,
                        "seconds": seconds, "seed": seed, "perturb": perturb,
@@ -271,6 +307,7 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
                        "consistent": consistent, "demonstration_vectors": demo_vectors,
                        "rounds": rounds, "round_seconds": round_seconds if rounds else None,
                        "takeover": takeover if rounds else None, "round_stats": round_stats,
+                       "round_free": round_free if rounds else None,
                        "range_noise": range_noise, "odom_noise": odom_noise,
                        "vectors": traj.learned}
     return traj
@@ -278,16 +315,21 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
 
 def _corrective_rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, poses, rounds: int,
                        seconds: float, takeover: float, seed: int, range_noise: float,
-                       odom_noise: float, dt: float, traj: Trajectory) -> list[dict]:
+                       odom_noise: float, dt: float, traj: Trajectory, free: int = 0,
+                       rng=None) -> list[dict]:
     """DAgger rounds (see ``train``): the tree drives, the teacher labels; per round the number
-    of steps, disagreements (learned labels that differed from the tree's choice) and takeovers."""
+    of steps, disagreements (learned labels that differed from the tree's choice) and takeovers.
+    ``free`` > 0: each round also drives from that many fresh poses anywhere in the free space
+    (``free_pose``), so the corrections cover states the start poses never lead to."""
     world = World(spec, robots=1, seed=seed, range_noise=range_noise, odom_noise=odom_noise)
     tree = TreePolicy.from_learner(learner)
     side = followed_side(spec.task)
     stats = []
     for r in range(rounds):
         steps = disagree = took = 0
-        for k, pose in enumerate(poses):
+        extra = [p for p in (free_pose(spec, rng) for _ in range(free)) if p is not None] \
+            if free > 0 and rng is not None else []
+        for k, pose in enumerate([*poses, *extra]):
             world.reset(poses=[pose], seed=seed * 1000 + 500 + r * 50 + k)
             policy.reset()
             for _ in range(max(1, int(round(seconds / dt)))):
@@ -366,9 +408,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-radius", type=float, default=None)
     parser.add_argument("--max-nodes", type=int, default=None)
     parser.add_argument("--stride", type=int, default=None, help="learn every n-th step")
-    parser.add_argument("--starts", choices=["default", "world"], default=None,
+    parser.add_argument("--starts", choices=["default", "world", "free"], default=None,
                         help="demonstrate from the world's default pose only, or from each of its "
-                             "start poses in turn (default: the task's recipe)")
+                             "start poses in turn ('free': then from poses anywhere in the free "
+                             "space, random heading) (default: the task's recipe)")
     parser.add_argument("--segment", type=float, default=None,
                         help="sim seconds per demonstration before the teacher restarts")
     parser.add_argument("--random-segment", type=float, default=None,
@@ -381,6 +424,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "from every start pose, the teacher labels (default: the recipe's)")
     parser.add_argument("--round-seconds", type=float, default=None,
                         help="sim seconds per start pose in each corrective round")
+    parser.add_argument("--round-free", type=int, default=None,
+                        help="corrective rounds also drive from this many random free-space poses")
     parser.add_argument("--takeover", type=float, default=None,
                         help="in corrective rounds the teacher drives while a beam is closer "
                              "than this (m; 0 = never)")
@@ -414,7 +459,8 @@ def main(args) -> int:
                  random_starts=getattr(args, "random_segment", None),
                  consistent=getattr(args, "consistent", None),
                  rounds=getattr(args, "rounds", None), round_seconds=getattr(args, "round_seconds", None),
-                 takeover=getattr(args, "takeover", None))
+                 takeover=getattr(args, "takeover", None),
+                 round_free=getattr(args, "round_free", None))
     out = learner.save(args.out)
     m = traj.metrics()
     print(f"trained on {spec.name} ({spec.task}) for {seconds:g} s from {list(traj.start)}: "

@@ -63,3 +63,31 @@ def test_corrective_rounds_learner_drives_teacher_labels():
     assert len(traj.labels) == 200 + 2 * n * 50
     assert learner.session["demonstration_vectors"] < learner.vectors
     assert learner.metadata()["provenance"]["sessions"][-1]["rounds"] == 2
+
+
+def test_free_pose_inside_and_clear():
+    from lab.harness import _inside, free_pose
+
+    for name in ("room", "maze"):
+        spec = resolve_world(name)
+        rng = np.random.default_rng(3)
+        segs = spec.segments()
+        for _ in range(30):
+            p = free_pose(spec, rng)
+            assert p is not None and _clearance(segs, p[0], p[1]) >= 0.45
+            assert _inside(spec, p[0], p[1]) and -math.pi <= p[2] <= math.pi
+    room = resolve_world("room")
+    assert not _inside(room, 0.5, 0.5)  # the room's cut-off corner (outside the polygon)
+    assert _inside(room, 6.0, 4.5)
+
+
+def test_free_starts_and_free_round_poses():
+    spec = resolve_world("corridor")
+    learner = make_learner(spec.task)
+    traj = train(spec, learner, 40, seed=2, starts="free", segment=10, random_starts=0.5,
+                 rounds=1, round_seconds=3, round_free=2)
+    n_fixed = len(spec.start_poses)
+    assert [tuple(p) for p in traj.segments[:n_fixed]] == [tuple(p) for p in spec.start_poses]
+    assert len(traj.segments) > n_fixed
+    assert learner.session["round_stats"][0]["steps"] == (n_fixed + 2) * 30
+    assert learner.session["round_free"] == 2
