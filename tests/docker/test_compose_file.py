@@ -92,6 +92,9 @@ def test_scenario_flags(compose):
     services = _rhbl_services(compose)
     teacher = build_parser("teacher").parse_args(services["teacher"][1:])
     assert teacher.seconds and teacher.seconds > 0  # stops by itself: the controller takes over
+    # the training recipe: demonstrate, then correct while the controller drives
+    assert teacher.correct and 0 < teacher.demonstrate < teacher.seconds
+    assert teacher.style == "reactive" and teacher.policy == "wall-follower"
     learner = build_parser("learner").parse_args(services["learner"][1:])
     assert learner.out.startswith("/data/")
     controller = build_parser("controller").parse_args(services["controller"][1:])

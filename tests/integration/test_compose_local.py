@@ -3,8 +3,9 @@
 Same commands and arguments as the containers (docker/compose_local.py maps /run/secrets and
 /data to temporary directories and ``router`` to 127.0.0.1), a Python zenoh session in router
 mode on the shipped router config standing in for the router image, secrets made by the
-compose ``secrets`` service's own command. Only RHBL_TEACH_SECONDS is shortened. The scenario
-must end with a learned tree driving the robot.
+compose ``secrets`` service's own command. Only RHBL_TEACH_SECONDS and RHBL_DEMONSTRATE_SECONDS
+are shortened. The teacher demonstrates, then corrects while the controller drives, then stops;
+the scenario must end with a learned tree driving the robot.
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ from protocol.messages import DriverState, State  # noqa: E402
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 ROOT = Path(__file__).resolve().parents[2]
-TEACH_SECONDS = 12
+TEACH_SECONDS = 14
+DEMONSTRATE_SECONDS = 8
 ROBOT = "r0"
 
 
@@ -57,7 +59,8 @@ def _observer(scenario, role="learner") -> zenoh.Config:
 def test_compose_scenario_ends_with_a_learned_tree_driving_the_robot(tmp_path):
     compose_local = _module("compose_local")
     healthcheck = _module("healthcheck")
-    env = dict(os.environ, RHBL_TEACH_SECONDS=str(TEACH_SECONDS), RHBL_LOG_LEVEL="INFO")
+    env = dict(os.environ, RHBL_TEACH_SECONDS=str(TEACH_SECONDS),
+               RHBL_DEMONSTRATE_SECONDS=str(DEMONSTRATE_SECONDS), RHBL_LOG_LEVEL="INFO")
     scenario = compose_local.Scenario(tmp_path, _free_port(), env=env)
     drivers: list[tuple[float, str]] = []
     moving: list[tuple[float, str, float]] = []  # (time, driver, |vx|) from the state stream
@@ -101,8 +104,9 @@ def test_compose_scenario_ends_with_a_learned_tree_driving_the_robot(tmp_path):
         for sub in subs:
             sub.undeclare()
 
-        # the teacher demonstrated and stopped by itself
+        # the teacher demonstrated, corrected and stopped by itself
         assert scenario.procs["teacher"].exits == [0], logs()
+        assert "correcting from" in scenario.procs["teacher"].log.read_text(), logs()
         seen = [d for _, d in drivers]
         assert "teacher" in seen, logs()
         assert handed_over is not None, f"driver never became the controller: {seen}\n{logs()}"
