@@ -20,8 +20,8 @@ import argparse
 import contextlib
 import logging
 import os
-import queue
 import signal
+import threading
 import time
 from collections import OrderedDict, deque
 from pathlib import Path
@@ -49,7 +49,7 @@ from client.journal import Journal, JournalError, journal_path
 from protocol import keys
 from protocol.messages import Scan, TeacherAction, TreeNotice
 
-__all__ = ["LearnerCore", "add_arguments", "main", "TASK_OF_FEATURES"]
+__all__ = ["LearnerCore", "Pairing", "add_arguments", "main", "TASK_OF_FEATURES"]
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +58,8 @@ TASK_OF_FEATURES = {"wall": "wall-following", "maze": "maze"}
 # of demonstration at 10 Hz (~2 KB each); beyond that the oldest are dropped, counted and logged
 MAX_BACKLOG = 36_000
 _RETRY = 1.0  # s between attempts to write the journal again
+# labeled scans waiting to be learned beyond which the learner says (error) it falls behind
+BEHIND = 600  # about a minute of demonstration at 10 Hz
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -239,6 +241,169 @@ def _resume(path, spec: FeatureSpec | None) -> DemonstrationLearner:
         raise ProcessError(f"cannot load snapshot {path}: {exc}", EXIT_USAGE) from exc
 
 
+# ---- pairing labels with scans, as they arrive (no zenoh: testable on its own) -------------
+class Pairing:
+    """Pairs every label with exactly the scan it answers (by scan id, whichever arrives first),
+    at arrival: ``on_scan`` and ``on_label`` are the subscribers' callbacks (any thread); the
+    learning loop takes the labeled scans with ``get``.
+
+    Memory is bounded however fast scans arrive and however slowly the loop learns:
+
+    - scans are never queued: a scan is decoded on arrival and either completes a waiting label
+      or goes into the pairing buffer (the newest ``scan_buffer`` unlabeled scans, keyed by id).
+      Older unlabeled scans are forgotten and counted (``forgotten``): most scans are never
+      labeled, so that is not a loss. A label whose scan was already forgotten (it came more
+      than ``scan_buffer`` scans late) is counted ``unmatched`` and logged at once.
+    - labels whose scan has not arrived wait at most ``match_timeout`` (then dropped, counted
+      ``unmatched`` and logged), as before.
+    - labeled scans (``ready``) are never dropped while the loop falls behind: their number is
+      bounded by the teacher's label rate, and each one is kept (an error is logged when more
+      than ``BEHIND`` wait, every few seconds while they do). Only beyond ``max_ready`` (an hour
+      of demonstration at 10 Hz, as the journal backlog) the oldest is dropped, counted ``lost``
+      and logged as an error (and the learner exits 1). No backpressure: blocking a zenoh
+      callback stalls the whole session (scans, queries), and the router would then drop the
+      teacher's labels under congestion, silently: keeping them here is the only visible place.
+    """
+
+    def __init__(self, scan_buffer: int = 512, match_timeout: float = 2.0,
+                 max_ready: int = MAX_BACKLOG, behind: int = BEHIND, on_scan_seen=None,
+                 clock=time.monotonic):
+        self.scan_buffer = max(1, int(scan_buffer))
+        self.match_timeout = match_timeout
+        self.max_ready = max_ready
+        self.behind = behind
+        self._seen = on_scan_seen
+        self._clock = clock
+        self._cond = threading.Condition()
+        self.scans: OrderedDict[int, Scan] = OrderedDict()  # unlabeled, newest last
+        self.pending: dict[int, tuple[TeacherAction, float]] = {}  # labels awaiting their scan
+        self.ready: deque[tuple[Scan, TeacherAction]] = deque()  # labeled, to be learned
+        self.last_id = -1
+        self.forgot_upto = -1  # the newest scan id forgotten unlabeled
+        self.stats = {"scans": 0, "labels": 0, "forgotten": 0, "unmatched": 0, "bad": 0,
+                      "lost": 0, "max_ready": 0}
+        self._said_behind = -1e9
+
+    # -- the callbacks (zenoh threads) --
+    def on_scan(self, data: bytes) -> None:
+        if self._seen is not None:
+            self._seen()
+        try:
+            scan = Scan.decode(data)
+        except Exception as exc:  # noqa: BLE001 - DecodeError
+            with self._cond:
+                self.stats["bad"] += 1
+            log.warning("dropped a malformed scan: %s", exc)
+            return
+        with self._cond:
+            self.stats["scans"] += 1
+            if scan.id <= self.last_id:
+                log.info("scan ids restarted (%d after %d): the server restarted; forgetting "
+                         "%d unlabeled scans", scan.id, self.last_id, len(self.scans))
+                self.scans.clear()
+                self.forgot_upto = -1
+            self.last_id = scan.id
+            hit = self.pending.pop(scan.id, None)
+            if hit is not None:
+                self._ready(scan, hit[0])
+                return
+            self.scans[scan.id] = scan
+            while len(self.scans) > self.scan_buffer:
+                old, _ = self.scans.popitem(last=False)
+                self.forgot_upto = max(self.forgot_upto, old)
+                self.stats["forgotten"] += 1
+
+    def on_label(self, data: bytes) -> None:
+        try:
+            act = TeacherAction.decode(data)
+        except Exception as exc:  # noqa: BLE001
+            with self._cond:
+                self.stats["bad"] += 1
+            log.warning("dropped a malformed teacher action: %s", exc)
+            return
+        with self._cond:
+            self.stats["labels"] += 1
+            scan = self.scans.pop(act.scan_id, None)
+            if scan is not None:
+                self._ready(scan, act)
+            elif act.scan_id <= self.forgot_upto:
+                self.stats["unmatched"] += 1
+                n = self.stats["unmatched"]
+                if n <= 3 or n % 100 == 0:
+                    log.warning("label %r for scan %d came more than %d scans after it: the "
+                                "scan was already forgotten; dropped (%d unmatched so far; "
+                                "raise --scan-buffer)", act.action, act.scan_id,
+                                self.scan_buffer, n)
+            else:
+                self.pending[act.scan_id] = (act, self._clock())
+                if len(self.pending) > 64:
+                    self._expire(self._clock())
+
+    def _ready(self, scan: Scan, act: TeacherAction) -> None:  # under the lock
+        self.ready.append((scan, act))
+        n = len(self.ready)
+        self.stats["max_ready"] = max(self.stats["max_ready"], n)
+        if n > self.max_ready:
+            self.ready.popleft()
+            self.stats["lost"] += 1
+            lost = self.stats["lost"]
+            if lost <= 3 or lost % 1000 == 0:
+                log.error("the learner is far behind the teacher: dropped the oldest of %d "
+                          "labeled scans waiting to be learned (%d lost so far)",
+                          self.max_ready, lost)
+        elif n > self.behind and self._clock() - self._said_behind >= 5.0:
+            self._said_behind = self._clock()
+            log.error("the learner falls behind the teacher: %d labeled scans wait to be "
+                      "learned (all kept, at most %d; then the oldest are dropped)", n,
+                      self.max_ready)
+        self._cond.notify()
+
+    # -- the learning loop --
+    def get(self, timeout: float) -> tuple[Scan, TeacherAction] | None:
+        """The oldest labeled scan, or None after ``timeout`` s without one."""
+        with self._cond:
+            if not self.ready:
+                self._cond.wait(timeout)
+            return self.ready.popleft() if self.ready else None
+
+    def expire(self) -> list[int]:
+        """Drop (count, log) the labels that waited longer than ``match_timeout``."""
+        with self._cond:
+            return self._expire(self._clock())
+
+    def _expire(self, now: float) -> list[int]:  # under the lock
+        old = [k for k, (_, t) in self.pending.items() if now - t > self.match_timeout]
+        for k in old:
+            del self.pending[k]
+        if old:
+            self.stats["unmatched"] += len(old)
+            log.warning("%d labels matched no scan within %.1f s (scan ids %s...): dropped; "
+                        "%d so far", len(old), self.match_timeout, old[:3],
+                        self.stats["unmatched"])
+        return old
+
+    def close(self) -> int:
+        """Count the labels still waiting for their scan as unmatched; how many waited."""
+        with self._cond:
+            n = len(self.pending)
+            self.stats["unmatched"] += n
+            self.pending.clear()
+            return n
+
+    def waiting(self) -> int:
+        """Labeled scans waiting to be learned."""
+        with self._cond:
+            return len(self.ready)
+
+    def discard(self) -> int:
+        """Forget the labeled scans waiting to be learned (the caller counts and logs them as
+        lost); how many there were."""
+        with self._cond:
+            n = len(self.ready)
+            self.ready.clear()
+            return n
+
+
 # ---- the process --------------------------------------------------------------------------
 class _Stop:
     """SIGINT/SIGTERM set a flag; the loop finishes the vector at hand, snapshots and exits."""
@@ -270,7 +435,6 @@ def _body(ctx: Context) -> int:
     except JournalError as exc:
         raise ProcessError(f"learner: {exc}") from exc
     session, robot = ctx.session, ctx.robot
-    events: queue.SimpleQueue = queue.SimpleQueue()
     latest = {"bytes": core.out.read_bytes() if core.out.exists() else None}
     notice_pub = session.declare_publisher(keys.learner_notice_key(robot))
     snap_key = keys.learner_snapshot_key(robot)
@@ -286,10 +450,13 @@ def _body(ctx: Context) -> int:
             log.debug("snapshot reply failed: %s", exc)
 
     scan_k = keys.scan_key(robot)
+    watch = ScanWatch("learner", scan_k, stale=3.0)
+    # labels are paired with their scans as they arrive: nothing but labeled scans is queued
+    pairing = Pairing(args.scan_buffer, args.match_timeout, on_scan_seen=watch.seen)
     subs = [
-        session.declare_subscriber(scan_k, lambda s: events.put((0, s.payload.to_bytes()))),
+        session.declare_subscriber(scan_k, lambda s: pairing.on_scan(s.payload.to_bytes())),
         session.declare_subscriber(keys.teacher_action_key(robot),
-                                   lambda s: events.put((1, s.payload.to_bytes()))),
+                                   lambda s: pairing.on_label(s.payload.to_bytes())),
     ]
     queryable = session.declare_queryable(snap_key, on_query)
     ctx.declare_token()  # after the subscriptions: the token means "ready to receive labels"
@@ -306,13 +473,10 @@ def _body(ctx: Context) -> int:
             wait_for_server(ctx)
         except SystemExit:
             stop.flag = True
-    watch = ScanWatch("learner", scan_k, stale=3.0).start()
-    scans: OrderedDict[int, Scan] = OrderedDict()
-    pending: dict[int, tuple[TeacherAction, float]] = {}
-    stats = {"learned": 0, "paired": 0, "unmatched": 0, "bad": 0, "rejected": 0, "lost": 0}
+    watch.start()
+    stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0}
     last_snap = time.monotonic()
     last_log = last_snap
-    last_id = -1
     # labeled scans waiting to be journaled (in order): empty unless the journal cannot be
     # written (disk full); nothing is learned before it is journaled
     backlog: deque[tuple[Scan, TeacherAction]] = deque()
@@ -378,6 +542,7 @@ def _body(ctx: Context) -> int:
             flush_backlog()
 
     drain_until = None  # after a stop request: finish what already arrived, then exit
+    last_expire = time.monotonic()
     code = 0
     try:
         while True:
@@ -389,70 +554,35 @@ def _body(ctx: Context) -> int:
                     with contextlib.suppress(Exception):
                         ctx.token.undeclare()
                     ctx.token = None
-            try:
-                kind, data = events.get(timeout=0.1 if drain_until is None else 0.05)
-            except queue.Empty:
-                kind = None
-                if drain_until is not None:
-                    break  # quiet: everything that arrived is learned
+            item = pairing.get(timeout=0.1 if drain_until is None else 0.05)
+            if item is None and drain_until is not None:
+                break  # quiet: everything that arrived is learned
             if drain_until is not None and time.monotonic() > drain_until:
-                log.warning("stopping with %d messages not processed (drain limit)",
-                            events.qsize())
+                left = pairing.discard() + (item is not None)
+                if left:
+                    stats["lost"] += left
+                    log.error("stopping with %d labeled scans not learned (--drain %.1f s "
+                              "limit): lost", left, args.drain)
                 break
-            if kind == 0:
-                watch.seen()
-                try:
-                    scan = Scan.decode(data)
-                except Exception as exc:  # noqa: BLE001 - DecodeError
-                    stats["bad"] += 1
-                    log.warning("dropped a malformed scan: %s", exc)
-                    scan = None
-                if scan is not None and scan.id <= last_id:
-                    log.info("scan ids restarted (%d after %d): the server restarted; "
-                             "forgetting %d unlabeled scans", scan.id, last_id, len(scans))
-                    scans.clear()
-                if scan is not None:
-                    last_id = scan.id
-                    hit = pending.pop(scan.id, None)
-                    if hit is not None:
-                        learn(scan, hit[0])
-                    else:
-                        scans[scan.id] = scan
-                        while len(scans) > args.scan_buffer:
-                            scans.popitem(last=False)
-            elif kind == 1:
-                try:
-                    act = TeacherAction.decode(data)
-                except Exception as exc:  # noqa: BLE001
-                    stats["bad"] += 1
-                    log.warning("dropped a malformed teacher action: %s", exc)
-                    act = None
-                if act is not None:
-                    scan = scans.pop(act.scan_id, None)
-                    if scan is not None:
-                        learn(scan, act)
-                    else:
-                        pending[act.scan_id] = (act, time.monotonic())
+            if item is not None:
+                learn(*item)
             now = time.monotonic()
             if backlog and now >= jstate["retry_at"]:
                 flush_backlog()
-            if pending and (kind is None or len(pending) > 64):
-                old = [k for k, (_, t) in pending.items() if now - t > args.match_timeout]
-                for k in old:
-                    del pending[k]
-                if old:
-                    stats["unmatched"] += len(old)
-                    log.warning("%d labels matched no scan within %.1f s (scan ids %s...): "
-                                "dropped; %d so far", len(old), args.match_timeout, old[:3],
-                                stats["unmatched"])
+            if item is None or now - last_expire >= 0.5:
+                last_expire = now
+                pairing.expire()
             if core.dirty and now - last_snap >= args.snapshot_every:
                 publish_notice()
                 last_snap = now
             if now - last_log >= 5.0:
                 last_log = now
-                log.info("vectors %d (learned %d this run), nodes %d, height %d, unmatched %d",
+                ps = pairing.stats
+                log.info("vectors %d (learned %d this run), nodes %d, height %d, unmatched %d; "
+                         "%d labeled scans waiting, %d unlabeled scans forgotten",
                          core.applied, stats["learned"], core.learner.nodes,
-                         core.learner.height, stats["unmatched"])
+                         core.learner.height, ps["unmatched"], pairing.waiting(),
+                         ps["forgotten"])
     finally:
         watch.stop()
         signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -460,22 +590,37 @@ def _body(ctx: Context) -> int:
         for s in subs:
             s.undeclare()
         try:
+            # labeled scans that arrived after the loop's last look (a stop, an error): learned
+            # after a stop, counted lost otherwise; never dropped silently
+            while drain_until is not None and time.monotonic() <= drain_until + 1.0:
+                item = pairing.get(0.0)
+                if item is None:
+                    break
+                learn(*item)
+            if left := pairing.discard():
+                stats["lost"] += left
+                log.error("%d labeled scans not learned (the learner is failing or out of "
+                          "--drain time): lost", left)
             if backlog:
                 flush_backlog()
             if backlog:
                 stats["lost"] += len(backlog)
                 log.error("%d labeled vectors could not be journaled (the journal is not "
                           "writable) and are lost", len(backlog))
-            if stats["lost"]:
+            pairing.close()
+            ps = pairing.stats
+            lost = stats["lost"] + ps["lost"]
+            if lost:
                 code = 1
             if core.dirty and not publish_notice():
                 code = 1
-            stats["unmatched"] += len(pending)
             log.info("stopped: %d labeled vectors (%d this run, %d learned, %d unmatched "
                      "labels, %d malformed, %d rejected, %d lost), %d nodes, height %d; "
-                     "snapshot %s", core.applied, stats["paired"], stats["learned"],
-                     stats["unmatched"], stats["bad"], stats["rejected"], stats["lost"],
-                     core.learner.nodes, core.learner.height, core.out)
+                     "snapshot %s; %d scans received, %d unlabeled ones forgotten, at most %d "
+                     "labeled scans waited to be learned", core.applied, stats["paired"],
+                     stats["learned"], ps["unmatched"], ps["bad"], stats["rejected"], lost,
+                     core.learner.nodes, core.learner.height, core.out, ps["scans"],
+                     ps["forgotten"], ps["max_ready"])
         finally:
             queryable.undeclare()
             try:

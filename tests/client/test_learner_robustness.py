@@ -1,7 +1,8 @@
-"""The learner process under a full disk and hostile input: it keeps running, keeps every
-labeled vector it could not journal yet in memory (in order) and writes it once space is back;
-a scan its features cannot use is dropped with a log line, not a crash. The test is the server
-and the teacher (it publishes scans and labels itself)."""
+"""The learner process under a full disk, hostile input and a flood of scans: it keeps running,
+keeps every labeled vector it could not journal yet in memory (in order) and writes it once space
+is back; a scan its features cannot use is dropped with a log line, not a crash; a learner far
+behind a flood of scans stays in bounded memory and still learns every label. The test is the
+server and the teacher (it publishes scans and labels itself)."""
 
 from __future__ import annotations
 
@@ -119,4 +120,83 @@ def test_disk_full_keeps_labels_in_memory_and_journals_them_later(free_port, tmp
     text = log.read_text()
     assert f"scan {bad[0]} dropped" in text, text
     assert "the journal is writable again" in text, text
+    assert "Traceback" not in text, text
+
+
+# runs the learner with every learning step slowed down (a learner that falls behind)
+_SLOW = """
+import sys, time
+import client.learner as L
+_learn = L.LearnerCore.learn
+def slow(self, *args, **kwargs):
+    time.sleep(0.02)
+    return _learn(self, *args, **kwargs)
+L.LearnerCore.learn = slow
+from lab.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def _rss_mb(pid: int) -> float:
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    raise AssertionError("no VmRSS")
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs /proc")
+def test_a_flood_of_scans_keeps_a_slow_learner_bounded_and_every_label_learned(free_port,
+                                                                               tmp_path):
+    """30000 scans as fast as zenoh carries them (blocking congestion control: none is lost on
+    the way), one in 100 labeled, into a learner that needs 20 ms per labeled scan. Its memory
+    stays flat (the old unbounded event queue grew by ~50 MB here) and every label is learned."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    out = tmp_path / "t.rhbl"
+    log = tmp_path / "learner.log"
+    rng = np.random.default_rng(0)
+    ranges = [rng.uniform(0.3, 3.0, 360).astype(np.float32) for _ in range(8)]
+    n, every = 30_000, 100
+    block = zenoh.CongestionControl.BLOCK
+    with zenoh.open(make_config(mode="router", listen=[endpoint])) as session:
+        scan_pub = session.declare_publisher(keys.scan_key("r0"), congestion_control=block)
+        act_pub = session.declare_publisher(keys.teacher_action_key("r0"),
+                                            congestion_control=block)
+        with open(log, "wb") as f:
+            proc = subprocess.Popen(
+                [sys.executable, "-c", _SLOW, "learner", "--features", "wall", "--out",
+                 str(out), "--connect", endpoint],
+                cwd=ROOT, stdout=f, stderr=subprocess.STDOUT, start_new_session=True,
+                env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        try:
+            token = keys.alive_key("learner", f"r0-{proc.pid}")
+            _wait(lambda: any(r.ok is not None
+                              for r in session.liveliness().get(token, timeout=0.5)),
+                  30, "the learner's token", proc, log)
+            scan_pub.put(Scan(ts=0.0, id=0, ranges=ranges[0]).encode())  # the server is up
+            _wait(lambda: "server is up" in log.read_text(), 20, "the first scan", proc, log)
+            time.sleep(0.5)
+            before = peak = _rss_mb(proc.pid)
+            for sid in range(1, n + 1):
+                scan_pub.put(Scan(ts=0.01 * sid, id=sid, ranges=ranges[sid % 8]).encode())
+                if sid % every == 0:
+                    act_pub.put(TeacherAction(scan_id=sid, action="fwd").encode())
+                if sid % 1000 == 0:
+                    peak = max(peak, _rss_mb(proc.pid))
+            for _ in range(10):  # the scans still on their way
+                peak = max(peak, _rss_mb(proc.pid))
+                time.sleep(0.1)
+            assert peak - before < 20, (before, peak)
+            labeled = list(range(every, n + 1, every))
+            _wait(lambda: _records(out) == labeled, 60, "every label learned", proc, log)
+            os.kill(proc.pid, signal.SIGINT)
+            assert proc.wait(30) == 0, log.read_text()
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait(10)
+    text = log.read_text()
+    assert " 0 unmatched labels" in text and " 0 lost)" in text, text
+    assert f"{n + 1} scans received" in text, text
     assert "Traceback" not in text, text

@@ -1,14 +1,20 @@
-"""The learner's core without zenoh: journal first, snapshots with provenance, exact recovery."""
+"""The learner's core without zenoh: journal first, snapshots with provenance, exact recovery;
+labels paired with their scans under a flood of scans, in bounded memory."""
 
 from __future__ import annotations
+
+import logging
+import threading
+import tracemalloc
 
 import numpy as np
 import pytest
 
 from client._process import ProcessError
 from client.behaviour.learning import load_snapshot
-from client.journal import journal_path
-from client.learner import LearnerCore
+from client.journal import Journal, journal_path
+from client.learner import LearnerCore, Pairing
+from protocol.messages import Scan, TeacherAction
 
 LABELS = ["fwd", "fwd-left", "rot-left", "fwd-right", "rot-right"]
 
@@ -96,3 +102,117 @@ def test_snapshot_ahead_of_its_journal_is_an_error(tmp_path):
 def test_a_new_tree_needs_features(tmp_path):
     with pytest.raises(ProcessError, match="needs --features"):
         LearnerCore(tmp_path / "t.rhbl")
+
+
+# ---- pairing under a flood of scans -----------------------------------------------------------
+def _scan(sid: int, ranges: np.ndarray) -> bytes:
+    return Scan(ts=0.01 * sid, id=sid, ranges=ranges).encode()
+
+
+def _label(sid: int) -> bytes:
+    return TeacherAction(scan_id=sid, action=LABELS[sid % 5]).encode()
+
+
+def test_a_scan_flood_stays_bounded_and_every_label_whose_scan_arrived_is_learned(tmp_path):
+    """30000 scans arrive while the learning loop is stalled (a learner far behind a server at a
+    high --speedup); one scan in 60 is labeled, the label some scans after its scan, a few
+    before it. Memory stays bounded by the pairing buffer plus the labeled scans, and once the
+    loop runs every label is learned, in order, exactly once."""
+    n, every, buffer = 30_000, 60, 256
+    rng = np.random.default_rng(0)
+    ranges = [rng.uniform(0.3, 3.0, 360).astype(np.float32) for _ in range(16)]
+    scans = [_scan(sid, ranges[sid % 16]) for sid in range(1, n + 1)]  # encoded up front
+    labeled = list(range(every, n + 1, every))
+    early = set(labeled[::25])  # these labels arrive before their scan
+    lag = {sid: 1 + sid % 200 for sid in labeled}  # the others 1..200 scans after theirs
+    due: dict[int, list[int]] = {}
+    for sid in labeled:
+        if sid not in early:
+            due.setdefault(sid + lag[sid], []).append(sid)
+    too_late = n - 2 * buffer  # one label that comes after its scan was forgotten
+    assert too_late not in labeled
+
+    pairing = Pairing(scan_buffer=buffer, match_timeout=60.0)
+    sizes = {"scans": 0, "ready": 0, "pending": 0}
+
+    def flood():
+        for sid, data in enumerate(scans, start=1):
+            if sid in early:
+                pairing.on_label(_label(sid))
+            pairing.on_scan(data)
+            for old in due.pop(sid, ()):
+                pairing.on_label(_label(old))
+            if sid % 500 == 0:
+                sizes["scans"] = max(sizes["scans"], len(pairing.scans))
+                sizes["ready"] = max(sizes["ready"], pairing.waiting())
+                sizes["pending"] = max(sizes["pending"], len(pairing.pending))
+        for rest in due.values():
+            for old in rest:
+                pairing.on_label(_label(old))
+        pairing.on_label(_label(too_late))
+
+    tracemalloc.start()
+    try:
+        base = tracemalloc.get_traced_memory()[0]
+        thread = threading.Thread(target=flood)  # the zenoh callbacks' thread
+        thread.start()
+        thread.join(120)
+        assert not thread.is_alive()
+        peak = tracemalloc.get_traced_memory()[1] - base
+    finally:
+        tracemalloc.stop()
+
+    assert pairing.stats["scans"] == n
+    assert len(pairing.scans) <= buffer and sizes["scans"] <= buffer
+    assert pairing.waiting() == len(labeled)  # every labeled scan kept, none dropped
+    assert sizes["pending"] <= len(early)
+    assert pairing.pending == {}
+    assert pairing.stats["lost"] == 0
+    assert pairing.stats["unmatched"] == 1  # the one label after its scan was forgotten
+    # every scan was either labeled, forgotten unlabeled, or is still in the buffer
+    assert pairing.stats["forgotten"] + len(pairing.scans) + len(labeled) == n
+    assert pairing.stats["forgotten"] > n - buffer - len(labeled) - every
+    # what stays in memory is the buffer plus the labeled scans (~2 KB each), not the 30000
+    # scans that arrived (~60 MB as queued bytes, more as decoded scans)
+    one = 2_000 + 8 * 360
+    assert peak < (buffer + len(labeled)) * one * 2 + 2_000_000, peak
+
+    out = tmp_path / "flood.rhbl"
+    core = LearnerCore(out, features="wall")
+    while (item := pairing.get(0.0)) is not None:
+        scan, act = item
+        core.learn(scan.id, scan.ts, scan.ranges, float(scan.pose[2]), act.action)
+    core.close()
+    with Journal.open(journal_path(out), readonly=True) as jr:
+        records = [(r.scan_id, r.label) for r in jr.records()]
+    assert sorted(records) == [(sid, LABELS[sid % 5]) for sid in labeled]
+    assert len(records) == len(set(records))
+
+
+def test_pairing_says_when_the_learner_falls_behind_and_counts_what_it_drops(caplog):
+    pairing = Pairing(scan_buffer=8, max_ready=10, behind=4)
+    ranges = np.ones(360, np.float32)
+    with caplog.at_level(logging.WARNING, logger="client.learner"):
+        for sid in range(1, 16):
+            pairing.on_scan(_scan(sid, ranges))
+            pairing.on_label(_label(sid))
+    text = caplog.text
+    assert "falls behind the teacher: 5 labeled scans wait" in text
+    assert "far behind the teacher: dropped the oldest" in text
+    assert pairing.stats["lost"] == 5 and pairing.waiting() == 10
+    assert pairing.get(0.0)[0].id == 6  # the oldest went first
+    # malformed input is counted and logged, never raised into the zenoh callback
+    pairing.on_scan(b"not a scan")
+    pairing.on_label(b"not a label")
+    assert pairing.stats["bad"] == 2
+    # a label whose scan never arrives expires after match_timeout, counted
+    clock = [0.0]
+    late = Pairing(match_timeout=1.0, clock=lambda: clock[0])
+    late.on_label(_label(99))
+    clock[0] = 2.0
+    assert late.expire() == [99] and late.stats["unmatched"] == 1
+    # ids going backwards (a restarted server): the old run's scans are forgotten
+    late.on_scan(_scan(500, ranges))
+    late.on_scan(_scan(1, ranges))
+    late.on_label(_label(500))
+    assert late.waiting() == 0 and 500 in late.pending
