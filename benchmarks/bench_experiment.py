@@ -1,6 +1,7 @@
 """Tree size against success: the trade-off study of docs/experiments.md.
 
     python benchmarks/bench_experiment.py [--trials 3] [--task wall-following] [--json out.json]
+        [--study size|tradeoff|beams]
 
 Each row trains on the task's shipped world with one recipe (spawn rule, teacher style,
 perturbation, sample stride) for ``--trials`` seeds and evaluates from every start pose.
@@ -35,14 +36,55 @@ ROWS = [
 ]
 
 
+# the size study of the current recipe (docs/experiments.md): reactive teacher, free-space
+# demonstrations, corrective rounds; each row overrides one setting
+SIZE_ROWS = [
+    ("winner (default)", {}),
+    ("literal spawn=all (paper)", {"spawn": "all"}),
+    ("min_radius 0.005", {"min_radius": 0.005}),
+    ("min_radius 0.02", {"min_radius": 0.02}),
+    ("max_depth 20", {"max_depth": 20}),
+    ("stride 2", {"stride": 2}),
+    ("stride 5", {"stride": 5}),
+    ("euclidean", {"distance": "euclidean"}),
+    ("1 corrective round", {"rounds": 1}),
+    ("no corrective round", {"rounds": 0}),
+]
+
+
+def size_study(task: str, trials: int) -> list[dict]:
+    from lab.experiment import default_eval_worlds
+
+    out = []
+    print(f"{'setting':28} {'nodes':>7} {'height':>6}  success per world (mean/min)")
+    for name, kw in SIZE_ROWS:
+        res = run_experiment(task, trials=trials, eval_worlds=default_eval_worlds(task), **kw)
+        s = res["summary"]
+        worlds = {w: (v["success_rate"]["mean"], v["success_rate"]["min"])
+                  for w, v in s["worlds"].items()}
+        out.append({"setting": name, **kw, "nodes": s["nodes"]["mean"],
+                    "height": s["height"]["mean"], "worlds": worlds})
+        print(f"{name:28} {s['nodes']['mean']:>7.0f} {s['height']['mean']:>6.1f}  "
+              + " ".join(f"{w}:{m:.0%}/{lo:.0%}" for w, (m, lo) in worlds.items()), flush=True)
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--trials", type=int, default=3)
     ap.add_argument("--task", default="wall-following", choices=["wall-following", "maze"])
     ap.add_argument("--json", default=None)
-    ap.add_argument("--study", default="tradeoff", choices=["tradeoff", "beams"])
+    ap.add_argument("--study", default="size", choices=["size", "tradeoff", "beams"],
+                    help="size: the current recipe's size study (default); tradeoff: the old "
+                         "smooth-teacher study; beams: beam choice")
     args = ap.parse_args()
     out = []
+    if args.study == "size":
+        out = size_study(args.task, args.trials)
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump(out, fh, indent=1)
+        return 0
     if args.study == "beams":
         print(f"{'beams':32} {'success':>8} {'min':>5} {'nodes':>7} {'height':>6} {'collisions':>10}")
         for name, beams in BEAMS:
