@@ -162,3 +162,13 @@ def test_a_robot_name_that_is_not_a_key_chunk_is_bad_input():
     r = _run("teacher", "--robot", "a/b", "--connect", "tcp/127.0.0.1:1")
     assert r.returncode == EXIT_USAGE, r.stderr
     assert "--robot must be" in r.stderr and "'a/b'" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_correcting_needs_a_scripted_teacher(free_port):
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    with zenoh.open(make_config(mode="router", listen=[ep])):
+        r = _run("teacher", "--connect", ep, "--policy", "keyboard", "--correct")
+        assert r.returncode == EXIT_USAGE and "--correct needs a scripted expert" in r.stderr
+        r = _run("teacher", "--connect", ep, "--correct", "--takeover", "-1")
+        assert r.returncode == EXIT_USAGE and ">= 0" in r.stderr
+    assert "Traceback" not in r.stderr
