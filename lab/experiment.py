@@ -53,6 +53,7 @@ def run_trial(task: str, seed: int, world: str | None = None, train_seconds: flo
               turn: float | None = None, consistent: bool | None = None,
               rounds: int | None = None, round_seconds: float | None = None,
               takeover: float | None = None, round_free: int | None = None,
+              augment: int | None = None, augment_scale: float | None = None,
               teacher_params: dict | None = None,
               **tree_params) -> dict:
     spec = resolve_world(world or WORLD[task])
@@ -65,7 +66,8 @@ def run_trial(task: str, seed: int, world: str | None = None, train_seconds: flo
           range_noise=range_noise if train_noise else 0.0,
           odom_noise=odom_noise if train_noise else 0.0, starts=starts, segment=segment,
           random_starts=random_segment, turn=turn, consistent=consistent, rounds=rounds,
-          round_seconds=round_seconds, takeover=takeover, round_free=round_free)
+          round_seconds=round_seconds, takeover=takeover, round_free=round_free,
+          augment=augment, augment_scale=augment_scale)
     t_train = time.perf_counter() - t0
     tree = TreePolicy.from_learner(learner)
     out = {"seed": seed, "nodes": learner.nodes, "height": learner.height,
@@ -153,6 +155,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--takeover", type=float, default=None)
     parser.add_argument("--round-free", type=int, default=None,
                         help="corrective rounds also drive from N random free-space poses")
+    parser.add_argument("--augment", type=int, default=None,
+                        help="scale augmentation copies per labelled state (see rhbl train)")
+    parser.add_argument("--augment-scale", type=float, default=None)
     parser.add_argument("--range-noise", type=float, default=0.0)
     parser.add_argument("--odom-noise", type=float, default=0.0)
     parser.add_argument("--train-noise", action="store_true",
@@ -179,7 +184,8 @@ def main(args) -> int:
                              segment=args.segment, random_segment=args.random_segment,
                              consistent=args.consistent, rounds=args.rounds,
                              round_seconds=args.round_seconds, takeover=args.takeover,
-                             round_free=args.round_free, **tree)
+                             round_free=args.round_free, augment=args.augment,
+                             augment_scale=args.augment_scale, **tree)
         results[task] = res
         print(f"\n{task}: {args.trials} trials")
         print(format_worlds(res))

@@ -221,7 +221,8 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
           random_starts: float | None = None, turn: float | None = None,
           consistent: bool | None = None, rounds: int | None = None,
           round_seconds: float | None = None, takeover: float | None = None,
-          round_free: int | None = None) -> Trajectory:
+          round_free: int | None = None, augment: int | None = None,
+          augment_scale: float | None = None) -> Trajectory:
     """One training run: the world's scripted teacher demonstrates for ``seconds`` (sim time, in
     total) while ``learner`` observes every step.
 
@@ -250,8 +251,11 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
     round_seconds = recipe.get("round_seconds", segment) if round_seconds is None else round_seconds
     takeover = recipe.get("takeover", 0.0) if takeover is None else takeover
     round_free = int(recipe.get("round_free", 0) if round_free is None else round_free)
+    augment = int(recipe.get("augment", 0) if augment is None else augment)
+    augment_scale = float(recipe.get("augment_scale", 1.3) if augment_scale is None else augment_scale)
     policy = policy or make_policy(task, actions=learner.actions)
     rng = np.random.default_rng(seed)
+    aug = _Augmenter(policy, augment, augment_scale, seed) if augment > 0 else None
     demo = Demonstrator(policy, perturb=perturb, rng=rng, dt=dt)
     fixed = [tuple(start)] if start is not None else demonstration_starts(spec, starts)
     if start is not None:
@@ -286,6 +290,8 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
             traj.labels.append(label)
             if (not consistent or demo.consistent) and learner.observe(ranges, odom[2], label):
                 traj.learned += 1
+            if aug is not None:
+                traj.learned += aug.offer(learner, ranges, odom)
             _step_world(world, traj, learner.actions, executed, side, ranges)
             done += 1
             if spec.goal is not None and world.at_goal(0):
@@ -298,7 +304,7 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
     if rounds > 0:
         round_stats = _corrective_rounds(spec, learner, policy, fixed, rounds, round_seconds,
                                          takeover, seed, range_noise, odom_noise, dt, traj,
-                                         free=round_free, rng=rng)
+                                         free=round_free, rng=rng, aug=aug)
     traj.wall_time = time.perf_counter() - t0
     learner.session = {"world": spec.name, "world_path": str(spec.path) if spec.path else None,
                        "seconds": seconds, "seed": seed, "perturb": perturb,
@@ -308,15 +314,38 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
                        "rounds": rounds, "round_seconds": round_seconds if rounds else None,
                        "takeover": takeover if rounds else None, "round_stats": round_stats,
                        "round_free": round_free if rounds else None,
+                       "augment": augment, "augment_scale": augment_scale if augment else None,
                        "range_noise": range_noise, "odom_noise": odom_noise,
                        "vectors": traj.learned}
     return traj
 
 
+class _Augmenter:
+    """Scale augmentation (see ``train``): offers each state again with the scan scaled."""
+
+    def __init__(self, policy, copies: int, scale: float, seed: int):
+        label = getattr(policy, "reactive", None)
+        if label is None:
+            raise ValueError("augment needs a teacher with a scan-only label (reactive)")
+        if scale < 1.0:
+            raise ValueError(f"augment_scale must be >= 1, got {scale}")
+        self.label, self.copies = label, int(copies)
+        self.log_scale = math.log(scale)
+        self.rng = np.random.default_rng(seed + 7919)
+
+    def offer(self, learner: DemonstrationLearner, ranges, odom) -> int:
+        r = np.asarray(ranges, dtype=np.float64)
+        n = 0
+        for _ in range(self.copies):
+            scaled = r * math.exp(float(self.rng.uniform(-self.log_scale, self.log_scale)))
+            n += bool(learner.observe(scaled, odom[2], self.label(scaled)))
+        return n
+
+
 def _corrective_rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, poses, rounds: int,
                        seconds: float, takeover: float, seed: int, range_noise: float,
                        odom_noise: float, dt: float, traj: Trajectory, free: int = 0,
-                       rng=None) -> list[dict]:
+                       rng=None, aug=None) -> list[dict]:
     """DAgger rounds (see ``train``): the tree drives, the teacher labels; per round the number
     of steps, disagreements (learned labels that differed from the tree's choice) and takeovers.
     ``free`` > 0: each round also drives from that many fresh poses anywhere in the free space
@@ -341,6 +370,8 @@ def _corrective_rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, p
                     disagree += 1
                 if learner.observe(ranges, odom[2], label):
                     traj.learned += 1
+                if aug is not None:
+                    traj.learned += aug.offer(learner, ranges, odom)
                 if takes_over(ranges, takeover):
                     drive = label
                     took += 1
@@ -429,6 +460,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--takeover", type=float, default=None,
                         help="in corrective rounds the teacher drives while a beam is closer "
                              "than this (m; 0 = never)")
+    parser.add_argument("--augment", type=int, default=None,
+                        help="scale augmentation: offer every labelled state N more times with the "
+                             "scan scaled (a wider/narrower copy of the world; default: recipe's)")
+    parser.add_argument("--augment-scale", type=float, default=None,
+                        help="largest scale factor of --augment (and 1/it the smallest)")
     parser.add_argument("--range-noise", type=float, default=0.0)
     parser.add_argument("--odom-noise", type=float, default=0.0)
 
@@ -460,7 +496,9 @@ def main(args) -> int:
                  consistent=getattr(args, "consistent", None),
                  rounds=getattr(args, "rounds", None), round_seconds=getattr(args, "round_seconds", None),
                  takeover=getattr(args, "takeover", None),
-                 round_free=getattr(args, "round_free", None))
+                 round_free=getattr(args, "round_free", None),
+                 augment=getattr(args, "augment", None),
+                 augment_scale=getattr(args, "augment_scale", None))
     out = learner.save(args.out)
     m = traj.metrics()
     print(f"trained on {spec.name} ({spec.task}) for {seconds:g} s from {list(traj.start)}: "

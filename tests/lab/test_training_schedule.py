@@ -91,3 +91,42 @@ def test_free_starts_and_free_round_poses():
     assert len(traj.segments) > n_fixed
     assert learner.session["round_stats"][0]["steps"] == (n_fixed + 2) * 30
     assert learner.session["round_free"] == 2
+
+
+def test_scale_augmentation_offers_scaled_scans_labelled_by_the_teacher():
+    from lab.harness import _Augmenter
+
+    spec = resolve_world("corridor")
+    plain = make_learner(spec.task)
+    train(spec, plain, 10, seed=3, rounds=0)
+    learner = make_learner(spec.task)
+    traj = train(spec, learner, 10, seed=3, rounds=0, augment=2, augment_scale=1.3)
+    assert learner.vectors == 3 * plain.vectors  # each state offered 1 + 2 times
+    assert traj.learned == learner.vectors
+    assert learner.session["augment"] == 2 and learner.session["augment_scale"] == 1.3
+    policy = make_policy("maze")
+    aug = _Augmenter(policy, 5, 1.3, seed=0)
+    seen = []
+
+    class Rec:
+        def observe(self, ranges, yaw, label):
+            seen.append((np.asarray(ranges).copy(), label))
+            return True
+
+    ranges = np.full(360, 1.0)
+    assert aug.offer(Rec(), ranges, (0.0, 0.0, 0.0)) == 5
+    for r, label in seen:
+        s = float(r[0])
+        assert 1 / 1.3 - 1e-9 <= s <= 1.3 + 1e-9 and np.allclose(r, s)
+        assert label == policy.label(r)
+
+
+def test_scale_augmentation_needs_a_scan_only_teacher():
+    import pytest
+
+    from lab.harness import _Augmenter
+
+    with pytest.raises(ValueError):
+        _Augmenter(object(), 1, 1.3, seed=0)
+    with pytest.raises(ValueError):
+        _Augmenter(make_policy("maze"), 1, 0.9, seed=0)
