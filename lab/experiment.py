@@ -54,6 +54,7 @@ def run_trial(task: str, seed: int, world: str | None = None, train_seconds: flo
               rounds: int | None = None, round_seconds: float | None = None,
               takeover: float | None = None, round_free: int | None = None,
               augment: int | None = None, augment_scale: float | None = None,
+              round_scales: tuple[float, ...] | None = None,
               teacher_params: dict | None = None,
               **tree_params) -> dict:
     spec = resolve_world(world or WORLD[task])
@@ -67,7 +68,7 @@ def run_trial(task: str, seed: int, world: str | None = None, train_seconds: flo
           odom_noise=odom_noise if train_noise else 0.0, starts=starts, segment=segment,
           random_starts=random_segment, turn=turn, consistent=consistent, rounds=rounds,
           round_seconds=round_seconds, takeover=takeover, round_free=round_free,
-          augment=augment, augment_scale=augment_scale)
+          augment=augment, augment_scale=augment_scale, round_scales=round_scales)
     t_train = time.perf_counter() - t0
     tree = TreePolicy.from_learner(learner)
     out = {"seed": seed, "nodes": learner.nodes, "height": learner.height,
@@ -158,6 +159,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--augment", type=int, default=None,
                         help="scale augmentation copies per labelled state (see rhbl train)")
     parser.add_argument("--augment-scale", type=float, default=None)
+    parser.add_argument("--round-scales", type=lambda t: tuple(float(v) for v in t.split(",")),
+                        default=None, metavar="F,F",
+                        help="corrective rounds also in the training world scaled by these factors")
     parser.add_argument("--range-noise", type=float, default=0.0)
     parser.add_argument("--odom-noise", type=float, default=0.0)
     parser.add_argument("--train-noise", action="store_true",
@@ -185,7 +189,8 @@ def main(args) -> int:
                              consistent=args.consistent, rounds=args.rounds,
                              round_seconds=args.round_seconds, takeover=args.takeover,
                              round_free=args.round_free, augment=args.augment,
-                             augment_scale=args.augment_scale, **tree)
+                             augment_scale=args.augment_scale,
+                             round_scales=args.round_scales, **tree)
         results[task] = res
         print(f"\n{task}: {args.trials} trials")
         print(format_worlds(res))

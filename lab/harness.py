@@ -40,6 +40,7 @@ __all__ = [
     "main",
     "make_learner",
     "parse_pose",
+    "scale_world",
     "resolve_world",
     "run",
     "train",
@@ -222,7 +223,8 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
           consistent: bool | None = None, rounds: int | None = None,
           round_seconds: float | None = None, takeover: float | None = None,
           round_free: int | None = None, augment: int | None = None,
-          augment_scale: float | None = None) -> Trajectory:
+          augment_scale: float | None = None,
+          round_scales: tuple[float, ...] | None = None) -> Trajectory:
     """One training run: the world's scripted teacher demonstrates for ``seconds`` (sim time, in
     total) while ``learner`` observes every step.
 
@@ -253,6 +255,8 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
     round_free = int(recipe.get("round_free", 0) if round_free is None else round_free)
     augment = int(recipe.get("augment", 0) if augment is None else augment)
     augment_scale = float(recipe.get("augment_scale", 1.3) if augment_scale is None else augment_scale)
+    round_scales = tuple(float(v) for v in (recipe.get("round_scales", ()) if round_scales is None
+                                            else round_scales))
     policy = policy or make_policy(task, actions=learner.actions)
     rng = np.random.default_rng(seed)
     aug = _Augmenter(policy, augment, augment_scale, seed) if augment > 0 else None
@@ -305,6 +309,12 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
         round_stats = _corrective_rounds(spec, learner, policy, fixed, rounds, round_seconds,
                                          takeover, seed, range_noise, odom_noise, dt, traj,
                                          free=round_free, rng=rng, aug=aug)
+        for f in round_scales:
+            scaled = scale_world(spec, f)
+            for st in _corrective_rounds(scaled, learner, policy, scaled.start_poses, rounds,
+                                         round_seconds, takeover, seed, range_noise, odom_noise,
+                                         dt, traj, free=round_free, rng=rng, aug=aug):
+                round_stats.append(dict(st, scale=f))
     traj.wall_time = time.perf_counter() - t0
     learner.session = {"world": spec.name, "world_path": str(spec.path) if spec.path else None,
                        "seconds": seconds, "seed": seed, "perturb": perturb,
@@ -314,10 +324,33 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
                        "rounds": rounds, "round_seconds": round_seconds if rounds else None,
                        "takeover": takeover if rounds else None, "round_stats": round_stats,
                        "round_free": round_free if rounds else None,
+                       "round_scales": list(round_scales) if rounds else None,
                        "augment": augment, "augment_scale": augment_scale if augment else None,
                        "range_noise": range_noise, "odom_noise": odom_noise,
                        "vectors": traj.learned}
     return traj
+
+
+def scale_world(spec: WorldSpec, factor: float) -> WorldSpec:
+    """A copy of ``spec`` uniformly scaled about the origin by ``factor``: wall points, start
+    poses (headings kept) and the goal centre (radius kept). Works for any world file."""
+    import dataclasses
+
+    from server.world import Goal, Wall
+
+    if factor <= 0:
+        raise ValueError(f"scale factor must be > 0, got {factor}")
+
+    def pose(p):
+        return (p[0] * factor, p[1] * factor, p[2])
+
+    walls = tuple(Wall(tuple((x * factor, y * factor) for x, y in w.points), w.closed)
+                  for w in spec.walls)
+    goal = None if spec.goal is None else Goal(
+        (spec.goal.center[0] * factor, spec.goal.center[1] * factor), spec.goal.radius)
+    return dataclasses.replace(spec, name=f"{spec.name}x{factor:g}", pose=pose(spec.pose),
+                               starts=tuple(pose(p) for p in spec.starts), walls=walls, goal=goal,
+                               path=None)
 
 
 class _Augmenter:
@@ -465,6 +498,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "scan scaled (a wider/narrower copy of the world; default: recipe's)")
     parser.add_argument("--augment-scale", type=float, default=None,
                         help="largest scale factor of --augment (and 1/it the smallest)")
+    parser.add_argument("--round-scales", type=lambda t: tuple(float(v) for v in t.split(",")),
+                        default=None, metavar="F,F",
+                        help="repeat the corrective rounds in the training world scaled by these "
+                             "factors (e.g. 0.85,1.2; default: the recipe's)")
     parser.add_argument("--range-noise", type=float, default=0.0)
     parser.add_argument("--odom-noise", type=float, default=0.0)
 
@@ -498,7 +535,8 @@ def main(args) -> int:
                  takeover=getattr(args, "takeover", None),
                  round_free=getattr(args, "round_free", None),
                  augment=getattr(args, "augment", None),
-                 augment_scale=getattr(args, "augment_scale", None))
+                 augment_scale=getattr(args, "augment_scale", None),
+                 round_scales=getattr(args, "round_scales", None))
     out = learner.save(args.out)
     m = traj.metrics()
     print(f"trained on {spec.name} ({spec.task}) for {seconds:g} s from {list(traj.start)}: "

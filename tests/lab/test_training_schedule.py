@@ -130,3 +130,20 @@ def test_scale_augmentation_needs_a_scan_only_teacher():
         _Augmenter(object(), 1, 1.3, seed=0)
     with pytest.raises(ValueError):
         _Augmenter(make_policy("maze"), 1, 0.9, seed=0)
+
+
+def test_scale_world_and_rounds_in_scaled_copies():
+    from lab.harness import scale_world
+
+    maze = resolve_world("maze")
+    big = scale_world(maze, 1.2)
+    assert big.walls[1].points[1] == (8.7 * 1.2, 2.2 * 1.2)
+    assert big.start_poses[0] == (1.0 * 1.2, 1.1 * 1.2, 0.0)
+    assert big.goal.center == (1.0 * 1.2, 7.7 * 1.2) and big.goal.radius == maze.goal.radius
+    assert len(big.start_poses) == len(maze.start_poses) and big.path is None
+    spec = resolve_world("corridor")
+    learner = make_learner(spec.task)
+    train(spec, learner, 10, seed=0, rounds=1, round_seconds=2, round_scales=(0.9, 1.1))
+    stats = learner.session["round_stats"]
+    assert [s.get("scale") for s in stats] == [None, 0.9, 1.1]
+    assert learner.session["round_scales"] == [0.9, 1.1]
