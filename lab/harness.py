@@ -306,15 +306,16 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
     if start is not None:
         rounds = 0  # a corrective demonstration from a given pose: no rounds
     if rounds > 0:
-        round_stats = _corrective_rounds(spec, learner, policy, fixed, rounds, round_seconds,
-                                         takeover, seed, range_noise, odom_noise, dt, traj,
-                                         free=round_free, rng=rng, aug=aug)
+        # scaled copies first, the training world last (its corrections are the latest)
         for f in round_scales:
             scaled = scale_world(spec, f)
             for st in _corrective_rounds(scaled, learner, policy, scaled.start_poses, rounds,
                                          round_seconds, takeover, seed, range_noise, odom_noise,
                                          dt, traj, free=round_free, rng=rng, aug=aug):
                 round_stats.append(dict(st, scale=f))
+        round_stats += _corrective_rounds(spec, learner, policy, fixed, rounds, round_seconds,
+                                          takeover, seed, range_noise, odom_noise, dt, traj,
+                                          free=round_free, rng=rng, aug=aug)
     traj.wall_time = time.perf_counter() - t0
     learner.session = {"world": spec.name, "world_path": str(spec.path) if spec.path else None,
                        "seconds": seconds, "seed": seed, "perturb": perturb,
