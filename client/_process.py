@@ -215,15 +215,21 @@ def server_alive(session: zenoh.Session, timeout: float = 1.0) -> list[str]:
     return found
 
 
-def wait_for_server(ctx: Context, timeout: float | None = None) -> None:
+def wait_for_server(ctx: Context, timeout: float | None = None,
+                    got: threading.Event | None = None) -> None:
     """Block until the robot's first scan arrives; ProcessError(EXIT_NO_SERVER) after timeout.
 
+    ``got``: an event the caller's own scan subscription sets (``ScanWatch.first``). Pass it
+    when that subscription was declared before the process announced itself: a subscription
+    declared here, later, could miss a scan sent as soon as the token was seen.
     Logs what it is waiting for every few seconds, so a process never waits silently.
     """
     timeout = ctx.args.wait_server if timeout is None else timeout
     key = keys.scan_key(ctx.robot)
-    got = threading.Event()
-    sub = ctx.session.declare_subscriber(key, lambda _s: got.set())
+    sub = None
+    if got is None:
+        got = threading.Event()
+        sub = ctx.session.declare_subscriber(key, lambda _s: got.set())
     try:
         t0 = time.monotonic()
         next_note = t0 + 2.0
@@ -248,7 +254,8 @@ def wait_for_server(ctx: Context, timeout: float | None = None) -> None:
                          now - t0)
                 next_note = now + 3.0
     finally:
-        sub.undeclare()
+        if sub is not None:
+            sub.undeclare()
     log.info("server is up: scans arrive on %s", key)
 
 
@@ -308,6 +315,7 @@ class ScanWatch:
         self.role, self.key, self.stale = role, key, stale
         self._last = time.monotonic()
         self._stalled = False
+        self.first = threading.Event()  # set by the first scan seen
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, name=f"{role}-scanwatch", daemon=True)
 
@@ -317,6 +325,7 @@ class ScanWatch:
 
     def seen(self) -> None:
         self._last = time.monotonic()
+        self.first.set()
         if self._stalled:
             self._stalled = False
             log.info("%s: scans resumed on %s", self.role, self.key)

@@ -470,7 +470,7 @@ def _body(ctx: Context) -> int:
 
     if not stop.flag:
         try:
-            wait_for_server(ctx)
+            wait_for_server(ctx, got=watch.first)
         except SystemExit:
             stop.flag = True
     watch.start()
