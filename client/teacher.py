@@ -60,7 +60,10 @@ __all__ = ["POLICIES", "add_arguments", "main"]
 log = logging.getLogger(__name__)
 
 SOURCE = "teacher"
-CORRECT_QUEUE = 8  # scans kept for labelling in --correct mode (the oldest are dropped)
+# scans kept for labelling in --correct mode (the oldest are dropped, counted and logged): a
+# lock-step server runs at the controller's pace, ~10x real time, so 64 scans let the teacher be
+# descheduled for ~0.6 s on a loaded machine without a state the controller visited going unlabelled
+CORRECT_QUEUE = 64
 # --policy name -> the behaviour package's task name
 POLICIES = {"wall-follower": "wall-following", "maze": "maze", "keyboard": None}
 
@@ -170,6 +173,7 @@ def _loop(ctx: Context, demo) -> int:
     took = 0
     bad = 0
     correcting = False
+    last_id, missed = -1, 0  # correcting: scans dropped from the queue before being labelled
     try:
         while True:
             sample = sub.handler.recv()
@@ -190,6 +194,12 @@ def _loop(ctx: Context, demo) -> int:
                 continue
             if t0 is None:
                 t0 = scan.ts
+            elif correcting and scan.id > last_id + 1:
+                missed += scan.id - last_id - 1  # the queue overflowed: states left unlabelled
+                if missed == scan.id - last_id - 1 or missed % 100 == 0:
+                    log.warning("teacher fell behind the controller: %d scans not labelled so "
+                                "far", missed)
+            last_id = scan.id
             if args.seconds is not None and scan.ts - t0 >= args.seconds:
                 log.info("demonstrated %.1f s of sim time: done", scan.ts - t0)
                 break
@@ -240,8 +250,8 @@ def _loop(ctx: Context, demo) -> int:
             hold.release()
         if learners is not None:
             learners.close()
-        log.info("teacher stopped after %d labels (%d perturbed, %d taken over)", n, perturbed,
-                 took)
+        log.info("teacher stopped after %d labels (%d perturbed, %d taken over)%s", n, perturbed,
+                 took, f"; {missed} scans not labelled (fell behind)" if missed else "")
     return 0
 
 
