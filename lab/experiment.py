@@ -23,7 +23,7 @@ from client.behaviour.learning import TreePolicy
 from client.behaviour.policies import make_policy
 from lab import metrics
 from lab.evaluate import evaluate
-from lab.harness import TRAINING, make_learner, resolve_world, train
+from lab.harness import TRAINING, make_learner, parse_scales, resolve_world, train
 
 __all__ = ["PAPER", "TEACHERS", "add_arguments", "main", "run_experiment", "run_trial", "table_i"]
 
@@ -159,9 +159,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--augment", type=int, default=None,
                         help="scale augmentation copies per labelled state (see rhbl train)")
     parser.add_argument("--augment-scale", type=float, default=None)
-    parser.add_argument("--round-scales", type=lambda t: tuple(float(v) for v in t.split(",")),
-                        default=None, metavar="F,F",
-                        help="corrective rounds also in the training world scaled by these factors")
+    parser.add_argument("--round-scales", type=parse_scales, default=None, metavar="F,F",
+                        help="corrective rounds also in the training world scaled by these "
+                             "factors ('none': only the world itself; default: the recipe's)")
     parser.add_argument("--range-noise", type=float, default=0.0)
     parser.add_argument("--odom-noise", type=float, default=0.0)
     parser.add_argument("--train-noise", action="store_true",

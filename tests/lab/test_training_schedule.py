@@ -1,8 +1,10 @@
 """One training run = several demonstrations (start poses, then poses near the teacher's path)."""
 
+import argparse
 import math
 
 import numpy as np
+import pytest
 
 from client.behaviour.features import FEATURES
 from client.behaviour.policies import Demonstrator, make_policy
@@ -55,7 +57,7 @@ def test_corrective_rounds_learner_drives_teacher_labels():
     spec = resolve_world("corridor")
     learner = make_learner(spec.task)
     traj = train(spec, learner, 20, seed=0, starts="world", segment=10, random_starts=0.0,
-                 rounds=2, round_seconds=5, takeover=0.3)
+                 rounds=2, round_seconds=5, takeover=0.3, round_scales=())
     n = len(spec.start_poses)
     stats = learner.session["round_stats"]
     assert [s["round"] for s in stats] == [1, 2]
@@ -147,3 +149,20 @@ def test_scale_world_and_rounds_in_scaled_copies():
     stats = learner.session["round_stats"]
     assert [s.get("scale") for s in stats] == [0.9, 1.1, None]  # training world last
     assert learner.session["round_scales"] == [0.9, 1.1]
+
+
+def test_the_recipe_runs_rounds_in_scaled_copies_and_none_turns_them_off():
+    from lab.harness import parse_scales
+
+    spec = resolve_world("maze")
+    learner = make_learner(spec.task)
+    train(spec, learner, 10, seed=0, rounds=1, round_seconds=2)  # the maze recipe's scales
+    assert [s.get("scale") for s in learner.session["round_stats"]] == [0.85, 1.2, None]
+    room = resolve_world("corridor")  # wall following: the world itself only
+    learner = make_learner(room.task)
+    train(room, learner, 10, seed=0, rounds=1, round_seconds=2)
+    assert [s.get("scale") for s in learner.session["round_stats"]] == [None]
+    assert parse_scales("none") == () and parse_scales("0.9, 1.1") == (0.9, 1.1)
+    for bad in ("abc", "0,1", "-1", "nan"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            parse_scales(bad)
