@@ -561,10 +561,16 @@ def main(args) -> int:
     out = learner.save(args.out)
     m = traj.metrics()
     print(f"trained on {spec.name} ({spec.task}) for {seconds:g} s from {list(traj.start)}: "
-          f"{len(traj.segments)} demonstrations + {learner.session.get('rounds', 0)} corrective rounds, {traj.learned} vectors learned, tree {learner.nodes} nodes, height {learner.height}; "
+          f"{len(traj.segments)} demonstrations + {learner.session.get('rounds', 0)} corrective "
+          f"rounds{_scales_note(learner.session.get('round_scales'))}, {traj.learned} vectors "
+          f"learned, tree {learner.nodes} nodes, height {learner.height}; "
           f"teacher collisions {m['collisions']}; {traj.wall_time:.1f} s wall time")
     print(f"wrote {out}")
     return 0
+
+
+def _scales_note(scales) -> str:
+    return f" (each also in copies scaled {', '.join(f'{f:g}' for f in scales)})" if scales else ""
 
 
 __all__ += ["TreePolicy"]
