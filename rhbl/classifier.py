@@ -56,8 +56,11 @@ _PARAMS = (
 # every (query, sphere) pair; the single-query path always tests every sphere at once.
 _DENSE_BATCH_MAX_NODES = 64
 _CHUNK_PAIRS = 1 << 21
-# the batch descent tests a whole subtree at once when queries x subtree size is at most this
-_DENSE_SUBTREE_PAIRS = 16384
+# the batch descent tests a whole subtree at once when queries x subtree size is at most this.
+# Off (0): measured with 20,000 queries it was 3-23% slower on literal trees of 400, 5,000 and
+# 50,000 spheres than the filtered descent alone, and 16% faster only on a 1,550-sphere
+# wall tree of `rhbl demo` (2026-11-28; the first three are bench_classifier.py trees); a knob
+_DENSE_SUBTREE_PAIRS = 0
 
 
 def _plain_label(label: Any) -> Any:

@@ -239,8 +239,10 @@ def test_batch_paths_agree_on_small_and_large_trees(monkeypatch):
         c = clf.predict(Q)
         monkeypatch.setattr(clfmod, "_DENSE_SUBTREE_PAIRS", 0)  # filter + exact recheck only
         d = clf.predict(Q)
+        monkeypatch.setattr(clfmod, "_DENSE_SUBTREE_PAIRS", 10**6)  # whole subtrees at once
+        e = clf.predict(Q)
         monkeypatch.undo()
-        assert a.tolist() == b.tolist() == c.tolist() == d.tolist()
+        assert a.tolist() == b.tolist() == c.tolist() == d.tolist() == e.tolist()
     assert clf.predict(np.zeros((0, 4))).shape == (0,)
 
 
