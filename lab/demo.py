@@ -414,7 +414,7 @@ class Demo:
                      until_exit: Child | None = None) -> None:
         """Until ``seconds`` of sim time were recorded (or ``until_exit`` exits, or the goal)."""
         goal = self.spec.goal
-        next_note = time.monotonic()
+        next_note = time.monotonic() + 2.0  # a line every 2 s, and one when the episode ends
         first_scan_by = time.monotonic() + 20.0
         while True:
             self.deadline_check()
@@ -428,6 +428,7 @@ class Demo:
             if not ep.ts and time.monotonic() > first_scan_by:
                 raise DemoError(f"{what}: no scan from the server within 20 s")
             if until_exit is None and t >= seconds:
+                self.say(f"{what}: sim {t:5.0f}/{seconds:g} s{self.sc_notice()}")
                 return
             if goal is not None and ep.poses and until_exit is None:
                 x, y, _ = ep.poses[-1]
