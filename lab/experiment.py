@@ -155,7 +155,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--round-seconds", type=float, default=None)
     parser.add_argument("--takeover", type=float, default=None)
     parser.add_argument("--round-free", type=int, default=None,
-                        help="corrective rounds also drive from N random free-space poses")
+                        help="corrective rounds also drive from N random free-space poses "
+                             "(default: the recipe's)")
     parser.add_argument("--augment", type=int, default=None,
                         help="scale augmentation copies per labelled state (see rhbl train)")
     parser.add_argument("--augment-scale", type=float, default=None)
