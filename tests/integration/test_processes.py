@@ -200,9 +200,12 @@ def _labels(t: Proc) -> int:
 
 
 def test_controller_drives_without_collision(env):
-    """The recipe over zenoh: the demonstrated tree (tests above) plus one corrective round
-    (the controller drives the learner's latest tree, the teacher labels and takes over near
-    walls); then the corrected tree alone drives without collision."""
+    """The recipe over zenoh: the demonstrated tree (tests above) plus, from each start pose of
+    the world, a short demonstration and a corrective round (the controller drives the
+    learner's latest tree, the teacher labels and takes over near walls), as `rhbl demo` does;
+    then the corrected tree alone drives without collision."""
+    from lab.harness import resolve_world
+
     out = env["tmp"] / "tree.rhbl"  # the learner continues the lineage
     session = env["session"]
     n0 = _journal_len(out)
@@ -212,16 +215,20 @@ def test_controller_drives_without_collision(env):
     _wait_snapshot(session)
     follow = env["start"]("controller", "controller", "--from-learner", "--follow")
     _wait_token(session, "controller", follow)
-    t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--correct",
-                     "--seconds", "150")
-    assert t.wait(150) == 0, t.text()
-    _wait_journal(out, n0 + _labels(t))
+    sim = PlayerClient(session=session, source="test").simulation
+    labels = 0
+    for pose in resolve_world("room").start_poses:
+        sim.set_pose2d(*pose)
+        t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--correct",
+                         "--demonstrate", "20", "--seconds", "60")
+        assert t.wait(120) == 0, t.text()
+        labels += _labels(t)
+    _wait_journal(out, n0 + labels)
     assert "swapped in a newer tree" in follow.text(), follow.text()
     assert follow.stop() == 0, follow.text()
     assert learner.stop() == 0, learner.text()
     # the corrected tree drives from the world's start pose, as the recipe is measured (the
     # correcting run may have ended anywhere, mid-takeover next to a wall)
-    sim = PlayerClient(session=session, source="test").simulation
     sim.set_pose2d(*env["start_pose"])
     stalls, cmds = [], []
     subs = [
