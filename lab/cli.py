@@ -61,6 +61,12 @@ def main(argv: list[str] | None = None) -> int:
         return int(args._main(args) or 0)
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:
+        # the reader of stdout went away (`rhbl ... | head`): no error line, the usual status
+        # of a process ended by SIGPIPE; stdout goes to /dev/null so the exit flush is quiet
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
     except (OSError, ValueError) as exc:
         # bad input (a missing or corrupt world, snapshot or journal, a wrong value): one clear
         # line naming what was wrong, exit code 2 like argparse; RHBL_DEBUG=1 shows the traceback

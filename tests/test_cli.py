@@ -64,3 +64,17 @@ def test_bad_input_is_one_clear_line_not_a_traceback(tmp_path, argv, needle):
     assert "Traceback" not in proc.stderr
     assert proc.stderr.startswith(f"rhbl {argv[0]}: error: ")
     assert needle in proc.stderr
+
+
+def test_a_closed_stdout_pipe_ends_quietly(tmp_path):
+    """`rhbl train ... | head -c 10`: the reader goes away; the snapshot is written, no error
+    line or traceback, the SIGPIPE status."""
+    out = tmp_path / "c.rhbl"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "lab.cli", "train", "--world", "corridor", "--seconds", "5",
+         "--out", str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()  # nobody reads: the first print meets a broken pipe
+    err = proc.stderr.read().decode()
+    assert proc.wait(60) == 141, err
+    assert err == "" and out.exists()
