@@ -191,12 +191,13 @@ def _loop(ctx: Context, demo) -> int:
                 cmd_pub.put(VelCmd(vx=0.0, va=0.0, source=SOURCE, scan_id=scan.id,
                                    ts=scan.ts).encode())  # stand still now, not after the watchdog
                 wait_learner()
+                last_id = -1  # the scans of the pause were skipped on purpose, not missed
                 continue
             if t0 is None:
                 t0 = scan.ts
-            elif correcting and scan.id > last_id + 1:
-                missed += scan.id - last_id - 1  # the queue overflowed: states left unlabelled
-                if missed == scan.id - last_id - 1 or missed % 100 == 0:
+            elif correcting and last_id >= 0 and scan.id > last_id + 1:
+                before, missed = missed, missed + scan.id - last_id - 1  # the queue overflowed
+                if before == 0 or missed // 100 > before // 100:
                     log.warning("teacher fell behind the controller: %d scans not labelled so "
                                 "far", missed)
             last_id = scan.id

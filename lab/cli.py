@@ -52,16 +52,34 @@ def build_parser(command: str) -> argparse.ArgumentParser:
     return parser
 
 
+def _stdout_closed() -> bool:
+    """Whether stdout is a pipe whose reader has gone (poll reports an error on it)."""
+    import select
+
+    try:
+        fd = sys.stdout.fileno()
+        poller = select.poll()
+        poller.register(fd, select.POLLOUT)
+        return any(ev & (select.POLLERR | select.POLLHUP) for _fd, ev in poller.poll(0))
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     top = _top_parser().parse_args(argv[:1] if argv and not argv[0].startswith("-") else argv)
     parser = build_parser(top.command)
     args = parser.parse_args(argv[1:])
     try:
-        return int(args._main(args) or 0)
+        rc = int(args._main(args) or 0)
+        sys.stdout.flush()  # a pipe is block-buffered: a closed reader shows here, not at exit
+        return rc
     except KeyboardInterrupt:
         return 130
-    except BrokenPipeError:
+    except BrokenPipeError as exc:
+        if not _stdout_closed():  # another pipe (a child's, a socket): a real error
+            print(f"rhbl {top.command}: error: {exc}", file=sys.stderr)
+            return 2
         # the reader of stdout went away (`rhbl ... | head`): no error line, the usual status
         # of a process ended by SIGPIPE; stdout goes to /dev/null so the exit flush is quiet
         devnull = os.open(os.devnull, os.O_WRONLY)

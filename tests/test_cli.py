@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -73,7 +74,8 @@ def test_a_closed_stdout_pipe_ends_quietly(tmp_path):
     proc = subprocess.Popen(
         [sys.executable, "-m", "lab.cli", "train", "--world", "corridor", "--seconds", "5",
          "--out", str(out)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        env={k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"})  # block-buffered
     proc.stdout.close()  # nobody reads: the first print meets a broken pipe
     err = proc.stderr.read().decode()
     assert proc.wait(60) == 141, err
