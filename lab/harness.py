@@ -89,11 +89,16 @@ def resolve_world(path_or_name: str) -> WorldSpec:
     return load_world(p)
 
 
-def parse_pose(text: str) -> tuple[float, float, float]:
+def _floats(text: str, what: str) -> tuple[float, ...]:
+    """Comma-separated numbers of a CLI value; ArgumentTypeError saying ``what`` they must be."""
     try:
-        vals = tuple(float(v) for v in text.replace(" ", "").split(","))
+        return tuple(float(v) for v in text.replace(" ", "").split(","))
     except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"pose must be x,y,yaw numbers, got {text!r}") from exc
+        raise argparse.ArgumentTypeError(f"{what}, got {text!r}") from exc
+
+
+def parse_pose(text: str) -> tuple[float, float, float]:
+    vals = _floats(text, "pose must be x,y,yaw numbers")
     if len(vals) != 3:
         raise argparse.ArgumentTypeError(f"pose must be x,y,yaw (3 numbers), got {text!r}")
     return vals  # type: ignore[return-value]
@@ -103,11 +108,7 @@ def parse_scales(text: str) -> tuple[float, ...]:
     """``--round-scales``: comma-separated positive factors, or 'none'."""
     if text.strip().lower() in ("", "none"):
         return ()
-    try:
-        vals = tuple(float(v) for v in text.replace(" ", "").split(","))
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"scales must be numbers like 0.85,1.2 or 'none', "
-                                         f"got {text!r}") from exc
+    vals = _floats(text, "scales must be numbers like 0.85,1.2 or 'none'")
     if not all(v > 0 and math.isfinite(v) for v in vals):
         raise argparse.ArgumentTypeError(f"scales must be positive, got {text!r}")
     return vals

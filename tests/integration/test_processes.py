@@ -230,10 +230,10 @@ def test_controller_drives_without_collision(env):
     # the corrected tree drives from the world's start pose, as the recipe is measured (the
     # correcting run may have ended anywhere, mid-takeover next to a wall)
     sim.set_pose2d(*env["start_pose"])
-    stalls, cmds = [], []
+    states, cmds = [], []
     subs = [
-        session.declare_subscriber(keys.state_key("r0"), lambda s: stalls.append(
-            (lambda st: (st.stall, st.ts, st.pos))(State.decode(s.payload.to_bytes())))),
+        session.declare_subscriber(keys.state_key("r0"), lambda s: states.append(
+            State.decode(s.payload.to_bytes()))),
         session.declare_subscriber(keys.cmd_vel_key("r0", source="controller"), lambda s: cmds.append(
             VelCmd.decode(s.payload.to_bytes()))),
     ]
@@ -243,9 +243,9 @@ def test_controller_drives_without_collision(env):
         s.undeclare()
     assert len(cmds) >= 550, c.text()
     assert all(m.source == "controller" and m.scan_id is not None for m in cmds)
-    hits = [(ts, pos) for stall, ts, pos in stalls if stall]
-    assert not hits, f"the learned robot collided (first at t={hits[0][0]:.1f} s, pose " \
-        f"{hits[0][1]}):\n{c.text()}"
+    hits = [st for st in states if st.stall]
+    assert not hits, f"the learned robot collided (first at t={hits[0].ts:.1f} s, odometry " \
+        f"{hits[0].pos}):\n{c.text()}"
 
 
 def test_controller_follows_the_learner(env):
