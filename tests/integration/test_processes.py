@@ -201,8 +201,8 @@ def _labels(t: Proc) -> int:
 
 def test_controller_drives_without_collision(env):
     """The recipe over zenoh: the demonstrated tree (tests above) plus, from each start pose of
-    the world, a short demonstration and a corrective round (the controller drives the
-    learner's latest tree, the teacher labels and takes over near walls), as `rhbl demo` does;
+    the world, a demonstration and two corrective rounds (the controller drives the learner's
+    latest tree, the teacher labels and takes over near walls), close to what `rhbl demo` does;
     then the corrected tree alone drives without collision."""
     from lab.harness import resolve_world
 
@@ -217,12 +217,14 @@ def test_controller_drives_without_collision(env):
     _wait_token(session, "controller", follow)
     sim = PlayerClient(session=session, source="test").simulation
     labels = 0
-    for pose in resolve_world("room").start_poses:
-        sim.set_pose2d(*pose)
-        t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--correct",
-                         "--demonstrate", "20", "--seconds", "60")
-        assert t.wait(120) == 0, t.text()
-        labels += _labels(t)
+    # first pass: 60 s demonstration then 60 s correcting; second pass: correcting only
+    for phase in (("--demonstrate", "60", "--seconds", "120"), ("--seconds", "60")):
+        for pose in resolve_world("room").start_poses:
+            sim.set_pose2d(*pose)
+            t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--correct",
+                             *phase)
+            assert t.wait(120) == 0, t.text()
+            labels += _labels(t)
     _wait_journal(out, n0 + labels)
     assert "swapped in a newer tree" in follow.text(), follow.text()
     assert follow.stop() == 0, follow.text()
