@@ -45,6 +45,7 @@ from protocol.messages import (
     SimPose,
     State,
     VelCmd,
+    WorldInfo,
 )
 from protocol.session import make_config
 
@@ -416,3 +417,7 @@ class SimulationProxy:
     def get_pose(self, timeout: float = 2.0) -> SimPose:
         """The true pose, the odometry and the sim time (:class:`SimPose`)."""
         return SimPose.decode(self.client.request("sim", "get_pose", timeout=timeout))
+
+    def get_world(self, timeout: float = 2.0) -> WorldInfo:
+        """The world's walls, goal and start poses (``WorldInfo``), e.g. to draw it."""
+        return WorldInfo.decode(self.client.request("sim", "get_world", timeout=timeout))

@@ -105,7 +105,7 @@ def request_key(
 
 def sim_request_key(robot: str = "r0", name: str = "set_pose") -> str:
     """A simulation-only request (queryable) ``rhbl/<robot>/sim/req/<name>``: ``set_pose``,
-    ``get_pose`` (Player's ``simulation`` interface). Outside the device tree on purpose: the
+    ``get_pose``, ``get_world`` (Player's ``simulation`` interface). Outside the device tree on purpose: the
     secured router grants ``rhbl/*/*/*/req/**`` (device requests) and ``rhbl/*/sim/req/**``
     (teleporting the robot) to different roles."""
     check_chunk(robot, "robot")

@@ -47,6 +47,7 @@ __all__ = [
     "TeacherAction",
     "TreeNotice",
     "VelCmd",
+    "WorldInfo",
 ]
 
 COMMAND_MAX_PAYLOAD = 64 * 1024  # bytes: commands and requests are small
@@ -443,6 +444,51 @@ class SimPose(_Message):
             odom=get_opt(m, "odom", get_vec, w, 3, default=(0.0, 0.0, 0.0)),
             ts=get_opt(m, "ts", get_float, w, default=0.0),
         )
+
+
+@dataclass
+class WorldInfo(_Message):
+    """Reply to the sim-only ``get_world``: what a viewer needs to draw the world. ``walls`` are
+    line segments ``[x0, y0, x1, y1]`` (m, world frame), ``goal`` is ``[x, y, radius]`` or absent,
+    ``starts`` the world's start poses ``[x, y, yaw]`` (the default one first)."""
+
+    WHAT: ClassVar[str] = "world info"
+    name: str
+    task: str
+    walls: tuple[tuple[float, float, float, float], ...] = ()
+    goal: tuple[float, float, float] | None = None
+    starts: tuple[tuple[float, float, float], ...] = ()
+
+    def to_map(self):
+        m = {
+            "name": self.name,
+            "task": self.task,
+            "walls": [[float(x) for x in w] for w in self.walls],
+            "starts": [[float(x) for x in p] for p in self.starts],
+        }
+        if self.goal is not None:
+            m["goal"] = [float(x) for x in self.goal]
+        return m
+
+    @classmethod
+    def from_map(cls, m):
+        w = cls.WHAT
+        return cls(
+            name=get_str(m, "name", w),
+            task=get_str(m, "task", w),
+            walls=_vec_list(m, "walls", w, 4),
+            goal=get_opt(m, "goal", get_vec, w, 3),
+            starts=_vec_list(m, "starts", w, 3),
+        )
+
+
+def _vec_list(m: dict, name: str, what: str, n: int) -> tuple[tuple[float, ...], ...]:
+    """A list of finite n-vectors (every element checked like ``get_vec``)."""
+    x = m.get(name, [])
+    if not isinstance(x, list | tuple):
+        raise DecodeError(f"{what}: field '{name}': expected a list of [{n} numbers], "
+                          f"got {type(x).__name__}")
+    return tuple(get_vec({name: e}, name, what, n) for e in x)
 
 
 @dataclass

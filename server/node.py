@@ -43,9 +43,10 @@ from protocol.messages import (
     SimPose,
     State,
     VelCmd,
+    WorldInfo,
 )
 from server.arbiter import Arbiter, priority_of
-from server.world import LASER, ROBOT, World
+from server.world import LASER, ROBOT, World, WorldSpec
 
 __all__ = ["ServerNode"]
 
@@ -53,6 +54,14 @@ log = logging.getLogger(__name__)
 
 _LASER_SIZE = (0.156, 0.155)  # m, a SICK LMS200's footprint
 _DRIVER_REPEAT = 1.0  # s sim time between repeated driver messages
+
+
+def world_info(spec: WorldSpec) -> WorldInfo:
+    """The ``get_world`` reply of a world: its walls as segments, goal and start poses."""
+    goal = None if spec.goal is None else (*spec.goal.center, spec.goal.radius)
+    return WorldInfo(name=spec.name, task=spec.task,
+                     walls=tuple(tuple(s) for s in spec.segments().tolist()),
+                     goal=goal, starts=tuple(tuple(p) for p in spec.start_poses))
 
 
 class _RobotIO:
@@ -114,6 +123,7 @@ class ServerNode:
         self._robots = [_RobotIO(n, i, self.watchdog) for i, n in enumerate(names)]
         self._by_name = {r.name: r for r in self._robots}
         self._decls: list[Any] = []
+        self._world_info = world_info(world.spec)
         self._declare()
 
     # -- zenoh declarations ---------------------------------------------------------------
@@ -144,7 +154,7 @@ class ServerNode:
                         lambda q, r=r, iface=iface, name=name: self._on_query(r, iface, name, q),
                     )
                 )
-            for name in ("set_pose", "get_pose"):  # simulation-only requests
+            for name in ("set_pose", "get_pose", "get_world"):  # simulation-only requests
                 self._decls.append(
                     s.declare_queryable(
                         keys.sim_request_key(r.name, name),
@@ -280,6 +290,8 @@ class ServerNode:
 
     def _answer_sim(self, r: _RobotIO, name: str, payload: bytes):
         i = r.index
+        if name == "get_world":
+            return self._world_info
         if name == "get_pose":
             with self._cond:
                 return SimPose(pose=self.world.pose(i), odom=self.world.odom(i),

@@ -97,3 +97,16 @@ def test_read_times_out_without_server():
     with PlayerClient(make_config(mode="peer")) as c, c.laser:
         assert c.read(timeout=0.2) is False
         assert c.laser.count == 0
+
+
+def test_simulation_proxy_gets_the_world(server, client_config):
+    from server import world_path
+    from server.world import load_world
+
+    spec = load_world(world_path("corridor"))
+    with PlayerClient(client_config(server.endpoint), source="controller") as c:
+        info = c.simulation.get_world()
+    assert (info.name, info.task) == (spec.name, spec.task)
+    assert np.allclose(np.asarray(info.walls), spec.segments())
+    assert info.starts[0] == pytest.approx(spec.pose)
+    assert len(info.starts) == len(spec.start_poses)

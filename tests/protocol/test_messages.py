@@ -27,6 +27,7 @@ from protocol.messages import (
     TeacherAction,
     TreeNotice,
     VelCmd,
+    WorldInfo,
 )
 
 
@@ -86,8 +87,19 @@ def test_roundtrips():
         MotorPower(state=False),
         Ack(info="ok"),
         Nack(reason="no"),
+        WorldInfo(name="room", task="wall-following", walls=((0.0, 0.0, 1.0, 0.0),),
+                  goal=(1.0, 2.0, 0.5), starts=((0.5, 0.5, 0.0),)),
+        WorldInfo(name="open", task="maze"),
     ]:
         assert _roundtrip(m) == m
+
+
+def test_world_info_names_a_bad_wall():
+    good = {"v": PROTOCOL_VERSION, "name": "w", "task": "maze", "walls": [[0, 0, 1, 1]]}
+    assert WorldInfo.decode(msgpack.packb(good)).walls == ((0.0, 0.0, 1.0, 1.0),)
+    for walls in ([[0, 0, 1]], [[0, 0, 1, float("nan")]], "walls", [["a", 0, 1, 1]]):
+        with pytest.raises(DecodeError, match="walls"):
+            WorldInfo.decode(msgpack.packb({**good, "walls": walls}))
 
 
 def test_extra_fields_allowed_and_optional_fields_default():
