@@ -423,6 +423,7 @@ class LearnerProcess:
         self.stopping = False
         on_stop_signal(self.request_stop)
         self.core = self._open_core(self.args)
+        ctx.scope.callback(self.close_journal)  # also on a path that never reaches finish()
         self.latest = self.core.out.read_bytes() if self.core.out.exists() else None
         self.snap_key = keys.learner_snapshot_key(ctx.robot)
         self.watch = ScanWatch("learner", keys.scan_key(ctx.robot), stale=3.0)
@@ -631,12 +632,18 @@ class LearnerProcess:
                 code = 1
             self.report(lost)
         finally:
-            try:
-                self.core.close()
-            except OSError as exc:
-                log.error("closing the journal %s failed: %s", self.core.jpath, exc)
+            if not self.close_journal():
                 code = 1
         return code
+
+    def close_journal(self) -> bool:
+        """Close (fsync) the journal; False (logged) when that failed. Idempotent."""
+        try:
+            self.core.close()
+        except OSError as exc:
+            log.error("closing the journal %s failed: %s", self.core.jpath, exc)
+            return False
+        return True
 
     def learn_leftovers(self) -> None:
         """Labeled scans that arrived after the loop's last look (a stop, an error): learned

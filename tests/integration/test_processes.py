@@ -396,3 +396,41 @@ def test_correcting_teacher_labels_while_the_controller_drives(env):
     ticks = [s.driver for s in states if s.driver]
     assert ticks.count("controller") > 0.5 * len(ticks), ticks.count("teacher")
     assert "teacher" in ticks and "teacher" in drivers and "controller" in drivers
+
+
+def _wait_text(proc: Proc, text: str, timeout: float = 30.0) -> None:
+    end = time.monotonic() + timeout
+    while text not in proc.text():
+        assert proc.proc.poll() is None, f"{proc.name} exited:\n{proc.text()}"
+        assert time.monotonic() < end, f"no {text!r} within {timeout:g} s:\n{proc.text()}"
+        time.sleep(0.05)
+
+
+def test_starting_order_does_not_matter_for_a_following_controller(env):
+    """``rhbl controller --from-learner --follow`` started before the learner waits for its
+    first tree (saying so), then drives; it never exits for want of a tree."""
+    import threading
+
+    session = env["session"]
+    sim = PlayerClient(session=session, source="test").simulation
+    start = sim.get_pose2d()
+    commanded = threading.Event()
+    sub = session.declare_subscriber(keys.cmd_vel_key("r0", source="controller"),
+                                     lambda _s: commanded.set())
+    try:
+        c = env["start"]("controller", "controller", "--from-learner", "--follow")
+        _wait_text(c, "waiting for the learner's first tree")
+        assert not commanded.is_set(), c.text()
+        out = env["tmp"] / "order.rhbl"
+        learner = env["start"]("learner", "learner", "--features", "wall", "--out", str(out),
+                               "--snapshot-every", "0.3")
+        _wait_token(session, "learner", learner)
+        _teach(env, 5, seed=4)
+        assert commanded.wait(60), c.text()
+        _wait_text(c, "tree loaded")
+        assert c.proc.poll() is None, c.text()
+        assert c.stop() == 0, c.text()
+        assert learner.stop() == 0, learner.text()
+    finally:
+        sub.undeclare()
+        sim.set_pose2d(*start)
