@@ -108,6 +108,19 @@ def _journal_len(out: Path) -> int:
         return len(j)
 
 
+def _wait_snapshot_file(out: Path, labeled: int, timeout: float = 20.0) -> dict:
+    """The metadata of the snapshot at ``out`` once it includes ``labeled`` journal records."""
+    end = time.monotonic() + timeout
+    meta: dict = {}
+    while time.monotonic() < end:
+        if out.exists():
+            meta = load_snapshot(out)[3]
+            if meta["provenance"]["labeled"] >= labeled:
+                return meta
+        time.sleep(0.05)
+    raise AssertionError(f"snapshot {out} holds {meta.get('provenance')}, expected {labeled}")
+
+
 def _wait_journal(out: Path, n: int, timeout: float = 20.0) -> None:
     end = time.monotonic() + timeout
     while time.monotonic() < end:
@@ -165,10 +178,10 @@ def test_learner_grows_a_tree_and_survives_sigkill(env):
     _wait_token(env["session"], "learner", learner)
     n1 = _teach(env, 40)
     _wait_journal(out, n1)
-    time.sleep(0.8)  # a periodic snapshot is written
-    clf, _f, _a, meta = load_snapshot(out)
+    meta = _wait_snapshot_file(out, n1)  # a periodic snapshot with every journaled vector
+    clf = load_snapshot(out)[0]
     assert clf.node_count_ > 5
-    assert meta["provenance"]["labeled"] >= 1
+    assert meta["provenance"]["labeled"] == n1
 
     # SIGKILL: no final snapshot; the journal holds every labeled vector
     learner.kill()
@@ -257,7 +270,6 @@ def test_controller_follows_the_learner(env):
     _wait_token(env["session"], "learner", learner)
     _teach(env, 5)
     _wait_journal(out, 40)
-    time.sleep(0.5)
     c = env["start"]("controller", "controller", "--from-learner", "--follow")
     _wait_token(env["session"], "controller", c)
     _teach(env, 20, seed=2)  # the teacher outranks the controller while it demonstrates
@@ -309,7 +321,7 @@ def test_teacher_pauses_while_no_learner_is_up(env):
     while "first label" not in t.text() and time.monotonic() < end:
         time.sleep(0.05)
     assert "first label" in t.text(), t.text()
-    time.sleep(0.5)
+    _wait_journal(out, 5)  # demonstrating
     assert learner.stop(signal.SIGTERM) == 0, learner.text()
     end = time.monotonic() + 10
     while "pausing" not in t.text() and time.monotonic() < end:
