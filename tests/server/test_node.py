@@ -207,8 +207,8 @@ def test_hostile_messages_are_survived(session, corridor):
     assert corridor.wait_for_line("rejected cmd_source (3 so far)"), corridor.output()
     impersonation = next(ln for ln in corridor.lines if "rejected cmd_source (1 so far)" in ln)
     assert "field 'source' 'teacher' does not match the key's source 'controller'" in impersonation
-    assert corridor.wait_for_line("rejected cmd (10 so far)"), corridor.output()
-    # every message was handled by now: two more ticks show none of them moved the robot
+    # the messages before it came the same way (one session, one link, in order): all handled
+    # by now; two more ticks show none of them moved the robot
     n0 = lis.states
     lis.wait(lambda: lis.states >= n0 + 2)  # kept publishing
     assert lis.state.truth == pytest.approx(pose0, abs=1e-9)  # never moved
