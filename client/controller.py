@@ -7,12 +7,14 @@ commanding (and logs it), and the server's watchdog stops the robot.
 
     rhbl controller --tree tree.rhbl
     rhbl controller --from-learner --follow     # fetch the learner's tree, swap in newer ones
+
+With ``--follow`` the starting order does not matter: started before the learner (or before its
+first snapshot) it waits for the first tree (``--wait-tree``, forever by default), then drives.
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import logging
 import threading
 import time
@@ -26,6 +28,7 @@ from client._process import (
     ProcessError,
     ScanWatch,
     add_process_arguments,
+    decode_scan,
     run,
     wait_for_server,
 )
@@ -35,7 +38,7 @@ from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, che
 from protocol import keys
 from protocol.messages import Scan, TreeNotice, VelCmd
 
-__all__ = ["add_arguments", "fetch_snapshot", "load_tree", "main"]
+__all__ = ["ControllerProcess", "add_arguments", "fetch_snapshot", "load_tree", "main"]
 
 log = logging.getLogger(__name__)
 
@@ -55,11 +58,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seconds", type=float, default=None, metavar="S",
                         help="stop after driving S seconds of sim time (default: until stopped)")
     parser.add_argument("--query-timeout", type=float, default=5.0, metavar="SECONDS",
-                        help="how long to wait for the learner's snapshot (default 5)")
+                        help="how long one query waits for the learner's snapshot (default 5)")
+    parser.add_argument("--wait-tree", type=float, default=None, metavar="SECONDS",
+                        help="with --from-learner: wait this long for the learner's first tree "
+                             "(queried again at each tree notice and every second, logging "
+                             "every few seconds; 0 = forever). Default: forever with --follow, "
+                             "otherwise one query (no learner or no tree yet: exit 4)")
 
 
 def main(args: argparse.Namespace) -> int:
-    return run("controller", args, _body)
+    return run("controller", args, lambda ctx: ControllerProcess(ctx).run())
 
 
 def _policy_from(clf_bytes_or_path, features: str | None) -> TreePolicy:
@@ -109,78 +117,145 @@ def _describe(p: TreePolicy) -> str:
             f"{(p.metadata.get('provenance') or {}).get('vectors', '?')} vectors")
 
 
-def _body(ctx: Context) -> int:
-    args, session, robot = ctx.args, ctx.session, ctx.robot
-    if args.follow and not args.from_learner:
-        raise ProcessError("controller: --follow needs --from-learner", EXIT_USAGE)
-    if args.tree:
-        policy = load_tree(args.tree, args.features)
-    else:
-        policy = _policy_from(fetch_snapshot(session, robot, args.query_timeout), args.features)
-    log.info("tree loaded: %s; features %s", _describe(policy), policy.features.to_dict())
-    current = {"policy": policy}
-    updater = None
-    if args.follow:
-        updater = _Follower(session, robot, args, current)
-    cmd_pub = session.declare_publisher(keys.cmd_vel_key(robot, source=SOURCE),
-                                        congestion_control=zenoh.CongestionControl.BLOCK,
-                                        express=True)
-    scan_k = keys.scan_key(robot)
-    sub = session.declare_subscriber(scan_k, zenoh.handlers.RingChannel(1))
-    wait_for_server(ctx)
-    watch = ScanWatch("controller", scan_k, stale=1.0).start()
-    t0 = None
-    n = 0
-    bad = 0
-    try:
+class ControllerProcess:
+    """For every scan: the tree's action as a command on ``.../cmd/vel/controller``. With
+    ``--follow`` a newer tree the learner announces is swapped in between two scans."""
+
+    def __init__(self, ctx: Context):
+        self.ctx, self.args = ctx, ctx.args
+        if self.args.follow and not self.args.from_learner:
+            raise ProcessError("controller: --follow needs --from-learner", EXIT_USAGE)
+        self.policy: TreePolicy | None = None  # swapped between scans by the follower
+        # subscribed before the first query: a tree announced meanwhile is not missed
+        self.follower = _Follower(ctx, self.swap) if self.args.follow else None
+        self.cmd_pub = ctx.publisher(keys.cmd_vel_key(ctx.robot, source=SOURCE),
+                                     congestion_control=zenoh.CongestionControl.BLOCK,
+                                     express=True)
+        self.scan_key = keys.scan_key(ctx.robot)
+        self.sub = ctx.subscriber(self.scan_key, zenoh.handlers.RingChannel(1))
+        self.watch = ScanWatch("controller", self.scan_key, stale=1.0)
+        ctx.scope.callback(self.watch.stop)
+        self.t0: float | None = None
+        self.n = self.bad = 0
+
+    def swap(self, policy: TreePolicy) -> None:
+        self.policy = policy
+
+    def run(self) -> int:
+        self.policy = self.first_tree()
+        log.info("tree loaded: %s; features %s", _describe(self.policy),
+                 self.policy.features.to_dict())
+        if self.follower is not None:
+            self.follower.start()
+        wait_for_server(self.ctx)
+        self.watch.start()
+        try:
+            while self.step():
+                pass
+        finally:
+            self.watch.stop()
+            log.info("controller stopped after %d commands", self.n)
+        return 0
+
+    def first_tree(self) -> TreePolicy:
+        args = self.args
+        if args.tree:
+            return load_tree(args.tree, args.features)
+        wait = args.wait_tree if args.wait_tree is not None else (0.0 if args.follow else None)
+        if wait is None:
+            return _policy_from(fetch_snapshot(self.ctx.session, self.ctx.robot,
+                                               args.query_timeout), args.features)
+        return self.wait_for_tree(wait)
+
+    def wait_for_tree(self, timeout: float) -> TreePolicy:
+        """Query the learner until it gives a tree, again at each tree notice and every few
+        seconds, logging what it waits for; ``timeout`` s (0 = forever) then the last reason."""
+        ctx, args = self.ctx, self.args
+        t0 = time.monotonic()
+        next_note = t0
         while True:
-            sample = sub.handler.recv()
-            watch.seen()
+            if self.follower is not None:
+                self.follower.clear()  # a notice from now on means a tree newer than this query
             try:
-                scan = Scan.decode(sample.payload.to_bytes())
-            except Exception as exc:  # noqa: BLE001 - DecodeError: log and keep running
-                log.warning("dropped a malformed scan: %s", exc)
-                continue
-            if t0 is None:
-                t0 = scan.ts
-            if args.seconds is not None and scan.ts - t0 >= args.seconds:
-                log.info("drove %.1f s of sim time: done", scan.ts - t0)
-                break
-            p = current["policy"]  # swapped between scans by --follow
-            try:
-                action = str(p.classifier.predict_one(p.features.extract(scan.ranges,
-                                                                         scan.pose[2])))
-                vx, va = p.actions[action]
-            except Exception as exc:  # noqa: BLE001 - a scan the tree cannot use: no command
-                bad += 1
-                if bad <= 10 or bad % 100 == 0:
-                    log.warning("scan %d not answered (%d so far; the watchdog stops the "
-                                "robot): %s: %s", scan.id, bad, type(exc).__name__, exc)
-                continue
-            cmd_pub.put(VelCmd(vx=vx, va=va, source=SOURCE, scan_id=scan.id, ts=scan.ts).encode())
-            n += 1
-            if n % 1000 == 0:
-                log.info("%d commands, %.0f s sim", n, scan.ts - t0)
-    finally:
-        watch.stop()
-        if updater is not None:
-            updater.stop()
-        log.info("controller stopped after %d commands", n)
-    return 0
+                data = fetch_snapshot(ctx.session, ctx.robot, args.query_timeout)
+                return _policy_from(data, args.features)
+            except ProcessError as exc:
+                if exc.code == EXIT_USAGE:  # a tree that does not fit: waiting will not help
+                    raise
+                waited = time.monotonic() - t0
+                if timeout and waited >= timeout:
+                    raise ProcessError(f"{exc} (waited --wait-tree {timeout:g} s)",
+                                       exc.code) from exc
+                if time.monotonic() >= next_note:
+                    log.info("waiting for the learner's first tree on %s (%s; %.0f s%s)",
+                             keys.learner_snapshot_key(ctx.robot), exc, waited,
+                             f" of {timeout:g}" if timeout else "")
+                    next_note = time.monotonic() + 3.0
+            if self.follower is not None:
+                self.follower.wait_notice(1.0)
+            else:
+                time.sleep(1.0)
+
+    def step(self) -> bool:
+        """Answer the next scan; False when done (``--seconds``)."""
+        sample = self.sub.handler.recv()
+        self.watch.seen()
+        scan = decode_scan(sample.payload.to_bytes())
+        if scan is None:
+            return True
+        if self.t0 is None:
+            self.t0 = scan.ts
+        if self.args.seconds is not None and scan.ts - self.t0 >= self.args.seconds:
+            log.info("drove %.1f s of sim time: done", scan.ts - self.t0)
+            return False
+        vel = self.answer(scan)
+        if vel is not None:
+            self.cmd_pub.put(VelCmd(vx=vel[0], va=vel[1], source=SOURCE, scan_id=scan.id,
+                                    ts=scan.ts).encode())
+            self.n += 1
+            if self.n % 1000 == 0:
+                log.info("%d commands, %.0f s sim", self.n, scan.ts - self.t0)
+        return True
+
+    def answer(self, scan: Scan) -> tuple[float, float] | None:
+        """The velocity of the tree's action for ``scan``; None (logged) when it cannot."""
+        p = self.policy
+        try:
+            action = str(p.classifier.predict_one(p.features.extract(scan.ranges, scan.pose[2])))
+            return p.actions[action]
+        except Exception as exc:  # noqa: BLE001 - a scan the tree cannot use: no command
+            self.bad += 1
+            if self.bad <= 10 or self.bad % 100 == 0:
+                log.warning("scan %d not answered (%d so far; the watchdog stops the robot): "
+                            "%s: %s", scan.id, self.bad, type(exc).__name__, exc)
+            return None
 
 
 class _Follower:
-    """Subscribes to tree notices; fetches the newer snapshot in a thread and swaps it in."""
+    """Subscribes to tree notices; a thread fetches the newer snapshot and swaps it in."""
 
-    def __init__(self, session, robot, args, current):
-        self.session, self.robot, self.args, self.current = session, robot, args, current
+    def __init__(self, ctx: Context, swap):
+        self.ctx, self.args, self._swap = ctx, ctx.args, swap
         self._want = threading.Event()
         self._stop = threading.Event()
-        self.seen_seq = -1
         self.swaps = 0
-        self._sub = session.declare_subscriber(keys.learner_notice_key(robot), self._on_notice)
+        ctx.subscriber(keys.learner_notice_key(ctx.robot), self._on_notice)
         self._thread = threading.Thread(target=self._loop, name="controller-follow", daemon=True)
+        ctx.scope.callback(self.stop)
+
+    def start(self) -> None:
         self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():  # a fetch in flight ends within --query-timeout
+            self._thread.join(self.args.query_timeout + 1.0)
+
+    def clear(self) -> None:
+        self._want.clear()
+
+    def wait_notice(self, timeout: float) -> bool:
+        return self._want.wait(timeout)
 
     def _on_notice(self, sample) -> None:
         try:
@@ -193,25 +268,21 @@ class _Follower:
 
     def _loop(self) -> None:
         while not self._stop.is_set():
-            if not self._want.wait(0.2):
-                continue
-            self._want.clear()
-            try:
-                data = fetch_snapshot(self.session, self.robot, self.args.query_timeout)
-                policy = _policy_from(data, self.args.features)
-            except ProcessError as exc:
-                log.warning("could not swap the tree: %s", exc)
-                continue
-            except Exception as exc:  # noqa: BLE001 - the session closing under us
-                if not self._stop.is_set():
-                    log.warning("could not swap the tree: %s", exc)
-                continue
-            self.current["policy"] = policy
-            self.swaps += 1
-            log.info("swapped in a newer tree: %s", _describe(policy))
-            time.sleep(0.0)
+            if self._want.wait(0.2):
+                self._want.clear()
+                self._fetch()
 
-    def stop(self) -> None:
-        self._stop.set()
-        with contextlib.suppress(Exception):
-            self._sub.undeclare()
+    def _fetch(self) -> None:
+        try:
+            data = fetch_snapshot(self.ctx.session, self.ctx.robot, self.args.query_timeout)
+            policy = _policy_from(data, self.args.features)
+        except ProcessError as exc:
+            log.warning("could not swap the tree: %s", exc)
+            return
+        except Exception as exc:  # noqa: BLE001 - the session closing under us
+            if not self._stop.is_set():
+                log.warning("could not swap the tree: %s", exc)
+            return
+        self._swap(policy)
+        self.swaps += 1
+        log.info("swapped in a newer tree: %s", _describe(policy))

@@ -20,7 +20,6 @@ import argparse
 import contextlib
 import logging
 import os
-import signal
 import threading
 import time
 from collections import OrderedDict, deque
@@ -48,8 +47,9 @@ from client.behaviour.learning import (
 from client.journal import Journal, JournalError, journal_path
 from protocol import keys
 from protocol.messages import Scan, TeacherAction, TreeNotice
+from protocol.process import on_stop_signal
 
-__all__ = ["LearnerCore", "Pairing", "add_arguments", "main", "TASK_OF_FEATURES"]
+__all__ = ["LearnerCore", "LearnerProcess", "Pairing", "add_arguments", "main", "TASK_OF_FEATURES"]
 
 log = logging.getLogger(__name__)
 
@@ -405,227 +405,272 @@ class Pairing:
 
 
 # ---- the process --------------------------------------------------------------------------
-class _Stop:
-    """SIGINT/SIGTERM set a flag; the loop finishes the vector at hand, snapshots and exits."""
-
-    def __init__(self):
-        self.flag = False
-
-    def __call__(self, signum, _frame):
-        self.flag = True
-
-
 def main(args: argparse.Namespace) -> int:
-    # the token is declared by the body once the label subscription is in place: a teacher
-    # that waits for it (rhbl teacher) then loses no label
-    return run("learner", args, _body, early_token=False)
+    # the token is declared once the label subscription is in place: a teacher that waits for
+    # it (rhbl teacher) then loses no label
+    return run("learner", args, lambda ctx: LearnerProcess(ctx).run(), early_token=False)
 
 
-def _body(ctx: Context) -> int:
-    args = ctx.args
-    stop = _Stop()
-    signal.signal(signal.SIGINT, stop)
-    signal.signal(signal.SIGTERM, stop)
-    try:
-        core = LearnerCore(
-            args.out, features=args.features, resume=args.resume, task=args.task,
-            tree_params={"spawn": args.spawn,
-                         **({"max_nodes": args.max_nodes} if args.max_nodes else {})},
-            stride=args.stride, min_delta=args.min_delta, fsync_interval=args.fsync_interval)
-    except JournalError as exc:
-        raise ProcessError(f"learner: {exc}") from exc
-    session, robot = ctx.session, ctx.robot
-    latest = {"bytes": core.out.read_bytes() if core.out.exists() else None}
-    notice_pub = session.declare_publisher(keys.learner_notice_key(robot))
-    snap_key = keys.learner_snapshot_key(robot)
+class LearnerProcess:
+    """The learner over zenoh: scans and labels paired as they arrive (``Pairing``), learned in
+    order by ``LearnerCore``; snapshots announced with a ``TreeNotice`` and served on a query.
 
-    def on_query(query):
-        data = latest["bytes"]
+    SIGINT/SIGTERM set ``stopping``: the loop withdraws the token, learns what already arrived
+    (up to ``--drain`` s), writes the final snapshot and returns."""
+
+    def __init__(self, ctx: Context):
+        self.ctx, self.args = ctx, ctx.args
+        self.stopping = False
+        on_stop_signal(self.request_stop)
+        self.core = self._open_core(self.args)
+        ctx.scope.callback(self.close_journal)  # also on a path that never reaches finish()
+        self.latest = self.core.out.read_bytes() if self.core.out.exists() else None
+        self.snap_key = keys.learner_snapshot_key(ctx.robot)
+        self.watch = ScanWatch("learner", keys.scan_key(ctx.robot), stale=3.0)
+        # labels are paired with their scans as they arrive: nothing but labeled scans is queued
+        self.pairing = Pairing(self.args.scan_buffer, self.args.match_timeout,
+                               on_scan_seen=self.watch.seen)
+        self.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0}
+        # labeled scans waiting to be journaled (in order): empty unless the journal cannot be
+        # written (disk full); nothing is learned before it is journaled
+        self.backlog: deque[tuple[Scan, TeacherAction]] = deque()
+        self.retry_at = 0.0
+        self.failures = 0  # journal writes failed in a row
+        self.drain_until: float | None = None  # after a stop request: finish what arrived
+        self.notice_pub = self.subs = None
+
+    @staticmethod
+    def _open_core(args: argparse.Namespace) -> LearnerCore:
+        try:
+            return LearnerCore(
+                args.out, features=args.features, resume=args.resume, task=args.task,
+                tree_params={"spawn": args.spawn,
+                             **({"max_nodes": args.max_nodes} if args.max_nodes else {})},
+                stride=args.stride, min_delta=args.min_delta,
+                fsync_interval=args.fsync_interval)
+        except JournalError as exc:
+            raise ProcessError(f"learner: {exc}") from exc
+
+    def request_stop(self) -> None:
+        self.stopping = True
+
+    # -- zenoh --
+    def declare(self) -> None:
+        ctx, robot = self.ctx, self.ctx.robot
+        self.notice_pub = ctx.publisher(keys.learner_notice_key(robot))
+        self.subs = [
+            ctx.subscriber(keys.scan_key(robot), self.on_scan),
+            ctx.subscriber(keys.teacher_action_key(robot), self.on_label),
+        ]
+        ctx.queryable(self.snap_key, self.on_query)
+        ctx.declare_token()  # after the subscriptions: the token means "ready to receive labels"
+
+    def on_scan(self, sample) -> None:
+        self.pairing.on_scan(sample.payload.to_bytes())
+
+    def on_label(self, sample) -> None:
+        self.pairing.on_label(sample.payload.to_bytes())
+
+    def on_query(self, query) -> None:
+        data = self.latest
         try:
             if data is None:
                 query.reply_err(b"no snapshot yet")
             else:
-                query.reply(snap_key, data)
+                query.reply(self.snap_key, data)
         except Exception as exc:  # noqa: BLE001 - the querier went away
             log.debug("snapshot reply failed: %s", exc)
 
-    scan_k = keys.scan_key(robot)
-    watch = ScanWatch("learner", scan_k, stale=3.0)
-    # labels are paired with their scans as they arrive: nothing but labeled scans is queued
-    pairing = Pairing(args.scan_buffer, args.match_timeout, on_scan_seen=watch.seen)
-    subs = [
-        session.declare_subscriber(scan_k, lambda s: pairing.on_scan(s.payload.to_bytes())),
-        session.declare_subscriber(keys.teacher_action_key(robot),
-                                   lambda s: pairing.on_label(s.payload.to_bytes())),
-    ]
-    queryable = session.declare_queryable(snap_key, on_query)
-    ctx.declare_token()  # after the subscriptions: the token means "ready to receive labels"
-    if core.dirty:
+    def publish(self) -> bool:
+        """Write the snapshot and announce it; False (logged) when it cannot be written."""
+        core = self.core
         try:
-            latest["bytes"] = core.snapshot()
-        except OSError as exc:  # the journal holds every vector; retried while learning
-            log.error("cannot write snapshot %s (%s); retrying later", core.out, exc)
-    log.info("learning: features %s, %d vectors so far, %d nodes; snapshot %s",
-             core.features.to_dict()["beams"], core.applied, core.learner.nodes, core.out)
-
-    if not stop.flag:
-        try:
-            wait_for_server(ctx, got=watch.first)
-        except SystemExit:
-            stop.flag = True
-    watch.start()
-    stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0}
-    last_snap = time.monotonic()
-    last_log = last_snap
-    # labeled scans waiting to be journaled (in order): empty unless the journal cannot be
-    # written (disk full); nothing is learned before it is journaled
-    backlog: deque[tuple[Scan, TeacherAction]] = deque()
-    jstate = {"retry_at": 0.0, "failures": 0}
-
-    def publish_notice() -> bool:
-        try:
-            latest["bytes"] = core.snapshot()
+            self.latest = core.snapshot()
         except OSError as exc:  # disk full, ...: the journal still holds every vector
             log.error("cannot write snapshot %s (%s); retrying in %.0f s (the journal holds "
-                      "every labeled vector)", core.out, exc, args.snapshot_every)
+                      "every labeled vector)", core.out, exc, self.args.snapshot_every)
             return False
         note = TreeNotice(seq=core.seq, nodes=core.learner.nodes, height=core.learner.height,
                           vectors=core.applied, snapshot_id=f"{core.journal.lineage}:{core.applied}",
                           ts=time.time())
-        notice_pub.put(note.encode())
+        self.notice_pub.put(note.encode())
         return True
 
-    def flush_backlog() -> None:
+    # -- learning --
+    def learn(self, scan: Scan, act: TeacherAction) -> None:
+        if act.action not in self.core.actions:
+            self.stats["rejected"] += 1
+            log.warning("label %r for scan %d is not an action of this tree %s: dropped",
+                        act.action, act.scan_id, self.core.actions.names)
+            return
+        self.stats["paired"] += 1
+        self.backlog.append((scan, act))
+        if len(self.backlog) == 1 or time.monotonic() >= self.retry_at:
+            self.flush_backlog()
+
+    def flush_backlog(self) -> None:
         """Journal and learn the waiting labeled scans, in order, until the journal fails."""
-        while backlog:
-            scan, act = backlog[0]
+        while self.backlog:
+            scan, act = self.backlog[0]
             try:
-                learned = core.learn(scan.id, scan.ts, scan.ranges, float(scan.pose[2]),
-                                     act.action)
+                learned = self.core.learn(scan.id, scan.ts, scan.ranges, float(scan.pose[2]),
+                                          act.action)
             except FeatureError as exc:  # a scan the features cannot use (bad input)
-                backlog.popleft()
-                stats["rejected"] += 1
+                self.backlog.popleft()
+                self.stats["rejected"] += 1
                 log.warning("label %r for scan %d dropped: %s", act.action, scan.id, exc)
                 continue
             except (JournalError, OSError) as exc:
-                jstate["retry_at"] = time.monotonic() + _RETRY
-                jstate["failures"] += 1
-                n = jstate["failures"]
-                if n <= 3 or n % 60 == 0:
-                    log.error("cannot write the journal (%s): %d labeled vectors kept in memory "
-                              "(at most %d), retrying every %.0f s; nothing is learned before "
-                              "it is journaled", exc, len(backlog), MAX_BACKLOG, _RETRY)
-                while len(backlog) > MAX_BACKLOG:
-                    backlog.popleft()
-                    stats["lost"] += 1
-                    if stats["lost"] <= 3 or stats["lost"] % 1000 == 0:
-                        log.error("journal still failing: dropped the oldest labeled vector "
-                                  "kept in memory (%d lost so far)", stats["lost"])
+                self._journal_failed(exc)
                 return
-            backlog.popleft()
-            if learned:
-                stats["learned"] += 1
-        if jstate["failures"]:
-            log.warning("the journal is writable again after %d failed attempts",
-                        jstate["failures"])
-            jstate["failures"] = 0
+            self.backlog.popleft()
+            self.stats["learned"] += bool(learned)
+        if self.failures:
+            log.warning("the journal is writable again after %d failed attempts", self.failures)
+            self.failures = 0
 
-    def learn(scan: Scan, act: TeacherAction):
-        if act.action not in core.actions:
-            stats["rejected"] += 1
-            log.warning("label %r for scan %d is not an action of this tree %s: dropped",
-                        act.action, act.scan_id, core.actions.names)
-            return
-        stats["paired"] += 1
-        backlog.append((scan, act))
-        if len(backlog) == 1 or time.monotonic() >= jstate["retry_at"]:
-            flush_backlog()
+    def _journal_failed(self, exc: Exception) -> None:
+        self.retry_at = time.monotonic() + _RETRY
+        self.failures += 1
+        n = self.failures
+        if n <= 3 or n % 60 == 0:
+            log.error("cannot write the journal (%s): %d labeled vectors kept in memory "
+                      "(at most %d), retrying every %.0f s; nothing is learned before "
+                      "it is journaled", exc, len(self.backlog), MAX_BACKLOG, _RETRY)
+        while len(self.backlog) > MAX_BACKLOG:
+            self.backlog.popleft()
+            self.stats["lost"] += 1
+            if self.stats["lost"] <= 3 or self.stats["lost"] % 1000 == 0:
+                log.error("journal still failing: dropped the oldest labeled vector "
+                          "kept in memory (%d lost so far)", self.stats["lost"])
 
-    drain_until = None  # after a stop request: finish what already arrived, then exit
-    last_expire = time.monotonic()
-    code = 0
-    try:
+    # -- the loop --
+    def run(self) -> int:
+        self.declare()
+        self.first_snapshot()
+        if not self.stopping:
+            wait_for_server(self.ctx, got=self.watch.first, stop=lambda: self.stopping)
+        self.ctx.scope.callback(self.watch.stop)
+        self.watch.start()
+        try:
+            self.loop()
+        finally:
+            code = self.finish()
+        return code
+
+    def first_snapshot(self) -> None:
+        core = self.core
+        if core.dirty:
+            try:
+                self.latest = core.snapshot()
+            except OSError as exc:  # the journal holds every vector; retried while learning
+                log.error("cannot write snapshot %s (%s); retrying later", core.out, exc)
+        log.info("learning: features %s, %d vectors so far, %d nodes; snapshot %s",
+                 core.features.to_dict()["beams"], core.applied, core.learner.nodes, core.out)
+
+    def loop(self) -> None:
+        now = time.monotonic()
+        last_snap = last_log = last_expire = now
         while True:
-            if stop.flag and drain_until is None:
-                drain_until = time.monotonic() + args.drain
-                log.info("stopping: learning what already arrived (up to %.1f s)", args.drain)
-                # withdraw the token first: a teacher pauses instead of labelling into the void
-                if ctx.token is not None:
-                    with contextlib.suppress(Exception):
-                        ctx.token.undeclare()
-                    ctx.token = None
-            item = pairing.get(timeout=0.1 if drain_until is None else 0.05)
-            if item is None and drain_until is not None:
-                break  # quiet: everything that arrived is learned
-            if drain_until is not None and time.monotonic() > drain_until:
-                left = pairing.discard() + (item is not None)
-                if left:
-                    stats["lost"] += left
-                    log.error("stopping with %d labeled scans not learned (--drain %.1f s "
-                              "limit): lost", left, args.drain)
-                break
+            if self.stopping and self.drain_until is None:
+                self.begin_drain()
+            item = self.pairing.get(timeout=0.1 if self.drain_until is None else 0.05)
+            if self.drain_until is not None and (item is None or self._out_of_drain(item)):
+                return  # quiet (everything that arrived is learned), or out of time
             if item is not None:
-                learn(*item)
+                self.learn(*item)
             now = time.monotonic()
-            if backlog and now >= jstate["retry_at"]:
-                flush_backlog()
+            if self.backlog and now >= self.retry_at:
+                self.flush_backlog()
             if item is None or now - last_expire >= 0.5:
                 last_expire = now
-                pairing.expire()
-            if core.dirty and now - last_snap >= args.snapshot_every:
-                publish_notice()
+                self.pairing.expire()
+            if self.core.dirty and now - last_snap >= self.args.snapshot_every:
+                self.publish()
                 last_snap = now
             if now - last_log >= 5.0:
                 last_log = now
-                ps = pairing.stats
-                log.info("vectors %d (learned %d this run), nodes %d, height %d, unmatched %d; "
-                         "%d labeled scans waiting, %d unlabeled scans forgotten",
-                         core.applied, stats["learned"], core.learner.nodes,
-                         core.learner.height, ps["unmatched"], pairing.waiting(),
-                         ps["forgotten"])
-    finally:
-        watch.stop()
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        for s in subs:
-            s.undeclare()
+                self.log_progress()
+
+    def begin_drain(self) -> None:
+        self.drain_until = time.monotonic() + self.args.drain
+        log.info("stopping: learning what already arrived (up to %.1f s)", self.args.drain)
+        # withdraw the token first: a teacher pauses instead of labelling into the void
+        self.ctx.withdraw_token()
+
+    def _out_of_drain(self, item) -> bool:
+        if time.monotonic() <= self.drain_until:
+            return False
+        left = self.pairing.discard() + 1  # + the item at hand
+        self.stats["lost"] += left
+        log.error("stopping with %d labeled scans not learned (--drain %.1f s limit): lost",
+                  left, self.args.drain)
+        return True
+
+    def log_progress(self) -> None:
+        ps, core = self.pairing.stats, self.core
+        log.info("vectors %d (learned %d this run), nodes %d, height %d, unmatched %d; "
+                 "%d labeled scans waiting, %d unlabeled scans forgotten",
+                 core.applied, self.stats["learned"], core.learner.nodes,
+                 core.learner.height, ps["unmatched"], self.pairing.waiting(),
+                 ps["forgotten"])
+
+    # -- stopping --
+    def finish(self) -> int:
+        """Stop receiving, learn or count what is left, the final snapshot, close the journal:
+        the exit code (1 when a labeled vector was lost or the last snapshot not written)."""
+        self.watch.stop()
+        self.ctx.withdraw_token()
+        for sub in self.subs or []:
+            with contextlib.suppress(Exception):
+                sub.undeclare()
+        code = 0
         try:
-            # labeled scans that arrived after the loop's last look (a stop, an error): learned
-            # after a stop, counted lost otherwise; never dropped silently
-            while drain_until is not None and time.monotonic() <= drain_until + 1.0:
-                item = pairing.get(0.0)
-                if item is None:
-                    break
-                learn(*item)
-            if left := pairing.discard():
-                stats["lost"] += left
-                log.error("%d labeled scans not learned (the learner is failing or out of "
-                          "--drain time): lost", left)
-            if backlog:
-                flush_backlog()
-            if backlog:
-                stats["lost"] += len(backlog)
-                log.error("%d labeled vectors could not be journaled (the journal is not "
-                          "writable) and are lost", len(backlog))
-            pairing.close()
-            ps = pairing.stats
-            lost = stats["lost"] + ps["lost"]
-            if lost:
+            self.learn_leftovers()
+            lost = self.stats["lost"] + self.pairing.stats["lost"]
+            if lost or (self.core.dirty and not self.publish()):
                 code = 1
-            if core.dirty and not publish_notice():
-                code = 1
-            log.info("stopped: %d labeled vectors (%d this run, %d learned, %d unmatched "
-                     "labels, %d malformed, %d rejected, %d lost), %d nodes, height %d; "
-                     "snapshot %s; %d scans received, %d unlabeled ones forgotten, at most %d "
-                     "labeled scans waited to be learned", core.applied, stats["paired"],
-                     stats["learned"], ps["unmatched"], ps["bad"], stats["rejected"], lost,
-                     core.learner.nodes, core.learner.height, core.out, ps["scans"],
-                     ps["forgotten"], ps["max_ready"])
+            self.report(lost)
         finally:
-            queryable.undeclare()
-            try:
-                core.close()
-            except OSError as exc:
-                log.error("closing the journal %s failed: %s", core.jpath, exc)
+            if not self.close_journal():
                 code = 1
-    return code
+        return code
+
+    def close_journal(self) -> bool:
+        """Close (fsync) the journal; False (logged) when that failed. Idempotent."""
+        try:
+            self.core.close()
+        except OSError as exc:
+            log.error("closing the journal %s failed: %s", self.core.jpath, exc)
+            return False
+        return True
+
+    def learn_leftovers(self) -> None:
+        """Labeled scans that arrived after the loop's last look (a stop, an error): learned
+        after a stop, counted lost otherwise; never dropped silently."""
+        while self.drain_until is not None and time.monotonic() <= self.drain_until + 1.0:
+            item = self.pairing.get(0.0)
+            if item is None:
+                break
+            self.learn(*item)
+        if left := self.pairing.discard():
+            self.stats["lost"] += left
+            log.error("%d labeled scans not learned (the learner is failing or out of "
+                      "--drain time): lost", left)
+        if self.backlog:
+            self.flush_backlog()
+        if self.backlog:
+            self.stats["lost"] += len(self.backlog)
+            log.error("%d labeled vectors could not be journaled (the journal is not "
+                      "writable) and are lost", len(self.backlog))
+        self.pairing.close()
+
+    def report(self, lost: int) -> None:
+        ps, st, core = self.pairing.stats, self.stats, self.core
+        log.info("stopped: %d labeled vectors (%d this run, %d learned, %d unmatched "
+                 "labels, %d malformed, %d rejected, %d lost), %d nodes, height %d; "
+                 "snapshot %s; %d scans received, %d unlabeled ones forgotten, at most %d "
+                 "labeled scans waited to be learned", core.applied, st["paired"],
+                 st["learned"], ps["unmatched"], ps["bad"], st["rejected"], lost,
+                 core.learner.nodes, core.learner.height, core.out, ps["scans"],
+                 ps["forgotten"], ps["max_ready"])

@@ -46,6 +46,7 @@ from client._process import (
     ProcessError,
     ScanWatch,
     add_process_arguments,
+    decode_scan,
     run,
     wait_for_learner,
     wait_for_server,
@@ -108,7 +109,14 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _body(ctx: Context) -> int:
-    args = ctx.args
+    demo = _demonstrator(ctx.args)
+    close = getattr(demo, "close", None)
+    if close:
+        ctx.scope.callback(close)  # the keyboard restores the terminal
+    return TeacherProcess(ctx, demo).run()
+
+
+def _demonstrator(args: argparse.Namespace):
     if args.correct and args.policy == "keyboard":
         raise ProcessError("teacher: --correct needs a scripted expert (--policy wall-follower "
                            "or maze), not the keyboard", EXIT_USAGE)
@@ -117,143 +125,167 @@ def _body(ctx: Context) -> int:
     if args.policy == "keyboard":
         from client.keyboard import KeyboardPolicy
 
-        demo = KeyboardPolicy(DEFAULT_ACTIONS)
-    else:
-        try:
-            policy = make_policy(POLICIES[args.policy], DEFAULT_ACTIONS, style=args.style)
-        except ValueError as exc:
-            raise ProcessError(f"teacher: {exc}", EXIT_USAGE) from exc
-        demo = Demonstrator(policy, perturb=args.perturb, rng=np.random.default_rng(args.seed))
+        return KeyboardPolicy(DEFAULT_ACTIONS)
     try:
-        return _loop(ctx, demo)
-    finally:
-        close = getattr(demo, "close", None)
-        if close:
-            close()
+        policy = make_policy(POLICIES[args.policy], DEFAULT_ACTIONS, style=args.style)
+    except ValueError as exc:
+        raise ProcessError(f"teacher: {exc}", EXIT_USAGE) from exc
+    return Demonstrator(policy, perturb=args.perturb, rng=np.random.default_rng(args.seed))
 
 
-def _loop(ctx: Context, demo) -> int:
-    args, session, robot = ctx.args, ctx.session, ctx.robot
-    cmd_pub = session.declare_publisher(keys.cmd_vel_key(robot, source=SOURCE),
-                                        congestion_control=zenoh.CongestionControl.BLOCK,
-                                        express=True)
-    act_pub = session.declare_publisher(keys.teacher_action_key(robot),
-                                        congestion_control=zenoh.CongestionControl.BLOCK)
-    scan_k = keys.scan_key(robot)
-    # the latest scan wins (a teacher never acts on a backlog); correcting, a short queue: the
-    # server does not wait for a teacher that does not drive, and every state the controller
-    # visits should get its label (a lock-step run only falls a scan or two behind)
-    sub = session.declare_subscriber(
-        scan_k, zenoh.handlers.RingChannel(CORRECT_QUEUE if args.correct else 1))
-    learners = _Learners(session, robot) if args.wait_learner else None
-    wait_for_server(ctx)
+class TeacherProcess:
+    """For every scan: the demonstrator's label on ``rhbl/<robot>/teacher/action`` and, when it
+    drives, the executed action's command on ``.../cmd/vel/teacher``."""
 
-    def wait_learner() -> None:
-        found = wait_for_learner(ctx)
+    def __init__(self, ctx: Context, demo):
+        self.ctx, self.args, self.demo = ctx, ctx.args, demo
+        robot = ctx.robot
+        self.cmd_pub = ctx.publisher(keys.cmd_vel_key(robot, source=SOURCE),
+                                     congestion_control=zenoh.CongestionControl.BLOCK,
+                                     express=True)
+        self.act_pub = ctx.publisher(keys.teacher_action_key(robot),
+                                     congestion_control=zenoh.CongestionControl.BLOCK)
+        self.scan_key = keys.scan_key(robot)
+        # the latest scan wins (a teacher never acts on a backlog); correcting, a short queue:
+        # the server does not wait for a teacher that does not drive, and every state the
+        # controller visits should get its label (a lock-step run only falls a scan or two behind)
+        self.sub = ctx.subscriber(
+            self.scan_key, zenoh.handlers.RingChannel(CORRECT_QUEUE if self.args.correct else 1))
+        self.learners = _Learners(ctx) if self.args.wait_learner else None
+        self.hold = _Hold(ctx) if self.args.correct else None
+        self.watch = ScanWatch("teacher", self.scan_key, stale=1.0)
+        ctx.scope.callback(self.watch.stop)
+        self.t0: float | None = None
+        self.n = self.perturbed = self.took = self.bad = 0
+        self.correcting = False
+        self.last_id, self.missed = -1, 0  # correcting: scans dropped from the queue unlabelled
+
+    def run(self) -> int:
+        wait_for_server(self.ctx)
+        if self.learners is not None:
+            self.wait_learner()
+        else:
+            log.info("not waiting for a learner (--no-wait-learner): labels go to whoever "
+                     "listens")
+        self.watch.start()
+        try:
+            while self.step():
+                pass
+        finally:
+            self.close()
+        return 0
+
+    def wait_learner(self) -> None:
+        found = wait_for_learner(self.ctx)
         end = time.monotonic() + 2.0  # the subscriber sees the token too (normally at once)
-        while not learners and time.monotonic() < end:
+        while not self.learners and time.monotonic() < end:
             time.sleep(0.01)
-        if not learners:
-            learners.add(found)
+        if not self.learners:
+            self.learners.add(found)
         # a scan kept from before the learner subscribed never reached it: its label could not
         # be paired. Drop it and start with the next scan.
-        while sub.handler.try_recv() is not None:
+        while self.sub.handler.try_recv() is not None:
             pass
 
-    if learners is not None:
-        wait_learner()
-    else:
-        log.info("not waiting for a learner (--no-wait-learner): labels go to whoever listens")
-    watch = ScanWatch("teacher", scan_k, stale=1.0).start()
-    actions = DEFAULT_ACTIONS
-    hold = _Hold(ctx) if args.correct else None
-    t0 = None
-    n = 0
-    perturbed = 0
-    took = 0
-    bad = 0
-    correcting = False
-    last_id, missed = -1, 0  # correcting: scans dropped from the queue before being labelled
-    try:
-        while True:
-            sample = sub.handler.recv()
-            watch.seen()
-            try:
-                scan = Scan.decode(sample.payload.to_bytes())
-            except Exception as exc:  # noqa: BLE001 - DecodeError: count, log, keep running
-                log.warning("dropped a malformed scan: %s", exc)
-                continue
-            if learners is not None and not learners:
-                # the learner stopped or crashed: a label now would be lost. Pause (no command:
-                # the server's watchdog stops the robot) until a learner is up again.
-                log.warning("teacher: no learner of robot %s is up any more: pausing (no "
-                            "commands, no labels)", robot)
-                cmd_pub.put(VelCmd(vx=0.0, va=0.0, source=SOURCE, scan_id=scan.id,
-                                   ts=scan.ts).encode())  # stand still now, not after the watchdog
-                wait_learner()
-                last_id = -1  # the scans of the pause were skipped on purpose, not missed
-                continue
-            if t0 is None:
-                t0 = scan.ts
-            elif correcting and last_id >= 0 and scan.id > last_id + 1:
-                before, missed = missed, missed + scan.id - last_id - 1  # the queue overflowed
-                if before == 0 or missed // 100 > before // 100:
-                    log.warning("teacher fell behind the controller: %d scans not labelled so "
-                                "far", missed)
-            last_id = scan.id
-            if args.seconds is not None and scan.ts - t0 >= args.seconds:
-                log.info("demonstrated %.1f s of sim time: done", scan.ts - t0)
-                break
-            if args.correct and not correcting and scan.ts - t0 >= args.demonstrate:
-                correcting = True
-                log.info("correcting from %.1f s of sim time: the controller drives, the teacher "
-                         "labels every scan and takes over while a beam is closer than %g m",
-                         scan.ts - t0, args.takeover)
-            try:
-                if correcting:
-                    # the expert's choice on the state the controller put the robot in; the
-                    # wheels only when the harness's takeover rule says so
-                    label = demo.policy.act(scan.ranges, scan.pose)
-                    executed = label if takes_over(scan.ranges, args.takeover) else None
-                else:
-                    label, executed = demo.step(scan.ranges, scan.pose)
-                vx, va = actions[executed] if label is not None and executed else (0.0, 0.0)
-            except Exception as exc:  # noqa: BLE001 - a scan the policy cannot use
-                bad += 1
-                if bad <= 10 or bad % 100 == 0:
-                    log.warning("scan %d not demonstrated (%d so far): %s: %s", scan.id, bad,
-                                type(exc).__name__, exc)
-                continue
-            if label is None:  # keyboard: nothing pressed yet
-                continue
-            if n == 0:
-                log.info("first label: scan %d, %s", scan.id, label)
-            if executed is not None:
-                if hold is not None:
-                    hold.acquire()  # before the command: the server may release at once
-                cmd_pub.put(VelCmd(vx=vx, va=va, source=SOURCE, scan_id=scan.id,
-                                   ts=scan.ts).encode())
-            elif hold is not None:
-                hold.release()  # the controller drives from the next tick on
-            act_pub.put(TeacherAction(scan_id=scan.id, action=label, source=SOURCE, ts=scan.ts,
-                                      executed=executed).encode())
-            n += 1
-            if correcting:
-                took += executed is not None
+    def step(self) -> bool:
+        """Answer the next scan; False when done (``--seconds``)."""
+        sample = self.sub.handler.recv()
+        self.watch.seen()
+        scan = decode_scan(sample.payload.to_bytes())
+        if scan is None:
+            return True
+        if self.learners is not None and not self.learners:
+            self.pause(scan)
+            return True
+        if not self.track(scan):
+            return False
+        choice = self.choose(scan)
+        if choice is not None:
+            self.publish(scan, *choice)
+        return True
+
+    def pause(self, scan: Scan) -> None:
+        """The learner stopped or crashed: a label now would be lost. Stand still (now, not
+        after the watchdog) and wait until a learner is up again."""
+        log.warning("teacher: no learner of robot %s is up any more: pausing (no commands, no "
+                    "labels)", self.ctx.robot)
+        self.cmd_pub.put(VelCmd(vx=0.0, va=0.0, source=SOURCE, scan_id=scan.id,
+                                ts=scan.ts).encode())
+        self.wait_learner()
+        self.last_id = -1  # the scans of the pause were skipped on purpose, not missed
+
+    def track(self, scan: Scan) -> bool:
+        """Sim time, scans missed while correcting, the switch to correcting; False when done."""
+        args = self.args
+        if self.t0 is None:
+            self.t0 = scan.ts
+        elif self.correcting and self.last_id >= 0 and scan.id > self.last_id + 1:
+            before = self.missed  # the queue overflowed
+            self.missed += scan.id - self.last_id - 1
+            if before == 0 or self.missed // 100 > before // 100:
+                log.warning("teacher fell behind the controller: %d scans not labelled so far",
+                            self.missed)
+        self.last_id = scan.id
+        if args.seconds is not None and scan.ts - self.t0 >= args.seconds:
+            log.info("demonstrated %.1f s of sim time: done", scan.ts - self.t0)
+            return False
+        if args.correct and not self.correcting and scan.ts - self.t0 >= args.demonstrate:
+            self.correcting = True
+            log.info("correcting from %.1f s of sim time: the controller drives, the teacher "
+                     "labels every scan and takes over while a beam is closer than %g m",
+                     scan.ts - self.t0, args.takeover)
+        return True
+
+    def choose(self, scan: Scan) -> tuple[str, str | None, tuple[float, float]] | None:
+        """(label, executed action or None, its velocity), or None when there is nothing to
+        demonstrate."""
+        try:
+            if self.correcting:
+                # the expert's choice on the state the controller put the robot in; the wheels
+                # only when the harness's takeover rule says so
+                label = self.demo.policy.act(scan.ranges, scan.pose)
+                executed = label if takes_over(scan.ranges, self.args.takeover) else None
             else:
-                perturbed += executed != label
-            if n % 500 == 0:
-                log.info("%d labels, %.0f s sim, %.0f%% perturbed, %d taken over", n,
-                         scan.ts - t0, 100.0 * perturbed / n, took)
-    finally:
-        watch.stop()
-        if hold is not None:
-            hold.release()
-        if learners is not None:
-            learners.close()
-        log.info("teacher stopped after %d labels (%d perturbed, %d taken over)%s", n, perturbed,
-                 took, f"; {missed} scans not labelled (fell behind)" if missed else "")
-    return 0
+                label, executed = self.demo.step(scan.ranges, scan.pose)
+            vel = DEFAULT_ACTIONS[executed] if label is not None and executed else (0.0, 0.0)
+        except Exception as exc:  # noqa: BLE001 - a scan the policy cannot use
+            self.bad += 1
+            if self.bad <= 10 or self.bad % 100 == 0:
+                log.warning("scan %d not demonstrated (%d so far): %s: %s", scan.id, self.bad,
+                            type(exc).__name__, exc)
+            return None
+        return None if label is None else (label, executed, vel)  # keyboard: nothing pressed
+
+    def publish(self, scan: Scan, label: str, executed: str | None,
+                vel: tuple[float, float]) -> None:
+        if self.n == 0:
+            log.info("first label: scan %d, %s", scan.id, label)
+        if executed is not None:
+            vx, va = vel
+            if self.hold is not None:
+                self.hold.acquire()  # before the command: the server may release at once
+            self.cmd_pub.put(VelCmd(vx=vx, va=va, source=SOURCE, scan_id=scan.id,
+                                    ts=scan.ts).encode())
+        elif self.hold is not None:
+            self.hold.release()  # the controller drives from the next tick on
+        self.act_pub.put(TeacherAction(scan_id=scan.id, action=label, source=SOURCE, ts=scan.ts,
+                                       executed=executed).encode())
+        self.n += 1
+        if self.correcting:
+            self.took += executed is not None
+        else:
+            self.perturbed += executed != label
+        if self.n % 500 == 0:
+            log.info("%d labels, %.0f s sim, %.0f%% perturbed, %d taken over", self.n,
+                     scan.ts - self.t0, 100.0 * self.perturbed / self.n, self.took)
+
+    def close(self) -> None:
+        self.watch.stop()
+        if self.hold is not None:
+            self.hold.release()
+        log.info("teacher stopped after %d labels (%d perturbed, %d taken over)%s", self.n,
+                 self.perturbed, self.took,
+                 f"; {self.missed} scans not labelled (fell behind)" if self.missed else "")
 
 
 class _Hold:
@@ -268,6 +300,7 @@ class _Hold:
         self._key = keys.alive_key("teacher", f"{ctx.ident}-hold")
         self._token = None
         self.handbacks = 0
+        ctx.scope.callback(self.release)
 
     def acquire(self) -> None:
         if self._token is None:
@@ -285,12 +318,12 @@ class _Learners:
     """The liveliness tokens of the robot's learners now up (``rhbl/alive/learner/<robot>-*``),
     kept current by a liveliness subscriber (a callback of a few microseconds)."""
 
-    def __init__(self, session, robot: str):
-        self._prefix = f"{robot}-"
+    def __init__(self, ctx: Context):
+        self._prefix = f"{ctx.robot}-"
         self._keys: set[str] = set()
         self._lock = threading.Lock()
-        self._sub = session.liveliness().declare_subscriber(
-            keys.alive_key("learner", "*"), self._on_token, history=True)
+        ctx.keep(ctx.session.liveliness().declare_subscriber(
+            keys.alive_key("learner", "*"), self._on_token, history=True))
 
     def _on_token(self, sample) -> None:
         key = str(sample.key_expr)
@@ -309,7 +342,3 @@ class _Learners:
     def __bool__(self) -> bool:
         with self._lock:
             return bool(self._keys)
-
-    def close(self) -> None:
-        with contextlib.suppress(Exception):  # the session is closing
-            self._sub.undeclare()

@@ -1,15 +1,26 @@
-"""``rhbl server``: serve a world over zenoh (Player-like position2d + laser per robot)."""
+"""``rhbl server``: serve a world over zenoh (Player-like position2d + laser per robot).
+
+It runs through ``protocol.process.run``, as the client processes do: the same log lines and exit
+codes (0 ok, also after SIGINT/SIGTERM once the session is closed; 2 bad world or flags; 3 a
+connect endpoint unreachable, the session refused or a listen endpoint taken).
+"""
 
 from __future__ import annotations
 
 import argparse
 import logging
-import signal
-import sys
-import threading
 
 from protocol import keys
-from protocol.session import DEFAULT_ENDPOINT, add_zenoh_arguments, config_from_args
+from protocol.process import (
+    EXIT_OK,
+    EXIT_USAGE,
+    Context,
+    ProcessError,
+    add_logging_arguments,
+    on_stop_signal,
+    run,
+)
+from protocol.session import DEFAULT_ENDPOINT, add_zenoh_arguments
 
 __all__ = ["add_arguments", "main"]
 
@@ -62,110 +73,77 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--duration", type=float, default=None, help="stop after this many sim seconds"
     )
     parser.add_argument("--ident", default="sim", help="server id in its liveliness token")
-    parser.add_argument("--log-level", default="INFO", help="logging level (INFO)")
+    add_logging_arguments(parser)
     add_zenoh_arguments(parser, default_listen=[DEFAULT_ENDPOINT], default_mode="router")
 
 
 def main(args: argparse.Namespace) -> int:
-    logging.basicConfig(
-        level=getattr(logging, str(args.log_level).upper(), logging.INFO),
-        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-    )
-    import zenoh
+    server = ServerProcess(args)
+    return run("server", args, server.serve, check=server.prepare, ident=args.ident,
+               early_token=False)  # the node declares rhbl/alive/server/<ident> itself
 
-    from server import world_path
-    from server.node import ServerNode
-    from server.world import World, WorldError, load_world
 
-    try:
-        spec = load_world(world_path(args.world))
-    except (FileNotFoundError, WorldError) as e:
-        print(f"rhbl server: {e}", file=sys.stderr)
-        return 2
-    names = args.robot
-    n = args.robots if args.robots is not None else (len(names) if names else 1)
-    if names is None:
-        names = [keys.robot_name(i) for i in range(n)]
-    if len(names) != n:
-        print(f"rhbl server: --robots {n} but {len(names)} --robot names", file=sys.stderr)
-        return 2
-    try:
+class ServerProcess:
+    """``rhbl server``: ``prepare`` checks the flags and loads the world (bad input: exit 2,
+    before any network); ``serve`` runs a ``ServerNode`` on the session until SIGINT/SIGTERM
+    (or ``--duration``) and reports its counters."""
+
+    def __init__(self, args: argparse.Namespace):
+        self.args = args
+        self.spec = self.world = None
+        self.names: list[str] = []
+
+    def prepare(self) -> None:
+        from server import world_path
+        from server.world import World, WorldError, load_world
+
+        args = self.args
+        try:
+            self.spec = load_world(world_path(args.world))
+        except (FileNotFoundError, WorldError) as e:
+            raise ProcessError(f"server: {e}", EXIT_USAGE) from e
+        names = args.robot
+        n = args.robots if args.robots is not None else (len(names) if names else 1)
+        if names is None:
+            names = [keys.robot_name(i) for i in range(n)]
+        if len(names) != n:
+            raise ValueError(f"--robots {n} but {len(names)} --robot names")
         for name in names:
             keys.check_chunk(name, "robot name")
-        world = World(
-            spec,
-            robots=n,
-            seed=args.seed,
-            range_noise=args.range_noise,
-            odom_noise=args.odom_noise,
-        )
-        conf = config_from_args(args)
-    except ValueError as e:
-        print(f"rhbl server: {e}", file=sys.stderr)
-        return 2
-    if n > len(spec.start_poses):
-        log.warning(
-            "%d robots but world %r has %d start poses: some robots start together",
-            n,
-            spec.name,
-            len(spec.start_poses),
-        )
+        keys.check_chunk(args.ident, "--ident")
+        self.names = names
+        self.world = World(self.spec, robots=n, seed=args.seed, range_noise=args.range_noise,
+                           odom_noise=args.odom_noise)
+        if n > len(self.spec.start_poses):
+            log.warning("%d robots but world %r has %d start poses: some robots start together",
+                        n, self.spec.name, len(self.spec.start_poses))
 
-    stop = threading.Event()
-    holder: dict[str, ServerNode] = {}
+    def serve(self, ctx: Context) -> int:
+        node = self._node(ctx)
+        ctx.scope.callback(self._report, node)  # after the node is closed (the scope is LIFO)
+        ctx.scope.callback(node.close)
+        on_stop_signal(node.stop)
+        args = self.args
+        pace = ("lock-step" if args.lockstep else
+                "as fast as possible" if args.speedup == 0 else f"{args.speedup:g}x real time")
+        print(f"rhbl server: world {self.spec.name!r} ({self.spec.path}), robots "
+              f"{', '.join(self.names)}, {args.rate:g} Hz, {pace}; listening on "
+              f"{ctx.config.get_json('listen/endpoints')}", flush=True)
+        node.run(duration=args.duration)
+        return EXIT_OK
 
-    def on_signal(signum, _frame):
-        stop.set()
-        node = holder.get("node")
-        if node is not None:
-            node.stop()
+    def _node(self, ctx: Context):
+        from server.node import ServerNode
 
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
-
-    listen = conf.get_json("listen/endpoints")
-    try:
-        session = zenoh.open(conf)
-    except Exception as e:
-        print(f"rhbl server: cannot open zenoh session ({e})", file=sys.stderr)
-        return 1
-    with session:
+        args = self.args
         try:
-            node = ServerNode(
-                session,
-                world,
-                names=names,
-                rate=args.rate,
-                speedup=0.0 if args.lockstep else args.speedup,
-                lockstep=args.lockstep,
-                lockstep_timeout=args.lockstep_timeout,
-                watchdog=args.watchdog,
-                ident=args.ident,
-            )
+            return ServerNode(ctx.session, self.world, names=self.names, rate=args.rate,
+                              speedup=0.0 if args.lockstep else args.speedup,
+                              lockstep=args.lockstep, lockstep_timeout=args.lockstep_timeout,
+                              watchdog=args.watchdog, ident=args.ident)
         except ValueError as e:
-            print(f"rhbl server: {e}", file=sys.stderr)
-            return 2
-        holder["node"] = node
-        pace = (
-            "lock-step"
-            if args.lockstep
-            else ("as fast as possible" if args.speedup == 0 else f"{args.speedup:g}x real time")
-        )
-        print(
-            f"rhbl server: world {spec.name!r} ({spec.path}), robots {', '.join(names)}, "
-            f"{args.rate:g} Hz, {pace}; listening on {listen}",
-            flush=True,
-        )
-        if stop.is_set():
-            node.stop()
-        try:
-            node.run(duration=args.duration)
-        finally:
-            node.close()
-            log.info(
-                "stopped after %d ticks (%.1f s sim); counters %s",
-                node.ticks,
-                world.time,
-                dict(node.counters),
-            )
-    return 0
+            raise ProcessError(f"server: {e}", EXIT_USAGE) from e
+
+    def _report(self, node) -> None:
+        log.info("stopped after %d ticks (%.1f s sim); counters %s", node.ticks,
+                 self.world.time, dict(node.counters))

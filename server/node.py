@@ -64,6 +64,11 @@ def world_info(spec: WorldSpec) -> WorldInfo:
                      goal=goal, starts=tuple(tuple(p) for p in spec.start_poses))
 
 
+def _undeclare(declared: Any) -> None:
+    with contextlib.suppress(Exception):  # already gone with the session
+        declared.undeclare()
+
+
 class _RobotIO:
     def __init__(self, name: str, index: int, watchdog: float) -> None:
         self.name = name
@@ -122,19 +127,24 @@ class ServerNode:
         self._stop = threading.Event()
         self._robots = [_RobotIO(n, i, self.watchdog) for i, n in enumerate(names)]
         self._by_name = {r.name: r for r in self._robots}
-        self._decls: list[Any] = []
         self._world_info = world_info(world.spec)
-        self._declare()
+        # every declaration, undeclared in reverse order by close() (on every path)
+        self._scope = contextlib.ExitStack()
+        try:
+            self._declare()
+        except BaseException:
+            self._scope.close()
+            raise
 
     # -- zenoh declarations ---------------------------------------------------------------
 
     def _declare(self) -> None:
         s = self.session
         for r in self._robots:
-            r.pubs["state"] = s.declare_publisher(keys.state_key(r.name))
-            r.pubs["scan"] = s.declare_publisher(keys.scan_key(r.name))
-            r.pubs["driver"] = s.declare_publisher(keys.driver_key(r.name))
-            self._decls.append(
+            r.pubs["state"] = self._keep(s.declare_publisher(keys.state_key(r.name)))
+            r.pubs["scan"] = self._keep(s.declare_publisher(keys.scan_key(r.name)))
+            r.pubs["driver"] = self._keep(s.declare_publisher(keys.driver_key(r.name)))
+            self._keep(
                 s.declare_subscriber(
                     keys.cmd_vel_subscription(r.name),
                     lambda sample, r=r: self._on_cmd(r, sample),
@@ -148,33 +158,41 @@ class ServerNode:
                 ("laser", "get_geom"),
                 ("laser", "get_config"),
             ]:
-                self._decls.append(
+                self._keep(
                     s.declare_queryable(
                         keys.request_key(r.name, iface, name),
                         lambda q, r=r, iface=iface, name=name: self._on_query(r, iface, name, q),
                     )
                 )
             for name in ("set_pose", "get_pose", "get_world"):  # simulation-only requests
-                self._decls.append(
+                self._keep(
                     s.declare_queryable(
                         keys.sim_request_key(r.name, name),
                         lambda q, r=r, name=name: self._on_query(r, "sim", name, q),
                     )
                 )
-        self._decls.append(
+        # the token before the liveliness subscriber: closing undeclares the subscriber first,
+        # so the node does not see its own token go
+        self._keep(s.liveliness().declare_token(keys.alive_key("server", self.ident)))
+        self._keep(
             s.liveliness().declare_subscriber(f"{keys.PREFIX}/alive/**", self._on_liveliness)
         )
-        self._token = s.liveliness().declare_token(keys.alive_key("server", self.ident))
+
+    def _keep(self, declared: Any) -> Any:
+        self._scope.callback(_undeclare, declared)
+        return declared
 
     def close(self) -> None:
-        """Undeclare everything (the session stays open; its owner closes it)."""
+        """Undeclare everything, the token first (the session stays open; its owner closes it).
+        Idempotent."""
         self._stop.set()
-        for d in self._decls:
-            with contextlib.suppress(Exception):  # already gone with the session
-                d.undeclare()
-        self._decls.clear()
-        with contextlib.suppress(Exception):
-            self._token.undeclare()
+        self._scope.close()
+
+    def __enter__(self) -> ServerNode:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     # -- input ------------------------------------------------------------------------------
 

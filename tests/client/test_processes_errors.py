@@ -172,3 +172,46 @@ def test_correcting_needs_a_scripted_teacher(free_port):
         r = _run("teacher", "--connect", ep, "--correct", "--takeover", "-1")
         assert r.returncode == EXIT_USAGE and ">= 0" in r.stderr
     assert "Traceback" not in r.stderr
+
+
+def test_controller_waits_for_a_tree_as_long_as_told(free_port):
+    """--wait-tree bounds the wait for the learner's first tree: then the last reason, exit 4
+    (without --wait-tree and without --follow: a single query)."""
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    with zenoh.open(make_config(mode="router", listen=[ep])):
+        t = time.monotonic()
+        r = _run("controller", "--connect", ep, "--from-learner", "--follow", "--wait-tree", "2")
+        waited = time.monotonic() - t
+    assert r.returncode == EXIT_NO_SERVER, r.stderr
+    assert "waiting for the learner's first tree" in r.stderr
+    assert "no learner answered" in r.stderr and "--wait-tree 2 s" in r.stderr
+    assert waited >= 2.0 and "Traceback" not in r.stderr
+
+
+def test_a_learner_waiting_for_the_server_stops_on_sigterm(free_port, tmp_path):
+    """SIGTERM ends the (endless) wait for the server at once: exit 0, the journal closed."""
+    from protocol import keys
+
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    log = tmp_path / "l.log"
+    with zenoh.open(make_config(mode="router", listen=[ep])) as session:
+        with open(log, "wb") as f:
+            p = subprocess.Popen([sys.executable, "-m", "lab.cli", "learner", "--connect", ep,
+                                  "--features", "wall", "--out", str(tmp_path / "t.rhbl"),
+                                  "--wait-server", "0"], stdout=f, stderr=subprocess.STDOUT,
+                                 cwd=ROOT, start_new_session=True,
+                                 env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        try:
+            key = keys.alive_key("learner", f"r0-{p.pid}")
+            end = time.monotonic() + 30
+            while not any(r.ok is not None for r in session.liveliness().get(key, timeout=1.0)):
+                assert p.poll() is None and time.monotonic() < end, log.read_text()
+                time.sleep(0.05)
+            os.kill(p.pid, signal.SIGTERM)
+            assert p.wait(10) == 0, log.read_text()
+        finally:
+            if p.poll() is None:
+                os.kill(p.pid, signal.SIGKILL)
+                p.wait(5)
+    assert "stopped: 0 labeled vectors" in log.read_text()
+    assert "server is up" not in log.read_text()

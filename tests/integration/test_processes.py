@@ -108,6 +108,19 @@ def _journal_len(out: Path) -> int:
         return len(j)
 
 
+def _wait_snapshot_file(out: Path, labeled: int, timeout: float = 20.0) -> dict:
+    """The metadata of the snapshot at ``out`` once it includes ``labeled`` journal records."""
+    end = time.monotonic() + timeout
+    meta: dict = {}
+    while time.monotonic() < end:
+        if out.exists():
+            meta = load_snapshot(out)[3]
+            if meta["provenance"]["labeled"] >= labeled:
+                return meta
+        time.sleep(0.05)
+    raise AssertionError(f"snapshot {out} holds {meta.get('provenance')}, expected {labeled}")
+
+
 def _wait_journal(out: Path, n: int, timeout: float = 20.0) -> None:
     end = time.monotonic() + timeout
     while time.monotonic() < end:
@@ -165,10 +178,10 @@ def test_learner_grows_a_tree_and_survives_sigkill(env):
     _wait_token(env["session"], "learner", learner)
     n1 = _teach(env, 40)
     _wait_journal(out, n1)
-    time.sleep(0.8)  # a periodic snapshot is written
-    clf, _f, _a, meta = load_snapshot(out)
+    meta = _wait_snapshot_file(out, n1)  # a periodic snapshot with every journaled vector
+    clf = load_snapshot(out)[0]
     assert clf.node_count_ > 5
-    assert meta["provenance"]["labeled"] >= 1
+    assert meta["provenance"]["labeled"] == n1
 
     # SIGKILL: no final snapshot; the journal holds every labeled vector
     learner.kill()
@@ -257,7 +270,6 @@ def test_controller_follows_the_learner(env):
     _wait_token(env["session"], "learner", learner)
     _teach(env, 5)
     _wait_journal(out, 40)
-    time.sleep(0.5)
     c = env["start"]("controller", "controller", "--from-learner", "--follow")
     _wait_token(env["session"], "controller", c)
     _teach(env, 20, seed=2)  # the teacher outranks the controller while it demonstrates
@@ -309,7 +321,7 @@ def test_teacher_pauses_while_no_learner_is_up(env):
     while "first label" not in t.text() and time.monotonic() < end:
         time.sleep(0.05)
     assert "first label" in t.text(), t.text()
-    time.sleep(0.5)
+    _wait_journal(out, 5)  # demonstrating
     assert learner.stop(signal.SIGTERM) == 0, learner.text()
     end = time.monotonic() + 10
     while "pausing" not in t.text() and time.monotonic() < end:
@@ -396,3 +408,41 @@ def test_correcting_teacher_labels_while_the_controller_drives(env):
     ticks = [s.driver for s in states if s.driver]
     assert ticks.count("controller") > 0.5 * len(ticks), ticks.count("teacher")
     assert "teacher" in ticks and "teacher" in drivers and "controller" in drivers
+
+
+def _wait_text(proc: Proc, text: str, timeout: float = 30.0) -> None:
+    end = time.monotonic() + timeout
+    while text not in proc.text():
+        assert proc.proc.poll() is None, f"{proc.name} exited:\n{proc.text()}"
+        assert time.monotonic() < end, f"no {text!r} within {timeout:g} s:\n{proc.text()}"
+        time.sleep(0.05)
+
+
+def test_starting_order_does_not_matter_for_a_following_controller(env):
+    """``rhbl controller --from-learner --follow`` started before the learner waits for its
+    first tree (saying so), then drives; it never exits for want of a tree."""
+    import threading
+
+    session = env["session"]
+    sim = PlayerClient(session=session, source="test").simulation
+    start = sim.get_pose2d()
+    commanded = threading.Event()
+    sub = session.declare_subscriber(keys.cmd_vel_key("r0", source="controller"),
+                                     lambda _s: commanded.set())
+    try:
+        c = env["start"]("controller", "controller", "--from-learner", "--follow")
+        _wait_text(c, "waiting for the learner's first tree")
+        assert not commanded.is_set(), c.text()
+        out = env["tmp"] / "order.rhbl"
+        learner = env["start"]("learner", "learner", "--features", "wall", "--out", str(out),
+                               "--snapshot-every", "0.3")
+        _wait_token(session, "learner", learner)
+        _teach(env, 5, seed=4)
+        assert commanded.wait(60), c.text()
+        _wait_text(c, "tree loaded")
+        assert c.proc.poll() is None, c.text()
+        assert c.stop() == 0, c.text()
+        assert learner.stop() == 0, learner.text()
+    finally:
+        sub.undeclare()
+        sim.set_pose2d(*start)

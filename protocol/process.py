@@ -1,0 +1,322 @@
+"""What every rhbl process shares: exit codes, logging, signals, opening the session, a scope.
+
+``rhbl server`` and the client processes (teacher, learner, controller) run through ``run``:
+
+- ``run(role, args, body, check=..., robot=..., ident=..., early_token=...)``: configures
+  logging (``--log-level``), turns SIGINT/SIGTERM into ``SystemExit(0)``, calls ``check()``
+  (flags and files checked before any network: bad input exits 2 before an unreachable router
+  exits 3), opens the zenoh session with an error naming the endpoint and the likely reason,
+  optionally declares the liveliness token ``rhbl/alive/<role>/<ident>``, calls ``body(ctx)``
+  and maps failures to exit codes (``EXIT_*`` below), each reported as one log line.
+- ``Context.scope``: a ``contextlib.ExitStack`` holding everything the process declares
+  (``ctx.subscriber``, ``ctx.queryable``, ``ctx.publisher``, ``ctx.keep``): released in reverse
+  order on every path, then the session is closed (an unclosed session with callback
+  subscribers hangs the interpreter at exit).
+- ``on_stop_signal(callback)``: a process that stops gracefully (the learner drains, the server
+  finishes its tick) replaces ``SystemExit`` by its own stop request.
+
+Exit codes: 0 ok (also after SIGINT/SIGTERM), 1 failure, 2 usage/bad input (a snapshot that does
+not fit, a bad world, ...), 3 the router/server endpoint is unreachable, refused the session or a
+listen endpoint cannot be bound, 4 the server is not up (no scans of the robot), 5 no learner is
+up (the teacher, unless ``--no-wait-learner``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import logging
+import os
+import signal
+import socket
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import zenoh
+
+from protocol import keys
+from protocol.session import config_from_args
+
+__all__ = [
+    "EXIT_FAILURE",
+    "EXIT_NO_LEARNER",
+    "EXIT_NO_SERVER",
+    "EXIT_OK",
+    "EXIT_UNREACHABLE",
+    "EXIT_USAGE",
+    "Context",
+    "ProcessError",
+    "add_logging_arguments",
+    "install_signal_handlers",
+    "on_stop_signal",
+    "open_session",
+    "run",
+    "setup_logging",
+]
+
+log = logging.getLogger(__name__)
+
+EXIT_OK = 0
+EXIT_FAILURE = 1
+EXIT_USAGE = 2
+EXIT_UNREACHABLE = 3
+EXIT_NO_SERVER = 4
+EXIT_NO_LEARNER = 5
+
+
+class ProcessError(Exception):
+    """A failure a process reports with one clear message and an exit code (no traceback)."""
+
+    def __init__(self, message: str, code: int = EXIT_FAILURE):
+        super().__init__(message)
+        self.code = code
+
+
+def _undeclare(thing: Any) -> None:
+    with contextlib.suppress(Exception):  # already gone with the session
+        thing.undeclare()
+
+
+@dataclass
+class Context:
+    """What ``run`` hands to a process body: the session and the scope its declarations live in."""
+
+    role: str
+    ident: str
+    args: argparse.Namespace
+    session: zenoh.Session
+    scope: contextlib.ExitStack
+    robot: str = ""
+    endpoints: list[str] = field(default_factory=list)  # the connect endpoints
+    config: zenoh.Config | None = None
+    token: Any = None  # the liveliness token (kept referenced while declared)
+
+    def declare_token(self) -> None:
+        """Declare the liveliness token ``rhbl/alive/<role>/<ident>`` (once). ``run(...,
+        early_token=False)`` leaves it to the body, to declare when the process is ready (the
+        learner: after its label subscription, so the token means "ready to receive")."""
+        if self.token is None:
+            self.token = self.session.liveliness().declare_token(
+                keys.alive_key(self.role, self.ident))
+            self.scope.callback(self.withdraw_token)
+
+    def withdraw_token(self) -> None:
+        """Undeclare the liveliness token now (the process stops being what it announced)."""
+        token, self.token = self.token, None
+        if token is not None:
+            _undeclare(token)
+
+    def keep(self, thing: Any) -> Any:
+        """Undeclare ``thing`` (a subscriber, queryable, publisher, token) when the scope ends."""
+        self.scope.callback(_undeclare, thing)
+        return thing
+
+    def subscriber(self, key: str, handler: Any, **kw: Any) -> Any:
+        return self.keep(self.session.declare_subscriber(key, handler, **kw))
+
+    def queryable(self, key: str, handler: Any, **kw: Any) -> Any:
+        return self.keep(self.session.declare_queryable(key, handler, **kw))
+
+    def publisher(self, key: str, **kw: Any) -> Any:
+        return self.keep(self.session.declare_publisher(key, **kw))
+
+
+def add_logging_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--log-level", default=os.environ.get("RHBL_LOG_LEVEL", "INFO"),
+                        choices=["DEBUG", "INFO", "WARNING", "ERROR"], type=str.upper,
+                        help="logging level (default: INFO or $RHBL_LOG_LEVEL)")
+
+
+def setup_logging(role: str, level: str = "INFO") -> None:
+    logging.basicConfig(
+        level=getattr(logging, str(level).upper(), logging.INFO),
+        format=f"%(asctime)s {role}[%(process)d] %(levelname)s %(message)s",
+        datefmt="%H:%M:%S",
+        stream=sys.stderr,
+        force=True,
+    )
+
+
+def _raise_exit(signum, _frame) -> None:
+    raise SystemExit(EXIT_OK)
+
+
+def install_signal_handlers() -> None:
+    """SIGINT/SIGTERM -> SystemExit(0) in the main thread (a blocking ``recv`` is interrupted)."""
+    signal.signal(signal.SIGINT, _raise_exit)
+    signal.signal(signal.SIGTERM, _raise_exit)
+
+
+def on_stop_signal(callback: Callable[[], None]) -> None:
+    """SIGINT/SIGTERM call ``callback()`` instead (a process that stops on its own terms)."""
+    def handler(signum, _frame) -> None:
+        callback()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+
+
+def _ignore_signals() -> None:
+    """A second signal while closing must not leave the session open."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+
+# ---- session ------------------------------------------------------------------------------
+def _config_endpoints(config: zenoh.Config, key: str) -> list[str]:
+    try:
+        value = config.get_json(key)
+    except Exception:  # noqa: BLE001 - a config without the key
+        return []
+    if isinstance(value, str):
+        try:
+            value = json.loads(value)
+        except ValueError:
+            return [value]
+    if isinstance(value, dict):  # per-mode endpoints {"router": [...], "peer": [...]}
+        out: list[str] = []
+        for v in value.values():
+            out.extend(v if isinstance(v, list) else [v])
+        return [str(e) for e in out]
+    return [str(e) for e in value or []]
+
+
+def _probe(endpoint: str, timeout: float = 1.0) -> str:
+    """What a plain TCP connect to an endpoint says: 'open', 'refused', 'timeout: ...'."""
+    proto, _, rest = endpoint.partition("/")
+    if proto not in ("tcp", "tls", "quic", "ws"):
+        return "unknown"
+    addr = rest.split("#", 1)[0]
+    host, _, port = addr.rpartition(":")
+    host = host.strip("[]")
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout):
+            return "open"
+    except ConnectionRefusedError:
+        return "refused"
+    except (OSError, ValueError) as exc:
+        return f"unreachable ({exc})"
+
+
+def _diagnose(connect: list[str], listen: list[str]) -> list[str]:
+    """Why ``zenoh.open`` failed, endpoint by endpoint (zenoh reports every case alike)."""
+    reasons = []
+    for ep in connect:
+        state = _probe(ep)
+        if state == "open":
+            reasons.append(f"{ep}: something listens there but refused the zenoh session "
+                           f"(wrong credentials, TLS certificates or protocol version?)")
+        elif state == "refused":
+            reasons.append(f"{ep}: connection refused (no router/server listening there; "
+                           f"is `rhbl server` or the router running?)")
+        else:
+            reasons.append(f"{ep}: {state}")
+    for ep in listen:
+        if _probe(ep, timeout=0.5) == "open":
+            reasons.append(f"listen {ep}: already in use (another server or router listens "
+                           f"there?)")
+    return reasons
+
+
+def _mode(config: zenoh.Config) -> str:
+    try:
+        return str(json.loads(config.get_json("mode")))
+    except Exception:  # noqa: BLE001
+        return "peer"
+
+
+def open_session(config: zenoh.Config, role: str = "process") -> tuple[zenoh.Session, list[str]]:
+    """``zenoh.open`` with an error that says which endpoint failed and the likely reason
+    (ProcessError, EXIT_UNREACHABLE). Returns the session and its connect endpoints."""
+    connect = _config_endpoints(config, "connect/endpoints")
+    mode = _mode(config)
+    try:
+        session = zenoh.open(config)
+    except Exception as exc:  # zenoh.ZError; also config errors
+        detail = "; ".join(_diagnose(connect, _config_endpoints(config, "listen/endpoints")))
+        raise ProcessError(f"{role}: cannot open a zenoh session ({mode} mode, connect "
+                           f"{connect or 'none'}): {detail or exc}. zenoh said: {exc}",
+                           EXIT_UNREACHABLE) from exc
+    if connect and mode != "client":
+        _say_if_alone(session, role, connect)
+    return session, connect
+
+
+def _say_if_alone(session: zenoh.Session, role: str, connect: list[str]) -> None:
+    """A peer (or router) that cannot connect opens anyway, silently alone: say so."""
+    deadline = time.monotonic() + 2.0
+    while time.monotonic() < deadline:
+        info = session.info
+        if info.routers_zid() or info.peers_zid():
+            return
+        time.sleep(0.05)
+    log.warning("%s: connected to no router or peer yet (connect %s); still trying",
+                role, ", ".join(connect))
+
+
+def _close_session(session: zenoh.Session) -> None:
+    _ignore_signals()
+    with contextlib.suppress(Exception):
+        session.close()
+
+
+# ---- the main wrapper ---------------------------------------------------------------------
+def run(role: str, args: argparse.Namespace, body: Callable[[Context], int | None], *,
+        check: Callable[[], None] | None = None, robot: str = "", ident: str | None = None,
+        early_token: bool = True) -> int:
+    """Run a process body with logging, signals, a session and a scope; the exit code.
+
+    ``check()`` runs before the session opens (raise ProcessError(EXIT_USAGE) or ValueError for
+    bad input). The liveliness token ``rhbl/alive/<role>/<ident>`` (``ident`` default: the pid)
+    is declared before ``body`` runs if ``early_token``, else by the body with
+    ``ctx.declare_token()`` if ever (the server's node declares its own)."""
+    setup_logging(role, getattr(args, "log_level", "INFO"))
+    install_signal_handlers()
+    try:
+        with contextlib.ExitStack() as scope:
+            if check is not None:
+                _checked(role, check)
+            ctx = _open(role, args, scope, robot, ident or str(os.getpid()))
+            if early_token:
+                ctx.declare_token()
+            where = f"robot {robot}, " if robot else ""
+            log.info("%s up (%spid %d, zid %s)", role, where, os.getpid(), ctx.session.zid())
+            try:
+                return int(body(ctx) or EXIT_OK)
+            finally:
+                _ignore_signals()  # the scope is released whatever arrives now
+    except ProcessError as exc:
+        log.error("%s", exc)
+        return exc.code
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else EXIT_OK
+        if code == EXIT_OK:
+            log.info("%s stopping (signal)", role)
+        return code
+    except KeyboardInterrupt:
+        return EXIT_OK
+    except Exception:
+        log.exception("%s failed", role)
+        return EXIT_FAILURE
+
+
+def _checked(role: str, check: Callable[[], None]) -> None:
+    try:
+        check()
+    except ValueError as exc:
+        raise ProcessError(f"{role}: {exc}", EXIT_USAGE) from exc
+
+
+def _open(role: str, args: argparse.Namespace, scope: contextlib.ExitStack, robot: str,
+          ident: str) -> Context:
+    try:
+        config = config_from_args(args)
+    except Exception as exc:  # noqa: BLE001 - bad flags or config file
+        raise ProcessError(f"{role}: bad zenoh configuration: {exc}", EXIT_USAGE) from exc
+    session, endpoints = open_session(config, role)
+    scope.callback(_close_session, session)  # the last to go: everything else was declared in it
+    return Context(role, ident, args, session, scope, robot, endpoints, config)
