@@ -3,7 +3,7 @@ a start pose, stepped in-process (``lab.harness``) or recorded from the server o
 (``lab.demo``). Lists hold one entry per step unless said otherwise.
 
     ep = Episode(start=(x, y, yaw), kind="learner")
-    ep.poses, ep.stalls, ep.actions, ep.side, ep.teacher_actions, ep.drivers, ep.ts
+    ep.poses, ep.stalls, ep.actions, ep.side, ep.teacher_actions, ep.drivers, ep.ts, ep.ids
     ep.metrics(goal)          # lab.metrics.episode_metrics of this episode
 """
 
@@ -31,6 +31,7 @@ class Episode:
     teacher_actions: list = field(default_factory=list)  # the teacher's choice on these states
     drivers: list = field(default_factory=list)  # who drove ("teacher", "controller"), if known
     ts: list = field(default_factory=list)  # sim time of each step, if known (a recording)
+    ids: list = field(default_factory=list)  # the server's scan id of each step (a recording)
     labels: list = field(default_factory=list)  # teacher labels given (not per step)
     segments: list = field(default_factory=list)  # training: start pose of each demonstration
     learned: int = 0  # training: labelled vectors the learner took
