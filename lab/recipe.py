@@ -131,7 +131,7 @@ class Recipe:
         return self.replace(**DEMO.get(self.task, {}))
 
 
-# The default recipe per task (docs/experiments.md "Training recipe" has the measurements
+# The default recipe per task (docs/experiments.md "Current recipe" has the measurements
 # behind each value). Wall following: demonstrations from the start poses, then 30 s ones
 # from random free-space poses, three corrective rounds. Maze: long demonstrations from each
 # start pose, six corrective rounds in copies scaled 0.85 and 1.2 and in the maze itself, each
