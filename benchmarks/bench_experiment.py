@@ -15,6 +15,7 @@ import time
 
 from client.behaviour.features import FeatureSpec
 from lab.experiment import run_experiment
+from lab.recipe import RECIPES
 
 BEAMS = [
     ("wall side 0-90 deg (default)", (0.0, 22.5, 45.0, 67.5, 90.0)),
@@ -58,7 +59,8 @@ def size_study(task: str, trials: int) -> list[dict]:
     out = []
     print(f"{'setting':28} {'nodes':>7} {'height':>6}  success per world (mean/min)")
     for name, kw in SIZE_ROWS:
-        res = run_experiment(task, trials=trials, eval_worlds=default_eval_worlds(task), **kw)
+        res = run_experiment(task, trials=trials, eval_worlds=default_eval_worlds(task),
+                             recipe=RECIPES[task].replace(**kw))
         s = res["summary"]
         worlds = {w: (v["success_rate"]["mean"], v["success_rate"]["min"])
                   for w, v in s["worlds"].items()}
@@ -89,7 +91,8 @@ def main() -> int:
         print(f"{'beams':32} {'success':>8} {'min':>5} {'nodes':>7} {'height':>6} {'collisions':>10}")
         for name, beams in BEAMS:
             res = run_experiment(args.task, trials=args.trials, eval_worlds=[],
-                                 features=FeatureSpec(beams=beams))
+                                 recipe=RECIPES[args.task].replace(
+                                     features=FeatureSpec(beams=beams)))
             s = res["summary"]
             w = next(iter(s["worlds"].values()))
             out.append({"beams": list(beams), "success": w["success_rate"]["mean"],
@@ -104,8 +107,9 @@ def main() -> int:
     print(f"{'recipe':36} {'success':>8} {'min':>5} {'nodes':>7} {'height':>6} {'collisions':>10}")
     for name, teacher, spawn, perturb, stride in ROWS:
         t0 = time.perf_counter()
+        recipe = RECIPES[args.task].replace(perturb=perturb, stride=stride, spawn=spawn)
         res = run_experiment(args.task, trials=args.trials, eval_worlds=[], teacher=teacher,
-                             perturb=perturb, stride=stride, spawn=spawn)
+                             recipe=recipe)
         s = res["summary"]
         w = next(iter(s["worlds"].values()))
         row = {"recipe": name, "teacher": teacher, "spawn": spawn, "perturb": perturb,

@@ -64,10 +64,11 @@ def echo(endpoint: str) -> int:
 
 def _train_tree(path: Path) -> None:
     from lab.harness import make_learner, resolve_world, train
+    from lab.recipe import RECIPES
 
     spec = resolve_world("room")
     learner = make_learner(spec.task)
-    train(spec, learner, seconds=120.0, seed=0)
+    train(spec, learner, RECIPES[spec.task].replace(seconds=120.0), seed=0)
     learner.save(path)
 
 

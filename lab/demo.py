@@ -3,8 +3,8 @@
 The demo is the rendezvous (a zenoh session in router mode on a free loopback port, the role a
 zenohd plays in compose); every child connects to it as a client:
 
-It runs the training recipe of ``rhbl train`` (docs/experiments.md) over zenoh, with one server
-for the whole run; the demo teleports the robot to each of the world's start poses with the
+It runs the training recipe of ``rhbl train`` (``lab.recipe``: ``RECIPES[task].for_demo()``,
+docs/experiments.md) over zenoh, with one server for the whole run; the demo teleports the robot to each of the world's start poses with the
 sim-only ``set_pose`` request (``rhbl/r0/sim/req/set_pose``, odometry reset too):
 
 1. ``rhbl learner`` (the tree and its journal go into the output folder), ``rhbl server
@@ -41,42 +41,102 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["SCENARIOS", "add_arguments", "main", "free_port"]
+from lab.episode import DT, Episode
+from lab.recipe import EVAL_SECONDS, RECIPES, Recipe, per_task
+
+__all__ = ["SCENARIOS", "Scenario", "add_arguments", "main", "free_port"]
 
 log = logging.getLogger(__name__)
 
-# scenario -> world, feature spec, teacher policy; sim seconds per start pose in each phase
-# (demonstration, corrective round, evaluation; the maze's end at the goal) and rounds: the
-# recipe of `rhbl train` (lab.harness.TRAINING), except the maze's 4 rounds instead of 6 (the
-# demo must finish within about two minutes on a shared 2-core machine; --rounds 6 for the recipe)
-# and no rounds in scaled copies of the world or from random free-space poses (one server
-# serves one world; the demo teleports only to its start poses)
-SCENARIOS: dict[str, dict] = {
-    "wall-following": {"world": "room", "features": "wall", "policy": "wall-follower",
-                       "teach": 60.0, "rounds": 3, "round": 60.0, "drive": 120.0},
-    "maze": {"world": "maze", "features": "wall", "policy": "maze",
-             "teach": 240.0, "rounds": 4, "round": 240.0, "drive": 240.0},
-}
+# teacher policy of each task (``rhbl teacher --policy``)
+TEACHER_POLICY = {"wall-following": "wall-follower", "maze": "maze"}
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """What ``rhbl demo --scenario TASK`` runs, derived from the task's training recipe
+    (``Recipe.for_demo``): each start pose demonstrates ``recipe.segment`` sim seconds, then
+    ``recipe.rounds`` corrective rounds of ``recipe.round_seconds`` per start pose, then the
+    final tree drives ``drive`` seconds (``EVAL_SECONDS``) from each; each phase ends early at
+    the goal."""
+
+    recipe: Recipe
+    drive: float
+
+    @property
+    def task(self) -> str:
+        return self.recipe.task
+
+    @property
+    def world(self) -> str:
+        return self.recipe.world
+
+    @property
+    def policy(self) -> str:
+        return TEACHER_POLICY[self.recipe.task]
+
+    def replace(self, teach: float | None = None, rounds: int | None = None,
+                round_seconds: float | None = None, drive: float | None = None) -> Scenario:
+        """This scenario with the phase lengths given (None: unchanged)."""
+        changes = {k: v for k, v in (("segment", teach), ("rounds", rounds),
+                                     ("round_seconds", round_seconds)) if v is not None}
+        return Scenario(self.recipe.replace(**changes), self.drive if drive is None else drive)
+
+    def learner_args(self) -> list[str]:
+        """``rhbl learner`` options that make its tree the recipe's (task, features, tree)."""
+        r = self.recipe
+        if not isinstance(r.features, str) or any(
+                getattr(r, k) is not None for k in ("distance", "min_radius", "max_depth")):
+            raise ValueError("rhbl learner takes a named feature spec and no distance, "
+                             "min_radius or max_depth option")
+        args = ["--task", r.task, "--features", r.features, "--spawn", r.spawn,
+                "--stride", str(r.stride), "--min-delta", f"{r.min_delta:g}"]
+        return args + (["--max-nodes", str(r.max_nodes)] if r.max_nodes is not None else [])
+
+    def teacher_args(self, style: str, seed: int) -> list[str]:
+        """``rhbl teacher`` options of the demonstrations."""
+        return ["--policy", self.policy, "--style", style, "--seed", str(seed),
+                "--perturb", f"{self.recipe.perturb:g}"]
+
+    def corrector_args(self, style: str) -> list[str]:
+        """``rhbl teacher --correct`` options of the corrective rounds."""
+        return ["--policy", self.policy, "--style", style, "--correct",
+                "--takeover", f"{self.recipe.takeover:g}"]
+
+
+# scenario -> the task's recipe with the demo's changes (lab.recipe.DEMO, the time budget);
+# the demo cannot run rounds in scaled copies or from free-space poses (one server serves one
+# world, the demo teleports only to its start poses): those parts of the recipe are left out
+SCENARIOS: dict[str, Scenario] = {
+    task: Scenario(recipe.for_demo(), EVAL_SECONDS[task]) for task, recipe in RECIPES.items()}
+
+
+def _defaults(value) -> str:
+    return per_task({task: value(sc) for task, sc in SCENARIOS.items()})
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", choices=list(SCENARIOS), default="wall-following")
     parser.add_argument("--out", metavar="DIR", default=None,
                         help="output folder (default: rhbl-out/<timestamp>-<scenario>)")
-    parser.add_argument("--world", default=None, help="world file or name (default: the scenario's)")
+    parser.add_argument("--world", default=None,
+                        help=f"world file or name (default: the scenario's, "
+                             f"{_defaults(lambda sc: sc.world)})")
     parser.add_argument("--teach-seconds", type=float, default=None, metavar="S",
                         help="sim seconds the teacher demonstrates from each start pose (or until "
-                             "the goal; default: 60 wall following, 240 maze)")
+                             f"the goal; default: {_defaults(lambda sc: sc.recipe.segment)})")
     parser.add_argument("--rounds", type=int, default=None, metavar="N",
                         help="corrective rounds: the controller drives the latest tree from each "
                              "start pose while the teacher labels and takes over near walls "
-                             "(default: 3 wall following, 6 maze; 0 = demonstrations only)")
+                             f"(default: {_defaults(lambda sc: sc.recipe.rounds)}; the training "
+                             f"recipe's: {per_task({t: r.rounds for t, r in RECIPES.items()})}; "
+                             "0 = demonstrations only)")
     parser.add_argument("--round-seconds", type=float, default=None, metavar="S",
                         help="sim seconds per start pose in each corrective round (or until the "
-                             "goal; default: 60 wall following, 240 maze)")
+                             f"goal; default: {_defaults(lambda sc: sc.recipe.round_seconds)})")
     parser.add_argument("--drive-seconds", type=float, default=None, metavar="S",
                         help="sim seconds the final tree drives from each start pose "
-                             "(default: 120 wall following, 240 maze)")
+                             f"(default: {_defaults(lambda sc: sc.drive)})")
     parser.add_argument("--starts", type=int, default=None, metavar="N",
                         help="use the first N start poses only (default: all)")
     parser.add_argument("--style", choices=["reactive", "smooth"], default="reactive",
@@ -170,38 +230,26 @@ def _rhbl(*args: str) -> list[str]:
 
 # ---- recording -----------------------------------------------------------------------------
 @dataclass
-class Episode:
-    kind: str  # "teacher" | "round" | "learner"
-    start: tuple[float, float, float]
-    round: int = 0
-    ts: list = field(default_factory=list)
-    poses: list = field(default_factory=list)
-    side: list = field(default_factory=list)
-    ids: list = field(default_factory=list)
+class _Raw:
+    """What arrives for the current episode besides its scans, keyed until it ends."""
+
     stalls: dict = field(default_factory=dict)  # ts -> stall
     cmds: dict = field(default_factory=dict)  # scan id -> (source, vx, va) (teacher's first)
     drivers: dict = field(default_factory=dict)  # ts -> driving source (State.driver)
-    labels: int = 0  # teacher labels published while recording
     first_id: int = 0  # scans before this one (the old pose, before a teleport) are ignored
-
-    @property
-    def teacher_ticks(self) -> int:
-        """Ticks the teacher drove (in a corrective round: took over)."""
-        return sum(1 for t in self.ts if self.drivers.get(round(t, 6)) == "teacher")
-
-    @property
-    def sim_time(self) -> float:
-        return (self.ts[-1] - self.ts[0]) if len(self.ts) > 1 else 0.0
 
 
 class Recorder:
     """Records the server's scans, states and commands into the current episode (callbacks
     of a few microseconds: the heavier work happens after the run)."""
 
-    def __init__(self, session, robot: str):
+    def __init__(self, session, robot: str, actions, side: str | None):
         from protocol import keys
 
         self.episode: Episode | None = None
+        self.raw = _Raw()
+        self.names = {tuple(v): k for k, v in actions.items()}  # (vx, va) -> action name
+        self.side = side  # the followed side (lab.episode.Episode.side), None: not recorded
         self.lock = threading.Lock()
         self.notice: dict = {}
         self.sources: dict[str, int] = {}  # commands seen per source (recording or not)
@@ -226,35 +274,42 @@ class Recorder:
         except Exception:  # noqa: BLE001
             return
         with self.lock:
-            if ep is self.episode and s.id >= ep.first_id:
+            if ep is self.episode and s.id >= self.raw.first_id:
                 ep.ts.append(s.ts)
                 ep.poses.append(s.truth if s.truth is not None else s.pose)
-                ep.side.append(side_distance(s.ranges))
+                if self.side is not None:
+                    ep.side.append(side_distance(s.ranges, self.side))
                 ep.ids.append(s.id)
 
     def _on_state(self, sample) -> None:
         from protocol.messages import State
 
-        ep = self.episode
+        ep, raw = self.episode, self.raw
         if ep is None:
             return
         try:
             st = State.decode(sample.payload.to_bytes())
         except Exception:  # noqa: BLE001
             return
-        ep.stalls[round(st.ts, 6)] = bool(st.stall)
-        ep.drivers[round(st.ts, 6)] = st.driver
+        raw.stalls[round(st.ts, 6)] = bool(st.stall)
+        raw.drivers[round(st.ts, 6)] = st.driver
 
-    def _on_label(self, _sample) -> None:
+    def _on_label(self, sample) -> None:
+        from protocol.messages import TeacherAction
+
         self.labels += 1
         ep = self.episode
         if ep is not None:
-            ep.labels += 1
+            try:
+                action = TeacherAction.decode(sample.payload.to_bytes()).action
+            except Exception:  # noqa: BLE001
+                action = None  # still a label the learner was offered
+            ep.labels.append(action)
 
     def _on_cmd(self, sample) -> None:
         from protocol.messages import VelCmd
 
-        ep = self.episode
+        ep, raw = self.episode, self.raw
         try:
             c = VelCmd.decode(sample.payload.to_bytes())
         except Exception:  # noqa: BLE001
@@ -262,9 +317,9 @@ class Recorder:
         self.sources[c.source] = self.sources.get(c.source, 0) + 1
         if ep is not None and c.scan_id is not None:
             # the teacher outranks the controller (the server's arbitration)
-            old = ep.cmds.get(c.scan_id)
+            old = raw.cmds.get(c.scan_id)
             if old is None or old[0] != "teacher" or c.source == "teacher":
-                ep.cmds[c.scan_id] = (c.source, c.vx, c.va)
+                raw.cmds[c.scan_id] = (c.source, c.vx, c.va)
 
     def _on_notice(self, sample) -> None:
         from protocol.messages import TreeNotice
@@ -277,45 +332,44 @@ class Recorder:
 
     def begin(self, kind: str, start, round_: int = 0) -> Episode:
         with self.lock:
-            self.episode = Episode(kind, tuple(start), round_)
+            self.raw = _Raw()
+            self.episode = Episode(start=tuple(start), dt=DT, kind=kind, round=round_)
             return self.episode
 
     def trim(self, ep: Episode, first_id: int) -> None:
         """Forget what ``ep`` recorded before scan ``first_id`` (scans of the old pose that
         arrived between ``begin`` and a teleport)."""
         with self.lock:
-            ep.first_id = first_id  # and a late scan of the old pose is not recorded either
+            raw = self.raw
+            raw.first_id = first_id  # and a late scan of the old pose is not recorded either
             keep = [k for k, i in enumerate(ep.ids) if i >= first_id]
             for f in ("ts", "poses", "side", "ids"):
                 col = getattr(ep, f)
-                setattr(ep, f, [col[k] for k in keep])
-            ep.cmds = {i: c for i, c in ep.cmds.items() if i >= first_id}
+                if col:
+                    setattr(ep, f, [col[k] for k in keep])
+            raw.cmds = {i: c for i, c in raw.cmds.items() if i >= first_id}
             if ep.ts:
-                ep.stalls = {t: v for t, v in ep.stalls.items() if t >= round(ep.ts[0], 6)}
-                ep.drivers = {t: v for t, v in ep.drivers.items() if t >= round(ep.ts[0], 6)}
+                raw.stalls = {t: v for t, v in raw.stalls.items() if t >= round(ep.ts[0], 6)}
+                raw.drivers = {t: v for t, v in raw.drivers.items() if t >= round(ep.ts[0], 6)}
 
     def end(self) -> None:
+        """Close the current episode: each recorded scan gets the action executed on it (the
+        teacher's over the controller's; "none" if no command came), its stall and its driver."""
         with self.lock:
+            ep, raw = self.episode, self.raw
             self.episode = None
+            if ep is None:
+                return
+            for ts, sid in zip(ep.ts, ep.ids, strict=True):
+                cmd = raw.cmds.get(sid)
+                ep.actions.append(self.names.get((cmd[1], cmd[2]), "none") if cmd else "none")
+                ep.stalls.append(raw.stalls.get(round(ts, 6), False))
+                ep.drivers.append(raw.drivers.get(round(ts, 6)))
 
     def close(self) -> None:
         for s in self.subs:
             with contextlib.suppress(Exception):
                 s.undeclare()
-
-
-def _episode_metrics(ep: Episode, actions, goal, dt: float, side: str | None) -> dict:
-    from lab.metrics import episode_metrics
-
-    names = {tuple(v): k for k, v in actions.items()}
-    acts, stalls = [], []
-    for ts, sid in zip(ep.ts, ep.ids, strict=True):
-        cmd = ep.cmds.get(sid)
-        acts.append(names.get((cmd[1], cmd[2]), "none") if cmd else "none")
-        stalls.append(ep.stalls.get(round(ts, 6), False))
-    m = episode_metrics(np.asarray(ep.poses).reshape(-1, 3), stalls, acts, dt,
-                        side=ep.side if side else None, goal=goal, start=ep.start)
-    return m
 
 
 # ---- the demo ------------------------------------------------------------------------------
@@ -324,8 +378,17 @@ class Demo:
         from lab.harness import resolve_world
 
         self.args = args
-        self.sc = dict(SCENARIOS[args.scenario])
-        self.spec = resolve_world(args.world or self.sc["world"])
+        for flag, v in (("--teach-seconds", args.teach_seconds),
+                        ("--round-seconds", args.round_seconds),
+                        ("--drive-seconds", args.drive_seconds)):
+            if v is not None and not v > 0:
+                raise ValueError(f"{flag} must be > 0, got {v:g}")
+        if args.rounds is not None and args.rounds < 0:
+            raise ValueError(f"--rounds must be >= 0, got {args.rounds}")
+        self.sc = SCENARIOS[args.scenario].replace(
+            teach=args.teach_seconds, rounds=args.rounds, round_seconds=args.round_seconds,
+            drive=args.drive_seconds)
+        self.spec = resolve_world(args.world or self.sc.world)
         stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
         self.out = Path(args.out or Path("rhbl-out") / f"{stamp}-{args.scenario}")
         self.out.mkdir(parents=True, exist_ok=True)
@@ -336,13 +399,10 @@ class Demo:
         self.failures: list[str] = []
         self.t0 = time.monotonic()
         self.tree = self.out / "tree.rhbl"
-        self.teach = args.teach_seconds if args.teach_seconds is not None else self.sc["teach"]
-        self.drive = args.drive_seconds if args.drive_seconds is not None else self.sc["drive"]
-        self.rounds = args.rounds if args.rounds is not None else self.sc["rounds"]
-        self.round_seconds = (args.round_seconds if args.round_seconds is not None
-                              else self.sc["round"])
-        if self.rounds < 0 or min(self.teach, self.drive, self.round_seconds) <= 0:
-            raise ValueError("--rounds must be >= 0 and the phase seconds > 0")
+        self.teach = self.sc.recipe.segment
+        self.drive = self.sc.drive
+        self.rounds = self.sc.recipe.rounds
+        self.round_seconds = self.sc.recipe.round_seconds
 
     # -- helpers --
     def say(self, msg: str) -> None:
@@ -480,12 +540,15 @@ class Demo:
         a = self.args
         self.say(f"rhbl demo: scenario {a.scenario}, world {self.spec.name}, output {self.out}")
         self.say(f"rendezvous (router) on {self.endpoint}; children log into {self.out / 'logs'}")
+        from client.behaviour.actions import DEFAULT_ACTIONS
         from client.player import PlayerClient
+        from lab.harness import followed_side
 
         with zenoh.open(make_config(mode="router", listen=[self.endpoint])) as session:
             self.session = session
             self.sim = PlayerClient(session=session, robot="r0", source="demo").simulation
-            self.rec = Recorder(session, "r0")
+            # the learner's actions (``rhbl learner`` has no other set)
+            self.rec = Recorder(session, "r0", DEFAULT_ACTIONS, followed_side(self.spec.task))
             try:
                 return self._phases()
             finally:
@@ -497,20 +560,20 @@ class Demo:
         a, sc = self.args, self.sc
         starts = self.spec.start_poses[: a.starts] if a.starts else self.spec.start_poses
         # 1. learner, server, the teacher demonstrates from each start pose
-        learner = self.child("learner", "learner", "--features", sc["features"], "--out",
+        learner = self.child("learner", "learner", *sc.learner_args(), "--out",
                              str(self.tree), "--wait-server", "60", "--snapshot-every", "0.5")
         self.wait_token("learner", learner)  # no demonstration before the learner listens
         server = self.start_server()
-        teacher = self.child("teacher", "teacher", "--policy", sc["policy"], "--style", a.style,
-                             "--seed", str(a.seed), "--wait-server", "30")
-        self.say(f"teaching: the {a.style} {sc['policy']} teacher demonstrates from each of "
+        teacher = self.child("teacher", "teacher", *sc.teacher_args(a.style, a.seed),
+                             "--wait-server", "30")
+        self.say(f"teaching: the {a.style} {sc.policy} teacher demonstrates from each of "
                  f"{len(starts)} start poses, {self.teach:g} s of sim time each (pids: server "
                  f"{server.pid}, learner {learner.pid}, teacher {teacher.pid})")
         self.wait_labels(server, learner, teacher)
         demos = self.episodes("teacher", starts, self.teach, "teaching", server, learner, teacher)
         teacher.stop()
         self.say(f"demonstrations done ({sum(ep.sim_time for ep in demos):.0f} s sim, "
-                 f"{sum(ep.labels for ep in demos)} labels){self.sc_notice()}")
+                 f"{sum(len(ep.labels) for ep in demos)} labels){self.sc_notice()}")
 
         # 2. corrective rounds: the controller drives the latest tree, the teacher corrects
         rounds: list[Episode] = []
@@ -518,8 +581,8 @@ class Demo:
             follower = self.child("controller-follow", "controller", "--from-learner", "--follow",
                                   "--wait-server", "60", "--query-timeout", "10")
             self.wait_commands("controller", server, learner, follower)
-            corrector = self.child("teacher-correct", "teacher", "--policy", sc["policy"],
-                                   "--style", a.style, "--correct", "--wait-server", "30")
+            corrector = self.child("teacher-correct", "teacher", *sc.corrector_args(a.style),
+                                   "--wait-server", "30")
             self.say(f"corrective rounds: the controller drives the learner's latest tree "
                      f"(pid {follower.pid}), the teacher labels every scan and takes over near "
                      f"walls (pid {corrector.pid}); {self.rounds} rounds x {len(starts)} starts, "
@@ -531,7 +594,7 @@ class Demo:
                 rounds.extend(eps)
                 took = sum(ep.teacher_ticks for ep in eps)
                 ticks = sum(len(ep.ts) for ep in eps)
-                self.say(f"round {r} done: {ticks} scans, {sum(ep.labels for ep in eps)} labels, "
+                self.say(f"round {r} done: {ticks} scans, {sum(len(ep.labels) for ep in eps)} labels, "
                          f"teacher took over {took} ticks{self.sc_notice()}")
             corrector.stop()
             follower.stop()
@@ -563,15 +626,14 @@ class Demo:
 
     def report(self, clf, actions, meta, demos: list[Episode], rounds: list[Episode],
                learned: list[Episode]) -> int:
-        from lab.harness import followed_side
+        from lab.metrics import BAND
         from lab.plot import plot_paths
+        from lab.report import episode_table, table
 
-        dt = 0.1
         goal = self.spec.goal
-        side = followed_side(self.spec.task)
-        tms = [_episode_metrics(ep, actions, goal, dt, side) for ep in demos]
-        rms = [_episode_metrics(ep, actions, goal, dt, side) for ep in rounds]
-        lms = [_episode_metrics(ep, actions, goal, dt, side) for ep in learned]
+        tms = [ep.metrics(goal) for ep in demos]
+        rms = [ep.metrics(goal) for ep in rounds]
+        lms = [ep.metrics(goal) for ep in learned]
         prov = meta.get("provenance") or {}
         paths = {"teacher": [np.asarray(ep.poses).reshape(-1, 3) for ep in demos]}
         if rounds:
@@ -587,18 +649,19 @@ class Demo:
             ticks = sum(len(ep.ts) for ep in eps)
             per_round.append({
                 "round": r, "episodes": len(eps), "seconds": round(sum(m["seconds"] for m in ms), 1),
-                "scans": ticks, "labels": sum(ep.labels for ep in eps),
+                "scans": ticks, "labels": sum(len(ep.labels) for ep in eps),
                 "teacher_ticks": sum(ep.teacher_ticks for ep in eps),
                 "collisions": sum(m["collisions"] for m in ms),
                 "goals": (None if goal is None else sum(bool(m["goal_reached"]) for m in ms))})
         wall_time = time.monotonic() - self.t0
+        demo_labels = sum(len(ep.labels) for ep in demos)
         summary = {
-            "scenario": self.args.scenario, "world": self.spec.name,
+            "scenario": self.args.scenario, "task": self.sc.task, "world": self.spec.name,
             "tree": {"nodes": int(clf.node_count_), "height": int(clf.height_),
-                     "vectors": prov.get("vectors"), "labeled": prov.get("labeled"),
-                     "path": str(self.tree)},
+                     "task": meta.get("task"), "vectors": prov.get("vectors"),
+                     "labeled": prov.get("labeled"), "path": str(self.tree)},
             "teacher": tms, "rounds": per_round, "learned": lms,
-            "demonstration_labels": sum(ep.labels for ep in demos),
+            "demonstration_labels": demo_labels,
             "wall_time": round(wall_time, 1), "teach_seconds": self.teach,
             "rounds_count": self.rounds, "round_seconds": self.round_seconds,
             "drive_seconds": self.drive, "style": self.args.style,
@@ -608,42 +671,30 @@ class Demo:
         np.savez_compressed(
             self.out / "trajectories.npz",
             **{f"{ep.kind}{k}_{f}": np.asarray(getattr(ep, f))
-               for k, ep in enumerate(eps) for f in ("ts", "poses", "side", "ids")},
-            **{f"{ep.kind}{k}_stalls": np.asarray([ep.stalls.get(round(t, 6), False)
-                                                   for t in ep.ts])
-               for k, ep in enumerate(eps)})
+               for k, ep in enumerate(eps) for f in ("ts", "poses", "side", "ids", "stalls")})
         print()
-        print(f"Table I (paper) -- {self.args.scenario}, learned over zenoh by separate processes")
-        print("| scenario | nodes | tree height | demonstration vectors |")
-        print("|---|---|---|---|")
-        print(f"| {self.args.scenario} | {clf.node_count_} | {clf.height_} | "
-              f"{prov.get('vectors')} |")
-        print(f"(labeled vectors: {summary['demonstration_labels']} demonstrated from "
-              f"{len(demos)} start poses + {prov.get('vectors', 0) - summary['demonstration_labels']}"
-              f" labeled in {self.rounds} corrective rounds)")
+        print(table(["scenario", "nodes", "tree height", "demonstration vectors"],
+                    [[self.args.scenario, clf.node_count_, clf.height_, prov.get("vectors")]],
+                    title=f"Table I (paper) -- {self.args.scenario}, learned over zenoh by "
+                          "separate processes",
+                    notes=[f"(labeled vectors: {demo_labels} demonstrated from {len(demos)} start "
+                           f"poses + {prov.get('vectors', 0) - demo_labels} labeled in "
+                           f"{self.rounds} corrective rounds)"]))
         if per_round:
             print()
-            print("Corrective rounds (the controller drives the latest tree; the teacher labels "
-                  "every scan and takes over while a beam is closer than 0.3 m)")
-            print("| round | sim seconds | scans | labels | teacher drove | collisions | goal |")
-            print("|---|---|---|---|---|---|---|")
-            for pr in per_round:
-                g = "-" if pr["goals"] is None else f"{pr['goals']}/{pr['episodes']}"
-                print(f"| {pr['round']} | {pr['seconds']:.0f} | {pr['scans']} | {pr['labels']} | "
-                      f"{pr['teacher_ticks']} ticks | {pr['collisions']} | {g} |")
+            rows = [[pr["round"], f"{pr['seconds']:.0f}", pr["scans"], pr["labels"],
+                     f"{pr['teacher_ticks']} ticks", pr["collisions"],
+                     "-" if pr["goals"] is None else f"{pr['goals']}/{pr['episodes']}"]
+                    for pr in per_round]
+            print(table(["round", "sim seconds", "scans", "labels", "teacher drove", "collisions",
+                         "goal"], rows,
+                        title="Corrective rounds (the controller drives the latest tree; the "
+                              "teacher labels every scan and takes over while a beam is closer "
+                              f"than {self.sc.recipe.takeover:g} m)"))
         print()
-        print("What the robots did (sim seconds per episode; band = time with the right-hand "
-              "wall within 0.3-1.2 m)")
-        print("| driver | start (x, y, yaw) | seconds | collisions | distance m | in band | goal |")
-        print("|---|---|---|---|---|---|---|")
-        for name, m in [("teacher", m) for m in tms] + [("learned", m) for m in lms]:
-            band = m["wall_band_fraction"]
-            goal_s = ("-" if m["goal_reached"] is None else
-                      (f"yes, {m['time_to_goal']:.0f} s" if m["goal_reached"] else "no"))
-            st = ", ".join(f"{v:.2f}" for v in (m["start"] or []))
-            print(f"| {name} | ({st}) | {m['seconds']:.0f} | {m['collisions']} | "
-                  f"{m['distance']:.1f} | {'-' if band is None else f'{100 * band:.0f}%'} | "
-                  f"{goal_s} |")
+        print(episode_table([("teacher", m) for m in tms] + [("learned", m) for m in lms],
+                            title="What the robots did (sim seconds per episode; band = time "
+                                  f"with the right-hand wall within {BAND[0]:g}-{BAND[1]:g} m)"))
         ok = sum(1 for m in lms if m["collisions"] == 0 and m["goal_reached"] is not False)
         print()
         print(f"learned robot: {ok}/{len(lms)} starts without collision"

@@ -21,11 +21,11 @@ from client.behaviour.learning import TreePolicy
 from client.behaviour.policies import make_policy
 from lab import metrics
 from lab.harness import DT, resolve_world, run
+from lab.recipe import EVAL_SECONDS, per_task
+from lab.report import episode_table
 from server.world import WorldSpec
 
-__all__ = ["DEFAULT_SECONDS", "add_arguments", "evaluate", "format_table", "main"]
-
-DEFAULT_SECONDS = {"wall-following": 120.0, "maze": 240.0}
+__all__ = ["add_arguments", "evaluate", "format_table", "main"]
 
 
 def _success(task: str, m: dict, teacher_m: dict | None) -> bool:
@@ -49,7 +49,7 @@ def _teacher_episode(spec: WorldSpec, actions, start, seconds: float, seed: int,
         if hit is not None:
             return hit
     tt = run(spec, make_policy(spec.task, actions=actions), start, seconds, seed=seed,
-             range_noise=range_noise, odom_noise=odom_noise, dt=dt)
+             range_noise=range_noise, odom_noise=odom_noise, dt=dt, kind="teacher")
     if key is not None:
         if len(_TEACHER_CACHE) > 256:
             _TEACHER_CACHE.clear()
@@ -64,7 +64,7 @@ def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
     task = spec.task
     starts = spec.start_poses
     episodes = len(starts) if episodes is None else int(episodes)
-    seconds = DEFAULT_SECONDS.get(task, 120.0) if seconds is None else float(seconds)
+    seconds = EVAL_SECONDS[task] if seconds is None else float(seconds)
     learner_eps, teacher_eps, paths = [], [], {"teacher": [], "learner": []}
     for k in range(episodes):
         start = starts[k % len(starts)]
@@ -73,8 +73,9 @@ def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
                               odom_noise, dt)
         tm = tt.metrics(spec.goal)
         tm["success"] = _success(task, tm, None)
-        lt = run(spec, policy, start, seconds, seed=ep_seed, teacher=make_policy(task, actions=policy.actions),
-                 range_noise=range_noise, odom_noise=odom_noise, dt=dt)
+        lt = run(spec, policy, start, seconds, seed=ep_seed,
+                 teacher=make_policy(task, actions=policy.actions), range_noise=range_noise,
+                 odom_noise=odom_noise, dt=dt, kind="learner")
         lm = lt.metrics(spec.goal)
         lm["success"] = _success(task, lm, tm)
         learner_eps.append(lm)
@@ -108,26 +109,22 @@ def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
 
 
 def format_table(report: dict) -> str:
-    rows = [f"world {report['world']} ({report['task']}), {report['episodes']} episodes of "
-            f"{report['seconds']:g} s, tree {report['tree']['nodes']} nodes, height {report['tree']['height']}",
-            f"{'ep':>2} {'start':>22} | {'who':7} {'ok':>3} {'coll':>4} {'dist m':>7} {'band':>5} "
-            f"{'goal s':>6} {'osc':>4} {'agree':>5}"]
-    for k, (lm, tm) in enumerate(zip(report["learner"], report["teacher"], strict=True)):
-        start = ",".join(f"{v:g}" for v in lm["start"])
-        for who, m in (("learner", lm), ("teacher", tm)):
-            band = "" if m["wall_band_fraction"] is None else f"{m['wall_band_fraction']:.2f}"
-            goal = "" if m["time_to_goal"] is None else f"{m['time_to_goal']:.1f}"
-            agree = "" if m["teacher_agreement"] is None else f"{m['teacher_agreement']:.2f}"
-            rows.append(f"{k:>2} {start if who == 'learner' else '':>22} | {who:7} "
-                        f"{'yes' if m['success'] else 'no':>3} {m['collisions']:>4} "
-                        f"{m['distance']:>7.1f} {band:>5} {goal:>6} {m['oscillations']:>4} {agree:>5}")
-    rows.append(f"success rate: learner {report['success_rate']:.0%}, teacher "
-                f"{report['teacher_success_rate']:.0%}")
+    """The report as a markdown table (``lab.report``): per episode the learner's row, then
+    the teacher's; the success rates and every oscillation loop after it."""
+    title = (f"world {report['world']} ({report['task']}), {report['episodes']} episodes of "
+             f"{report['seconds']:g} s, tree {report['tree']['nodes']} nodes, height "
+             f"{report['tree']['height']}")
+    entries = [(f"{k}: {who}", m)
+               for k, (lm, tm) in enumerate(zip(report["learner"], report["teacher"], strict=True))
+               for who, m in (("learner", lm), ("teacher", tm))]
+    notes = [f"success rate: learner {report['success_rate']:.0%}, teacher "
+             f"{report['teacher_success_rate']:.0%}"]
     for loop in report["loops"]:
         x, y, yaw = loop["pose"]
-        rows.append(f"rotate-left/rotate-right loop in episode {loop['episode']} at t={loop['time']:g} s; "
-                    f"correct it with: rhbl train --resume TREE --start {x:g},{y:g},{yaw:g} ...")
-    return "\n".join(rows)
+        notes.append(f"rotate-left/rotate-right loop in episode {loop['episode']} at "
+                     f"t={loop['time']:g} s; correct it with: rhbl train --resume TREE "
+                     f"--start {x:g},{y:g},{yaw:g} ...")
+    return episode_table(entries, title=title, notes=notes)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -136,7 +133,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--episodes", type=int, default=None,
                         help="episodes, cycling over the world's start poses (default: one per pose)")
     parser.add_argument("--seconds", type=float, default=None,
-                        help="sim seconds per episode (default 120 wall following, 240 maze)")
+                        help=f"sim seconds per episode (default: {per_task(EVAL_SECONDS)})")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--range-noise", type=float, default=0.0, help="laser noise (server option)")
     parser.add_argument("--odom-noise", type=float, default=0.0, help="odometry noise (server option)")

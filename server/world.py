@@ -26,9 +26,9 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pymunk
@@ -38,13 +38,16 @@ __all__ = [
     "ROBOT",
     "Goal",
     "LaserSpec",
+    "Pose",
     "RobotSpec",
     "Wall",
     "World",
     "WorldError",
     "WorldSpec",
+    "free_pose",
     "load_world",
     "parse_world",
+    "sample_pose",
     "wrap_angle",
 ]
 
@@ -59,6 +62,14 @@ def wrap_angle(a: float) -> float:
     elif a > math.pi:
         a -= 2.0 * math.pi
     return a
+
+
+class Pose(NamedTuple):
+    """A planar pose: metres and radians (a tuple, so ``(x, y, yaw)`` compares equal)."""
+
+    x: float
+    y: float
+    yaw: float
 
 
 @dataclass(frozen=True)
@@ -151,6 +162,79 @@ class WorldSpec:
         xs = np.concatenate([s[:, 0], s[:, 2]])
         ys = np.concatenate([s[:, 1], s[:, 3]])
         return float(xs.min()), float(ys.min()), float(xs.max()), float(ys.max())
+
+    def clearance(self, x: float, y: float) -> float:
+        """Distance from (x, y) to the nearest wall segment (inf in a world without walls)."""
+        segs = self.segments()
+        if len(segs) == 0:
+            return float("inf")
+        return float(_point_segment_distance(np.array([x, y]), segs).min())
+
+    def inside(self, x: float, y: float) -> bool:
+        """True when (x, y) lies inside every closed wall polyline of the world (even-odd rule;
+        a world with no closed wall: everywhere)."""
+        for w in self.walls:
+            if not w.closed:
+                continue
+            inside = False
+            for x0, y0, x1, y1 in w.segments():
+                if (y0 > y) != (y1 > y) and x < x0 + (y - y0) * (x1 - x0) / (y1 - y0):
+                    inside = not inside
+            if not inside:
+                return False
+        return True
+
+    def scaled(self, factor: float) -> WorldSpec:
+        """A copy uniformly scaled about the origin by ``factor``: wall points, start poses
+        (headings kept) and the goal centre (radius kept); named ``<name>x<factor>``, no path."""
+        if not (factor > 0 and math.isfinite(factor)):
+            raise ValueError(f"scale factor must be a finite number > 0, got {factor}")
+
+        def pose(p):
+            return (p[0] * factor, p[1] * factor, p[2])
+
+        walls = tuple(Wall(tuple((x * factor, y * factor) for x, y in w.points), w.closed)
+                      for w in self.walls)
+        goal = None if self.goal is None else Goal(
+            (self.goal.center[0] * factor, self.goal.center[1] * factor), self.goal.radius)
+        return replace(self, name=f"{self.name}x{factor:g}", pose=pose(self.pose),
+                       starts=tuple(pose(p) for p in self.starts), walls=walls, goal=goal,
+                       path=None)
+
+
+# ------------------------------------------------------------------------- free-space poses
+
+
+def free_pose(spec: WorldSpec, rng: np.random.Generator, clearance: float = 0.45,
+              tries: int = 200) -> Pose | None:
+    """A pose anywhere in the world's free space: position uniform over the walls' bounding
+    box, inside the closed walls and at least ``clearance`` metres from every wall, heading
+    uniform. Needs no map-specific code (any world file). None if none was found."""
+    x0, y0, x1, y1 = spec.bounds()
+    for _ in range(tries):
+        x, y = float(rng.uniform(x0, x1)), float(rng.uniform(y0, y1))
+        if spec.clearance(x, y) >= clearance and spec.inside(x, y):
+            return Pose(round(x, 3), round(y, 3), round(float(rng.uniform(-math.pi, math.pi)), 4))
+    return None
+
+
+def sample_pose(spec: WorldSpec, visited, rng: np.random.Generator, jitter: float = 0.3,
+                turn: float = math.pi, clearance: float = 0.45, tries: int = 50) -> Pose | None:
+    """A pose near one of ``visited`` (so it lies in the reachable free space of any world, no
+    map-specific code): position jittered by ``jitter`` metres (normal), heading turned by up to
+    +/- ``turn`` rad (uniform; pi = any heading), at least ``clearance`` metres from every wall.
+    None when ``visited`` is empty or no such pose was found."""
+    if not len(visited):
+        return None
+    for _ in range(tries):
+        x, y, yaw = visited[int(rng.integers(len(visited)))]
+        x += float(rng.normal(0.0, jitter))
+        y += float(rng.normal(0.0, jitter))
+        yaw += float(rng.uniform(-turn, turn))
+        yaw = math.atan2(math.sin(yaw), math.cos(yaw))
+        if spec.clearance(x, y) >= clearance:
+            return Pose(round(x, 3), round(y, 3), round(yaw, 4))
+    return None
 
 
 # ---------------------------------------------------------------------------------- loading

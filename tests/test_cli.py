@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 
 import pytest
 
 from lab.cli import COMMANDS, build_parser, main
+from lab.recipe import DEMO, EVAL_SECONDS, RECIPES
 
 
 def test_top_level_help_lists_every_command(capsys):
@@ -80,3 +82,69 @@ def test_a_closed_stdout_pipe_ends_quietly(tmp_path):
     err = proc.stderr.read().decode()
     assert proc.wait(60) == 141, err
     assert err == "" and out.exists()
+
+
+# ---- help defaults come from the training recipe (lab.recipe), so they cannot drift ----
+
+
+def _helps(command: str) -> dict[str, str]:
+    """option -> its help text, whitespace normalised."""
+    parser = build_parser(command)
+    return {a.option_strings[0]: " ".join((a.help or "").split())
+            for a in parser._actions if a.option_strings}
+
+
+def _number(text: str) -> float | tuple[float, ...] | str:
+    if text == "none":
+        return ()
+    if "," in text:
+        return tuple(float(v) for v in text.split(","))
+    try:
+        return float(text)
+    except ValueError:
+        return {"no": False, "yes": True}.get(text, text)
+
+
+def test_train_help_defaults_are_the_recipes():
+    helps = _helps("train")
+    flags = {"--seconds": "seconds", "--perturb": "perturb", "--features": "features",
+             "--spawn": "spawn", "--stride": "stride", "--starts": "starts",
+             "--segment": "segment", "--random-segment": "random_segment",
+             "--consistent": "consistent", "--rounds": "rounds",
+             "--round-seconds": "round_seconds", "--round-free": "round_free",
+             "--takeover": "takeover", "--augment": "augment",
+             "--augment-scale": "augment_scale", "--round-scales": "round_scales"}
+    for flag, name in flags.items():
+        m = re.search(r"default: the recipe's \(wall following (\S+?), maze (\S+?)\)", helps[flag])
+        assert m, (flag, helps[flag])
+        for task, shown in zip(("wall-following", "maze"), m.groups(), strict=True):
+            assert _number(shown) == getattr(RECIPES[task], name), (flag, task, shown)
+    # the drift found before the recipe was typed: 300 s and perturb 0.2 in the help
+    assert RECIPES["wall-following"].seconds == 600.0 and RECIPES["maze"].perturb == 0.05
+    for flag in ("--distance", "--min-radius", "--max-nodes"):
+        assert "default: the classifier's" in helps[flag]
+
+
+def _demo_defaults(helps: dict[str, str], flag: str) -> tuple[float, float]:
+    m = re.search(r"default: wall following (\S+?), maze (\S+?)[;)]", helps[flag])
+    assert m, (flag, helps[flag])
+    return float(m.group(1)), float(m.group(2))
+
+
+def test_demo_help_says_the_values_the_demo_uses(tmp_path):
+    from lab.demo import Demo
+
+    helps = _helps("demo")
+    shown = {flag: _demo_defaults(helps, flag) for flag in
+             ("--teach-seconds", "--rounds", "--round-seconds", "--drive-seconds")}
+    assert shown["--rounds"] == (3, 4)  # the maze demo: 4 rounds, not the recipe's 6
+    parser = build_parser("demo")
+    for k, task in enumerate(("wall-following", "maze")):
+        demo = Demo(parser.parse_args(["--scenario", task, "--out", str(tmp_path / task),
+                                       "--quiet"]))
+        used = {"--teach-seconds": demo.teach, "--rounds": demo.rounds,
+                "--round-seconds": demo.round_seconds, "--drive-seconds": demo.drive}
+        for flag, value in used.items():
+            assert shown[flag][k] == value, (task, flag)
+        assert demo.sc.recipe == RECIPES[task].replace(**DEMO.get(task, {}))
+        assert demo.drive == EVAL_SECONDS[task] and demo.spec.name == RECIPES[task].world

@@ -8,6 +8,7 @@ from client.behaviour.learning import TreePolicy, load_snapshot
 from lab.cli import main as cli
 from lab.evaluate import evaluate
 from lab.harness import make_learner, parse_pose, resolve_world, train
+from lab.recipe import RECIPES
 
 CORRIDOR = "corridor"
 
@@ -56,7 +57,7 @@ def test_parse_pose():
 def test_maze_episode_stops_at_goal_and_reports_time():
     spec = resolve_world("maze")
     learner = make_learner("maze")
-    train(spec, learner, 20.0, seed=0)
+    train(spec, learner, RECIPES["maze"].replace(seconds=20.0, rounds=0), seed=0)  # teacher checked
     rep = evaluate(spec, TreePolicy.from_learner(learner), episodes=1, seconds=5.0)
     ep = rep["teacher"][0]
     assert ep["goal_reached"] is False and ep["time_to_goal"] is None  # 5 s is too short

@@ -1,21 +1,22 @@
 """One training run = several demonstrations (start poses, then poses near the teacher's path)."""
 
 import argparse
-import math
 
 import numpy as np
 import pytest
 
 from client.behaviour.features import FEATURES
 from client.behaviour.policies import Demonstrator, make_policy
-from lab.harness import _clearance, make_learner, resolve_world, sample_pose, train
+from lab.harness import make_learner, resolve_world, train
+from lab.recipe import RECIPES, parse_scales
 
 
 def test_world_starts_then_sampled_poses():
     spec = resolve_world("corridor")
     learner = make_learner(spec.task)
-    traj = train(spec, learner, 60, seed=1, starts="world", segment=10, random_starts=0.5,
-                 rounds=0)
+    recipe = RECIPES[spec.task].replace(seconds=60, starts="world", segment=10,
+                                        random_segment=0.5, rounds=0)
+    traj = train(spec, learner, recipe, seed=1)
     n_fixed = len(spec.start_poses)
     assert [tuple(p) for p in traj.segments[:n_fixed]] == [tuple(p) for p in spec.start_poses]
     assert len(traj.segments) > n_fixed  # the rest of the time: sampled poses
@@ -26,19 +27,9 @@ def test_world_starts_then_sampled_poses():
 def test_explicit_start_is_one_demonstration():
     spec = resolve_world("corridor")
     learner = make_learner(spec.task)
-    traj = train(spec, learner, 20, seed=0, start=spec.start_poses[-1], starts="world", segment=5)
+    recipe = RECIPES[spec.task].replace(seconds=20, starts="world", segment=5)
+    traj = train(spec, learner, recipe, seed=0, start=spec.start_poses[-1])
     assert traj.segments == [list(spec.start_poses[-1])]
-
-
-def test_sample_pose_is_clear_of_walls():
-    spec = resolve_world("maze")
-    rng = np.random.default_rng(0)
-    visited = [(1.0, 1.1, 0.0), (5.0, 3.3, math.pi)]
-    segs = spec.segments()
-    for _ in range(20):
-        p = sample_pose(spec, visited, rng, turn=0.6)
-        assert p is not None and _clearance(segs, p[0], p[1]) >= 0.45
-    assert sample_pose(spec, [], rng) is None
 
 
 def test_maze_recipe_features_and_reactive_labels():
@@ -56,8 +47,10 @@ def test_maze_recipe_features_and_reactive_labels():
 def test_corrective_rounds_learner_drives_teacher_labels():
     spec = resolve_world("corridor")
     learner = make_learner(spec.task)
-    traj = train(spec, learner, 20, seed=0, starts="world", segment=10, random_starts=0.0,
-                 rounds=2, round_seconds=5, takeover=0.3, round_scales=())
+    recipe = RECIPES[spec.task].replace(seconds=20, starts="world", segment=10,
+                                        random_segment=0.0, rounds=2, round_seconds=5,
+                                        takeover=0.3, round_scales=())
+    traj = train(spec, learner, recipe, seed=0)
     n = len(spec.start_poses)
     stats = learner.session["round_stats"]
     assert [s["round"] for s in stats] == [1, 2]
@@ -67,27 +60,13 @@ def test_corrective_rounds_learner_drives_teacher_labels():
     assert learner.metadata()["provenance"]["sessions"][-1]["rounds"] == 2
 
 
-def test_free_pose_inside_and_clear():
-    from lab.harness import _inside, free_pose
-
-    for name in ("room", "maze"):
-        spec = resolve_world(name)
-        rng = np.random.default_rng(3)
-        segs = spec.segments()
-        for _ in range(30):
-            p = free_pose(spec, rng)
-            assert p is not None and _clearance(segs, p[0], p[1]) >= 0.45
-            assert _inside(spec, p[0], p[1]) and -math.pi <= p[2] <= math.pi
-    room = resolve_world("room")
-    assert not _inside(room, 0.5, 0.5)  # the room's cut-off corner (outside the polygon)
-    assert _inside(room, 6.0, 4.5)
-
-
 def test_free_starts_and_free_round_poses():
     spec = resolve_world("corridor")
     learner = make_learner(spec.task)
-    traj = train(spec, learner, 40, seed=2, starts="free", segment=10, random_starts=0.5,
-                 rounds=1, round_seconds=3, round_free=2)
+    recipe = RECIPES[spec.task].replace(seconds=40, starts="free", segment=10,
+                                        random_segment=0.5, rounds=1, round_seconds=3,
+                                        round_free=2)
+    traj = train(spec, learner, recipe, seed=2)
     n_fixed = len(spec.start_poses)
     assert [tuple(p) for p in traj.segments[:n_fixed]] == [tuple(p) for p in spec.start_poses]
     assert len(traj.segments) > n_fixed
@@ -100,9 +79,10 @@ def test_scale_augmentation_offers_scaled_scans_labelled_by_the_teacher():
 
     spec = resolve_world("corridor")
     plain = make_learner(spec.task)
-    train(spec, plain, 10, seed=3, rounds=0)
+    recipe = RECIPES[spec.task].replace(seconds=10, rounds=0)
+    train(spec, plain, recipe, seed=3)
     learner = make_learner(spec.task)
-    traj = train(spec, learner, 10, seed=3, rounds=0, augment=2, augment_scale=1.3)
+    traj = train(spec, learner, recipe.replace(augment=2, augment_scale=1.3), seed=3)
     assert learner.vectors == 3 * plain.vectors  # each state offered 1 + 2 times
     assert traj.learned == learner.vectors
     assert learner.session["augment"] == 2 and learner.session["augment_scale"] == 1.3
@@ -134,33 +114,27 @@ def test_scale_augmentation_needs_a_scan_only_teacher():
         _Augmenter(make_policy("maze"), 1, 0.9, seed=0)
 
 
-def test_scale_world_and_rounds_in_scaled_copies():
-    from lab.harness import scale_world
-
-    maze = resolve_world("maze")
-    big = scale_world(maze, 1.2)
-    assert big.walls[1].points[1] == (8.7 * 1.2, 2.2 * 1.2)
-    assert big.start_poses[0] == (1.0 * 1.2, 1.1 * 1.2, 0.0)
-    assert big.goal.center == (1.0 * 1.2, 7.7 * 1.2) and big.goal.radius == maze.goal.radius
-    assert len(big.start_poses) == len(maze.start_poses) and big.path is None
+def test_rounds_in_scaled_copies_of_the_world():
     spec = resolve_world("corridor")
     learner = make_learner(spec.task)
-    train(spec, learner, 10, seed=0, rounds=1, round_seconds=2, round_scales=(0.9, 1.1))
+    recipe = RECIPES[spec.task].replace(seconds=10, rounds=1, round_seconds=2,
+                                        round_scales=(0.9, 1.1))
+    train(spec, learner, recipe, seed=0)
     stats = learner.session["round_stats"]
     assert [s.get("scale") for s in stats] == [0.9, 1.1, None]  # training world last
     assert learner.session["round_scales"] == [0.9, 1.1]
 
 
 def test_the_recipe_runs_rounds_in_scaled_copies_and_none_turns_them_off():
-    from lab.harness import parse_scales
-
     spec = resolve_world("maze")
     learner = make_learner(spec.task)
-    train(spec, learner, 10, seed=0, rounds=1, round_seconds=2)  # the maze recipe's scales
+    recipe = RECIPES["maze"].replace(seconds=10, rounds=1, round_seconds=2)  # its scales
+    train(spec, learner, recipe, seed=0)
     assert [s.get("scale") for s in learner.session["round_stats"]] == [0.85, 1.2, None]
     room = resolve_world("corridor")  # wall following: the world itself only
     learner = make_learner(room.task)
-    train(room, learner, 10, seed=0, rounds=1, round_seconds=2)
+    recipe = RECIPES["wall-following"].replace(seconds=10, rounds=1, round_seconds=2)
+    train(room, learner, recipe, seed=0)
     assert [s.get("scale") for s in learner.session["round_stats"]] == [None]
     assert parse_scales("none") == () and parse_scales("0.9, 1.1") == (0.9, 1.1)
     for bad in ("abc", "0,1", "-1", "nan"):

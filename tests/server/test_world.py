@@ -275,3 +275,68 @@ def test_set_pose_teleports_and_refuses_walls(corridor):
         with pytest.raises(ValueError, match=why):
             w.set_pose(0, pose)
     assert w.pose(0) == pytest.approx((4.0, 1.0, 0.0))
+
+
+# ---- free-space geometry (demonstration and corrective-round starts of any world file) ----
+
+
+def test_clearance_and_inside():
+    room = load_world(server.world_path("room"))
+    assert not room.inside(0.5, 0.5)  # the room's cut-off corner (outside the polygon)
+    assert room.inside(6.0, 4.5)
+    x, y, _ = room.pose
+    segs = room.segments()
+    # clearance: the distance to the nearest segment (checked against a dense sampling of them)
+    t = np.linspace(0.0, 1.0, 2001)[:, None]
+    pts = np.concatenate([s[:2] + t * (s[2:] - s[:2]) for s in segs])
+    assert room.clearance(x, y) == pytest.approx(np.hypot(pts[:, 0] - x, pts[:, 1] - y).min(),
+                                                 abs=5e-3)
+    assert room.clearance(x, y) > ROBOT.radius
+    # an open wall encloses nothing: everywhere is inside; no wall at all: infinitely clear
+    from server.world import Wall, WorldSpec
+
+    line = WorldSpec("line", "wall-following", (0.0, 0.0, 0.0), walls=(Wall(((0, 0), (1, 0))),))
+    assert line.clearance(2.0, 0.0) == pytest.approx(1.0) and line.inside(5.0, 5.0)
+    empty = WorldSpec("empty", "wall-following", (0.0, 0.0, 0.0))
+    assert empty.clearance(1.0, 2.0) == math.inf
+
+
+def test_free_pose_is_inside_and_clear():
+    from server.world import Pose, free_pose
+
+    for name in ("room", "maze"):
+        spec = load_world(server.world_path(name))
+        rng = np.random.default_rng(3)
+        for _ in range(30):
+            p = free_pose(spec, rng)
+            assert isinstance(p, Pose) and spec.clearance(p.x, p.y) >= 0.45
+            assert spec.inside(p.x, p.y) and -math.pi <= p.yaw <= math.pi
+    # no free space that far from the walls: None
+    corridor = load_world(server.world_path("corridor"))
+    assert free_pose(corridor, np.random.default_rng(0), clearance=50.0) is None
+
+
+def test_sample_pose_is_near_the_path_and_clear():
+    from server.world import sample_pose
+
+    spec = load_world(server.world_path("maze"))
+    rng = np.random.default_rng(0)
+    visited = [(1.0, 1.1, 0.0), (5.0, 3.3, math.pi)]
+    for _ in range(20):
+        p = sample_pose(spec, visited, rng, turn=0.6)
+        assert p is not None and spec.clearance(p.x, p.y) >= 0.45
+        assert min(math.hypot(p.x - v[0], p.y - v[1]) for v in visited) < 1.5
+    assert sample_pose(spec, [], rng) is None
+
+
+def test_scaled_copy_of_a_world():
+    maze = load_world(server.world_path("maze"))
+    big = maze.scaled(1.2)
+    assert big.name == "mazex1.2" and big.path is None and big.task == maze.task
+    assert big.walls[1].points[1] == (8.7 * 1.2, 2.2 * 1.2)
+    assert big.start_poses[0] == (1.0 * 1.2, 1.1 * 1.2, 0.0)
+    assert big.goal.center == (1.0 * 1.2, 7.7 * 1.2) and big.goal.radius == maze.goal.radius
+    assert len(big.start_poses) == len(maze.start_poses)
+    for bad in (0.0, -1.0, math.nan):
+        with pytest.raises(ValueError, match="scale factor"):
+            maze.scaled(bad)

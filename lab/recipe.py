@@ -1,0 +1,272 @@
+"""The training recipe: one frozen :class:`Recipe` per task, the single home of every default of
+``rhbl train``, ``rhbl experiment`` and ``rhbl demo`` (their ``--help`` texts are generated from
+it). docs/experiments.md says how each value was chosen and what it measured.
+
+    recipe = RECIPES["maze"]                          # the task's recipe
+    recipe = recipe.replace(seconds=120, rounds=1)    # a variant (validated, still frozen)
+    recipe = recipe_from_args("maze", args)           # the recipe plus the CLI flags given
+    demo = recipe.for_demo()                          # what ``rhbl demo`` runs (DEMO overrides)
+
+One training run (``lab.harness.train``): demonstrations from the ``starts`` poses, each
+``segment`` seconds (or until the goal), then from sampled poses (``random_segment`` x
+``segment`` each) until ``seconds`` of sim time are used; then ``rounds`` corrective (DAgger)
+rounds of ``round_seconds`` per start pose, first in copies of the world scaled by each of
+``round_scales``, each round also from ``round_free`` random free-space poses.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from dataclasses import dataclass
+
+from client.behaviour.features import FEATURES, FeatureSpec
+from server.world import TASKS
+
+__all__ = [
+    "DEMO",
+    "EVAL_SECONDS",
+    "RECIPES",
+    "Recipe",
+    "add_recipe_arguments",
+    "parse_floats",
+    "parse_scales",
+    "per_task",
+    "recipe_default",
+    "recipe_for",
+    "recipe_from_args",
+]
+
+STARTS = ("default", "world", "free")
+SPAWN = ("all", "winner")
+DISTANCE = ("squared", "euclidean")
+TREE_PARAMS = ("spawn", "distance", "min_radius", "max_nodes", "max_depth")
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """How a task's tree is trained. ``None`` tree parameters: the classifier's own default."""
+
+    task: str
+    world: str                      # the shipped world it is trained on (experiment, demo)
+    features: str | FeatureSpec = "wall"
+    perturb: float = 0.05           # fraction of steps a random action is executed
+    seconds: float = 600.0          # sim seconds of demonstration in total
+    # the tree (rhbl.HypersphereClassifier) and what the learner offers it
+    spawn: str = "winner"
+    distance: str | None = None
+    min_radius: float | None = None
+    max_nodes: int | None = None
+    max_depth: int | None = None
+    stride: int = 1                 # learn every n-th labelled step
+    min_delta: float = 0.0
+    # the demonstrations
+    starts: str = "world"           # "default" | "world" | "free"
+    segment: float = 60.0           # sim seconds per demonstration before the teacher restarts
+    random_segment: float = 0.0     # sampled-pose demonstrations: this fraction of ``segment``
+    turn: float = math.pi           # heading change of a sampled pose (rad)
+    consistent: bool = False        # learn only labels that do not depend on the teacher's memory
+    # the corrective (DAgger) rounds
+    rounds: int = 0
+    round_seconds: float = 60.0
+    takeover: float = 0.0           # the teacher drives while a beam is closer than this (m)
+    round_scales: tuple[float, ...] = ()
+    round_free: int = 0
+    # scale augmentation: each labelled state offered again with the scan scaled
+    augment: int = 0
+    augment_scale: float = 1.3
+
+    def __post_init__(self) -> None:
+        def bad(name: str, expected: str) -> ValueError:
+            return ValueError(f"recipe {name} must be {expected}, got {getattr(self, name)!r}")
+
+        if self.task not in TASKS:
+            raise bad("task", f"one of {', '.join(TASKS)}")
+        if not isinstance(self.features, FeatureSpec) and self.features not in FEATURES:
+            raise bad("features", f"one of {', '.join(sorted(FEATURES))} or a FeatureSpec")
+        if self.starts not in STARTS:
+            raise bad("starts", f"one of {', '.join(STARTS)}")
+        if self.spawn not in SPAWN:
+            raise bad("spawn", f"one of {', '.join(SPAWN)}")
+        if self.distance is not None and self.distance not in DISTANCE:
+            raise bad("distance", f"one of {', '.join(DISTANCE)}")
+        for name in ("seconds", "segment", "round_seconds", "augment_scale"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+                raise bad(name, "a finite number > 0")
+        for name in ("perturb", "random_segment", "turn", "takeover", "min_delta"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
+                raise bad(name, "a finite number >= 0")
+        if not self.perturb <= 1:
+            raise bad("perturb", "a fraction in [0, 1]")
+        for name in ("rounds", "round_free", "augment"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise bad(name, "an integer >= 0")
+        if isinstance(self.stride, bool) or not isinstance(self.stride, int) or self.stride < 1:
+            raise bad("stride", "an integer >= 1")
+        scales = tuple(float(v) for v in self.round_scales)
+        if not all(math.isfinite(v) and v > 0 for v in scales):
+            raise bad("round_scales", "finite factors > 0")
+        object.__setattr__(self, "round_scales", scales)
+
+    def replace(self, **changes) -> Recipe:
+        """A copy with ``changes`` (field names; an unknown name is a TypeError naming it)."""
+        unknown = sorted(set(changes) - {f.name for f in dataclasses.fields(self)})
+        if unknown:
+            raise TypeError(f"not a recipe field: {', '.join(unknown)}")
+        return dataclasses.replace(self, **changes)
+
+    def feature_spec(self) -> FeatureSpec:
+        return self.features if isinstance(self.features, FeatureSpec) else FEATURES[self.features]
+
+    def tree_params(self) -> dict:
+        """The classifier's keyword arguments the recipe sets (``None``: its own default)."""
+        return {k: getattr(self, k) for k in TREE_PARAMS if getattr(self, k) is not None}
+
+    def for_demo(self) -> Recipe:
+        """The recipe ``rhbl demo`` runs over zenoh (this one with the task's ``DEMO`` changes)."""
+        return self.replace(**DEMO.get(self.task, {}))
+
+
+# The default recipe per task (docs/experiments.md "Current recipe" has the measurements
+# behind each value). Wall following: demonstrations from the start poses, then 30 s ones
+# from random free-space poses, three corrective rounds. Maze: long demonstrations from each
+# start pose, six corrective rounds in copies scaled 0.85 and 1.2 and in the maze itself, each
+# also from four random free-space poses.
+RECIPES: dict[str, Recipe] = {
+    "wall-following": Recipe(
+        task="wall-following", world="room", seconds=600.0, starts="free", segment=60.0,
+        random_segment=0.5, rounds=3, round_seconds=60.0, takeover=0.3),
+    "maze": Recipe(
+        task="maze", world="maze", seconds=600.0, starts="world", segment=240.0,
+        random_segment=0.0, rounds=6, round_seconds=240.0, takeover=0.3,
+        round_scales=(0.85, 1.2), round_free=4),
+}
+
+# What ``rhbl demo`` changes for its time budget (about two minutes on a shared 2-core machine):
+# the maze runs 4 corrective rounds instead of 6 (``--rounds 6`` for the recipe's). The demo
+# also leaves out, by construction (one server serves one world, the demo teleports only to
+# its start poses): rounds in scaled copies, rounds from free-space poses and the wall
+# following's demonstrations from free-space poses; each start pose demonstrates ``segment``.
+DEMO: dict[str, dict] = {"maze": {"rounds": 4}}
+
+# Sim seconds of one evaluation episode per task (``rhbl evaluate``, the demo's final drives).
+EVAL_SECONDS: dict[str, float] = {"wall-following": 120.0, "maze": 240.0}
+
+
+def recipe_for(task: str) -> Recipe:
+    """The default recipe of ``task`` (ValueError naming the task when there is none)."""
+    try:
+        return RECIPES[task]
+    except KeyError:
+        raise ValueError(f"no training recipe for task {task!r} "
+                         f"(known: {', '.join(RECIPES)})") from None
+
+
+# ------------------------------------------------------------------------------------- CLI
+
+
+def _show(value) -> str:
+    if isinstance(value, tuple):
+        return ",".join(f"{v:g}" for v in value) if value else "none"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, float):
+        return f"{value:g}"
+    return "the classifier's" if value is None else str(value)
+
+
+def per_task(values: dict[str, object]) -> str:
+    """``"wall following 600, maze 600"``: one value per task, for help texts."""
+    return ", ".join(f"{task.replace('-', ' ')} {_show(v)}" for task, v in values.items())
+
+
+def recipe_default(name: str, recipes: dict[str, Recipe] | None = None) -> str:
+    """The help text's default of recipe field ``name``, generated from ``recipes``:
+    ``"default: the recipe's (wall following 600, maze 600)"``."""
+    values = {t: getattr(r, name) for t, r in (RECIPES if recipes is None else recipes).items()}
+    if all(v is None for v in values.values()):
+        return "default: the classifier's"
+    return f"default: the recipe's ({per_task(values)})"
+
+
+def parse_floats(text: str, what: str) -> tuple[float, ...]:
+    """Comma-separated numbers of a CLI value; ArgumentTypeError saying ``what`` they must be."""
+    try:
+        return tuple(float(v) for v in text.replace(" ", "").split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{what}, got {text!r}") from exc
+
+
+def parse_scales(text: str) -> tuple[float, ...]:
+    """``--round-scales``: comma-separated positive factors, or 'none'."""
+    if text.strip().lower() in ("", "none"):
+        return ()
+    vals = parse_floats(text, "scales must be numbers like 0.85,1.2 or 'none'")
+    if not all(v > 0 and math.isfinite(v) for v in vals):
+        raise argparse.ArgumentTypeError(f"scales must be positive, got {text!r}")
+    return vals
+
+
+# flag -> (recipe field, argparse keywords, help); the help gets the recipe's defaults appended
+_FLAGS: list[tuple[str, str, dict, str]] = [
+    ("--perturb", "perturb", {"type": float},
+     "fraction of time a random action is executed"),
+    ("--features", "features", {"choices": sorted(FEATURES)}, "feature spec"),
+    ("--spawn", "spawn", {"choices": list(SPAWN)},
+     "spawn rule ('all' is the paper's literal rule)"),
+    ("--distance", "distance", {"choices": list(DISTANCE)}, "the tree's distance"),
+    ("--min-radius", "min_radius", {"type": float}, "the smallest sphere radius"),
+    ("--max-nodes", "max_nodes", {"type": int}, "cap on the tree size"),
+    ("--stride", "stride", {"type": int}, "learn every n-th step"),
+    ("--starts", "starts", {"choices": list(STARTS)},
+     "demonstrate from the world's default pose only, or from each of its start poses in turn "
+     "('free': then from poses anywhere in the free space, random heading)"),
+    ("--segment", "segment", {"type": float},
+     "sim seconds per demonstration before the teacher restarts"),
+    ("--random-segment", "random_segment", {"type": float},
+     "after the start poses: demonstrations from sampled poses, each this fraction of "
+     "--segment (0: cycle the start poses)"),
+    ("--consistent", "consistent", {"action": "store_true"},
+     "learn only labels that do not depend on the teacher's memory"),
+    ("--rounds", "rounds", {"type": int},
+     "corrective (DAgger) rounds after the demonstration: the tree drives from every start "
+     "pose, the teacher labels"),
+    ("--round-seconds", "round_seconds", {"type": float},
+     "sim seconds per start pose in each corrective round"),
+    ("--round-free", "round_free", {"type": int},
+     "corrective rounds also drive from this many random free-space poses"),
+    ("--takeover", "takeover", {"type": float},
+     "in corrective rounds the teacher drives while a beam is closer than this (m; 0 = never)"),
+    ("--augment", "augment", {"type": int},
+     "scale augmentation: offer every labelled state N more times with the scan scaled (a "
+     "wider/narrower copy of the world)"),
+    ("--augment-scale", "augment_scale", {"type": float},
+     "largest scale factor of --augment (and 1/it the smallest)"),
+    ("--round-scales", "round_scales", {"type": parse_scales, "metavar": "F,F"},
+     "repeat the corrective rounds in the training world scaled by these factors first "
+     "('none': only the world itself)"),
+]
+
+
+def add_recipe_arguments(parser: argparse.ArgumentParser, seconds: str = "--seconds") -> None:
+    """The recipe's flags (default None: the task's recipe), ``seconds`` naming the flag of
+    the demonstration time; every help text shows the recipe's values."""
+    parser.add_argument(seconds, dest="recipe_seconds", type=float, default=None, metavar="S",
+                        help=f"sim seconds of demonstration ({recipe_default('seconds')})")
+    for flag, name, kw, text in _FLAGS:
+        parser.add_argument(flag, dest=name, default=None, **kw,
+                            help=f"{text} ({recipe_default(name)})".replace("%", "%%"))
+
+
+def recipe_from_args(task: str, args: argparse.Namespace) -> Recipe:
+    """The task's recipe with the flags of ``add_recipe_arguments`` that were given."""
+    changes = {f.name: getattr(args, f.name) for f in dataclasses.fields(Recipe)
+               if f.name not in ("task", "world", "seconds") and getattr(args, f.name, None)
+               is not None}
+    if getattr(args, "recipe_seconds", None) is not None:
+        changes["seconds"] = args.recipe_seconds
+    return recipe_for(task).replace(**changes)

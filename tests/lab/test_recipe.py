@@ -1,0 +1,73 @@
+"""lab.recipe: the one typed training recipe per task and what is derived from it (the demo's
+scenario; the help texts: tests/test_cli.py)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import pytest
+
+from lab.cli import build_parser
+from lab.harness import make_learner, resolve_world, train
+from lab.recipe import EVAL_SECONDS, RECIPES, Recipe, recipe_for, recipe_from_args
+
+
+def test_the_maze_demo_snapshot_records_task_maze():
+    from lab.demo import SCENARIOS
+
+    for task, sc in SCENARIOS.items():
+        args = build_parser("learner").parse_args([*sc.learner_args(), "--out", "x.rhbl"])
+        assert args.task == task == sc.task
+        assert (args.features, args.spawn, args.stride) == (sc.recipe.features, sc.recipe.spawn,
+                                                            sc.recipe.stride)
+        teacher = build_parser("teacher").parse_args(sc.teacher_args("reactive", 7))
+        assert teacher.perturb == sc.recipe.perturb and teacher.seed == 7
+        corrector = build_parser("teacher").parse_args(sc.corrector_args("reactive"))
+        assert corrector.correct and corrector.takeover == sc.recipe.takeover
+
+
+def test_replace_validates_and_names_the_field():
+    r = RECIPES["maze"]
+    assert r.replace(rounds=1).rounds == 1 and r.rounds == 6  # frozen: a copy
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        r.rounds = 1  # type: ignore[misc]
+    with pytest.raises(TypeError, match="not a recipe field: roundz"):
+        r.replace(roundz=1)
+    for field, bad in [("rounds", -1), ("seconds", 0.0), ("perturb", 1.5), ("stride", 0),
+                       ("starts", "anywhere"), ("features", "sonar"), ("task", "dance"),
+                       ("round_scales", (0.9, -1.0)), ("segment", math.nan), ("rounds", 1.5)]:
+        with pytest.raises(ValueError, match=f"recipe {field} must be"):
+            r.replace(**{field: bad})
+    assert r.replace(round_scales=[1, 2]).round_scales == (1.0, 2.0)
+    with pytest.raises(ValueError, match="no training recipe for task 'dance'"):
+        recipe_for("dance")
+
+
+def test_recipe_from_args_takes_the_flags_given():
+    parser = build_parser("train")
+    args = parser.parse_args(["--world", "maze", "--out", "x", "--seconds", "120", "--rounds",
+                              "1", "--round-scales", "none", "--consistent"])
+    r = recipe_from_args("maze", args)
+    assert r == RECIPES["maze"].replace(seconds=120.0, rounds=1, round_scales=(),
+                                        consistent=True)
+    assert recipe_from_args("maze", parser.parse_args(["--world", "maze", "--out", "x"])) \
+        == RECIPES["maze"]
+
+
+def test_learner_and_run_follow_the_recipe():
+    r = RECIPES["wall-following"].replace(stride=2, spawn="all", max_nodes=50)
+    learner = make_learner(r)
+    assert learner.task == "wall-following" and learner.stride == 2
+    spec = resolve_world("corridor")
+    train(spec, learner, r.replace(seconds=5, rounds=0), seed=0)
+    assert learner.nodes <= 50
+    assert learner.session["seconds"] == 5 and learner.session["rounds"] == 0
+    with pytest.raises(ValueError, match="recipe is for task 'maze'"):
+        train(spec, make_learner("maze"), RECIPES["maze"], seed=0)
+
+
+def test_every_task_has_a_recipe_and_an_evaluation_length():
+    assert set(RECIPES) == set(EVAL_SECONDS) == {"wall-following", "maze"}
+    for task, r in RECIPES.items():
+        assert isinstance(r, Recipe) and r.task == task and r.for_demo().task == task
