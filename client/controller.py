@@ -32,6 +32,7 @@ from client._process import (
 from client.behaviour.actions import ActionSet
 from client.behaviour.features import FEATURES, FeatureSpec
 from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, check_compatible
+from client.decision import Decider
 from protocol import keys
 from protocol.messages import Scan, TreeNotice, VelCmd
 
@@ -129,6 +130,7 @@ def _body(ctx: Context) -> int:
     sub = session.declare_subscriber(scan_k, zenoh.handlers.RingChannel(1))
     wait_for_server(ctx)
     watch = ScanWatch("controller", scan_k, stale=1.0).start()
+    decider = Decider(session, robot)
     t0 = None
     n = 0
     bad = 0
@@ -148,8 +150,7 @@ def _body(ctx: Context) -> int:
                 break
             p = current["policy"]  # swapped between scans by --follow
             try:
-                action = str(p.classifier.predict_one(p.features.extract(scan.ranges,
-                                                                         scan.pose[2])))
+                action = decider.decide(p, scan)  # classify, publish the decision
                 vx, va = p.actions[action]
             except Exception as exc:  # noqa: BLE001 - a scan the tree cannot use: no command
                 bad += 1
