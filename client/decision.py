@@ -9,6 +9,8 @@ keep up loses decisions, the controller never waits for it.
 
 from __future__ import annotations
 
+import contextlib
+
 import zenoh
 
 from protocol import keys
@@ -47,7 +49,5 @@ class Decider:
         return action
 
     def close(self) -> None:
-        try:
+        with contextlib.suppress(Exception):  # the session is closing
             self._pub.undeclare()
-        except Exception:  # noqa: BLE001 - the session is closing
-            pass

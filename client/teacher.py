@@ -55,7 +55,7 @@ from client.behaviour.policies import STYLES, TAKEOVER, Demonstrator, make_polic
 from protocol import keys
 from protocol.messages import Scan, TeacherAction, VelCmd
 
-__all__ = ["POLICIES", "add_arguments", "main"]
+__all__ = ["POLICIES", "TeacherPublisher", "add_arguments", "main"]
 
 log = logging.getLogger(__name__)
 
@@ -134,11 +134,8 @@ def _body(ctx: Context) -> int:
 
 def _loop(ctx: Context, demo) -> int:
     args, session, robot = ctx.args, ctx.session, ctx.robot
-    cmd_pub = session.declare_publisher(keys.cmd_vel_key(robot, source=SOURCE),
-                                        congestion_control=zenoh.CongestionControl.BLOCK,
-                                        express=True)
-    act_pub = session.declare_publisher(keys.teacher_action_key(robot),
-                                        congestion_control=zenoh.CongestionControl.BLOCK)
+    pubs = TeacherPublisher(session, robot)
+    cmd_pub, act_pub = pubs.cmd_pub, pubs.act_pub
     scan_k = keys.scan_key(robot)
     # the latest scan wins (a teacher never acts on a backlog); correcting, a short queue: the
     # server does not wait for a teacher that does not drive, and every state the controller
@@ -254,6 +251,31 @@ def _loop(ctx: Context, demo) -> int:
         log.info("teacher stopped after %d labels (%d perturbed, %d taken over)%s", n, perturbed,
                  took, f"; {missed} scans not labelled (fell behind)" if missed else "")
     return 0
+
+
+class TeacherPublisher:
+    """A teacher's two outputs for a robot: the executed velocity on the per-source key
+    ``.../cmd/vel/teacher`` (express, never dropped) and the label on ``.../teacher/action``.
+    Shared by ``rhbl teacher`` and ``rhbl console``, so both publish alike."""
+
+    def __init__(self, session, robot: str):
+        self.cmd_pub = session.declare_publisher(keys.cmd_vel_key(robot, source=SOURCE),
+                                                 congestion_control=zenoh.CongestionControl.BLOCK,
+                                                 express=True)
+        self.act_pub = session.declare_publisher(keys.teacher_action_key(robot),
+                                                 congestion_control=zenoh.CongestionControl.BLOCK)
+
+    def command(self, vx: float, va: float, scan_id: int, ts: float) -> None:
+        self.cmd_pub.put(VelCmd(vx=vx, va=va, source=SOURCE, scan_id=scan_id, ts=ts).encode())
+
+    def label(self, scan_id: int, action: str, ts: float, executed: str | None) -> None:
+        self.act_pub.put(TeacherAction(scan_id=scan_id, action=action, source=SOURCE, ts=ts,
+                                       executed=executed).encode())
+
+    def close(self) -> None:
+        for pub in (self.cmd_pub, self.act_pub):
+            with contextlib.suppress(Exception):  # the session is closing
+                pub.undeclare()
 
 
 class _Hold:

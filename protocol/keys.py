@@ -134,7 +134,7 @@ def learner_snapshot_key(robot: str = "r0") -> str:
 
 def controller_decision_key(robot: str = "r0") -> str:
     """The controller's decision for each scan it answers (``Decision``), controller -> all."""
-    check_chunk(robot, "robot", wildcard=True)
+    check_chunk(robot, "robot")
     return f"{PREFIX}/{robot}/controller/decision"
 
 

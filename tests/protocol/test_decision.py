@@ -11,7 +11,6 @@ from protocol.messages import Decision
 
 def test_decision_key():
     assert keys.controller_decision_key("r1") == "rhbl/r1/controller/decision"
-    assert keys.controller_decision_key("*") == "rhbl/*/controller/decision"
     with pytest.raises(ValueError):
         keys.controller_decision_key("a/b")
 
