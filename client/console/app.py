@@ -109,9 +109,13 @@ class _Page:
         self.id, self.ws, self.robot = ident, ws, robot
         self.mode = "demonstrate"
         self.pending: dict[str, str] = {}  # kind -> latest JSON text
+        self.errors = 0
         self.wake = asyncio.Event()
 
     def push(self, kind: str, text: str) -> None:
+        if kind == "error":  # every error is said, the other kinds keep only their latest
+            self.errors += 1
+            kind = f"error-{self.errors}"
         self.pending[kind] = text
         self.wake.set()
 

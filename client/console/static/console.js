@@ -11,7 +11,7 @@ const g = canvas.getContext("2d");
 const S = {
   ws: null, page: null, robot: null, viewOnly: false, mode: "demonstrate",
   world: null, state: null, scan: null, notice: null, decision: null, control: null,
-  cmds: {}, trail: [], firstNodes: null,
+  cmds: {}, trail: [],
   view: { cx: 0, cy: 0, scale: 50, fitted: false }, follow: false,
   keys: new Set(), pad: null, gamepad: null, sent: null, sentScan: -1,
   frames: 0, fpsT0: performance.now(), fpsN: 0,
@@ -62,9 +62,13 @@ function receive(m) {
       }
       break;
     case "robots": setRobots(m.robots); break;
-    case "world": S.world = m; S.view.fitted = false; break;
+    case "world": S.world = m; S.view.fitted = false; canvas.dataset.walls = m.walls.length; break;
     case "state":
       S.state = m;
+      { // a jump (a teleport) starts a new trail
+        const last = S.trail[S.trail.length - 1];
+        if (last && Math.hypot(m.pose[0] - last[0], m.pose[1] - last[1]) > 1.0) S.trail = [];
+      }
       S.trail.push([m.pose[0], m.pose[1]]);
       if (S.trail.length > 2000) S.trail.splice(0, S.trail.length - 2000);
       break;
@@ -72,7 +76,7 @@ function receive(m) {
       S.scan = m;
       if (S.sent) { send({ t: "drive", action: S.sent, scan_id: m.id }); S.sentScan = m.id; }
       break;
-    case "notice": S.notice = m; if (S.firstNodes === null) S.firstNodes = m.nodes; break;
+    case "notice": S.notice = m; break;
     case "decision": S.decision = m; break;
     case "cmd": S.cmds[m.source] = m; break;
     case "control": S.control = m; showHold(); break;
@@ -91,7 +95,7 @@ function setRobots(names) {
 $("robot").onchange = (e) => {
   release();
   S.robot = e.target.value; S.world = null; S.state = null; S.scan = null; S.notice = null;
-  S.decision = null; S.control = null; S.cmds = {}; S.trail = []; S.firstNodes = null;
+  S.decision = null; S.control = null; S.cmds = {}; S.trail = [];
   send({ t: "view", robot: S.robot });
 };
 
@@ -292,8 +296,7 @@ function panel() {
   if (n) {
     const t = $("tree");
     t.dataset.nodes = n.nodes; t.dataset.vectors = n.vectors;
-    t.textContent = `${n.nodes} nodes, height ${n.height}, ${n.vectors} vectors` +
-      (S.firstNodes !== null && n.nodes > S.firstNodes ? ` (+${n.nodes - S.firstNodes} here)` : "");
+    t.textContent = `${n.nodes} nodes, height ${n.height}, ${n.vectors} vectors`;
   }
   const d = S.decision;
   if (d && d !== panel.shown) {
