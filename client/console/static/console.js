@@ -316,13 +316,16 @@ function panel() {
 
 function frame(now) {
   pollGamepad();
+  const t = performance.now();
   draw();
+  S.drawMs = (S.drawMs || 0) + performance.now() - t;
   S.frames++; S.fpsN++;
   if (now - S.fpsT0 >= 1000) {
-    const fps = (1000 * S.fpsN) / (now - S.fpsT0);
+    const fps = (1000 * S.fpsN) / (now - S.fpsT0), ms = S.drawMs / S.fpsN;
     $("fps").dataset.fps = fps.toFixed(1);
-    $("fps").textContent = `${fps.toFixed(0)} frames/s`;
-    S.fpsT0 = now; S.fpsN = 0;
+    $("fps").dataset.drawMs = ms.toFixed(2);
+    $("fps").textContent = `${fps.toFixed(0)} frames/s, ${ms.toFixed(1)} ms to draw`;
+    S.fpsT0 = now; S.fpsN = 0; S.drawMs = 0;
   }
   $("fps").dataset.frames = S.frames;
   requestAnimationFrame(frame);
