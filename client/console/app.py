@@ -264,6 +264,8 @@ class Console:
 
     def _deliver(self, robot: str, kind: str, text: str, scan) -> None:
         r = self._robot(robot)
+        if r.world is None:  # the server came up after the console (asked at most every 5 s)
+            self._ask_world(r)
         if scan is not None:
             r.scans[scan[0]] = scan[1]
             r.last_scan = scan
