@@ -20,6 +20,7 @@ docs/console.md describes the page; ``client.console.app`` the server side.
 from __future__ import annotations
 
 import argparse
+import sys
 
 from client._process import add_process_arguments, run
 
@@ -41,6 +42,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from client.console.app import body
+    from client.console.app import body, parse_http
 
+    # bad flags are said before any session is opened (exit status 2, like argparse)
+    try:
+        parse_http(args.http)
+        if bool(args.tls_cert) != bool(args.tls_key):
+            raise ValueError("--tls-cert and --tls-key go together")
+    except ValueError as exc:
+        print(f"rhbl console: error: {exc}", file=sys.stderr)
+        return 2
     return run("console", args, body, early_token=False)

@@ -45,3 +45,18 @@ def test_cli_flags():
     assert args.http == "127.0.0.1:8080" and args.token is None and not args.view_only
     args = build_parser("console").parse_args(["--http", "0.0.0.0:9", "--view-only"])
     assert args.http == "0.0.0.0:9" and args.view_only
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["--http", "nonsense"], "--http must be HOST:PORT"),
+    (["--tls-cert", "c.pem"], "--tls-cert and --tls-key go together"),
+])
+def test_bad_flags_exit_2_before_opening_a_session(argv, said):
+    import os
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "lab.cli", "console", *argv,
+                        "--connect", "tcp/127.0.0.1:9"], capture_output=True, text=True,
+                       timeout=60, env={**os.environ, "RHBL_LOG_LEVEL": "INFO"})
+    assert r.returncode == 2 and said in r.stderr, r.stderr

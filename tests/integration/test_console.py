@@ -233,6 +233,94 @@ def test_holding_arrow_up_teaches_the_learner_fwd_and_releasing_stops(env, brows
     assert _errors(browser) == []
 
 
+def _wait_learner(env, learner, log: Path) -> None:
+    key = keys.alive_key("learner", f"r0-{learner.pid}")
+    end = time.monotonic() + 30
+    while not any(r.ok is not None for r in env["session"].liveliness().get(key, timeout=1.0)):
+        assert learner.poll() is None and time.monotonic() < end, log.read_text()
+
+
+def _mode(browser, mode: str) -> None:
+    browser.find_element("css selector", f"#modes input[value={mode}]").click()
+    browser.find_element("id", "view").click()  # keys go to the page again
+
+
+def test_correct_mode_takes_over_and_hands_back_to_a_following_controller(env, browser, tmp_path):
+    """demonstrate, then a controller --from-learner --follow drives; in correct mode a key takes
+    over (its labels are learned) and releasing hands the robot back at once; the controller
+    picks up the grown tree without stopping; in watch mode keys neither drive nor teach."""
+    w = env["watch"]
+    out = tmp_path / "tree.rhbl"
+    learner = _learner(out, env["srv"].endpoint, tmp_path / "learner.log")
+    ctl = None
+    decisions: list[Decision] = []
+
+    def on_decision(sample):
+        with w.cond:
+            decisions.append(Decision.decode(sample.payload))
+            w.cond.notify_all()
+
+    sub = env["session"].declare_subscriber(keys.controller_decision_key("r0"), on_decision)
+    try:
+        _wait_learner(env, learner, tmp_path / "learner.log")
+        _home(env)
+        _open(browser, env["console"].url)
+        before = len(w.labels)
+        _keys(browser, ("down", "ARROW_UP"))
+        w.wait(lambda w: len(w.labels) - before >= 10, 10, "ten demonstrated labels")
+        _keys(browser, ("up", "ARROW_UP"))
+        w.wait(Watch.stopped, STOP_WITHIN, "stopped after the demonstration")
+        demonstrated = len(w.labels) - before
+        w.wait(lambda w: w.notice is not None and w.notice.vectors >= demonstrated, 10,
+               "the learner learned the demonstration")
+        with open(tmp_path / "controller.log", "wb") as f:
+            ctl = subprocess.Popen(
+                [sys.executable, "-m", "lab.cli", "controller", "--from-learner", "--follow",
+                 "--connect", env["srv"].endpoint], stdout=f, stderr=subprocess.STDOUT, cwd=ROOT,
+                start_new_session=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        w.wait(lambda w: w.state.driver == "controller", 30, "the controller drives")
+        _mode(browser, "correct")
+        mark = len(w.labels)
+        _keys(browser, ("down", "ARROW_LEFT"))
+        w.wait(lambda w: w.state.driver == "teacher", 5, "a key takes over from the controller")
+        w.wait(lambda w: len(w.labels) - mark >= 5, 10, "five corrections")
+        _keys(browser, ("up", "ARROW_LEFT"))
+        t0 = time.monotonic()
+        w.wait(lambda w: w.state.driver == "controller", STOP_WITHIN,
+               "releasing hands the robot back to the controller")
+        assert time.monotonic() - t0 < STOP_WITHIN
+        corrections = w.labels[mark:]
+        assert {a.action for a in corrections} == {"rot-left"}
+        total = demonstrated + len(corrections)
+        # the following controller swaps in the grown tree and keeps driving
+        w.wait(lambda w: w.notice.vectors >= total, 10, "the corrections are learned")
+        w.wait(lambda w: any(d.snapshot_id.endswith(f":{total}") for d in decisions[-20:]),
+               30, "the controller decides with the grown tree")
+        assert ctl.poll() is None, (tmp_path / "controller.log").read_text()
+        assert "swapped in a newer tree" in (tmp_path / "controller.log").read_text()
+        # watch: keys neither drive nor teach
+        _mode(browser, "watch")
+        mark, seq = len(w.labels), w.state.seq
+        _keys(browser, ("down", "ARROW_UP"))
+        w.wait(lambda w: w.state.seq >= seq + 10, 10, "ten ticks")
+        _keys(browser, ("up", "ARROW_UP"))
+        assert len(w.labels) == mark and w.state.driver == "controller"
+        assert ctl.poll() is None
+        _mode(browser, "demonstrate")
+    finally:
+        sub.undeclare()
+        for p in (ctl, learner):
+            if p is not None and p.poll() is None:
+                p.send_signal(signal.SIGINT)
+                try:
+                    p.wait(30)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+                    p.wait(10)
+    w.wait(Watch.stopped, STOP_WITHIN + 2.0, "the robot stops when the controller stops")
+    assert _errors(browser) == []
+
+
 def test_losing_focus_stops_the_robot(env, browser):
     w = env["watch"]
     _home(env)
