@@ -511,3 +511,41 @@ def test_screenshot_of_the_page(env, browser):
     env["watch"].wait(Watch.stopped, STOP_WITHIN, "stopped")
     assert path.stat().st_size > 10_000
     _home(env)
+
+
+def test_tls_with_a_token(env, tmp_path):
+    """--tls-cert/--tls-key: the page and its WebSocket over TLS (https, wss), token in the URL."""
+    import shutil
+    import ssl
+
+    if shutil.which("openssl") is None:
+        pytest.skip("openssl is needed to make a test certificate")
+    cert, key = tmp_path / "cert.pem", tmp_path / "key.pem"
+    subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "1",
+                    "-subj", "/CN=localhost", "-addext", "subjectAltName=IP:127.0.0.1",
+                    "-keyout", str(key), "-out", str(cert)], check=True, capture_output=True)
+    console = ConsoleProcess(env["srv"].endpoint, "--tls-cert", str(cert), "--tls-key", str(key),
+                             "--token", "t0k")
+    try:
+        url = console.wait_url()
+        assert url.startswith("https://127.0.0.1:") and url.endswith("/?token=t0k")
+        trust = ssl.create_default_context(cafile=str(cert))
+
+        async def check() -> tuple[int, int, int]:
+            async with aiohttp.ClientSession() as s:
+                async with s.get(url, ssl=trust) as r:
+                    page = r.status
+                wss = url.replace("https://", "wss://").replace("/?", "/ws?")
+                async with s.ws_connect(wss, ssl=trust, origin=console.base.rstrip("/")) as ws:
+                    hello = json.loads((await ws.receive(timeout=10)).data)
+                try:  # plain HTTP on the TLS port is no page
+                    async with s.get(url.replace("https://", "http://")) as r:
+                        plain = r.status
+                except aiohttp.ClientError:
+                    plain = -1
+            return page, hello["t"] == "hello", plain
+
+        page, hello, plain = asyncio.run(check())
+        assert page == 200 and hello and plain != 200
+    finally:
+        assert console.stop() == 0, console.output()
