@@ -39,6 +39,35 @@ KEY = ("window.__t = performance.timeOrigin + performance.now();"
        "return window.__t;")
 
 
+def decision_cost(n: int = 2000) -> str:
+    """The controller's extra cost per scan: ``decision_path`` + a ``Decision`` encoded, against
+    ``predict_one``, on a tree of a few thousand spheres (20 features)."""
+    from rhbl import HypersphereClassifier
+    from protocol.messages import Decision
+
+    rng = np.random.default_rng(0)
+    X = rng.random((3000, 20))
+    y = np.where(X[:, 0] > 0.5, "fwd", "rot-left")
+    clf = HypersphereClassifier(default_label="fwd").fit(X, y)
+    for i in range(200):  # warm up both paths
+        clf.predict_one(X[i])
+        clf.decision_path(X[i])
+    t0 = time.perf_counter()
+    for i in range(n):
+        clf.predict_one(X[i % 3000])
+    t1 = time.perf_counter()
+    size = 0
+    for i in range(n):
+        path = clf.decision_path(X[i % 3000])
+        size += len(Decision(scan_id=i, action=str(path[-1]["label"]), nodes=clf.node_count_,
+                             path=tuple((e["index"], e["depth"], e["radius"], str(e["label"]))
+                                        for e in path)).encode())
+    t2 = time.perf_counter()
+    return (f"controller per scan ({clf.node_count_}-node tree, height {clf.height_}): "
+            f"predict_one {(t1 - t0) / n * 1e6:.0f} us, decision_path + Decision encoded "
+            f"{(t2 - t1) / n * 1e6:.0f} us ({size / n:.0f} bytes)")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--n", type=int, default=200, help="key presses measured (default 200)")
@@ -101,6 +130,7 @@ def main() -> int:
               f"ms, p99 {np.percentile(p, 99):.2f} ms")
         print(f"key release -> stop command: p50 {np.percentile(r, 50):.2f} ms, "
               f"p99 {np.percentile(r, 99):.2f} ms")
+        print(decision_cost())
         print(f"page frame rate with {beams}-beam scans at 10 Hz: {fps:.1f} frames/s over "
               f"{args.seconds:g} s, {draw_ms:.2f} ms to draw a frame")
     finally:

@@ -303,7 +303,7 @@ function panel() {
     panel.shown = d;
     const win = d.path[d.path.length - 1];
     $("decision").textContent = win
-      ? `${d.action}: sphere #${win.index}, radius ${win.radius === null ? "inf" : win.radius.toFixed(3)}, depth ${win.depth} (scan ${d.scan_id}, tree ${d.nodes} nodes)`
+      ? `${d.action}: sphere #${win.index}, radius ${win.radius === null ? "inf" : win.radius.toFixed(3)}, depth ${win.depth} (scan ${d.scan_id}, tree ${d.snapshot_id || "from a file"}, ${d.nodes} nodes)`
       : d.action;
     $("path").innerHTML = "";
     for (const e of d.path) {
