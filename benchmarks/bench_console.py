@@ -42,8 +42,8 @@ KEY = ("window.__t = performance.timeOrigin + performance.now();"
 def decision_cost(n: int = 2000) -> str:
     """The controller's extra cost per scan: ``decision_path`` + a ``Decision`` encoded, against
     ``predict_one``, on a tree of a few thousand spheres (20 features)."""
-    from rhbl import HypersphereClassifier
     from protocol.messages import Decision
+    from rhbl import HypersphereClassifier
 
     rng = np.random.default_rng(0)
     X = rng.random((3000, 20))

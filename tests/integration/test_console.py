@@ -321,6 +321,22 @@ def test_correct_mode_takes_over_and_hands_back_to_a_following_controller(env, b
     assert _errors(browser) == []
 
 
+def test_on_screen_buttons_drive_while_pressed(env, browser):
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    w = env["watch"]
+    _home(env)
+    _open(browser, env["console"].url)
+    button = browser.find_element("css selector", "#pad button[data-action=fwd]")
+    ActionChains(browser).click_and_hold(button).perform()
+    try:
+        w.wait(_driving, 5, "the page drives while the button is pressed")
+        assert w.labels[-1].action == "fwd"
+    finally:
+        ActionChains(browser).release(button).perform()
+    w.wait(Watch.stopped, STOP_WITHIN, "the robot stops when the button is released")
+
+
 def test_losing_focus_stops_the_robot(env, browser):
     w = env["watch"]
     _home(env)
@@ -440,6 +456,13 @@ async def _bad_messages(url: str) -> list[str]:
             if m["t"] == "error":
                 errors.append(m["error"])
         assert not ws.closed
+        await ws.send_str("x" * 5000)  # over the 4 KiB limit: this connection ends
+        end = time.monotonic() + 20
+        while not ws.closed and time.monotonic() < end:
+            await ws.receive(timeout=10)
+        assert ws.closed
+    async with aiohttp.ClientSession() as s, s.ws_connect(url) as ws:  # the console serves on
+        assert json.loads((await ws.receive(timeout=10)).data)["t"] == "hello"
     return errors
 
 
@@ -547,5 +570,47 @@ def test_tls_with_a_token(env, tmp_path):
 
         page, hello, plain = asyncio.run(check())
         assert page == 200 and hello and plain != 200
+    finally:
+        assert console.stop() == 0, console.output()
+
+
+def test_robot_selector_views_and_drives_another_robot(start_server, browser):
+    """A server with two robots: the page lists both; selecting r1 draws r1 and drives r1."""
+    from selenium.webdriver.support.ui import Select, WebDriverWait
+
+    srv = start_server("room", robots=2)
+    console = ConsoleProcess(srv.endpoint)
+    try:
+        url = console.wait_url()
+        with zenoh.open(make_config(mode="client", connect=[srv.endpoint])) as session:
+            states: dict[str, State] = {}
+            cond = threading.Condition()
+
+            def on_state(s):
+                with cond:
+                    states[str(s.key_expr).split("/")[1]] = State.decode(s.payload)
+                    cond.notify_all()
+
+            sub = session.declare_subscriber("rhbl/*/position2d/0/data/state", on_state)
+            with cond:
+                assert cond.wait_for(lambda: {"r0", "r1"} <= set(states), 10)
+            r1 = states["r1"].truth
+            _open(browser, url)
+            WebDriverWait(browser, 10).until(lambda d: [o.get_attribute("value") for o in Select(
+                d.find_element("id", "robot")).options] == ["r0", "r1"])
+            Select(browser.find_element("id", "robot")).select_by_value("r1")
+            WebDriverWait(browser, 10).until(lambda d: abs(
+                float(d.find_element("id", "pose").get_attribute("data-x") or 1e9) - r1[0]) < 0.01)
+            browser.find_element("id", "view").click()
+            _keys(browser, ("down", "ARROW_UP"))
+            with cond:
+                assert cond.wait_for(lambda: states["r1"].driver == "teacher", 5), states
+                assert states["r0"].driver == ""
+            _keys(browser, ("up", "ARROW_UP"))
+            with cond:
+                assert cond.wait_for(lambda: states["r1"].driver == "", STOP_WITHIN), states
+            sub.undeclare()
+        browser.get("about:blank")
+        assert _errors(browser) == []
     finally:
         assert console.stop() == 0, console.output()
