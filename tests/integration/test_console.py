@@ -510,11 +510,11 @@ def test_screenshot_of_the_page(env, browser):
     WebDriverWait(browser, 10).until(
         lambda d: abs(float(d.find_element("id", "pose").get_attribute("data-x")) - x) < 0.01
         and int(d.find_element("id", "view").get_attribute("data-walls") or 0) > 4)
-    # a short drive so the trail and the driver show
+    # a short drive so the trail and the driver show (fwd-left: a curve)
     _keys(browser, ("down", "ARROW_UP"), ("down", "ARROW_LEFT"))
     env["watch"].wait(lambda w: w.state.driver == "teacher", 5, "the page drives")
     n = len(env["watch"].labels)
-    env["watch"].wait(lambda w: len(w.labels) - n >= 8, 5, "eight labels")
+    env["watch"].wait(lambda w: len(w.labels) - n >= 20, 10, "two seconds of labels (a trail)")
     # what a learner and a controller would say (their real messages, so the panels show)
     env["session"].put(keys.learner_notice_key("r0"), TreeNotice(
         seq=1, nodes=1391, height=9, vectors=5210, snapshot_id="demo:5210").encode())

@@ -483,3 +483,22 @@ def test_remote_teacher_says_when_the_server_is_not_up(secrets, router):
     run = _teacher(secrets, router)
     assert run.returncode == 4, run.stderr
     assert "server is not up" in run.stderr
+
+
+def test_console_runs_with_the_teachers_credentials(secrets, router, sessions):
+    """``rhbl console`` behind the secured router with the teacher's credentials: the session is
+    accepted and its liveliness token (rhbl/alive/console/...) is let through."""
+    from browser import ConsoleProcess
+
+    console = ConsoleProcess(f"tls/localhost:{router}", "--zenoh-config",
+                             str(secrets / "teacher.json5"))
+    try:
+        console.wait_url()
+        key = keys.alive_key("console", f"{ROBOT}-{console.proc.pid}")
+        deadline = time.monotonic() + 10.0
+        seen: set[str] = set()
+        while key not in seen and time.monotonic() < deadline:
+            seen = _alive_tokens(sessions["server"])
+        assert key in seen, console.output()
+    finally:
+        assert console.stop() == 0, console.output()

@@ -259,7 +259,7 @@ function draw() {
   const sc = S.scan;
   if (sc) {
     const [x, y, yaw] = sc.pose, n = sc.ranges.length;
-    g.fillStyle = "rgba(230,60,40,0.08)"; g.beginPath(); g.moveTo(x, y);
+    g.fillStyle = "rgba(230,60,40,0.12)"; g.beginPath(); g.moveTo(x, y);
     const hits = [];
     for (let i = 0; i < n; i++) {
       const a = yaw + sc.min_angle + i * sc.resolution, r = sc.ranges[i];
