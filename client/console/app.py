@@ -51,7 +51,7 @@ from client.teacher import TeacherPublisher, _Hold
 from protocol import keys
 from protocol.messages import Decision, Scan, State, TreeNotice, VelCmd, WorldInfo
 
-__all__ = ["STALE", "Console", "access_token", "body", "parse_http"]
+__all__ = ["STALE", "Console", "access_token", "body", "host_name", "parse_http"]
 
 log = logging.getLogger(__name__)
 
@@ -78,6 +78,13 @@ def is_loopback(host: str) -> bool:
         return ipaddress.ip_address(host).is_loopback
     except ValueError:
         return False
+
+
+def host_name(host: str) -> str:
+    """The name in a Host header: ``[::1]:8080`` -> ``::1``, ``localhost:80`` -> ``localhost``."""
+    if host.startswith("["):
+        return host[1:].split("]", 1)[0]
+    return host.rsplit(":", 1)[0] if host.count(":") == 1 else host
 
 
 def access_token(host: str, token: str | None) -> str | None:
@@ -144,6 +151,7 @@ class Console:
         self.robots: dict[str, _Robot] = {}
         self.pages: dict[int, _Page] = {}
         self._next_page = 1
+        self._tasks: set[asyncio.Task] = set()  # kept referenced until done
         self.default_robot = ctx.robot
         self._robot(self.default_robot)
         self.subs = []
@@ -260,7 +268,9 @@ class Console:
                     if p.robot == r.name:
                         p.push("world", text)
 
-        self.loop.create_task(get())
+        task = self.loop.create_task(get())
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
 
     def _deliver(self, robot: str, kind: str, text: str, scan) -> None:
         r = self._robot(robot)
@@ -420,6 +430,11 @@ class Console:
     # ---- HTTP ------------------------------------------------------------------------------
     def _authorised(self, request: web.Request) -> bool:
         if self.token is None:
+            # no token (loopback only): the page must be asked for by a loopback name, so a
+            # site whose name an attacker points at 127.0.0.1 (DNS rebinding) gets nothing
+            if not is_loopback(host_name(request.host or "")):
+                raise web.HTTPForbidden(text=f"rhbl console: Host {request.host!r} refused: "
+                                             f"open it as http://127.0.0.1:<port>/\n")
             return True
         given = request.query.get("token", "")
         return hmac.compare_digest(given.encode(), self.token.encode())

@@ -19,6 +19,13 @@ def test_parse_http():
             parse_http(bad)
 
 
+def test_host_name():
+    from client.console.app import host_name
+
+    assert host_name("[::1]:8080") == "::1" and host_name("[::1]") == "::1"
+    assert host_name("localhost:80") == "localhost" and host_name("127.0.0.1") == "127.0.0.1"
+
+
 def test_a_token_is_required_beyond_loopback():
     assert access_token("127.0.0.1", None) is None
     assert access_token("localhost", None) is None

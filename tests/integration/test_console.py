@@ -466,6 +466,22 @@ async def _bad_messages(url: str) -> list[str]:
     return errors
 
 
+def test_a_foreign_host_name_is_refused_without_a_token(env):
+    """DNS rebinding: a site whose name points at 127.0.0.1 reaches the console under its own
+    name (and its own origin); without a token only loopback names are served."""
+    base = env["console"].base
+
+    async def status(host: str, path: str) -> int:
+        async with aiohttp.ClientSession() as s, s.get(base + path, headers={"Host": host}) as r:
+            return r.status
+
+    assert asyncio.run(status("evil.example:80", "")) == 403
+    assert asyncio.run(status("evil.example:80", "ws")) == 403
+    port = base.rsplit(":", 1)[1].strip("/")
+    assert asyncio.run(status(f"localhost:{port}", "")) == 200
+    assert asyncio.run(status(f"127.0.0.1:{port}", "")) == 200
+
+
 def test_malformed_messages_get_an_error_and_the_console_lives_on(env):
     errors = asyncio.run(_bad_messages(env["console"].base + "ws"))
     assert len(errors) == 9 and all(errors), errors

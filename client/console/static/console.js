@@ -331,5 +331,9 @@ function frame(now) {
   requestAnimationFrame(frame);
 }
 
+// while a key is held, say so at least every 200 ms even when scans come slowly (the console
+// stops the person's commands after 0.5 s without a word from the page)
+setInterval(() => { if (S.sent && S.scan) send({ t: "drive", action: S.sent, scan_id: S.scan.id }); }, 200);
+
 connect();
 requestAnimationFrame(frame);
