@@ -321,6 +321,20 @@ def test_correct_mode_takes_over_and_hands_back_to_a_following_controller(env, b
     assert _errors(browser) == []
 
 
+@pytest.mark.parametrize("key", ["SPACE", "ESCAPE"])
+def test_space_or_escape_releases_the_robot_with_the_arrow_still_down(env, browser, key):
+    w = env["watch"]
+    _home(env)
+    _open(browser, env["console"].url)
+    _keys(browser, ("down", "ARROW_UP"))
+    try:
+        w.wait(_driving, 5, "the page drives")
+        _keys(browser, ("down", key), ("up", key))
+        w.wait(Watch.stopped, STOP_WITHIN, f"{key} releases the robot")
+    finally:
+        _keys(browser, ("up", "ARROW_UP"))
+
+
 def test_on_screen_buttons_drive_while_pressed(env, browser):
     from selenium.webdriver.common.action_chains import ActionChains
 
