@@ -335,6 +335,26 @@ def test_space_or_escape_releases_the_robot_with_the_arrow_still_down(env, brows
         _keys(browser, ("up", "ARROW_UP"))
 
 
+def test_zoom_pan_and_follow(env, browser):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.actions.wheel_input import ScrollOrigin
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    _home(env)
+    _open(browser, env["console"].url)
+    view = browser.find_element("id", "view")
+    scale = float(view.get_attribute("data-scale"))
+    ActionChains(browser).scroll_from_origin(ScrollOrigin.from_element(view), 0, -300).perform()
+    WebDriverWait(browser, 5).until(lambda d: float(view.get_attribute("data-scale")) > scale)
+    cx = float(view.get_attribute("data-cx"))
+    ActionChains(browser).click_and_hold(view).move_by_offset(120, 0).release().perform()
+    WebDriverWait(browser, 5).until(lambda d: float(view.get_attribute("data-cx")) < cx - 0.1)
+    browser.find_element("id", "follow").click()
+    x = float(browser.find_element("id", "pose").get_attribute("data-x"))
+    WebDriverWait(browser, 5).until(lambda d: abs(float(view.get_attribute("data-cx")) - x) < 0.01)
+    browser.find_element("id", "follow").click()  # off again for the next tests
+
+
 def test_on_screen_buttons_drive_while_pressed(env, browser):
     from selenium.webdriver.common.action_chains import ActionChains
 

@@ -237,6 +237,8 @@ function draw() {
   const pose = S.state ? S.state.pose : S.scan ? S.scan.pose : null;
   if (S.follow && pose) { S.view.cx = pose[0]; S.view.cy = pose[1]; }
   const v = S.view;
+  if (canvas.dataset.scale !== v.scale.toFixed(2)) canvas.dataset.scale = v.scale.toFixed(2);
+  canvas.dataset.cx = v.cx.toFixed(3); canvas.dataset.cy = v.cy.toFixed(3);
   g.setTransform(dpr, 0, 0, dpr, 0, 0);
   g.clearRect(0, 0, w, h);
   g.setTransform(dpr * v.scale, 0, 0, -dpr * v.scale, dpr * (w / 2 - v.cx * v.scale), dpr * (h / 2 + v.cy * v.scale));
