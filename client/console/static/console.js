@@ -53,14 +53,17 @@ function showError(text) {
 function receive(m) {
   if (m.robot !== undefined && S.robot !== null && m.t !== "hello" && m.robot !== S.robot) return;
   switch (m.t) {
-    case "hello":
+    case "hello": {
+      const want = S.robot; // a reconnection keeps watching the robot chosen before
       S.page = m.page; S.robot = m.robot; S.viewOnly = m.view_only;
       setRobots(m.robots.length ? m.robots : [m.robot]);
+      if (want && want !== m.robot) { S.robot = want; $("robot").value = want; send({ t: "view", robot: want }); }
       if (m.view_only) {
         for (const el of document.querySelectorAll("#pad button, #modes input, #take")) el.disabled = true;
         $("hold").textContent = "view-only console: watching";
       }
       break;
+    }
     case "robots": setRobots(m.robots); break;
     case "world": S.world = m; S.view.fitted = false; canvas.dataset.walls = m.walls.length; break;
     case "state":
