@@ -664,3 +664,28 @@ def test_robot_selector_views_and_drives_another_robot(start_server, browser):
         assert _errors(browser) == []
     finally:
         assert console.stop() == 0, console.output()
+
+
+def test_the_console_dying_stops_the_robot_and_the_page_says_so(env, browser):
+    """The link drops the hard way (the console process is killed): no more commands, the
+    server's watchdog stops the robot, and the page shows it is disconnected."""
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    w = env["watch"]
+    _home(env)
+    console = ConsoleProcess(env["srv"].endpoint)
+    try:
+        _open(browser, console.wait_url())
+        _keys(browser, ("down", "ARROW_UP"))
+        w.wait(_driving, 5, "the page drives through the second console")
+        os.kill(console.proc.pid, signal.SIGKILL)
+        t0 = time.monotonic()
+        w.wait(Watch.stopped, STOP_WITHIN, "the robot stops when the console dies")
+        assert time.monotonic() - t0 < STOP_WITHIN
+        WebDriverWait(browser, 10).until(
+            lambda d: d.find_element("id", "link").get_attribute("data-state") == "closed")
+        _keys(browser, ("up", "ARROW_UP"))
+    finally:
+        console.stop()
+    browser.get("about:blank")
+    browser.get_log("browser")  # the refused reconnections are expected here
