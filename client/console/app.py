@@ -152,6 +152,7 @@ class Console:
         self.pages: dict[int, _Page] = {}
         self._next_page = 1
         self._tasks: set[asyncio.Task] = set()  # kept referenced until done
+        self.scope = contextlib.ExitStack()  # what the console's publishers leave to undo
         self.default_robot = ctx.robot
         self._robot(self.default_robot)
         self.subs = []
@@ -322,7 +323,8 @@ class Console:
                     f"{r.name}: the page is behind, not driving on a stale view")
         if r.pubs is None:
             r.pubs = TeacherPublisher(self.session, r.name)
-            r.hold = _Hold(types.SimpleNamespace(session=self.session,
+            # the teacher's hold token, one per robot driven (its ident names that robot)
+            r.hold = _Hold(types.SimpleNamespace(session=self.session, scope=self.scope,
                                                  ident=f"{r.name}-{os.getpid()}"))
         changed = r.holder is not page or r.action != action
         r.holder = page
@@ -505,6 +507,7 @@ class Console:
         for sub in self.subs:
             with contextlib.suppress(Exception):
                 sub.undeclare()
+        self.scope.close()
 
 
 def _ssl_context(args) -> ssl.SSLContext | None:
