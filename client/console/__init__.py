@@ -29,6 +29,9 @@ __all__ = ["add_arguments", "main"]
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_process_arguments(parser)
+    for action in parser._actions:  # the console never waits for the server: its page does
+        if action.dest == "wait_server":
+            action.help = argparse.SUPPRESS
     parser.add_argument("--http", default="127.0.0.1:8080", metavar="HOST:PORT",
                         help="where the page is served (default 127.0.0.1:8080; port 0 = any "
                              "free port). Any address but loopback requires an access token")
