@@ -35,6 +35,7 @@ from client._process import (
 from client.behaviour.actions import ActionSet
 from client.behaviour.features import FEATURES, FeatureSpec
 from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, check_compatible
+from client.decision import Decider
 from protocol import keys
 from protocol.messages import Scan, TreeNotice, VelCmd
 
@@ -135,6 +136,7 @@ class ControllerProcess:
         self.sub = ctx.subscriber(self.scan_key, zenoh.handlers.RingChannel(1))
         self.watch = ScanWatch("controller", self.scan_key, stale=1.0)
         ctx.scope.callback(self.watch.stop)
+        self.decider = Decider(ctx.session, ctx.robot)
         self.t0: float | None = None
         self.n = self.bad = 0
 
@@ -221,7 +223,7 @@ class ControllerProcess:
         """The velocity of the tree's action for ``scan``; None (logged) when it cannot."""
         p = self.policy
         try:
-            action = str(p.classifier.predict_one(p.features.extract(scan.ranges, scan.pose[2])))
+            action = self.decider.decide(p, scan)  # classify, publish the decision
             return p.actions[action]
         except Exception as exc:  # noqa: BLE001 - a scan the tree cannot use: no command
             self.bad += 1

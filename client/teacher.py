@@ -56,7 +56,7 @@ from client.behaviour.policies import STYLES, TAKEOVER, Demonstrator, make_polic
 from protocol import keys
 from protocol.messages import Scan, TeacherAction, VelCmd
 
-__all__ = ["POLICIES", "add_arguments", "main"]
+__all__ = ["POLICIES", "TeacherPublisher", "add_arguments", "main"]
 
 log = logging.getLogger(__name__)
 
@@ -140,11 +140,9 @@ class TeacherProcess:
     def __init__(self, ctx: Context, demo):
         self.ctx, self.args, self.demo = ctx, ctx.args, demo
         robot = ctx.robot
-        self.cmd_pub = ctx.publisher(keys.cmd_vel_key(robot, source=SOURCE),
-                                     congestion_control=zenoh.CongestionControl.BLOCK,
-                                     express=True)
-        self.act_pub = ctx.publisher(keys.teacher_action_key(robot),
-                                     congestion_control=zenoh.CongestionControl.BLOCK)
+        pubs = TeacherPublisher(ctx.session, robot)
+        ctx.scope.callback(pubs.close)
+        self.cmd_pub, self.act_pub = pubs.cmd_pub, pubs.act_pub
         self.scan_key = keys.scan_key(robot)
         # the latest scan wins (a teacher never acts on a backlog); correcting, a short queue:
         # the server does not wait for a teacher that does not drive, and every state the
@@ -286,6 +284,31 @@ class TeacherProcess:
         log.info("teacher stopped after %d labels (%d perturbed, %d taken over)%s", self.n,
                  self.perturbed, self.took,
                  f"; {self.missed} scans not labelled (fell behind)" if self.missed else "")
+
+
+class TeacherPublisher:
+    """A teacher's two outputs for a robot: the executed velocity on the per-source key
+    ``.../cmd/vel/teacher`` (express, never dropped) and the label on ``.../teacher/action``.
+    Shared by ``rhbl teacher`` and ``rhbl console``, so both publish alike."""
+
+    def __init__(self, session, robot: str):
+        self.cmd_pub = session.declare_publisher(keys.cmd_vel_key(robot, source=SOURCE),
+                                                 congestion_control=zenoh.CongestionControl.BLOCK,
+                                                 express=True)
+        self.act_pub = session.declare_publisher(keys.teacher_action_key(robot),
+                                                 congestion_control=zenoh.CongestionControl.BLOCK)
+
+    def command(self, vx: float, va: float, scan_id: int, ts: float) -> None:
+        self.cmd_pub.put(VelCmd(vx=vx, va=va, source=SOURCE, scan_id=scan_id, ts=ts).encode())
+
+    def label(self, scan_id: int, action: str, ts: float, executed: str | None) -> None:
+        self.act_pub.put(TeacherAction(scan_id=scan_id, action=action, source=SOURCE, ts=ts,
+                                       executed=executed).encode())
+
+    def close(self) -> None:
+        for pub in (self.cmd_pub, self.act_pub):
+            with contextlib.suppress(Exception):  # the session is closing
+                pub.undeclare()
 
 
 class _Hold:

@@ -126,6 +126,8 @@ class Scenario:
     # ---- mapping container paths and names to this machine ---------------------------------
     def localize(self, arg: str) -> str:
         arg = arg.replace(f"tls/{ROUTER_HOST}:{ROUTER_PORT}", f"tls/127.0.0.1:{self.port}")
+        if arg.startswith("0.0.0.0:"):  # a container's published port: here loopback, any port
+            arg = "127.0.0.1:0"
         for inside, here in (("/run/secrets", self.secrets), ("/data", self.data)):
             if arg == inside or arg.startswith(inside + "/"):
                 arg = str(here) + arg[len(inside) :]

@@ -21,6 +21,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "teacher": ("client.teacher", "demonstrate: a scripted expert or keyboard teleop drives the robot"),
     "learner": ("client.learner", "learn a hypersphere tree from the teacher's demonstrations"),
     "controller": ("client.controller", "drive the robot with a learned tree"),
+    "console": ("client.console", "a web page to watch, teach and correct the robot from a browser"),
     "train": ("lab.harness", "in-process: a scripted teacher demonstrates on a world, write a tree"),
     "evaluate": ("lab.evaluate", "in-process: run a tree (and the teacher) from a world's start poses"),
     "experiment": ("lab.experiment", "repeat train-then-evaluate over seeds; the paper's Table I"),

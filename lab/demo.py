@@ -148,6 +148,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--timeout", type=float, default=600.0, metavar="SECONDS",
                         help="give up (and fail) after this much wall time")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
+    parser.add_argument("--console", nargs="?", const="127.0.0.1:8080", default=None,
+                        metavar="HOST:PORT",
+                        help="also serve the teacher's console (view-only) to watch the loop "
+                             "live in a browser (default address 127.0.0.1:8080; the URL is "
+                             "printed)")
 
 
 def free_port() -> int:
@@ -438,6 +443,20 @@ class Demo:
         raise DemoError(f"{child.name} (pid {child.pid}) did not come up within {timeout:g} s:\n"
                         f"{child.tail()}")
 
+    def start_console(self) -> Child:
+        """``rhbl console --view-only`` beside the others; prints the URL it serves."""
+        c = self.child("console", "console", "--view-only", "--http", self.args.console)
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline:
+            self.check_alive(c)
+            lines = c.logfile.read_text(errors="replace").splitlines()
+            url = next((ln.split(" ", 1)[1] for ln in lines if ln.startswith("console: ")), None)
+            if url:
+                print(f"console: {url}  (watch the loop live)", flush=True)
+                return c
+            time.sleep(0.05)
+        raise DemoError(f"the console did not start within 30 s:\n{c.tail()}")
+
     def start_server(self) -> Child:
         """One server for the whole demo, at the world's own start pose."""
         pace = (["--speedup", f"{self.args.speedup:g}"] if self.args.speedup is not None
@@ -563,6 +582,8 @@ class Demo:
         learner = self.child("learner", "learner", *sc.learner_args(), "--out",
                              str(self.tree), "--wait-server", "60", "--snapshot-every", "0.5")
         self.wait_token("learner", learner)  # no demonstration before the learner listens
+        if a.console:
+            self.start_console()
         server = self.start_server()
         teacher = self.child("teacher", "teacher", *sc.teacher_args(a.style, a.seed),
                              "--wait-server", "30")

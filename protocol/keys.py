@@ -14,6 +14,7 @@ __all__ = [
     "check_chunk",
     "cmd_vel_key",
     "cmd_vel_subscription",
+    "controller_decision_key",
     "driver_key",
     "learner_notice_key",
     "learner_snapshot_key",
@@ -129,6 +130,12 @@ def learner_snapshot_key(robot: str = "r0") -> str:
     """The learner's queryable answering with its latest tree snapshot."""
     check_chunk(robot, "robot")
     return f"{PREFIX}/{robot}/learner/snapshot"
+
+
+def controller_decision_key(robot: str = "r0") -> str:
+    """The controller's decision for each scan it answers (``Decision``), controller -> all."""
+    check_chunk(robot, "robot")
+    return f"{PREFIX}/{robot}/controller/decision"
 
 
 def alive_key(role: str, ident: str) -> str:

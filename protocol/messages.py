@@ -30,6 +30,7 @@ from protocol.codec import (
 
 __all__ = [
     "COMMAND_MAX_PAYLOAD",
+    "Decision",
     "PROTOCOL_VERSION",
     "Ack",
     "DecodeError",
@@ -317,6 +318,62 @@ class TreeNotice(_Message):
             vectors=get_opt(m, "vectors", get_int, w, minimum=0, default=0),
             snapshot_id=get_opt(m, "snapshot_id", get_str, w, default=""),
             ts=get_opt(m, "ts", get_float, w, default=0.0),
+        )
+
+
+@dataclass
+class Decision(_Message):
+    """The controller's decision for one scan: the ``action`` it commanded for ``scan_id``
+    (sim time ``ts``) and the tree's decision ``path`` from the root to the winning sphere, one
+    ``(index, depth, radius, label)`` per node (the last is the winner, its label the action's);
+    ``snapshot_id`` names the tree (``<lineage>:<vectors>`` as in the learner's notices, ``""``
+    when unknown) and ``nodes`` its size."""
+
+    WHAT: ClassVar[str] = "controller/decision"
+    MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
+    MAX_PATH: ClassVar[int] = 1024
+    scan_id: int
+    action: str
+    path: tuple[tuple[int, int, float, str], ...] = ()
+    ts: float = 0.0
+    snapshot_id: str = ""
+    nodes: int = 0
+
+    def to_map(self):
+        return {
+            "scan_id": int(self.scan_id),
+            "ts": float(self.ts),
+            "action": self.action,
+            "path": [[int(i), int(d), float(r), str(lab)] for i, d, r, lab in self.path],
+            "snapshot_id": self.snapshot_id,
+            "nodes": int(self.nodes),
+        }
+
+    @classmethod
+    def from_map(cls, m):
+        w = cls.WHAT
+        raw = m.get("path", [])
+        if not isinstance(raw, list | tuple) or len(raw) > cls.MAX_PATH:
+            raise DecodeError(f"{w}: field 'path': expected a list of at most {cls.MAX_PATH} "
+                              f"[index, depth, radius, label], got {type(raw).__name__}")
+        path = []
+        for k, e in enumerate(raw):
+            name = f"path[{k}]"
+            if not isinstance(e, list | tuple) or len(e) != 4:
+                raise DecodeError(f"{w}: field '{name}': expected [index, depth, radius, label], "
+                                  f"got {e!r:.80}")
+            item = dict(zip(("index", "depth", "radius", "label"), e, strict=True))
+            path.append((get_int(item, "index", f"{w} {name}", minimum=0),
+                         get_int(item, "depth", f"{w} {name}", minimum=0),
+                         get_float(item, "radius", f"{w} {name}"),
+                         get_str(item, "label", f"{w} {name}")))
+        return cls(
+            scan_id=get_int(m, "scan_id", w, minimum=0),
+            action=get_str(m, "action", w),
+            path=tuple(path),
+            ts=get_opt(m, "ts", get_float, w, default=0.0),
+            snapshot_id=get_opt(m, "snapshot_id", get_str, w, default=""),
+            nodes=get_opt(m, "nodes", get_int, w, minimum=0, default=0),
         )
 
 

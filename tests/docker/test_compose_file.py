@@ -82,7 +82,8 @@ def test_check_jsonschema_cli_agrees():
 
 def test_every_rhbl_service_command_is_a_valid_rhbl_invocation(compose):
     services = _rhbl_services(compose)
-    assert set(services) == {"server", "teacher", "learner", "controller"}
+    assert set(services) == {"server", "teacher", "learner", "controller", "console"}
+    credentials = {"console": "teacher"}  # the console teaches: the teacher's credentials
     for name, argv in services.items():
         command, rest = argv[0], argv[1:]
         assert command in COMMANDS, name
@@ -91,7 +92,7 @@ def test_every_rhbl_service_command_is_a_valid_rhbl_invocation(compose):
         assert args.mode == "client", f"{name}: every process is a client of the router"
         assert args.connect == ["tls/router:7447"], f"{name}: explicit TLS endpoint"
         assert not args.multicast_scouting
-        assert args.zenoh_config == f"/run/secrets/{name}.json5"
+        assert args.zenoh_config == f"/run/secrets/{credentials.get(name, name)}.json5"
 
 
 def test_scenario_flags(compose):
@@ -108,6 +109,20 @@ def test_scenario_flags(compose):
     assert learner.features == controller.features
     # the controller exits until the learner has a tree: compose restarts it
     assert compose["services"]["controller"]["restart"] == "on-failure"
+
+
+def test_console_is_published_on_the_hosts_loopback_only(compose):
+    console = compose["services"]["console"]
+    ports = console["ports"]
+    assert ports and all(p.startswith("127.0.0.1:") for p in ports), ports
+    assert all(p.endswith(":8080") for p in ports)
+    args = build_parser("console").parse_args(_rhbl_services(compose)["console"][1:])
+    assert args.http == "0.0.0.0:8080" and not args.view_only
+    # inside the container it listens on every address, so it requires a token (random
+    # unless RHBL_CONSOLE_TOKEN is set)
+    from client.console.app import access_token, parse_http
+
+    assert access_token(parse_http(args.http)[0], args.token or None)
 
 
 def test_learned_tree_lives_on_a_named_volume(compose):

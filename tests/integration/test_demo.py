@@ -21,9 +21,12 @@ def test_short_demo(tmp_path):
     r = subprocess.run(
         [sys.executable, "-m", "lab.cli", "demo", "--out", str(out), "--teach-seconds", "30",
          "--rounds", "1", "--round-seconds", "20", "--drive-seconds", "20", "--starts", "2",
-         "--quiet"],
+         "--quiet", "--console", "127.0.0.1:0"],
         cwd=ROOT, capture_output=True, text=True, timeout=150)
     assert r.returncode == 0, r.stdout + r.stderr
+    # the console served the page beside the others (view-only) and said where
+    assert "console: http://127.0.0.1:" in r.stdout
+    assert "serving the console" in (out / "logs/console.log").read_text()
     assert "| wall-following |" in r.stdout and "demonstration vectors" in r.stdout
     assert "Corrective rounds" in r.stdout and "What the robots did" in r.stdout
     for name in ("tree.rhbl", "tree.rhbl.journal", "paths.png", "summary.json",

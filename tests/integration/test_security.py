@@ -347,6 +347,28 @@ def test_learner_snapshot_and_notices_reach_the_controller(sessions):
         sub.undeclare()
 
 
+def test_console_reads_notices_and_decisions_with_the_teachers_credentials(sessions):
+    """``rhbl console`` runs with the teacher's credentials: it receives the learner's notices
+    and the controller's decisions, and only the controller may publish decisions."""
+    inbox = Inbox()
+    decision, notice = keys.controller_decision_key(ROBOT), keys.learner_notice_key(ROBOT)
+    subs = [_subscribe(sessions, inbox, "teacher", decision),
+            _subscribe(sessions, inbox, "teacher", notice)]
+    time.sleep(SETTLE)
+    for who in ("learner", "server"):  # (a session's own puts reach its own subscribers)
+        sessions[who].put(decision, f"forged:{who}".encode())
+    sessions["controller"].put(decision, b"decision")
+    sessions["learner"].put(notice, b"notice")
+    try:
+        assert inbox.wait_for(("teacher", decision, b"decision"))
+        assert inbox.wait_for(("teacher", notice, b"notice"))
+        time.sleep(SETTLE)
+        assert [p for _, _, p in inbox.items if p.startswith(b"forged:")] == []
+    finally:
+        for sub in subs:
+            sub.undeclare()
+
+
 def test_liveliness_is_shared_between_authorised_roles(sessions):
     token = sessions["teacher"].liveliness().declare_token(keys.alive_key("teacher", "t1"))
     try:
@@ -461,3 +483,22 @@ def test_remote_teacher_says_when_the_server_is_not_up(secrets, router):
     run = _teacher(secrets, router)
     assert run.returncode == 4, run.stderr
     assert "server is not up" in run.stderr
+
+
+def test_console_runs_with_the_teachers_credentials(secrets, router, sessions):
+    """``rhbl console`` behind the secured router with the teacher's credentials: the session is
+    accepted and its liveliness token (rhbl/alive/console/...) is let through."""
+    from browser import ConsoleProcess
+
+    console = ConsoleProcess(f"tls/localhost:{router}", "--zenoh-config",
+                             str(secrets / "teacher.json5"))
+    try:
+        console.wait_url()
+        key = keys.alive_key("console", f"{ROBOT}-{console.proc.pid}")
+        deadline = time.monotonic() + 10.0
+        seen: set[str] = set()
+        while key not in seen and time.monotonic() < deadline:
+            seen = _alive_tokens(sessions["server"])
+        assert key in seen, console.output()
+    finally:
+        assert console.stop() == 0, console.output()

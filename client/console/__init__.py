@@ -1,0 +1,58 @@
+"""``rhbl console``: the teacher's console, a web page to see the robot, teach it and correct it.
+
+A zenoh client like the other processes (the same ``--connect/--listen/--mode/--zenoh-config``
+and ``--robot`` flags; behind the secured router it uses the teacher's credentials) that serves
+one page and its WebSocket on ``--http HOST:PORT`` (default ``127.0.0.1:8080``) and prints one
+line ``console: <URL>`` with the URL to open. The page (``client/console/static/``: plain HTML,
+JS and a canvas, no network access beyond this process) shows the world, the robot, its trail and
+laser, who drives and with which action, the learner's tree and the controller's decision; the
+person drives with the arrow keys/WASD, on-screen buttons or a gamepad. Commands go on the bus
+exactly as ``rhbl teacher`` sends them (``client.teacher.TeacherPublisher``): the velocity on
+``.../cmd/vel/teacher`` and the label for the scan the page displayed on ``.../teacher/action``.
+
+    rhbl console                                   # http://127.0.0.1:8080/
+    rhbl console --http 0.0.0.0:8443 --tls-cert c.pem --tls-key k.pem   # token in the URL
+    rhbl console --view-only                       # watch: publishes nothing at all
+
+docs/console.md describes the page; ``client.console.app`` the server side.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from client._process import add_process_arguments, run
+
+__all__ = ["add_arguments", "main"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_process_arguments(parser)
+    for action in parser._actions:  # the console never waits for the server: its page does
+        if action.dest == "wait_server":
+            action.help = argparse.SUPPRESS
+    parser.add_argument("--http", default="127.0.0.1:8080", metavar="HOST:PORT",
+                        help="where the page is served (default 127.0.0.1:8080; port 0 = any "
+                             "free port). Any address but loopback requires an access token")
+    parser.add_argument("--token", default=None,
+                        help="access token the URL must carry (default: none on loopback, a "
+                             "random one on any other address; printed in the URL)")
+    parser.add_argument("--tls-cert", metavar="PEM", help="serve HTTPS/WSS with this certificate")
+    parser.add_argument("--tls-key", metavar="PEM", help="the certificate's private key")
+    parser.add_argument("--view-only", action="store_true",
+                        help="watch only: no commands, no labels, no liveliness token")
+
+
+def main(args: argparse.Namespace) -> int:
+    from client.console.app import body, parse_http
+
+    # bad flags are said before any session is opened (exit status 2, like argparse)
+    try:
+        parse_http(args.http)
+        if bool(args.tls_cert) != bool(args.tls_key):
+            raise ValueError("--tls-cert and --tls-key go together")
+    except ValueError as exc:
+        print(f"rhbl console: error: {exc}", file=sys.stderr)
+        return 2
+    return run("console", args, body, early_token=False)

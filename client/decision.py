@@ -1,0 +1,53 @@
+"""The controller's decision for a scan, classified once and published for viewers.
+
+``Decider(session, robot).decide(policy, scan) -> action`` classifies the scan's features with
+``decision_path`` (the root-to-winner path; the winner's label is what ``predict_one`` answers,
+at a few tens of microseconds more) and publishes a ``Decision`` on
+``rhbl/<robot>/controller/decision`` (docs/protocol.md) without blocking: a viewer that cannot
+keep up loses decisions, the controller never waits for it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+import zenoh
+
+from protocol import keys
+from protocol.messages import Decision, Scan
+
+__all__ = ["Decider", "snapshot_id"]
+
+
+def snapshot_id(metadata: dict) -> str:
+    """``<lineage>:<records>`` of a learner's snapshot (as its notices name it), else ``""``."""
+    j = (metadata.get("provenance") or {}).get("journal") or {}
+    if j.get("lineage") is None:
+        return ""
+    return f"{j['lineage']}:{j.get('records', 0)}"
+
+
+class Decider:
+    def __init__(self, session: zenoh.Session, robot: str):
+        self._pub = session.declare_publisher(keys.controller_decision_key(robot),
+                                              congestion_control=zenoh.CongestionControl.DROP)
+        self._tree = None
+        self._sid = ""
+
+    def decide(self, policy, scan: Scan) -> str:
+        """The action the policy's tree chooses for ``scan`` (published with its path)."""
+        clf = policy.classifier
+        path = clf.decision_path(policy.features.extract(scan.ranges, scan.pose[2]))
+        action = str(path[-1]["label"])
+        if clf is not self._tree:  # a swapped-in tree (--follow)
+            self._tree, self._sid = clf, snapshot_id(policy.metadata)
+        self._pub.put(Decision(
+            scan_id=scan.id, ts=scan.ts, action=action, snapshot_id=self._sid,
+            nodes=int(getattr(clf, "node_count_", 0)),
+            path=tuple((e["index"], e["depth"], e["radius"], str(e["label"])) for e in path),
+        ).encode())
+        return action
+
+    def close(self) -> None:
+        with contextlib.suppress(Exception):  # the session is closing
+            self._pub.undeclare()

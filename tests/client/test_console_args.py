@@ -1,0 +1,69 @@
+"""``rhbl console``'s pure parts: the --http address, when a token is required, key helpers."""
+
+from __future__ import annotations
+
+import pytest
+
+pytest.importorskip("aiohttp")
+
+from client.console.app import _action_of, _every_robot, access_token, parse_http  # noqa: E402
+from lab.cli import build_parser  # noqa: E402
+from protocol import keys  # noqa: E402
+
+
+def test_parse_http():
+    assert parse_http("127.0.0.1:8080") == ("127.0.0.1", 8080)
+    assert parse_http("[::1]:0") == ("::1", 0)
+    for bad in ("8080", "host:", ":80", "h:70000", "h:x"):
+        with pytest.raises(ValueError, match="HOST:PORT"):
+            parse_http(bad)
+
+
+def test_host_name():
+    from client.console.app import host_name
+
+    assert host_name("[::1]:8080") == "::1" and host_name("[::1]") == "::1"
+    assert host_name("localhost:80") == "localhost" and host_name("127.0.0.1") == "127.0.0.1"
+
+
+def test_a_token_is_required_beyond_loopback():
+    assert access_token("127.0.0.1", None) is None
+    assert access_token("localhost", None) is None
+    assert access_token("::1", None) is None
+    a, b = access_token("0.0.0.0", None), access_token("192.0.2.7", None)
+    assert a and b and a != b and len(a) >= 20  # random, unguessable
+    assert access_token("127.0.0.1", "given") == "given"
+    assert access_token("0.0.0.0", "") != ""  # an empty --token (compose's default) is none
+
+
+def test_keys_of_every_robot_and_action_names():
+    assert _every_robot(keys.scan_key) == "rhbl/*/laser/0/data/scan"
+    assert _every_robot(keys.cmd_vel_subscription) == "rhbl/*/position2d/0/cmd/vel/**"
+    assert _every_robot(keys.controller_decision_key) == "rhbl/*/controller/decision"
+    from client.behaviour.actions import DEFAULT_ACTIONS
+
+    for name, (vx, va) in DEFAULT_ACTIONS.items():
+        assert _action_of(vx, va) == name
+    assert _action_of(0.0, 0.0) == "stop"
+
+
+def test_cli_flags():
+    args = build_parser("console").parse_args([])
+    assert args.http == "127.0.0.1:8080" and args.token is None and not args.view_only
+    args = build_parser("console").parse_args(["--http", "0.0.0.0:9", "--view-only"])
+    assert args.http == "0.0.0.0:9" and args.view_only
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["--http", "nonsense"], "--http must be HOST:PORT"),
+    (["--tls-cert", "c.pem"], "--tls-cert and --tls-key go together"),
+])
+def test_bad_flags_exit_2_before_opening_a_session(argv, said):
+    import os
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "lab.cli", "console", *argv,
+                        "--connect", "tcp/127.0.0.1:9"], capture_output=True, text=True,
+                       timeout=60, env={**os.environ, "RHBL_LOG_LEVEL": "INFO"})
+    assert r.returncode == 2 and said in r.stderr, r.stderr

@@ -1,0 +1,117 @@
+"""A real headless Chromium (Debian's ``chromium`` and ``chromium-driver``) and a real
+``rhbl console`` process, for the console's browser tests and benchmark.
+
+``chromium()`` starts a browser (selenium); when none is installed the caller skips with the
+reason, except in CI (``CI=true``), where a missing browser is a failure. ``ConsoleProcess``
+starts ``rhbl console`` on a free loopback port and reads the URL it prints.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                  "--disable-background-networking", "--disable-component-update",
+                  "--disable-sync", "--disable-dev-shm-usage", "--window-size=1200,800")
+
+
+def find_chromium() -> tuple[str, str] | str:
+    """(browser, driver) paths, or the reason there are none."""
+    browser = next((p for p in ("/usr/bin/chromium", shutil.which("chromium") or "")
+                    if p and os.access(p, os.X_OK)), None)
+    driver = next((p for p in ("/usr/bin/chromedriver", shutil.which("chromedriver") or "")
+                   if p and os.access(p, os.X_OK)), None)
+    if browser and driver:
+        return browser, driver
+    return ("no Chromium to drive: install Debian's chromium and chromium-driver "
+            "(scripts/ci-browser.sh); missing: "
+            + ", ".join(n for n, p in (("chromium", browser), ("chromedriver", driver)) if not p))
+
+
+def in_ci() -> bool:
+    return os.environ.get("CI", "").lower() in ("1", "true", "yes")
+
+
+def chromium():
+    """A selenium Chrome driver for a new headless Chromium with an empty profile."""
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    found = find_chromium()
+    if isinstance(found, str):
+        raise RuntimeError(found)
+    browser, driver = found
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = browser
+    profile = tempfile.mkdtemp(prefix="rhbl-chromium-")
+    for flag in (*CHROMIUM_FLAGS, f"--user-data-dir={profile}"):
+        opts.add_argument(flag)
+    opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    drv = webdriver.Chrome(options=opts, service=Service(driver))
+    drv.set_page_load_timeout(30)
+    drv._rhbl_profile = profile  # removed by close_chromium
+    return drv
+
+
+def close_chromium(drv) -> None:
+    try:
+        drv.quit()
+    finally:
+        shutil.rmtree(getattr(drv, "_rhbl_profile", ""), ignore_errors=True)
+
+
+class ConsoleProcess:
+    """``rhbl console --connect ENDPOINT --http 127.0.0.1:0 ...``; ``url`` once it printed it."""
+
+    def __init__(self, endpoint: str, *extra: str):
+        argv = [sys.executable, "-m", "lab.cli", "console", "--connect", endpoint,
+                "--http", "127.0.0.1:0", *extra]
+        self.lines: list[str] = []
+        self.url: str | None = None
+        self._ready = threading.Event()
+        self.proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                     text=True, bufsize=1, cwd=ROOT, start_new_session=True,
+                                     env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            line = line.rstrip("\n")
+            self.lines.append(line)
+            if line.startswith("console: ") and self.url is None:
+                self.url = line.split(" ", 1)[1]
+                self._ready.set()
+        self._ready.set()
+
+    def wait_url(self, timeout: float = 30.0) -> str:
+        if not self._ready.wait(timeout) or self.url is None:
+            self.stop()
+            raise RuntimeError(f"rhbl console did not print its URL:\n{self.output()}")
+        return self.url
+
+    @property
+    def base(self) -> str:
+        return self.url.split("?", 1)[0]
+
+    def output(self) -> str:
+        return "\n".join(self.lines)
+
+    def stop(self, timeout: float = 10.0) -> int | None:
+        if self.proc.poll() is None:
+            os.kill(self.proc.pid, signal.SIGTERM)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                os.kill(self.proc.pid, signal.SIGKILL)
+                self.proc.wait(5)
+        self._reader.join(2.0)
+        return self.proc.returncode
