@@ -42,7 +42,7 @@ from lab import processes
 from lab.processes import free_port
 from lab.processes import rhbl_argv as _rhbl
 
-__all__ = ["SCENARIOS", "add_arguments", "main"]
+__all__ = ["SCENARIOS", "add_arguments", "main", "free_port"]
 
 log = logging.getLogger(__name__)
 
