@@ -1,20 +1,35 @@
 # The two quick-start commands: `make demo` (the main job) and `make test` (the whole suite).
+# Both first install rhbl and its dependencies into a virtual environment of its own, $(VENV),
+# made from $(PYTHON): the interpreter itself is never installed into, so a system python3 that
+# is "externally managed" (PEP 668, Debian 12, Ubuntu 24.04) works as well as any other.
+#   make PYTHON=python3.12 demo      build the environment from another interpreter
+#   make VENV=$VIRTUAL_ENV test       install into (and use) an environment you already have
+#   make demo DEMO_ARGS='--scenario maze'
 PYTHON ?= python3
-STAMP := .make-installed
+VENV ?= .venv
+DEMO_ARGS ?=
+BIN := $(VENV)/bin
+# installed once per change of pyproject.toml; removing $(VENV) starts afresh
+STAMP := $(VENV)/.rhbl-installed
+# the environment's commands (hadolint, shellcheck, rhbl) first on PATH for the tests
+RUN := PATH="$(abspath $(BIN)):$$PATH"
 
 $(STAMP): pyproject.toml
-	$(PYTHON) -m pip install --quiet -e '.[dev]'
+	@bash scripts/make-venv.sh "$(PYTHON)" "$(VENV)"
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev]'
 	@touch $(STAMP)
+	@echo "make: rhbl is installed in the virtual environment $(VENV)/ ($(BIN)/rhbl;" \
+	      "'. $(BIN)/activate' puts it on your PATH)"
 
 install: $(STAMP)
 
 demo: $(STAMP)
-	rhbl demo
+	$(RUN) $(BIN)/rhbl demo $(DEMO_ARGS)
 
 test: $(STAMP)
-	$(PYTHON) -m pytest -q tests
+	$(RUN) $(BIN)/python -m pytest -q tests
 
 lint: $(STAMP)
-	ruff check .
+	$(RUN) $(BIN)/ruff check .
 
 .PHONY: install demo test lint

@@ -21,8 +21,6 @@ from __future__ import annotations
 import argparse
 import os
 import signal
-import socket
-import subprocess
 import sys
 import tempfile
 import threading
@@ -35,17 +33,12 @@ import zenoh
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from lab.processes import Child, free_port, rhbl_argv  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, VelCmd  # noqa: E402
 from protocol.session import make_config  # noqa: E402
 
 PING, PONG = "bench/ping", "bench/pong"
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def echo(endpoint: str) -> int:
@@ -93,10 +86,13 @@ def main() -> int:
     _train_tree(tree)
     world = World(resolve_world("room"))
     ranges = world.scan(0)
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     robot = "r0"
-    children: list[subprocess.Popen] = []
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    children = [
+        Child("echo", [sys.executable, __file__, "--echo", endpoint]),
+        Child("controller", rhbl_argv("controller", "--tree", str(tree), "--connect", endpoint,
+                                      "--log-level", "WARNING"), cwd=ROOT),
+    ]
     got = threading.Event()
     box: dict = {}
 
@@ -117,11 +113,8 @@ def main() -> int:
         subs = [s.declare_subscriber(PONG, on_pong),
                 s.declare_subscriber(keys.cmd_vel_key(robot, source="controller"), on_cmd)]
         try:
-            children.append(subprocess.Popen([sys.executable, __file__, "--echo", endpoint],
-                                             env=env, start_new_session=True))
-            children.append(subprocess.Popen(
-                [sys.executable, "-m", "lab.cli", "controller", "--tree", str(tree), "--connect",
-                 endpoint, "--log-level", "WARNING"], env=env, cwd=ROOT, start_new_session=True))
+            for c in children:
+                c.start()
             sid = 0
 
             def scan_payload(i: int) -> bytes:
@@ -165,13 +158,7 @@ def main() -> int:
             for sub in subs:
                 sub.undeclare()
             for c in children:
-                if c.poll() is None:
-                    os.kill(c.pid, signal.SIGTERM)
-            for c in children:
-                try:
-                    c.wait(10)
-                except subprocess.TimeoutExpired:
-                    os.kill(c.pid, signal.SIGKILL)
+                c.stop()
     r50, r99 = _pct(raw)
     c50, c99 = _pct(s2a)
     from rhbl import load

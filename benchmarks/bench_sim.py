@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import socket
 import sys
 import time
 from pathlib import Path
@@ -23,6 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 import server  # noqa: E402
+from lab.processes import free_port  # noqa: E402
 from server.world import LASER, ROBOT, World, load_world  # noqa: E402
 
 
@@ -97,10 +97,7 @@ def _node(spec, n: int):
     from protocol.session import make_config
     from server.node import ServerNode
 
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    session = zenoh.open(make_config(mode="router", listen=[f"tcp/127.0.0.1:{port}"]))
+    session = zenoh.open(make_config(mode="router", listen=[f"tcp/127.0.0.1:{free_port()}"]))
     w = World(spec, robots=n)
     w.reset(poses=free_poses(spec, n))
     node = ServerNode(session, w, rate=10.0, speedup=1.0, watchdog=0.5)

@@ -1,4 +1,4 @@
-"""A Player-like client library over zenoh (DESIGN.md section 4, docs/protocol.md).
+"""A Player-like client library over zenoh (docs/protocol.md; the model: docs/architecture.md).
 
 ::
 

@@ -18,13 +18,15 @@ import argparse
 import os
 import re
 import signal
-import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
+
+from lab import processes
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -94,13 +96,16 @@ def start_order(services: dict) -> list[str]:
 
 @dataclass
 class Proc:
+    """A service: its process (started again as its ``restart`` policy says) and exit codes."""
+
     name: str
-    argv: list[str]
     restart: str
-    log: Path
-    popen: subprocess.Popen | None = None
-    starts: int = 0
+    child: processes.Child
     exits: list[int] = field(default_factory=list)
+
+    @property
+    def log(self) -> Path:
+        return self.child.logfile
 
 
 class Scenario:
@@ -172,27 +177,16 @@ class Scenario:
         argv = rhbl_argv(service)
         if argv is None:
             raise ValueError(f"service {name}: do not know how to run it locally")
-        return [sys.executable, "-m", "lab.cli", *[self.localize(a) for a in argv]]
+        return processes.rhbl_argv(*[self.localize(a) for a in argv])
 
     # ---- running ----------------------------------------------------------------------------
-    def _spawn(self, proc: Proc) -> None:
-        service = self.services[proc.name]
+    def _child(self, name: str) -> processes.Child:
+        service = self.services[name]
         env = dict(self.env)
         env.update({k: str(v) for k, v in (service.get("environment") or {}).items()})
         env["SECRETS_PREFIX"] = str(self.secrets)  # the generated configs point here
-        env.setdefault("PYTHONUNBUFFERED", "1")
         env["RUST_LOG"] = env.get("RUST_LOG", "warn")
-        out = open(proc.log, "ab")  # noqa: SIM115 - kept open by the child
-        proc.popen = subprocess.Popen(
-            proc.argv,
-            stdout=out,
-            stderr=subprocess.STDOUT,
-            env=env,
-            cwd=str(self.data),
-            start_new_session=True,
-        )
-        out.close()
-        proc.starts += 1
+        return processes.Child(name, self.argv_of(name), self.logs, env=env, cwd=self.data)
 
     def start(self, wait_completed: float = 60.0) -> Scenario:
         for d in (self.secrets, self.data, self.logs):
@@ -202,68 +196,52 @@ class Scenario:
             for dep, cond in deps.items() if isinstance(deps, dict) else []:
                 if cond.get("condition") == "service_completed_successfully":
                     self._wait_completed(dep, wait_completed)
-            proc = Proc(
-                name,
-                self.argv_of(name),
-                str(self.services[name].get("restart", "no")),
-                self.logs / f"{name}.log",
-            )
+            proc = Proc(name, str(self.services[name].get("restart", "no")), self._child(name))
             self.procs[name] = proc
-            self._spawn(proc)
+            proc.child.start()
             if name == "router":
-                self._wait_port(10.0)
+                self._wait_router(10.0)
         return self
 
     def _wait_completed(self, name: str, timeout: float) -> None:
-        proc = self.procs[name]
-        code = proc.popen.wait(timeout)
+        child = self.procs[name].child
+        code = child.wait(timeout)
         if code != 0:
-            raise RuntimeError(f"{name} exited {code}: {proc.log.read_text()[-2000:]}")
+            why = "did not finish in time" if code is None else f"exited {code}"
+            raise RuntimeError(f"{name} {why}:\n{child.tail(30)}")
 
-    def _wait_port(self, timeout: float) -> None:
-        import socket
-
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            with socket.socket() as s:
-                if s.connect_ex(("127.0.0.1", self.port)) == 0:
-                    return
-            if self.procs["router"].popen.poll() is not None:
-                break
-            time.sleep(0.05)
-        raise RuntimeError(f"router did not listen: {self.procs['router'].log.read_text()[-2000:]}")
+    def _wait_router(self, timeout: float) -> None:
+        """Until the router stand-in says it listens (it prints that once its session is open)."""
+        child = self.procs["router"].child
+        if not child.wait_for_line("listening on", timeout):
+            raise RuntimeError(f"router did not listen:\n{child.tail(30)}")
 
     def poll(self, restart_delay: float = 1.0) -> None:
         """Restart exited services as their ``restart`` policy says (call it periodically)."""
         for proc in self.procs.values():
-            code = proc.popen.poll()
-            if code is None or proc.popen.returncode is None:
+            code = proc.child.poll()
+            if code is None or len(proc.exits) >= proc.child.starts:
                 continue
-            if len(proc.exits) < proc.starts:
-                proc.exits.append(code)
-                again = proc.restart in ("always", "unless-stopped") or (
-                    proc.restart == "on-failure" and code != 0
-                )
-                if again and proc.name != "secrets":
-                    time.sleep(restart_delay)
-                    self._spawn(proc)
+            proc.exits.append(code)
+            again = proc.restart in ("always", "unless-stopped") or (
+                proc.restart == "on-failure" and code != 0
+            )
+            if again and proc.name != "secrets":
+                time.sleep(restart_delay)
+                proc.child.start()
 
     def running(self, name: str) -> bool:
-        return self.procs[name].popen.poll() is None
+        return self.procs[name].child.poll() is None
 
     def stop(self, timeout: float = 10.0) -> None:
-        for name in reversed(list(self.procs)):
-            p = self.procs[name].popen
-            if p is not None and p.poll() is None:
-                os.killpg(p.pid, signal.SIGTERM)
+        """SIGTERM to every service by PID (last started first), then wait for each; SIGKILL
+        for any still running after ``timeout``."""
+        children = [self.procs[name].child for name in reversed(list(self.procs))]
+        for child in children:
+            child.send_signal(signal.SIGTERM)
         deadline = time.monotonic() + timeout
-        for proc in self.procs.values():
-            p = proc.popen
-            try:
-                p.wait(max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                os.killpg(p.pid, signal.SIGKILL)
-                p.wait(5)
+        for child in children:
+            child.stop(signal.SIGTERM, timeout=max(0.1, deadline - time.monotonic()))
 
     def __enter__(self) -> Scenario:
         return self.start()
@@ -279,14 +257,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--port", type=int, default=ROUTER_PORT, help="router port (7447)")
     args = parser.parse_args(argv)
-    stop = []
+    stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.append(1))
+        signal.signal(sig, lambda *_: stop.set())
     with Scenario(args.workdir, args.port) as scenario:
         print(f"compose_local: running {', '.join(scenario.procs)}; logs in {scenario.logs}")
-        while not stop:
+        while not stop.wait(0.5):  # restarts exited services twice a second, as docker would
             scenario.poll()
-            time.sleep(0.5)
     return 0
 
 

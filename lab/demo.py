@@ -29,10 +29,7 @@ import contextlib
 import datetime as _dt
 import json
 import logging
-import os
 import signal
-import socket
-import subprocess
 import sys
 import threading
 import time
@@ -41,7 +38,10 @@ from pathlib import Path
 
 import numpy as np
 
+from lab import processes
 from lab.episode import DT, Episode
+from lab.processes import free_port
+from lab.processes import rhbl_argv as _rhbl
 from lab.recipe import EVAL_SECONDS, RECIPES, Recipe, per_task
 
 __all__ = ["SCENARIOS", "Scenario", "add_arguments", "main", "free_port"]
@@ -155,82 +155,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "printed)")
 
 
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 # ---- children ------------------------------------------------------------------------------
 class DemoError(Exception):
     pass
 
 
-@dataclass
-class Child:
-    """One child process (its own session and process group), logging into the output folder."""
+class Child(processes.Child):
+    """One child process, logging into the output folder; stopped with SIGINT first (the
+    learner then writes its final snapshot), SIGTERM and SIGKILL by PID if it does not end."""
 
-    name: str
-    argv: list[str]
-    logdir: Path
-    proc: subprocess.Popen | None = None
-    rc: int | None = None
-    expected_stop: bool = False
-
-    def start(self) -> Child:
-        self.logfile = self.logdir / f"{self.name}.log"
-        f = open(self.logfile, "ab")  # noqa: SIM115 - kept open by the child
-        f.write(f"$ {' '.join(self.argv)}\n".encode())
-        f.flush()
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
-        self.proc = subprocess.Popen(self.argv, stdout=f, stderr=subprocess.STDOUT, env=env,
-                                     start_new_session=True)
-        f.close()
-        return self
-
-    @property
-    def pid(self) -> int:
-        return self.proc.pid if self.proc else -1
-
-    def poll(self) -> int | None:
-        if self.proc is not None and self.rc is None:
-            self.rc = self.proc.poll()
-        return self.rc
-
-    def wait(self, timeout: float) -> int | None:
-        if self.proc is None:
-            return None
-        try:
-            self.rc = self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            return None
-        return self.rc
-
-    def stop(self, timeout: float = 10.0) -> int | None:
-        """SIGINT, then SIGTERM, then SIGKILL (by PID), waiting ``timeout`` for each."""
-        if self.proc is None or self.poll() is not None:
-            return self.rc
-        self.expected_stop = True
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(self.proc.pid, sig)
-            if self.wait(timeout if sig != signal.SIGKILL else 5.0) is not None:
-                if sig != signal.SIGINT:
-                    log.warning("%s needed %s", self.name, sig.name)
-                    self.rc = self.rc if sig == signal.SIGTERM else -9
-                return self.rc
-        return self.rc
-
-    def tail(self, n: int = 15) -> str:
-        try:
-            lines = self.logfile.read_text(errors="replace").splitlines()
-        except OSError:
-            return ""
-        return "\n".join("    " + ln for ln in lines[-n:])
-
-
-def _rhbl(*args: str) -> list[str]:
-    return [sys.executable, "-m", "lab.cli", *args]
+    def __init__(self, name: str, argv: list[str], logdir: Path) -> None:
+        super().__init__(name, argv, logdir, stop_signal=signal.SIGINT)
 
 
 # ---- recording -----------------------------------------------------------------------------
@@ -446,15 +381,11 @@ class Demo:
     def start_console(self) -> Child:
         """``rhbl console --view-only`` beside the others; prints the URL it serves."""
         c = self.child("console", "console", "--view-only", "--http", self.args.console)
-        deadline = time.monotonic() + 30.0
-        while time.monotonic() < deadline:
-            self.check_alive(c)
-            lines = c.logfile.read_text(errors="replace").splitlines()
-            url = next((ln.split(" ", 1)[1] for ln in lines if ln.startswith("console: ")), None)
-            if url:
-                print(f"console: {url}  (watch the loop live)", flush=True)
-                return c
-            time.sleep(0.05)
+        if c.wait_for_line("console: ", timeout=30.0):
+            url = next(ln.split(" ", 1)[1] for ln in c.lines if ln.startswith("console: "))
+            print(f"console: {url}  (watch the loop live)", flush=True)
+            return c
+        self.check_alive(c)
         raise DemoError(f"the console did not start within 30 s:\n{c.tail()}")
 
     def start_server(self) -> Child:

@@ -1,4 +1,4 @@
-"""The one helper that builds zenoh session configs (DESIGN.md section 3).
+"""The one helper that builds zenoh session configs (why they look so: docs/architecture.md).
 
 Hermetic by default: multicast scouting off, explicit endpoints, a short link lease so a dead
 peer is noticed within about two seconds. Processes connect as clients to the server, which

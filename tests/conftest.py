@@ -11,24 +11,15 @@ def test_something(start_server, client_config):
 from __future__ import annotations
 
 import os
-import signal
-import socket
-import subprocess
 import sys
-import threading
-import time
 from collections.abc import Callable
 
 import pytest
 
+from lab.processes import Child
+from lab.processes import free_port as find_free_port
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-def find_free_port() -> int:
-    """A TCP port on 127.0.0.1 that was free a moment ago."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture
@@ -37,70 +28,21 @@ def free_port() -> Callable[[], int]:
     return find_free_port
 
 
-class ServerProcess:
-    """A running ``rhbl server`` (stdout and stderr merged into ``lines``)."""
+class ServerProcess(Child):
+    """A running ``rhbl server`` (a ``lab.processes.Child``: stdout and stderr in ``lines``)."""
 
     def __init__(self, args: list[str], endpoint: str) -> None:
+        super().__init__("rhbl server", args, cwd=ROOT)
         self.args = args
         self.endpoint = endpoint
-        self.lines: list[str] = []
-        self._ready = threading.Event()
-        self.proc = subprocess.Popen(
-            args,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-            bufsize=1,
-            cwd=ROOT,
-            start_new_session=True,
-            env={**os.environ, "PYTHONUNBUFFERED": "1"},
-        )
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-
-    def _read(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            self.lines.append(line.rstrip("\n"))
-            if "listening on" in line:
-                self._ready.set()
-        self._ready.set()  # EOF: the process ended
-
-    @property
-    def pid(self) -> int:
-        return self.proc.pid
+        self.start()
 
     def wait_ready(self, timeout: float = 30.0) -> None:
-        if not self._ready.wait(timeout) or self.proc.poll() is not None:
+        """Until the server says it listens; stops it and raises if it ends or takes too long."""
+        if not self.wait_for_line("listening on", timeout):
             self.stop()
-            raise RuntimeError(
-                f"rhbl server did not start (exit {self.proc.poll()}):\n" + self.output()
-            )
-
-    def output(self) -> str:
-        return "\n".join(self.lines)
-
-    def wait_for_line(self, text: str, timeout: float = 10.0) -> bool:
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if any(text in ln for ln in self.lines):
-                return True
-            time.sleep(0.05)
-        return False
-
-    def stop(self, sig: int = signal.SIGTERM, timeout: float = 10.0) -> int | None:
-        """Send ``sig`` to the server's PID and wait; SIGKILL if it does not end in time."""
-        if self.proc.poll() is None:
-            try:
-                os.kill(self.proc.pid, sig)
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                os.kill(self.proc.pid, signal.SIGKILL)
-                self.proc.wait(5)
-            except ProcessLookupError:
-                pass
-        self._reader.join(2.0)
-        return self.proc.returncode
+            raise RuntimeError(f"rhbl server did not start (exit {self.poll()}):\n"
+                               + self.output())
 
 
 def _server_factory(started: list[ServerProcess]):

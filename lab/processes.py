@@ -1,0 +1,219 @@
+"""Child processes, one way for everyone: ``rhbl demo``, ``docker/compose_local.py``, the tests
+and the benchmarks start, watch and stop their processes with these helpers.
+
+    child = Child("server", rhbl_argv("server", "--listen", f"tcp/127.0.0.1:{free_port()}"),
+                  logdir=Path("logs")).start()
+    if not child.wait_for_line("listening on", timeout=30):
+        raise RuntimeError(f"the server did not start:\\n{child.tail()}")
+    ...
+    child.stop(signal.SIGINT)     # by PID; SIGTERM, then SIGKILL if it does not end in time
+
+A child runs in its own session (``start_new_session``: a Ctrl-C in the terminal reaches only
+the parent, which stops its children itself). A thread reads its merged stdout and stderr line
+by line: into ``lines`` (the last ``keep``), into ``logdir/<name>.log`` when a folder is given,
+and wakes whoever waits for a line or for the exit, so nobody polls.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import itertools
+import logging
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+__all__ = ["Child", "free_port", "rhbl_argv"]
+
+log = logging.getLogger(__name__)
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port on ``host`` that was free a moment ago (the OS picks it)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+def rhbl_argv(*args: str) -> list[str]:
+    """The command line of ``rhbl ARGS...`` run by this interpreter (no PATH lookup)."""
+    return [sys.executable, "-m", "lab.cli", *args]
+
+
+class Child:
+    """One child process: started by :meth:`start`, stopped by PID by :meth:`stop`.
+
+    ``name`` names it in messages and its log file (``logdir/<name>.log``, appended to: a child
+    started again keeps one log). ``env`` replaces the environment (default: this process's);
+    ``PYTHONUNBUFFERED=1`` is added so Python children's lines arrive as they are printed.
+    ``stop_signal`` is what :meth:`stop` sends first (SIGINT for a process that saves its work
+    on Ctrl-C).
+    """
+
+    def __init__(self, name: str, argv: Sequence[str], logdir: Path | None = None, *,
+                 env: Mapping[str, str] | None = None, cwd: str | Path | None = None,
+                 stop_signal: int = signal.SIGTERM, keep: int = 10_000) -> None:
+        if not argv:
+            raise ValueError(f"{name}: empty command line")
+        self.name = name
+        self.argv = [str(a) for a in argv]
+        self.logfile: Path | None = Path(logdir) / f"{name}.log" if logdir is not None else None
+        self.env = dict(os.environ if env is None else env)
+        self.env.setdefault("PYTHONUNBUFFERED", "1")
+        self.cwd = cwd
+        self.stop_signal = stop_signal
+        self.lines: collections.deque[str] = collections.deque(maxlen=keep)
+        self.proc: subprocess.Popen | None = None
+        self.rc: int | None = None
+        self.expected_stop = False  # stop() was called: an exit from now on is no surprise
+        self.starts = 0
+        self._changed = threading.Condition()  # a line arrived or the output ended
+        self._count = 0  # lines read since the first start
+        self._eof = True
+        self._reader: threading.Thread | None = None
+
+    # ---- starting ---------------------------------------------------------------------------
+    def start(self) -> Child:
+        """Start the process (again, if it ended: the same log, ``lines`` go on)."""
+        if self.proc is not None and self.poll() is None:
+            raise RuntimeError(f"{self.name} (pid {self.pid}) is still running")
+        logf = None
+        if self.logfile is not None:
+            self.logfile.parent.mkdir(parents=True, exist_ok=True)
+            logf = open(self.logfile, "a", encoding="utf-8", errors="replace")  # noqa: SIM115
+            logf.write(f"$ {' '.join(self.argv)}\n")
+            logf.flush()
+        try:
+            proc = subprocess.Popen(
+                self.argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL, env=self.env, cwd=self.cwd, start_new_session=True,
+                text=True, encoding="utf-8", errors="replace", bufsize=1)
+        except OSError:
+            if logf is not None:
+                logf.close()
+            raise
+        with self._changed:
+            self.proc, self.rc, self.expected_stop, self._eof = proc, None, False, False
+            self.starts += 1
+        self._reader = threading.Thread(target=self._read, args=(proc, logf),
+                                        name=f"child-{self.name}", daemon=True)
+        self._reader.start()
+        return self
+
+    def _read(self, proc: subprocess.Popen, logf) -> None:
+        assert proc.stdout is not None
+        try:
+            for raw in proc.stdout:
+                line = raw.rstrip("\n")
+                if logf is not None:
+                    logf.write(raw)
+                    logf.flush()
+                with self._changed:
+                    self.lines.append(line)
+                    self._count += 1
+                    self._changed.notify_all()
+        finally:
+            proc.stdout.close()
+            if logf is not None:
+                logf.close()
+            with self._changed:
+                if self.proc is proc:
+                    self._eof = True
+                self._changed.notify_all()
+
+    # ---- watching ---------------------------------------------------------------------------
+    @property
+    def pid(self) -> int:
+        return self.proc.pid if self.proc is not None else -1
+
+    def poll(self) -> int | None:
+        """The exit status once the process ended, else None."""
+        if self.proc is not None and self.rc is None:
+            self.rc = self.proc.poll()
+        return self.rc
+
+    def wait(self, timeout: float | None = None) -> int | None:
+        """Wait up to ``timeout`` seconds for the exit; its status, or None if still running.
+        Once it returned a status, ``lines`` hold everything the process printed."""
+        if self.proc is None:
+            return None
+        try:
+            self.rc = self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            return None
+        if self._reader is not None:  # its last lines, unless a grandchild holds the pipe open
+            self._reader.join(2.0)
+        return self.rc
+
+    def wait_for_line(self, text: str, timeout: float = 10.0) -> bool:
+        """True as soon as a line containing ``text`` was printed (now or before: among the
+        lines kept); False after ``timeout`` seconds, or once the output ended without it."""
+        deadline = time.monotonic() + timeout
+        with self._changed:
+            checked = self._count - len(self.lines)  # lines older than the kept ones are gone
+            while True:
+                new = min(self._count - checked, len(self.lines))
+                if new and any(text in ln for ln in itertools.islice(
+                        self.lines, len(self.lines) - new, None)):
+                    return True
+                checked = self._count
+                left = deadline - time.monotonic()
+                if self._eof or left <= 0:
+                    return False
+                self._changed.wait(left)
+
+    def output(self) -> str:
+        """Every line kept, joined."""
+        with self._changed:
+            return "\n".join(self.lines)
+
+    def tail(self, n: int = 15, indent: str = "    ") -> str:
+        """The last ``n`` lines, indented (for error messages)."""
+        with self._changed:
+            lines = list(self.lines)[-n:]
+        return "\n".join(indent + ln for ln in lines)
+
+    # ---- stopping ---------------------------------------------------------------------------
+    def send_signal(self, sig: int) -> None:
+        """Send ``sig`` to the PID (nothing if it already ended); marks the stop as expected."""
+        if self.proc is None or self.poll() is not None:
+            return
+        self.expected_stop = True
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(self.proc.pid, sig)
+
+    def stop(self, sig: int | None = None, timeout: float = 10.0) -> int | None:
+        """Send ``sig`` (default ``stop_signal``) by PID and wait ``timeout`` seconds; then
+        SIGTERM (if ``sig`` was gentler) and SIGKILL, each with its own wait. Returns the exit
+        status (None if never started)."""
+        if self.proc is None:
+            return None
+        sig = self.stop_signal if sig is None else sig
+        steps = [sig] + [s for s in (signal.SIGTERM, signal.SIGKILL) if s != sig]
+        if sig == signal.SIGKILL:
+            steps = [sig]
+        for i, s in enumerate(steps):
+            if self.poll() is not None:
+                break
+            if i:
+                log.warning("%s (pid %d) did not end after %s: sending %s", self.name, self.pid,
+                            signal.Signals(steps[i - 1]).name, signal.Signals(s).name)
+            self.send_signal(s)
+            self.wait(timeout if s != signal.SIGKILL else max(timeout, 5.0))
+        return self.poll()
+
+    def __enter__(self) -> Child:
+        return self.start() if self.proc is None else self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def __repr__(self) -> str:
+        return f"Child({self.name!r}, pid={self.pid}, rc={self.rc})"
