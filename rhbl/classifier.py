@@ -212,8 +212,6 @@ class HypersphereClassifier:
 
     def _init_tree(self, n_features: int, root_label: Any) -> None:
         self._check_params()
-        if n_features < 1:
-            raise ValueError(f"need at least one feature, got {n_features}")
         self._labels: list[Any] = []
         self._label_index: dict[Any, int] = {}
         root = self._intern(root_label)

@@ -86,7 +86,7 @@ def _array(a: np.ndarray, dtype: str) -> dict[str, Any]:
     return {"dtype": dtype, "shape": list(a.shape), "data": a.tobytes()}
 
 
-def to_dict(snap: Snapshot) -> dict[str, Any]:
+def _to_dict(snap: Snapshot) -> dict[str, Any]:
     """The snapshot map of ``snap`` (before msgpack)."""
     doc: dict[str, Any] = {
         "format": FORMAT,
@@ -109,7 +109,7 @@ def to_dict(snap: Snapshot) -> dict[str, Any]:
 def encode(snap: Snapshot, *, source: str = "<bytes>") -> bytes:
     """The snapshot as msgpack bytes (``source`` names them in errors)."""
     try:
-        return msgpack.packb(to_dict(snap), default=_default, use_bin_type=True)
+        return msgpack.packb(_to_dict(snap), default=_default, use_bin_type=True)
     except (TypeError, ValueError, OverflowError) as exc:
         raise SnapshotError(source, f"cannot serialise the snapshot: {exc}") from exc
 
@@ -157,7 +157,7 @@ def decode(data: bytes, *, source: str = "<bytes>") -> Snapshot:
         raise SnapshotError(source, "trailing data after the snapshot (corrupted)") from None
     except Exception as exc:  # msgpack raises several types for truncated/garbage input
         raise SnapshotError(source, f"truncated or not msgpack ({type(exc).__name__}: {exc})") from None
-    return from_dict(doc, source=source)
+    return _from_dict(doc, source=source)
 
 
 def _get(doc: dict, key: str, types: type | tuple, source: str) -> Any:
@@ -184,7 +184,7 @@ def _read_array(doc: dict, key: str, dtype: str, shape: tuple, source: str) -> n
     return np.frombuffer(raw, dtype=np.dtype(dtype)).reshape(shape).astype(dtype[1:], copy=True)
 
 
-def from_dict(doc: Any, *, source: str = "<dict>") -> Snapshot:
+def _from_dict(doc: Any, *, source: str = "<dict>") -> Snapshot:
     """The contents of a decoded snapshot map, the structure of every field checked."""
     if not isinstance(doc, dict):
         raise SnapshotError(source, f"not an rhbl snapshot (top level is {type(doc).__name__})")

@@ -139,6 +139,12 @@ def _imports(path: Path) -> tuple[set[str], list[int]]:
     return ours, nested
 
 
+def test_snapshots_store_every_parameter_but_the_search():
+    assert set(rhbl.snapshot.PARAMS) == set(HypersphereClassifier().get_params()) - {"algorithm"}
+    with pytest.raises(ValueError, match="need at least one feature"):
+        HypersphereClassifier("a").fit(np.zeros((0, 0)), [])
+
+
 def test_modules_import_one_way():
     """tree <- snapshot <- classifier: no import circle, and no import hidden in a function."""
     root = Path(rhbl.__file__).parent
