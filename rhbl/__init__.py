@@ -9,8 +9,9 @@ See ``docs/rhbl.md``. This package imports only numpy and msgpack.
 """
 
 from ._errors import NotFittedError, RhblError, SnapshotError
-from .classifier import HypersphereClassifier
-from .snapshot import FORMAT, VERSION, load, loads
+from .classifier import HypersphereClassifier, load, loads
+from .snapshot import FORMAT, VERSION
+from .tree import SphereTree
 
 __all__ = [
     "FORMAT",
@@ -19,6 +20,7 @@ __all__ = [
     "NotFittedError",
     "RhblError",
     "SnapshotError",
+    "SphereTree",
     "load",
     "loads",
 ]

@@ -14,6 +14,9 @@ The paper's algorithm (sections 3-5), in its default configuration:
 * Classification: among the spheres that enclose ``x`` and whose ancestors all enclose ``x``,
   the smallest radius wins; ties go to the deepest, then to the earliest created.
 
+The spheres, spawning and the winner searches live in :class:`rhbl.tree.SphereTree` (the
+estimator's ``tree_``); this module holds the parameters, input checks and labels.
+
 Decisions where the paper is silent (see ``docs/rhbl.md``):
 
 * One inclusive test ``d <= r + eps`` everywhere; a child's radius is clamped at 0 (a sphere of
@@ -27,20 +30,18 @@ Decisions where the paper is silent (see ``docs/rhbl.md``):
 
 from __future__ import annotations
 
-import logging
-import math
 from collections.abc import Iterable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ._errors import NotFittedError
+from . import snapshot
+from ._errors import NotFittedError, SnapshotError
+from .tree import ALGORITHMS, DISTANCES, SphereTree
 
-__all__ = ["HypersphereClassifier"]
+__all__ = ["HypersphereClassifier", "load", "loads"]
 
-log = logging.getLogger(__name__)
-
-_DISTANCES = ("squared", "euclidean")
 _SPAWNS = ("all", "winner")
 _PARAMS = (
     "default_label",
@@ -51,16 +52,11 @@ _PARAMS = (
     "max_depth",
     "clip",
     "eps",
+    "algorithm",
 )
-# Above this many nodes the batch path descends the tree level by level instead of testing
-# every (query, sphere) pair; the single-query path always tests every sphere at once.
-_DENSE_BATCH_MAX_NODES = 64
-_CHUNK_PAIRS = 1 << 21
-# the batch descent tests a whole subtree at once when queries x subtree size is at most this.
-# Off (0): measured with 20,000 queries it was 3-23% slower on literal trees of 400, 5,000 and
-# 50,000 spheres than the filtered descent alone, and 16% faster only on a 1,550-sphere
-# wall tree of `rhbl demo` (2026-11-28; the first three are bench_classifier.py trees); a knob
-_DENSE_SUBTREE_PAIRS = 0
+# the parameters that shape the tree (saved in snapshots, compared by ``tree_equal``);
+# ``algorithm`` only chooses how predictions are searched
+_TREE_PARAMS = snapshot.PARAMS
 
 
 def _plain_label(label: Any) -> Any:
@@ -98,7 +94,7 @@ class HypersphereClassifier:
         The root's label (the paper's default behaviour). ``None`` uses the first training label.
     distance:
         ``"squared"`` (the paper: squared Euclidean distance for radii and enclosure) or
-        ``"euclidean"`` (the variant of section 5, for ablation).
+        ``"euclidean"`` (the variant of section 5, for ablation). Fixed once a tree exists.
     spawn:
         ``"all"`` (the paper, literal): every candidate with a conflicting label spawns a child.
         ``"winner"``: only the candidate that classification would choose spawns, when its
@@ -115,11 +111,21 @@ class HypersphereClassifier:
         ``False`` (default): values outside ``[0, 1]`` raise ``ValueError``. ``True``: clip them.
     eps:
         Tolerance of the inclusive enclosure test ``d <= r + eps`` and of "coincides with a
-        centre" (``d <= eps``).
+        centre" (``d <= eps``). Fixed once a tree exists.
+    algorithm:
+        How ``predict`` and ``score`` find the winning sphere of several rows (like
+        ``algorithm=`` of scikit-learn's ``KNeighborsClassifier``): ``"brute"`` tests every
+        (query, sphere) pair at once; ``"descent"`` walks down the tree carrying the queries
+        each sphere encloses, testing only children of enclosing spheres; ``"auto"`` (default)
+        uses ``"brute"`` for trees of at most 64 spheres, else ``"descent"``. Every choice gives
+        exactly the same answers; only the speed differs. Single queries (``predict_one``,
+        ``predict`` of one row, ``decision_path``) always test every sphere in one vectorised
+        pass. Not saved in snapshots (a loaded classifier has ``"auto"``).
 
-    Learned attributes: ``n_features_in_``, ``classes_`` (labels in order of first appearance,
-    the default label first), ``node_count_``, ``height_`` (edges; a lone root has height 0),
-    ``n_seen_`` (vectors trained on), ``n_skipped_`` (vectors with a spawn suppressed by
+    Learned attributes: ``tree_`` (the :class:`rhbl.tree.SphereTree`), ``n_features_in_``,
+    ``classes_`` (labels in order of first appearance, the default label first),
+    ``node_count_``, ``height_`` (edges; a lone root has height 0), ``n_seen_`` (vectors
+    trained on), ``n_skipped_`` (vectors with a spawn suppressed by
     ``min_radius``/``max_nodes``/``max_depth``), ``n_relabelled_`` (in-place relabels).
     ``metadata`` is a free dict saved in snapshots.
     """
@@ -135,6 +141,7 @@ class HypersphereClassifier:
         max_depth: int | None = None,
         clip: bool = False,
         eps: float = 1e-9,
+        algorithm: str = "auto",
     ) -> None:
         self.default_label = default_label
         self.distance = distance
@@ -144,6 +151,7 @@ class HypersphereClassifier:
         self.max_depth = max_depth
         self.clip = clip
         self.eps = eps
+        self.algorithm = algorithm
         self.metadata: dict[str, Any] = {}
 
     # ------------------------------------------------------------------ parameters
@@ -160,8 +168,8 @@ class HypersphereClassifier:
         return self
 
     def _check_params(self) -> None:
-        if self.distance not in _DISTANCES:
-            raise ValueError(f"distance must be one of {_DISTANCES}, got {self.distance!r}")
+        if self.distance not in DISTANCES:
+            raise ValueError(f"distance must be one of {DISTANCES}, got {self.distance!r}")
         if self.spawn not in _SPAWNS:
             raise ValueError(f"spawn must be one of {_SPAWNS}, got {self.spawn!r}")
         if not (isinstance(self.min_radius, int | float) and self.min_radius >= 0):
@@ -176,12 +184,25 @@ class HypersphereClassifier:
             raise ValueError(f"max_depth must be None or an int >= 0, got {self.max_depth!r}")
         if not (isinstance(self.eps, int | float) and 0 <= self.eps < 0.5):
             raise ValueError(f"eps must be a number in [0, 0.5), got {self.eps!r}")
+        if self.algorithm not in ALGORITHMS:
+            raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {self.algorithm!r}")
         if self.default_label is not None:
             _plain_label(self.default_label)
 
+    def _check_tree_params(self) -> None:
+        """The parameters are valid and agree with the existing tree's distance and eps."""
+        self._check_params()
+        tree = self.tree_
+        for name in ("distance", "eps"):
+            if getattr(self, name) != getattr(tree, name):
+                raise ValueError(
+                    f"{name}={getattr(self, name)!r} but the tree was grown with "
+                    f"{getattr(tree, name)!r}"
+                )
+
     # ------------------------------------------------------------------ state
     def _is_fitted(self) -> bool:
-        return getattr(self, "_n", 0) > 0
+        return getattr(self, "tree_", None) is not None
 
     def _check_fitted(self) -> None:
         if not self._is_fitted():
@@ -191,28 +212,57 @@ class HypersphereClassifier:
 
     def _init_tree(self, n_features: int, root_label: Any) -> None:
         self._check_params()
-        if n_features < 1:
-            raise ValueError(f"need at least one feature, got {n_features}")
-        self.n_features_in_ = int(n_features)
-        self._tree_distance = self.distance
-        self._euclid = self.distance == "euclidean"
         self._labels: list[Any] = []
         self._label_index: dict[Any, int] = {}
-        cap = 64
-        self._centers = np.empty((cap, n_features), dtype=np.float64)
-        self._radii = np.empty(cap, dtype=np.float64)
-        self._parent = np.empty(cap, dtype=np.int64)
-        self._depth = np.empty(cap, dtype=np.int64)
-        self._label = np.empty(cap, dtype=np.int64)
-        self._children: list[list[int]] = []
-        self._ct: np.ndarray | None = None  # (features, capacity) centres for the training scan
-        self._n = 0
-        self.height_ = 0
+        root = self._intern(root_label)
+        self.tree_ = SphereTree(n_features, root, distance=self.distance, eps=self.eps)
+        self.n_features_in_ = int(n_features)
         self.n_seen_ = 0
         self.n_skipped_ = 0
         self.n_relabelled_ = 0
-        root_radius = math.sqrt(n_features) / 2 if self._euclid else n_features / 4
-        self._add_node(np.full(n_features, 0.5), root_radius, -1, self._intern(root_label))
+
+    @classmethod
+    def from_tree(
+        cls,
+        tree: SphereTree,
+        classes: Iterable[Any],
+        *,
+        n_seen: int = 0,
+        n_skipped: int = 0,
+        n_relabelled: int = 0,
+        metadata: dict[str, Any] | None = None,
+        **params: Any,
+    ) -> HypersphereClassifier:
+        """A fitted classifier around an existing tree (what loading a snapshot does).
+
+        ``classes`` maps the tree's label indices to labels (str or int, no duplicates);
+        ``params`` are constructor parameters, ``distance`` and ``eps`` defaulting to the
+        tree's (others must agree with it). Raises ``ValueError`` naming what is wrong.
+        """
+        if not isinstance(tree, SphereTree):
+            raise ValueError(f"tree must be a SphereTree, got {type(tree).__name__}")
+        clf = cls(distance=tree.distance, eps=tree.eps)
+        try:
+            clf.set_params(**params)
+            clf._check_params()
+        except ValueError as exc:
+            raise ValueError(f"invalid parameters: {exc}") from None
+        labels = list(classes)
+        if not labels or not all(isinstance(v, str | int) for v in labels):
+            raise ValueError("labels must be a non-empty list of str or int")
+        if len(set(labels)) != len(labels):
+            raise ValueError("duplicate labels")
+        if int(tree.label.max()) >= len(labels):
+            raise ValueError("label index out of range")
+        clf._labels = [_plain_label(v) for v in labels]
+        clf._label_index = {v: i for i, v in enumerate(clf._labels)}
+        clf._label_values = _label_array(clf._labels)
+        clf.tree_ = tree
+        clf._check_tree_params()
+        clf.n_features_in_ = tree.n_features
+        clf.n_seen_, clf.n_skipped_, clf.n_relabelled_ = n_seen, n_skipped, n_relabelled
+        clf.metadata = {} if metadata is None else metadata
+        return clf
 
     def _intern(self, label: Any) -> int:
         label = _plain_label(label)
@@ -224,43 +274,17 @@ class HypersphereClassifier:
             self._label_values = _label_array(self._labels)
         return idx
 
-    def _add_node(self, center: np.ndarray, radius: float, parent: int, label: int) -> int:
-        i = self._n
-        if i == len(self._radii):
-            cap = 2 * i
-            for name in ("_centers", "_radii", "_parent", "_depth", "_label"):
-                old = getattr(self, name)
-                new = np.empty((cap,) + old.shape[1:], dtype=old.dtype)
-                new[:i] = old[:i]
-                setattr(self, name, new)
-        self._centers[i] = center
-        ct = self._ct
-        if ct is not None:
-            if ct.shape[1] <= i:
-                new = np.empty((ct.shape[0], len(self._radii)), dtype=np.float64)
-                new[:, :i] = ct[:, :i]
-                self._ct = ct = new
-            ct[:, i] = center
-        self._radii[i] = radius
-        self._parent[i] = parent
-        depth = 0 if parent < 0 else int(self._depth[parent]) + 1
-        self._depth[i] = depth
-        self._label[i] = label
-        self._children.append([])
-        if parent >= 0:
-            self._children[parent].append(i)
-        self._n = i + 1
-        if depth > self.height_:
-            self.height_ = depth
-        self._layout = None
-        self._one = None
-        return i
-
     @property
     def node_count_(self) -> int:
         """Number of spheres, root included."""
         self._check_fitted()
-        return self._n
+        return self.tree_.node_count
+
+    @property
+    def height_(self) -> int:
+        """Height of the tree in edges (a lone root has height 0)."""
+        self._check_fitted()
+        return self.tree_.height
 
     @property
     def classes_(self) -> np.ndarray:
@@ -319,7 +343,7 @@ class HypersphereClassifier:
     # ------------------------------------------------------------------ training
     def fit(self, X: Any, y: Iterable[Any], classes: Iterable[Any] | None = None):
         """Grow a fresh tree on ``(X, y)``, vectors in order. Returns ``self``."""
-        self._n = 0
+        self.tree_ = None
         return self.partial_fit(X, y, classes=classes)
 
     def partial_fit(self, X: Any, y: Iterable[Any], classes: Iterable[Any] | None = None):
@@ -328,12 +352,11 @@ class HypersphereClassifier:
         ``classes`` optionally registers labels up front (scikit-learn compatibility); unseen
         labels are added as they appear anyway.
         """
-        self._check_params()
         fitted = self._is_fitted()
-        if fitted and self.distance != self._tree_distance:
-            raise ValueError(
-                f"distance={self.distance!r} but the tree was grown with {self._tree_distance!r}"
-            )
+        if fitted:
+            self._check_tree_params()
+        else:
+            self._check_params()
         X = self._check_X(X)
         y = list(np.asarray(y, dtype=object).reshape(-1)) if not isinstance(y, list) else y
         if len(y) != X.shape[0]:
@@ -359,236 +382,31 @@ class HypersphereClassifier:
         The tree must exist already (after a ``fit``/``partial_fit``, possibly on zero rows).
         """
         self._check_fitted()
-        self._check_params()
+        self._check_tree_params()
         x = self._check_X(np.asarray(x, dtype=np.float64).reshape(1, -1))[0]
         return self._learn(x, self._intern(label))
 
-    def _dist_one(self, i: int, x: np.ndarray) -> float:
-        diff = self._centers[i] - x
-        d = float(np.dot(diff, diff))
-        return math.sqrt(d) if self._euclid else d
-
-    def _scan(self, x: np.ndarray) -> tuple[np.ndarray, list[int], list[int]]:
-        """Distances from ``x`` to every centre, and the spheres reachable through enclosing
-        ancestors, in creation order, with their parents.
-
-        The arithmetic is exactly that of the single-query path (``_winner_one``): one
-        ``sum((c - x)**2)`` over the features in feature order and the test ``d <= r + eps``,
-        so training and prediction always agree on which spheres enclose a vector.
-        """
-        n = self._n
-        ct = self._ct
-        if ct is None:
-            ct = self._ct = np.ascontiguousarray(self._centers.T)
-        buf = np.subtract(ct[:, :n], x[:, None])
-        np.multiply(buf, buf, out=buf)
-        d = np.add.reduce(buf, axis=0)
-        if self._euclid:
-            np.sqrt(d, out=d)
-        enc = np.flatnonzero(d <= self._radii[:n] + self.eps)
-        ok = {-1}
-        reach: list[int] = []
-        parents: list[int] = []
-        for i, p in zip(enc.tolist(), self._parent[enc].tolist(), strict=True):
-            if p in ok:
-                ok.add(i)
-                reach.append(i)
-                parents.append(p)
-        return d, reach, parents
-
-    def _candidates(self, reach: list[int], parents: list[int]) -> list[int]:
-        """Reachable spheres none of whose children are reachable, in the order of a
-        depth-first search that visits children in creation order (the paper's traversal)."""
-        inner = set(parents)
-        path: dict[int, tuple[int, ...]] = {-1: ()}
-        for i, p in zip(reach, parents, strict=True):
-            path[i] = path[p] + (i,)
-        return sorted((i for i in reach if i not in inner), key=path.__getitem__)
-
-    def _winner_of(self, nodes: list[int]) -> int:
-        radii = self._radii
-        depth = self._depth
-        return min(nodes, key=lambda i: (radii[i], -depth[i], i))
-
-    def _learn(self, x: np.ndarray, a: int) -> int:
-        self.n_seen_ += 1
-        d_all, reach, parents = self._scan(x)
-        cands = self._candidates(reach, parents)
-        if self.spawn == "winner":
-            w = self._winner_of(cands)
-            targets = [w] if self._label[w] != a else []
-        else:
-            targets = [c for c in cands if self._label[c] != a]
-        if not targets:
-            return 0
-        eps = self.eps
-        changes = 0
-        skipped = False
-        for p in targets:
-            d = float(d_all[p])
-            if d <= eps:
-                self._label[p] = a  # coincides with the centre: relabel in place
-                self.n_relabelled_ += 1
-                self._layout = None
-                self._one = None
-                changes += 1
-                continue
-            r = max(float(self._radii[p]) - d, 0.0)
-            if (
-                (self.min_radius and r < self.min_radius)
-                or (self.max_nodes is not None and self._n >= self.max_nodes)
-                or (self.max_depth is not None and self._depth[p] + 1 > self.max_depth)
-            ):
-                skipped = True
-                continue
-            self._add_node(x, r, p, a)
-            changes += 1
-        if skipped:
-            self.n_skipped_ += 1
-        return changes
-
-    # ------------------------------------------------------------------ inference layout
-    def _build_layout(self) -> dict[str, Any]:
-        """Pre-order arrays for vectorised classification (rebuilt lazily after a change)."""
-        n = self._n
-        order = np.empty(n, dtype=np.int64)
-        end = np.empty(n, dtype=np.int64)
-        children = self._children
-        # iterative pre-order DFS, children in creation order
-        pos = 0
-        stack = [(0, False)]
-        while stack:
-            node, done = stack.pop()
-            if done:
-                end[node] = pos
-                continue
-            order[pos] = node
-            pos += 1
-            stack.append((node, True))
-            for c in reversed(children[node]):
-                stack.append((c, False))
-        posof = np.empty(n, dtype=np.int64)
-        posof[order] = np.arange(n)
-        radii = self._radii[:n]
-        depth = self._depth[:n]
-        # tie-break rank: smallest radius, then deepest, then earliest created
-        by_rank = np.lexsort((np.arange(n), -depth, radii))
-        rank = np.empty(n, dtype=np.int64)
-        rank[by_rank] = np.arange(n)
-        lay: dict[str, Any] = {}
-        lay["order"] = order
-        lay["centers_t"] = np.ascontiguousarray(self._centers[order].T)
-        lay["reach"] = radii[order] + self.eps
-        lay["end"] = end[order]  # end position of each pre-order node's subtree
-        lay["ar"] = np.arange(n)
-        lay["rank"] = rank[order]
-        lay["rank_pos"] = posof[by_rank]  # rank -> pre-order position
-        lay["label"] = self._label[:n][order]
-        lay["big"] = np.int64(n)
-        # per pre-order position: children positions, their centres (transposed) and reach
-        ct_all = lay["centers_t"]
-        reach = lay["reach"]
-        kids: list[np.ndarray | None] = []
-        kids_ct: list[np.ndarray | None] = []
-        kids_reach: list[np.ndarray | None] = []
-        for i in order.tolist():
-            if children[i]:
-                k = posof[children[i]]
-                kids.append(k)
-                kids_ct.append(np.ascontiguousarray(ct_all[:, k]))
-                kids_reach.append(reach[k])
-            else:
-                kids.append(None)
-                kids_ct.append(None)
-                kids_reach.append(None)
-        lay["kids"] = kids
-        lay["kids_ct"] = kids_ct
-        lay["kids_reach"] = kids_reach
-        # for the batch filter: centres row-major, their squared norms, and the band of
-        # rounding error of the expanded squared distance around each child's reach
-        n_feat = self.n_features_in_
-        tol = 16 * 2.0**-53 * (n_feat * n_feat + 4 * n_feat)
-        lay["kids_c"] = [None if k is None else np.ascontiguousarray(k.T) for k in kids_ct]
-        lay["kids_cc"] = [None if k is None else np.einsum("ij,ij->j", k, k) for k in kids_ct]
-        lo_l: list[np.ndarray | None] = []
-        hi_l: list[np.ndarray | None] = []
-        for r in kids_reach:
-            if r is None:
-                lo_l.append(None)
-                hi_l.append(None)
-                continue
-            lim = r * r if self._euclid else r
-            band = tol + (8 * 2.0**-53 * lim if self._euclid else 0.0)
-            lo_l.append(lim - band)
-            hi_l.append(lim + band)
-        lay["kids_lo"] = lo_l
-        lay["kids_hi"] = hi_l
-        self._layout = lay
-        return lay
-
-    def _get_layout(self) -> dict[str, Any]:
-        lay = self._layout
-        return lay if lay is not None else self._build_layout()
-
-    def _build_one(self) -> tuple:
-        """Creation-order arrays for single queries (rebuilt lazily after a change).
-
-        Creation order has every parent before its children, so no tree walk is needed.
-        """
-        n = self._n
-        ct = np.ascontiguousarray(self._centers[:n].T)
-        reach = self._radii[:n] + self.eps
-        # tie-break rank: smallest radius, then deepest, then earliest created
-        by_rank = np.lexsort((np.arange(n), -self._depth[:n], self._radii[:n]))
-        rank = np.empty(n, dtype=np.int64)
-        rank[by_rank] = np.arange(n)
-        one = (
-            ct,
-            reach,
-            np.empty_like(ct),  # scratch: differences
-            np.empty(n),  # scratch: distances
-            np.empty(n, dtype=bool),  # scratch: enclosure mask
-            self._parent[:n].tolist(),
-            rank.tolist(),
-            by_rank.tolist(),  # rank -> node
-            n,
-            self._euclid,
+    def _learn(self, x: np.ndarray, label: int) -> int:
+        growth = self.tree_.learn(
+            x,
+            label,
+            spawn=self.spawn,
+            min_radius=self.min_radius,
+            max_nodes=self.max_nodes,
+            max_depth=self.max_depth,
         )
-        self._one = one
-        return one
-
-    def _winner_one(self, x: np.ndarray) -> int:
-        """The winning sphere (creation index) for one checked query vector.
-
-        Every sphere is tested at once (one vectorised ``sum((x - c)**2)`` over the features,
-        in feature order); the few enclosing spheres are then walked in creation order in
-        Python: a sphere is reachable iff it encloses ``x`` and its parent is reachable.
-        """
-        one = self._one
-        if one is None:
-            one = self._build_one()
-        ct, reach, buf, d, enc, parent, rank, by_rank, best, euclid = one
-        np.subtract(ct, x[:, None], out=buf)
-        np.multiply(buf, buf, out=buf)
-        np.add.reduce(buf, axis=0, out=d)
-        if euclid:
-            np.sqrt(d, out=d)
-        np.less_equal(d, reach, out=enc)
-        ok = {-1}
-        for i in np.flatnonzero(enc).tolist():
-            if parent[i] in ok:
-                ok.add(i)
-                r = rank[i]
-                if r < best:
-                    best = r
-        return by_rank[best]
+        self.n_seen_ += 1
+        self.n_relabelled_ += growth.relabelled
+        if growth.suppressed:
+            self.n_skipped_ += 1
+        return growth.spawned + growth.relabelled
 
     # ------------------------------------------------------------------ prediction
     def predict_one(self, x: Any) -> Any:
         """The label of one vector (the fast path for controllers). Returns a plain str/int."""
         self._check_fitted()
         x = self._check_x(x)
-        return self._labels[self._label[self._winner_one(x)]]
+        return self._labels[self.tree_.predict_one(x)]
 
     def predict(self, X: Any) -> np.ndarray:
         """Labels of the rows of ``X`` as a numpy array."""
@@ -603,132 +421,11 @@ class HypersphereClassifier:
             xs = X[0].tolist()
             total = sum(xs)
             if min(xs) >= 0.0 and max(xs) <= 1.0 and total == total:
-                return self._label_values[[self._label[self._winner_one(X[0])]]]
+                return self._label_values[[self.tree_.predict_one(X[0])]]
         X = self._check_X(X)
         if X.shape[0] == 1:
-            return self._label_values[[self._label[self._winner_one(X[0])]]]
-        return self._label_values[self._predict_index(X)]
-
-    def _predict_index(self, X: np.ndarray) -> np.ndarray:
-        """Label indices of the rows of a checked ``X``."""
-        lay = self._get_layout()
-        pos = self._winner_pos_batch(X, lay)
-        return lay["label"][pos]
-
-    def _winner_pos_batch(self, X: np.ndarray, lay: dict[str, Any]) -> np.ndarray:
-        m = X.shape[0]
-        n_nodes = self._n
-        if m == 0:
-            return np.zeros(0, dtype=np.int64)
-        if n_nodes <= _DENSE_BATCH_MAX_NODES:
-            return self._winner_pos_dense(X, lay)
-        return self._winner_pos_descent(X, lay)
-
-    def _winner_pos_dense(self, X: np.ndarray, lay: dict[str, Any]) -> np.ndarray:
-        """Every (query, sphere) pair at once, in chunks of queries."""
-        n_nodes = self._n
-        ct = lay["centers_t"]
-        out = np.empty(X.shape[0], dtype=np.int64)
-        step = max(1, _CHUNK_PAIRS // max(n_nodes, 1))
-        for s in range(0, X.shape[0], step):
-            Q = X[s : s + step]
-            d = np.zeros((Q.shape[0], n_nodes))
-            for k in range(ct.shape[0]):
-                t = Q[:, k, None] - ct[k]
-                t *= t
-                d += t
-            if self._euclid:
-                np.sqrt(d, out=d)
-            bad = d > lay["reach"]
-            reach_end = np.maximum.accumulate(lay["end"] * bad, axis=1)
-            key = np.where(reach_end > lay["ar"], lay["big"], lay["rank"])
-            out[s : s + step] = lay["rank_pos"][key.min(axis=1)]
-        return out
-
-    def _winner_rank_dense(self, xt: np.ndarray, lay: dict[str, Any], lo: int, hi: int):
-        """Best tie-break rank of each query (columns of ``xt``) within pre-order [lo, hi).
-
-        The sphere at ``lo`` must enclose every query (it is their subtree's root).
-        """
-        ct = lay["centers_t"][:, lo:hi]
-        d = np.subtract.outer(xt[0], ct[0])
-        d *= d
-        for k in range(1, ct.shape[0]):
-            t = np.subtract.outer(xt[k], ct[k])
-            t *= t
-            d += t
-        if self._euclid:
-            np.sqrt(d, out=d)
-        bad = d > lay["reach"][lo:hi]
-        reach_end = np.maximum.accumulate(lay["end"][lo:hi] * bad, axis=1)
-        key = np.where(reach_end > lay["ar"][lo:hi], lay["big"], lay["rank"][lo:hi])
-        return key.min(axis=1)
-
-    def _winner_pos_descent(self, X: np.ndarray, lay: dict[str, Any]) -> np.ndarray:
-        """Descend sphere by sphere, carrying the queries each sphere encloses.
-
-        Only the children of spheres that enclose some query are tested. Children are tested
-        against many queries at once with a matrix product (the expanded form of the squared
-        distance) as a *filter*: every (query, child) pair whose expanded distance lies within
-        a rounding-error band of the radius is recomputed exactly as ``sum((x - c)**2)``, so
-        the answers are exactly those of the direct form. Small subtrees with few queries are
-        tested all at once with the direct form.
-        """
-        m = X.shape[0]
-        rank = lay["rank"]
-        kids_of = lay["kids"]
-        kids_c = lay["kids_c"]
-        kids_cc = lay["kids_cc"]
-        kids_lo = lay["kids_lo"]
-        kids_hi = lay["kids_hi"]
-        kids_reach = lay["kids_reach"]
-        end = lay["end"]
-        euclid = self._euclid
-        dense_pairs = _DENSE_SUBTREE_PAIRS
-        XT = np.ascontiguousarray(X.T)
-        XX = np.einsum("ij,ij->i", X, X)
-        best = np.full(m, rank[0], dtype=np.int64)
-        stack: list[tuple[int, np.ndarray | None]] = [(0, None)]
-        while stack:
-            node, q = stack.pop()
-            if q is None:
-                q = np.arange(m)
-                xt, xx = XT, XX
-            else:
-                xt = XT[:, q]
-                xx = XX[q]
-            stop = int(end[node])
-            if stop - node == 1:  # a leaf (only the root can get here)
-                continue
-            if q.size * (stop - node) <= dense_pairs:
-                # few queries and a small subtree: test all of it at once
-                sub = self._winner_rank_dense(xt, lay, node, stop)
-                best[q] = np.minimum(best[q], sub)
-                continue
-            d = np.einsum("kn,nq->kq", kids_c[node], xt)  # (no BLAS threads)
-            d *= -2.0
-            d += kids_cc[node][:, None]
-            d += xx
-            enc = d <= kids_lo[node][:, None]
-            maybe = d <= kids_hi[node][:, None]
-            if not np.array_equal(enc, maybe):
-                jj, ii = np.nonzero(maybe & ~enc)
-                ct = lay["kids_ct"][node]
-                exact = (ct[0][jj] - xt[0][ii]) ** 2
-                for k in range(1, ct.shape[0]):
-                    exact += (ct[k][jj] - xt[k][ii]) ** 2
-                if euclid:
-                    np.sqrt(exact, out=exact)
-                ok = exact <= kids_reach[node][jj]
-                enc[jj[ok], ii[ok]] = True
-            kids = kids_of[node]
-            for j in np.flatnonzero(enc.any(axis=1)).tolist():
-                qj = q[enc[j]]
-                c = int(kids[j])
-                best[qj] = np.minimum(best[qj], rank[c])
-                if kids_of[c] is not None:
-                    stack.append((c, qj))
-        return lay["rank_pos"][best]
+            return self._label_values[[self.tree_.predict_one(X[0])]]
+        return self._label_values[self.tree_.predict(X, self.algorithm)]
 
     def decision_path(self, x: Any) -> list[dict[str, Any]]:
         """The spheres from the root to the winning sphere for ``x``.
@@ -739,26 +436,23 @@ class HypersphereClassifier:
         """
         self._check_fitted()
         x = self._check_x(x)
-        node = self._winner_one(x)
-        path = []
-        while node >= 0:
-            path.append(
-                {
-                    "index": node,
-                    "depth": int(self._depth[node]),
-                    "radius": float(self._radii[node]),
-                    "label": self._labels[self._label[node]],
-                    "center": self._centers[node].tolist(),
-                    "distance": self._dist_one(node, x),
-                }
-            )
-            node = int(self._parent[node])
-        return path[::-1]
+        tree = self.tree_
+        return [
+            {
+                "index": node,
+                "depth": int(tree.depth[node]),
+                "radius": float(tree.radii[node]),
+                "label": self._labels[tree.label[node]],
+                "center": tree.centers[node].tolist(),
+                "distance": tree.distance_to(node, x),
+            }
+            for node in tree.path(tree.apply_one(x))
+        ]
 
     def label_counts(self) -> dict[Any, int]:
         """Number of spheres per label (every known label, root included)."""
         self._check_fitted()
-        counts = np.bincount(self._label[: self._n], minlength=len(self._labels))
+        counts = np.bincount(self.tree_.label, minlength=len(self._labels))
         return {label: int(c) for label, c in zip(self._labels, counts, strict=True)}
 
     def score(self, X: Any, y: Iterable[Any]) -> float:
@@ -771,26 +465,23 @@ class HypersphereClassifier:
         if not y:
             return float("nan")
         want = np.array([self._label_index.get(v, -1) for v in y], dtype=np.int64)
-        return float(np.mean(self._predict_index(X) == want))
+        return float(np.mean(self.tree_.predict(X, self.algorithm) == want))
 
     # ------------------------------------------------------------------ inspection
     def tree_arrays(self) -> dict[str, np.ndarray]:
         """Copies of the sphere data in creation order: centers, radii, parent, depth, label."""
         self._check_fitted()
-        n = self._n
-        return {
-            "centers": self._centers[:n].copy(),
-            "radii": self._radii[:n].copy(),
-            "parent": self._parent[:n].copy(),
-            "depth": self._depth[:n].copy(),
-            "label": self._label[:n].copy(),
-        }
+        return self.tree_.to_arrays()
 
     def tree_equal(self, other: Any, *, metadata: bool = False) -> bool:
-        """True if ``other`` has the same parameters, labels and spheres (exactly)."""
+        """True if ``other`` has the same parameters, labels and spheres (exactly).
+
+        ``algorithm`` is not compared: it changes no answer.
+        """
         if not isinstance(other, HypersphereClassifier):
             return False
-        if self.get_params() != other.get_params():
+        mine, theirs = self.get_params(), other.get_params()
+        if any(mine[k] != theirs[k] for k in _TREE_PARAMS):
             return False
         if self._is_fitted() != other._is_fitted():
             return False
@@ -798,17 +489,14 @@ class HypersphereClassifier:
             return False
         if not self._is_fitted():
             return True
-        if (
-            self.n_features_in_ != other.n_features_in_
-            or self._n != other._n
-            or self._labels != other._labels
-            or [type(v) for v in self._labels] != [type(v) for v in other._labels]
-            or (self.n_seen_, self.n_skipped_, self.n_relabelled_)
-            != (other.n_seen_, other.n_skipped_, other.n_relabelled_)
-        ):
-            return False
-        a, b = self.tree_arrays(), other.tree_arrays()
-        return all(np.array_equal(a[k], b[k]) for k in a)
+        return (
+            self.n_features_in_ == other.n_features_in_
+            and self._labels == other._labels
+            and [type(v) for v in self._labels] == [type(v) for v in other._labels]
+            and (self.n_seen_, self.n_skipped_, self.n_relabelled_)
+            == (other.n_seen_, other.n_skipped_, other.n_relabelled_)
+            and self.tree_.equal(other.tree_)
+        )
 
     def __repr__(self) -> str:
         params = self.get_params()
@@ -817,14 +505,59 @@ class HypersphereClassifier:
         return f"HypersphereClassifier({shown})"
 
     # ------------------------------------------------------------------ snapshots
+    def _snapshot(self, metadata: dict[str, Any] | None) -> snapshot.Snapshot:
+        self._check_fitted()
+        if metadata is not None:
+            self.metadata.update(metadata)
+        tree = self.tree_
+        params = {name: getattr(self, name) for name in _TREE_PARAMS}
+        params["distance"], params["eps"] = tree.distance, tree.eps
+        return snapshot.Snapshot(
+            params=params,
+            labels=list(self._labels),
+            arrays=tree.to_arrays(),
+            n_seen=self.n_seen_,
+            n_skipped=self.n_skipped_,
+            n_relabelled=self.n_relabelled_,
+            metadata=self.metadata,
+        )
+
     def save(self, path: Any, metadata: dict[str, Any] | None = None) -> None:
         """Write a msgpack snapshot atomically. ``metadata`` updates ``self.metadata`` first."""
-        from .snapshot import save
-
-        save(self, path, metadata=metadata)
+        path = Path(path)
+        snapshot.write(path, snapshot.encode(self._snapshot(metadata), source=str(path)))
 
     def to_bytes(self, metadata: dict[str, Any] | None = None) -> bytes:
         """The snapshot as bytes (what ``save`` writes)."""
-        from .snapshot import dumps
+        return snapshot.encode(self._snapshot(metadata))
 
-        return dumps(self, metadata=metadata)
+
+def load(path: Any) -> HypersphereClassifier:
+    """Read a snapshot file written by :meth:`HypersphereClassifier.save`."""
+    return loads(snapshot.read(path), source=str(path))
+
+
+def loads(data: bytes, *, source: str = "<bytes>") -> HypersphereClassifier:
+    """Rebuild a classifier from snapshot bytes (``source`` names them in errors).
+
+    Every problem raises :class:`SnapshotError` naming ``source`` and the problem.
+    """
+    snap = snapshot.decode(data, source=source)
+    try:
+        clf = HypersphereClassifier(**snap.params)
+        clf._check_params()
+    except ValueError as exc:
+        raise SnapshotError(source, f"invalid parameters: {exc}") from None
+    try:
+        tree = SphereTree.from_arrays(**snap.arrays, distance=clf.distance, eps=clf.eps)
+        return HypersphereClassifier.from_tree(
+            tree,
+            snap.labels,
+            n_seen=snap.n_seen,
+            n_skipped=snap.n_skipped,
+            n_relabelled=snap.n_relabelled,
+            metadata=snap.metadata,
+            **snap.params,
+        )
+    except ValueError as exc:
+        raise SnapshotError(source, str(exc)) from None

@@ -1,4 +1,4 @@
-"""msgpack snapshots of a :class:`HypersphereClassifier` (the unit of extensible retraining).
+"""The msgpack snapshot format of a hypersphere tree (the unit of extensible retraining).
 
 A snapshot is one msgpack map::
 
@@ -14,8 +14,15 @@ A snapshot is one msgpack map::
 
 Spheres are stored in creation order, which is also the order of every node's children, so
 loading and training further gives exactly the tree that training in one process gives.
-Files are written atomically (temporary file in the same folder, fsync, ``os.replace``).
-Every problem while loading raises :class:`SnapshotError` naming the file and the problem.
+
+This module knows the format only: :func:`encode` and :func:`decode` turn a :class:`Snapshot`
+(parameters, labels, the tree's arrays, counters, metadata) into bytes and back, checking the
+structure of every field; :func:`write` writes bytes atomically (temporary file in the same
+folder, fsync, ``os.replace``). :class:`rhbl.HypersphereClassifier` (``save``, ``to_bytes``)
+and :func:`rhbl.load`/:func:`rhbl.loads` build on it; the consistency of the tree and of the
+parameters is checked there, by :meth:`rhbl.SphereTree.from_arrays` and
+:meth:`rhbl.HypersphereClassifier.from_tree`. Every problem while reading raises
+:class:`SnapshotError` naming the file and the problem.
 """
 
 from __future__ import annotations
@@ -23,6 +30,7 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -30,12 +38,35 @@ import msgpack
 import numpy as np
 
 from ._errors import SnapshotError
-from .classifier import _PARAMS, HypersphereClassifier, _label_array
 
-__all__ = ["FORMAT", "VERSION", "dumps", "load", "loads", "save"]
+__all__ = ["FORMAT", "PARAMS", "VERSION", "Snapshot", "decode", "encode", "read", "write"]
 
 FORMAT = "rhbl-tree"
 VERSION = 1
+# the parameters a snapshot stores, in the order written (the classifier's, but ``algorithm``:
+# the choice of winner search changes no answer, so it is not part of the tree)
+PARAMS = ("default_label", "distance", "spawn", "min_radius", "max_nodes", "max_depth", "clip", "eps")
+# the tree's arrays a snapshot stores: field name -> (SphereTree.to_arrays name, dtype)
+_ARRAYS = {"centers": ("centers", "<f8"), "radii": ("radii", "<f8"), "parent": ("parent", "<i8"),
+           "label_index": ("label", "<i8")}
+
+
+@dataclass
+class Snapshot:
+    """The contents of a snapshot.
+
+    ``arrays`` holds ``centers``, ``radii``, ``parent`` and ``label`` as
+    :meth:`rhbl.SphereTree.to_arrays` names them (further arrays are ignored); ``params``
+    only names from :data:`PARAMS`.
+    """
+
+    params: dict[str, Any]
+    labels: list[Any]
+    arrays: dict[str, np.ndarray]
+    n_seen: int
+    n_skipped: int
+    n_relabelled: int
+    metadata: dict[str, Any]
 
 
 def _default(obj: Any) -> Any:
@@ -55,47 +86,37 @@ def _array(a: np.ndarray, dtype: str) -> dict[str, Any]:
     return {"dtype": dtype, "shape": list(a.shape), "data": a.tobytes()}
 
 
-def to_dict(clf: HypersphereClassifier, metadata: dict[str, Any] | None = None) -> dict:
-    """The snapshot map of a fitted classifier."""
-    clf._check_fitted()
-    if metadata is not None:
-        clf.metadata.update(metadata)
-    arrays = clf.tree_arrays()
-    params = clf.get_params()
-    params["distance"] = clf._tree_distance
-    return {
+def _to_dict(snap: Snapshot) -> dict[str, Any]:
+    """The snapshot map of ``snap`` (before msgpack)."""
+    doc: dict[str, Any] = {
         "format": FORMAT,
         "version": VERSION,
-        "params": params,
-        "n_features": clf.n_features_in_,
-        "labels": list(clf._labels),
-        "centers": _array(arrays["centers"], "<f8"),
-        "radii": _array(arrays["radii"], "<f8"),
-        "parent": _array(arrays["parent"], "<i8"),
-        "label_index": _array(arrays["label"], "<i8"),
-        "counters": {
-            "n_seen": clf.n_seen_,
-            "n_skipped": clf.n_skipped_,
-            "n_relabelled": clf.n_relabelled_,
-        },
-        "metadata": dict(clf.metadata),
+        "params": {name: snap.params[name] for name in PARAMS if name in snap.params},
+        "n_features": int(snap.arrays["centers"].shape[1]),
+        "labels": list(snap.labels),
     }
+    for field, (name, dtype) in _ARRAYS.items():
+        doc[field] = _array(snap.arrays[name], dtype)
+    doc["counters"] = {
+        "n_seen": snap.n_seen,
+        "n_skipped": snap.n_skipped,
+        "n_relabelled": snap.n_relabelled,
+    }
+    doc["metadata"] = dict(snap.metadata)
+    return doc
 
 
-def dumps(clf: HypersphereClassifier, metadata: dict[str, Any] | None = None, *,
-          source: str = "<bytes>") -> bytes:
-    """The snapshot of ``clf`` as msgpack bytes."""
-    clf._check_fitted()
+def encode(snap: Snapshot, *, source: str = "<bytes>") -> bytes:
+    """The snapshot as msgpack bytes (``source`` names them in errors)."""
     try:
-        return msgpack.packb(to_dict(clf, metadata), default=_default, use_bin_type=True)
+        return msgpack.packb(_to_dict(snap), default=_default, use_bin_type=True)
     except (TypeError, ValueError, OverflowError) as exc:
         raise SnapshotError(source, f"cannot serialise the snapshot: {exc}") from exc
 
 
-def save(clf: HypersphereClassifier, path: Any, metadata: dict[str, Any] | None = None) -> None:
-    """Write the snapshot of ``clf`` to ``path`` atomically."""
+def write(path: Any, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically."""
     path = Path(path)
-    data = dumps(clf, metadata, source=str(path))
     folder = path.parent if str(path.parent) else Path(".")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
     try:
@@ -118,18 +139,16 @@ def save(clf: HypersphereClassifier, path: Any, metadata: dict[str, Any] | None 
         pass
 
 
-def load(path: Any) -> HypersphereClassifier:
-    """Read a snapshot file written by :meth:`HypersphereClassifier.save`."""
-    source = str(path)
+def read(path: Any) -> bytes:
+    """The bytes of a snapshot file."""
     try:
-        data = Path(path).read_bytes()
+        return Path(path).read_bytes()
     except OSError as exc:
-        raise SnapshotError(source, f"cannot read: {exc.strerror or exc}") from exc
-    return loads(data, source=source)
+        raise SnapshotError(str(path), f"cannot read: {exc.strerror or exc}") from exc
 
 
-def loads(data: bytes, *, source: str = "<bytes>") -> HypersphereClassifier:
-    """Rebuild a classifier from snapshot bytes (``source`` names them in errors)."""
+def decode(data: bytes, *, source: str = "<bytes>") -> Snapshot:
+    """The contents of snapshot bytes, their structure checked (``source`` names them in errors)."""
     if not data:
         raise SnapshotError(source, "empty file")
     try:
@@ -138,7 +157,7 @@ def loads(data: bytes, *, source: str = "<bytes>") -> HypersphereClassifier:
         raise SnapshotError(source, "trailing data after the snapshot (corrupted)") from None
     except Exception as exc:  # msgpack raises several types for truncated/garbage input
         raise SnapshotError(source, f"truncated or not msgpack ({type(exc).__name__}: {exc})") from None
-    return from_dict(doc, source=source)
+    return _from_dict(doc, source=source)
 
 
 def _get(doc: dict, key: str, types: type | tuple, source: str) -> Any:
@@ -165,8 +184,8 @@ def _read_array(doc: dict, key: str, dtype: str, shape: tuple, source: str) -> n
     return np.frombuffer(raw, dtype=np.dtype(dtype)).reshape(shape).astype(dtype[1:], copy=True)
 
 
-def from_dict(doc: Any, *, source: str = "<dict>") -> HypersphereClassifier:
-    """Rebuild a classifier from a decoded snapshot map, checking every field."""
+def _from_dict(doc: Any, *, source: str = "<dict>") -> Snapshot:
+    """The contents of a decoded snapshot map, the structure of every field checked."""
     if not isinstance(doc, dict):
         raise SnapshotError(source, f"not an rhbl snapshot (top level is {type(doc).__name__})")
     fmt = doc.get("format")
@@ -180,21 +199,11 @@ def from_dict(doc: Any, *, source: str = "<dict>") -> HypersphereClassifier:
             source, f"snapshot version {version} is newer than this reader ({VERSION}); upgrade rhbl"
         )
     params = _get(doc, "params", dict, source)
-    unknown = set(params) - set(_PARAMS)
+    unknown = set(params) - set(PARAMS)
     if unknown:
         raise SnapshotError(source, f"unknown parameters {sorted(unknown)}")
-    clf = HypersphereClassifier()
-    try:
-        clf.set_params(**params)
-        clf._check_params()
-    except ValueError as exc:
-        raise SnapshotError(source, f"invalid parameters: {exc}") from None
     n_features = _get(doc, "n_features", int, source)
     labels = _get(doc, "labels", list, source)
-    if not labels or not all(isinstance(v, str | int) for v in labels):
-        raise SnapshotError(source, "labels must be a non-empty list of str or int")
-    if len(set(labels)) != len(labels):
-        raise SnapshotError(source, "duplicate labels")
     radii_spec = _get(doc, "radii", dict, source)
     shape = radii_spec.get("shape")
     if not (isinstance(shape, list) and len(shape) == 1 and isinstance(shape[0], int) and shape[0] >= 1):
@@ -202,51 +211,14 @@ def from_dict(doc: Any, *, source: str = "<dict>") -> HypersphereClassifier:
     n = shape[0]
     if n_features < 1:
         raise SnapshotError(source, f"invalid n_features {n_features}")
-    centers = _read_array(doc, "centers", "<f8", (n, n_features), source)
-    radii = _read_array(doc, "radii", "<f8", (n,), source)
-    parent = _read_array(doc, "parent", "<i8", (n,), source)
-    label = _read_array(doc, "label_index", "<i8", (n,), source)
+    arrays = {
+        name: _read_array(doc, field, dtype, (n, n_features) if field == "centers" else (n,), source)
+        for field, (name, dtype) in _ARRAYS.items()
+    }
     counters = _get(doc, "counters", dict, source)
     metadata = _get(doc, "metadata", dict, source)
-    # consistency of the tree
-    if not (np.isfinite(centers).all() and np.isfinite(radii).all()):
-        raise SnapshotError(source, "non-finite sphere data")
-    if (radii < 0).any():
-        raise SnapshotError(source, "negative radius")
-    if parent[0] != -1 or (n > 1 and ((parent[1:] < 0) | (parent[1:] >= np.arange(1, n))).any()):
-        raise SnapshotError(source, "inconsistent parent indices (each parent must precede its child)")
-    if (label < 0).any() or (label >= len(labels)).any():
-        raise SnapshotError(source, "label index out of range")
-    if n > 1 and (radii[1:] > radii[parent[1:]]).any():
-        raise SnapshotError(source, "a child's radius exceeds its parent's")
     try:
         seen, skipped, relabelled = (int(counters[k]) for k in ("n_seen", "n_skipped", "n_relabelled"))
     except (KeyError, TypeError, ValueError):
         raise SnapshotError(source, "invalid counters") from None
-    # rebuild
-    clf._init_tree(n_features, labels[0])
-    clf._labels = list(labels)
-    clf._label_index = {v: i for i, v in enumerate(labels)}
-    clf._label_values = _label_array(clf._labels)
-    depth = np.zeros(n, dtype=np.int64)
-    children: list[list[int]] = [[] for _ in range(n)]
-    for i in range(1, n):
-        p = int(parent[i])
-        depth[i] = depth[p] + 1
-        children[p].append(i)
-    cap = max(64, n)
-    clf._centers = np.empty((cap, n_features))
-    clf._centers[:n] = centers
-    for name, arr in (("_radii", radii), ("_parent", parent), ("_depth", depth), ("_label", label)):
-        full = np.empty(cap, dtype=arr.dtype)
-        full[:n] = arr
-        setattr(clf, name, full)
-    clf._children = children
-    clf._ct = None
-    clf._n = n
-    clf.height_ = int(depth.max())
-    clf.n_seen_, clf.n_skipped_, clf.n_relabelled_ = seen, skipped, relabelled
-    clf.metadata = metadata
-    clf._layout = None
-    clf._one = None
-    return clf
+    return Snapshot(params, labels, arrays, seen, skipped, relabelled, metadata)

@@ -10,7 +10,6 @@ import pytest
 
 import rhbl
 from rhbl import HypersphereClassifier, NotFittedError
-from rhbl import classifier as clfmod
 
 
 def synthetic(m=400, n=5, seed=0, k=5):
@@ -94,9 +93,8 @@ def test_predict_one_matches_predict_and_paths():
     Q = np.random.default_rng(9).random((500, 6))
     batch = clf.predict(Q)
     assert [clf.predict_one(q) for q in Q] == batch.tolist()
-    lay = clf._get_layout()
-    dense = clf._label_values[lay["label"][clf._winner_pos_dense(Q, lay)]]
-    assert dense.tolist() == batch.tolist()
+    assert clf.node_count_ > 64  # "auto" descends; brute force must agree
+    assert clf.set_params(algorithm="brute").predict(Q).tolist() == batch.tolist()
     for q in Q[:20]:
         path = clf.decision_path(q)
         assert path[0]["index"] == 0 and path[-1]["label"] == clf.predict_one(q)
@@ -211,12 +209,21 @@ def test_params_contract():
     with pytest.raises(ValueError, match="invalid parameter"):
         clf.set_params(colour="red")
     for bad in ({"distance": "manhattan"}, {"spawn": "some"}, {"min_radius": -1},
-                {"max_nodes": 0}, {"max_depth": -1}, {"eps": -1.0}):
-        with pytest.raises(ValueError):
+                {"max_nodes": 0}, {"max_depth": -1}, {"eps": -1.0}, {"algorithm": "kd_tree"}):
+        name = next(iter(bad))
+        with pytest.raises(ValueError, match=name):
             HypersphereClassifier("a", **bad).fit([[0.5]], ["a"])
-    fitted = HypersphereClassifier("a").fit([[0.1]], ["b"])
-    with pytest.raises(ValueError, match="grown with"):
-        fitted.set_params(distance="euclidean").partial_fit([[0.2]], ["a"])
+    for name, value in (("distance", "euclidean"), ("eps", 1e-6)):
+        fitted = HypersphereClassifier("a").fit([[0.1]], ["b"])
+        fitted.set_params(**{name: value})
+        with pytest.raises(ValueError, match=f"{name}=.* grown with"):
+            fitted.partial_fit([[0.2]], ["a"])
+        with pytest.raises(ValueError, match=f"{name}=.* grown with"):
+            fitted.learn_one([0.2], "a")
+        assert fitted.node_count_ == 2
+    fitted = HypersphereClassifier("a").fit([[0.1]], ["b"]).set_params(algorithm="bogus")
+    with pytest.raises(ValueError, match="algorithm must be one of"):
+        fitted.predict([[0.1], [0.2]])
     assert "spawn='winner'" in repr(clf)
 
 
@@ -227,23 +234,23 @@ def test_learn_one_reports_changes():
     assert clf.learn_one([0.2, 0.2], "b") == 1  # relabel
 
 
-def test_batch_paths_agree_on_small_and_large_trees(monkeypatch):
-    X, y = synthetic(300, n=4, seed=5)
+@pytest.mark.parametrize("rows", [40, 300])  # a tree of at most and of more than 64 spheres
+def test_algorithms_agree_on_small_and_large_trees(rows):
+    X, y = synthetic(rows, n=4, seed=5)
     Q = np.random.default_rng(1).random((300, 4))
     for spawn in ("all", "winner"):
-        clf = HypersphereClassifier("fwd", spawn=spawn).fit(X, y)
-        a = clf.predict(Q)
-        monkeypatch.setattr(clfmod, "_DENSE_BATCH_MAX_NODES", 10**9)
-        b = clf.predict(Q)
-        monkeypatch.setattr(clfmod, "_DENSE_BATCH_MAX_NODES", 0)
-        c = clf.predict(Q)
-        monkeypatch.setattr(clfmod, "_DENSE_SUBTREE_PAIRS", 0)  # filter + exact recheck only
-        d = clf.predict(Q)
-        monkeypatch.setattr(clfmod, "_DENSE_SUBTREE_PAIRS", 10**6)  # whole subtrees at once
-        e = clf.predict(Q)
-        monkeypatch.undo()
-        assert a.tolist() == b.tolist() == c.tolist() == d.tolist() == e.tolist()
-    assert clf.predict(np.zeros((0, 4))).shape == (0,)
+        want = [HypersphereClassifier("fwd", spawn=spawn).fit(X, y).predict_one(q) for q in Q]
+        answers = {}
+        for algorithm in ("auto", "brute", "descent"):
+            clf = HypersphereClassifier("fwd", spawn=spawn, algorithm=algorithm).fit(X, y)
+            assert (clf.node_count_ <= 64) == (rows == 40)
+            answers[algorithm] = clf.predict(Q).tolist()
+            assert clf.score(Q, want) == 1.0
+            assert clf.predict(np.zeros((0, 4))).shape == (0,)
+        assert answers == {a: want for a in answers}
+        # the choice changes no tree: not compared, not saved
+        assert clf.tree_equal(HypersphereClassifier("fwd", spawn=spawn).fit(X, y))
+        assert rhbl.loads(clf.to_bytes()).algorithm == "auto"
 
 
 def test_training_speed_thousands_of_vectors():
@@ -257,15 +264,14 @@ def test_training_speed_thousands_of_vectors():
 
 
 @pytest.mark.parametrize("distance", ["squared", "euclidean"])
-def test_batch_filter_exact_on_boundaries(monkeypatch, distance):
+def test_batch_filter_exact_on_boundaries(distance):
     # grid points sit exactly on many sphere boundaries (including radius-0 spheres)
     g = np.linspace(0, 1, 5)
     grid = np.array(np.meshgrid(g, g, g)).reshape(3, -1).T
     rng = np.random.default_rng(3)
     y = rng.choice(["a", "b", "c"], len(grid))
-    clf = HypersphereClassifier("a", distance=distance).fit(grid[rng.permutation(len(grid))], y)
-    monkeypatch.setattr(clfmod, "_DENSE_BATCH_MAX_NODES", 0)
-    monkeypatch.setattr(clfmod, "_DENSE_SUBTREE_PAIRS", 0)
+    clf = HypersphereClassifier("a", distance=distance, algorithm="descent")
+    clf.fit(grid[rng.permutation(len(grid))], y)
     Q = np.vstack([grid, (grid[:-1] + grid[1:]) / 2])
     assert clf.predict(Q).tolist() == [clf.predict_one(q) for q in Q]
 

@@ -11,7 +11,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rhbl import HypersphereClassifier, loads
-from rhbl import classifier as clfmod
 
 EPS = 1e-9
 SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -99,13 +98,9 @@ def test_matches_naive_reference(data, distance, spawn):
     # the one-row fast path of predict, and the winner itself
     assert [clf.predict(q[None, :]).tolist() for q in Q] == [[w] for w in want]
     assert [clf.decision_path(q)[-1]["index"] for q in Q] == [ref.winner(q) for q in Q.tolist()]
-    # the batch descent with its matrix-product filter, forced even on small trees
-    old = clfmod._DENSE_BATCH_MAX_NODES, clfmod._DENSE_SUBTREE_PAIRS
-    clfmod._DENSE_BATCH_MAX_NODES = clfmod._DENSE_SUBTREE_PAIRS = 0
-    try:
-        assert clf.predict(Q).tolist() == want
-    finally:
-        clfmod._DENSE_BATCH_MAX_NODES, clfmod._DENSE_SUBTREE_PAIRS = old
+    # every batch search, whatever the tree's size (the descent with its matrix-product filter)
+    for algorithm in ("brute", "descent"):
+        assert clf.set_params(algorithm=algorithm).predict(Q).tolist() == want
 
 
 @SETTINGS

@@ -123,8 +123,12 @@ def test_errors_name_file_and_problem(tmp_path, fitted):
         load(tmp_path / "missing.rhbl")
 
 
+def _doc(fitted):
+    return msgpack.unpackb(fitted.to_bytes())
+
+
 def _mutated(fitted, **changes):
-    doc = snap.to_dict(fitted)
+    doc = _doc(fitted)
     for key, value in changes.items():
         if value is None:
             del doc[key]
@@ -134,7 +138,7 @@ def _mutated(fitted, **changes):
 
 
 def test_newer_version_and_inconsistent_arrays(fitted):
-    doc = snap.to_dict(fitted)
+    doc = _doc(fitted)
     n = fitted.node_count_
     with pytest.raises(SnapshotError, match="version 2 is newer"):
         loads(_mutated(fitted, version=2), source="f.rhbl")
