@@ -29,6 +29,7 @@ from client.behaviour.features import FEATURES, FeatureSpec
 from client.behaviour.learning import DemonstrationLearner, TreePolicy
 from client.behaviour.policies import Demonstrator, make_policy, takes_over
 from lab import metrics
+from lab.recording import active_tap, finish_run_recording, start_run_recording
 from server.world import World, WorldSpec, load_world
 
 __all__ = [
@@ -154,7 +155,9 @@ def make_learner(task: str, features: FeatureSpec | str | None = None,
 
 
 def _step_world(world: World, traj: Trajectory, actions: ActionSet, name: str, side: str | None,
-                ranges) -> None:
+                ranges, label: str | None = None, source: str = "teacher") -> None:
+    if (tap := active_tap()) is not None:  # rhbl train/evaluate --record
+        tap.step(world, name, ranges, actions, label=label, source=source)
     vx, va = actions[name]
     world.set_command(0, vx, va)
     world.step(traj.dt)
@@ -318,7 +321,7 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
                 traj.learned += 1
             if aug is not None:
                 traj.learned += aug.offer(learner, ranges, odom)
-            _step_world(world, traj, learner.actions, executed, side, ranges)
+            _step_world(world, traj, learner.actions, executed, side, ranges, label=label)
             done += 1
             if spec.goal is not None and world.at_goal(0):
                 break
@@ -428,10 +431,12 @@ def _corrective_rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, p
                     traj.learned += 1
                 if aug is not None:
                     traj.learned += aug.offer(learner, ranges, odom)
-                if takes_over(ranges, takeover):
+                took_now = takes_over(ranges, takeover)
+                if took_now:
                     drive = label
                     took += 1
-                _step_world(world, traj, learner.actions, drive, side, ranges)
+                _step_world(world, traj, learner.actions, drive, side, ranges, label=label,
+                            source="teacher" if took_now else "controller")
                 traj.labels.append(label)
                 steps += 1
                 if spec.goal is not None and world.at_goal(0):
@@ -464,7 +469,8 @@ def run(spec: WorldSpec, driver, start, seconds: float, seed: int = 0, teacher=N
         name = driver.act(ranges, odom)
         if teacher is not None:
             traj.teacher_actions.append(teacher.act(ranges, odom))
-        _step_world(world, traj, actions, name, side, ranges)
+        _step_world(world, traj, actions, name, side, ranges,
+                    source="controller" if isinstance(driver, TreePolicy) else "teacher")
         if stop_at_goal and spec.goal is not None and world.at_goal(0):
             break
     traj.wall_time = time.perf_counter() - t0
@@ -475,7 +481,8 @@ def run(spec: WorldSpec, driver, start, seconds: float, seed: int = 0, teacher=N
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--world", required=True, help="world file (or a shipped world's name)")
+    parser.add_argument("--world", help="world file (or a shipped world's name); required "
+                                        "unless --from-recording")
     parser.add_argument("--seconds", type=float, default=None,
                         help="sim seconds of demonstration (default: the task's recipe, 300)")
     parser.add_argument("--out", required=True, help="snapshot to write")
@@ -528,6 +535,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "recipe's: maze 0.85,1.2, wall following none)")
     parser.add_argument("--range-noise", type=float, default=0.0)
     parser.add_argument("--odom-noise", type=float, default=0.0)
+    parser.add_argument("--record", metavar="FILE", default=None,
+                        help="also write the run as an MCAP recording (docs/recording.md)")
+    parser.add_argument("--from-recording", nargs="+", metavar="FILE", default=None,
+                        help="no simulation: learn the teacher labels of these recordings "
+                             "(with --features and the tree options; docs/recording.md)")
 
 
 def _tree_overrides(args) -> dict:
@@ -541,6 +553,12 @@ def _tree_overrides(args) -> dict:
 
 def main(args) -> int:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    if args.from_recording:
+        from lab.recording import train_main
+
+        return train_main(args)
+    if not args.world:
+        raise ValueError("--world is required (or --from-recording FILE)")
     spec = resolve_world(args.world)
     if args.resume:
         learner = DemonstrationLearner.resume(
@@ -550,6 +568,7 @@ def main(args) -> int:
                                **_tree_overrides(args))
     seconds = args.seconds if args.seconds is not None else TRAINING.get(
         spec.task, TRAINING["wall-following"])["seconds"]
+    recording = start_run_recording(args.record, "rhbl train")  # None without --record
     traj = train(spec, learner, seconds, seed=args.seed, perturb=args.perturb, start=args.start,
                  range_noise=args.range_noise, odom_noise=args.odom_noise,
                  starts=getattr(args, "starts", None), segment=getattr(args, "segment", None),
@@ -561,6 +580,7 @@ def main(args) -> int:
                  augment=getattr(args, "augment", None),
                  augment_scale=getattr(args, "augment_scale", None),
                  round_scales=getattr(args, "round_scales", None))
+    finish_run_recording(recording)
     out = learner.save(args.out)
     m = traj.metrics()
     print(f"trained on {spec.name} ({spec.task}) for {seconds:g} s from {list(traj.start)}: "

@@ -30,8 +30,8 @@ from client.recording import RecordingError, RecordingWriter, read_recording, re
 from protocol import keys
 from protocol.messages import DriverState, Scan, State, TeacherAction, VelCmd
 
-__all__ = ["SimTap", "active_tap", "add_arguments", "main", "record_run", "retrain",
-           "format_summary"]
+__all__ = ["SimTap", "active_tap", "add_arguments", "finish_run_recording", "format_summary",
+           "main", "record_run", "retrain", "start_run_recording"]
 
 log = logging.getLogger(__name__)
 
@@ -268,25 +268,41 @@ class SimTap:
         self.sim = round(self.sim + self.dt, 9)
 
 
-@contextlib.contextmanager
-def record_run(path: str | Path | None, recorder: str, overwrite: bool = True,
-               dt: float = 0.1):
-    """Record the in-process run inside the ``with`` (``None``: record nothing)."""
+def start_run_recording(path: str | Path | None, recorder: str, overwrite: bool = True,
+                        dt: float = 0.1) -> SimTap | None:
+    """Start recording the in-process run (``None``: record nothing); every harness step is
+    written until ``finish_run_recording``."""
     if path is None:
-        yield None
-        return
+        return None
     try:
         writer = RecordingWriter(path, overwrite=overwrite, recorder=recorder)
     except RecordingError as exc:
         raise ValueError(str(exc)) from None
     tap = SimTap(writer, dt=dt)
     _ACTIVE.append(tap)
+    return tap
+
+
+def finish_run_recording(tap: SimTap | None) -> None:
+    """Finish the file of ``start_run_recording`` (a run that raised instead leaves it readable
+    up to its last chunk)."""
+    if tap is None:
+        return
+    if tap in _ACTIVE:
+        _ACTIVE.remove(tap)
+    try:
+        tap.writer.close()
+    except RecordingError as exc:
+        raise ValueError(str(exc)) from None
+    log.info("recorded %d messages (%d steps) in %s", tap.writer.messages, tap.scan_id,
+             tap.writer.path)
+
+
+@contextlib.contextmanager
+def record_run(path: str | Path | None, recorder: str, overwrite: bool = True, dt: float = 0.1):
+    """``with record_run(path, "..."): train(...)``: start/finish_run_recording as a block."""
+    tap = start_run_recording(path, recorder, overwrite, dt)
     try:
         yield tap
     finally:
-        _ACTIVE.remove(tap)
-        try:
-            writer.close()
-        except RecordingError as exc:
-            raise ValueError(str(exc)) from None
-        log.info("recorded %d messages (%d steps) in %s", writer.messages, tap.scan_id, path)
+        finish_run_recording(tap)
