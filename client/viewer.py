@@ -18,7 +18,7 @@ message. Topics (frame ``world`` = the world file's coordinates; frame ``<robot>
 | ``/<robot>/laser`` | ``foxglove.LaserScan`` | the scan, in the robot's frame |
 | ``/<robot>/pose`` | ``foxglove.PoseInFrame`` | the robot's pose in ``world`` |
 | ``/<robot>/path`` | ``foxglove.PosesInFrame`` | the path so far (once per sim second; last 2000 poses 5 cm apart) |
-| ``/<robot>/status`` | JSON | who drives, the tree's size (nodes, height, vectors), sim time |
+| ``/<robot>/status`` | JSON | who drives, the tree's size (nodes, height, vectors), sim time (on change, at least once per sim second) |
 """
 
 from __future__ import annotations
@@ -97,6 +97,7 @@ class _Robot:
     path: list = field(default_factory=list)
     last_path_ts: float = -1e9
     status: dict = field(default_factory=dict)
+    last_status_ts: float = -1e9
     body_sent: bool = False
 
 
@@ -214,8 +215,12 @@ class ViewerFeed:
         changed = any(r.status.get(k) != v for k, v in changes.items())
         if sim_time is not None:
             r.status["sim_time"] = float(sim_time)
+            # also once per sim second: a viewer that joins late sees who drives
+            changed = changed or not 0 <= sim_time - r.last_status_ts < 1.0
         if not changed:
             return []
+        if sim_time is not None:
+            r.last_status_ts = float(sim_time)
         r.status.update(changes)
         doc = {"robot": robot, **r.status}
         return [ViewerMessage(f"/{robot}/status", "rhbl.RobotStatus", "jsonschema",
