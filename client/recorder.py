@@ -22,7 +22,8 @@ from client.recording import CHUNK_SECONDS, BusRecorder, RecordingError, Recordi
 from protocol import keys
 from protocol.session import add_zenoh_arguments
 
-__all__ = ["add_arguments", "main", "start_recording"]
+__all__ = ["add_arguments", "finish_demo_recording", "main", "start_demo_recording",
+           "start_recording"]
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +55,29 @@ def start_recording(session, out, robots=None, overwrite: bool = False, viewer: 
     writer = RecordingWriter(out, overwrite=overwrite, viewer=viewer, recorder=recorder,
                              chunk_seconds=chunk_seconds, metadata=metadata)
     return BusRecorder(session, writer, robots=robots)
+
+
+def start_demo_recording(session, record: str | None, out_dir, say=print) -> BusRecorder | None:
+    """``rhbl demo --record [FILE]``: record the demo's rendezvous (default ``OUT/run.mcap``);
+    None when not asked."""
+    if record is None:
+        return None
+    path = record or os.path.join(out_dir, "run.mcap")
+    try:
+        rec = start_recording(session, path, overwrite=True, recorder="rhbl demo")
+    except RecordingError as exc:
+        raise ValueError(str(exc)) from None
+    say(f"recording every bus message into {path}")
+    return rec
+
+
+def finish_demo_recording(rec: BusRecorder | None, say=print) -> None:
+    if rec is None:
+        return
+    err = rec.close()
+    w = rec.writer
+    say(f"recording: {w.messages} messages on {len(w.counts)} keys in {w.path}"
+        + (f"; FAILED: {err}" if err else ""))
 
 
 def main(args: argparse.Namespace) -> int:

@@ -88,6 +88,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--timeout", type=float, default=600.0, metavar="SECONDS",
                         help="give up (and fail) after this much wall time")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
+    parser.add_argument("--record", nargs="?", const="", default=None, metavar="FILE",
+                        help="record the whole run (every bus message) as MCAP into FILE "
+                             "(default: OUT/run.mcap; docs/recording.md)")
 
 
 def free_port() -> int:
@@ -481,15 +484,18 @@ class Demo:
         self.say(f"rhbl demo: scenario {a.scenario}, world {self.spec.name}, output {self.out}")
         self.say(f"rendezvous (router) on {self.endpoint}; children log into {self.out / 'logs'}")
         from client.player import PlayerClient
+        from client.recorder import finish_demo_recording, start_demo_recording
 
         with zenoh.open(make_config(mode="router", listen=[self.endpoint])) as session:
             self.session = session
             self.sim = PlayerClient(session=session, robot="r0", source="demo").simulation
             self.rec = Recorder(session, "r0")
+            recording = start_demo_recording(session, a.record, self.out, self.say)
             try:
                 return self._phases()
             finally:
                 self.rec.close()
+                finish_demo_recording(recording, self.say)
 
     def _phases(self) -> int:
         from client.behaviour.learning import load_snapshot
