@@ -22,6 +22,7 @@ import zenoh
 from client._process import EXIT_USAGE, Context, ProcessError, run
 from client.recording import RecordingError, classify, read_recording
 from protocol import keys
+from protocol.messages import Scan, VelCmd
 from protocol.session import add_zenoh_arguments
 
 __all__ = ["SENSOR_KINDS", "add_arguments", "main"]
@@ -42,6 +43,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--wait-subscriber", type=float, default=10.0, metavar="SECONDS",
                         help="start once something subscribes to the scans, waiting at most "
                              "this long (0 = start at once; default 10)")
+    parser.add_argument("--lockstep", action="store_true",
+                        help="after each scan wait until a command answers it (its scan_id), "
+                             "as a lock-step server does, at most --lockstep-timeout: every "
+                             "scan gets its command however slow the machine")
+    parser.add_argument("--lockstep-timeout", type=float, default=1.0, metavar="SECONDS",
+                        help="with --lockstep: go on after this long without an answer "
+                             "(default 1)")
     parser.add_argument("--log-level", default=os.environ.get("RHBL_LOG_LEVEL", "INFO"),
                         choices=["DEBUG", "INFO", "WARNING", "ERROR"], type=str.upper,
                         help="logging level (default: INFO or $RHBL_LOG_LEVEL)")
@@ -99,9 +107,10 @@ def _body(ctx: Context) -> int:
             time.sleep(0.02)
     log.info("replaying %d messages of %s (robots %s) at %s", len(stream), args.recording,
              ", ".join(robots), f"{args.speed:g}x" if args.speed else "full speed")
+    answers = _Answers(session, robots) if args.lockstep else None
     t_rec0 = stream[0].log_time
     t0 = time.monotonic()
-    sent = 0
+    sent = unanswered = 0
     try:
         for m in stream:
             if args.speed > 0:
@@ -111,7 +120,16 @@ def _body(ctx: Context) -> int:
                     time.sleep(delay)
             pubs[m.key].put(m.data)
             sent += 1
+            if answers is not None and m.kind == "scan":
+                waited = time.monotonic()
+                if not answers.wait(m.robot, m.data, args.lockstep_timeout):
+                    unanswered += 1
+                t0 += time.monotonic() - waited  # the recorded spacing after the answer
     finally:
+        if answers is not None:
+            answers.close()
+            log.info("lock-step: %d scans without an answer within %.1f s", unanswered,
+                     args.lockstep_timeout)
         span = (stream[-1].log_time - t_rec0) / 1e9
         log.info("replay stopped: %d of %d messages sent (%.1f s recorded, %.1f s played)", sent,
                  len(stream), span, time.monotonic() - t0)
@@ -120,3 +138,39 @@ def _body(ctx: Context) -> int:
             q.undeclare()
     return 0
 
+
+
+class _Answers:
+    """The scan ids the robots' commands answered (``--lockstep``)."""
+
+    def __init__(self, session, robots):
+        import threading
+
+        self._cond = threading.Condition()
+        self._seen: dict[str, int] = {}
+        self._subs = [session.declare_subscriber(keys.cmd_vel_subscription(r),
+                                                 lambda s, r=r: self._on(r, s))
+                      for r in robots]
+
+    def _on(self, robot: str, sample) -> None:
+        try:
+            cmd = VelCmd.decode(sample.payload.to_bytes())
+        except Exception:  # noqa: BLE001 - a malformed command answers nothing
+            return
+        if cmd.scan_id is None:
+            return
+        with self._cond:
+            self._seen[robot] = max(self._seen.get(robot, -1), cmd.scan_id)
+            self._cond.notify_all()
+
+    def wait(self, robot: str, scan_payload: bytes, timeout: float) -> bool:
+        try:
+            sid = Scan.decode(scan_payload).id
+        except Exception:  # noqa: BLE001
+            return True
+        with self._cond:
+            return self._cond.wait_for(lambda: self._seen.get(robot, -1) >= sid, timeout)
+
+    def close(self) -> None:
+        for s in self._subs:
+            s.undeclare()
