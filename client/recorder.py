@@ -119,8 +119,8 @@ def _body(ctx: Context) -> int:
     finally:
         err = rec.close()
         w = rec.writer
-        log.info("recorder stopped: %d messages on %d keys in %s (%.1f MB)%s", w.messages,
-                 len(w.counts), args.out,
-                 os.path.getsize(args.out) / 1e6 if os.path.exists(args.out) else 0.0,
-                 "" if err is None else "; FAILED")
+        log.info("recorder stopped: %d messages on %d keys in %s (%.1f MB); at most %d "
+                 "received messages waited to be written%s", w.messages, len(w.counts),
+                 args.out, os.path.getsize(args.out) / 1e6 if os.path.exists(args.out) else 0.0,
+                 rec.max_backlog, "" if err is None else "; FAILED")
     return EXIT_FAILURE if err is not None else 0

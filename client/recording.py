@@ -71,6 +71,7 @@ log = logging.getLogger(__name__)
 CHUNK_SECONDS = 1.0  # a chunk is closed (written, readable) at least this often
 CHUNK_SIZE = 256 * 1024  # ... or when it holds this many uncompressed bytes
 ENCODING = "msgpack"
+BACKLOG_WARN = 2000  # received messages waiting to be written beyond which it says so
 
 # kind -> (message class, schema name); "alive": liveliness (our own small map), "other":
 # a key of ours we do not know (kept, undecoded)
@@ -282,7 +283,10 @@ class RecordingWriter:
                     self._sim[robot] = sim_time
             else:
                 sim_time = self._sim.get(robot, 0.0)
-        cid = self._channel(key, schema_name(kind), "jsonschema", _schema_data(kind), ENCODING)
+        cid = self._channels.get(key)
+        if cid is None:
+            cid = self._channel(key, schema_name(kind), "jsonschema", _schema_data(kind),
+                                ENCODING)
         self._writer.add_message(cid, log_time=recv_ns, data=data,
                                  publish_time=max(0, int(round(sim_time * 1e9))),
                                  sequence=self.counts[key] + 1)
@@ -295,7 +299,7 @@ class RecordingWriter:
                 log.debug("viewer conversion of %s failed: %s", key, exc)
                 vms = []
             for vm in vms:
-                vc = self._channel(vm.topic, vm.schema_name, vm.schema_encoding, vm.schema_data,
+                vc = self._channels.get(vm.topic) or self._channel(vm.topic, vm.schema_name, vm.schema_encoding, vm.schema_data,
                                    vm.encoding)
                 self._writer.add_message(vc, log_time=vm.time_ns, data=vm.data,
                                          publish_time=max(0, int(round(sim_time * 1e9))))
@@ -372,6 +376,7 @@ class BusRecorder:
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self._stop = threading.Event()
         self.max_backlog = 0
+        self._warned = 0.0
         exprs = [f"{keys.PREFIX}/{r}/**" for r in self.robots] if self.robots \
             else [f"{keys.PREFIX}/**"]
         self._subs = [session.declare_subscriber(e, self._on_sample) for e in exprs]
@@ -429,6 +434,10 @@ class BusRecorder:
                 n = self._q.qsize()
                 if n > self.max_backlog:
                     self.max_backlog = n
+                if n > BACKLOG_WARN and time.monotonic() - self._warned >= 10.0:
+                    self._warned = time.monotonic()
+                    log.warning("the recorder falls behind: %d messages wait to be written "
+                                "(all kept, in memory)", n)
             except RecordingError as exc:
                 self.error = exc
                 log.error("%s", exc)

@@ -193,7 +193,7 @@ class ViewerFeed:
             timestamp=stamp, frame_id=robot, pose=_pose(0, 0, 0),
             start_angle=float(scan.min_angle),
             end_angle=float(scan.min_angle + (scan.count - 1) * scan.resolution),
-            ranges=[float(v) for v in scan.ranges], intensities=[]), time_ns))
+            ranges=scan.ranges.tolist(), intensities=[]), time_ns))
         pose = _pose(x, y, yaw)
         out.append(_proto(f"/{robot}/pose", fm.PoseInFrame(timestamp=stamp, frame_id=WORLD_FRAME,
                                                             pose=pose), time_ns))
