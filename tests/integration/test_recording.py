@@ -523,3 +523,20 @@ def test_bad_files_and_arguments_give_one_clear_error(tmp_path, start_server, pr
     # an existing --out is never replaced silently
     r = rhbl("record", "--out", str(good), "--connect", srv.endpoint)
     assert r.returncode == 2 and "exists" in r.stderr, r.stderr
+
+
+def test_demo_record_keeps_the_whole_run(tmp_path):
+    out = tmp_path / "demo"
+    r = subprocess.run([sys.executable, "-m", "lab.cli", "demo", "--out", str(out),
+                        "--teach-seconds", "5", "--rounds", "1", "--round-seconds", "3",
+                        "--drive-seconds", "3", "--starts", "1", "--record"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=200)
+    assert r.returncode == 0, r.stdout + r.stderr
+    rec = out / "run.mcap"
+    assert f"recording every bus message into {rec}" in r.stdout + r.stderr
+    with open(rec, "rb") as f:
+        summary = mcap_reader.make_reader(f).get_summary()  # finished: summary and indexes
+    topics = {c.topic for c in summary.channels.values()}
+    assert {keys.scan_key("r0"), keys.teacher_action_key("r0"),
+            keys.cmd_vel_key("r0", source="teacher"), keys.cmd_vel_key("r0", source="controller"),
+            keys.learner_notice_key("r0"), "/r0/laser", "/world"} <= topics
