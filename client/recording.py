@@ -26,6 +26,7 @@ The format (written with the official ``mcap`` package, read back with ``mcap.re
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import errno
 import json
@@ -195,7 +196,7 @@ class RecordingWriter:
         except OSError as exc:
             raise RecordingError(f"cannot create the recording {self.path}: "
                                  f"{exc.strerror or exc}") from exc
-        self._file = os.fdopen(fd, "wb")
+        self._file = _Out(fd)
         self._writer = Writer(self._file, chunk_size=chunk_size,
                               compression=CompressionType.ZSTD)
         self.failed: RecordingError | None = None
@@ -237,10 +238,9 @@ class RecordingWriter:
     def _fail(self, exc: OSError):
         why = "the disk is full" if exc.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT) \
             else (exc.strerror or str(exc))
-        with _suppress():
-            self._file.truncate(self._good)
-        with _suppress():
-            os.close(self._file.fileno())
+        with contextlib.suppress(OSError):
+            os.ftruncate(self._file.fd, self._good)
+        self._file.close()
         self.failed = RecordingError(
             f"cannot write the recording {self.path}: {why} ({exc}). Recording stopped; the file "
             f"keeps the {self._good_messages} messages up to its last complete chunk "
@@ -335,8 +335,7 @@ class RecordingWriter:
 
         def go():
             self._writer.finish()
-            self._file.flush()
-            os.fsync(self._file.fileno())
+            os.fsync(self._file.fd)
             self._file.close()
 
         self._guard(go)
@@ -349,12 +348,34 @@ class RecordingWriter:
         self.close()
 
 
-class _suppress:
-    def __enter__(self):
-        return self
+class _Out:
+    """The file the MCAP writer writes to, unbuffered: every write the writer makes (a whole
+    chunk, a record group) is in the kernel when it returns, so a SIGKILL loses nothing the
+    writer wrote, and after a failed write nothing buffered here can land in the file later."""
 
-    def __exit__(self, *exc):
-        return True
+    def __init__(self, fd: int):
+        self.fd = fd
+        self.pos = 0
+
+    def write(self, data) -> int:
+        view = memoryview(data)
+        while view:
+            n = os.write(self.fd, view)
+            self.pos += n
+            view = view[n:]
+        return len(data)
+
+    def tell(self) -> int:
+        return self.pos
+
+    def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        if self.fd >= 0:
+            with contextlib.suppress(OSError):
+                os.close(self.fd)
+            self.fd = -1
 
 
 # ---- recording a bus ----------------------------------------------------------------------
@@ -451,7 +472,7 @@ class BusRecorder:
     def close(self) -> RecordingError | None:
         """Stop subscribing, write what arrived, finish the file; the error, if any."""
         for s in self._subs:
-            with _suppress():
+            with contextlib.suppress(Exception):
                 s.undeclare()
         self._stop.set()
         self._thread.join()
