@@ -45,6 +45,19 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def _wait_port(ep: str, timeout: float = 60.0) -> None:
+    """Until the server's endpoint accepts TCP connections."""
+    host, port = ep.split("/", 1)[1].rsplit(":", 1)
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        try:
+            socket.create_connection((host, int(port)), timeout=1.0).close()
+            return
+        except OSError:
+            time.sleep(0.1)
+    raise RuntimeError(f"no server on {ep} within {timeout} s")
+
+
 def _cpu(pid: int) -> float:
     """user + system CPU seconds of a process (Linux /proc)."""
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
@@ -106,7 +119,7 @@ def live_bus(tmp: Path, seconds: float) -> dict:
     out = tmp / "bus.mcap"
     procs = [srv]
     try:
-        time.sleep(1.0)
+        _wait_port(ep)
         log = open(tmp / "rec.log", "wb")  # noqa: SIM115 - closed below
         rec = _start("record", "--out", str(out), "--overwrite", "--connect", ep, "--robot", "r0",
                      log=log)
@@ -139,7 +152,7 @@ def lockstep_rate(tmp: Path, tree: Path, seconds: float, record: bool) -> float:
     srv = _start("server", "--world", "room", "--listen", ep, "--lockstep")
     procs = [srv]
     try:
-        time.sleep(1.0)
+        _wait_port(ep)
         if record:
             out = tmp / "ls.mcap"
             procs.append(_start("record", "--out", str(out), "--overwrite", "--connect", ep))

@@ -25,7 +25,6 @@ from pathlib import Path
 from client.behaviour.actions import DEFAULT_ACTIONS
 from client.behaviour.features import FEATURES, FeatureError
 from client.behaviour.learning import DemonstrationLearner
-from client.learner import TASK_OF_FEATURES, Pairing
 from client.recording import RecordingError, RecordingWriter, read_recording, recording_summary
 from protocol import keys
 from protocol.messages import DriverState, Scan, State, TeacherAction, VelCmd
@@ -104,6 +103,8 @@ def labeled_scans(path: str | Path, robots: list[str] | None = None,
                   stats: dict | None = None) -> Iterator[tuple[str, Scan, TeacherAction]]:
     """(robot, scan, label) in the order the live learner paired them: the recording's scans
     and labels through ``client.learner.Pairing`` (one per robot), clocked by receive time."""
+    from client.learner import Pairing  # (imports zenoh: only when retraining)
+
     pairings: dict[str, tuple[Pairing, _Clock]] = {}
     for m in read_recording(path):
         if m.kind not in ("scan", "label") or (robots and m.robot not in robots):
@@ -134,6 +135,8 @@ def retrain(paths, features: str = "wall", robots: list[str] | None = None,
     """A tree learned from the recordings' teacher labels (in order, files in the order
     given), as ``rhbl learner`` learns: labels that are no action of the tree and scans the
     features cannot use are skipped and counted. Returns (learner, stats)."""
+    from client.learner import TASK_OF_FEATURES
+
     spec = FEATURES[features]
     params = {"spawn": "winner", **(tree_params or {})}
     learner = DemonstrationLearner(spec, DEFAULT_ACTIONS,
