@@ -236,14 +236,15 @@ class RecordingWriter:
             self._fail(exc)
 
     def _fail(self, exc: OSError):
-        why = "the disk is full" if exc.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT) \
-            else (exc.strerror or str(exc))
+        why = {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is used up",
+               errno.EFBIG: "the file reached its size limit"}.get(exc.errno,
+                                                                   exc.strerror or str(exc))
         with contextlib.suppress(OSError):
             os.ftruncate(self._file.fd, self._good)
         self._file.close()
         self.failed = RecordingError(
             f"cannot write the recording {self.path}: {why} ({exc}). Recording stopped; the file "
-            f"keeps the {self._good_messages} messages up to its last complete chunk "
+            f"keeps the {self._good_messages} bus messages up to its last complete chunk "
             f"({self._good} bytes), readable by MCAP readers (it has no summary: readers scan it)")
         self.closed = True
         raise self.failed from exc
