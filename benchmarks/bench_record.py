@@ -32,7 +32,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from client.recording import RecordingWriter, read_recording  # noqa: E402
+from client.recording import RecordingError, RecordingWriter, read_recording  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, State, TeacherAction, VelCmd  # noqa: E402
 
@@ -107,8 +107,11 @@ def _stop(p: subprocess.Popen, sig=signal.SIGINT) -> None:
 def _wait_file(path: Path, timeout: float = 30.0) -> None:
     end = time.monotonic() + timeout
     while time.monotonic() < end:
-        if path.exists() and any(m.kind == "scan" for m in read_recording(path)):
-            return
+        try:
+            if path.exists() and any(m.kind == "scan" for m in read_recording(path)):
+                return
+        except RecordingError:  # created a moment ago: not even its header yet
+            pass
         time.sleep(0.1)
     raise RuntimeError(f"{path}: nothing recorded in {timeout} s")
 

@@ -519,6 +519,8 @@ def read_recording(path: str | os.PathLike, viewer: bool = False,
         raise RecordingError(f"cannot open the recording {path}: {exc.strerror or exc}") from exc
     n = 0
     with f:
+        if os.fstat(f.fileno()).st_size == 0:
+            raise RecordingError(f"{path} is empty: not an MCAP recording")
         try:
             reader = NonSeekingReader(f, validate_crcs=True)
             for schema, channel, m in reader.iter_messages(log_time_order=False):

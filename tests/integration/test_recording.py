@@ -36,7 +36,7 @@ zenoh = pytest.importorskip("zenoh")
 mcap_reader = pytest.importorskip("mcap.reader")
 pytest.importorskip("google.protobuf")
 
-from client.recording import read_recording  # noqa: E402
+from client.recording import RecordingError, read_recording  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, VelCmd  # noqa: E402
 from protocol.session import make_config  # noqa: E402
@@ -123,8 +123,11 @@ def wait_recorded(path: Path, kind: str = "scan", timeout: float = 30.0) -> None
     """Until the (unfinished) file holds a chunk with a message of ``kind``."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
-        if path.exists() and any(m.kind == kind for m in read_recording(path)):
-            return
+        try:
+            if path.exists() and any(m.kind == kind for m in read_recording(path)):
+                return
+        except RecordingError:  # created a moment ago: not even its header yet
+            pass
         time.sleep(0.1)
     raise AssertionError(f"{path}: no {kind} recorded within {timeout} s")
 
@@ -504,6 +507,10 @@ def test_bad_files_and_arguments_give_one_clear_error(tmp_path, start_server, pr
     r = rhbl("inspect", str(junk))
     assert r.returncode == 2 and f"{junk} is not an MCAP recording" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    r = rhbl("inspect", str(empty))
+    assert r.returncode == 2 and f"{empty} is empty" in r.stderr, r.stderr
     r = rhbl("train", "--from-recording", str(tmp_path / "missing.mcap"), "--out",
              str(tmp_path / "x.rhbl"))
     assert r.returncode == 2 and "missing.mcap" in r.stderr and "Traceback" not in r.stderr
