@@ -388,8 +388,8 @@ def test_replay_makes_a_controller_send_the_same_commands(live_run, procs, tmp_p
         cmds = Tap(session, keys.cmd_vel_key("r0", source="controller"))
         ctl2 = procs("controller2", "controller", "--tree", str(tree), "--connect", endpoint,
                      "--wait-server", "60")
-        rp = procs("replay", "replay", str(live_rec), "--lockstep", "--connect", endpoint,
-                   "--wait-subscriber", "60")
+        rp = procs("replay", "replay", str(live_rec), "--lockstep", "--lockstep-timeout", "10",
+                   "--connect", endpoint, "--wait-subscriber", "60")  # 10 s: a loaded machine
         assert rp.wait(180) == 0, rp.text()
         last = max(live)
         end = time.monotonic() + 10
@@ -409,7 +409,7 @@ def test_replay_makes_a_controller_send_the_same_commands(live_run, procs, tmp_p
     # the new one answers those too)
     assert set(live) <= set(replayed), (sorted(set(live) - set(replayed)), rp.text())
     assert {k: replayed[k] for k in live} == live
-    assert "0 scans without an answer" in rp.text()
+    assert "lock-step: 0 scans without an answer" in rp.text(), rp.text()
 
 
 def cmds_key() -> str:
