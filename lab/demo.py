@@ -153,6 +153,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also serve the teacher's console (view-only) to watch the loop "
                              "live in a browser (default address 127.0.0.1:8080; the URL is "
                              "printed)")
+    parser.add_argument("--record", nargs="?", const="", default=None, metavar="FILE",
+                        help="record the whole run (every bus message) as MCAP into FILE "
+                             "(default: OUT/run.mcap; docs/recording.md)")
+
 
 
 # ---- children ------------------------------------------------------------------------------
@@ -492,6 +496,7 @@ class Demo:
         self.say(f"rendezvous (router) on {self.endpoint}; children log into {self.out / 'logs'}")
         from client.behaviour.actions import DEFAULT_ACTIONS
         from client.player import PlayerClient
+        from client.recorder import finish_demo_recording, start_demo_recording
         from lab.harness import followed_side
 
         with zenoh.open(make_config(mode="router", listen=[self.endpoint])) as session:
@@ -499,10 +504,12 @@ class Demo:
             self.sim = PlayerClient(session=session, robot="r0", source="demo").simulation
             # the learner's actions (``rhbl learner`` has no other set)
             self.rec = Recorder(session, "r0", DEFAULT_ACTIONS, followed_side(self.spec.task))
+            recording = start_demo_recording(session, a.record, self.out, self.say)
             try:
                 return self._phases()
             finally:
                 self.rec.close()
+                finish_demo_recording(recording, self.say)
 
     def _phases(self) -> int:
         from client.behaviour.learning import load_snapshot

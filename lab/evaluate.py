@@ -22,6 +22,7 @@ from client.behaviour.policies import make_policy
 from lab import metrics
 from lab.harness import DT, resolve_world, run
 from lab.recipe import EVAL_SECONDS, per_task
+from lab.recording import finish_run_recording, start_run_recording
 from lab.report import episode_table
 from server.world import WorldSpec
 
@@ -141,14 +142,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plot", default=None, help="draw world and paths to this PNG")
     parser.add_argument("--spheres", default=None, metavar="I,J",
                         help="with --plot: also draw the tree's spheres projected on features I,J")
+    parser.add_argument("--record", metavar="FILE", default=None,
+                        help="also write the episodes (tree and teacher runs) as an MCAP "
+                             "recording (docs/recording.md)")
 
 
 def main(args) -> int:
     spec = resolve_world(args.world)
     policy = TreePolicy.load(args.tree)
+    recording = start_run_recording(args.record, "rhbl evaluate")  # None without --record
     report = evaluate(spec, policy, episodes=args.episodes, seconds=args.seconds, seed=args.seed,
                       range_noise=args.range_noise, odom_noise=args.odom_noise,
                       keep_paths=bool(args.plot))
+    finish_run_recording(recording)
     paths = report.pop("_paths", None)
     print(format_table(report))
     if args.json:

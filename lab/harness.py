@@ -31,6 +31,7 @@ from client.behaviour.policies import Demonstrator, make_policy, takes_over
 from lab import metrics
 from lab.episode import DT, Episode
 from lab.recipe import Recipe, add_recipe_arguments, parse_floats, recipe_for, recipe_from_args
+from lab.recording import active_tap, finish_run_recording, start_run_recording
 from server.world import World, WorldSpec, free_pose, load_world, sample_pose
 
 __all__ = [
@@ -81,7 +82,9 @@ def make_learner(recipe: Recipe | str, actions: ActionSet = DEFAULT_ACTIONS) -> 
 
 
 def _step_world(world: World, ep: Episode, actions: ActionSet, name: str, side: str | None,
-                ranges) -> None:
+                ranges, label: str | None = None, source: str = "teacher") -> None:
+    if (tap := active_tap()) is not None:  # rhbl train/evaluate --record
+        tap.step(world, name, ranges, actions, label=label, source=source)
     vx, va = actions[name]
     world.set_command(0, vx, va)
     world.step(ep.dt)
@@ -171,7 +174,7 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
                 ep.learned += 1
             if aug is not None:
                 ep.learned += aug.offer(learner, ranges, odom)
-            _step_world(world, ep, learner.actions, executed, side, ranges)
+            _step_world(world, ep, learner.actions, executed, side, ranges, label=label)
             done += 1
             if spec.goal is not None and world.at_goal(0):
                 break
@@ -263,10 +266,12 @@ def _corrective_rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, p
                     ep.learned += 1
                 if aug is not None:
                     ep.learned += aug.offer(learner, ranges, odom)
-                if takes_over(ranges, takeover):
+                took_now = takes_over(ranges, takeover)
+                if took_now:
                     drive = label
                     took += 1
-                _step_world(world, ep, learner.actions, drive, side, ranges)
+                _step_world(world, ep, learner.actions, drive, side, ranges, label=label,
+                            source="teacher" if took_now else "controller")
                 ep.labels.append(label)
                 steps += 1
                 if spec.goal is not None and world.at_goal(0):
@@ -299,7 +304,8 @@ def run(spec: WorldSpec, driver, start, seconds: float, seed: int = 0, teacher=N
         name = driver.act(ranges, odom)
         if teacher is not None:
             ep.teacher_actions.append(teacher.act(ranges, odom))
-        _step_world(world, ep, actions, name, side, ranges)
+        _step_world(world, ep, actions, name, side, ranges,
+                    source="controller" if isinstance(driver, TreePolicy) else "teacher")
         if stop_at_goal and spec.goal is not None and world.at_goal(0):
             break
     ep.wall_time = time.perf_counter() - t0
@@ -310,7 +316,8 @@ def run(spec: WorldSpec, driver, start, seconds: float, seed: int = 0, teacher=N
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--world", required=True, help="world file (or a shipped world's name)")
+    parser.add_argument("--world", help="world file (or a shipped world's name); required "
+                                        "unless --from-recording")
     parser.add_argument("--out", required=True, help="snapshot to write")
     parser.add_argument("--resume", default=None,
                         help="continue training this snapshot (a corrective demonstration)")
@@ -321,10 +328,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_recipe_arguments(parser)
     parser.add_argument("--range-noise", type=float, default=0.0)
     parser.add_argument("--odom-noise", type=float, default=0.0)
+    parser.add_argument("--record", metavar="FILE", default=None,
+                        help="also write the run as an MCAP recording (docs/recording.md)")
+    parser.add_argument("--from-recording", nargs="+", metavar="FILE", default=None,
+                        help="no simulation: learn the teacher labels of these recordings "
+                             "(with --features and the tree options; docs/recording.md)")
 
 
 def main(args) -> int:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    if args.from_recording:
+        from lab.recording import train_main
+
+        return train_main(args)
+    if not args.world:
+        raise ValueError("--world is required (or --from-recording FILE)")
     spec = resolve_world(args.world)
     recipe = recipe_from_args(spec.task, args)
     if args.resume:
@@ -332,8 +350,10 @@ def main(args) -> int:
             args.resume, features=recipe.feature_spec() if args.features else None)
     else:
         learner = make_learner(recipe)
+    recording = start_run_recording(args.record, "rhbl train")  # None without --record
     ep = train(spec, learner, recipe, seed=args.seed, start=args.start,
                range_noise=args.range_noise, odom_noise=args.odom_noise)
+    finish_run_recording(recording)
     out = learner.save(args.out)
     m = ep.metrics()
     print(f"trained on {spec.name} ({spec.task}) for {recipe.seconds:g} s from {list(ep.start)}: "

@@ -1,0 +1,148 @@
+"""``rhbl foxglove``: serve the live bus to Foxglove or Lichtblick over the Foxglove WebSocket
+protocol (``foxglove-sdk``'s server), on localhost.
+
+    rhbl foxglove --connect tcp/127.0.0.1:7447           # then open ws://127.0.0.1:8765
+
+It subscribes like ``rhbl record`` (``client.recording.BusRecorder``: every robot seen, or
+``--robot``) and converts with ``client.viewer`` (the same viewer channels a recording holds):
+``/world`` (walls, goal, robots), ``/tf``, ``/<robot>/laser``, ``/<robot>/pose``,
+``/<robot>/path``, ``/<robot>/status`` (who drives, the tree's size). The world scene is sent
+again every few seconds, so a viewer that connects late draws the walls too.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import threading
+import time
+
+from client._process import EXIT_USAGE, Context, ProcessError, run
+from client.recording import BusRecorder, classify, decode
+from client.viewer import ViewerFeed, ViewerMessage
+from protocol import keys
+from protocol.session import add_zenoh_arguments
+
+__all__ = ["FoxgloveSink", "add_arguments", "main"]
+
+log = logging.getLogger(__name__)
+
+WORLD_REPEAT = 3.0  # s between repeats of the world scene
+
+
+class FoxgloveSink:
+    """A ``BusRecorder`` sink that logs the viewer messages on foxglove-sdk channels (whatever
+    sinks their context has: a WebSocket server, an MCAP file)."""
+
+    def __init__(self, context=None):
+        self.context = context
+        self.feed = ViewerFeed()
+        self.channels: dict[str, object] = {}
+        self.messages = 0
+        self.counts: dict[str, int] = {}
+        self._world: dict[str, ViewerMessage] = {}  # robot -> its latest /world scene
+        self._world_at = 0.0
+        self._lock = threading.Lock()
+
+    def _channel(self, vm: ViewerMessage):
+        import foxglove
+
+        ch = self.channels.get(vm.topic)
+        if ch is None:
+            ch = self.channels[vm.topic] = foxglove.Channel(
+                vm.topic, message_encoding=vm.encoding, context=self.context,
+                schema=foxglove.Schema(name=vm.schema_name, encoding=vm.schema_encoding,
+                                       data=vm.schema_data))
+        return ch
+
+    def _log(self, vm: ViewerMessage) -> None:
+        self._channel(vm).log(vm.data, log_time=vm.time_ns)
+        self.counts[vm.topic] = self.counts.get(vm.topic, 0) + 1
+
+    def write(self, key: str, data: bytes, recv_ns: int, kind: str | None = None,
+              robot: str | None = None, sim_time: float | None = None) -> None:
+        if kind is None:
+            kind, robot = classify(key)
+        if kind in ("other", "alive", "cmd", "label"):
+            return
+        try:
+            msg = decode(kind, data)
+        except Exception as exc:  # noqa: BLE001 - a malformed message draws nothing
+            log.debug("dropped a malformed %s: %s", key, exc)
+            return
+        with self._lock:
+            for vm in self.feed.update(kind, robot, msg, recv_ns):
+                if kind == "world" and vm.topic == "/world":
+                    self._world[robot] = vm
+                self._log(vm)
+            self.messages += 1
+        self.maybe_flush()
+
+    def write_alive(self, key: str, alive: bool, recv_ns: int) -> None:
+        pass
+
+    def maybe_flush(self, now: float | None = None) -> None:
+        """Repeat the world scenes every few seconds (late viewers)."""
+        now = time.monotonic() if now is None else now
+        if self._world and now - self._world_at >= WORLD_REPEAT:
+            self._world_at = now
+            with self._lock:
+                for vm in self._world.values():
+                    self._log(ViewerMessage(vm.topic, vm.schema_name, vm.schema_encoding,
+                                            vm.schema_data, vm.encoding, vm.data,
+                                            time.time_ns()))
+
+    def close(self) -> None:
+        pass
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_zenoh_arguments(parser)
+    parser.add_argument("--robot", action="append", dest="robots", metavar="NAME",
+                        help="show this robot (repeatable; default: every robot seen)")
+    parser.add_argument("--host", default="127.0.0.1",
+                        help="address the WebSocket server binds (default 127.0.0.1: this "
+                             "machine only)")
+    parser.add_argument("--port", type=int, default=8765,
+                        help="WebSocket port (default 8765, Foxglove's default; 0 = any free)")
+    parser.add_argument("--duration", type=float, default=None, metavar="SECONDS",
+                        help="stop after this many seconds (default: until stopped)")
+    parser.add_argument("--log-level", default=os.environ.get("RHBL_LOG_LEVEL", "INFO"),
+                        choices=["DEBUG", "INFO", "WARNING", "ERROR"], type=str.upper,
+                        help="logging level (default: INFO or $RHBL_LOG_LEVEL)")
+
+
+def main(args: argparse.Namespace) -> int:
+    for r in args.robots or []:
+        keys.check_chunk(r, "--robot")  # ValueError: one line, exit 2
+    args.robot = "all" if not args.robots else args.robots[0]
+    return run("foxglove", args, _body)
+
+
+def _body(ctx: Context) -> int:
+    import foxglove
+
+    args = ctx.args
+    context = foxglove.Context()
+    try:
+        server = foxglove.start_server(name="rhbl", host=args.host, port=args.port,
+                                       context=context)
+    except Exception as exc:  # noqa: BLE001 - the port is taken, ...
+        raise ProcessError(f"foxglove: cannot serve on {args.host}:{args.port}: {exc}",
+                           EXIT_USAGE) from exc
+    sink = FoxgloveSink(context)
+    tap = BusRecorder(ctx.session, sink, robots=args.robots)
+    # the line tests and people wait for
+    log.info("Foxglove WebSocket server listening on ws://%s:%d (open it in Foxglove or "
+             "Lichtblick: Open connection -> Foxglove WebSocket)", args.host, server.port)
+    t0 = time.monotonic()
+    try:
+        while args.duration is None or time.monotonic() - t0 < args.duration:
+            time.sleep(0.1)
+    finally:
+        tap.close()
+        server.stop()
+        log.info("foxglove bridge stopped: %d bus messages shown on %d topics", sink.messages,
+                 len(sink.channels))
+    return 0

@@ -1,0 +1,607 @@
+"""Recordings: every message of a run kept as an MCAP file (docs/recording.md).
+
+The format (written with the official ``mcap`` package, read back with ``mcap.reader``):
+
+- one channel per bus key (topic = the zenoh key, e.g. ``rhbl/r0/laser/0/data/scan``),
+  ``message_encoding`` ``msgpack``; each message is the original payload, bit for bit. A schema
+  per message type (encoding ``jsonschema``, name ``rhbl.v<protocol version>.<Type>``, e.g.
+  ``rhbl.v1.Scan``) describes the map and names the protocol version.
+- log time = when the message was received (ns since the Unix epoch; in-process runs, which have
+  no bus: the run's start plus the sim time), publish time = the message's own sim time stamp
+  ``ts`` (messages without one: the robot's latest sim time).
+- liveliness tokens (``rhbl/alive/<role>/<id>``) appear as their key's channel with a
+  ``rhbl.v1.Liveliness`` message ``{v, key, alive}`` when they appear and disappear; the sim
+  world (``sim/req/get_world``'s ``WorldInfo`` reply) on ``rhbl/<robot>/sim/req/get_world``.
+- viewer channels beside them (``client.viewer``: laser, pose, path, world scene, status in
+  Foxglove's well-known schemas), so Foxglove and Lichtblick show a recording without a plugin.
+- chunked (zstd), indexed, with a summary; a chunk is closed at least every ``chunk_seconds``
+  (1 s), so a recorder killed with SIGKILL leaves every message up to its last chunk readable.
+- a metadata record ``rhbl`` (protocol version, what recorded it, when).
+
+    with RecordingWriter("run.mcap") as w:
+        w.write(key, payload, recv_ns)
+    for m in read_recording("run.mcap"):         # RecordedMessage(key, kind, robot, data, ...)
+        ...
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import errno
+import json
+import logging
+import os
+import queue
+import threading
+import time
+from collections import defaultdict
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import msgpack
+
+from protocol import keys
+from protocol.codec import PROTOCOL_VERSION
+from protocol.messages import (
+    DriverState,
+    Scan,
+    State,
+    TeacherAction,
+    TreeNotice,
+    VelCmd,
+    WorldInfo,
+)
+
+__all__ = [
+    "CHUNK_SECONDS",
+    "KINDS",
+    "BusRecorder",
+    "RecordedMessage",
+    "RecordingError",
+    "RecordingWriter",
+    "classify",
+    "decode",
+    "read_recording",
+    "recording_summary",
+]
+
+log = logging.getLogger(__name__)
+
+CHUNK_SECONDS = 1.0  # a chunk is closed (written, readable) at least this often
+CHUNK_SIZE = 256 * 1024  # ... or when it holds this many uncompressed bytes
+ENCODING = "msgpack"
+BACKLOG_WARN = 2000  # received messages waiting to be written beyond which it says so
+
+# kind -> (message class, schema name); "alive": liveliness (our own small map), "other":
+# a key of ours we do not know (kept, undecoded)
+KINDS: dict[str, tuple[type | None, str]] = {
+    "state": (State, "State"),
+    "scan": (Scan, "Scan"),
+    "driver": (DriverState, "Driver"),
+    "cmd": (VelCmd, "VelCmd"),
+    "label": (TeacherAction, "TeacherAction"),
+    "notice": (TreeNotice, "TreeNotice"),
+    "world": (WorldInfo, "WorldInfo"),
+    "alive": (None, "Liveliness"),
+    "other": (None, "Message"),
+}
+
+_NUM = {"type": "number"}
+_INT = {"type": "integer"}
+_STR = {"type": "string"}
+_BOOL = {"type": "boolean"}
+_VEC3 = {"type": "array", "items": _NUM, "minItems": 3, "maxItems": 3}
+_FIELDS: dict[str, dict] = {
+    "state": {"ts": _NUM, "seq": _INT, "pos": _VEC3, "vel": _VEC3, "stall": _BOOL,
+              "driver": _STR, "truth": _VEC3},
+    "scan": {"ts": _NUM, "id": _INT, "min_angle": _NUM, "max_angle": _NUM, "resolution": _NUM,
+             "max_range": _NUM, "ranges": {"description": "bin: little-endian float32 ranges, m"},
+             "pose": _VEC3, "truth": _VEC3},
+    "driver": {"source": _STR, "ts": _NUM, "priority": _INT},
+    "cmd": {"vel": _VEC3, "state": _BOOL, "source": _STR, "scan_id": _INT, "ts": _NUM},
+    "label": {"scan_id": _INT, "action": _STR, "source": _STR, "ts": _NUM, "executed": _STR},
+    "notice": {"seq": _INT, "nodes": _INT, "height": _INT, "vectors": _INT,
+               "snapshot_id": _STR, "ts": _NUM},
+    "world": {"name": _STR, "task": _STR, "walls": {"type": "array"},
+              "goal": {"type": "array"}, "starts": {"type": "array"}},
+    "alive": {"key": _STR, "alive": _BOOL},
+    "other": {},
+}
+
+
+def schema_name(kind: str) -> str:
+    return f"rhbl.v{PROTOCOL_VERSION}.{KINDS[kind][1]}"
+
+
+def _schema_data(kind: str) -> bytes:
+    doc = {
+        "title": schema_name(kind),
+        "description": (f"rhbl wire protocol version {PROTOCOL_VERSION} (docs/protocol.md): a "
+                        f"msgpack map, as published on the bus"),
+        "type": "object",
+        "properties": {"v": {"const": PROTOCOL_VERSION}, **_FIELDS[kind]},
+    }
+    return json.dumps(doc).encode()
+
+
+class RecordingError(Exception):
+    """A recording that cannot be written or read: the message names the file and the reason."""
+
+
+def classify(key: str) -> tuple[str, str]:
+    """(kind, robot) of a bus key; robot "" for keys of no robot (a server's token)."""
+    parts = str(key).split("/")
+    if len(parts) < 3 or parts[0] != keys.PREFIX:
+        return "other", ""
+    if parts[1] == "alive":
+        ident = parts[3] if len(parts) > 3 else ""
+        return "alive", ident.split("-", 1)[0] if "-" in ident else ""
+    robot, rest = parts[1], parts[2:]
+    if rest[:1] == ["position2d"] and rest[2:4] == ["data", "state"]:
+        return "state", robot
+    if rest[:1] == ["position2d"] and rest[2:4] == ["data", "driver"]:
+        return "driver", robot
+    if rest[:1] == ["laser"] and rest[2:4] == ["data", "scan"]:
+        return "scan", robot
+    if rest[:1] == ["position2d"] and rest[2:4] == ["cmd", "vel"]:
+        return "cmd", robot
+    if rest == ["teacher", "action"]:
+        return "label", robot
+    if rest == ["learner", "notice"]:
+        return "notice", robot
+    if rest == ["sim", "req", "get_world"]:
+        return "world", robot
+    return "other", robot
+
+
+def decode(kind: str, data: bytes):
+    """The protocol message of a payload (``protocol.messages``), or raise its DecodeError;
+    for ``alive``: the map ``{v, key, alive}``."""
+    cls = KINDS[kind][0]
+    if cls is None:
+        return msgpack.unpackb(data)
+    return cls.decode(data)
+
+
+def alive_payload(key: str, alive: bool) -> bytes:
+    return msgpack.packb({"v": PROTOCOL_VERSION, "key": str(key), "alive": bool(alive)})
+
+
+# ---- writing ------------------------------------------------------------------------------
+class RecordingWriter:
+    """An MCAP file being written: raw bus messages plus viewer channels.
+
+    Not thread-safe: one thread writes (``BusRecorder`` funnels the zenoh callbacks into one).
+    Any error writing (a full disk) stops the writer with ``RecordingError``; the file is cut
+    back to the end of its last complete chunk, which standard readers read.
+    """
+
+    def __init__(self, path: str | os.PathLike, *, overwrite: bool = False, viewer: bool = True,
+                 recorder: str = "rhbl record", chunk_seconds: float = CHUNK_SECONDS,
+                 chunk_size: int = CHUNK_SIZE, metadata: dict | None = None):
+        from mcap.writer import CompressionType, Writer
+
+        self.path = Path(path)
+        self.chunk_seconds = float(chunk_seconds)
+        flags = os.O_WRONLY | os.O_CREAT | (os.O_TRUNC if overwrite else os.O_EXCL)
+        try:
+            if self.path.parent and not self.path.parent.exists():
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(self.path, flags, 0o644)
+        except FileExistsError:
+            raise RecordingError(f"{self.path} exists: choose another file or pass --overwrite "
+                                 f"(a recording is never replaced silently)") from None
+        except OSError as exc:
+            raise RecordingError(f"cannot create the recording {self.path}: "
+                                 f"{exc.strerror or exc}") from exc
+        self._file = _Out(fd)
+        self._writer = Writer(self._file, chunk_size=chunk_size,
+                              compression=CompressionType.ZSTD)
+        self.failed: RecordingError | None = None
+        self.closed = False
+        self.messages = 0
+        self.counts: dict[str, int] = defaultdict(int)
+        self._channels: dict[str, int] = {}
+        self._schemas: dict[str, int] = {}
+        self._sim: dict[str, float] = {}  # robot -> latest sim time
+        self._good = 0  # file offset after the last complete chunk
+        self._good_messages = 0
+        self._last_flush = time.monotonic()
+        self.feed = None
+        if viewer:
+            from client.viewer import ViewerFeed
+
+            self.feed = ViewerFeed()
+        self._guard(self._start, recorder, metadata or {})
+
+    def _start(self, recorder: str, metadata: dict) -> None:
+        self._writer.start(profile="", library=f"rhbl protocol v{PROTOCOL_VERSION} (python mcap)")
+        meta = {"protocol_version": str(PROTOCOL_VERSION), "recorder": recorder,
+                "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+                "message_encoding": ENCODING, "viewer_channels": str(self.feed is not None)}
+        meta.update({str(k): str(v) for k, v in metadata.items()})
+        self._writer.add_metadata("rhbl", meta)
+        self._writer.flush()
+        self._good = self._file.tell()
+
+    # -- errors --
+    def _guard(self, fn, *a):
+        if self.failed is not None:
+            raise self.failed
+        try:
+            return fn(*a)
+        except OSError as exc:
+            self._fail(exc)
+
+    def _fail(self, exc: OSError):
+        why = {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is used up",
+               errno.EFBIG: "the file reached its size limit"}.get(exc.errno,
+                                                                   exc.strerror or str(exc))
+        with contextlib.suppress(OSError):
+            os.ftruncate(self._file.fd, self._good)
+        self._file.close()
+        self.failed = RecordingError(
+            f"cannot write the recording {self.path}: {why} ({exc}). Recording stopped; the file "
+            f"keeps the {self._good_messages} bus messages up to its last complete chunk "
+            f"({self._good} bytes), readable by MCAP readers (it has no summary: readers scan it)")
+        self.closed = True
+        raise self.failed from exc
+
+    # -- channels --
+    def _channel(self, topic: str, sname: str, sencoding: str, sdata: bytes,
+                 encoding: str) -> int:
+        cid = self._channels.get(topic)
+        if cid is None:
+            sid = self._schemas.get(sname)
+            if sid is None:
+                sid = self._schemas[sname] = self._writer.register_schema(sname, sencoding, sdata)
+            cid = self._channels[topic] = self._writer.register_channel(topic, encoding, sid)
+        return cid
+
+    # -- messages --
+    def write(self, key: str, data: bytes, recv_ns: int, kind: str | None = None,
+              robot: str | None = None, sim_time: float | None = None) -> None:
+        """Record one bus message (the payload as received) and its viewer messages."""
+        self._guard(self._write, key, bytes(data), int(recv_ns), kind, robot, sim_time)
+
+    def _write(self, key, data, recv_ns, kind, robot, sim_time):
+        if kind is None:
+            kind, robot = classify(key)
+        msg = None
+        if kind != "other":
+            try:
+                msg = decode(kind, data)
+            except Exception:  # noqa: BLE001 - a malformed message is still recorded, raw
+                msg = None
+        if sim_time is None:
+            ts = getattr(msg, "ts", None) if kind in ("state", "scan", "driver", "cmd",
+                                                      "label") else None
+            if ts is not None:
+                sim_time = float(ts)
+                if kind in ("state", "scan"):
+                    self._sim[robot] = sim_time
+            else:
+                sim_time = self._sim.get(robot, 0.0)
+        cid = self._channels.get(key)
+        if cid is None:
+            cid = self._channel(key, schema_name(kind), "jsonschema", _schema_data(kind),
+                                ENCODING)
+        self._writer.add_message(cid, log_time=recv_ns, data=data,
+                                 publish_time=max(0, int(round(sim_time * 1e9))),
+                                 sequence=self.counts[key] + 1)
+        self.counts[key] += 1
+        self.messages += 1
+        if self.feed is not None and msg is not None:
+            try:
+                vms = self.feed.update(kind, robot, msg, recv_ns)
+            except Exception as exc:  # noqa: BLE001 - a viewer glitch never stops a recording
+                log.debug("viewer conversion of %s failed: %s", key, exc)
+                vms = []
+            for vm in vms:
+                vc = self._channels.get(vm.topic) or self._channel(vm.topic, vm.schema_name, vm.schema_encoding, vm.schema_data,
+                                   vm.encoding)
+                self._writer.add_message(vc, log_time=vm.time_ns, data=vm.data,
+                                         publish_time=max(0, int(round(sim_time * 1e9))))
+        self.maybe_flush()
+
+    def write_alive(self, key: str, alive: bool, recv_ns: int) -> None:
+        self.write(key, alive_payload(key, alive), recv_ns, "alive", classify(key)[1])
+
+    def maybe_flush(self, now: float | None = None) -> None:
+        """Close the chunk in progress when it is ``chunk_seconds`` old (called by ``write``;
+        call it when idle too)."""
+        now = time.monotonic() if now is None else now
+        if now - self._last_flush >= self.chunk_seconds:
+            self.flush()
+
+    def flush(self) -> None:
+        """Close the chunk in progress and hand it to the kernel (SIGKILL-safe from then)."""
+        if self.closed:
+            return
+
+        def go():
+            self._writer.flush()
+            self._good = self._file.tell()
+            self._good_messages = self.messages
+
+        self._guard(go)
+        self._last_flush = time.monotonic()
+
+    def close(self) -> None:
+        """Finish the file (summary, indexes, footer) and close it."""
+        if self.closed:
+            return
+
+        def go():
+            self._writer.finish()
+            os.fsync(self._file.fd)
+            self._file.close()
+
+        self._guard(go)
+        self.closed = True
+
+    def __enter__(self) -> RecordingWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class _Out:
+    """The file the MCAP writer writes to, unbuffered: every write the writer makes (a whole
+    chunk, a record group) is in the kernel when it returns, so a SIGKILL loses nothing the
+    writer wrote, and after a failed write nothing buffered here can land in the file later."""
+
+    def __init__(self, fd: int):
+        self.fd = fd
+        self.pos = 0
+
+    def write(self, data) -> int:
+        view = memoryview(data)
+        while view:
+            n = os.write(self.fd, view)
+            self.pos += n
+            view = view[n:]
+        return len(data)
+
+    def tell(self) -> int:
+        return self.pos
+
+    def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        if self.fd >= 0:
+            with contextlib.suppress(OSError):
+                os.close(self.fd)
+            self.fd = -1
+
+
+# ---- recording a bus ----------------------------------------------------------------------
+class BusRecorder:
+    """Records a zenoh session's view of the robots' keys into a ``RecordingWriter``.
+
+    The subscribers' callbacks only timestamp and queue the payload; one thread writes (and
+    closes a chunk every second even when the bus is quiet). ``robots`` None: every robot.
+    """
+
+    def __init__(self, session, writer: RecordingWriter, robots: list[str] | None = None,
+                 world: bool = True):
+        self.session = session
+        self.writer = writer
+        self.robots = list(robots) if robots else None
+        self.error: RecordingError | None = None
+        self.seen_robots: set[str] = set()
+        self._world = world
+        self._q: queue.SimpleQueue = queue.SimpleQueue()
+        self._stop = threading.Event()
+        self.max_backlog = 0
+        self._warned = 0.0
+        exprs = [f"{keys.PREFIX}/{r}/**" for r in self.robots] if self.robots \
+            else [f"{keys.PREFIX}/**"]
+        self._subs = [session.declare_subscriber(e, self._on_sample) for e in exprs]
+        self._subs.append(session.liveliness().declare_subscriber(
+            f"{keys.PREFIX}/alive/**", self._on_alive, history=True))
+        self._thread = threading.Thread(target=self._loop, name="recorder-writer", daemon=True)
+        self._thread.start()
+
+    def _on_sample(self, sample) -> None:
+        key = str(sample.key_expr)
+        if key.startswith(f"{keys.PREFIX}/alive/"):
+            return
+        self._q.put((key, sample.payload.to_bytes(), time.time_ns(), None))
+
+    def _on_alive(self, sample) -> None:
+        import zenoh
+
+        self._q.put((str(sample.key_expr), None, time.time_ns(),
+                     sample.kind == zenoh.SampleKind.PUT))
+
+    def _fetch_world(self, robot: str) -> None:
+        try:
+            for reply in self.session.get(keys.sim_request_key(robot, "get_world"), timeout=2.0):
+                if reply.ok is not None:
+                    self._q.put((keys.sim_request_key(robot, "get_world"),
+                                 reply.ok.payload.to_bytes(), time.time_ns(), None))
+                    return
+        except Exception as exc:  # noqa: BLE001 - not a simulator, or the session closing
+            log.debug("no world for robot %s: %s", robot, exc)
+
+    def _loop(self) -> None:
+        w = self.writer
+        while True:
+            try:
+                item = self._q.get(timeout=0.2)
+            except queue.Empty:
+                if self._stop.is_set():
+                    return
+                item = None
+            try:
+                if item is None:
+                    w.maybe_flush()
+                    continue
+                key, data, t, alive = item
+                if data is None:
+                    w.write_alive(key, alive, t)
+                else:
+                    kind, robot = classify(key)
+                    if (self._world and robot and kind != "world"
+                            and robot not in self.seen_robots):
+                        self.seen_robots.add(robot)
+                        threading.Thread(target=self._fetch_world, args=(robot,),
+                                         daemon=True).start()
+                    w.write(key, data, t, kind, robot)
+                n = self._q.qsize()
+                if n > self.max_backlog:
+                    self.max_backlog = n
+                if n > BACKLOG_WARN and time.monotonic() - self._warned >= 10.0:
+                    self._warned = time.monotonic()
+                    log.warning("the recorder falls behind: %d messages wait to be written "
+                                "(all kept, in memory)", n)
+            except RecordingError as exc:
+                self.error = exc
+                log.error("%s", exc)
+                self._stop.set()
+                return
+
+    @property
+    def failed(self) -> bool:
+        return self.error is not None
+
+    def close(self) -> RecordingError | None:
+        """Stop subscribing, write what arrived, finish the file; the error, if any."""
+        for s in self._subs:
+            with contextlib.suppress(Exception):
+                s.undeclare()
+        self._stop.set()
+        self._thread.join()
+        if self.error is None:
+            try:
+                self.writer.close()
+            except RecordingError as exc:
+                self.error = exc
+        return self.error
+
+
+# ---- reading ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RecordedMessage:
+    key: str  # the topic: the bus key (or a viewer topic)
+    kind: str  # classify(key)[0]; "viewer" for viewer channels
+    robot: str
+    data: bytes
+    log_time: int  # ns: receive time
+    publish_time: int  # ns: sim time
+    encoding: str
+    schema: str
+
+    @property
+    def sim_time(self) -> float:
+        return self.publish_time / 1e9
+
+    def message(self):
+        return decode(self.kind, self.data)
+
+
+def read_recording(path: str | os.PathLike, viewer: bool = False,
+                   notes: list | None = None) -> Iterator[RecordedMessage]:
+    """The messages of a recording in file order (= the order they were received). A file
+    that was not closed (a recorder killed) is read up to its last complete chunk; ``notes``
+    gets a line saying so. Raises ``RecordingError`` naming the file for anything else."""
+    from mcap.reader import NonSeekingReader
+
+    path = Path(path)
+    try:
+        f = open(path, "rb")  # noqa: SIM115 - closed below
+    except OSError as exc:
+        raise RecordingError(f"cannot open the recording {path}: {exc.strerror or exc}") from exc
+    n = 0
+    with f:
+        if os.fstat(f.fileno()).st_size == 0:
+            raise RecordingError(f"{path} is empty: not an MCAP recording")
+        try:
+            reader = NonSeekingReader(f, validate_crcs=True)
+            for schema, channel, m in reader.iter_messages(log_time_order=False):
+                if channel.message_encoding != ENCODING:
+                    if not viewer:
+                        continue
+                    kind, robot = "viewer", ""
+                else:
+                    kind, robot = classify(channel.topic)
+                n += 1
+                yield RecordedMessage(channel.topic, kind, robot, m.data, m.log_time,
+                                      m.publish_time, channel.message_encoding,
+                                      schema.name if schema else "")
+        except Exception as exc:  # noqa: BLE001 - McapError, zstd/lz4 errors, EOF, ...
+            name = type(exc).__name__
+            if "InvalidMagic" in name:
+                raise RecordingError(f"{path} is not an MCAP recording ({name}: {exc})") from exc
+            if "EndOfFile" in name or isinstance(exc, EOFError):
+                line = (f"{path} ends after {n} messages without its summary: it was not closed "
+                        f"(a recorder killed, a full disk?); read up to its last complete chunk")
+                log.warning("%s", line)
+                if notes is not None:
+                    notes.append(line)
+                return
+            raise RecordingError(f"{path} is damaged after {n} messages (at byte {f.tell()}): "
+                                 f"{name}: {exc}") from exc
+
+
+def recording_summary(path: str | os.PathLike) -> dict:
+    """What a recording holds (``rhbl inspect``): robots, keys and counts, the sim-time span,
+    teacher labels per action, gaps in the scan stream, the metadata."""
+    from mcap.reader import NonSeekingReader
+
+    notes: list[str] = []
+    keys_: dict[str, dict] = {}
+    robots: dict[str, dict] = {}
+    viewer: dict[str, int] = defaultdict(int)
+    labels: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
+    last_scan: dict[str, tuple[int, float]] = {}
+    gaps: list[dict] = []
+    t_first = t_last = None
+    for m in read_recording(path, viewer=True, notes=notes):
+        if m.kind == "viewer":
+            viewer[m.key] += 1
+            continue
+        k = keys_.setdefault(m.key, {"kind": m.kind, "schema": m.schema, "messages": 0})
+        k["messages"] += 1
+        t_first = m.log_time if t_first is None else min(t_first, m.log_time)
+        t_last = m.log_time if t_last is None else max(t_last, m.log_time)
+        if not m.robot or m.kind == "alive":
+            continue
+        r = robots.setdefault(m.robot, {"sim_start": None, "sim_end": None, "scans": 0})
+        if m.kind in ("scan", "state"):
+            s = m.sim_time
+            r["sim_start"] = s if r["sim_start"] is None else min(r["sim_start"], s)
+            r["sim_end"] = s if r["sim_end"] is None else max(r["sim_end"], s)
+        if m.kind == "scan":
+            r["scans"] += 1
+            try:
+                scan = m.message()
+            except Exception:  # noqa: BLE001
+                continue
+            prev = last_scan.get(m.robot)
+            if prev is not None and scan.id > prev[0] + 1:
+                gaps.append({"robot": m.robot, "after_scan": prev[0], "missing": scan.id - prev[0] - 1,
+                             "sim_time": round(prev[1], 3)})
+            last_scan[m.robot] = (scan.id, scan.ts)
+        elif m.kind == "label":
+            try:
+                labels[m.robot][m.message().action] += 1
+            except Exception:  # noqa: BLE001
+                labels[m.robot]["<malformed>"] += 1
+    meta = {}
+    try:
+        with open(path, "rb") as f:
+            for rec in NonSeekingReader(f).iter_metadata():
+                if rec.name == "rhbl":
+                    meta = dict(rec.metadata)
+    except Exception:  # noqa: BLE001 - an unclosed file: metadata still read above if present
+        pass
+    return {"path": str(path), "metadata": meta, "robots": robots, "keys": keys_,
+            "viewer": dict(viewer), "labels": {r: dict(v) for r, v in labels.items()},
+            "gaps": gaps, "notes": notes,
+            "wall_seconds": (t_last - t_first) / 1e9 if t_first is not None else 0.0}
