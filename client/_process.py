@@ -25,6 +25,7 @@ import os
 import threading
 import time
 from collections.abc import Callable
+from typing import Any
 
 import zenoh
 
@@ -90,25 +91,35 @@ def server_alive(session: zenoh.Session, timeout: float = 1.0) -> list[str]:
 
 def wait_for_server(ctx: Context, timeout: float | None = None,
                     got: threading.Event | None = None,
-                    stop: Callable[[], bool] | None = None) -> None:
+                    stop: Callable[[], bool] | None = None, ring: Any = None) -> Any:
     """Block until the robot's first scan arrives; ProcessError(EXIT_NO_SERVER) after timeout.
     Returns early, quietly, when ``stop()`` says so (a process whose signals set a flag).
 
     ``got``: an event the caller's own scan subscription sets (``ScanWatch.first``). Pass it
     when that subscription was declared before the process announced itself: a subscription
     declared here, later, could miss a scan sent as soon as the token was seen.
+    ``ring``: the caller's own scan subscriber with a channel handler (``RingChannel``): the
+    wait takes the first scan from it and returns that sample, for the caller to answer (a
+    lock-step sender waits for that answer before it sends another scan).
     Logs what it is waiting for every few seconds, so a process never waits silently.
     """
     timeout = ctx.args.wait_server if timeout is None else timeout
     key = keys.scan_key(ctx.robot)
-    sub = None
-    if got is None:
+    sub = first = None
+    if ring is not None:
+        got = threading.Event()
+    elif got is None:
         got = threading.Event()
         sub = ctx.session.declare_subscriber(key, lambda _s: got.set())
     try:
         t0 = time.monotonic()
         next_note = t0 + 2.0
-        while not got.wait(0.05):
+        while not got.wait(0 if ring is not None else 0.05):
+            if ring is not None:
+                first = ring.handler.try_recv()
+                if first is not None:
+                    break
+                time.sleep(0.01)
             if stop is not None and stop():
                 return
             now = time.monotonic()
@@ -134,6 +145,7 @@ def wait_for_server(ctx: Context, timeout: float | None = None,
         if sub is not None:
             sub.undeclare()
     log.info("server is up: scans arrive on %s", key)
+    return first
 
 
 def learners_alive(session: zenoh.Session, robot: str, timeout: float = 1.0) -> list[str]:

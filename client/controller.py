@@ -149,11 +149,13 @@ class ControllerProcess:
                  self.policy.features.to_dict())
         if self.follower is not None:
             self.follower.start()
-        wait_for_server(self.ctx)
+        # the first scan is taken from the controller's own subscription and answered: a
+        # lock-step server or replay sends no other scan until it has that answer
+        first = wait_for_server(self.ctx, ring=self.sub)
         self.watch.start()
         try:
-            while self.step():
-                pass
+            while self.step(first):
+                first = None
         finally:
             self.watch.stop()
             log.info("controller stopped after %d commands", self.n)
@@ -198,9 +200,10 @@ class ControllerProcess:
             else:
                 time.sleep(1.0)
 
-    def step(self) -> bool:
-        """Answer the next scan; False when done (``--seconds``)."""
-        sample = self.sub.handler.recv()
+    def step(self, sample: zenoh.Sample | None = None) -> bool:
+        """Answer ``sample`` or the next scan; False when done (``--seconds``)."""
+        if sample is None:
+            sample = self.sub.handler.recv()
         self.watch.seen()
         scan = decode_scan(sample.payload.to_bytes())
         if scan is None:

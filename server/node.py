@@ -221,7 +221,7 @@ class ServerNode:
                 r.arbiter.offer(msg.source, msg.vx, msg.va, msg.state, now)
                 if msg.scan_id is not None:
                     r.answers[msg.source] = msg.scan_id
-                self.counters["cmd"] += 1
+                self.counters["cmd_accepted"] += 1
                 self._cond.notify_all()
         except DecodeError as e:
             self._reject("cmd", f"{sample.key_expr}: {e}")

@@ -189,14 +189,19 @@ def test_hostile_messages_are_survived(session, corridor):
     lis = Listener(session)
     lis.wait(lambda: lis.state is not None and lis.state.vel == (0.0, 0.0, 0.0))
     pose0 = lis.state.truth
+    # puts block rather than drop when the link is busy (the 100 kB payloads fill it on a loaded
+    # machine), so every message below reaches the server and the count awaited is exact
+    block = zenoh.CongestionControl.BLOCK
     for _ in range(3):
         for payload in HOSTILE:
-            session.put(keys.cmd_vel_key("r0"), payload)
-            session.put(keys.cmd_vel_key("r0", source="controller"), payload)
+            session.put(keys.cmd_vel_key("r0"), payload, congestion_control=block)
+            session.put(keys.cmd_vel_key("r0", source="controller"), payload,
+                        congestion_control=block)
         # a valid message on a per-source key that names another source: impersonation
         session.put(
             keys.cmd_vel_key("r0", source="controller"),
             VelCmd(vx=0.5, source="teacher").encode(),
+            congestion_control=block,
         )
     # requests with hostile payloads on every queryable
     for iface, name in [("position2d", "set_odom"), ("position2d", "motor_power")]:
