@@ -290,7 +290,7 @@ def test_correct_mode_takes_over_and_hands_back_to_a_following_controller(env, b
         w.wait(lambda w: any(d.snapshot_id.endswith(f":{total}") for d in decisions[-20:]),
                30, "the controller decides with the grown tree")
         assert ctl.poll() is None, ctl.output()
-        assert "swapped in a newer tree" in ctl.output()
+        assert ctl.wait_for_line("swapped in a newer tree", 5), ctl.output()  # 5 s: the pipe
         # watch: keys neither drive nor teach
         _mode(browser, "watch")
         mark, seq = len(w.labels), w.state.seq

@@ -214,7 +214,7 @@ def test_controller_drives_without_collision(env):
             assert t.wait(120) == 0, t.output()
             labels += _labels(t)
     _wait_journal(out, n0 + labels)
-    assert "swapped in a newer tree" in follow.output(), follow.output()
+    assert follow.wait_for_line("swapped in a newer tree", 5), follow.output()  # 5 s: the pipe
     assert follow.stop() == 0, follow.output()
     assert learner.stop() == 0, learner.output()
     # the corrected tree drives from the world's start pose, as the recipe is measured (the
