@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import os
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -33,29 +32,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from client.recording import RecordingError, RecordingWriter, read_recording  # noqa: E402
+from lab.processes import Child, free_port, rhbl_argv  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, State, TeacherAction, VelCmd  # noqa: E402
 
 ENV = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _wait_port(ep: str, timeout: float = 60.0) -> None:
-    """Until the server's endpoint accepts TCP connections."""
-    host, port = ep.split("/", 1)[1].rsplit(":", 1)
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        try:
-            socket.create_connection((host, int(port)), timeout=1.0).close()
-            return
-        except OSError:
-            time.sleep(0.1)
-    raise RuntimeError(f"no server on {ep} within {timeout} s")
 
 
 def _cpu(pid: int) -> float:
@@ -88,20 +69,14 @@ def writer_throughput(tmp: Path, n: int, viewer: bool) -> float:
     return n / (time.perf_counter() - t0)
 
 
-def _start(*args, log=None) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "lab.cli", *args], cwd=ROOT, env=ENV,
-                            stdout=log or subprocess.DEVNULL, stderr=subprocess.STDOUT,
-                            start_new_session=True)
-
-
-def _stop(p: subprocess.Popen, sig=signal.SIGINT) -> None:
-    if p.poll() is None:
-        os.kill(p.pid, sig)
-        try:
-            p.wait(30)
-        except subprocess.TimeoutExpired:
-            os.kill(p.pid, signal.SIGKILL)
-            p.wait(5)
+def _start(name: str, tmp: Path, *args: str, ready: str | None = None) -> Child:
+    """``rhbl ARGS...`` (output in ``tmp/<name>.log``); with ``ready``, until it printed a line
+    containing it. Stopped by PID: SIGTERM, then SIGKILL (30 s each)."""
+    child = Child(name, rhbl_argv(*args), tmp, env=ENV, cwd=ROOT, stop_timeout=30.0).start()
+    if ready is not None and not child.wait_for_line(ready, timeout=60):
+        child.stop()
+        raise RuntimeError(f"{name} did not say {ready!r} within 60 s:\n{child.tail()}")
+    return child
 
 
 def _wait_file(path: Path, timeout: float = 30.0) -> None:
@@ -117,30 +92,28 @@ def _wait_file(path: Path, timeout: float = 30.0) -> None:
 
 
 def live_bus(tmp: Path, seconds: float) -> dict:
-    ep = f"tcp/127.0.0.1:{_free_port()}"
-    srv = _start("server", "--world", "room", "--listen", ep, "--speedup", "0")
+    ep = f"tcp/127.0.0.1:{free_port()}"
     out = tmp / "bus.mcap"
-    procs = [srv]
+    procs = []
     try:
-        _wait_port(ep)
-        log = open(tmp / "rec.log", "wb")  # noqa: SIM115 - closed below
-        rec = _start("record", "--out", str(out), "--overwrite", "--connect", ep, "--robot", "r0",
-                     log=log)
+        srv = _start("server", tmp, "server", "--world", "room", "--listen", ep, "--speedup", "0",
+                     ready="listening on")
+        procs.append(srv)
+        rec = _start("rec", tmp, "record", "--out", str(out), "--overwrite", "--connect", ep,
+                     "--robot", "r0")
         procs.append(rec)
         _wait_file(out)
         c0, t0 = _cpu(rec.pid), time.monotonic()
         time.sleep(seconds)
         cpu = (_cpu(rec.pid) - c0) / (time.monotonic() - t0)
-        os.kill(srv.pid, signal.SIGTERM)  # the bus stops; the recorder writes what it holds
-        srv.wait(30)
+        srv.stop(signal.SIGTERM)  # the bus stops; the recorder writes what it holds
         t_stop = time.monotonic()
-        _stop(rec)
+        rec.stop(signal.SIGINT)
         drain = time.monotonic() - t_stop
-        log.close()
     finally:
         for p in procs:
-            _stop(p, signal.SIGTERM)
-    text = (tmp / "rec.log").read_text()
+            p.stop(signal.SIGTERM)
+    text = rec.output()
     backlog = int(text.split("at most ")[1].split()[0]) if "at most " in text else -1
     ids = [m.message().id for m in read_recording(out) if m.kind == "scan"]
     span = ids[-1] - ids[0] + 1
@@ -151,15 +124,16 @@ def live_bus(tmp: Path, seconds: float) -> dict:
 
 
 def lockstep_rate(tmp: Path, tree: Path, seconds: float, record: bool) -> float:
-    ep = f"tcp/127.0.0.1:{_free_port()}"
-    srv = _start("server", "--world", "room", "--listen", ep, "--lockstep")
-    procs = [srv]
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    procs = []
     try:
-        _wait_port(ep)
+        procs.append(_start("ls-server", tmp, "server", "--world", "room", "--listen", ep,
+                            "--lockstep", ready="listening on"))
         if record:
             out = tmp / "ls.mcap"
-            procs.append(_start("record", "--out", str(out), "--overwrite", "--connect", ep))
-            time.sleep(1.5)
+            # subscribed once it says it is recording
+            procs.append(_start("ls-rec", tmp, "record", "--out", str(out), "--overwrite",
+                                "--connect", ep, ready="recording "))
         import zenoh
 
         from protocol.session import make_config
@@ -168,7 +142,8 @@ def lockstep_rate(tmp: Path, tree: Path, seconds: float, record: bool) -> float:
         with zenoh.open(make_config(mode="client", connect=[ep])) as s:
             sub = s.declare_subscriber(keys.scan_key(), lambda smp: ids.append(
                 (time.monotonic(), Scan.decode(smp.payload.to_bytes()).id)))
-            procs.append(_start("controller", "--tree", str(tree), "--connect", ep))
+            procs.append(_start("ls-controller", tmp, "controller", "--tree", str(tree),
+                                "--connect", ep))
             end = time.monotonic() + 60
             while len(ids) < 20 and time.monotonic() < end:
                 time.sleep(0.05)
@@ -180,7 +155,7 @@ def lockstep_rate(tmp: Path, tree: Path, seconds: float, record: bool) -> float:
         return (b - a) / (t_b - t_a)
     finally:
         for p in reversed(procs):
-            _stop(p, signal.SIGTERM)
+            p.stop(signal.SIGTERM)
 
 
 def size_per_minute(tmp: Path) -> tuple[float, float]:

@@ -27,7 +27,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 __all__ = ["Child", "free_port", "rhbl_argv"]
@@ -54,12 +54,17 @@ class Child:
     started again keeps one log). ``env`` replaces the environment (default: this process's);
     ``PYTHONUNBUFFERED=1`` is added so Python children's lines arrive as they are printed.
     ``stop_signal`` is what :meth:`stop` sends first (SIGINT for a process that saves its work
-    on Ctrl-C).
+    on Ctrl-C) and ``stop_timeout`` how long it waits for each signal. ``escalate=False`` makes
+    :meth:`stop` go from that signal straight to SIGKILL (no SIGTERM in between), so an exit
+    status of 0 means the first signal alone ended the process (for tests of how it stops).
+    ``preexec_fn`` runs in the child before the command (e.g. to set a resource limit).
     """
 
     def __init__(self, name: str, argv: Sequence[str], logdir: Path | None = None, *,
                  env: Mapping[str, str] | None = None, cwd: str | Path | None = None,
-                 stop_signal: int = signal.SIGTERM, keep: int = 10_000) -> None:
+                 stop_signal: int = signal.SIGTERM, stop_timeout: float = 10.0,
+                 escalate: bool = True, preexec_fn: Callable[[], None] | None = None,
+                 keep: int = 10_000) -> None:
         if not argv:
             raise ValueError(f"{name}: empty command line")
         self.name = name
@@ -69,6 +74,9 @@ class Child:
         self.env.setdefault("PYTHONUNBUFFERED", "1")
         self.cwd = cwd
         self.stop_signal = stop_signal
+        self.stop_timeout = stop_timeout
+        self.escalate = escalate
+        self.preexec_fn = preexec_fn
         self.lines: collections.deque[str] = collections.deque(maxlen=keep)
         self.proc: subprocess.Popen | None = None
         self.rc: int | None = None
@@ -94,7 +102,7 @@ class Child:
             proc = subprocess.Popen(
                 self.argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL, env=self.env, cwd=self.cwd, start_new_session=True,
-                text=True, encoding="utf-8", errors="replace", bufsize=1)
+                preexec_fn=self.preexec_fn, text=True, encoding="utf-8", errors="replace", bufsize=1)
         except OSError:
             if logf is not None:
                 logf.close()
@@ -189,14 +197,16 @@ class Child:
         with contextlib.suppress(ProcessLookupError):
             os.kill(self.proc.pid, sig)
 
-    def stop(self, sig: int | None = None, timeout: float = 10.0) -> int | None:
-        """Send ``sig`` (default ``stop_signal``) by PID and wait ``timeout`` seconds; then
-        SIGTERM (if ``sig`` was gentler) and SIGKILL, each with its own wait. Returns the exit
-        status (None if never started)."""
+    def stop(self, sig: int | None = None, timeout: float | None = None) -> int | None:
+        """Send ``sig`` (default ``stop_signal``) by PID and wait ``timeout`` seconds (default
+        ``stop_timeout``); then SIGTERM (if ``sig`` was gentler and ``escalate``) and SIGKILL,
+        each with its own wait. Returns the exit status (None if never started)."""
         if self.proc is None:
             return None
         sig = self.stop_signal if sig is None else sig
-        steps = [sig] + [s for s in (signal.SIGTERM, signal.SIGKILL) if s != sig]
+        timeout = self.stop_timeout if timeout is None else timeout
+        later = (signal.SIGTERM, signal.SIGKILL) if self.escalate else (signal.SIGKILL,)
+        steps = [sig] + [s for s in later if s != sig]
         if sig == signal.SIGKILL:
             steps = [sig]
         for i, s in enumerate(steps):
@@ -208,6 +218,10 @@ class Child:
             self.send_signal(s)
             self.wait(timeout if s != signal.SIGKILL else max(timeout, 5.0))
         return self.poll()
+
+    def kill(self) -> int | None:
+        """SIGKILL by PID and wait for the exit (nothing if it already ended); its status."""
+        return self.stop(signal.SIGKILL)
 
     def __enter__(self) -> Child:
         return self.start() if self.proc is None else self

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import os
 import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -19,6 +18,7 @@ import pytest
 zenoh = pytest.importorskip("zenoh")
 
 from client.journal import Journal, journal_path  # noqa: E402
+from lab.processes import Child  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, TeacherAction  # noqa: E402
 from protocol.session import make_config  # noqa: E402
@@ -44,7 +44,7 @@ sys.exit(main(sys.argv[1:]))
 """
 
 
-def _wait(cond, timeout: float, what: str, proc=None, log=None) -> None:
+def _wait(cond, timeout: float, what: str, proc: Child | None = None) -> None:
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         if cond():
@@ -52,7 +52,7 @@ def _wait(cond, timeout: float, what: str, proc=None, log=None) -> None:
         if proc is not None and proc.poll() is not None:
             break
         time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}:\n{log.read_text() if log else ''}")
+    raise AssertionError(f"timed out waiting for {what}:\n{proc.output() if proc else ''}")
 
 
 def _records(out: Path) -> list[int]:
@@ -67,22 +67,19 @@ def test_disk_full_keeps_labels_in_memory_and_journals_them_later(free_port, tmp
     endpoint = f"tcp/127.0.0.1:{port}"
     out = tmp_path / "t.rhbl"
     flag = tmp_path / "full"
-    log = tmp_path / "learner.log"
     rng = np.random.default_rng(0)
     with zenoh.open(make_config(mode="router", listen=[endpoint])) as session:
         scan_pub = session.declare_publisher(keys.scan_key("r0"))
         act_pub = session.declare_publisher(keys.teacher_action_key("r0"))
-        with open(log, "wb") as f:
-            proc = subprocess.Popen(
-                [sys.executable, "-c", _WRAPPER, "learner", "--features", "wall", "--out",
-                 str(out), "--connect", endpoint, "--snapshot-every", "0.2"],
-                cwd=ROOT, stdout=f, stderr=subprocess.STDOUT, start_new_session=True,
-                env={**os.environ, "PYTHONUNBUFFERED": "1", "FULL_FLAG": str(flag)})
+        proc = Child("learner", [sys.executable, "-c", _WRAPPER, "learner", "--features", "wall",
+                                 "--out", str(out), "--connect", endpoint, "--snapshot-every",
+                                 "0.2"], tmp_path, cwd=ROOT,
+                     env={**os.environ, "FULL_FLAG": str(flag)}).start()
         try:
             token = keys.alive_key("learner", f"r0-{proc.pid}")
             _wait(lambda: any(r.ok is not None
                               for r in session.liveliness().get(token, timeout=0.5)),
-                  30, "the learner's token", proc, log)
+                  30, "the learner's token", proc)
             sid = 0
 
             def teach(n: int, beams: int = 360) -> list[int]:
@@ -98,26 +95,23 @@ def test_disk_full_keeps_labels_in_memory_and_journals_them_later(free_port, tmp
                 return ids
 
             first = teach(5)
-            _wait(lambda: _records(out) == first, 20, "the first records", proc, log)
+            _wait(lambda: _records(out) == first, 20, "the first records", proc)
             flag.write_text("")  # the disk is full
             bad = teach(1, beams=1)  # a scan the features cannot use: dropped, no crash
             held = teach(20)
-            _wait(lambda: "cannot write the journal" in log.read_text(), 20,
-                  "the journal error", proc, log)
+            assert proc.wait_for_line("cannot write the journal", 20), (
+                f"timed out waiting for the journal error:\n{proc.output()}")
             time.sleep(0.5)
-            assert proc.poll() is None, log.read_text()
+            assert proc.poll() is None, proc.output()
             assert _records(out) == first
             flag.unlink()  # space is back
             later = teach(5)
-            _wait(lambda: _records(out) == first + held + later, 20, "all the records",
-                  proc, log)
-            os.kill(proc.pid, signal.SIGINT)
-            assert proc.wait(30) == 0, log.read_text()
+            _wait(lambda: _records(out) == first + held + later, 20, "all the records", proc)
+            proc.send_signal(signal.SIGINT)
+            assert proc.wait(30) == 0, proc.output()
         finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait(10)
-    text = log.read_text()
+            proc.kill()  # nothing if it ended
+    text = proc.output()
     assert f"scan {bad[0]} dropped" in text, text
     assert "the journal is writable again" in text, text
     assert "Traceback" not in text, text
@@ -154,7 +148,6 @@ def test_a_flood_of_scans_keeps_a_slow_learner_bounded_and_every_label_learned(f
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     out = tmp_path / "t.rhbl"
-    log = tmp_path / "learner.log"
     rng = np.random.default_rng(0)
     ranges = [rng.uniform(0.3, 3.0, 360).astype(np.float32) for _ in range(8)]
     n, every = 30_000, 100
@@ -163,23 +156,23 @@ def test_a_flood_of_scans_keeps_a_slow_learner_bounded_and_every_label_learned(f
         scan_pub = session.declare_publisher(keys.scan_key("r0"), congestion_control=block)
         act_pub = session.declare_publisher(keys.teacher_action_key("r0"),
                                             congestion_control=block)
-        with open(log, "wb") as f:
-            proc = subprocess.Popen(
-                # the flood runs ~1000x a server's 10 Hz: the default 512-scan pairing buffer
-                # is 50 s of a real robot but only ~50 ms here, less than one scheduling hiccup
-                # of a loaded CI machine between a scan's and its label's callbacks; 2048 scans
-                # (~3 MB) keeps the same tolerance in time and memory still bounded
-                [sys.executable, "-c", _SLOW, "learner", "--features", "wall", "--out",
-                 str(out), "--connect", endpoint, "--scan-buffer", "2048"],
-                cwd=ROOT, stdout=f, stderr=subprocess.STDOUT, start_new_session=True,
-                env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        proc = Child(
+            "learner",
+            # the flood runs ~1000x a server's 10 Hz: the default 512-scan pairing buffer
+            # is 50 s of a real robot but only ~50 ms here, less than one scheduling hiccup
+            # of a loaded CI machine between a scan's and its label's callbacks; 2048 scans
+            # (~3 MB) keeps the same tolerance in time and memory still bounded
+            [sys.executable, "-c", _SLOW, "learner", "--features", "wall", "--out",
+             str(out), "--connect", endpoint, "--scan-buffer", "2048"],
+            tmp_path, cwd=ROOT).start()
         try:
             token = keys.alive_key("learner", f"r0-{proc.pid}")
             _wait(lambda: any(r.ok is not None
                               for r in session.liveliness().get(token, timeout=0.5)),
-                  30, "the learner's token", proc, log)
+                  30, "the learner's token", proc)
             scan_pub.put(Scan(ts=0.0, id=0, ranges=ranges[0]).encode())  # the server is up
-            _wait(lambda: "server is up" in log.read_text(), 20, "the first scan", proc, log)
+            assert proc.wait_for_line("server is up", 20), (
+                f"timed out waiting for the first scan:\n{proc.output()}")
             time.sleep(0.5)
             before = peak = _rss_mb(proc.pid)
             for sid in range(1, n + 1):
@@ -193,14 +186,12 @@ def test_a_flood_of_scans_keeps_a_slow_learner_bounded_and_every_label_learned(f
                 time.sleep(0.1)
             assert peak - before < 20, (before, peak)
             labeled = list(range(every, n + 1, every))
-            _wait(lambda: _records(out) == labeled, 60, "every label learned", proc, log)
-            os.kill(proc.pid, signal.SIGINT)
-            assert proc.wait(30) == 0, log.read_text()
+            _wait(lambda: _records(out) == labeled, 60, "every label learned", proc)
+            proc.send_signal(signal.SIGINT)
+            assert proc.wait(30) == 0, proc.output()
         finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait(10)
-    text = log.read_text()
+            proc.kill()  # nothing if it ended
+    text = proc.output()
     assert " 0 unmatched labels" in text and " 0 lost)" in text, text
     assert f"{n + 1} scans received" in text, text
     assert "Traceback" not in text, text

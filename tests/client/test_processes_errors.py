@@ -4,7 +4,6 @@ a tree that does not fit, scans that stop. Each runs a real process for a second
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -17,6 +16,7 @@ import pytest
 zenoh = pytest.importorskip("zenoh")
 
 from client._process import EXIT_NO_SERVER, EXIT_UNREACHABLE, EXIT_USAGE  # noqa: E402
+from lab.processes import Child, rhbl_argv  # noqa: E402
 from protocol.session import make_config  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
@@ -85,27 +85,16 @@ def test_controller_refuses_a_tree_with_other_features(start_server, tmp_path):
 
 def test_controller_reports_when_scans_stop(start_server, tmp_path):
     srv = start_server("room", speedup=1)
-    log = tmp_path / "c.log"
-    with open(log, "wb") as f:
-        p = subprocess.Popen([sys.executable, "-m", "lab.cli", "controller", "--connect",
-                              srv.endpoint, "--tree", str(_tree(tmp_path))], stdout=f,
-                             stderr=subprocess.STDOUT, cwd=ROOT, start_new_session=True,
-                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    p = Child("controller", rhbl_argv("controller", "--connect", srv.endpoint, "--tree",
+                                      str(_tree(tmp_path))), tmp_path, cwd=ROOT).start()
     try:
-        end = time.monotonic() + 30
-        while "server is up" not in log.read_text() and time.monotonic() < end:
-            time.sleep(0.1)
+        p.wait_for_line("server is up", 30)
         srv.stop()
-        end = time.monotonic() + 10
-        while "not commanding" not in log.read_text() and time.monotonic() < end:
-            time.sleep(0.1)
-        assert "no scan on rhbl/r0/laser/0/data/scan" in log.read_text()
-        os.kill(p.pid, signal.SIGTERM)
-        assert p.wait(20) == 0
+        p.wait_for_line("not commanding", 10)
+        assert "no scan on rhbl/r0/laser/0/data/scan" in p.output()
+        assert p.stop(signal.SIGTERM, 20) == 0  # SIGTERM, then SIGKILL (-9) after 20 s
     finally:
-        if p.poll() is None:
-            os.kill(p.pid, signal.SIGKILL)
-            p.wait(5)
+        p.kill()  # nothing if it ended
 
 
 def test_controller_survives_a_scan_its_tree_cannot_use(free_port, tmp_path):
@@ -115,47 +104,40 @@ def test_controller_survives_a_scan_its_tree_cannot_use(free_port, tmp_path):
     from protocol.messages import Scan, VelCmd
 
     ep = f"tcp/127.0.0.1:{free_port()}"
-    log = tmp_path / "c.log"
     answered: list[int] = []
     with zenoh.open(make_config(mode="router", listen=[ep])) as session:
         session.declare_subscriber(keys.cmd_vel_key("r0", source="controller"),
                                    lambda s: answered.append(
                                        VelCmd.decode(s.payload.to_bytes()).scan_id))
         pub = session.declare_publisher(keys.scan_key("r0"))
-        with open(log, "wb") as f:
-            p = subprocess.Popen([sys.executable, "-m", "lab.cli", "controller", "--connect", ep,
-                                  "--tree", str(_tree(tmp_path))], stdout=f,
-                                 stderr=subprocess.STDOUT, cwd=ROOT, start_new_session=True,
-                                 env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        p = Child("controller", rhbl_argv("controller", "--connect", ep, "--tree",
+                                          str(_tree(tmp_path))), tmp_path, cwd=ROOT).start()
         try:
             good = np.full(360, 2.0, np.float32)
 
             def until(cond, what):
                 end = time.monotonic() + 30
                 while not cond() and time.monotonic() < end:
-                    assert p.poll() is None, log.read_text()
+                    assert p.poll() is None, p.output()
                     time.sleep(0.05)
-                assert cond(), f"{what}:\n{log.read_text()}"
+                assert cond(), f"{what}:\n{p.output()}"
 
             sid = 0
             while not answered:  # the first scans also tell it the server is up
                 sid += 1
                 pub.put(Scan(ts=0.1 * sid, id=sid, ranges=good).encode())
-                assert p.poll() is None, log.read_text()
+                assert p.poll() is None, p.output()
                 time.sleep(0.1)
-                assert sid < 300, log.read_text()
+                assert sid < 300, p.output()
             bad_id = sid + 1
             pub.put(Scan(ts=0.1 * bad_id, id=bad_id, ranges=np.ones(1, np.float32)).encode())
-            until(lambda: "not answered" in log.read_text(), "the warning")
+            assert p.wait_for_line("not answered", 30), f"the warning:\n{p.output()}"
             pub.put(Scan(ts=0.1 * (bad_id + 1), id=bad_id + 1, ranges=good).encode())
             until(lambda: bad_id + 1 in answered, "the next scan answered")
             assert bad_id not in answered and p.poll() is None
-            os.kill(p.pid, signal.SIGTERM)
-            assert p.wait(20) == 0, log.read_text()
+            assert p.stop(signal.SIGTERM, 20) == 0, p.output()  # then SIGKILL (-9) after 20 s
         finally:
-            if p.poll() is None:
-                os.kill(p.pid, signal.SIGKILL)
-                p.wait(5)
+            p.kill()  # nothing if it ended
 
 
 def test_a_robot_name_that_is_not_a_key_chunk_is_bad_input():
@@ -193,25 +175,18 @@ def test_a_learner_waiting_for_the_server_stops_on_sigterm(free_port, tmp_path):
     from protocol import keys
 
     ep = f"tcp/127.0.0.1:{free_port()}"
-    log = tmp_path / "l.log"
     with zenoh.open(make_config(mode="router", listen=[ep])) as session:
-        with open(log, "wb") as f:
-            p = subprocess.Popen([sys.executable, "-m", "lab.cli", "learner", "--connect", ep,
-                                  "--features", "wall", "--out", str(tmp_path / "t.rhbl"),
-                                  "--wait-server", "0"], stdout=f, stderr=subprocess.STDOUT,
-                                 cwd=ROOT, start_new_session=True,
-                                 env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        p = Child("learner", rhbl_argv("learner", "--connect", ep, "--features", "wall", "--out",
+                                       str(tmp_path / "t.rhbl"), "--wait-server", "0"),
+                  tmp_path, cwd=ROOT).start()
         try:
             key = keys.alive_key("learner", f"r0-{p.pid}")
             end = time.monotonic() + 30
             while not any(r.ok is not None for r in session.liveliness().get(key, timeout=1.0)):
-                assert p.poll() is None and time.monotonic() < end, log.read_text()
+                assert p.poll() is None and time.monotonic() < end, p.output()
                 time.sleep(0.05)
-            os.kill(p.pid, signal.SIGTERM)
-            assert p.wait(10) == 0, log.read_text()
+            assert p.stop(signal.SIGTERM, 10) == 0, p.output()  # then SIGKILL (-9) after 10 s
         finally:
-            if p.poll() is None:
-                os.kill(p.pid, signal.SIGKILL)
-                p.wait(5)
-    assert "stopped: 0 labeled vectors" in log.read_text()
-    assert "server is up" not in log.read_text()
+            p.kill()  # nothing if it ended
+    assert "stopped: 0 labeled vectors" in p.output()
+    assert "server is up" not in p.output()

@@ -10,12 +10,10 @@ from __future__ import annotations
 
 import os
 import shutil
-import signal
-import subprocess
-import sys
 import tempfile
-import threading
 from pathlib import Path
+
+from lab.processes import Child, rhbl_argv
 
 ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -68,32 +66,22 @@ def close_chromium(drv) -> None:
         shutil.rmtree(getattr(drv, "_rhbl_profile", ""), ignore_errors=True)
 
 
-class ConsoleProcess:
-    """``rhbl console --connect ENDPOINT --http 127.0.0.1:0 ...``; ``url`` once it printed it."""
+class ConsoleProcess(Child):
+    """``rhbl console --connect ENDPOINT --http 127.0.0.1:0 ...`` (a ``lab.processes.Child``:
+    stopped by PID with SIGTERM, then SIGKILL); ``url`` once it printed it."""
 
     def __init__(self, endpoint: str, *extra: str):
-        argv = [sys.executable, "-m", "lab.cli", "console", "--connect", endpoint,
-                "--http", "127.0.0.1:0", *extra]
-        self.lines: list[str] = []
+        super().__init__("rhbl console", rhbl_argv("console", "--connect", endpoint, "--http",
+                                                   "127.0.0.1:0", *extra), cwd=ROOT)
         self.url: str | None = None
-        self._ready = threading.Event()
-        self.proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     text=True, bufsize=1, cwd=ROOT, start_new_session=True,
-                                     env={**os.environ, "PYTHONUNBUFFERED": "1"})
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-
-    def _read(self) -> None:
-        for line in self.proc.stdout:
-            line = line.rstrip("\n")
-            self.lines.append(line)
-            if line.startswith("console: ") and self.url is None:
-                self.url = line.split(" ", 1)[1]
-                self._ready.set()
-        self._ready.set()
+        self.start()
 
     def wait_url(self, timeout: float = 30.0) -> str:
-        if not self._ready.wait(timeout) or self.url is None:
+        """The URL of its line ``console: <URL>``; stops it and raises if none comes."""
+        if self.wait_for_line("console: http", timeout):
+            self.url = next((ln.split(" ", 1)[1] for ln in self.output().splitlines()
+                             if ln.startswith("console: ")), None)
+        if self.url is None:
             self.stop()
             raise RuntimeError(f"rhbl console did not print its URL:\n{self.output()}")
         return self.url
@@ -101,17 +89,3 @@ class ConsoleProcess:
     @property
     def base(self) -> str:
         return self.url.split("?", 1)[0]
-
-    def output(self) -> str:
-        return "\n".join(self.lines)
-
-    def stop(self, timeout: float = 10.0) -> int | None:
-        if self.proc.poll() is None:
-            os.kill(self.proc.pid, signal.SIGTERM)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                os.kill(self.proc.pid, signal.SIGKILL)
-                self.proc.wait(5)
-        self._reader.join(2.0)
-        return self.proc.returncode

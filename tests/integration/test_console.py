@@ -18,7 +18,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -33,6 +32,7 @@ from browser import ConsoleProcess, chromium, close_chromium, find_chromium, in_
 
 from client.journal import Journal, journal_path  # noqa: E402
 from client.player import PlayerClient  # noqa: E402
+from lab.processes import Child, rhbl_argv  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Decision, State, TeacherAction, TreeNotice  # noqa: E402
 from protocol.session import make_config  # noqa: E402
@@ -160,13 +160,16 @@ def test_page_loads_without_errors_and_draws_the_robot_where_the_server_has_it(e
     _home(env)
 
 
-def _learner(out: Path, endpoint: str, log: Path) -> subprocess.Popen:
-    with open(log, "wb") as f:
-        return subprocess.Popen(
-            [sys.executable, "-m", "lab.cli", "learner", "--features", "wall", "--out", str(out),
-             "--snapshot-every", "0.3", "--connect", endpoint],
-            stdout=f, stderr=subprocess.STDOUT, cwd=ROOT, start_new_session=True,
-            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+def _rhbl(name: str, logdir: Path, *args: str) -> Child:
+    """``rhbl ARGS...`` logging to ``logdir/<name>.log``; stop() sends SIGINT and returns 0
+    only if SIGINT alone ended it (else SIGKILL after 30 s)."""
+    return Child(name, rhbl_argv(*args), logdir, cwd=ROOT, stop_signal=signal.SIGINT,
+                 stop_timeout=30.0, escalate=False).start()
+
+
+def _learner(out: Path, endpoint: str, logdir: Path) -> Child:
+    return _rhbl("learner", logdir, "learner", "--features", "wall", "--out", str(out),
+                 "--snapshot-every", "0.3", "--connect", endpoint)
 
 
 def test_holding_arrow_up_teaches_the_learner_fwd_and_releasing_stops(env, browser, tmp_path):
@@ -174,13 +177,12 @@ def test_holding_arrow_up_teaches_the_learner_fwd_and_releasing_stops(env, brows
 
     w, session = env["watch"], env["session"]
     out = tmp_path / "tree.rhbl"
-    learner = _learner(out, env["srv"].endpoint, tmp_path / "learner.log")
+    learner = _learner(out, env["srv"].endpoint, tmp_path)
     try:
         key = keys.alive_key("learner", f"r0-{learner.pid}")
         end = time.monotonic() + 30
         while not any(r.ok is not None for r in session.liveliness().get(key, timeout=1.0)):
-            assert learner.poll() is None and time.monotonic() < end, (
-                (tmp_path / "learner.log").read_text())
+            assert learner.poll() is None and time.monotonic() < end, learner.output()
         _home(env)
         _open(browser, env["console"].url)
         before = len(w.labels)
@@ -201,9 +203,8 @@ def test_holding_arrow_up_teaches_the_learner_fwd_and_releasing_stops(env, brows
         WebDriverWait(browser, 10).until(
             lambda d: int(d.find_element("id", "tree").get_attribute("data-vectors") or 0) >= n)
     finally:
-        learner.send_signal(signal.SIGINT)
-        rc = learner.wait(30)
-    assert rc == 0, (tmp_path / "learner.log").read_text()
+        rc = learner.stop()
+    assert rc == 0, learner.output()
     with Journal.open(journal_path(out), readonly=True) as j:
         labels = [r.label for r in j.records()]
     assert len(labels) >= n and set(labels) == {"fwd"}
@@ -211,19 +212,14 @@ def test_holding_arrow_up_teaches_the_learner_fwd_and_releasing_stops(env, brows
     decisions = []
     sub = session.declare_subscriber(keys.controller_decision_key("r0"),
                                      lambda s: decisions.append(Decision.decode(s.payload)))
-    with open(tmp_path / "controller.log", "wb") as f:
-        ctl = subprocess.Popen(
-            [sys.executable, "-m", "lab.cli", "controller", "--tree", str(out), "--seconds", "2",
-             "--connect", env["srv"].endpoint], stdout=f, stderr=subprocess.STDOUT, cwd=ROOT,
-            start_new_session=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    ctl = _rhbl("controller", tmp_path, "controller", "--tree", str(out), "--seconds", "2",
+                "--connect", env["srv"].endpoint)
     try:
         WebDriverWait(browser, 30).until(
             lambda d: d.find_element("id", "decision").text.startswith("fwd: sphere #"))
-        assert ctl.wait(30) == 0, (tmp_path / "controller.log").read_text()
+        assert ctl.wait(30) == 0, ctl.output()
     finally:
-        if ctl.poll() is None:
-            ctl.kill()
-            ctl.wait(10)
+        ctl.kill()  # nothing if it ended
         sub.undeclare()
     assert decisions and all(d.action == "fwd" and d.path and d.path[0][0] == 0
                              and d.path[-1][3] == "fwd" for d in decisions)
@@ -233,11 +229,11 @@ def test_holding_arrow_up_teaches_the_learner_fwd_and_releasing_stops(env, brows
     assert _errors(browser) == []
 
 
-def _wait_learner(env, learner, log: Path) -> None:
+def _wait_learner(env, learner: Child) -> None:
     key = keys.alive_key("learner", f"r0-{learner.pid}")
     end = time.monotonic() + 30
     while not any(r.ok is not None for r in env["session"].liveliness().get(key, timeout=1.0)):
-        assert learner.poll() is None and time.monotonic() < end, log.read_text()
+        assert learner.poll() is None and time.monotonic() < end, learner.output()
 
 
 def _mode(browser, mode: str) -> None:
@@ -251,7 +247,7 @@ def test_correct_mode_takes_over_and_hands_back_to_a_following_controller(env, b
     picks up the grown tree without stopping; in watch mode keys neither drive nor teach."""
     w = env["watch"]
     out = tmp_path / "tree.rhbl"
-    learner = _learner(out, env["srv"].endpoint, tmp_path / "learner.log")
+    learner = _learner(out, env["srv"].endpoint, tmp_path)
     ctl = None
     decisions: list[Decision] = []
 
@@ -262,7 +258,7 @@ def test_correct_mode_takes_over_and_hands_back_to_a_following_controller(env, b
 
     sub = env["session"].declare_subscriber(keys.controller_decision_key("r0"), on_decision)
     try:
-        _wait_learner(env, learner, tmp_path / "learner.log")
+        _wait_learner(env, learner)
         _home(env)
         _open(browser, env["console"].url)
         before = len(w.labels)
@@ -273,11 +269,8 @@ def test_correct_mode_takes_over_and_hands_back_to_a_following_controller(env, b
         demonstrated = len(w.labels) - before
         w.wait(lambda w: w.notice is not None and w.notice.vectors >= demonstrated, 10,
                "the learner learned the demonstration")
-        with open(tmp_path / "controller.log", "wb") as f:
-            ctl = subprocess.Popen(
-                [sys.executable, "-m", "lab.cli", "controller", "--from-learner", "--follow",
-                 "--connect", env["srv"].endpoint], stdout=f, stderr=subprocess.STDOUT, cwd=ROOT,
-                start_new_session=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        ctl = _rhbl("controller", tmp_path, "controller", "--from-learner", "--follow",
+                    "--connect", env["srv"].endpoint)
         w.wait(lambda w: w.state.driver == "controller", 30, "the controller drives")
         _mode(browser, "correct")
         mark = len(w.labels)
@@ -296,8 +289,8 @@ def test_correct_mode_takes_over_and_hands_back_to_a_following_controller(env, b
         w.wait(lambda w: w.notice.vectors >= total, 10, "the corrections are learned")
         w.wait(lambda w: any(d.snapshot_id.endswith(f":{total}") for d in decisions[-20:]),
                30, "the controller decides with the grown tree")
-        assert ctl.poll() is None, (tmp_path / "controller.log").read_text()
-        assert "swapped in a newer tree" in (tmp_path / "controller.log").read_text()
+        assert ctl.poll() is None, ctl.output()
+        assert ctl.wait_for_line("swapped in a newer tree", 5), ctl.output()  # 5 s: the pipe
         # watch: keys neither drive nor teach
         _mode(browser, "watch")
         mark, seq = len(w.labels), w.state.seq
@@ -310,13 +303,8 @@ def test_correct_mode_takes_over_and_hands_back_to_a_following_controller(env, b
     finally:
         sub.undeclare()
         for p in (ctl, learner):
-            if p is not None and p.poll() is None:
-                p.send_signal(signal.SIGINT)
-                try:
-                    p.wait(30)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait(10)
+            if p is not None:
+                p.stop()  # SIGINT, SIGKILL after 30 s
     w.wait(Watch.stopped, STOP_WITHIN + 2.0, "the robot stops when the controller stops")
     assert _errors(browser) == []
 
@@ -520,7 +508,7 @@ def test_malformed_messages_get_an_error_and_the_console_lives_on(env):
     errors = asyncio.run(_bad_messages(env["console"].base + "ws"))
     assert len(errors) == 9 and all(errors), errors
     assert any("bad message" in e for e in errors) and any("unknown action" in e for e in errors)
-    assert env["console"].proc.poll() is None
+    assert env["console"].poll() is None
     env["watch"].wait(lambda w: w.state.driver == "", 5, "nothing drove")
 
 
@@ -544,8 +532,8 @@ def test_view_only_publishes_nothing(env):
         assert "view-only" in asyncio.run(drive())
         tokens = [str(r.ok.key_expr) for r in env["session"].liveliness().get(
             keys.alive_key("*", "*"), timeout=1.0) if r.ok is not None]
-        assert any(f"-{env['console'].proc.pid}" in t for t in tokens)  # a driving console's
-        assert not any(f"-{console.proc.pid}" in t for t in tokens), tokens
+        assert any(f"-{env['console'].pid}" in t for t in tokens)  # a driving console's
+        assert not any(f"-{console.pid}" in t for t in tokens), tokens
     finally:
         assert console.stop() == 0, console.output()
 
@@ -678,7 +666,7 @@ def test_the_console_dying_stops_the_robot_and_the_page_says_so(env, browser):
         _open(browser, console.wait_url())
         _keys(browser, ("down", "ARROW_UP"))
         w.wait(_driving, 5, "the page drives through the second console")
-        os.kill(console.proc.pid, signal.SIGKILL)
+        console.send_signal(signal.SIGKILL)  # by PID, no wait: the clock starts now
         t0 = time.monotonic()
         w.wait(Watch.stopped, STOP_WITHIN, "the robot stops when the console dies")
         assert time.monotonic() - t0 < STOP_WITHIN

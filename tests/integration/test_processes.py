@@ -11,10 +11,7 @@ near a wall.
 
 from __future__ import annotations
 
-import os
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -26,6 +23,7 @@ zenoh = pytest.importorskip("zenoh")
 from client.behaviour.learning import DemonstrationLearner, load_snapshot  # noqa: E402
 from client.journal import Journal, journal_path  # noqa: E402
 from client.player import PlayerClient  # noqa: E402
+from lab.processes import Child, rhbl_argv  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import DriverState, State, TeacherAction, VelCmd  # noqa: E402
 from protocol.session import make_config  # noqa: E402
@@ -35,71 +33,52 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(180)]
 ROOT = Path(__file__).resolve().parents[2]
 
 
-class Proc:
-    def __init__(self, name: str, endpoint: str, *args: str, logdir: Path):
-        self.name = name
-        self.log = logdir / f"{name}-{time.monotonic_ns()}.log"
-        argv = [sys.executable, "-m", "lab.cli", *args, "--connect", endpoint]
-        with open(self.log, "wb") as f:
-            self.proc = subprocess.Popen(argv, stdout=f, stderr=subprocess.STDOUT, cwd=ROOT,
-                                         start_new_session=True,
-                                         env={**os.environ, "PYTHONUNBUFFERED": "1"})
-
-    def text(self) -> str:
-        return self.log.read_text(errors="replace")
-
-    def wait(self, timeout: float = 60.0) -> int:
-        try:
-            return self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            self.kill()
-            raise AssertionError(f"{self.name} did not finish in {timeout} s:\n{self.text()}") from None
-
-    def stop(self, sig=signal.SIGINT, timeout: float = 30.0) -> int:
-        if self.proc.poll() is None:
-            os.kill(self.proc.pid, sig)
-        return self.wait(timeout)
-
-    def kill(self) -> None:
-        if self.proc.poll() is None:
-            os.kill(self.proc.pid, signal.SIGKILL)
-            self.proc.wait(10)
-
-
 @pytest.fixture(scope="module")
 def env(start_module_server, tmp_path_factory):
     srv = start_module_server("room", lockstep=True)
     tmp = tmp_path_factory.mktemp("processes")
-    procs: list[Proc] = []
+    procs: list[Child] = []
 
     def start(name, *args):
-        p = Proc(name, srv.endpoint, *args, logdir=tmp)
+        # SIGINT, then SIGKILL after 30 s: stop() returns 0 only if SIGINT alone ended it
+        p = Child(name, rhbl_argv(*args, "--connect", srv.endpoint), tmp, cwd=ROOT,
+                  stop_signal=signal.SIGINT, stop_timeout=30.0, escalate=False).start()
         procs.append(p)
         return p
 
     with zenoh.open(make_config(mode="client", connect=[srv.endpoint])) as session:
         pose = PlayerClient(session=session, source="test").simulation.get_pose2d()
-        yield {"srv": srv, "tmp": tmp, "start": start, "session": session, "start_pose": pose}
+        yield {"srv": srv, "tmp": tmp, "start": start, "session": session, "start_pose": pose,
+               "procs": procs}
         for p in procs:
             p.kill()
 
 
-def _wait_token(session, role: str, proc: Proc, timeout: float = 30.0) -> None:
-    key = keys.alive_key(role, f"r0-{proc.proc.pid}")
+@pytest.fixture(autouse=True)
+def _no_leftovers(env):
+    """A process a failed test left running (a wait that timed out) does not drive on into the
+    next test: SIGKILL by PID after each test."""
+    yield
+    for p in env["procs"]:
+        p.kill()
+
+
+def _wait_token(session, role: str, proc: Child, timeout: float = 30.0) -> None:
+    key = keys.alive_key(role, f"r0-{proc.pid}")
     end = time.monotonic() + timeout
     while time.monotonic() < end:
-        assert proc.proc.poll() is None, f"{proc.name} exited:\n{proc.text()}"
+        assert proc.poll() is None, f"{proc.name} exited:\n{proc.output()}"
         if any(r.ok is not None for r in session.liveliness().get(key, timeout=1.0)):
             return
         time.sleep(0.05)
-    raise AssertionError(f"no liveliness token {key}:\n{proc.text()}")
+    raise AssertionError(f"no liveliness token {key}:\n{proc.output()}")
 
 
 def _teach(env, seconds: float, seed: int = 0) -> int:
     t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--seconds",
                      str(seconds), "--seed", str(seed))
-    assert t.wait(60) == 0, t.text()
-    line = [ln for ln in t.text().splitlines() if "teacher stopped after" in ln][-1]
+    assert t.wait(60) == 0, t.output()
+    line = [ln for ln in t.output().splitlines() if "teacher stopped after" in ln][-1]
     return int(line.split("after ")[1].split()[0])
 
 
@@ -136,28 +115,24 @@ def test_teacher_waits_for_a_learner_and_no_label_is_lost(env):
     # no learner: a bounded wait, then a clear message and exit status 5
     t = env["start"]("teacher", "teacher", "--policy", "wall-follower",
                      "--wait-learner-timeout", "1.5")
-    assert t.wait(30) == 5, t.text()
-    assert "no learner is up" in t.text() and "--no-wait-learner" in t.text()
-    assert "first label" not in t.text()
+    assert t.wait(30) == 5, t.output()
+    assert "no learner is up" in t.output() and "--no-wait-learner" in t.output()
+    assert "first label" not in t.output()
 
     # a teacher started before the learner waits, saying so, and demonstrates once it is up
     out = env["tmp"] / "first.rhbl"
     t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--seconds", "5",
                      "--wait-learner-timeout", "60")
-    end = time.monotonic() + 30
-    while "waiting for a learner" not in t.text() and time.monotonic() < end:
-        assert t.proc.poll() is None, t.text()
-        time.sleep(0.1)
-    assert "waiting for a learner" in t.text(), t.text()
+    assert t.wait_for_line("waiting for a learner", 30), t.output()
     time.sleep(1.0)
-    assert t.proc.poll() is None and "first label" not in t.text(), t.text()
+    assert t.poll() is None and "first label" not in t.output(), t.output()
     learner = env["start"]("learner", "learner", "--features", "wall", "--out", str(out))
-    assert t.wait(60) == 0, t.text()
-    first = int(t.text().split("first label: scan ")[1].split(",")[0])
-    n = int([ln for ln in t.text().splitlines() if "teacher stopped after" in ln][-1]
+    assert t.wait(60) == 0, t.output()
+    first = int(t.output().split("first label: scan ")[1].split(",")[0])
+    n = int([ln for ln in t.output().splitlines() if "teacher stopped after" in ln][-1]
             .split("after ")[1].split()[0])
     _wait_journal(out, n)
-    assert learner.stop() == 0, learner.text()
+    assert learner.stop() == 0, learner.output()
     with Journal.open(journal_path(out), readonly=True) as j:
         records = list(j.records())
     assert records[0].scan_id == first, (first, [r.scan_id for r in records[:3]])
@@ -166,8 +141,8 @@ def test_teacher_waits_for_a_learner_and_no_label_is_lost(env):
     # pure teleop: --no-wait-learner demonstrates with nobody recording
     t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--seconds", "2",
                      "--no-wait-learner")
-    assert t.wait(30) == 0, t.text()
-    assert "first label" in t.text()
+    assert t.wait(30) == 0, t.output()
+    assert "first label" in t.output()
     sim.set_pose2d(*start)
 
 
@@ -188,15 +163,15 @@ def test_learner_grows_a_tree_and_survives_sigkill(env):
     assert _journal_len(out) == n1
     learner = env["start"]("learner", *args)
     _wait_token(env["session"], "learner", learner)
-    assert "recovered lineage" in learner.text()
+    assert learner.wait_for_line("recovered lineage", 10), learner.output()
     n2 = _teach(env, 15, seed=1)
     _wait_journal(out, n1 + n2)
-    assert learner.stop() == 0, learner.text()
+    assert learner.stop() == 0, learner.output()
 
     clf, _f, _a, meta = load_snapshot(out)
     prov = meta["provenance"]
     assert prov["labeled"] == n1 + n2 == prov["journal"]["records"]
-    assert "unmatched labels" in learner.text() and " 0 unmatched" in learner.text()
+    assert "unmatched labels" in learner.output() and " 0 unmatched" in learner.output()
     # the tree equals every journaled vector learned in one go, in-process
     from client.behaviour.features import FEATURES
 
@@ -207,8 +182,8 @@ def test_learner_grows_a_tree_and_survives_sigkill(env):
     assert ref.classifier.tree_equal(clf)
 
 
-def _labels(t: Proc) -> int:
-    line = [ln for ln in t.text().splitlines() if "teacher stopped after" in ln][-1]
+def _labels(t: Child) -> int:
+    line = [ln for ln in t.output().splitlines() if "teacher stopped after" in ln][-1]
     return int(line.split("after ")[1].split()[0])
 
 
@@ -236,12 +211,12 @@ def test_controller_drives_without_collision(env):
             sim.set_pose2d(*pose)
             t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--correct",
                              *phase)
-            assert t.wait(120) == 0, t.text()
+            assert t.wait(120) == 0, t.output()
             labels += _labels(t)
     _wait_journal(out, n0 + labels)
-    assert "swapped in a newer tree" in follow.text(), follow.text()
-    assert follow.stop() == 0, follow.text()
-    assert learner.stop() == 0, learner.text()
+    assert follow.wait_for_line("swapped in a newer tree", 5), follow.output()  # 5 s: the pipe
+    assert follow.stop() == 0, follow.output()
+    assert learner.stop() == 0, learner.output()
     # the corrected tree drives from the world's start pose, as the recipe is measured (the
     # correcting run may have ended anywhere, mid-takeover next to a wall)
     sim.set_pose2d(*env["start_pose"])
@@ -253,14 +228,14 @@ def test_controller_drives_without_collision(env):
             VelCmd.decode(s.payload.to_bytes()))),
     ]
     c = env["start"]("controller", "controller", "--tree", str(out), "--seconds", "60")
-    assert c.wait(90) == 0, c.text()
+    assert c.wait(90) == 0, c.output()
     for s in subs:
         s.undeclare()
-    assert len(cmds) >= 550, c.text()
+    assert len(cmds) >= 550, c.output()
     assert all(m.source == "controller" and m.scan_id is not None for m in cmds)
     hits = [st for st in states if st.stall]
     assert not hits, f"the learned robot collided (first at t={hits[0].ts:.1f} s, odometry " \
-        f"{hits[0].pos}):\n{c.text()}"
+        f"{hits[0].pos}):\n{c.output()}"
 
 
 def test_controller_follows_the_learner(env):
@@ -273,10 +248,7 @@ def test_controller_follows_the_learner(env):
     c = env["start"]("controller", "controller", "--from-learner", "--follow")
     _wait_token(env["session"], "controller", c)
     _teach(env, 20, seed=2)  # the teacher outranks the controller while it demonstrates
-    end = time.monotonic() + 20
-    while "swapped in a newer tree" not in c.text() and time.monotonic() < end:
-        time.sleep(0.1)
-    assert "swapped in a newer tree" in c.text(), c.text()
+    assert c.wait_for_line("swapped in a newer tree", 20), c.output()
     assert c.stop() == 0
     assert learner.stop() == 0
 
@@ -289,7 +261,7 @@ def test_resume_extends_a_tree(env):
     _wait_token(env["session"], "learner", learner)
     n = _teach(env, 10, seed=3)
     _wait_journal(out, n)
-    assert learner.stop() == 0, learner.text()
+    assert learner.stop() == 0, learner.output()
     clf, _f, _a, meta = load_snapshot(out)
     prov = meta["provenance"]
     assert prov["parent"] == str(base.resolve())
@@ -302,8 +274,8 @@ def test_resume_extends_a_tree(env):
 def test_processes_exit_cleanly_on_sigterm(env):
     t = env["start"]("teacher", "teacher", "--policy", "wall-follower")
     _wait_token(env["session"], "teacher", t)
-    assert t.stop(signal.SIGTERM) == 0, t.text()
-    assert "Traceback" not in t.text()
+    assert t.stop(signal.SIGTERM) == 0, t.output()
+    assert "Traceback" not in t.output()
 
 
 def test_teacher_pauses_while_no_learner_is_up(env):
@@ -317,30 +289,24 @@ def test_teacher_pauses_while_no_learner_is_up(env):
     _wait_token(env["session"], "learner", learner)
     t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--wait-learner-timeout",
                      "60")
-    end = time.monotonic() + 30
-    while "first label" not in t.text() and time.monotonic() < end:
-        time.sleep(0.05)
-    assert "first label" in t.text(), t.text()
+    assert t.wait_for_line("first label", 30), t.output()
     _wait_journal(out, 5)  # demonstrating
-    assert learner.stop(signal.SIGTERM) == 0, learner.text()
-    end = time.monotonic() + 10
-    while "pausing" not in t.text() and time.monotonic() < end:
-        time.sleep(0.05)
-    assert "pausing" in t.text() and t.proc.poll() is None, t.text()
+    assert learner.stop(signal.SIGTERM) == 0, learner.output()
+    assert t.wait_for_line("pausing", 10) and t.poll() is None, t.output()
     paused = _journal_len(out)
     time.sleep(1.0)  # nobody records: nothing may be demonstrated now
     learner = env["start"]("learner", *args)
     _wait_token(env["session"], "learner", learner)
     end = time.monotonic() + 10
-    while t.text().count("learner is up") < 2 and time.monotonic() < end:
+    while t.output().count("learner is up") < 2 and time.monotonic() < end:
         time.sleep(0.05)
-    assert t.text().count("learner is up") == 2, t.text()
+    assert t.output().count("learner is up") == 2, t.output()
     _wait_journal(out, paused + 20)  # demonstrating again
-    assert t.stop() == 0, t.text()
-    n = int([ln for ln in t.text().splitlines() if "teacher stopped after" in ln][-1]
+    assert t.stop() == 0, t.output()
+    n = int([ln for ln in t.output().splitlines() if "teacher stopped after" in ln][-1]
             .split("after ")[1].split()[0])
     _wait_journal(out, n)
-    assert learner.stop() == 0, learner.text()
+    assert learner.stop() == 0, learner.output()
     assert _journal_len(out) == n > paused > 0
     sim.set_pose2d(*start)
 
@@ -383,21 +349,21 @@ def test_correcting_teacher_labels_while_the_controller_drives(env):
     _wait_token(session, "controller", c)
     t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--correct",
                      "--seconds", "40")
-    assert t.wait(90) == 0, t.text()
+    assert t.wait(90) == 0, t.output()
     n = _labels(t)
     _wait_journal(out, n)
-    assert c.stop() == 0, c.text()
-    assert learner.stop() == 0, learner.text()
+    assert c.stop() == 0, c.output()
+    assert learner.stop() == 0, learner.output()
     for sub in subs:
         sub.undeclare()
     sim.set_pose2d(*start)
 
-    took = int(t.text().split("taken over)")[0].rsplit(", ", 1)[1].split()[0])
-    assert 0 < took < n / 2, t.text()
+    took = int(t.output().split("taken over)")[0].rsplit(", ", 1)[1].split()[0])
+    assert 0 < took < n / 2, t.output()
     # every label the teacher published is journaled, tied to its scan
     with Journal.open(journal_path(out), readonly=True) as j:
         records = list(j.records())
-    assert len(records) == n >= 350, (len(records), n, t.text()[-600:])
+    assert len(records) == n >= 350, (len(records), n, t.output()[-600:])
     mine = [lb for lb in labels if lb.source == "teacher"]
     assert {r.scan_id for r in records} == {lb.scan_id for lb in mine}
     # taking over: the command is the label; otherwise no command (executed unset)
@@ -410,12 +376,10 @@ def test_correcting_teacher_labels_while_the_controller_drives(env):
     assert "teacher" in ticks and "teacher" in drivers and "controller" in drivers
 
 
-def _wait_text(proc: Proc, text: str, timeout: float = 30.0) -> None:
-    end = time.monotonic() + timeout
-    while text not in proc.text():
-        assert proc.proc.poll() is None, f"{proc.name} exited:\n{proc.text()}"
-        assert time.monotonic() < end, f"no {text!r} within {timeout:g} s:\n{proc.text()}"
-        time.sleep(0.05)
+def _wait_text(proc: Child, text: str, timeout: float = 30.0) -> None:
+    assert proc.wait_for_line(text, timeout), (
+        f"{proc.name}: no {text!r} within {timeout:g} s (exit status {proc.poll()}):\n"
+        f"{proc.output()}")
 
 
 def test_starting_order_does_not_matter_for_a_following_controller(env):
@@ -432,17 +396,17 @@ def test_starting_order_does_not_matter_for_a_following_controller(env):
     try:
         c = env["start"]("controller", "controller", "--from-learner", "--follow")
         _wait_text(c, "waiting for the learner's first tree")
-        assert not commanded.is_set(), c.text()
+        assert not commanded.is_set(), c.output()
         out = env["tmp"] / "order.rhbl"
         learner = env["start"]("learner", "learner", "--features", "wall", "--out", str(out),
                                "--snapshot-every", "0.3")
         _wait_token(session, "learner", learner)
         _teach(env, 5, seed=4)
-        assert commanded.wait(60), c.text()
+        assert commanded.wait(60), c.output()
         _wait_text(c, "tree loaded")
-        assert c.proc.poll() is None, c.text()
-        assert c.stop() == 0, c.text()
-        assert learner.stop() == 0, learner.text()
+        assert c.poll() is None, c.output()
+        assert c.stop() == 0, c.output()
+        assert learner.stop() == 0, learner.output()
     finally:
         sub.undeclare()
         sim.set_pose2d(*start)

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import base64
 import json
-import os
 import resource
 import signal
 import struct
@@ -37,6 +36,7 @@ mcap_reader = pytest.importorskip("mcap.reader")
 pytest.importorskip("google.protobuf")
 
 from client.recording import RecordingError, read_recording  # noqa: E402
+from lab.processes import Child, rhbl_argv  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, VelCmd  # noqa: E402
 from protocol.session import make_config  # noqa: E402
@@ -47,53 +47,19 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 # ---- helpers ------------------------------------------------------------------------------
-class Proc:
-    def __init__(self, name: str, *args: str, logdir: Path, preexec=None):
-        self.name = name
-        self.log = logdir / f"{name}-{time.monotonic_ns()}.log"
-        with open(self.log, "wb") as f:
-            self.proc = subprocess.Popen([sys.executable, "-m", "lab.cli", *args], stdout=f,
-                                         stderr=subprocess.STDOUT, cwd=ROOT,
-                                         start_new_session=True, preexec_fn=preexec,
-                                         env={**os.environ, "PYTHONUNBUFFERED": "1"})
-
-    def text(self) -> str:
-        return self.log.read_text(errors="replace")
-
-    def wait(self, timeout: float = 60.0) -> int:
-        try:
-            return self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            self.kill()
-            raise AssertionError(f"{self.name} did not finish in {timeout} s:\n{self.text()}") from None
-
-    def stop(self, sig=signal.SIGINT, timeout: float = 30.0) -> int:
-        if self.proc.poll() is None:
-            os.kill(self.proc.pid, sig)
-        return self.wait(timeout)
-
-    def kill(self) -> None:
-        if self.proc.poll() is None:
-            os.kill(self.proc.pid, signal.SIGKILL)
-            self.proc.wait(10)
-
-    def wait_line(self, text: str, timeout: float = 30.0) -> str:
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            for ln in self.text().splitlines():
-                if text in ln:
-                    return ln
-            assert self.proc.poll() is None, f"{self.name} exited:\n{self.text()}"
-            time.sleep(0.05)
-        raise AssertionError(f"{self.name}: no line {text!r} in {timeout} s:\n{self.text()}")
+def _child(name: str, *args: str, logdir: Path, preexec=None) -> Child:
+    """``rhbl ARGS...``; stop() sends SIGINT and returns 0 only if SIGINT alone ended it
+    (else SIGKILL after 30 s)."""
+    return Child(name, rhbl_argv(*args), logdir, cwd=ROOT, stop_signal=signal.SIGINT,
+                 stop_timeout=30.0, escalate=False, preexec_fn=preexec).start()
 
 
 @pytest.fixture
 def procs(tmp_path):
-    started: list[Proc] = []
+    started: list[Child] = []
 
     def start(name, *args, preexec=None):
-        p = Proc(name, *args, logdir=tmp_path, preexec=preexec)
+        p = _child(name, *args, logdir=tmp_path, preexec=preexec)
         started.append(p)
         return p
 
@@ -158,8 +124,8 @@ def protobuf_class(schema_name: str, descriptor_set: bytes):
 def teach(procs, endpoint: str, seconds: float, *extra: str) -> int:
     t = procs("teacher", "teacher", "--policy", "wall-follower", "--seconds", str(seconds),
               "--connect", endpoint, *extra)
-    assert t.wait(120) == 0, t.text()
-    line = [ln for ln in t.text().splitlines() if "teacher stopped after" in ln][-1]
+    assert t.wait(120) == 0, t.output()
+    line = [ln for ln in t.output().splitlines() if "teacher stopped after" in ln][-1]
     return int(line.split("after ")[1].split()[0])
 
 
@@ -178,9 +144,9 @@ def test_record_keeps_every_message_and_viewer_channels_decode(start_server, pro
         end = time.monotonic() + 10  # the tap and the recorder both got the last label
         while tap.count(teacher_key) < labels and time.monotonic() < end:
             time.sleep(0.05)
-        assert rec.stop() == 0, rec.text()
+        assert rec.stop() == 0, rec.output()
         tap.sub.undeclare()
-    assert "recorder stopped" in rec.text()
+    assert "recorder stopped" in rec.output()
 
     with open(out, "rb") as f:
         reader = mcap_reader.make_reader(f)
@@ -286,8 +252,8 @@ def test_full_disk_stops_the_recorder_with_a_clear_error(start_server, procs, tm
     out = tmp_path / "full.mcap"
     rec = procs("recorder", "record", "--out", str(out), "--connect", srv.endpoint,
                 preexec=_limit_file_size)
-    assert rec.wait(120) == 1, rec.text()
-    text = rec.text()
+    assert rec.wait(120) == 1, rec.output()
+    text = rec.output()
     # (a file size limit stands in for a full disk: the same failed write, EFBIG for ENOSPC)
     assert f"cannot write the recording {out}: the file reached its size limit" in text, text
     assert "Recording stopped; the file keeps the" in text
@@ -305,10 +271,10 @@ def live_run(start_module_server, tmp_path_factory):
     final snapshot. Shared by the retraining and replay tests."""
     srv = start_module_server("room", lockstep=True)
     tmp = tmp_path_factory.mktemp("live")
-    started: list[Proc] = []
+    started: list[Child] = []
 
     def start(name, *args):
-        p = Proc(name, *args, logdir=tmp)
+        p = _child(name, *args, logdir=tmp)
         started.append(p)
         return p
 
@@ -320,8 +286,8 @@ def live_run(start_module_server, tmp_path_factory):
         learner = start("learner", "learner", "--features", "wall", "--out", str(tree),
                         "--connect", srv.endpoint)
         n = teach(start, srv.endpoint, 25.0) + teach(start, srv.endpoint, 10.0, "--seed", "3")
-        assert learner.stop() == 0, learner.text()
-        assert rec.stop() == 0, rec.text()
+        assert learner.stop() == 0, learner.output()
+        assert rec.stop() == 0, rec.output()
         yield {"srv": srv, "tmp": tmp, "recording": rec_path, "tree": tree, "labels": n,
                "start": start}
     finally:
@@ -373,8 +339,8 @@ def test_replay_makes_a_controller_send_the_same_commands(live_run, procs, tmp_p
     wait_recorded(live_rec)
     ctl = procs("controller", "controller", "--tree", str(tree), "--seconds", "8",
                 "--connect", srv.endpoint)
-    assert ctl.wait(120) == 0, ctl.text()
-    assert rec.stop() == 0, rec.text()
+    assert ctl.wait(120) == 0, ctl.output()
+    assert rec.stop() == 0, rec.output()
     live = {}
     for m in read_recording(live_rec):
         if m.kind == "cmd" and m.key.endswith("/controller"):
@@ -390,7 +356,7 @@ def test_replay_makes_a_controller_send_the_same_commands(live_run, procs, tmp_p
                      "--wait-server", "60")
         rp = procs("replay", "replay", str(live_rec), "--lockstep", "--lockstep-timeout", "10",
                    "--connect", endpoint, "--wait-subscriber", "60")  # 10 s: a loaded machine
-        assert rp.wait(180) == 0, rp.text()
+        assert rp.wait(180) == 0, rp.output()
         last = max(live)
         end = time.monotonic() + 10
         while time.monotonic() < end:
@@ -398,7 +364,7 @@ def test_replay_makes_a_controller_send_the_same_commands(live_run, procs, tmp_p
                 if any(VelCmd.decode(d).scan_id >= last for d in cmds.got[cmds_key()]):
                     break
             time.sleep(0.05)
-        assert ctl2.stop() == 0, ctl2.text()
+        assert ctl2.stop() == 0, ctl2.output()
         cmds.sub.undeclare()
     replayed = {}
     for d in cmds.got[cmds_key()]:
@@ -407,9 +373,9 @@ def test_replay_makes_a_controller_send_the_same_commands(live_run, procs, tmp_p
     # scan for scan: for every scan the controller answered live, the same command (the
     # replay also holds scans from before the live controller started and after it stopped:
     # the new one answers those too)
-    assert set(live) <= set(replayed), (sorted(set(live) - set(replayed)), rp.text())
+    assert set(live) <= set(replayed), (sorted(set(live) - set(replayed)), rp.output())
     assert {k: replayed[k] for k in live} == live
-    assert "lock-step: 0 scans without an answer" in rp.text(), rp.text()
+    assert "lock-step: 0 scans without an answer" in rp.output(), rp.output()
 
 
 def cmds_key() -> str:
@@ -423,7 +389,7 @@ def test_foxglove_bridge_serves_decodable_viewer_channels(start_server, procs, f
     srv = start_server("room")
     port = free_port()
     fx = procs("foxglove", "foxglove", "--connect", srv.endpoint, "--port", str(port))
-    fx.wait_line(f"listening on ws://127.0.0.1:{port}")
+    assert fx.wait_for_line(f"listening on ws://127.0.0.1:{port}", 30), fx.output()
     # the SDK's server speaks the Foxglove WebSocket protocol under the subprotocol name
     # foxglove.sdk.v1 (the same protocol as foxglove.websocket.v1)
     with connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"],
@@ -461,7 +427,7 @@ def test_foxglove_bridge_serves_decodable_viewer_channels(start_server, procs, f
         else:
             doc = json.loads(got[topic][-1])
             assert doc["robot"] == "r0" and "driver" in doc
-    assert fx.stop() == 0, fx.text()
+    assert fx.stop() == 0, fx.output()
 
 
 # ---- in-process runs ----------------------------------------------------------------------
@@ -521,7 +487,7 @@ def test_bad_files_and_arguments_give_one_clear_error(tmp_path, start_server, pr
     good = tmp_path / "good.mcap"
     rec = procs("recorder", "record", "--out", str(good), "--connect", srv.endpoint,
                 "--duration", "3")
-    assert rec.wait(60) == 0, rec.text()
+    assert rec.wait(60) == 0, rec.output()
     data = bytearray(good.read_bytes())
     bad = tmp_path / "bad.mcap"
     mid = len(data) // 2

@@ -11,7 +11,6 @@ from __future__ import annotations
 import importlib.util
 import json
 import os
-import socket
 import subprocess
 import sys
 import threading
@@ -21,6 +20,7 @@ from pathlib import Path
 import pytest
 
 zenoh = pytest.importorskip("zenoh")
+from lab.processes import free_port  # noqa: E402
 from protocol import keys  # noqa: E402
 
 pytestmark = pytest.mark.integration
@@ -40,12 +40,6 @@ def _load_standin():
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="module")
@@ -94,7 +88,7 @@ def _refused(config: zenoh.Config) -> bool:
 @pytest.fixture(scope="module")
 def router(secrets):
     standin = _load_standin()
-    port = _free_port()
+    port = free_port()
     session = standin.open_router(ROUTER_CONFIG, secrets, [f"tls/127.0.0.1:{port}"])
     yield port
     session.close()
@@ -191,7 +185,7 @@ def test_plain_tcp_is_refused(secrets, router):
 
 def test_mutual_tls_requires_a_client_certificate(secrets):
     standin = _load_standin()
-    port = _free_port()
+    port = free_port()
     mtls = ["transport/link/tls/enable_mtls:true"]
     with standin.open_router(ROUTER_CONFIG, secrets, [f"tls/127.0.0.1:{port}"], mtls):
         with zenoh.open(_client_config(secrets, port, "learner")) as session:
@@ -464,7 +458,7 @@ def _teacher(secrets: Path, port: int, config: Path | None = None, timeout: floa
 
 
 def test_remote_teacher_says_when_the_router_is_unreachable(secrets):
-    run = _teacher(secrets, _free_port())
+    run = _teacher(secrets, free_port())
     assert run.returncode == 3, run.stderr
     assert "connection refused" in run.stderr and "router" in run.stderr
 
@@ -494,7 +488,7 @@ def test_console_runs_with_the_teachers_credentials(secrets, router, sessions):
                              str(secrets / "teacher.json5"))
     try:
         console.wait_url()
-        key = keys.alive_key("console", f"{ROBOT}-{console.proc.pid}")
+        key = keys.alive_key("console", f"{ROBOT}-{console.pid}")
         deadline = time.monotonic() + 10.0
         seen: set[str] = set()
         while key not in seen and time.monotonic() < deadline:

@@ -76,6 +76,32 @@ def test_stop_escalates_to_sigkill(tmp_path):
     assert child.output().count("ignored") == 2  # SIGINT, then SIGTERM, then SIGKILL
 
 
+def test_stop_without_escalation_goes_straight_to_sigkill(tmp_path):
+    # SIGTERM would end it with 0: without escalation only SIGINT (ignored), then SIGKILL
+    code = STUBBORN.replace("import signal, sys, time", "import signal, sys, time\n"
+                            "signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))")
+    child = Child("strict", py(code) + ["SIGINT"], stop_signal=signal.SIGINT, stop_timeout=0.5,
+                  escalate=False).start()
+    assert child.wait_for_line("ready", timeout=30)
+    assert child.stop() == -signal.SIGKILL
+    assert child.output().count("ignored") == 1
+
+
+def test_kill_and_preexec_fn(tmp_path):
+    import resource
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_NOFILE, (64, 64))
+
+    code = ("import resource; print('limit', resource.getrlimit(resource.RLIMIT_NOFILE)[0],"
+            " flush=True)\n" + STUBBORN)
+    child = Child("limited", py(code) + ["SIGTERM"], preexec_fn=limit).start()
+    assert child.wait_for_line("ready", timeout=30)
+    assert "limit 64" in child.output()
+    assert child.kill() == -signal.SIGKILL and child.poll() == -signal.SIGKILL
+    assert child.kill() == -signal.SIGKILL  # already ended: nothing sent
+
+
 def test_stop_with_the_given_signal_first(tmp_path):
     code = ("import signal, sys\n"
             "signal.signal(signal.SIGINT, lambda *_: sys.exit(7))\n"
