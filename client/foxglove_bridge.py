@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 import threading
 import time
 
@@ -22,6 +21,7 @@ from client._process import EXIT_USAGE, Context, ProcessError, run
 from client.recording import BusRecorder, classify, decode
 from client.viewer import ViewerFeed, ViewerMessage
 from protocol import keys
+from protocol.process import add_logging_arguments
 from protocol.session import add_zenoh_arguments
 
 __all__ = ["FoxgloveSink", "add_arguments", "main"]
@@ -108,9 +108,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="WebSocket port (default 8765, Foxglove's default; 0 = any free)")
     parser.add_argument("--duration", type=float, default=None, metavar="SECONDS",
                         help="stop after this many seconds (default: until stopped)")
-    parser.add_argument("--log-level", default=os.environ.get("RHBL_LOG_LEVEL", "INFO"),
-                        choices=["DEBUG", "INFO", "WARNING", "ERROR"], type=str.upper,
-                        help="logging level (default: INFO or $RHBL_LOG_LEVEL)")
+    add_logging_arguments(parser)
 
 
 def main(args: argparse.Namespace) -> int:

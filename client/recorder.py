@@ -20,6 +20,7 @@ import time
 from client._process import EXIT_FAILURE, EXIT_USAGE, Context, ProcessError, run
 from client.recording import CHUNK_SECONDS, BusRecorder, RecordingError, RecordingWriter
 from protocol import keys
+from protocol.process import add_logging_arguments
 from protocol.session import add_zenoh_arguments
 
 __all__ = ["add_arguments", "finish_demo_recording", "main", "start_demo_recording",
@@ -42,9 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--chunk-seconds", type=float, default=CHUNK_SECONDS, metavar="S",
                         help=f"close a chunk at least this often (default {CHUNK_SECONDS:g}): "
                              f"what a killed recorder can lose at most")
-    parser.add_argument("--log-level", default=os.environ.get("RHBL_LOG_LEVEL", "INFO"),
-                        choices=["DEBUG", "INFO", "WARNING", "ERROR"], type=str.upper,
-                        help="logging level (default: INFO or $RHBL_LOG_LEVEL)")
+    add_logging_arguments(parser)
 
 
 def start_recording(session, out, robots=None, overwrite: bool = False, viewer: bool = True,

@@ -23,6 +23,7 @@ from client._process import EXIT_USAGE, Context, ProcessError, run
 from client.recording import RecordingError, classify, read_recording
 from protocol import keys
 from protocol.messages import Scan, VelCmd
+from protocol.process import add_logging_arguments
 from protocol.session import add_zenoh_arguments
 
 __all__ = ["SENSOR_KINDS", "add_arguments", "main"]
@@ -50,9 +51,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lockstep-timeout", type=float, default=1.0, metavar="SECONDS",
                         help="with --lockstep: go on after this long without an answer "
                              "(default 1)")
-    parser.add_argument("--log-level", default=os.environ.get("RHBL_LOG_LEVEL", "INFO"),
-                        choices=["DEBUG", "INFO", "WARNING", "ERROR"], type=str.upper,
-                        help="logging level (default: INFO or $RHBL_LOG_LEVEL)")
+    add_logging_arguments(parser)
 
 
 def main(args: argparse.Namespace) -> int:
