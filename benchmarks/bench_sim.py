@@ -7,6 +7,16 @@
    every robot commanded each tick): the cost of one 10 Hz tick (step + scan + encode + publish
    for every robot), and the largest number of robots it keeps at real time, checked by running
    that many at 10 Hz for a few seconds and counting missed ticks.
+3. ``--fleet N``: N robots at 10 Hz real time for ``--fleet-seconds``, every robot driven by one
+   controller process serving them all (a wall-avoiding reflex answering each scan with its id,
+   over the same zenoh router as the server): ticks missed, worst tick, and sense-to-act
+   latency (server's end of publishing a tick -> that tick's command arriving at the server)
+   percentiles. A world too small for N robots is tiled (``--tiles``: copies side by side,
+   1 m apart; a robot sees only its own room's robots, the walls hide the rest).
+
+The laser of all robots is cast together (``World.scans``, ``server.laser``): the robots-seen-by-
+robots part no longer grows with the square of the fleet. ``--compare`` times that batched cast
+against one ``scan(i)`` per robot in the same run.
 """
 
 from __future__ import annotations
@@ -23,7 +33,26 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 import server  # noqa: E402
-from server.world import LASER, ROBOT, World, load_world  # noqa: E402
+from server.world import LASER, ROBOT, Wall, World, load_world  # noqa: E402
+
+_PERIOD = 0.1  # s, 10 Hz
+
+
+def tiled(spec, tiles: int, gap: float = 1.0):
+    """``spec`` copied ``tiles`` times on a near-square grid, ``gap`` m apart."""
+    import dataclasses
+
+    if tiles <= 1:
+        return spec
+    x0, y0, x1, y1 = spec.bounds()
+    px, py = x1 - x0 + gap, y1 - y0 + gap
+    cols = math.ceil(math.sqrt(tiles))
+    walls = []
+    for k in range(tiles):
+        a, b = k % cols, k // cols
+        walls += [Wall(points=tuple((x + a * px, y + b * py) for x, y in w.points),
+                       closed=w.closed) for w in spec.walls]
+    return dataclasses.replace(spec, name=f"{spec.name}x{tiles}", walls=tuple(walls))
 
 
 def reflex(ranges: np.ndarray) -> tuple[float, float]:
@@ -150,6 +179,191 @@ def real_time_run(spec, n: int, seconds: float = 3.0) -> tuple[float, float]:
         session.close()
 
 
+def fleet_poses(spec, tiles: int, n: int) -> list[tuple[float, float, float]]:
+    """``n`` free poses spread round-robin over the rooms of ``tiled(spec, tiles)``."""
+    one = free_poses(spec, 10_000)
+    if n > len(one) * max(tiles, 1):
+        raise SystemExit(f"{n} robots do not fit in {tiles} copies of {spec.name!r} "
+                         f"({len(one)} free poses each): raise --tiles")
+    x0, y0, x1, y1 = spec.bounds()
+    px, py = x1 - x0 + 1.0, y1 - y0 + 1.0
+    cols = math.ceil(math.sqrt(max(tiles, 1)))
+    out = []
+    for k in range(n):
+        t, j = k % max(tiles, 1), k // max(tiles, 1)
+        x, y, a = one[j]
+        out.append((x + (t % cols) * px, y + (t // cols) * py, a))
+    return out
+
+
+def serve_controller(endpoint: str) -> int:
+    """Child process: one controller for every robot, answering each scan with its id."""
+    import signal
+    import threading
+
+    import zenoh
+
+    from protocol import keys
+    from protocol.messages import Scan, VelCmd
+    from protocol.session import make_config
+
+    done = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    with zenoh.open(make_config(mode="client", connect=[endpoint])) as s:
+        pubs: dict[str, object] = {}
+
+        def on_scan(sample) -> None:
+            robot = str(sample.key_expr).split("/")[1]
+            scan = Scan.decode(sample.payload.to_bytes())
+            vx, va = reflex(np.asarray(scan.ranges))
+            pub = pubs.get(robot)
+            if pub is None:
+                pub = pubs[robot] = s.declare_publisher(
+                    keys.cmd_vel_key(robot, source="controller"), express=True)
+            pub.put(VelCmd(vx=vx, va=va, source="controller", scan_id=scan.id).encode())
+
+        sub = s.declare_subscriber(keys.scan_key("*"), on_scan)
+        print("ready", flush=True)
+        done.wait()
+        sub.undeclare()
+    return 0
+
+
+class _TimedPub:
+    """A scan publisher that notes when each robot's scan went out."""
+
+    def __init__(self, pub, name: str, sent: dict) -> None:
+        self.pub, self.name, self.sent = pub, name, sent
+
+    def put(self, payload: bytes) -> None:
+        self.pub.put(payload)
+        self.sent[self.name] = time.perf_counter()
+
+
+def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
+    """n robots at 10 Hz real time, driven by one controller process: missed ticks and
+    sense-to-act latency (a robot's scan out -> its answer in at the server)."""
+    import os
+    import signal
+    import subprocess
+
+    import zenoh
+
+    from protocol import keys
+    from protocol.messages import VelCmd
+    from protocol.session import make_config
+    from server.node import ServerNode
+
+    world_spec = tiled(spec, tiles)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        endpoint = f"tcp/127.0.0.1:{s.getsockname()[1]}"
+    session = zenoh.open(make_config(mode="router", listen=[endpoint]))
+    w = World(world_spec, robots=n)
+    w.reset(poses=fleet_poses(spec, tiles, n))
+    node = ServerNode(session, w, rate=10.0, speedup=1.0, watchdog=0.5)
+    sent: dict[str, float] = {}  # robot -> when its last scan went out
+    scan_of: dict[str, int] = {}
+    lat: list[float] = []
+    answered = [0]
+    for r in node._robots:
+        r.pubs["scan"] = _TimedPub(r.pubs["scan"], r.name, sent)
+
+    def on_cmd(sample) -> None:
+        t = time.perf_counter()
+        robot = str(sample.key_expr).split("/")[1]
+        cmd = VelCmd.decode(sample.payload.to_bytes())
+        if cmd.scan_id is not None and cmd.scan_id == scan_of.get(robot) and robot in sent:
+            lat.append(t - sent[robot])
+            answered[0] += 1
+
+    sub = session.declare_subscriber(keys.cmd_vel_key("*", source="controller"), on_cmd)
+    child = subprocess.Popen(
+        [sys.executable, __file__, "--serve-controller", endpoint],
+        stdout=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        if child.stdout.readline().strip() != "ready":
+            raise SystemExit("the controller process did not start")
+        ticks = missed = 0
+        worst = 0.0
+        warm = 10  # ticks before counting (connections, first publishers)
+        t0 = time.monotonic()
+        next_t = t0
+        while time.monotonic() - t0 < seconds + warm * _PERIOD:
+            delay = next_t - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            start = next_t
+            next_t += _PERIOD
+            a = time.perf_counter()
+            node.tick()
+            took = time.perf_counter() - a
+            for r in node._robots:
+                scan_of[r.name] = r.scan_id
+            ticks += 1
+            if ticks == warm:
+                lat.clear()
+                answered[0] = 0
+                counted_from = ticks
+            if ticks > warm:
+                worst = max(worst, took)
+                if time.monotonic() - start > _PERIOD:
+                    missed += 1
+                if next_t < time.monotonic() - _PERIOD:  # behind by a whole tick: skip it
+                    next_t = time.monotonic()
+        counted = ticks - counted_from
+        ms = np.asarray(lat) * 1e3 if lat else np.asarray([math.nan])
+        return {
+            "robots": n, "tiles": tiles, "ticks": counted, "missed": missed,
+            "worst_ms": worst * 1e3, "answered": answered[0] / max(counted * n, 1),
+            "p50": float(np.percentile(ms, 50)), "p90": float(np.percentile(ms, 90)),
+            "p99": float(np.percentile(ms, 99)),
+            "hz": counted / (time.monotonic() - t0 - warm * _PERIOD),
+        }
+    finally:
+        os.kill(child.pid, signal.SIGTERM)
+        try:
+            child.wait(10)
+        except subprocess.TimeoutExpired:
+            os.kill(child.pid, signal.SIGKILL)
+            child.wait()
+        sub.undeclare()
+        node.close()
+        session.close()
+
+
+def compare_scans(spec, n: int, tiles: int, repeats: int = 5) -> tuple[float, float]:
+    """Best-of ``repeats`` seconds to cast all n lasers: one robot at a time against every other
+    robot (``server.laser.robots_dense``, the simulator's cast before ``World.scans``) vs all
+    together (``World.scans``), side by side in one run. Checks both give the same ranges."""
+    from server import laser
+
+    w = World(tiled(spec, tiles), robots=n)
+    w.reset(poses=fleet_poses(spec, tiles, n))
+
+    def one_by_one() -> np.ndarray:
+        centres = np.asarray([w.pose(i)[:2] for i in range(n)])
+        out = np.empty((n, LASER.count), dtype=np.float32)
+        for i in range(n):
+            x, y, yaw = w.pose(i)
+            r, dc, ds = w._scan_walls(x, y, yaw)
+            out[i] = laser.robots_dense(r, (x, y), dc, ds, np.delete(centres, i, axis=0),
+                                        ROBOT.radius, LASER.max_range)
+        return out
+
+    if not np.array_equal(one_by_one(), w.scans()):
+        raise SystemExit("the batched laser differs from the one-robot-at-a-time cast")
+    one = batch = math.inf
+    for _ in range(repeats):
+        t = time.perf_counter()
+        w.scans()
+        batch = min(batch, time.perf_counter() - t)
+        t = time.perf_counter()
+        one_by_one()
+        one = min(one, time.perf_counter() - t)
+    return one, batch
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -157,7 +371,39 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--world", default="room")
     p.add_argument("--seconds", type=float, default=300.0, help="sim seconds in-process")
     p.add_argument("--no-server", action="store_true", help="skip the zenoh server figures")
+    p.add_argument("--compare", default=None, metavar="N,N,...",
+                   help="only time the batched laser against one robot at a time for these "
+                        "fleet sizes (e.g. 1,10,40,100,300)")
+    p.add_argument("--fleet", type=int, default=None, metavar="N",
+                   help="only run N robots at 10 Hz with one controller process serving all")
+    p.add_argument("--tiles", type=int, default=None,
+                   help="copies of the world side by side (default: as few as fit the fleet)")
+    p.add_argument("--fleet-seconds", type=float, default=20.0, help="real seconds (20)")
+    p.add_argument("--serve-controller", metavar="ENDPOINT", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
+    if args.serve_controller:
+        return serve_controller(args.serve_controller)
+    spec = load_world(server.world_path(args.world))
+    capacity = len(free_poses(spec, 10_000))
+
+    def tiles_for(n: int) -> int:
+        return args.tiles if args.tiles else max(1, math.ceil(n / capacity))
+
+    if args.compare:
+        for n in (int(x) for x in args.compare.split(",")):
+            one, batch = compare_scans(spec, n, tiles_for(n))
+            print(f"{n:4d} robots ({tiles_for(n)} x {args.world!r}): all lasers one robot at a "
+                  f"time {one * 1e3:8.2f} ms, together {batch * 1e3:7.2f} ms "
+                  f"({one / batch:.1f}x)", flush=True)
+        return 0
+    if args.fleet:
+        r = fleet_run(spec, args.fleet, tiles_for(args.fleet), args.fleet_seconds)
+        print(f"fleet: {r['robots']} robots in {r['tiles']} x {args.world!r} at 10 Hz, one "
+              f"controller process for all, {r['ticks']} ticks ({r['hz']:.2f} Hz): "
+              f"{r['missed']} ticks missed, worst tick {r['worst_ms']:.1f} ms; "
+              f"{r['answered'] * 100:.1f}% of scans answered in time; sense-to-act "
+              f"p50 {r['p50']:.1f} ms, p90 {r['p90']:.1f} ms, p99 {r['p99']:.1f} ms")
+        return 0
 
     r = bench_in_process(args.world, args.seconds)
     print(

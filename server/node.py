@@ -329,7 +329,9 @@ class ServerNode:
     def _publish(self, robots: Sequence[_RobotIO] | None = None) -> None:
         w = self.world
         ts = w.time
-        for r in self._robots if robots is None else robots:
+        robots = self._robots if robots is None else robots
+        scans = w.scans([r.index for r in robots])  # all lasers cast together (server.laser)
+        for k, r in enumerate(robots):
             i = r.index
             r.seq += 1
             r.scan_id += 1
@@ -350,7 +352,7 @@ class ServerNode:
                 Scan(
                     ts=ts,
                     id=r.scan_id,
-                    ranges=w.scan(i),
+                    ranges=scans[k],
                     pose=pos,
                     min_angle=LASER.min_angle,
                     max_angle=LASER.max_angle,
