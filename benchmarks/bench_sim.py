@@ -222,7 +222,7 @@ def serve_controller(endpoint: str) -> int:
                     keys.cmd_vel_key(robot, source="controller"), express=True)
             pub.put(VelCmd(vx=vx, va=va, source="controller", scan_id=scan.id).encode())
 
-        sub = s.declare_subscriber(keys.scan_key("*"), on_scan)
+        sub = s.declare_subscriber(f"{keys.PREFIX}/*/laser/0/data/scan", on_scan)
         print("ready", flush=True)
         done.wait()
         sub.undeclare()
@@ -277,7 +277,8 @@ def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
             lat.append(t - sent[robot])
             answered[0] += 1
 
-    sub = session.declare_subscriber(keys.cmd_vel_key("*", source="controller"), on_cmd)
+    sub = session.declare_subscriber(
+        f"{keys.PREFIX}/*/position2d/0/cmd/vel/controller", on_cmd)
     child = subprocess.Popen(
         [sys.executable, __file__, "--serve-controller", endpoint],
         stdout=subprocess.PIPE, text=True, start_new_session=True)

@@ -132,16 +132,14 @@ def _cast(acc, count, li, lo, hi, pqx, pqy, pc, dc, ds, max_range) -> None:
     """Intersect each pair's beams lo..hi with its circle; fold the hits into ``acc``."""
     counts = hi - lo + 1
     pair = np.repeat(np.arange(len(li)), counts)
-    starts = np.cumsum(counts) - counts
-    beam = lo[pair] + (np.arange(len(pair)) - starts[pair])
-    row = li[pair]
-    b = dc[row, beam] * pqx[pair] + ds[row, beam] * pqy[pair]  # float64, as a full cast
+    flat = np.arange(len(pair)) + (li * count + lo - (np.cumsum(counts) - counts))[pair]
+    b = dc.ravel().take(flat) * pqx[pair] + ds.ravel().take(flat) * pqy[pair]  # float64
     disc = b * b - pc[pair]
     with np.errstate(invalid="ignore"):
         t = b - np.sqrt(disc)
     ok = (disc >= 0) & (t > 0)
     t = np.where(ok, t, max_range)
-    np.minimum.at(acc, row * count + beam, t)
+    np.minimum.at(acc, flat, t)
 
 
 def walls(
@@ -209,23 +207,23 @@ def walls(
         li, sj, lo_i, hi_i = li[ok], sj[ok], lo_i[ok], hi_i[ok]
         counts = hi_i - lo_i + 1
         pair = np.repeat(np.arange(len(li)), counts)
-        starts = np.cumsum(counts) - counts
-        beam = lo_i[pair] + (np.arange(len(pair)) - starts[pair])
-        row = li[pair]
-        seg = sj[pair]
+        flat = np.arange(len(pair)) + (li * count + lo_i - (np.cumsum(counts) - counts))[pair]
         f4 = np.float32
         pax = ax[li, sj].astype(f4)[pair]
         pay = ay[li, sj].astype(f4)[pair]
-        pex = ex.astype(f4)[seg]
-        pey = ey.astype(f4)[seg]
-        bdc = dc[row, beam]
-        bds = ds[row, beam]
+        pex = ex.astype(f4)[sj][pair]
+        pey = ey.astype(f4)[sj][pair]
+        bdc = dc.ravel().take(flat)
+        bds = ds.ravel().take(flat)
         with np.errstate(divide="ignore", invalid="ignore"):
             inv = 1.0 / (pey * bdc - pex * bds)
             tr = (pax * pey - pay * pex) * inv
             u = (pax * bds - pay * bdc) * inv
-        good = (u >= 0.0) & (u <= 1.0) & (tr > 0.0)
-        np.minimum.at(acc, row[good] * count + beam[good], tr[good])
+        bad = u < 0.0
+        bad |= u > 1.0
+        bad |= ~(tr > 0.0)
+        tr[bad] = max_range
+        np.minimum.at(acc, flat, tr)
     return acc.reshape(n, count), dc, ds
 
 
