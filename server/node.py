@@ -19,6 +19,9 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import os
+import re
+import socket
 import threading
 import time
 from collections import Counter
@@ -48,7 +51,7 @@ from protocol.messages import (
 from server.arbiter import Arbiter, priority_of
 from server.world import LASER, ROBOT, World, WorldSpec
 
-__all__ = ["ServerNode"]
+__all__ = ["DuplicateRobotError", "ServerNode", "default_ident", "hosted_robots"]
 
 log = logging.getLogger(__name__)
 
@@ -62,6 +65,29 @@ def world_info(spec: WorldSpec) -> WorldInfo:
     return WorldInfo(name=spec.name, task=spec.task,
                      walls=tuple(tuple(s) for s in spec.segments().tolist()),
                      goal=goal, starts=tuple(tuple(p) for p in spec.start_poses))
+
+
+class DuplicateRobotError(ValueError):
+    """A robot name this server would host is already hosted by another server."""
+
+
+def default_ident() -> str:
+    """A server's default id, unique on a zenoh network: ``<host>-<pid>`` (as a key chunk)."""
+    host = re.sub(r"[^A-Za-z0-9_.\-]", "-", socket.gethostname()) or "host"
+    return f"{host}-{os.getpid()}"
+
+
+def hosted_robots(session: zenoh.Session, timeout: float = 1.0) -> dict[str, list[str]]:
+    """Which server hosts which robot, from the servers' liveliness tokens
+    ``rhbl/alive/server/<ident>/<robot>``: ``{robot: [ident, ...]}``."""
+    out: dict[str, list[str]] = {}
+    for reply in session.liveliness().get(keys.alive_key("server", "**"), timeout=timeout):
+        if reply.ok is None:
+            continue
+        parts = str(reply.ok.key_expr).split("/")
+        if len(parts) == 5:
+            out.setdefault(parts[4], []).append(parts[3])
+    return out
 
 
 class _RobotIO:
@@ -91,7 +117,8 @@ class ServerNode:
         lockstep: bool = False,
         lockstep_timeout: float = 1.0,
         watchdog: float = 0.5,
-        ident: str = "sim",
+        ident: str | None = None,
+        refuse_duplicates: bool = True,
     ) -> None:
         if names is None:
             names = [keys.robot_name(i) for i in range(world.n_robots)]
@@ -114,7 +141,8 @@ class ServerNode:
         self.lockstep = bool(lockstep)
         self.lockstep_timeout = float(lockstep_timeout)
         self.watchdog = float(watchdog)
-        self.ident = keys.check_chunk(ident, "server ident")
+        self.ident = keys.check_chunk(default_ident() if ident is None else ident,
+                                      "server ident")
         self.counters: Counter[str] = Counter()
         self.ticks = 0
         self.lockstep_timeouts = 0
@@ -124,7 +152,22 @@ class ServerNode:
         self._by_name = {r.name: r for r in self._robots}
         self._decls: list[Any] = []
         self._world_info = world_info(world.spec)
+        if refuse_duplicates:
+            self._refuse_duplicates()
         self._declare()
+
+    def _refuse_duplicates(self) -> None:
+        """Raise :class:`DuplicateRobotError` if another server already hosts one of our robots
+        (its token ``rhbl/alive/server/<ident>/<robot>`` is visible). Two servers starting in
+        the same instant can both pass; each then logs the other's token (``_on_liveliness``)."""
+        hosted = hosted_robots(self.session)
+        taken = {r.name: hosted[r.name] for r in self._robots if r.name in hosted}
+        if taken:
+            which = "; ".join(f"robot {name!r} is hosted by server {', '.join(sorted(ids))}"
+                              for name, ids in sorted(taken.items()))
+            raise DuplicateRobotError(
+                f"refusing to start: {which} (robot names are unique on a zenoh network; "
+                f"name this server's robots differently with --robot, or use a --namespace)")
 
     # -- zenoh declarations ---------------------------------------------------------------
 
@@ -164,7 +207,11 @@ class ServerNode:
         self._decls.append(
             s.liveliness().declare_subscriber(f"{keys.PREFIX}/alive/**", self._on_liveliness)
         )
-        self._token = s.liveliness().declare_token(keys.alive_key("server", self.ident))
+        # one token per hosted robot: rhbl/alive/server/<ident>/<robot> says who hosts what
+        self._tokens = [
+            s.liveliness().declare_token(f"{keys.alive_key('server', self.ident)}/{r.name}")
+            for r in self._robots
+        ]
 
     def close(self) -> None:
         """Undeclare everything (the session stays open; its owner closes it)."""
@@ -173,8 +220,10 @@ class ServerNode:
             with contextlib.suppress(Exception):  # already gone with the session
                 d.undeclare()
         self._decls.clear()
-        with contextlib.suppress(Exception):
-            self._token.undeclare()
+        for t in self._tokens:
+            with contextlib.suppress(Exception):
+                t.undeclare()
+        self._tokens.clear()
 
     # -- input ------------------------------------------------------------------------------
 
@@ -212,9 +261,14 @@ class ServerNode:
 
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
         try:
-            if sample.kind != zenoh.SampleKind.DELETE:
-                return
             parts = str(sample.key_expr).split("/")
+            if sample.kind != zenoh.SampleKind.DELETE:
+                if (len(parts) == 5 and parts[2] == "server" and parts[3] != self.ident
+                        and parts[4] in self._by_name):
+                    self.counters["duplicate_robot"] += 1
+                    log.error("robot %r is also hosted by server %r: two servers publish its "
+                              "scans (stop one)", parts[4], parts[3])
+                return
             if len(parts) < 4:
                 return
             role, ident = parts[2], parts[3]
