@@ -249,6 +249,23 @@ def fuzz_server(per_key: int, seed: int = 0, valid_every: int = 10) -> list[KeyR
                         raise ValueError("oversized")
                 valid = anything
             gen = mutations(valid, rng)
+            pending: list[tuple[bool, Any]] = []  # queries in flight (answered concurrently)
+
+            def drain(res=res, pending=pending) -> None:
+                for want_ok, handler in pending:
+                    replies = list(handler)
+                    got_ok = any(r.ok is not None for r in replies)
+                    got_err = any(r.err is not None for r in replies)
+                    if want_ok:
+                        res.valid_sent += 1
+                        res.valid_processed += got_ok
+                    else:
+                        res.sent += 1
+                        res.rejected += got_err and not got_ok
+                    if not replies and len(res.notes) < 3:
+                        res.notes.append("no reply (hang?)")
+                pending.clear()
+
             n = 0
             while n < per_key:
                 data = next(gen)
@@ -260,17 +277,10 @@ def fuzz_server(per_key: int, seed: int = 0, valid_every: int = 10) -> list[KeyR
                 if want_ok and key.rsplit("/", 1)[1] in ("set_pose", "motor_power", "set_odom"):
                     continue  # a valid teleport or motors-off would change the robot
                 n += 1
-                replies = list(cli.get(key, payload=data, timeout=5.0))
-                got_ok = any(r.ok is not None for r in replies)
-                got_err = any(r.err is not None for r in replies)
-                if want_ok:
-                    res.valid_sent += 1
-                    res.valid_processed += got_ok
-                else:
-                    res.sent += 1
-                    res.rejected += got_err and not got_ok
-                if not replies:
-                    res.notes.append("no reply (hang?)") if len(res.notes) < 3 else None
+                pending.append((want_ok, cli.get(key, payload=data, timeout=10.0)))
+                if len(pending) >= 32:
+                    drain()
+            drain()
             results.append(res)
         # the robot stood still (only stand-still commands and rejected requests), motors on
         time.sleep(0.3)
@@ -359,11 +369,16 @@ def fuzz_clients(per_key: int, seed: int = 0, valid_every: int = 10,
                 results.append(res)
             res = KeyResult(keys.learner_snapshot_key("r0"))
             gen = mutations({"v": 1}, rng)
-            for _ in range(per_key):
-                replies = list(s.get(keys.learner_snapshot_key("r0"), payload=next(gen),
-                                     timeout=5.0))
-                res.valid_sent += 1  # the payload is ignored: every query gets the snapshot
-                res.valid_processed += any(r.ok is not None for r in replies)
+            inflight: list[Any] = []
+            for k in range(per_key):
+                inflight.append(s.get(keys.learner_snapshot_key("r0"), payload=next(gen),
+                                      timeout=10.0))
+                if len(inflight) >= 32 or k == per_key - 1:
+                    for h in inflight:
+                        # the payload is ignored: every query gets the snapshot
+                        res.valid_sent += 1
+                        res.valid_processed += any(r.ok is not None for r in h)
+                    inflight.clear()
             results.append(res)
             time.sleep(2.0)
             journal = tree.with_name(tree.name + ".journal")
