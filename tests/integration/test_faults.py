@@ -1,5 +1,7 @@
 """The fault campaign (``python -m lab.faults``) at CI size: learner SIGKILLs during a
-demonstration lose no label, and a restarted server is driven again by the teacher."""
+demonstration lose labels only around a kill (the design does not resend them; the full
+campaign measures how many: docs/reliability.md), none twice; a restarted server is driven
+again by the teacher."""
 
 from __future__ import annotations
 
@@ -12,10 +14,11 @@ from lab import faults
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 
 
-def test_learner_kills_lose_no_label(tmp_path):
+def test_learner_kills_lose_labels_only_around_a_kill(tmp_path):
     r = faults.learner_kill(tmp_path, random.Random(1), kills=2, speedup=2.0)
-    assert r["ok"] and r["labels published"] > 50
-    assert r["lost"] == 0 and r["duplicates in journal"] == 0, r
+    assert r["ok"] and r["labels published"] > 50, r
+    assert r["lost away from a kill"] == 0 and r["duplicates in journal"] == 0, r
+    assert r["journaled"] + r["lost"] == r["distinct labels"]
 
 
 def test_a_restarted_server_is_driven_again(tmp_path):
