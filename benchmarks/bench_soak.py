@@ -54,6 +54,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--every", type=float, default=30.0, help="seconds between samples (30)")
     ap.add_argument("--max-nodes", type=int, default=4000, help="learner's tree cap (4000)")
     ap.add_argument("--out", default="soak.csv", help="CSV of the samples (soak.csv)")
+    ap.add_argument("--fold-journal", action="store_true",
+                    help="the learner folds its journal into each snapshot")
     ap.add_argument("--dir", default=None, help="the learner's folder (default: a temp dir)")
     args = ap.parse_args(argv)
 
@@ -66,7 +68,8 @@ def main(argv: list[str] | None = None) -> int:
         "server": ["server", "--world", "room", "--speedup", str(args.speedup), "--listen",
                    endpoint, "--log-level", "WARNING"],
         "learner": ["learner", "--features", "wall", "--out", str(tree), "--max-nodes",
-                    str(args.max_nodes), "--connect", endpoint, "--log-level", "WARNING"],
+                    str(args.max_nodes), *(["--fold-journal"] if args.fold_journal else []),
+                    "--connect", endpoint, "--log-level", "WARNING"],
         "teacher": ["teacher", "--policy", "wall-follower", "--correct", "--demonstrate", "60",
                     "--connect", endpoint, "--log-level", "WARNING"],
         "controller": ["controller", "--from-learner", "--follow", "--connect", endpoint,

@@ -180,26 +180,34 @@ class Campaign:
         self.session.close()
 
 
-def _journal_ids(out: Path) -> list[int]:
+def _journal_ids(out: Path) -> tuple[list[int], int]:
+    """Scan ids of the records the journal holds (from its base) and its total record count."""
     from client.journal import Journal, journal_path
 
     with Journal.open(journal_path(out), readonly=True) as j:
-        return [r.scan_id for r in j.records()]
+        return [r.scan_id for r in j.records(j.base)], len(j)
 
 
-def _learner(c: Campaign, out: Path, name: str = "learner", **kw) -> Proc:
+def journal_size(out: Path) -> int:
+    from client.journal import journal_path
+
+    return journal_path(out).stat().st_size
+
+
+def _learner(c: Campaign, out: Path, name: str = "learner", fold: bool = False, **kw) -> Proc:
     return c.start(name, "learner", "--features", "wall", "--out", str(out),
-                   "--snapshot-every", "1", **kw)
+                   "--snapshot-every", "1", *(["--fold-journal"] if fold else []), **kw)
 
 
 # ------------------------------------------------------------------------------------ parts
-def learner_kill(workdir: Path, rng: random.Random, kills: int, speedup: float) -> dict:
+def learner_kill(workdir: Path, rng: random.Random, kills: int, speedup: float,
+                 fold: bool = False) -> dict:
     c = Campaign(workdir)
     out = workdir / "tree.rhbl"
     try:
         c.watch()
         c.server("--speedup", str(speedup))
-        learner = _learner(c, out)
+        learner = _learner(c, out, fold=fold)
         teacher = c.start("teacher", "teacher", "--policy", "wall-follower",
                           "--wait-learner-timeout", "60")
         if not c.wait(lambda: len(c.labels) > 20, 120):
@@ -210,7 +218,7 @@ def learner_kill(workdir: Path, rng: random.Random, kills: int, speedup: float) 
             t_kill = time.monotonic()
             learner.kill()
             time.sleep(rng.uniform(0.0, 1.0))
-            learner = _learner(c, out)
+            learner = _learner(c, out, fold=fold)
             killed.append((t_kill, learner.started))
         time.sleep(5.0)
         teacher.stop()
@@ -218,18 +226,25 @@ def learner_kill(workdir: Path, rng: random.Random, kills: int, speedup: float) 
         time.sleep(1.0)
         rc = learner.stop(60)
         published = {sid for _, sid in c.labels}
-        journaled = _journal_ids(out)
-        lost = sorted(published - set(journaled))
-        # a label can be lost only around a kill: published (seen here) from shortly before
-        # the kill (in flight, not yet journaled) until the teacher paused
-        seen = {sid: t for t, sid in c.labels}
-        stray = [sid for sid in lost
-                 if not any(k - 1.0 <= seen[sid] <= k + 2.0 for k, _ in killed)]
-        return {"part": "learner-kill", "kills": kills, "labels published": n_pub,
-                "distinct labels": len(published), "journaled": len(journaled),
-                "lost": len(lost), "lost ids": lost[:20],
+        journaled, total = _journal_ids(out)
+        if fold:  # the folded records are in the snapshot only: count them
+            lost = [None] * max(0, len(published) - total)
+            stray = []
+        else:
+            lost = sorted(published - set(journaled))
+            # a label can be lost only around a kill: published (seen here) from shortly
+            # before the kill (in flight, not yet journaled) until the teacher paused
+            seen = {sid: t for t, sid in c.labels}
+            stray = [sid for sid in lost
+                     if not any(k - 1.0 <= seen[sid] <= k + 2.0 for k, _ in killed)]
+        return {"part": "learner-kill", "kills": kills, "fold journal": fold,
+                "labels published": n_pub,
+                "distinct labels": len(published), "journaled": total,
+                "journal bytes": journal_size(out),
+                "lost": len(lost),
                 "lost away from a kill": len(stray),
                 "duplicates in journal": len(journaled) - len(set(journaled)),
+                "lost ids": [x for x in lost if x is not None][:20],
                 "learner exit": rc, "ok": rc == 0 and not stray}
     finally:
         c.close()
@@ -337,7 +352,7 @@ def learner_stop(workdir: Path, stop_for: float = 20.0) -> dict:
         teacher.stop()
         time.sleep(1.0)
         rc = learner.stop(60)
-        lost = len({s for _, s in c.labels} - set(_journal_ids(out)))
+        lost = len({s for _, s in c.labels} - set(_journal_ids(out)[0]))
         return {"part": "learner-stop", "stopped for s": stop_for,
                 "SIGSTOP -> teacher's last label, s": round(noticed, 2),
                 "teacher paused": paused, "SIGCONT -> labels again, s": round(resume_s, 2),
@@ -367,7 +382,7 @@ def disk_full(workdir: Path, full_for: float = 5.0) -> dict:
         teacher.stop()
         time.sleep(1.0)
         rc = learner.stop(60)
-        lost = len({s for _, s in c.labels} - set(_journal_ids(out)))
+        lost = len({s for _, s in c.labels} - set(_journal_ids(out)[0]))
         text = learner.log.read_text(errors="replace")
         return {"part": "disk-full", "full for s": full_for, "labels": len(c.labels),
                 "labels lost": lost, "ENOSPC reported": "No space left" in text,
@@ -385,6 +400,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", default=",".join(PARTS), help="comma list of parts")
     ap.add_argument("--kills", type=int, default=20, help="learner SIGKILLs (20)")
     ap.add_argument("--restarts", type=int, default=5, help="server restarts (5)")
+    ap.add_argument("--fold-journal", action="store_true",
+                    help="learner-kill with the learner folding its journal into snapshots")
     ap.add_argument("--speedup", type=float, default=2.0,
                     help="server speed-up during the learner kills (2)")
     ap.add_argument("--out", default=None, help="folder for logs and files (default: temp)")
@@ -398,7 +415,7 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.monotonic()
         try:
             if part == "learner-kill":
-                r = learner_kill(d, rng, args.kills, args.speedup)
+                r = learner_kill(d, rng, args.kills, args.speedup, fold=args.fold_journal)
             elif part == "server-restart":
                 r = server_restart(d, rng, args.restarts)
             elif part == "controller-kill":

@@ -25,3 +25,13 @@ def test_a_restarted_server_is_driven_again(tmp_path):
     r = faults.server_restart(tmp_path, random.Random(2), restarts=1)
     assert r["ok"], r
     assert r["max s"] < 30
+
+
+def test_a_folding_learner_killed_recovers_with_a_bounded_journal(tmp_path):
+    r = faults.learner_kill(tmp_path, random.Random(3), kills=2, speedup=2.0, fold=True)
+    assert r["ok"] and r["labels published"] > 50, r
+    # every record is counted (folded ones too), at most a label or two per kill lost
+    assert r["journaled"] + r["lost"] == r["distinct labels"], r
+    assert r["duplicates in journal"] == 0
+    # folded: the file holds about one snapshot interval of records, not all of them
+    assert r["journal bytes"] < r["journaled"] * 1538 / 2, r
