@@ -12,6 +12,11 @@ File format (little-endian)::
     frame i := record i-1, a msgpack map {"i", "scan", "ts", "label", "yaw", "ranges", "x"}
                (ranges and x as float32 bytes)
 
+Folding (``Journal.fold(upto)``, ``rhbl learner --fold-journal``): once a durable snapshot holds
+records ``0 .. upto - 1`` they are dropped: the file is rewritten as a header with ``base`` =
+``upto`` plus the later records, and renamed over the journal (atomic). Indices never change;
+``len()`` counts folded records too and ``records(start)`` needs ``start >= base``.
+
 Durability: each record is written with one unbuffered ``os.write`` (it is in the kernel's page
 cache when ``append`` returns, so it survives the process being killed) and ``os.fsync``'d at most
 ``fsync_interval`` seconds later (default 1 s) and on ``sync``/``close`` (so a power cut loses at
