@@ -562,7 +562,7 @@ class World:
             ox = x + LASER.offset * math.cos(yaw)
             oy = y + LASER.offset * math.sin(yaw)
             ranges, _, _ = self._scan_walls(ox, oy, yaw)
-            return self._add_noise(ranges)
+            return self._add_noise(ranges) if self.range_noise > 0.0 else ranges
         return self.scans([i])[0]
 
     def scans(self, indices: list[int] | None = None) -> np.ndarray:
@@ -640,7 +640,7 @@ class World:
                 bad = u < 0.0
                 bad |= u > 1.0
                 bad |= tr <= 0.0
-                np.putmask(tr, bad, max_r)
+                tr[bad] = max_r
             ranges = tr.min(axis=0)
             np.minimum(ranges, np.float32(max_r), out=ranges)
         else:
