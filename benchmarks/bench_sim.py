@@ -380,6 +380,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--tick-cpu", default=None, metavar="N,N,...",
                    help="only the server node's CPU seconds per tick (process time, zenoh's "
                         "threads included; best of 3 runs of 20 ticks) for these fleet sizes")
+    p.add_argument("--real-time", type=int, default=None, metavar="N",
+                   help="only run N robots at 10 Hz for --fleet-seconds, commanded in-process "
+                        "(no clients): achieved rate, worst tick, ticks over the period")
     p.add_argument("--fleet", type=int, default=None, metavar="N",
                    help="only run N robots at 10 Hz with one controller process serving all")
     p.add_argument("--tiles", type=int, default=None,
@@ -409,6 +412,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{n:4d} robots ({tiles_for(n)} x {args.world!r}): server tick CPU "
                   f"{c * 1e3:8.2f} ms ({c / n * 1e3:.3f} ms per robot; real time needs "
                   f"< 100 ms)", flush=True)
+        return 0
+    if args.real_time:
+        n = args.real_time
+        hz, worst = real_time_run(spec, n, seconds=args.fleet_seconds, tiles=tiles_for(n))
+        print(f"server node, {n} robots in {tiles_for(n)} x {args.world!r}, commanded "
+              f"in-process, {args.fleet_seconds:g} s at 10 Hz: achieved {hz:.2f} Hz, worst tick "
+              f"{worst * 1e3:.1f} ms")
         return 0
     if args.fleet:
         r = fleet_run(spec, args.fleet, tiles_for(args.fleet), args.fleet_seconds)
