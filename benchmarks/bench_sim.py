@@ -7,6 +7,16 @@
    every robot commanded each tick): the cost of one 10 Hz tick (step + scan + encode + publish
    for every robot), and the largest number of robots it keeps at real time, checked by running
    that many at 10 Hz for a few seconds and counting missed ticks.
+3. ``--fleet N``: N robots at 10 Hz real time for ``--fleet-seconds``, every robot driven by one
+   controller process serving them all (a wall-avoiding reflex answering each scan with its id,
+   over the same zenoh router as the server): ticks missed, worst tick, and sense-to-act
+   latency (server's end of publishing a tick -> that tick's command arriving at the server)
+   percentiles. A world too small for N robots is tiled (``--tiles``: copies side by side,
+   1 m apart; a robot sees only its own room's robots, the walls hide the rest).
+
+The laser of all robots is cast together (``World.scans``, ``server.laser``): the robots-seen-by-
+robots part no longer grows with the square of the fleet. ``--compare`` times that batched cast
+against one ``scan(i)`` per robot in the same run.
 """
 
 from __future__ import annotations
@@ -23,7 +33,26 @@ import numpy as np  # noqa: E402
 
 import server  # noqa: E402
 from lab.processes import free_port  # noqa: E402
-from server.world import LASER, ROBOT, World, load_world  # noqa: E402
+from server.world import LASER, ROBOT, Wall, World, load_world  # noqa: E402
+
+_PERIOD = 0.1  # s, 10 Hz
+
+
+def tiled(spec, tiles: int, gap: float = 1.0):
+    """``spec`` copied ``tiles`` times on a near-square grid, ``gap`` m apart."""
+    import dataclasses
+
+    if tiles <= 1:
+        return spec
+    x0, y0, x1, y1 = spec.bounds()
+    px, py = x1 - x0 + gap, y1 - y0 + gap
+    cols = math.ceil(math.sqrt(tiles))
+    walls = []
+    for k in range(tiles):
+        a, b = k % cols, k // cols
+        walls += [Wall(points=tuple((x + a * px, y + b * py) for x, y in w.points),
+                       closed=w.closed) for w in spec.walls]
+    return dataclasses.replace(spec, name=f"{spec.name}x{tiles}", walls=tuple(walls))
 
 
 def reflex(ranges: np.ndarray) -> tuple[float, float]:
@@ -91,15 +120,15 @@ def free_poses(spec, n: int, spacing: float = 0.7) -> list[tuple[float, float, f
     return out
 
 
-def _node(spec, n: int):
+def _node(spec, n: int, tiles: int = 1):
     import zenoh
 
     from protocol.session import make_config
     from server.node import ServerNode
 
     session = zenoh.open(make_config(mode="router", listen=[f"tcp/127.0.0.1:{free_port()}"]))
-    w = World(spec, robots=n)
-    w.reset(poses=free_poses(spec, n))
+    w = World(tiled(spec, tiles), robots=n)
+    w.reset(poses=fleet_poses(spec, tiles, n) if tiles > 1 else free_poses(spec, n))
     node = ServerNode(session, w, rate=10.0, speedup=1.0, watchdog=0.5)
     return session, node
 
@@ -109,22 +138,23 @@ def _command_all(node, k: int) -> None:
         r.arbiter.offer("bench", 0.3, 0.4 * math.sin(0.05 * k + r.index), True, node.world.time)
 
 
-def tick_cost(spec, n: int, ticks: int = 50) -> float:
-    session, node = _node(spec, n)
+def tick_cost(spec, n: int, ticks: int = 50, tiles: int = 1,
+              clock=time.perf_counter) -> float:
+    session, node = _node(spec, n, tiles)
     try:
-        t = time.perf_counter()
+        t = clock()
         for k in range(ticks):
             _command_all(node, k)
             node.tick()
-        return (time.perf_counter() - t) / ticks
+        return (clock() - t) / ticks
     finally:
         node.close()
         session.close()
 
 
-def real_time_run(spec, n: int, seconds: float = 3.0) -> tuple[float, float]:
+def real_time_run(spec, n: int, seconds: float = 3.0, tiles: int = 1) -> tuple[float, float]:
     """Run n robots at 10 Hz real time; return (achieved Hz, worst tick seconds)."""
-    session, node = _node(spec, n)
+    session, node = _node(spec, n, tiles)
     try:
         period = 0.1
         t0 = time.monotonic()
@@ -147,6 +177,191 @@ def real_time_run(spec, n: int, seconds: float = 3.0) -> tuple[float, float]:
         session.close()
 
 
+def fleet_poses(spec, tiles: int, n: int) -> list[tuple[float, float, float]]:
+    """``n`` free poses spread round-robin over the rooms of ``tiled(spec, tiles)``."""
+    one = free_poses(spec, 10_000)
+    if n > len(one) * max(tiles, 1):
+        raise SystemExit(f"{n} robots do not fit in {tiles} copies of {spec.name!r} "
+                         f"({len(one)} free poses each): raise --tiles")
+    x0, y0, x1, y1 = spec.bounds()
+    px, py = x1 - x0 + 1.0, y1 - y0 + 1.0
+    cols = math.ceil(math.sqrt(max(tiles, 1)))
+    out = []
+    for k in range(n):
+        t, j = k % max(tiles, 1), k // max(tiles, 1)
+        x, y, a = one[j]
+        out.append((x + (t % cols) * px, y + (t // cols) * py, a))
+    return out
+
+
+def serve_controller(endpoint: str) -> int:
+    """Child process: one controller for every robot, answering each scan with its id."""
+    import signal
+    import threading
+
+    import zenoh
+
+    from protocol import keys
+    from protocol.messages import Scan, VelCmd
+    from protocol.session import make_config
+
+    done = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    with zenoh.open(make_config(mode="client", connect=[endpoint])) as s:
+        pubs: dict[str, object] = {}
+
+        def on_scan(sample) -> None:
+            robot = str(sample.key_expr).split("/")[1]
+            scan = Scan.decode(sample.payload.to_bytes())
+            vx, va = reflex(np.asarray(scan.ranges))
+            pub = pubs.get(robot)
+            if pub is None:
+                pub = pubs[robot] = s.declare_publisher(
+                    keys.cmd_vel_key(robot, source="controller"), express=True)
+            pub.put(VelCmd(vx=vx, va=va, source="controller", scan_id=scan.id).encode())
+
+        sub = s.declare_subscriber(f"{keys.PREFIX}/*/laser/0/data/scan", on_scan)
+        print("ready", flush=True)
+        done.wait()
+        sub.undeclare()
+    return 0
+
+
+class _TimedPub:
+    """A scan publisher that notes when each robot's scan went out."""
+
+    def __init__(self, pub, name: str, sent: dict) -> None:
+        self.pub, self.name, self.sent = pub, name, sent
+
+    def put(self, payload: bytes) -> None:
+        self.pub.put(payload)
+        self.sent[self.name] = time.perf_counter()
+
+
+def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
+    """n robots at 10 Hz real time, driven by one controller process: missed ticks and
+    sense-to-act latency (a robot's scan out -> its answer in at the server)."""
+    import os
+    import signal
+    import subprocess
+
+    import zenoh
+
+    from protocol import keys
+    from protocol.messages import VelCmd
+    from protocol.session import make_config
+    from server.node import ServerNode
+
+    world_spec = tiled(spec, tiles)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    session = zenoh.open(make_config(mode="router", listen=[endpoint]))
+    w = World(world_spec, robots=n)
+    w.reset(poses=fleet_poses(spec, tiles, n))
+    node = ServerNode(session, w, rate=10.0, speedup=1.0, watchdog=0.5)
+    sent: dict[str, float] = {}  # robot -> when its last scan went out
+    scan_of: dict[str, int] = {}
+    lat: list[float] = []
+    answered = [0]
+    for r in node._robots:
+        r.pubs["scan"] = _TimedPub(r.pubs["scan"], r.name, sent)
+
+    def on_cmd(sample) -> None:
+        t = time.perf_counter()
+        robot = str(sample.key_expr).split("/")[1]
+        cmd = VelCmd.decode(sample.payload.to_bytes())
+        if cmd.scan_id is not None and cmd.scan_id == scan_of.get(robot) and robot in sent:
+            lat.append(t - sent[robot])
+            answered[0] += 1
+
+    sub = session.declare_subscriber(
+        f"{keys.PREFIX}/*/position2d/0/cmd/vel/controller", on_cmd)
+    child = subprocess.Popen(
+        [sys.executable, __file__, "--serve-controller", endpoint],
+        stdout=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        if child.stdout.readline().strip() != "ready":
+            raise SystemExit("the controller process did not start")
+        ticks = missed = 0
+        worst = 0.0
+        warm = 10  # ticks before counting (connections, first publishers)
+        t0 = time.monotonic()
+        next_t = t0
+        while time.monotonic() - t0 < seconds + warm * _PERIOD:
+            delay = next_t - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            start = next_t
+            next_t += _PERIOD
+            a = time.perf_counter()
+            node.tick()
+            took = time.perf_counter() - a
+            for r in node._robots:
+                scan_of[r.name] = r.scan_id
+            ticks += 1
+            if ticks == warm:
+                lat.clear()
+                answered[0] = 0
+                counted_from = ticks
+            if ticks > warm:
+                worst = max(worst, took)
+                if time.monotonic() - start > _PERIOD:
+                    missed += 1
+                if next_t < time.monotonic() - _PERIOD:  # behind by a whole tick: skip it
+                    next_t = time.monotonic()
+        counted = ticks - counted_from
+        ms = np.asarray(lat) * 1e3 if lat else np.asarray([math.nan])
+        return {
+            "robots": n, "tiles": tiles, "ticks": counted, "missed": missed,
+            "worst_ms": worst * 1e3, "answered": answered[0] / max(counted * n, 1),
+            "p50": float(np.percentile(ms, 50)), "p90": float(np.percentile(ms, 90)),
+            "p99": float(np.percentile(ms, 99)),
+            "hz": counted / (time.monotonic() - t0 - warm * _PERIOD),
+        }
+    finally:
+        os.kill(child.pid, signal.SIGTERM)
+        try:
+            child.wait(10)
+        except subprocess.TimeoutExpired:
+            os.kill(child.pid, signal.SIGKILL)
+            child.wait()
+        sub.undeclare()
+        node.close()
+        session.close()
+
+
+def compare_scans(spec, n: int, tiles: int, repeats: int = 5) -> tuple[float, float]:
+    """Best-of ``repeats`` CPU seconds to cast all n lasers: one robot at a time against every other
+    robot (``server.laser.robots_dense``, the simulator's cast before ``World.scans``) vs all
+    together (``World.scans``), side by side in one run. Checks both give the same ranges."""
+    from server import laser
+
+    w = World(tiled(spec, tiles), robots=n)
+    w.reset(poses=fleet_poses(spec, tiles, n))
+
+    def one_by_one() -> np.ndarray:
+        centres = np.asarray([w.pose(i)[:2] for i in range(n)])
+        out = np.empty((n, LASER.count), dtype=np.float32)
+        for i in range(n):
+            x, y, yaw = w.pose(i)
+            r, dc, ds = w._scan_walls(x, y, yaw)
+            out[i] = laser.robots_dense(r, (x, y), dc, ds, np.delete(centres, i, axis=0),
+                                        ROBOT.radius, LASER.max_range)
+        return out
+
+    if not np.array_equal(one_by_one(), w.scans()):
+        raise SystemExit("the batched laser differs from the one-robot-at-a-time cast")
+    one = batch = math.inf
+    clock = time.thread_time  # CPU seconds of this thread: steadier than wall time on a busy box
+    for _ in range(repeats):
+        t = clock()
+        w.scans()
+        batch = min(batch, clock() - t)
+        t = clock()
+        one_by_one()
+        one = min(one, clock() - t)
+    return one, batch
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -154,7 +369,60 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--world", default="room")
     p.add_argument("--seconds", type=float, default=300.0, help="sim seconds in-process")
     p.add_argument("--no-server", action="store_true", help="skip the zenoh server figures")
+    p.add_argument("--compare", default=None, metavar="N,N,...",
+                   help="only time the batched laser against one robot at a time for these "
+                        "fleet sizes (e.g. 1,10,40,100,300)")
+    p.add_argument("--tick-cpu", default=None, metavar="N,N,...",
+                   help="only the server node's CPU seconds per tick (process time, zenoh's "
+                        "threads included; best of 3 runs of 20 ticks) for these fleet sizes")
+    p.add_argument("--real-time", type=int, default=None, metavar="N",
+                   help="only run N robots at 10 Hz for --fleet-seconds, commanded in-process "
+                        "(no clients): achieved rate, worst tick, ticks over the period")
+    p.add_argument("--fleet", type=int, default=None, metavar="N",
+                   help="only run N robots at 10 Hz with one controller process serving all")
+    p.add_argument("--tiles", type=int, default=None,
+                   help="copies of the world side by side (default: as few as fit the fleet)")
+    p.add_argument("--fleet-seconds", type=float, default=20.0, help="real seconds (20)")
+    p.add_argument("--serve-controller", metavar="ENDPOINT", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
+    if args.serve_controller:
+        return serve_controller(args.serve_controller)
+    spec = load_world(server.world_path(args.world))
+    capacity = len(free_poses(spec, 10_000))
+
+    def tiles_for(n: int) -> int:
+        return args.tiles if args.tiles else max(1, math.ceil(n / capacity))
+
+    if args.compare:
+        for n in (int(x) for x in args.compare.split(",")):
+            one, batch = compare_scans(spec, n, tiles_for(n))
+            print(f"{n:4d} robots ({tiles_for(n)} x {args.world!r}): all lasers, CPU per tick: "
+                  f"one robot at a time {one * 1e3:8.2f} ms, together {batch * 1e3:7.2f} ms "
+                  f"({one / batch:.1f}x)", flush=True)
+        return 0
+    if args.tick_cpu:
+        for n in (int(x) for x in args.tick_cpu.split(",")):
+            c = min(tick_cost(spec, n, ticks=20, tiles=tiles_for(n), clock=time.process_time)
+                    for _ in range(3))
+            print(f"{n:4d} robots ({tiles_for(n)} x {args.world!r}): server tick CPU "
+                  f"{c * 1e3:8.2f} ms ({c / n * 1e3:.3f} ms per robot; real time needs "
+                  f"< 100 ms)", flush=True)
+        return 0
+    if args.real_time:
+        n = args.real_time
+        hz, worst = real_time_run(spec, n, seconds=args.fleet_seconds, tiles=tiles_for(n))
+        print(f"server node, {n} robots in {tiles_for(n)} x {args.world!r}, commanded "
+              f"in-process, {args.fleet_seconds:g} s at 10 Hz: achieved {hz:.2f} Hz, worst tick "
+              f"{worst * 1e3:.1f} ms")
+        return 0
+    if args.fleet:
+        r = fleet_run(spec, args.fleet, tiles_for(args.fleet), args.fleet_seconds)
+        print(f"fleet: {r['robots']} robots in {r['tiles']} x {args.world!r} at 10 Hz, one "
+              f"controller process for all, {r['ticks']} ticks ({r['hz']:.2f} Hz): "
+              f"{r['missed']} ticks missed, worst tick {r['worst_ms']:.1f} ms; "
+              f"{r['answered'] * 100:.1f}% of scans answered in time; sense-to-act "
+              f"p50 {r['p50']:.1f} ms, p90 {r['p90']:.1f} ms, p99 {r['p99']:.1f} ms")
+        return 0
 
     r = bench_in_process(args.world, args.seconds)
     print(
@@ -174,15 +442,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"server node, {n:3d} robots: one tick (step+scan+encode+publish) {c * 1e3:.2f} ms")
     slope = (per[40] - per[10]) / 30
     estimate = int(0.08 / max(slope, 1e-6))  # keep a 20% margin of the 100 ms period
-    n = max(1, min(estimate, len(free_poses(spec, 10_000))))
+    n = max(1, min(estimate, 2000))
     while n > 1:
-        hz, worst = real_time_run(spec, n)
+        hz, worst = real_time_run(spec, n, tiles=tiles_for(n))
         if hz >= 9.9 and worst < 0.1:
             break
         n = int(n * 0.8)
     print(
-        f"server node at real time (10 Hz): {n} robots in world {args.world!r} "
-        f"(achieved {hz:.2f} Hz, worst tick {worst * 1e3:.1f} ms)"
+        f"server node at real time (10 Hz): {n} robots in {tiles_for(n)} x world "
+        f"{args.world!r} (achieved {hz:.2f} Hz, worst tick {worst * 1e3:.1f} ms)"
     )
     return 0
 

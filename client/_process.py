@@ -133,7 +133,7 @@ def wait_for_server(ctx: Context, timeout: float | None = None,
                         f"the server is paused?)", EXIT_NO_SERVER)
                 raise ProcessError(
                     f"{ctx.role}: the server is not up: no scans on {key} and no liveliness "
-                    f"token {keys.alive_key('server', '*')} within {timeout:g} s via {where}. "
+                    f"token {keys.alive_key('server', '**')} within {timeout:g} s via {where}. "
                     f"Start `rhbl server` (or check --connect/--robot).", EXIT_NO_SERVER)
             if now >= next_note:
                 alive = server_alive(ctx.session, timeout=0.5)

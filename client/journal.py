@@ -12,6 +12,11 @@ File format (little-endian)::
     frame i := record i-1, a msgpack map {"i", "scan", "ts", "label", "yaw", "ranges", "x"}
                (ranges and x as float32 bytes)
 
+Folding (``Journal.fold(upto)``, ``rhbl learner --fold-journal``): once a durable snapshot holds
+records ``0 .. upto - 1`` they are dropped: the file is rewritten as a header with ``base`` =
+``upto`` plus the later records, and renamed over the journal (atomic). Indices never change;
+``len()`` counts folded records too and ``records(start)`` needs ``start >= base``.
+
 Durability: each record is written with one unbuffered ``os.write`` (it is in the kernel's page
 cache when ``append`` returns, so it survives the process being killed) and ``os.fsync``'d at most
 ``fsync_interval`` seconds later (default 1 s) and on ``sync``/``close`` (so a power cut loses at
@@ -23,6 +28,7 @@ silently.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import logging
 import os
@@ -119,7 +125,8 @@ class Journal:
         self.path = path
         self._fd = fd
         self.header = header
-        self._offsets = offsets  # file offset of each record's frame
+        self.base = int(header.get("base", 0))  # index of the first record held (fold)
+        self._offsets = offsets  # file offset of each record's frame (record base + k)
         self._end = end
         self.fsync_interval = float(fsync_interval)
         self._last_sync = time.monotonic()
@@ -196,18 +203,23 @@ class Journal:
         return str(self.header.get("lineage", ""))
 
     def __len__(self) -> int:
-        return len(self._offsets)
+        """Records appended since the journal was created (folded ones included)."""
+        return self.base + len(self._offsets)
 
     def records(self, start: int = 0) -> Iterator[JournalRecord]:
-        """Records ``start``, ``start + 1``, ... (re-read from the file, CRC-checked)."""
-        if start < 0 or start > len(self._offsets):
-            raise JournalError(f"journal {self.path} has {len(self._offsets)} records; "
-                               f"cannot start at record {start}")
-        if start == len(self._offsets):
+        """Records ``start``, ``start + 1``, ... (re-read from the file, CRC-checked). Records
+        before ``base`` were folded into a snapshot (:meth:`fold`) and cannot be read."""
+        if start < self.base or start > len(self):
+            held = (f"records {self.base}..{len(self) - 1}" if self.base else
+                    f"{len(self)} records")
+            raise JournalError(f"journal {self.path} holds {held}; cannot start at record "
+                               f"{start}" + (" (the earlier ones were folded into a snapshot)"
+                                             if start < self.base else ""))
+        if start == len(self):
             return
         with open(self.path, "rb") as f:
-            f.seek(self._offsets[start])
-            for i in range(start, len(self._offsets)):
+            f.seek(self._offsets[start - self.base])
+            for i in range(start - self.base, len(self._offsets)):
                 payload = _read_frame(f, self.path, i + 1, self._offsets[i])
                 yield JournalRecord.from_payload(_unpack(payload, self.path, i + 1,
                                                          self._offsets[i]))
@@ -219,7 +231,7 @@ class Journal:
         on return; fsync'd within ``fsync_interval`` seconds."""
         if self._fd < 0:
             raise JournalError(f"journal {self.path} is closed")
-        index = len(self._offsets)
+        index = len(self)
         rec = JournalRecord(index, scan_id, ts, label, ranges, yaw, features)
         data = _frame(msgpack.packb(rec.to_payload(), use_bin_type=True))
         if self._torn:  # a failed append left bytes that a retry could not remove yet
@@ -259,6 +271,51 @@ class Journal:
                 f"{self._end} ({exc}{'; after: ' + str(cause) if cause else ''}); nothing is "
                 f"appended until it can") from exc
         self._torn = False
+
+    def fold(self, upto: int) -> int:
+        """Drop records ``base .. upto - 1`` (a durable snapshot holds them): the file is
+        rewritten as a header with ``base = upto`` plus the records from ``upto`` on, fsync'd,
+        and renamed over the journal (atomic: a crash leaves the old or the new file, both
+        whole). Record indices do not change. Returns the bytes saved."""
+        if self._fd < 0:
+            raise JournalError(f"journal {self.path} is closed")
+        upto = min(int(upto), len(self))
+        if upto <= self.base:
+            return 0
+        self.sync()
+        head = dict(self.header, base=upto)
+        hdr = _frame(msgpack.packb(head, use_bin_type=True))
+        keep_from = self._offsets[upto - self.base] if upto < len(self) else self._end
+        tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.fold")
+        try:
+            with open(self.path, "rb") as src, open(tmp, "wb") as dst:
+                dst.write(hdr)
+                src.seek(keep_from)
+                left = self._end - keep_from
+                while left > 0:
+                    chunk = src.read(min(left, 1 << 20))
+                    if not chunk:
+                        raise OSError(errno.EIO, "journal shorter than expected")
+                    dst.write(chunk)
+                    left -= len(chunk)
+                dst.flush()
+                os.fsync(dst.fileno())
+            os.replace(tmp, self.path)
+        except OSError as exc:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise JournalError(f"cannot fold journal {self.path}: {exc}") from exc
+        _fsync_dir(self.path)
+        fd = os.open(self.path, os.O_RDWR | os.O_APPEND)
+        os.close(self._fd)
+        self._fd = fd
+        saved = keep_from - len(hdr)
+        shift = keep_from - len(hdr)
+        self._offsets = [o - shift for o in self._offsets[upto - self.base:]]
+        self._end -= shift
+        self.header = head
+        self.base = upto
+        return saved
 
     def sync(self) -> None:
         """fsync the journal now (called at the fsync cadence, on snapshots and on close)."""
@@ -357,12 +414,18 @@ def _scan(path: Path, fd: int) -> tuple[dict, list[int], int, int]:
                 if obj.get("format") != FORMAT:
                     raise JournalError(f"journal {path} has format {obj.get('format')!r}; "
                                        f"this version reads format {FORMAT}")
+                base = obj.get("base", 0)
+                if isinstance(base, bool) or not isinstance(base, int) or base < 0:
+                    raise JournalCorruptError(
+                        f"journal {path}: header field 'base' is {base!r}, expected an integer "
+                        f">= 0")
                 header = obj
             else:
-                if obj.get("i") != frame - 1:
+                want = int(header.get("base", 0)) + frame - 1  # type: ignore[union-attr]
+                if obj.get("i") != want:
                     raise JournalCorruptError(
                         f"journal {path}: frame {frame} at offset {pos} holds record "
-                        f"{obj.get('i')!r}, expected {frame - 1}")
+                        f"{obj.get('i')!r}, expected {want}")
                 offsets.append(pos)
             pos += _FRAME.size + length
             frame += 1

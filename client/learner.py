@@ -84,6 +84,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-nodes", type=int, default=None, help="cap on the tree size")
     parser.add_argument("--snapshot-every", type=float, default=2.0, metavar="SECONDS",
                         help="write a snapshot this often (wall time) when the tree changed")
+    parser.add_argument("--fold-journal", action="store_true",
+                        help="after each snapshot drop the journal records it holds (bounded "
+                             "disk; the raw scans before it can no longer be relearned)")
     parser.add_argument("--fsync-interval", type=float, default=1.0, metavar="SECONDS",
                         help="fsync the journal at most this long after an append (default 1)")
     parser.add_argument("--match-timeout", type=float, default=2.0, metavar="SECONDS",
@@ -102,8 +105,10 @@ class LearnerCore:
     def __init__(self, out: str | os.PathLike, features: str | None = None,
                  resume: str | None = None, task: str | None = None,
                  tree_params: dict | None = None, stride: int = 1, min_delta: float = 0.0,
-                 fsync_interval: float = 1.0, actions: ActionSet = DEFAULT_ACTIONS):
+                 fsync_interval: float = 1.0, actions: ActionSet = DEFAULT_ACTIONS,
+                 fold_journal: bool = False):
         self.out = Path(out)
+        self.fold_journal = bool(fold_journal)
         self.jpath = journal_path(self.out)
         self.out.parent.mkdir(parents=True, exist_ok=True)
         spec = FEATURES[features] if features else None
@@ -223,6 +228,11 @@ class LearnerCore:
         self.journal.sync()
         self.learner.classifier.save(str(self.out), metadata=self.metadata())
         self.saved_applied = self.applied
+        if self.fold_journal:  # the snapshot (durable: written atomically) holds them now
+            try:
+                self.journal.fold(self.applied)
+            except JournalError as exc:  # the journal is whole either way: retried next time
+                log.warning("%s", exc)
         self.seq += 1
         return self.out.read_bytes()
 
@@ -447,7 +457,7 @@ class LearnerProcess:
                 tree_params={"spawn": args.spawn,
                              **({"max_nodes": args.max_nodes} if args.max_nodes else {})},
                 stride=args.stride, min_delta=args.min_delta,
-                fsync_interval=args.fsync_interval)
+                fsync_interval=args.fsync_interval, fold_journal=args.fold_journal)
         except JournalError as exc:
             raise ProcessError(f"learner: {exc}") from exc
 

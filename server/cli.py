@@ -72,7 +72,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--duration", type=float, default=None, help="stop after this many sim seconds"
     )
-    parser.add_argument("--ident", default="sim", help="server id in its liveliness token")
+    parser.add_argument(
+        "--ident",
+        default=None,
+        help="server id in its liveliness tokens rhbl/alive/server/<id>/<robot>, one per robot "
+        "(default: <host>-<pid>, unique on the network)",
+    )
     add_logging_arguments(parser)
     add_zenoh_arguments(parser, default_listen=[DEFAULT_ENDPOINT], default_mode="router")
 

@@ -19,6 +19,9 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import os
+import re
+import socket
 import threading
 import time
 from collections import Counter
@@ -48,7 +51,7 @@ from protocol.messages import (
 from server.arbiter import Arbiter, priority_of
 from server.world import LASER, ROBOT, World, WorldSpec
 
-__all__ = ["ServerNode"]
+__all__ = ["DuplicateRobotError", "ServerNode", "default_ident", "hosted_robots"]
 
 log = logging.getLogger(__name__)
 
@@ -67,6 +70,29 @@ def world_info(spec: WorldSpec) -> WorldInfo:
 def _undeclare(declared: Any) -> None:
     with contextlib.suppress(Exception):  # already gone with the session
         declared.undeclare()
+
+
+class DuplicateRobotError(ValueError):
+    """A robot name this server would host is already hosted by another server."""
+
+
+def default_ident() -> str:
+    """A server's default id, unique on a zenoh network: ``<host>-<pid>`` (as a key chunk)."""
+    host = re.sub(r"[^A-Za-z0-9_.\-]", "-", socket.gethostname()) or "host"
+    return f"{host}-{os.getpid()}"
+
+
+def hosted_robots(session: zenoh.Session, timeout: float = 1.0) -> dict[str, list[str]]:
+    """Which server hosts which robot, from the servers' liveliness tokens
+    ``rhbl/alive/server/<ident>/<robot>``: ``{robot: [ident, ...]}``."""
+    out: dict[str, list[str]] = {}
+    for reply in session.liveliness().get(keys.alive_key("server", "**"), timeout=timeout):
+        if reply.ok is None:
+            continue
+        parts = str(reply.ok.key_expr).split("/")
+        if len(parts) == 5:
+            out.setdefault(parts[4], []).append(parts[3])
+    return out
 
 
 class _RobotIO:
@@ -96,7 +122,8 @@ class ServerNode:
         lockstep: bool = False,
         lockstep_timeout: float = 1.0,
         watchdog: float = 0.5,
-        ident: str = "sim",
+        ident: str | None = None,
+        refuse_duplicates: bool = True,
     ) -> None:
         if names is None:
             names = [keys.robot_name(i) for i in range(world.n_robots)]
@@ -119,7 +146,8 @@ class ServerNode:
         self.lockstep = bool(lockstep)
         self.lockstep_timeout = float(lockstep_timeout)
         self.watchdog = float(watchdog)
-        self.ident = keys.check_chunk(ident, "server ident")
+        self.ident = keys.check_chunk(default_ident() if ident is None else ident,
+                                      "server ident")
         self.counters: Counter[str] = Counter()
         self.ticks = 0
         self.lockstep_timeouts = 0
@@ -128,6 +156,8 @@ class ServerNode:
         self._robots = [_RobotIO(n, i, self.watchdog) for i, n in enumerate(names)]
         self._by_name = {r.name: r for r in self._robots}
         self._world_info = world_info(world.spec)
+        if refuse_duplicates:
+            self._refuse_duplicates()
         # every declaration, undeclared in reverse order by close() (on every path)
         self._scope = contextlib.ExitStack()
         try:
@@ -135,6 +165,19 @@ class ServerNode:
         except BaseException:
             self._scope.close()
             raise
+
+    def _refuse_duplicates(self) -> None:
+        """Raise :class:`DuplicateRobotError` if another server already hosts one of our robots
+        (its token ``rhbl/alive/server/<ident>/<robot>`` is visible). Two servers starting in
+        the same instant can both pass; each then logs the other's token (``_on_liveliness``)."""
+        hosted = hosted_robots(self.session)
+        taken = {r.name: hosted[r.name] for r in self._robots if r.name in hosted}
+        if taken:
+            which = "; ".join(f"robot {name!r} is hosted by server {', '.join(sorted(ids))}"
+                              for name, ids in sorted(taken.items()))
+            raise DuplicateRobotError(
+                f"refusing to start: {which} (robot names are unique on a zenoh network; "
+                f"name this server's robots differently with --robot, or use a --namespace)")
 
     # -- zenoh declarations ---------------------------------------------------------------
 
@@ -171,9 +214,12 @@ class ServerNode:
                         lambda q, r=r, name=name: self._on_query(r, "sim", name, q),
                     )
                 )
-        # the token before the liveliness subscriber: closing undeclares the subscriber first,
-        # so the node does not see its own token go
-        self._keep(s.liveliness().declare_token(keys.alive_key("server", self.ident)))
+        # one token per hosted robot, rhbl/alive/server/<ident>/<robot>, says who hosts what;
+        # the tokens before the liveliness subscriber: closing undeclares the subscriber first,
+        # so the node does not see its own tokens go
+        for r in self._robots:
+            self._keep(s.liveliness().declare_token(
+                f"{keys.alive_key('server', self.ident)}/{r.name}"))
         self._keep(
             s.liveliness().declare_subscriber(f"{keys.PREFIX}/alive/**", self._on_liveliness)
         )
@@ -230,9 +276,14 @@ class ServerNode:
 
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
         try:
-            if sample.kind != zenoh.SampleKind.DELETE:
-                return
             parts = str(sample.key_expr).split("/")
+            if sample.kind != zenoh.SampleKind.DELETE:
+                if (len(parts) == 5 and parts[2] == "server" and parts[3] != self.ident
+                        and parts[4] in self._by_name):
+                    self.counters["duplicate_robot"] += 1
+                    log.error("robot %r is also hosted by server %r: two servers publish its "
+                              "scans (stop one)", parts[4], parts[3])
+                return
             if len(parts) < 4:
                 return
             role, ident = parts[2], parts[3]
@@ -347,7 +398,9 @@ class ServerNode:
     def _publish(self, robots: Sequence[_RobotIO] | None = None) -> None:
         w = self.world
         ts = w.time
-        for r in self._robots if robots is None else robots:
+        robots = self._robots if robots is None else robots
+        scans = w.scans([r.index for r in robots])  # all lasers cast together (server.laser)
+        for k, r in enumerate(robots):
             i = r.index
             r.seq += 1
             r.scan_id += 1
@@ -368,7 +421,7 @@ class ServerNode:
                 Scan(
                     ts=ts,
                     id=r.scan_id,
-                    ranges=w.scan(i),
+                    ranges=scans[k],
                     pose=pos,
                     min_angle=LASER.min_angle,
                     max_angle=LASER.max_angle,

@@ -33,6 +33,8 @@ from typing import Any, NamedTuple
 import numpy as np
 import pymunk
 
+from server import laser
+
 __all__ = [
     "LASER",
     "ROBOT",
@@ -359,6 +361,8 @@ def load_world(path: str | Path) -> WorldSpec:
         raise WorldError(f"{p}: world file not found") from None
     except tomllib.TOMLDecodeError as e:
         raise WorldError(f"{p}: not valid TOML: {e}") from None
+    except UnicodeDecodeError as e:  # found by lab.fuzz: tomllib lets it through
+        raise WorldError(f"{p}: not valid TOML (not UTF-8 text: {e})") from None
     except OSError as e:
         raise WorldError(f"{p}: cannot read: {e}") from None
     return parse_world(data, source=str(p), path=p)
@@ -368,6 +372,7 @@ def load_world(path: str | Path) -> WorldSpec:
 
 _WALL_RADIUS = 0.02  # m, physics half-thickness of a wall segment (the laser sees the centre line)
 _MAX_SUBSTEP = 0.025  # s
+_BATCH_WALLS = 8  # lasers from which World.scans casts the walls for all at once
 
 
 class _Robot:
@@ -418,6 +423,8 @@ class World:
         self._seg_ey = self._seg_by - self._seg_ay
         ee = self._seg_ex**2 + self._seg_ey**2
         self._seg_ee = np.where(ee > 0, ee, 1.0)
+        self._seg_ex32 = self._seg_ex.astype(np.float32)
+        self._seg_ey32 = self._seg_ey.astype(np.float32)
         self._bearings = LASER.bearings()
         self.reset()
 
@@ -634,9 +641,58 @@ class World:
 
     def scan(self, i: int) -> np.ndarray:
         """Ray-cast robot ``i``'s laser: float32 ranges, ``ranges[0]`` at ``LASER.min_angle``."""
-        x, y, yaw = self.pose(i)
-        ox = x + LASER.offset * math.cos(yaw)
-        oy = y + LASER.offset * math.sin(yaw)
+        if self.n_robots == 1:
+            x, y, yaw = self.pose(i)
+            ox = x + LASER.offset * math.cos(yaw)
+            oy = y + LASER.offset * math.sin(yaw)
+            ranges, _, _ = self._scan_walls(ox, oy, yaw)
+            return self._add_noise(ranges) if self.range_noise > 0.0 else ranges
+        return self.scans([i])[0]
+
+    def scans(self, indices: list[int] | None = None) -> np.ndarray:
+        """Ray-cast the lasers of robots ``indices`` (default: all) together: float32 array
+        (len(indices), LASER.count); row k equals ``scan(indices[k])`` (and draws range noise in
+        the same order as those calls would). The robots are cast against each other for the
+        whole fleet at once (``server.laser``), so a tick's cost grows with the robots seen,
+        not with the square of the fleet."""
+        idx = list(range(self.n_robots)) if indices is None else [int(i) for i in indices]
+        n = len(idx)
+        out = np.empty((n, LASER.count), dtype=np.float32)
+        if n == 0:
+            return out
+        origins = np.empty((n, 2))
+        yaws = np.empty(n)
+        for k, i in enumerate(idx):
+            x, y, yaw = self.pose(i)
+            origins[k] = (x + LASER.offset * math.cos(yaw), y + LASER.offset * math.sin(yaw))
+            yaws[k] = yaw
+        if n < _BATCH_WALLS:  # a few lasers: one at a time has less overhead (same ranges)
+            dcs = np.empty((n, LASER.count), dtype=np.float32)
+            dss = np.empty((n, LASER.count), dtype=np.float32)
+            for k in range(n):
+                out[k], dcs[k], dss[k] = self._scan_walls(*origins[k], yaws[k])
+        else:
+            out, dcs, dss = laser.walls(origins, yaws, self._segs, self._bearings,
+                                        LASER.max_range)
+        if self.n_robots > 1:
+            centres = np.asarray([r.body.position for r in self._robots], dtype=np.float64)
+            out = laser.robots_into(out, origins, yaws, np.asarray(idx, dtype=np.intp), centres,
+                              dcs, dss, ROBOT.radius, LASER.min_angle, LASER.resolution,
+                              LASER.max_range)
+        if self.range_noise > 0.0:
+            for k in range(n):
+                out[k] = self._add_noise(out[k])
+        return out
+
+    def _add_noise(self, ranges: np.ndarray) -> np.ndarray:
+        if self.range_noise > 0.0:
+            ranges = ranges + self._rng.normal(0.0, self.range_noise, LASER.count)
+            np.clip(ranges, 0.0, LASER.max_range, out=ranges)
+        return ranges.astype(np.float32, copy=False)
+
+    def _scan_walls(self, ox: float, oy: float, yaw: float):
+        """Ranges to the walls from (ox, oy) facing ``yaw``: (float32 ranges, float32 cosines
+        and sines of the beams' world angles)."""
         max_r = LASER.max_range
         ang = self._bearings + yaw
         dc = np.cos(ang).astype(np.float32)
@@ -659,7 +715,7 @@ class World:
             # float32 for the (segments x beams) work: about 20% faster, ample for ranges <= 8 m
             f4 = np.float32
             ax, ay = ax[keep].astype(f4), ay[keep].astype(f4)
-            ex, ey = ex[keep].astype(f4), ey[keep].astype(f4)
+            ex, ey = self._seg_ex32[keep], self._seg_ey32[keep]
             # (S, beams) layout: the reduction runs over the short first axis
             with np.errstate(divide="ignore", invalid="ignore"):
                 inv = 1.0 / (np.multiply.outer(ey, dc) - np.multiply.outer(ex, ds))
@@ -673,20 +729,4 @@ class World:
             np.minimum(ranges, np.float32(max_r), out=ranges)
         else:
             ranges = np.full(LASER.count, max_r, dtype=np.float32)
-        if self.n_robots > 1:
-            ranges = self._scan_robots(i, ox, oy, dc, ds, ranges)
-        if self.range_noise > 0.0:
-            ranges = ranges + self._rng.normal(0.0, self.range_noise, LASER.count)
-            np.clip(ranges, 0.0, max_r, out=ranges)
-        return ranges.astype(np.float32, copy=False)
-
-    def _scan_robots(self, i, ox, oy, dc, ds, ranges):
-        others = [self._robots[j].body.position for j in range(self.n_robots) if j != i]
-        q = np.asarray([(p[0] - ox, p[1] - oy) for p in others], dtype=np.float64)
-        b = np.multiply.outer(dc, q[:, 0]) + np.multiply.outer(ds, q[:, 1])
-        disc = b * b - (np.einsum("ij,ij->i", q, q) - ROBOT.radius**2)
-        with np.errstate(invalid="ignore"):
-            t = b - np.sqrt(disc)
-        ok = (disc >= 0) & (t > 0)
-        t = np.where(ok, t, LASER.max_range)
-        return np.minimum(ranges, t.min(axis=1)).astype(np.float32)
+        return ranges, dc, ds

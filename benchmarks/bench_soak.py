@@ -1,0 +1,138 @@
+"""Soak: the full loop for a long time, sped up; memory of every process and file sizes sampled.
+
+    python benchmarks/bench_soak.py [--minutes 30] [--speedup 5] [--out soak.csv]
+
+Processes (real ``rhbl`` commands on loopback, as in ``rhbl demo``): a server (``--speedup``
+times real time, room world), a learner (snapshots every 2 s, its journal folding into them, a
+``--max-nodes`` cap so the tree itself is bounded), a teacher that demonstrates for 60 sim
+seconds and then corrects (``--correct``), and a controller driving with the learner's latest
+tree (``--from-learner --follow``). Every ``--every`` seconds one CSV row: wall seconds, each
+process's resident memory (VmRSS, KiB, from /proc) and the size of every file in the learner's
+folder (bytes). At the end: first and last rows, the maximum of each column over the second
+half against the first half (bounded: the second half's maximum is not above the first's by
+more than the stated tolerance), and the processes' exit statuses.
+
+Meant to run in the background at low priority (``nice -n 19``); not part of the test suite.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from lab.processes import free_port  # noqa: E402
+
+
+def _rss_kib(pid: int) -> int:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1])
+    except OSError:
+        pass
+    return -1
+
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--minutes", type=float, default=30.0, help="wall minutes (30)")
+    ap.add_argument("--speedup", type=float, default=5.0, help="server speed-up (5)")
+    ap.add_argument("--every", type=float, default=30.0, help="seconds between samples (30)")
+    ap.add_argument("--max-nodes", type=int, default=4000, help="learner's tree cap (4000)")
+    ap.add_argument("--out", default="soak.csv", help="CSV of the samples (soak.csv)")
+    ap.add_argument("--fold-journal", action="store_true",
+                    help="the learner folds its journal into each snapshot")
+    ap.add_argument("--dir", default=None, help="the learner's folder (default: a temp dir)")
+    args = ap.parse_args(argv)
+
+    work = Path(args.dir) if args.dir else Path(tempfile.mkdtemp(prefix="rhbl-soak-"))
+    work.mkdir(parents=True, exist_ok=True)
+    tree = work / "tree.rhbl"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    cmds = {
+        "server": ["server", "--world", "room", "--speedup", str(args.speedup), "--listen",
+                   endpoint, "--log-level", "WARNING"],
+        "learner": ["learner", "--features", "wall", "--out", str(tree), "--max-nodes",
+                    str(args.max_nodes), *(["--fold-journal"] if args.fold_journal else []),
+                    "--connect", endpoint, "--log-level", "WARNING"],
+        "teacher": ["teacher", "--policy", "wall-follower", "--correct", "--demonstrate", "60",
+                    "--connect", endpoint, "--log-level", "WARNING"],
+        "controller": ["controller", "--from-learner", "--follow", "--connect", endpoint,
+                       "--log-level", "WARNING"],
+    }
+    procs: dict[str, subprocess.Popen] = {}
+    logs = {}
+    try:
+        for name, argv_ in cmds.items():
+            if name == "controller":  # it needs the learner's first snapshot
+                deadline = time.monotonic() + 300
+                while not tree.exists() and time.monotonic() < deadline:
+                    time.sleep(0.5)
+            logs[name] = open(work / f"{name}.log", "wb")  # noqa: SIM115
+            procs[name] = subprocess.Popen([sys.executable, "-m", "lab.cli", *argv_], cwd=ROOT,
+                                           env=env, stdout=logs[name], stderr=subprocess.STDOUT,
+                                           start_new_session=True)
+            time.sleep(2.0 if name == "server" else 0.5)
+        t0 = time.monotonic()
+        rows = []
+        files: list[str] = []
+        with open(args.out, "w", newline="") as f:
+            w = None
+            while True:
+                now = time.monotonic() - t0
+                sizes = {p.name: p.stat().st_size for p in sorted(work.iterdir())
+                         if p.is_file() and not p.name.endswith(".log")}
+                for name in sizes:
+                    if name not in files:
+                        files.append(name)
+                row = {"seconds": round(now, 1)}
+                row.update({f"rss_kib_{n}": _rss_kib(p.pid) for n, p in procs.items()})
+                row.update({f"bytes_{n}": sizes.get(n, 0) for n in files})
+                rows.append(row)
+                if w is None or set(row) != set(w.fieldnames):
+                    w = csv.DictWriter(f, fieldnames=list(row))
+                    w.writeheader()
+                w.writerow(row)
+                f.flush()
+                dead = [n for n, p in procs.items() if p.poll() is not None]
+                if dead or now >= args.minutes * 60:
+                    break
+                time.sleep(args.every)
+    finally:
+        for p in procs.values():
+            if p.poll() is None:
+                os.kill(p.pid, signal.SIGINT)
+        for name, p in procs.items():
+            try:
+                p.wait(30)
+            except subprocess.TimeoutExpired:
+                os.kill(p.pid, signal.SIGKILL)
+                p.wait()
+            logs[name].close()
+    print(f"soak: {len(rows)} samples over {rows[-1]['seconds']:.0f} s, folder {work}")
+    half = len(rows) // 2
+    for key in rows[-1]:
+        if key == "seconds":
+            continue
+        first = [r.get(key, 0) for r in rows[:half] if r.get(key, 0) >= 0] or [0]
+        second = [r.get(key, 0) for r in rows[half:] if r.get(key, 0) >= 0] or [0]
+        print(f"  {key}: first half max {max(first)}, second half max {max(second)}, "
+              f"last {rows[-1].get(key)}")
+    print("  exit statuses: " + ", ".join(f"{n} {p.returncode}" for n, p in procs.items()))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,519 @@
+"""Structure-aware fuzzing of every key the rhbl processes listen to, and of their files.
+
+    python -m lab.fuzz [--per-key 10000] [--seed 0] [--only server,clients,files]
+
+Messages. From a valid message of each kind the generator derives hostile ones: a field of the
+wrong type, a field missing, extra fields, NaN and infinities, huge and negative numbers and
+sizes, wrong protocol versions, a payload truncated or oversized, not a map, random bytes. Each
+candidate goes through the message's own decoder first (the oracle): only payloads it rejects are
+sent, so every one of them must be rejected by the receiver and counted, and none may change the
+robot. Valid traffic is interleaved (one valid message per ``--valid-every`` hostile ones) and
+must still be processed.
+
+- ``server`` (a real :class:`server.node.ServerNode` on a zenoh router on loopback, the fuzzer a
+  client session): the public and a per-source command key, and every queryable (position2d
+  get_geom, set_odom, reset_odom, motor_power; laser get_geom, get_config; sim set_pose,
+  get_pose, get_world). Checked: the node's rejection counter rose by exactly the hostile
+  commands sent, every valid command was applied, every hostile request was answered with a
+  NACK, the payload-free requests answered, the robot did not move (valid commands say stand
+  still) and its motors stayed on; the node still ticks.
+- ``clients`` (real ``rhbl learner``, ``rhbl teacher`` and ``rhbl controller --follow``
+  processes on a lock-step server): the scan key (all three), the teacher's label key
+  (learner), the learner's notice key (controller) and the learner's snapshot queryable.
+  Checked: every process is alive at the end and still works (the learner journals labels, the
+  teacher labels, the controller answers scans); malformed messages counted from their logs.
+- ``files``: a snapshot, a journal and a world file, each mutated the same way (bytes flipped,
+  truncated, extended, random), loaded with the real loaders: each either loads or raises one
+  typed error that names the file (never another exception).
+
+The suite runs a CI-sized campaign (tests/fuzz/); the full one is this command.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections import Counter
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import msgpack
+
+from lab.processes import free_port
+
+ROOT = Path(__file__).resolve().parents[1]
+
+_WEIRD: list[Any] = [
+    None, True, False, 0, -1, 1, 2**31, -(2**31), 2**63 - 1, -(2**63), 2**64 - 1,
+    0.0, -0.0, 1e308, -1e308, 5e-324, math.nan, math.inf, -math.inf,
+    "", "x", "\x00", "é" * 40, "a" * 300, "a" * 70_000, b"", b"\x00" * 7, b"\xff" * 3,
+    [], [1], [1, 2], [math.nan, 0, 0], [math.inf, 0, 0], [0, 0, 0, 0], [[0, 0, 0]], {}, {"v": 1},
+    [0.0] * 3000,
+]
+
+
+def _mutate_value(v: Any, rng: random.Random) -> Any:
+    r = rng.random()
+    if r < 0.6:
+        return rng.choice(_WEIRD)
+    if isinstance(v, list) and v:
+        out = list(v)
+        out[rng.randrange(len(out))] = rng.choice(_WEIRD)
+        return out if rng.random() < 0.7 else out[: rng.randrange(len(out))]
+    if isinstance(v, bytes):
+        k = rng.choice([0, 1, 3, len(v) // 2, len(v) + 1, 4 * 70_000])
+        return os.urandom(k) if rng.random() < 0.3 else v[:k] + b"\x00" * max(0, k - len(v))
+    if isinstance(v, int | float) and not isinstance(v, bool):
+        return rng.choice([-v, v * 1e300, -(2**40), 2**40, math.nan, -math.inf])
+    return rng.choice(_WEIRD)
+
+
+def mutations(valid: dict[str, Any], rng: random.Random) -> Iterator[bytes]:
+    """An endless stream of payloads derived from the valid map ``valid`` (with ``v``)."""
+    keys = list(valid)
+    while True:
+        kind = rng.randrange(10)
+        m = dict(valid)
+        if kind == 0:  # a field of a wrong type / weird value
+            k = rng.choice(keys)
+            m[k] = _mutate_value(m[k], rng)
+        elif kind == 1:  # fields missing
+            for k in rng.sample(keys, rng.randint(1, len(keys))):
+                del m[k]
+        elif kind == 2:  # extra fields with a wrong field as well
+            m[f"x{rng.randrange(99)}"] = rng.choice(_WEIRD)
+            k = rng.choice(keys)
+            m[k] = _mutate_value(m[k], rng)
+        elif kind == 3:  # wrong versions
+            m["v"] = rng.choice([0, 2, -1, 99, "1", 1.0, None, [1], 2**70 if False else 2**63 - 1])
+        elif kind == 4:  # several fields at once
+            for k in rng.sample(keys, min(len(keys), 3)):
+                m[k] = _mutate_value(m[k], rng)
+        if kind <= 4:
+            try:
+                data = msgpack.packb(m, use_bin_type=True)
+            except Exception:  # noqa: BLE001 - a value msgpack cannot encode: try another
+                continue
+            yield data
+            continue
+        good = msgpack.packb(valid, use_bin_type=True)
+        if kind == 5:  # truncated
+            yield good[: rng.randrange(len(good))]
+        elif kind == 6:  # oversized: the valid map padded past the limits
+            m["pad"] = b"\x00" * rng.choice([70_000, 1_000_000, 5_000_000])
+            yield msgpack.packb(m, use_bin_type=True)
+        elif kind == 7:  # not a map
+            yield msgpack.packb(rng.choice([[valid.get("v"), 1], 3, "scan", None, b"x"]),
+                                use_bin_type=True)
+        elif kind == 8:  # bytes flipped
+            b = bytearray(good)
+            for _ in range(rng.randint(1, 4)):
+                b[rng.randrange(len(b))] = rng.randrange(256)
+            yield bytes(b)
+        else:  # random bytes
+            yield os.urandom(rng.choice([0, 1, 2, 5, 17, 100, 1500, 70_000]))
+
+
+def hostile(valid: dict[str, Any], decode: Callable[[bytes], Any], rng: random.Random,
+            ) -> Iterator[bytes]:
+    """Payloads of :func:`mutations` that ``decode`` rejects (raises); the others are skipped."""
+    for data in mutations(valid, rng):
+        try:
+            decode(data)
+        except Exception:  # noqa: BLE001 - any rejection
+            yield data
+
+
+@dataclass
+class KeyResult:
+    key: str
+    sent: int = 0
+    rejected: int = 0
+    valid_sent: int = 0
+    valid_processed: int = 0
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return (self.rejected == self.sent and self.valid_processed == self.valid_sent
+                and not self.notes)
+
+    def line(self) -> str:
+        status = "ok" if self.ok else "FAIL " + "; ".join(self.notes)
+        return (f"| {self.key} | {self.sent} | {self.rejected} | {self.valid_sent} | "
+                f"{self.valid_processed} | {status} |")
+
+
+
+# ------------------------------------------------------------------------------------ server
+def fuzz_server(per_key: int, seed: int = 0, valid_every: int = 10) -> list[KeyResult]:
+    """Fuzz every key and queryable of a real ServerNode (see the module's text)."""
+    import threading
+
+    import zenoh
+
+    import server as server_pkg
+    from protocol import keys
+    from protocol.messages import (
+        COMMAND_MAX_PAYLOAD,
+        MotorPower,
+        SetOdom,
+        SetPose,
+        VelCmd,
+    )
+    from protocol.session import make_config
+    from server.node import ServerNode
+    from server.world import World, load_world
+
+    rng = random.Random(seed)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    srv_session = zenoh.open(make_config(mode="router", listen=[endpoint]))
+    world = World(load_world(server_pkg.world_path("room")))
+    node = ServerNode(srv_session, world, names=["r0"], rate=10.0, speedup=4.0, watchdog=0.5)
+    runner = threading.Thread(target=node.run, daemon=True)
+    runner.start()
+    start_pose = world.pose(0)
+    results: list[KeyResult] = []
+    cli = zenoh.open(make_config(mode="client", connect=[endpoint]))
+    try:
+        time.sleep(0.5)
+
+        def still(source: str | None) -> bytes:
+            return VelCmd(vx=0.0, va=0.0, source=source or "fuzz-valid").encode()
+
+        def decode_cmd(data: bytes) -> VelCmd:
+            return VelCmd.decode(data, max_size=COMMAND_MAX_PAYLOAD)
+
+        valid_cmd = msgpack.unpackb(VelCmd(vx=0.1, va=0.2, source="fuzz", scan_id=3).encode())
+        for key, source in [(keys.cmd_vel_key("r0"), None),
+                            (keys.cmd_vel_key("r0", source="fuzz"), "fuzz")]:
+            res = KeyResult(key)
+            pub = cli.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+            before = Counter(node.counters)
+            gen = hostile(valid_cmd, decode_cmd, rng)
+            for k in range(per_key):
+                pub.put(next(gen))
+                res.sent += 1
+                if k % valid_every == 0:
+                    pub.put(still(source))
+                    res.valid_sent += 1
+            # a command on a per-source key whose source differs is hostile too (not counted
+            # by the decoder oracle): leave it to the tests of the node
+            deadline = time.monotonic() + 30
+            while time.monotonic() < deadline:
+                rej = node.counters["rejected"] - before["rejected"]
+                got = node.counters["cmd"] - before["cmd"] - rej
+                if got >= res.valid_sent and rej >= res.sent:
+                    break
+                time.sleep(0.05)
+            res.rejected = node.counters["rejected"] - before["rejected"]
+            # the node counts every command under "cmd", the rejected ones under "rejected" too
+            res.valid_processed = node.counters["cmd"] - before["cmd"] - res.rejected
+            pub.undeclare()
+            results.append(res)
+
+        requests: list[tuple[str, Callable[[bytes], Any] | None, dict | None]] = [
+            (keys.request_key("r0", "position2d", "set_odom"),
+             lambda d: SetOdom.decode(d), msgpack.unpackb(SetOdom(pose=(1, 2, 0)).encode())),
+            (keys.request_key("r0", "position2d", "motor_power"),
+             lambda d: MotorPower.decode(d), msgpack.unpackb(MotorPower(state=True).encode())),
+            (keys.sim_request_key("r0", "set_pose"),
+             lambda d: SetPose.decode(d),
+             msgpack.unpackb(SetPose(pose=(3.0, 0.7, 0.0)).encode())),
+        ]
+        for name in ("get_geom", "reset_odom"):
+            requests.append((keys.request_key("r0", "position2d", name), None, None))
+        for name in ("get_geom", "get_config"):
+            requests.append((keys.request_key("r0", "laser", name), None, None))
+        for name in ("get_pose", "get_world"):
+            requests.append((keys.sim_request_key("r0", name), None, None))
+        anything = {"v": 1, "pose": [1.0, 2.0, 0.0], "state": True, "x": b"\x00" * 8}
+        for key, decode, valid in requests:
+            res = KeyResult(key)
+            if decode is None:  # the payload is ignored: only the size limit rejects
+                def decode(d: bytes, _limit=COMMAND_MAX_PAYLOAD) -> None:
+                    if len(d) > _limit:
+                        raise ValueError("oversized")
+                valid = anything
+            gen = mutations(valid, rng)
+            pending: list[tuple[bool, Any]] = []  # queries in flight (answered concurrently)
+
+            def drain(res=res, pending=pending) -> None:
+                for want_ok, handler in pending:
+                    replies = list(handler)
+                    got_ok = any(r.ok is not None for r in replies)
+                    got_err = any(r.err is not None for r in replies)
+                    if want_ok:
+                        res.valid_sent += 1
+                        res.valid_processed += got_ok
+                    else:
+                        res.sent += 1
+                        res.rejected += got_err and not got_ok
+                    if not replies and len(res.notes) < 3:
+                        res.notes.append("no reply (hang?)")
+                pending.clear()
+
+            n = 0
+            while n < per_key:
+                data = next(gen)
+                try:
+                    decode(data)
+                    want_ok = True
+                except Exception:  # noqa: BLE001
+                    want_ok = False
+                if want_ok and key.rsplit("/", 1)[1] in ("set_pose", "motor_power", "set_odom"):
+                    continue  # a valid teleport or motors-off would change the robot
+                n += 1
+                pending.append((want_ok, cli.get(key, payload=data, timeout=10.0)))
+                if len(pending) >= 32:
+                    drain()
+            drain()
+            results.append(res)
+        # the robot stood still (only stand-still commands and rejected requests), motors on
+        time.sleep(0.3)
+        x0, y0, _ = start_pose
+        x1, y1, _ = world.pose(0)
+        moved = math.hypot(x1 - x0, y1 - y0)
+        ticks = node.ticks
+        time.sleep(0.5)
+        alive = node.ticks > ticks and runner.is_alive()
+        for res in results:
+            if moved > 1e-9:
+                res.notes.append(f"the robot moved {moved:.3g} m")
+            if not node._robots[0].motors:
+                res.notes.append("motors switched off")
+            if not alive:
+                res.notes.append("the node stopped ticking")
+    finally:
+        node.stop()
+        runner.join(10)
+        node.close()
+        cli.close()
+        srv_session.close()
+    return results
+
+
+# ----------------------------------------------------------------------------------- clients
+def fuzz_clients(per_key: int, seed: int = 0, valid_every: int = 10,
+                 workdir: Path | None = None) -> list[KeyResult]:
+    """Fuzz the keys the learner, teacher and controller processes listen to (module text)."""
+    import zenoh
+
+    from protocol import keys
+    from protocol.messages import Scan, TeacherAction, TreeNotice
+    from protocol.session import make_config
+
+    rng = random.Random(seed)
+    work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-"))
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    tree = work / "tree.rhbl"
+    procs: dict[str, subprocess.Popen] = {}
+    logs: dict[str, Path] = {}
+
+    def start(name: str, *argv: str) -> None:
+        logs[name] = work / f"{name}.log"
+        with open(logs[name], "wb") as f:
+            procs[name] = subprocess.Popen(
+                [sys.executable, "-m", "lab.cli", *argv], cwd=ROOT, env=env, stdout=f,
+                stderr=subprocess.STDOUT, start_new_session=True)
+
+    results: list[KeyResult] = []
+    try:
+        start("server", "server", "--world", "room", "--speedup", "2", "--listen", endpoint)
+        time.sleep(1.0)
+        start("learner", "learner", "--features", "wall", "--out", str(tree),
+              "--snapshot-every", "0.5", "--connect", endpoint)
+        start("teacher", "teacher", "--policy", "wall-follower", "--connect", endpoint)
+        deadline = time.monotonic() + 120
+        while not tree.exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        if not tree.exists():
+            raise RuntimeError(f"the learner wrote no snapshot:\n{logs['learner'].read_text()}")
+        start("controller", "controller", "--from-learner", "--follow", "--robot", "r0",
+              "--connect", endpoint)
+        time.sleep(3.0)
+        with zenoh.open(make_config(mode="client", connect=[endpoint])) as s:
+            scan = Scan(ts=1.0, id=5, ranges=[1.0] * 360, pose=(0, 0, 0))
+            targets = [
+                (keys.scan_key("r0"), lambda d: Scan.decode(d),
+                 msgpack.unpackb(scan.encode())),
+                (keys.teacher_action_key("r0"), lambda d: TeacherAction.decode(d),
+                 msgpack.unpackb(TeacherAction(scan_id=5, action="forward").encode())),
+                (keys.learner_notice_key("r0"), lambda d: TreeNotice.decode(d),
+                 msgpack.unpackb(TreeNotice(seq=1, nodes=3, height=1).encode())),
+            ]
+            for key, decode, valid in targets:
+                res = KeyResult(key)
+                pub = s.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+                gen = hostile(valid, decode, rng)
+                for _ in range(per_key):
+                    pub.put(next(gen))
+                    res.sent += 1
+                    if res.sent % 200 == 0:
+                        time.sleep(0.02)  # let the processes breathe; zenoh drops nothing
+                pub.undeclare()
+                results.append(res)
+            res = KeyResult(keys.learner_snapshot_key("r0"))
+            gen = mutations({"v": 1}, rng)
+            inflight: list[Any] = []
+            for k in range(per_key):
+                inflight.append(s.get(keys.learner_snapshot_key("r0"), payload=next(gen),
+                                      timeout=10.0))
+                if len(inflight) >= 32 or k == per_key - 1:
+                    for h in inflight:
+                        # the payload is ignored: every query gets the snapshot
+                        res.valid_sent += 1
+                        res.valid_processed += any(r.ok is not None for r in h)
+                    inflight.clear()
+            results.append(res)
+            time.sleep(2.0)
+            journal = tree.with_name(tree.name + ".journal")
+            size0 = journal.stat().st_size
+            time.sleep(3.0)
+            learning = journal.stat().st_size > size0
+    finally:
+        for name in ("controller", "teacher", "learner", "server"):
+            p = procs.get(name)
+            if p is not None and p.poll() is None:
+                os.kill(p.pid, signal.SIGINT)
+            if p is not None:
+                try:
+                    p.wait(30)
+                except subprocess.TimeoutExpired:
+                    os.kill(p.pid, signal.SIGKILL)
+                    p.wait(5)
+    text = {n: logs[n].read_text(errors="replace") for n in logs}
+    # who listens to what; the first one counts every message (the teacher's and controller's
+    # scan subscriptions are rings of one, "latest scan wins": a burst is mostly dropped unread)
+    who = {"scan": ("learner", "teacher", "controller"), "action": ("learner",),
+           "notice": ("controller",), "snapshot": ("learner",)}
+    for res in results:
+        part = next(p for p in who if p in res.key)
+        for n in who[part]:
+            rc = procs[n].returncode
+            if rc not in (0, -signal.SIGINT):
+                res.notes.append(f"{n} exited with {rc}")
+            if "Traceback" in text[n]:
+                res.notes.append(f"{n} logged a traceback")
+        if part != "snapshot":
+            res.rejected = text[who[part][0]].count(_DROPPED[part])
+            others = [f"{n} {text[n].count(_DROPPED[part])}" for n in who[part][1:]]
+            if others:
+                res.key += f" (read by the rings of: {', '.join(others)})"
+        if not learning:
+            res.notes.append("the learner stopped journaling labels")
+    return results
+
+
+_DROPPED = {"scan": "dropped a malformed scan", "action": "dropped a malformed teacher action",
+            "notice": "dropped a malformed tree notice"}
+
+
+# ------------------------------------------------------------------------------------- files
+def fuzz_files(per_file: int, seed: int = 0, workdir: Path | None = None) -> list[KeyResult]:
+    """Mutate a snapshot, a journal and a world file; each must load or raise one typed error
+    naming the file."""
+    import numpy as np
+
+    import server as server_pkg
+    from client.behaviour.learning import IncompatibleSnapshotError, load_snapshot
+    from client.journal import Journal, JournalError
+    from lab.harness import make_learner, resolve_world, train
+    from rhbl.snapshot import SnapshotError
+    from server.world import WorldError, load_world
+
+    rng = random.Random(seed)
+    work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-files-"))
+    spec = resolve_world("room")
+    learner = make_learner(spec.task)
+    train(spec, learner, seconds=5.0, seed=0)
+    snap = work / "tree.rhbl"
+    learner.save(snap)
+    jpath = work / "j.journal"
+    j = Journal.create(jpath, fsync_interval=0.0)
+    for i in range(20):
+        j.append(i, 0.1 * i, "forward", np.ones(360, np.float32), 0.0, np.ones(8, np.float32))
+    j.close()
+    world = Path(server_pkg.world_path("room"))
+    cases = [
+        ("snapshot", snap.read_bytes(), lambda p: load_snapshot(p),
+         (SnapshotError, IncompatibleSnapshotError)),
+        ("journal", jpath.read_bytes(), lambda p: Journal.open(p, fsync_interval=0.0).close(),
+         (JournalError,)),
+        ("world", world.read_bytes(), lambda p: load_world(p), (WorldError,)),
+    ]
+    results = []
+    for what, good, load, errors in cases:
+        res = KeyResult(f"{what} file")
+        target = work / f"fuzzed-{what}"
+        for _ in range(per_file):
+            b = bytearray(good)
+            kind = rng.randrange(5)
+            if kind == 0:
+                for _ in range(rng.randint(1, 8)):
+                    b[rng.randrange(len(b))] = rng.randrange(256)
+            elif kind == 1:
+                b = b[: rng.randrange(len(b))]
+            elif kind == 2:
+                b += os.urandom(rng.randint(1, 5000))
+            elif kind == 3:
+                b = bytearray(os.urandom(rng.choice([0, 1, 8, 100, 5000])))
+            else:
+                i = rng.randrange(len(b))
+                b[i:i] = os.urandom(rng.randint(1, 64))
+            target.write_bytes(bytes(b))
+            try:
+                load(target)
+                res.valid_sent += 1
+                res.valid_processed += 1
+            except errors as e:
+                res.sent += 1
+                if str(target) in str(e) or target.name in str(e):
+                    res.rejected += 1
+                elif len(res.notes) < 3:
+                    res.notes.append(f"error does not name the file: {e}")
+            except Exception as e:  # noqa: BLE001 - the finding
+                res.sent += 1
+                if len(res.notes) < 3:
+                    res.notes.append(f"{type(e).__name__}: {str(e)[:120]}")
+        results.append(res)
+    return results
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--per-key", type=int, default=10_000, help="hostile messages per key")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--only", default="server,clients,files",
+                    help="comma list of parts: server, clients, files")
+    args = ap.parse_args(argv)
+    parts = set(args.only.split(","))
+    results: list[KeyResult] = []
+    t0 = time.monotonic()
+    if "server" in parts:
+        results += fuzz_server(args.per_key, args.seed)
+    if "clients" in parts:
+        results += fuzz_clients(args.per_key, args.seed)
+    if "files" in parts:
+        results += fuzz_files(max(1, args.per_key // 10), args.seed)
+    print(f"fuzz: seed {args.seed}, {args.per_key} hostile messages per key, "
+          f"{time.monotonic() - t0:.0f} s")
+    print("| key | hostile sent | rejected | valid sent | valid processed | result |")
+    print("|---|---|---|---|---|---|")
+    for r in results:
+        print(r.line())
+    return 0 if all(r.ok for r in results) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,251 @@
+"""Robots seen by robots: the many-robot part of the simulated laser, for all robots at once.
+
+:meth:`server.world.World.scans` casts every robot's walls first (``World._scan_walls``), then
+calls :func:`robots_into` once for the whole fleet. Casting each beam against every other robot
+costs ``beams x robots`` per robot, so ``beams x robots**2`` per tick: this was the part of a
+server tick that grew with the square of the fleet. Here the work is bounded by what can be seen:
+
+1. all pairs (laser i, robot j) at once from one array of positions: a pair is kept only if j is
+   within range, not wholly behind the laser and the laser's origin is outside j's circle (a ray
+   starting inside a circle never reports it, as before);
+2. each kept pair covers the beams of an angular interval ``bearing(j) +- asin(r / d)`` (one beam
+   of margin on each side, the exact test below decides); a pair is dropped when its nearest
+   possible hit ``d - r`` lies beyond every range of laser i over that interval (a maximum query
+   on a sparse table of blocks of beams), nearest pairs first, so robots behind walls (in other
+   rooms) or behind nearer robots cost little;
+3. only the (pair, beam) elements left are intersected, with the same per-element arithmetic as a
+   full ``beams x robots`` cast (so the result is the same), and folded into the ranges with a
+   minimum.
+
+The laser's field of view must not exceed 180 degrees (a circle's angular interval is then never
+cut by the wrap at +-pi inside the field of view).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["robots_into"]
+
+_BANDS = (1.0, 2.0, 3.5)  # m, distance bands of the nearest-first cast
+
+
+_BLOCK = 16  # beams per block of the occlusion bound
+
+
+def _block_max_table(ranges: np.ndarray) -> list[np.ndarray]:
+    """Sparse table over blocks of ``_BLOCK`` beams: ``table[k][row, j]`` is the maximum range
+    of blocks j .. j + 2**k - 1 of ``row``."""
+    n, count = ranges.shape
+    nb = -(-count // _BLOCK)
+    padded = np.zeros((n, nb * _BLOCK), dtype=ranges.dtype)
+    padded[:, :count] = ranges
+    table = [padded.reshape(n, nb, _BLOCK).max(axis=2)]
+    span = 1
+    while 2 * span <= nb:
+        prev = table[-1]
+        nxt = np.maximum(prev[:, : nb - 2 * span + 1], prev[:, span : span + nb - 2 * span + 1])
+        table.append(nxt)
+        span *= 2
+    return table
+
+
+def _range_bound(table: list[np.ndarray], row: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+    """An upper bound (the maximum over whole blocks) of ``ranges[row, lo..hi]``, lo <= hi."""
+    blo, bhi = lo // _BLOCK, hi // _BLOCK
+    k = np.floor(np.log2(bhi - blo + 1)).astype(np.intp)
+    out = np.empty(len(row), dtype=table[0].dtype)
+    for level in np.unique(k):
+        sel = k == level
+        t = table[level]
+        r, a = row[sel], blo[sel]
+        b = bhi[sel] - (1 << int(level)) + 1
+        out[sel] = np.maximum(t[r, a], t[r, b])
+    return out
+
+
+def robots_into(
+    ranges: np.ndarray,
+    origins: np.ndarray,
+    yaws: np.ndarray,
+    rows: np.ndarray,
+    centres: np.ndarray,
+    dc: np.ndarray,
+    ds: np.ndarray,
+    radius: float,
+    min_angle: float,
+    resolution: float,
+    max_range: float,
+) -> np.ndarray:
+    """Lower ``ranges`` (R, beams), float32 wall ranges of R lasers, where a beam hits a robot.
+
+    ``origins`` (R, 2) and ``yaws`` (R,) are the lasers' poses, ``rows`` (R,) the robot index of
+    each laser (a laser never sees its own robot), ``centres`` (N, 2) every robot's position,
+    ``dc``/``ds`` (R, beams) the float32 cosines and sines of each beam's world angle. Returns
+    the new float32 ranges (R, beams).
+    """
+    n_lasers, count = ranges.shape
+    q = centres[None, :, :] - origins[:, None, :]  # (R, N, 2), float64
+    qx, qy = q[..., 0], q[..., 1]
+    qq = qx * qx + qy * qy
+    c = qq - radius**2
+    fx, fy = np.cos(yaws)[:, None], np.sin(yaws)[:, None]
+    reach = max_range + radius
+    cand = (c > 0.0) & (qq < reach * reach) & (qx * fx + qy * fy > -radius)
+    cand[np.arange(n_lasers), rows] = False
+    li, rj = np.nonzero(cand)
+    if len(li) == 0:
+        return ranges
+    pqx, pqy, pc = qx[li, rj], qy[li, rj], c[li, rj]
+    d = np.sqrt(qq[li, rj])
+    bearing = np.arctan2(pqy, pqx) - yaws[li]
+    bearing = (bearing + np.pi) % (2.0 * np.pi) - np.pi
+    half = np.arcsin(np.minimum(radius / d, 1.0))
+    lo = np.floor((bearing - half - min_angle) / resolution).astype(np.intp) - 1
+    hi = np.ceil((bearing + half - min_angle) / resolution).astype(np.intp) + 1
+    keep = np.flatnonzero((hi >= 0) & (lo <= count - 1))  # inside the field of view
+    if len(keep) == 0:
+        return ranges
+    li, lo, hi = li[keep], np.maximum(lo[keep], 0), np.minimum(hi[keep], count - 1)
+    pqx, pqy, pc, d = pqx[keep], pqy[keep], pc[keep], d[keep]
+    # nearest first, in bands of distance: a band is culled against the ranges the nearer
+    # bands left (walls and robots), so robots hidden behind robots cost little too
+    acc = np.full(n_lasers * count, max_range, dtype=np.float64)
+    edges = [0.0, *_BANDS, np.inf]
+    for near, far in zip(edges[:-1], edges[1:], strict=True):
+        band = np.flatnonzero((d >= near) & (d < far))
+        if len(band) == 0:
+            continue
+        # the nearest point of the circle is d - r away: beyond every range over the interval,
+        # the pair cannot shorten any beam
+        wall_max = _range_bound(_block_max_table(ranges), li[band], lo[band], hi[band])
+        band = band[d[band] - radius <= wall_max.astype(np.float64) + 1e-9]
+        if len(band) == 0:
+            continue
+        _cast(acc, count, li[band], lo[band], hi[band], pqx[band], pqy[band], pc[band],
+              dc, ds, max_range)
+        ranges = np.minimum(ranges, acc.reshape(n_lasers, count)).astype(np.float32)
+    return ranges
+
+
+def _cast(acc, count, li, lo, hi, pqx, pqy, pc, dc, ds, max_range) -> None:
+    """Intersect each pair's beams lo..hi with its circle; fold the hits into ``acc``."""
+    counts = hi - lo + 1
+    pair = np.repeat(np.arange(len(li)), counts)
+    flat = np.arange(len(pair)) + (li * count + lo - (np.cumsum(counts) - counts))[pair]
+    b = dc.ravel().take(flat) * pqx[pair] + ds.ravel().take(flat) * pqy[pair]  # float64
+    disc = b * b - pc[pair]
+    with np.errstate(invalid="ignore"):
+        t = b - np.sqrt(disc)
+    ok = (disc >= 0) & (t > 0)
+    t = np.where(ok, t, max_range)
+    np.minimum.at(acc, flat, t)
+
+
+def walls(
+    origins: np.ndarray,
+    yaws: np.ndarray,
+    segs: np.ndarray,
+    bearings: np.ndarray,
+    max_range: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cast R lasers against the wall segments at once: (ranges, dc, ds), each (R, beams)
+    float32 (dc, ds: cosines and sines of the beams' world angles).
+
+    A segment is cast only for lasers that can see it (not wholly behind, within range: the
+    culling of a one-laser cast) and only over the beams of its angular interval (one beam of
+    margin; the exact intersection test decides). Each (segment, beam) element uses the float32
+    arithmetic of a full ``segments x beams`` cast, so the ranges are the same.
+    """
+    n, count = len(yaws), len(bearings)
+    resolution = (bearings[-1] - bearings[0]) / (count - 1)
+    ang = bearings[None, :] + yaws[:, None]
+    dc = np.cos(ang).astype(np.float32)
+    ds = np.sin(ang).astype(np.float32)
+    ox, oy = origins[:, 0:1], origins[:, 1:2]
+    ax = segs[None, :, 0] - ox  # (R, S) float64
+    ay = segs[None, :, 1] - oy
+    bx = segs[None, :, 2] - ox
+    by = segs[None, :, 3] - oy
+    ex = segs[:, 2] - segs[:, 0]
+    ey = segs[:, 3] - segs[:, 1]
+    ee = ex * ex + ey * ey
+    ee = np.where(ee > 0, ee, 1.0)
+    fx, fy = np.cos(yaws)[:, None], np.sin(yaws)[:, None]
+    t = np.clip(-(ax * ex + ay * ey) / ee, 0.0, 1.0)
+    nx = ax + t * ex
+    ny = ay + t * ey
+    keep = ((ax * fx + ay * fy >= 0) | (bx * fx + by * fy >= 0)) & (
+        nx * nx + ny * ny < max_range * max_range
+    )
+    li, sj = np.nonzero(keep)
+    acc = np.full(n * count, max_range, dtype=np.float32)
+    if len(li):
+        yl = yaws[li]
+        a0 = np.arctan2(ay[li, sj], ax[li, sj]) - yl
+        a1 = np.arctan2(by[li, sj], bx[li, sj]) - yl
+        a0 = (a0 + np.pi) % (2.0 * np.pi) - np.pi
+        a1 = (a1 + np.pi) % (2.0 * np.pi) - np.pi
+        amin, amax = np.minimum(a0, a1), np.maximum(a0, a1)
+        wrap = amax - amin > np.pi  # the short way round passes behind the laser: two parts
+        start = bearings[0]
+        lo = np.where(wrap, amax, amin)
+        hi = np.where(wrap, np.pi, amax)
+        lo_i = np.floor((lo - start) / resolution).astype(np.intp) - 1
+        hi_i = np.ceil((hi - start) / resolution).astype(np.intp) + 1
+        w = np.flatnonzero(wrap)
+        if len(w):
+            lo_i = np.concatenate([lo_i, np.floor((-np.pi - start) / resolution).astype(np.intp)
+                                   - 1 + np.zeros(len(w), np.intp)])
+            hi_i = np.concatenate([hi_i, np.ceil((amin[w] - start) / resolution).astype(np.intp)
+                                   + 1])
+            li = np.concatenate([li, li[w]])
+            sj = np.concatenate([sj, sj[w]])
+        np.maximum(lo_i, 0, out=lo_i)
+        np.minimum(hi_i, count - 1, out=hi_i)
+        ok = np.flatnonzero(lo_i <= hi_i)
+        li, sj, lo_i, hi_i = li[ok], sj[ok], lo_i[ok], hi_i[ok]
+        counts = hi_i - lo_i + 1
+        pair = np.repeat(np.arange(len(li)), counts)
+        flat = np.arange(len(pair)) + (li * count + lo_i - (np.cumsum(counts) - counts))[pair]
+        f4 = np.float32
+        pax = ax[li, sj].astype(f4)[pair]
+        pay = ay[li, sj].astype(f4)[pair]
+        pex = ex.astype(f4)[sj][pair]
+        pey = ey.astype(f4)[sj][pair]
+        bdc = dc.ravel().take(flat)
+        bds = ds.ravel().take(flat)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / (pey * bdc - pex * bds)
+            tr = (pax * pey - pay * pex) * inv
+            u = (pax * bds - pay * bdc) * inv
+        bad = u < 0.0
+        bad |= u > 1.0
+        bad |= ~(tr > 0.0)
+        tr[bad] = max_range
+        np.minimum.at(acc, flat, tr)
+    return acc.reshape(n, count), dc, ds
+
+
+def robots_dense(
+    ranges: np.ndarray,
+    origin: tuple[float, float],
+    dc: np.ndarray,
+    ds: np.ndarray,
+    others: np.ndarray,
+    radius: float,
+    max_range: float,
+) -> np.ndarray:
+    """The plain cast of one laser against every other robot (``others`` (M, 2) centres):
+    ``beams x robots`` work per laser. The reference :func:`robots_into` is tested and
+    benchmarked against (it was the simulator's cast before the fleet was cast together)."""
+    if len(others) == 0:
+        return ranges
+    q = np.asarray(others, dtype=np.float64) - np.asarray(origin, dtype=np.float64)
+    b = np.multiply.outer(dc, q[:, 0]) + np.multiply.outer(ds, q[:, 1])
+    disc = b * b - (np.einsum("ij,ij->i", q, q) - radius**2)
+    with np.errstate(invalid="ignore"):
+        t = b - np.sqrt(disc)
+    ok = (disc >= 0) & (t > 0)
+    t = np.where(ok, t, max_range)
+    return np.minimum(ranges, t.min(axis=1)).astype(np.float32)
