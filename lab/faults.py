@@ -283,10 +283,11 @@ def server_restart(workdir: Path, rng: random.Random, restarts: int) -> dict:
 
 def _train_tree(path: Path) -> None:
     from lab.harness import make_learner, resolve_world, train
+    from lab.recipe import recipe_for
 
     spec = resolve_world("room")
     learner = make_learner(spec.task)
-    train(spec, learner, seconds=30.0, seed=0)
+    train(spec, learner, recipe_for(spec.task).replace(seconds=30.0), seed=0)
     learner.save(path)
 
 

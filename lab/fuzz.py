@@ -211,13 +211,13 @@ def fuzz_server(per_key: int, seed: int = 0, valid_every: int = 10) -> list[KeyR
             deadline = time.monotonic() + 30
             while time.monotonic() < deadline:
                 rej = node.counters["rejected"] - before["rejected"]
-                got = node.counters["cmd"] - before["cmd"] - rej
+                got = node.counters["cmd_accepted"] - before["cmd_accepted"]
                 if got >= res.valid_sent and rej >= res.sent:
                     break
                 time.sleep(0.05)
             res.rejected = node.counters["rejected"] - before["rejected"]
-            # the node counts every command under "cmd", the rejected ones under "rejected" too
-            res.valid_processed = node.counters["cmd"] - before["cmd"] - res.rejected
+            # the node counts accepted commands under "cmd_accepted", rejected ones apart
+            res.valid_processed = node.counters["cmd_accepted"] - before["cmd_accepted"]
             pub.undeclare()
             results.append(res)
 
@@ -429,6 +429,7 @@ def fuzz_files(per_file: int, seed: int = 0, workdir: Path | None = None) -> lis
     from client.behaviour.learning import IncompatibleSnapshotError, load_snapshot
     from client.journal import Journal, JournalError
     from lab.harness import make_learner, resolve_world, train
+    from lab.recipe import recipe_for
     from rhbl.snapshot import SnapshotError
     from server.world import WorldError, load_world
 
@@ -436,7 +437,7 @@ def fuzz_files(per_file: int, seed: int = 0, workdir: Path | None = None) -> lis
     work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-files-"))
     spec = resolve_world("room")
     learner = make_learner(spec.task)
-    train(spec, learner, seconds=5.0, seed=0)
+    train(spec, learner, recipe_for(spec.task).replace(seconds=5.0), seed=0)
     snap = work / "tree.rhbl"
     learner.save(snap)
     jpath = work / "j.journal"

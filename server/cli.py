@@ -84,8 +84,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     server = ServerProcess(args)
-    return run("server", args, server.serve, check=server.prepare, ident=args.ident,
-               early_token=False)  # the node declares rhbl/alive/server/<ident> itself
+    return run("server", args, server.serve, check=server.prepare,
+               early_token=False)  # the node declares rhbl/alive/server/<ident>/<robot> itself
 
 
 class ServerProcess:
@@ -115,6 +115,10 @@ class ServerProcess:
             raise ValueError(f"--robots {n} but {len(names)} --robot names")
         for name in names:
             keys.check_chunk(name, "robot name")
+        if args.ident is None:  # unique on the network: <host>-<pid>
+            from server.node import default_ident
+
+            args.ident = default_ident()
         keys.check_chunk(args.ident, "--ident")
         self.names = names
         self.world = World(self.spec, robots=n, seed=args.seed, range_noise=args.range_noise,

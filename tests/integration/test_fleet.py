@@ -33,11 +33,12 @@ ROOT = Path(__file__).resolve().parents[2]
 @pytest.fixture(scope="module")
 def tree(tmp_path_factory) -> Path:
     from lab.harness import make_learner, resolve_world, train
+    from lab.recipe import recipe_for
 
     path = tmp_path_factory.mktemp("fleet") / "tree.rhbl"
     spec = resolve_world("room")
     learner = make_learner(spec.task)
-    train(spec, learner, seconds=30.0, seed=0)
+    train(spec, learner, recipe_for(spec.task).replace(seconds=30.0), seed=0)
     learner.save(path)
     return path
 
