@@ -816,6 +816,21 @@ class HypersphereClassifier:
         shown = ", ".join(f"{k}={v!r}" for k, v in params.items() if v != defaults[k])
         return f"HypersphereClassifier({shown})"
 
+    # ------------------------------------------------------------------ compaction
+    def compact(self, X: Any, y: Iterable[Any] | None = None, *, method: str = "exact",
+                max_error: float = 0.0, max_nodes: int | None = None,
+                sample_weight: Any = None, class_weight: str | None = None,
+                data: str | None = None) -> HypersphereClassifier:
+        """A smaller copy of this tree that keeps its behaviour on ``X`` (see ``rhbl.compact``):
+        ``method="exact"`` keeps every prediction on ``X``; ``"prune"`` deletes the weakest
+        spheres against the labels ``y`` (``max_error``, ``max_nodes``, ``sample_weight``,
+        ``class_weight="balanced"``). The copy is an ordinary
+        tree (``partial_fit``, ``save``); ``metadata["compaction"]`` records the step."""
+        from .compact import compact
+
+        return compact(self, X, y, method=method, max_error=max_error, max_nodes=max_nodes,
+                       sample_weight=sample_weight, class_weight=class_weight, data=data)
+
     # ------------------------------------------------------------------ snapshots
     def save(self, path: Any, metadata: dict[str, Any] | None = None) -> None:
         """Write a msgpack snapshot atomically. ``metadata`` updates ``self.metadata`` first."""
