@@ -23,6 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "controller": ("client.controller", "drive the robot with a learned tree"),
     "train": ("lab.harness", "in-process: a scripted teacher demonstrates on a world, write a tree"),
     "evaluate": ("lab.evaluate", "in-process: run a tree (and the teacher) from a world's start poses"),
+    "compact": ("lab.compact", "make an existing tree smaller, keeping its behaviour on its data"),
     "experiment": ("lab.experiment", "repeat train-then-evaluate over seeds; the paper's Table I"),
     "example": ("lab.example", "a small end-to-end example of the learner on synthetic data"),
 }
