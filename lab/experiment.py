@@ -23,7 +23,15 @@ from client.behaviour.learning import TreePolicy
 from client.behaviour.policies import make_policy
 from lab import metrics
 from lab.evaluate import evaluate
-from lab.harness import TRAINING, make_learner, parse_scales, resolve_world, train
+from lab.harness import (
+    TRAINING,
+    add_compact_arguments,
+    compact_overrides,
+    make_learner,
+    parse_scales,
+    resolve_world,
+    train,
+)
 
 __all__ = ["PAPER", "TEACHERS", "add_arguments", "main", "run_experiment", "run_trial", "table_i"]
 
@@ -55,9 +63,11 @@ def run_trial(task: str, seed: int, world: str | None = None, train_seconds: flo
               takeover: float | None = None, round_free: int | None = None,
               augment: int | None = None, augment_scale: float | None = None,
               round_scales: tuple[float, ...] | None = None,
-              teacher_params: dict | None = None,
+              teacher_params: dict | None = None, compact: dict | None = None,
               **tree_params) -> dict:
     spec = resolve_world(world or WORLD[task])
+    tree_params.setdefault("record", bool(compact if compact is not None
+                                          else TRAINING[task].get("compact")))
     learner = make_learner(task, features=features, stride=stride, min_delta=min_delta,
                            **tree_params)
     seconds = train_seconds or TRAINING[task]["seconds"]
@@ -68,10 +78,15 @@ def run_trial(task: str, seed: int, world: str | None = None, train_seconds: flo
           odom_noise=odom_noise if train_noise else 0.0, starts=starts, segment=segment,
           random_starts=random_segment, turn=turn, consistent=consistent, rounds=rounds,
           round_seconds=round_seconds, takeover=takeover, round_free=round_free,
-          augment=augment, augment_scale=augment_scale, round_scales=round_scales)
+          augment=augment, augment_scale=augment_scale, round_scales=round_scales,
+          compact=compact)
     t_train = time.perf_counter() - t0
     tree = TreePolicy.from_learner(learner)
+    rec = learner.session.get("compaction") or {}
     out = {"seed": seed, "nodes": learner.nodes, "height": learner.height,
+           "nodes_before": rec.get("nodes_before", learner.nodes),
+           "height_before": rec.get("height_before", learner.height),
+           "compaction": rec.get("method"),
            "vectors": learner.vectors, "train_wall_s": round(t_train, 2), "worlds": {}}
     for w in [spec.path or spec.name, *eval_worlds]:
         wspec = resolve_world(str(w))
@@ -95,6 +110,8 @@ def run_experiment(task: str, trials: int = 5, seed0: int = 0, **kw) -> dict:
     summary = {
         "nodes": metrics.summarize([r["nodes"] for r in rows]),
         "height": metrics.summarize([r["height"] for r in rows]),
+        "nodes_before": metrics.summarize([r["nodes_before"] for r in rows]),
+        "height_before": metrics.summarize([r["height_before"] for r in rows]),
         "worlds": {w: {"success_rate": metrics.summarize([r["worlds"][w]["success_rate"] for r in rows]),
                        "teacher_success_rate": metrics.summarize(
                            [r["worlds"][w]["teacher_success_rate"] for r in rows]),
@@ -119,6 +136,14 @@ def table_i(results: dict[str, dict]) -> str:
         lines.append(f"{task:16} | {pn:>11.1f} {ph:>12.0f} | {s['nodes']['mean']:>8.1f} +/- {s['nodes']['std']:<4.0f}"
                      f" {s['height']['mean']:>5.1f} +/- {s['height']['std']:<3.1f} | "
                      f"{sr['mean']:>6.1%} (min {sr['min']:.0%}, max {sr['max']:.0%})")
+    if any(r.get("compaction") for res in results.values() for r in res["rows"]):
+        lines.append("compacted trees; before compaction (mean): " + "; ".join(
+            f"{task} {res['summary']['nodes_before']['mean']:.1f} nodes, height "
+            f"{res['summary']['height_before']['mean']:.1f}" for task, res in results.items()))
+        lines.append("per trial (nodes, height before -> after): " + "; ".join(
+            f"{task} " + ", ".join(f"s{r['seed']} {r['nodes_before']}/{r['height_before']} -> "
+                                   f"{r['nodes']}/{r['height']}" for r in res["rows"])
+            for task, res in results.items()))
     return "\n".join(lines)
 
 
@@ -167,6 +192,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--odom-noise", type=float, default=0.0)
     parser.add_argument("--train-noise", action="store_true",
                         help="also demonstrate with the noise on (default: noise only in evaluation)")
+    add_compact_arguments(parser)
     parser.add_argument("--json", default=None)
 
 
@@ -191,7 +217,8 @@ def main(args) -> int:
                              round_seconds=args.round_seconds, takeover=args.takeover,
                              round_free=args.round_free, augment=args.augment,
                              augment_scale=args.augment_scale,
-                             round_scales=args.round_scales, **tree)
+                             round_scales=args.round_scales,
+                             compact=compact_overrides(task, args), **tree)
         results[task] = res
         print(f"\n{task}: {args.trials} trials")
         print(format_worlds(res))

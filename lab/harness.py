@@ -36,6 +36,8 @@ __all__ = [
     "TRAINING",
     "Trajectory",
     "add_arguments",
+    "add_compact_arguments",
+    "compact_overrides",
     "followed_side",
     "main",
     "make_learner",
@@ -146,6 +148,7 @@ def make_learner(task: str, features: FeatureSpec | str | None = None,
         features = FEATURES[features]
     params = dict(recipe["tree"])
     params.update(tree_params)
+    params.setdefault("record", bool(recipe.get("compact")))  # compaction needs the vectors
     return DemonstrationLearner(
         features, actions, task=task,
         stride=recipe["stride"] if stride is None else stride,
@@ -246,7 +249,8 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
           round_seconds: float | None = None, takeover: float | None = None,
           round_free: int | None = None, augment: int | None = None,
           augment_scale: float | None = None,
-          round_scales: tuple[float, ...] | None = None) -> Trajectory:
+          round_scales: tuple[float, ...] | None = None,
+          compact: dict | None = None) -> Trajectory:
     """One training run: the world's scripted teacher demonstrates for ``seconds`` (sim time, in
     total) while ``learner`` observes every step.
 
@@ -338,6 +342,13 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
         round_stats += _corrective_rounds(spec, learner, policy, fixed, rounds, round_seconds,
                                           takeover, seed, range_noise, odom_noise, dt, traj,
                                           free=round_free, rng=rng, aug=aug)
+    compact = dict(recipe.get("compact") or {}) if compact is None else dict(compact)
+    compaction = None
+    if compact.get("method"):
+        if getattr(learner, "_rec_x", None) is None:
+            log.warning("not compacting: the learner kept no vectors (make it with record=True)")
+        else:
+            compaction = learner.compact(**compact)
     traj.wall_time = time.perf_counter() - t0
     learner.session = {"world": spec.name, "world_path": str(spec.path) if spec.path else None,
                        "seconds": seconds, "seed": seed, "perturb": perturb,
@@ -350,7 +361,7 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
                        "round_scales": list(round_scales) if rounds else None,
                        "augment": augment, "augment_scale": augment_scale if augment else None,
                        "range_noise": range_noise, "odom_noise": odom_noise,
-                       "vectors": traj.learned}
+                       "vectors": traj.learned, "compaction": compaction}
     return traj
 
 
@@ -528,6 +539,37 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "recipe's: maze 0.85,1.2, wall following none)")
     parser.add_argument("--range-noise", type=float, default=0.0)
     parser.add_argument("--odom-noise", type=float, default=0.0)
+    add_compact_arguments(parser)
+
+
+def add_compact_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--compact", choices=["none", "exact", "prune"], default=None,
+                        help="last step: compact the tree on the vectors it learned (rhbl.compact;"
+                             " default: the recipe's)")
+    parser.add_argument("--compact-max-nodes", type=int, default=None,
+                        help="prune: delete the weakest spheres until at most N are left")
+    parser.add_argument("--compact-max-error", type=float, default=None,
+                        help="prune: fraction of the learned vectors whose errors it may add")
+
+
+def compact_overrides(task: str, args) -> dict | None:
+    """The ``compact`` argument of ``train`` from the CLI options (None: the recipe's)."""
+    method = getattr(args, "compact", None)
+    n, e = getattr(args, "compact_max_nodes", None), getattr(args, "compact_max_error", None)
+    if method is None and n is None and e is None:
+        return None
+    if method == "none":
+        return {}
+    out = dict(TRAINING.get(task, TRAINING["wall-following"]).get("compact") or {})
+    if method is not None and method != out.get("method"):
+        out = {"method": method}
+    if n is not None:
+        out["max_nodes"] = n
+    if e is not None:
+        out["max_error"] = e
+    if out.get("method") == "exact" and len(out) > 1:
+        raise ValueError("--compact-max-nodes/--compact-max-error apply to --compact prune only")
+    return out
 
 
 def _tree_overrides(args) -> dict:
@@ -546,7 +588,10 @@ def main(args) -> int:
         learner = DemonstrationLearner.resume(
             args.resume, features=FEATURES[args.features] if args.features else None)
     else:
+        compact = compact_overrides(spec.task, args)
         learner = make_learner(spec.task, features=args.features, stride=args.stride,
+                               record=bool(compact if compact is not None else TRAINING.get(
+                                   spec.task, TRAINING["wall-following"]).get("compact")),
                                **_tree_overrides(args))
     seconds = args.seconds if args.seconds is not None else TRAINING.get(
         spec.task, TRAINING["wall-following"])["seconds"]
@@ -560,16 +605,25 @@ def main(args) -> int:
                  round_free=getattr(args, "round_free", None),
                  augment=getattr(args, "augment", None),
                  augment_scale=getattr(args, "augment_scale", None),
-                 round_scales=getattr(args, "round_scales", None))
+                 round_scales=getattr(args, "round_scales", None),
+                 compact={} if args.resume else compact_overrides(spec.task, args))
     out = learner.save(args.out)
     m = traj.metrics()
     print(f"trained on {spec.name} ({spec.task}) for {seconds:g} s from {list(traj.start)}: "
           f"{len(traj.segments)} demonstrations + {learner.session.get('rounds', 0)} corrective "
           f"rounds{_scales_note(learner.session.get('round_scales'))}, {traj.learned} vectors "
-          f"learned, tree {learner.nodes} nodes, height {learner.height}; "
+          f"learned, tree {_size_note(learner.session.get('compaction'))}{learner.nodes} nodes, "
+          f"height {learner.height}; "
           f"teacher collisions {m['collisions']}; {traj.wall_time:.1f} s wall time")
     print(f"wrote {out}")
     return 0
+
+
+def _size_note(rec) -> str:
+    if not rec:
+        return ""
+    return (f"compacted ({rec['method']}) from {rec['nodes_before']} nodes, height "
+            f"{rec['height_before']}, to ")
 
 
 def _scales_note(scales) -> str:

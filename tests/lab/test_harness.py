@@ -68,3 +68,33 @@ def test_experiment_cli_small(capsys):
                 "--seconds", "10", "--episodes", "1", "--eval-world", "none"]) == 0
     out = capsys.readouterr().out
     assert "Table I" in out and "53.4" in out
+
+
+def test_train_compacts_on_the_vectors_it_learned(tmp_path, capsys):
+    spec = resolve_world(CORRIDOR)
+    learner = make_learner(spec.task, record=True)
+    train(spec, learner, 20.0, seed=0, rounds=1, round_seconds=5, compact={"method": "exact"})
+    rec = learner.session["compaction"]
+    assert rec["method"] == "exact" and rec["nodes_after"] == learner.nodes
+    assert rec["data"]["rows"] == learner.vectors
+    X, _ = learner.recorded()
+    full = make_learner(spec.task)  # the same run without compaction: the same predictions
+    train(spec, full, 20.0, seed=0, rounds=1, round_seconds=5, compact={})
+    assert full.session["compaction"] is None and full.nodes >= learner.nodes
+    assert list(full.classifier.predict(X)) == list(learner.classifier.predict(X))
+    # the CLI: --compact prune --compact-max-nodes N, recorded in the snapshot
+    tree = tmp_path / "c.rhbl"
+    assert cli(["train", "--world", CORRIDOR, "--seconds", "20", "--rounds", "0", "--out",
+                str(tree), "--compact", "prune", "--compact-max-nodes", "5"]) == 0
+    assert "compacted (prune) from" in capsys.readouterr().out
+    _, _, _, meta = load_snapshot(tree)
+    assert meta["compaction"][-1]["nodes_after"] <= 5
+    assert meta["provenance"]["sessions"][-1]["compaction"]["method"] == "prune"
+
+
+def test_experiment_reports_nodes_before_and_after_compaction(capsys):
+    assert cli(["experiment", "wall-following", "--trials", "1", "--train-seconds", "20",
+                "--seconds", "10", "--episodes", "1", "--eval-world", "none", "--rounds", "0",
+                "--compact", "exact"]) == 0
+    out = capsys.readouterr().out
+    assert "before compaction" in out and "s0 " in out and " -> " in out
