@@ -48,9 +48,10 @@ log = logging.getLogger(__name__)
 # scenario -> world, feature spec, teacher policy; sim seconds per start pose in each phase
 # (demonstration, corrective round, evaluation; the maze's end at the goal) and rounds: the
 # recipe of `rhbl train` (lab.harness.TRAINING), except the maze's 4 rounds instead of 6 (the
-# demo must finish within about two minutes on a shared 2-core machine; --rounds 6 for the recipe)
+# demo must finish within about two minutes on a shared 2-core machine; --rounds 6 for the recipe),
 # and no rounds in scaled copies of the world or from random free-space poses (one server
-# serves one world; the demo teleports only to its start poses)
+# serves one world; the demo teleports only to its start poses) and no compaction step (the
+# learner process keeps its journal: `rhbl compact --tree TREE --out SMALL` compacts it after)
 SCENARIOS: dict[str, dict] = {
     "wall-following": {"world": "room", "features": "wall", "policy": "wall-follower",
                        "teach": 60.0, "rounds": 3, "round": 60.0, "drive": 120.0},

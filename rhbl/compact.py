@@ -16,7 +16,8 @@ Methods (``compact(clf, X, y, method=...)``):
 
 * ``"exact"``: delete every sphere whose deletion changes no prediction on ``X`` (passes in reverse
   creation order until a pass deletes nothing). ``predict(X)`` is the same before and after.
-* ``"prune"``: reduced-error pruning, weakest link first: repeatedly delete the sphere whose
+* ``"prune"``: the exact step, then reduced-error pruning, weakest link first: repeatedly
+  delete the sphere whose
   deletion adds the fewest errors against the labels ``y`` (ties: the latest created), while the
   errors added in total stay within ``max_error`` (a fraction of the rows) and, with
   ``max_nodes``, until the tree has at most that many spheres. ``X``/``y`` are typically the
@@ -86,8 +87,8 @@ class _Tree:
         by = np.empty(n + 1, dtype=np.int64)
         by[:n] = by_rank
         by[n] = -1
+        self.by_rank = by
         self.win = by[best]
-        self._layout = None
 
     # -- geometry, exactly as the classifier computes it
     def _dist(self, rows: np.ndarray, node: int) -> np.ndarray:
@@ -114,44 +115,43 @@ class _Tree:
             stack.extend(self.children[i])
         return out
 
-    # -- the current tree's pre-order layout, for the winner of a few vectors over all spheres
-    def _get_layout(self):
-        if self._layout is None:
-            order, end = [], {}
-            stack = [(0, False)]
-            while stack:
-                node, done = stack.pop()
-                if done:
-                    end[node] = len(order)
-                    continue
-                order.append(node)
-                stack.append((node, True))
-                stack.extend((c, False) for c in reversed(self.children[node]))
-            order_a = np.array(order, dtype=np.int64)
-            self._layout = (order_a, np.array([end[i] for i in order], dtype=np.int64),
-                            np.ascontiguousarray(self.centers[order_a].T),
-                            self.radii[order_a] + self.eps, self.rank[order_a])
-        return self._layout
-
     def _best_without(self, rows: np.ndarray, s: int) -> np.ndarray:
-        """The winner of each vector of ``rows`` among the spheres it reaches now, except ``s``."""
-        order, end, ct, reach, rank = self._get_layout()
-        X = self.X[rows]
-        d = (ct[0][None, :] - X[:, 0, None]) ** 2
-        for k in range(1, X.shape[1]):
-            d += (ct[k][None, :] - X[:, k, None]) ** 2
-        if self.euclid:
-            np.sqrt(d, out=d)
-        bad = d > reach
-        reach_end = np.maximum.accumulate(end * bad, axis=1)
-        key = np.where(reach_end > np.arange(len(order)), self.n, rank)
-        key[:, int(np.flatnonzero(order == s)[0])] = self.n
-        return order[np.argmin(key, axis=1)]
+        """The winner of each vector of ``rows`` among the spheres it reaches now, except ``s``:
+        a descent from the root carrying the rows each sphere encloses (children tested all at
+        once per sphere, with the arithmetic of ``_dist``)."""
+        X = self.X
+        rank = self.rank
+        best = np.full(rows.size, self.n, dtype=np.int64)  # best rank so far
+        stack = [(0, np.arange(rows.size))]
+        while stack:
+            node, idx = stack.pop()
+            if node != s:
+                best[idx] = np.minimum(best[idx], rank[node])
+            kids = self.children[node]
+            if not kids:
+                continue
+            C = self.centers[kids]
+            Q = X[rows[idx]]
+            d = (C[None, :, 0] - Q[:, 0, None]) ** 2
+            for k in range(1, Q.shape[1]):
+                d += (C[None, :, k] - Q[:, k, None]) ** 2
+            if self.euclid:
+                np.sqrt(d, out=d)
+            enc = d <= self.radii[kids] + self.eps
+            for j in np.flatnonzero(enc.any(axis=0)).tolist():
+                stack.append((kids[j], idx[enc[:, j]]))
+        return self.by_rank[best]
 
     # -- one deletion, evaluated without changing anything
     def evaluate(self, s: int):
         """What deleting ``s`` does: None if it must be kept, else (rows whose winner changes or
-        may change, their new winners, new reach sets of the subtree's spheres)."""
+        may change, their new winners, the subtree of ``s`` and the rows each of its spheres
+        gains).
+
+        Rows that reach ``s`` keep reaching everything they reach now but ``s``; only those
+        that ``s`` wins need a new winner (among all spheres they reach, but ``s``). Rows that
+        reach the parent but not ``s`` may gain spheres of the subtree (tested top-down, each
+        sphere on the rows its new parent gained); their winner can only get better."""
         if s == 0 or not self.alive[s]:
             return None
         sub = self.subtree(s)
@@ -160,38 +160,31 @@ class _Tree:
         p = int(self.parent[s])
         rs = self.reach[s]
         lost = rs[self.win[rs] == s]
-        base = {}
-        if lost.size:
-            base = dict(zip(lost.tolist(), self._best_without(lost, s).tolist(), strict=True))
-        new_reach: dict[int, np.ndarray] = {}
-        gained: list[np.ndarray] = []
+        outside = np.setdiff1d(self.reach[p], rs, assume_unique=True)
+        gain: dict[int, np.ndarray] = {}
         for t in sub[1:]:  # parents before children in this DFS order
             q = int(self.parent[t])
-            cand = self.reach[p] if q == s else new_reach[q]
-            r = cand[self._enc(cand, t)] if cand.size else cand
-            new_reach[t] = r
-            if r.size != self.reach[t].size:
-                gained.append(r)
-        rows = np.unique(np.concatenate([lost, *gained])) if gained else lost
-        if rows.size == 0:
-            return rows, rows, new_reach
-        cur = self.win[rows].copy()
-        if base:
-            cur = np.array([base.get(i, w) for i, w in zip(rows.tolist(), cur.tolist(),
-                                                            strict=True)], dtype=np.int64)
-        pos = {v: k for k, v in enumerate(rows.tolist())}
-        for t in sub[1:]:
-            r = new_reach[t]
-            if not r.size:
+            cand = outside if q == s else gain.get(q)
+            if cand is None or not cand.size:
                 continue
-            idx = np.array([pos[v] for v in r.tolist() if v in pos], dtype=np.int64)
-            if idx.size:
-                better = self.rank[t] < self.rank[cur[idx]]
-                cur[idx[better]] = t
-        return rows, cur, new_reach
+            r = cand[self._enc(cand, t)]
+            if r.size:
+                gain[t] = r
+        parts = [lost, *gain.values()]
+        rows = np.unique(np.concatenate(parts)) if gain else lost
+        if rows.size == 0:
+            return rows, rows, sub, gain
+        cur = self.win[rows].copy()
+        if lost.size:
+            cur[np.searchsorted(rows, lost)] = self._best_without(lost, s)
+        for t, r in gain.items():
+            idx = np.searchsorted(rows, r)
+            better = self.rank[t] < self.rank[cur[idx]]
+            cur[idx[better]] = t
+        return rows, cur, sub, gain
 
     def apply(self, s: int, result) -> None:
-        rows, new_win, new_reach = result
+        rows, new_win, sub, gain = result
         p = int(self.parent[s])
         self.alive[s] = False
         kids = self.children[s]
@@ -199,12 +192,11 @@ class _Tree:
         for c in kids:
             self.parent[c] = p
         self.children[s] = []
-        for t, r in new_reach.items():
-            self.depth[t] -= 1
-            self.reach[t] = r
+        self.depth[sub[1:]] -= 1
+        for t, r in gain.items():
+            self.reach[t] = np.union1d(self.reach[t], r)
         self.reach[s] = None
         self.win[rows] = new_win
-        self._layout = None
 
 
 def _tree_distance(clf: HypersphereClassifier) -> str:
@@ -305,6 +297,7 @@ def compact(clf: HypersphereClassifier, X: Any, y: Any = None, *, method: str = 
                     "sample_weight": None if sample_weight is None else "given"}
         w = _weights(yi, sample_weight, class_weight)
         budget = max_error * float(w.sum()) + 1e-9 if max_nodes is None else None
+        _exact(tree)  # free deletions first (they change no prediction, so cost nothing)
         _prune(tree, yi, w, budget=budget, max_nodes=max_nodes)
     record = {"method": method, "settings": settings,
               "nodes_before": before[0], "height_before": before[1],
@@ -332,14 +325,14 @@ def _exact(tree: _Tree) -> None:
             res = tree.evaluate(s)
             if res is None:
                 continue
-            rows, new_win, _ = res
+            rows, new_win = res[0], res[1]
             if np.array_equal(lab[new_win], lab[tree.win[rows]]):
                 tree.apply(s, res)
                 changed = True
 
 
 def _cost(tree: _Tree, res, yi: np.ndarray, w: np.ndarray) -> float:
-    rows, new_win, _ = res
+    rows, new_win = res[0], res[1]
     lab = tree.label
     t = yi[rows]
     return float(w[rows] @ ((lab[new_win] != t).astype(np.float64)
