@@ -188,7 +188,9 @@ def compact_run(args, X, y, title: str, default) -> None:
     Q = queries(X, max(args.single, 2000), seed=3)
     rows = [("uncompacted", tree), ("exact", tree.compact(X)),
             ("prune", tree.compact(X, y, method="prune")),
-            ("prune 1%", tree.compact(X, y, method="prune", max_error=0.01))]
+            ("prune 1%", tree.compact(X, y, method="prune", max_error=0.01)),
+            ("bal. 53", tree.compact(X, y, method="prune", class_weight="balanced",
+                                     max_nodes=53))]
     knn = KNeighborsClassifier(n_neighbors=1).fit(X, y)
     s_knn = median_latency_us(lambda r: knn.predict(r.reshape(1, -1)), Q[: args.single])
     print(f"\n== compaction: {title}; 1-NN on the same {len(X)} vectors: {s_knn:.1f} us")

@@ -82,10 +82,45 @@ COMPACT_METHODS = {
 }
 
 
+# sample selection, offline: a fresh tree (the recipe's parameters) grown on part of a trial's
+# learned vectors, in order: "changes" = only where the teacher's label changes (like a
+# person's key presses), "dedup:Q" = the first vector of each label in each grid cell of side
+# Q, "condense" = passes over all of them until a pass changes nothing (at most 20)
+SELECTIONS = ("changes", "dedup", "condense")
+
+
+def _selected_tree(name: str, clf, X, y):
+    import numpy as np
+
+    from rhbl import HypersphereClassifier
+
+    base, _, arg = name.partition(":")
+    params = clf.get_params()
+    fresh = HypersphereClassifier(**params)
+    if base == "changes":
+        keep = np.r_[True, y[1:] != y[:-1]]
+        return fresh.fit(X[keep], y[keep])
+    if base == "dedup":
+        cells = np.floor(X / float(arg)).astype(np.int64)
+        codes = np.unique(y, return_inverse=True)[1]
+        _, first = np.unique(np.c_[cells, codes], axis=0, return_index=True)
+        first.sort()
+        return fresh.fit(X[first], y[first])
+    fresh.fit(X, y)
+    for _ in range(20):
+        before = fresh.node_count_
+        fresh.partial_fit(X, y)
+        if fresh.node_count_ == before:
+            break
+    return fresh
+
+
 def _compact_method(name: str) -> dict | None:
     """'prune-balanced:400' -> prune with class_weight='balanced' to at most 400 spheres,
     applied after the exact step."""
     base, _, size = name.partition(":")
+    if base in SELECTIONS:
+        return {"select": name}
     if base not in COMPACT_METHODS:
         raise SystemExit(f"unknown method {base!r}; known: {', '.join(COMPACT_METHODS)}")
     kw = dict(COMPACT_METHODS[base] or {})
@@ -119,7 +154,8 @@ def record_trial(task: str, seed: int, folder) -> tuple:
 
 
 def compact_study(task: str, trials: int, folder: str, methods: list[str],
-                  offline: bool = False, eval_worlds: list[str] | None = None) -> list[dict]:
+                  offline: bool = False, eval_worlds: list[str] | None = None,
+                  first_seed: int = 0) -> list[dict]:
     from pathlib import Path
 
     import numpy as np
@@ -132,16 +168,23 @@ def compact_study(task: str, trials: int, folder: str, methods: list[str],
     Path(folder).mkdir(parents=True, exist_ok=True)
     worlds = [WORLD[task], *(default_eval_worlds(task) if eval_worlds is None else eval_worlds)]
     out = []
-    for seed in range(trials):
-        clf, feats, acts, meta, X, y = record_trial(task, seed, folder)
+    seeds = range(first_seed, first_seed + trials)
+    data = {seed: record_trial(task, seed, folder) for seed in seeds}
+    for seed in seeds:
+        clf, feats, acts, meta, X, y = data[seed]
+        others = [data[s] for s in seeds if s != seed]
         for name in methods:
             kw = _compact_method(name)
             t0 = time.perf_counter()
             small = clf
-            if kw is not None:
+            if kw is not None and "select" in kw:
+                small = _selected_tree(name, clf, X, y)
+            elif kw is not None:
                 small = clf.compact(X, None if kw["method"] == "exact" else y, **kw)
             row = {"task": task, "seed": seed, "method": name, "nodes": small.node_count_,
                    "height": small.height_, "agreement": float(np.mean(small.predict(X) == y)),
+                   "heldout_agreement": float(np.mean(np.concatenate(
+                       [small.predict(o[4]) == o[5] for o in others]))) if others else None,
                    "compact_s": round(time.perf_counter() - t0, 1), "worlds": {}}
             if not offline:
                 policy = TreePolicy(small, feats, acts, meta)
@@ -152,13 +195,14 @@ def compact_study(task: str, trials: int, folder: str, methods: list[str],
                         "collisions": sum(e["collisions"] for e in rep["learner"])}
             out.append(row)
             print(json.dumps(row), flush=True)
-    print(f"\n{'method':24} {'nodes':>7} {'height':>6} {'agree':>6}  success per world "
-          "(mean/min over trials), collisions")
+    print(f"\n{'method':24} {'nodes':>7} {'height':>6} {'agree':>6} {'held':>6}  success per "
+          "world (mean/min over trials), collisions")
     for name in methods:
         rows = [r for r in out if r["method"] == name]
         line = (f"{name:24} {np.mean([r['nodes'] for r in rows]):>7.1f} "
                 f"{np.mean([r['height'] for r in rows]):>6.1f} "
-                f"{np.mean([r['agreement'] for r in rows]):>6.3f} ")
+                f"{np.mean([r['agreement'] for r in rows]):>6.3f} "
+                f"{np.mean([r['heldout_agreement'] or 0.0 for r in rows]):>6.3f} ")
         for w in rows[0]["worlds"]:
             sr = [r["worlds"][w]["success_rate"] for r in rows]
             col = sum(r["worlds"][w]["collisions"] for r in rows)
@@ -179,18 +223,21 @@ def main() -> int:
     ap.add_argument("--dir", default="compact-study",
                     help="compact: folder for the recorded trees and vectors (reused)")
     ap.add_argument("--methods", default="none,exact,prune-balanced",
-                    help="compact: comma-separated none, exact, prune, prune-balanced, each "
-                         "optionally :N (at most N spheres)")
+                    help="compact: comma-separated none, exact, prune, prune-balanced (each "
+                         "optionally :N, at most N spheres), or the sample selections changes, "
+                         "dedup:Q, condense (fresh trees grown on part of the vectors)")
     ap.add_argument("--eval-world", action="append", default=None,
                     help="compact: evaluation world (repeatable; default: server/worlds/"
                          "eval-room* or eval-maze*)")
+    ap.add_argument("--seed", type=int, default=0, help="compact: first trial's seed")
     ap.add_argument("--offline", action="store_true",
                     help="compact: sizes and agreement only, no closed-loop evaluation")
     args = ap.parse_args()
     out = []
     if args.study == "compact":
         out = compact_study(args.task, args.trials, args.dir, args.methods.split(","),
-                            offline=args.offline, eval_worlds=args.eval_world)
+                            offline=args.offline, eval_worlds=args.eval_world,
+                            first_seed=args.seed)
         if args.json:
             with open(args.json, "w") as fh:
                 json.dump(out, fh, indent=1)

@@ -2,6 +2,7 @@
 
     rhbl compact --tree wall.rhbl --out wall-small.rhbl                  # data: wall.rhbl.journal
     rhbl compact --tree T --out T2 --data a.journal --data b.npz --method prune --max-error 0.01
+    rhbl compact --tree T --out T2 --method prune --class-weight balanced --max-nodes 200
 
 The data are the labelled vectors the tree should keep its behaviour on: learner journals
 (``client.journal``; each record's scan is turned into features with the snapshot's own feature
@@ -60,6 +61,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "the weakest spheres against the data's labels")
     parser.add_argument("--max-error", type=float, default=0.0,
                         help="prune: fraction of the rows whose errors the pruning may add (0)")
+    parser.add_argument("--class-weight", choices=["balanced"], default=None,
+                        help="prune: weigh each label's rows the same in total (rare labels, such "
+                             "as a turn in place before a wall, are not pruned away as cheap)")
     parser.add_argument("--max-nodes", type=int, default=None,
                         help="prune: delete the weakest spheres until at most this many are left")
 
@@ -74,7 +78,7 @@ def main(args) -> int:
     X = np.concatenate([p[0] for p in parts])
     y = np.concatenate([p[1] for p in parts])
     small = clf.compact(X, y, method=args.method, max_error=args.max_error,
-                        max_nodes=args.max_nodes,
+                        max_nodes=args.max_nodes, class_weight=args.class_weight,
                         data=", ".join(Path(f).name for f in files))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -57,10 +57,12 @@ def test_prune_on_an_npz_to_a_size(tmp_path, capsys):
     np.savez(tmp_path / "d.npz", X=X, y=y)
     small = tmp_path / "small.rhbl"
     assert main(["compact", "--tree", str(tree), "--out", str(small), "--data",
-                 str(tmp_path / "d.npz"), "--method", "prune", "--max-nodes", "10"]) == 0
+                 str(tmp_path / "d.npz"), "--method", "prune", "--class-weight", "balanced",
+                 "--max-nodes", "10"]) == 0
     clf = TreePolicy.load(small).classifier
     assert clf.node_count_ <= 10
-    assert clf.metadata["compaction"][-1]["settings"]["max_nodes"] == 10
+    settings = clf.metadata["compaction"][-1]["settings"]
+    assert settings["max_nodes"] == 10 and settings["class_weight"] == "balanced"
 
 
 def test_bad_data_is_named(tmp_path, capsys):

@@ -85,10 +85,11 @@ def test_train_compacts_on_the_vectors_it_learned(tmp_path, capsys):
     # the CLI: --compact prune --compact-max-nodes N, recorded in the snapshot
     tree = tmp_path / "c.rhbl"
     assert cli(["train", "--world", CORRIDOR, "--seconds", "20", "--rounds", "0", "--out",
-                str(tree), "--compact", "prune", "--compact-max-nodes", "5"]) == 0
+                str(tree), "--compact", "prune-balanced", "--compact-max-nodes", "5"]) == 0
     assert "compacted (prune) from" in capsys.readouterr().out
     _, _, _, meta = load_snapshot(tree)
     assert meta["compaction"][-1]["nodes_after"] <= 5
+    assert meta["compaction"][-1]["settings"]["class_weight"] == "balanced"
     assert meta["provenance"]["sessions"][-1]["compaction"]["method"] == "prune"
 
 
