@@ -16,13 +16,12 @@ Methods (``compact(clf, X, y, method=...)``):
 
 * ``"exact"``: delete every sphere whose deletion changes no prediction on ``X`` (passes in reverse
   creation order until a pass deletes nothing). ``predict(X)`` is the same before and after.
-* ``"prune"``: the exact step, then reduced-error pruning, weakest link first: repeatedly
-  delete the sphere whose
-  deletion adds the fewest errors against the labels ``y`` (ties: the latest created), while the
-  errors added in total stay within ``max_error`` (a fraction of the rows) and, with
-  ``max_nodes``, until the tree has at most that many spheres. ``X``/``y`` are typically the
-  states the learned robot visited, labelled by the teacher (its training data, and held-out
-  states of other runs).
+* ``"prune"``: the exact step, then reduced-error pruning, weakest link first: repeatedly delete
+  the sphere whose deletion adds the fewest errors against the labels ``y`` (weighted by
+  ``sample_weight`` / ``class_weight``; ties: the latest created), while the errors added in
+  total stay within ``max_error`` (a fraction of the total weight) or, with ``max_nodes``, until
+  the tree has at most that many spheres. ``X``/``y`` are typically the states the learned robot
+  visited, labelled by the teacher (its training data, and held-out states of other runs).
 
 A sphere whose radius equals another sphere's radius exactly is never deleted (deleting it
 could reorder a tie of the winner rule, which depends on depth); such ties are rare.
