@@ -349,7 +349,7 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, seconds: float, seed: 
     compact = dict(recipe.get("compact") or {}) if compact is None else dict(compact)
     compaction = None
     if compact.get("method"):
-        if getattr(learner, "_rec_x", None) is None:
+        if not getattr(learner, "recording", False):
             log.warning("not compacting: the learner kept no vectors (make it with record=True)")
         else:
             compaction = learner.compact(**compact)

@@ -150,6 +150,11 @@ class DemonstrationLearner:
             self._rec_x.append(x)
             self._rec_y.append(label)
 
+    @property
+    def recording(self) -> bool:
+        """True when this learner keeps the vectors it offers (``record=True``)."""
+        return self._rec_x is not None
+
     def recorded(self) -> tuple[np.ndarray, np.ndarray]:
         """``(X, y)``: every vector offered to the tree since this learner was made with
         ``record=True`` (ValueError otherwise), in the order offered."""
