@@ -9,6 +9,9 @@ single-query predict latency (median over individual calls; ``predict_one`` for 
 held-out accuracy. Data sets: a synthetic 5-feature, 5-action set, a 6-feature tree of about
 400 spheres (the issue's speed targets), and scikit-learn's bundled iris, wine and
 breast-cancer sets, min-max scaled to [0, 1]. Ratios are "how many times faster rhbl is".
+The compaction section compares a tree with its compacted copies (``rhbl.compact``: exact, and
+pruned against the training labels); ``--tree SNAPSHOT --data FILE.npz`` adds a robot's tree
+compacted on its recorded training vectors (arrays X, y).
 """
 
 from __future__ import annotations
@@ -174,11 +177,42 @@ def scaling_run(args) -> None:
               f"{single:>15.1f} {batch * 1e6:>15.2f}")
 
 
+def compact_run(args, X, y, title: str, default) -> None:
+    """Single-query predict of a tree and its compactions, against 1-NN on the tree's data."""
+    from sklearn.neighbors import KNeighborsClassifier
+
+    if isinstance(X, HypersphereClassifier):  # a given tree and the data it was trained on
+        tree, (X, y) = X, y
+    else:
+        tree = HypersphereClassifier(default, spawn="winner").fit(X, y)
+    Q = queries(X, max(args.single, 2000), seed=3)
+    rows = [("uncompacted", tree), ("exact", tree.compact(X)),
+            ("prune", tree.compact(X, y, method="prune")),
+            ("prune 1%", tree.compact(X, y, method="prune", max_error=0.01)),
+            ("bal. 53", tree.compact(X, y, method="prune", class_weight="balanced",
+                                     max_nodes=53))]
+    knn = KNeighborsClassifier(n_neighbors=1).fit(X, y)
+    s_knn = median_latency_us(lambda r: knn.predict(r.reshape(1, -1)), Q[: args.single])
+    print(f"\n== compaction: {title}; 1-NN on the same {len(X)} vectors: {s_knn:.1f} us")
+    print(f"{'tree':<12} {'spheres':>8} {'height':>6} {'1-query us':>11} {'x1NN':>7} "
+          f"{'x uncompacted':>13} {'agree with y':>12}")
+    base = None
+    for name, clf in rows:
+        us = median_latency_us(clf.predict_one, Q[: args.single])
+        base = base or us
+        print(f"{name:<12} {clf.node_count_:>8} {clf.height_:>6} {us:>11.1f} {s_knn / us:>7.1f} "
+              f"{base / us:>13.2f} {np.mean(clf.predict(X) == y):>12.3f}")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="smaller sets, fewer repeats")
     parser.add_argument("--check", action="store_true", help="exit 1 if a target is missed")
+    parser.add_argument("--tree", default=None, help="also compact this snapshot (needs --data)")
+    parser.add_argument("--data", default=None, help="the tree's training vectors (.npz: X, y)")
     args = parser.parse_args(argv)
+    if (args.tree is None) != (args.data is None):
+        parser.error("--tree and --data go together")
     args.single = 100 if args.quick else 400
     args.repeat = 1 if args.quick else 3
     n_batch = 5000 if args.quick else 20000
@@ -202,6 +236,13 @@ def main(argv: list[str] | None = None) -> int:
         rows = [measure(name, make, Xtr, ytr, Xte, yte, Q, Q[: args.single], args.repeat)
                 for name, make in models(default)]
         print_table(f"{title}: train {len(Xtr)}, test {len(Xte)}", rows)
+    compact_run(args, *synthetic(m_syn, 5, seed=1), "synthetic 5 features, rhbl winner", "fwd")
+    if args.tree:
+        from rhbl import load
+
+        with np.load(args.data) as d:
+            data = (np.asarray(d["X"], dtype=np.float64), np.asarray(d["y"]).astype(str))
+        compact_run(args, load(args.tree), data, f"{args.tree}", None)
     return 0 if (ok or not args.check) else 1
 
 

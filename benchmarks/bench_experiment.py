@@ -1,7 +1,9 @@
 """Tree size against success: the trade-off study of docs/experiments.md.
 
     python benchmarks/bench_experiment.py [--trials 3] [--task wall-following] [--json out.json]
-        [--study size|tradeoff|beams]
+        [--study size|tradeoff|beams|compact]
+    python benchmarks/bench_experiment.py --study compact --task wall-following --trials 5 \
+        --dir DIR [--methods exact,prune,prune-balanced:400,...] [--offline]
 
 Each row trains on the task's shipped world with one recipe (spawn rule, teacher style,
 perturbation, sample stride) for ``--trials`` seeds and evaluates from every start pose.
@@ -15,7 +17,7 @@ import time
 
 from client.behaviour.features import FeatureSpec
 from lab.experiment import run_experiment
-from lab.recipe import RECIPES
+from lab.recipe import COMPACT, RECIPES
 
 BEAMS = [
     ("wall side 0-90 deg (default)", (0.0, 22.5, 45.0, 67.5, 90.0)),
@@ -71,16 +73,171 @@ def size_study(task: str, trials: int) -> list[dict]:
     return out
 
 
+# --study compact: each trial's default training run is recorded once (tree + every labelled
+# vector it learned, DIR/<task>-s<seed>.rhbl/.npz); the methods are then applied to that tree
+# offline and the results evaluated closed loop on the training world and every eval world.
+# the methods are the recipe's compaction choices (lab.recipe.COMPACT)
+
+
+# sample selection, offline: a fresh tree (the recipe's parameters) grown on part of a trial's
+# learned vectors, in order: "changes" = only where the teacher's label changes (like a
+# person's key presses), "dedup:Q" = the first vector of each label in each grid cell of side
+# Q, "condense" = passes over all of them until a pass changes nothing (at most 20)
+SELECTIONS = ("changes", "dedup", "condense")
+
+
+def _selected_tree(name: str, clf, X, y):
+    import numpy as np
+
+    from rhbl import HypersphereClassifier
+
+    base, _, arg = name.partition(":")
+    params = clf.get_params()
+    fresh = HypersphereClassifier(**params)
+    if base == "changes":
+        keep = np.r_[True, y[1:] != y[:-1]]
+        return fresh.fit(X[keep], y[keep])
+    if base == "dedup":
+        cells = np.floor(X / float(arg)).astype(np.int64)
+        codes = np.unique(y, return_inverse=True)[1]
+        _, first = np.unique(np.c_[cells, codes], axis=0, return_index=True)
+        first.sort()
+        return fresh.fit(X[first], y[first])
+    fresh.fit(X, y)
+    for _ in range(20):
+        before = fresh.node_count_
+        fresh.partial_fit(X, y)
+        if fresh.node_count_ == before:
+            break
+    return fresh
+
+
+def _compact_method(name: str) -> dict | None:
+    """'prune-balanced:400' -> prune with class_weight='balanced' to at most 400 spheres,
+    applied after the exact step."""
+    base, _, size = name.partition(":")
+    if base in SELECTIONS:
+        return {"select": name}
+    if base not in COMPACT:
+        raise SystemExit(f"unknown method {base!r}; known: {', '.join(COMPACT)}")
+    kw = dict(COMPACT[base])
+    if size:
+        kw["max_nodes"] = int(size)
+    return kw or None
+
+
+def record_trial(task: str, seed: int, folder) -> tuple:
+    """The default recipe's tree of one seed and its learned vectors (cached in ``folder``)."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from client.behaviour.learning import load_snapshot
+    from lab.harness import make_learner, resolve_world, train
+
+    tag = Path(folder) / f"{task}-s{seed}"
+    tree, data = tag.with_suffix(".rhbl"), tag.with_suffix(".npz")
+    if not (tree.exists() and data.exists()):
+        recipe = RECIPES[task]  # the default recipe (no compaction step): the methods are
+        learner = make_learner(recipe, record=True)  # applied below, offline
+        train(resolve_world(recipe.world), learner, recipe, seed=seed)
+        X, y = learner.recorded()
+        learner.save(tree)
+        np.savez_compressed(data, X=X, y=y)
+    with np.load(data) as d:
+        X, y = d["X"], d["y"].astype(str)
+    return (*load_snapshot(tree), X, y)
+
+
+def compact_study(task: str, trials: int, folder: str, methods: list[str],
+                  offline: bool = False, eval_worlds: list[str] | None = None,
+                  first_seed: int = 0) -> list[dict]:
+    from pathlib import Path
+
+    import numpy as np
+
+    from client.behaviour.learning import TreePolicy
+    from lab.evaluate import evaluate
+    from lab.experiment import default_eval_worlds
+    from lab.harness import resolve_world
+
+    Path(folder).mkdir(parents=True, exist_ok=True)
+    worlds = [RECIPES[task].world, *(default_eval_worlds(task) if eval_worlds is None else eval_worlds)]
+    out = []
+    seeds = range(first_seed, first_seed + trials)
+    data = {seed: record_trial(task, seed, folder) for seed in seeds}
+    for seed in seeds:
+        clf, feats, acts, meta, X, y = data[seed]
+        others = [data[s] for s in seeds if s != seed]
+        for name in methods:
+            kw = _compact_method(name)
+            t0 = time.perf_counter()
+            small = clf
+            if kw is not None and "select" in kw:
+                small = _selected_tree(name, clf, X, y)
+            elif kw is not None:
+                small = clf.compact(X, None if kw["method"] == "exact" else y, **kw)
+            row = {"task": task, "seed": seed, "method": name, "nodes": small.node_count_,
+                   "height": small.height_, "agreement": float(np.mean(small.predict(X) == y)),
+                   "heldout_agreement": float(np.mean(np.concatenate(
+                       [small.predict(o[4]) == o[5] for o in others]))) if others else None,
+                   "compact_s": round(time.perf_counter() - t0, 1), "worlds": {}}
+            if not offline:
+                policy = TreePolicy(small, feats, acts, meta)
+                for w in worlds:
+                    rep = evaluate(resolve_world(w), policy, seed=seed)
+                    row["worlds"][rep["world"]] = {
+                        "success_rate": rep["success_rate"],
+                        "collisions": sum(e["collisions"] for e in rep["learner"])}
+            out.append(row)
+            print(json.dumps(row), flush=True)
+    print(f"\n{'method':24} {'nodes':>7} {'height':>6} {'agree':>6} {'held':>6}  success per "
+          "world (mean/min over trials), collisions")
+    for name in methods:
+        rows = [r for r in out if r["method"] == name]
+        line = (f"{name:24} {np.mean([r['nodes'] for r in rows]):>7.1f} "
+                f"{np.mean([r['height'] for r in rows]):>6.1f} "
+                f"{np.mean([r['agreement'] for r in rows]):>6.3f} "
+                f"{np.mean([r['heldout_agreement'] or 0.0 for r in rows]):>6.3f} ")
+        for w in rows[0]["worlds"]:
+            sr = [r["worlds"][w]["success_rate"] for r in rows]
+            col = sum(r["worlds"][w]["collisions"] for r in rows)
+            line += f" {w}:{np.mean(sr):.0%}/{min(sr):.0%}/{col}"
+        print(line)
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--trials", type=int, default=3)
     ap.add_argument("--task", default="wall-following", choices=["wall-following", "maze"])
     ap.add_argument("--json", default=None)
-    ap.add_argument("--study", default="size", choices=["size", "tradeoff", "beams"],
+    ap.add_argument("--study", default="size", choices=["size", "tradeoff", "beams", "compact"],
                     help="size: the current recipe's size study (default); tradeoff: the old "
-                         "smooth-teacher study; beams: beam choice")
+                         "smooth-teacher study; beams: beam choice; compact: compaction methods "
+                         "on the recipe's trees")
+    ap.add_argument("--dir", default="compact-study",
+                    help="compact: folder for the recorded trees and vectors (reused)")
+    ap.add_argument("--methods", default="none,exact,prune-balanced",
+                    help="compact: comma-separated none, exact, prune, prune-balanced (each "
+                         "optionally :N, at most N spheres), or the sample selections changes, "
+                         "dedup:Q, condense (fresh trees grown on part of the vectors)")
+    ap.add_argument("--eval-world", action="append", default=None,
+                    help="compact: evaluation world (repeatable; default: server/worlds/"
+                         "eval-room* or eval-maze*)")
+    ap.add_argument("--seed", type=int, default=0, help="compact: first trial's seed")
+    ap.add_argument("--offline", action="store_true",
+                    help="compact: sizes and agreement only, no closed-loop evaluation")
     args = ap.parse_args()
     out = []
+    if args.study == "compact":
+        out = compact_study(args.task, args.trials, args.dir, args.methods.split(","),
+                            offline=args.offline, eval_worlds=args.eval_world,
+                            first_seed=args.seed)
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump(out, fh, indent=1)
+        return 0
     if args.study == "size":
         out = size_study(args.task, args.trials)
         if args.json:

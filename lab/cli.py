@@ -24,6 +24,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "console": ("client.console", "a web page to watch, teach and correct the robot from a browser"),
     "train": ("lab.harness", "in-process: a scripted teacher demonstrates on a world, write a tree"),
     "evaluate": ("lab.evaluate", "in-process: run a tree (and the teacher) from a world's start poses"),
+    "compact": ("lab.compact", "make an existing tree smaller, keeping its behaviour on its data"),
     "experiment": ("lab.experiment", "repeat train-then-evaluate over seeds; the paper's Table I"),
     "record": ("client.recorder", "record every message of the robots' keys into an MCAP file"),
     "replay": ("client.replay", "republish a recording's sensor stream on zenoh with its timing"),

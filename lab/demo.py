@@ -106,7 +106,8 @@ class Scenario:
 
 # scenario -> the task's recipe with the demo's changes (lab.recipe.DEMO, the time budget);
 # the demo cannot run rounds in scaled copies or from free-space poses (one server serves one
-# world, the demo teleports only to its start poses): those parts of the recipe are left out
+# world, the demo teleports only to its start poses): those parts of the recipe are left out;
+# the demo has no compaction step either (the learner process keeps no vectors)
 SCENARIOS: dict[str, Scenario] = {
     task: Scenario(recipe.for_demo(), EVAL_SECONDS[task]) for task, recipe in RECIPES.items()}
 

@@ -61,7 +61,11 @@ def run_trial(task: str, seed: int, recipe: Recipe | None = None, world: str | N
           odom_noise=odom_noise if train_noise else 0.0)
     t_train = time.perf_counter() - t0
     tree = TreePolicy.from_learner(learner)
+    rec = learner.session.get("compaction") or {}
     out = {"seed": seed, "nodes": learner.nodes, "height": learner.height,
+           "nodes_before": rec.get("nodes_before", learner.nodes),
+           "height_before": rec.get("height_before", learner.height),
+           "compaction": rec.get("method"),
            "vectors": learner.vectors, "train_wall_s": round(t_train, 2), "worlds": {}}
     for w in [spec.path or spec.name, *eval_worlds]:
         wspec = resolve_world(str(w))
@@ -88,6 +92,8 @@ def run_experiment(task: str, trials: int = 5, seed0: int = 0, recipe: Recipe | 
     summary = {
         "nodes": metrics.summarize([r["nodes"] for r in rows]),
         "height": metrics.summarize([r["height"] for r in rows]),
+        "nodes_before": metrics.summarize([r["nodes_before"] for r in rows]),
+        "height_before": metrics.summarize([r["height_before"] for r in rows]),
         "worlds": {w: {"success_rate": metrics.summarize([r["worlds"][w]["success_rate"] for r in rows]),
                        "teacher_success_rate": metrics.summarize(
                            [r["worlds"][w]["teacher_success_rate"] for r in rows]),
@@ -101,20 +107,28 @@ def run_experiment(task: str, trials: int = 5, seed0: int = 0, recipe: Recipe | 
 
 
 def table_i(results: dict[str, dict]) -> str:
-    """The paper's Table I beside ours (markdown, ``lab.report``)."""
+    """The paper's Table I beside ours (markdown, ``lab.report``). When the recipe compacted
+    the trees: also the nodes and height before compaction (means), and per trial in notes."""
+    compacted = any(r.get("compaction") for res in results.values() for r in res["rows"])
     rows = []
     for task, res in results.items():
         s = res["summary"]
         pn, ph = PAPER[task]
         sr = next(iter(s["worlds"].values()))["success_rate"]
-        rows.append([task, f"{pn:.1f}", f"{ph:.0f}",
+        before = [f"{s['nodes_before']['mean']:.1f}", f"{s['height_before']['mean']:.1f}"] \
+            if compacted else []
+        rows.append([task, f"{pn:.1f}", f"{ph:.0f}", *before,
                      f"{s['nodes']['mean']:.1f} +/- {s['nodes']['std']:.0f}",
                      f"{s['height']['mean']:.1f} +/- {s['height']['std']:.1f}",
                      f"{sr['mean']:.1%} (min {sr['min']:.0%}, max {sr['max']:.0%})"])
-    return table(["scenario", "paper nodes", "paper height", "our nodes", "our height",
-                  "success (training world)"], rows,
+    notes = [f"{task} per trial (nodes/height before -> after compaction): " + ", ".join(
+        f"s{r['seed']} {r['nodes_before']}/{r['height_before']} -> {r['nodes']}/{r['height']}"
+        for r in res["rows"]) for task, res in results.items()] if compacted else []
+    before_cols = ["nodes before compaction", "height before compaction"] if compacted else []
+    return table(["scenario", "paper nodes", "paper height", *before_cols, "our nodes",
+                  "our height", "success (training world)"], rows,
                  title="Table I. Spawned tree properties (paper vs this reproduction, mean +/- "
-                       "std over trials)")
+                       "std over trials)", notes=notes)
 
 
 def format_worlds(res: dict) -> str:

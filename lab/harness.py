@@ -72,12 +72,15 @@ def parse_pose(text: str) -> tuple[float, float, float]:
     return vals  # type: ignore[return-value]
 
 
-def make_learner(recipe: Recipe | str, actions: ActionSet = DEFAULT_ACTIONS) -> DemonstrationLearner:
+def make_learner(recipe: Recipe | str, actions: ActionSet = DEFAULT_ACTIONS, *,
+                 record: bool | None = None) -> DemonstrationLearner:
     """A learner as ``recipe`` says (features, stride, tree parameters); a task name: its
-    default recipe."""
+    default recipe. ``record``: keep the vectors it learns (``learner.recorded()``); default:
+    when the recipe compacts (the step needs them)."""
     recipe = recipe_for(recipe) if isinstance(recipe, str) else recipe
     return DemonstrationLearner(recipe.feature_spec(), actions, task=recipe.task,
                                 stride=recipe.stride, min_delta=recipe.min_delta,
+                                record=recipe.compact != "none" if record is None else record,
                                 **recipe.tree_params())
 
 
@@ -192,6 +195,12 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
                 round_stats.append(dict(st, scale=f))
         round_stats += _corrective_rounds(spec, learner, policy, fixed, recipe, seed,
                                           range_noise, odom_noise, ep, rng=rng, aug=aug)
+    compaction = None
+    if (compact := recipe.compact_params()) is not None:  # the last step
+        if not learner.recording:
+            raise ValueError(f"recipe compact {recipe.compact!r} needs a learner that kept its "
+                             "vectors (make_learner(recipe), or record=True)")
+        compaction = learner.compact(**compact)
     ep.wall_time = time.perf_counter() - t0
     augment = recipe.augment
     learner.session = {"world": spec.name, "world_path": str(spec.path) if spec.path else None,
@@ -208,7 +217,7 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
                        "augment": augment,
                        "augment_scale": recipe.augment_scale if augment else None,
                        "range_noise": range_noise, "odom_noise": odom_noise,
-                       "vectors": ep.learned}
+                       "vectors": ep.learned, "compaction": compaction}
     return ep
 
 
@@ -340,12 +349,18 @@ def main(args) -> int:
     if args.from_recording:
         from lab.recording import train_main
 
+        if getattr(args, "compact", None) not in (None, "none"):
+            raise ValueError(f"--compact {args.compact} applies to a simulated training run, "
+                             "not to --from-recording")
         return train_main(args)
     if not args.world:
         raise ValueError("--world is required (or --from-recording FILE)")
     spec = resolve_world(args.world)
     recipe = recipe_from_args(spec.task, args)
     if args.resume:
+        if recipe.compact != "none":
+            raise ValueError(f"--compact {recipe.compact} needs a fresh tree: a resumed learner "
+                             "kept no vectors to compact on (use 'rhbl compact' on its journal)")
         learner = DemonstrationLearner.resume(
             args.resume, features=recipe.feature_spec() if args.features else None)
     else:
@@ -359,10 +374,18 @@ def main(args) -> int:
     print(f"trained on {spec.name} ({spec.task}) for {recipe.seconds:g} s from {list(ep.start)}: "
           f"{len(ep.segments)} demonstrations + {learner.session.get('rounds', 0)} corrective "
           f"rounds{_scales_note(learner.session.get('round_scales'))}, {ep.learned} vectors "
-          f"learned, tree {learner.nodes} nodes, height {learner.height}; "
+          f"learned, tree {_size_note(learner.session.get('compaction'))}{learner.nodes} nodes, "
+          f"height {learner.height}; "
           f"teacher collisions {m['collisions']}; {ep.wall_time:.1f} s wall time")
     print(f"wrote {out}")
     return 0
+
+
+def _size_note(rec) -> str:
+    if not rec:
+        return ""
+    return (f"compacted ({rec['method']}) from {rec['nodes_before']} nodes, height "
+            f"{rec['height_before']}, to ")
 
 
 def _scales_note(scales) -> str:

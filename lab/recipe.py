@@ -42,6 +42,10 @@ STARTS = ("default", "world", "free")
 SPAWN = ("all", "winner")
 DISTANCE = ("squared", "euclidean")
 TREE_PARAMS = ("spawn", "distance", "min_radius", "max_nodes", "max_depth")
+# the compaction step's choices and the ``rhbl.compact`` settings each one means
+COMPACT: dict[str, dict] = {
+    "none": {}, "exact": {"method": "exact"}, "prune": {"method": "prune"},
+    "prune-balanced": {"method": "prune", "class_weight": "balanced"}}
 
 
 @dataclass(frozen=True)
@@ -76,6 +80,12 @@ class Recipe:
     # scale augmentation: each labelled state offered again with the scan scaled
     augment: int = 0
     augment_scale: float = 1.3
+    # the last step: compact the tree on every vector it learned (``rhbl.compact``). None by
+    # default: every compaction measured lost closed-loop success on some world for some seed
+    # (docs/experiments.md, "Compact trees (issue)")
+    compact: str = "none"           # "none" | "exact" | "prune" | "prune-balanced"
+    compact_max_nodes: int | None = None    # prune: until at most this many spheres are left
+    compact_max_error: float | None = None  # prune: fraction of the vectors it may make wrong
 
     def __post_init__(self) -> None:
         def bad(name: str, expected: str) -> ValueError:
@@ -107,6 +117,17 @@ class Recipe:
                 raise bad(name, "an integer >= 0")
         if isinstance(self.stride, bool) or not isinstance(self.stride, int) or self.stride < 1:
             raise bad("stride", "an integer >= 1")
+        if self.compact not in COMPACT:
+            raise bad("compact", f"one of {', '.join(COMPACT)}")
+        n = self.compact_max_nodes
+        if n is not None and (isinstance(n, bool) or not isinstance(n, int) or n < 1):
+            raise bad("compact_max_nodes", "None or an integer >= 1")
+        e = self.compact_max_error
+        if e is not None and not (isinstance(e, int | float) and math.isfinite(e) and 0 <= e <= 1):
+            raise bad("compact_max_error", "None or a fraction in [0, 1]")
+        if (n is not None or e is not None) and not self.compact.startswith("prune"):
+            raise ValueError(f"recipe compact_max_nodes/compact_max_error apply to compact "
+                             f"'prune' or 'prune-balanced' only, got compact {self.compact!r}")
         scales = tuple(float(v) for v in self.round_scales)
         if not all(math.isfinite(v) and v > 0 for v in scales):
             raise bad("round_scales", "finite factors > 0")
@@ -125,6 +146,18 @@ class Recipe:
     def tree_params(self) -> dict:
         """The classifier's keyword arguments the recipe sets (``None``: its own default)."""
         return {k: getattr(self, k) for k in TREE_PARAMS if getattr(self, k) is not None}
+
+    def compact_params(self) -> dict | None:
+        """The keyword arguments of the compaction step (``DemonstrationLearner.compact``), or
+        None when the recipe does not compact."""
+        if self.compact == "none":
+            return None
+        out = dict(COMPACT[self.compact])
+        if self.compact_max_nodes is not None:
+            out["max_nodes"] = self.compact_max_nodes
+        if self.compact_max_error is not None:
+            out["max_error"] = self.compact_max_error
+        return out
 
     def for_demo(self) -> Recipe:
         """The recipe ``rhbl demo`` runs over zenoh (this one with the task's ``DEMO`` changes)."""
@@ -189,7 +222,7 @@ def recipe_default(name: str, recipes: dict[str, Recipe] | None = None) -> str:
     ``"default: the recipe's (wall following 600, maze 600)"``."""
     values = {t: getattr(r, name) for t, r in (RECIPES if recipes is None else recipes).items()}
     if all(v is None for v in values.values()):
-        return "default: the classifier's"
+        return "default: the classifier's" if name in TREE_PARAMS else "default: none"
     return f"default: the recipe's ({per_task(values)})"
 
 
@@ -249,6 +282,14 @@ _FLAGS: list[tuple[str, str, dict, str]] = [
     ("--round-scales", "round_scales", {"type": parse_scales, "metavar": "F,F"},
      "repeat the corrective rounds in the training world scaled by these factors first "
      "('none': only the world itself)"),
+    ("--compact", "compact", {"choices": list(COMPACT)},
+     "last step: compact the tree on every vector it learned (rhbl.compact; exact: no "
+     "prediction on them changes; prune: also delete the weakest spheres; prune-balanced: "
+     "errors weighted per label)"),
+    ("--compact-max-nodes", "compact_max_nodes", {"type": int},
+     "prune: delete the weakest spheres until at most N are left"),
+    ("--compact-max-error", "compact_max_error", {"type": float},
+     "prune: fraction of the learned vectors whose errors it may add"),
 ]
 
 

@@ -38,6 +38,7 @@ import numpy as np
 
 from . import snapshot
 from ._errors import NotFittedError, SnapshotError
+from .compact import compact
 from .tree import ALGORITHMS, DISTANCES, SphereTree
 
 __all__ = ["HypersphereClassifier", "load", "loads"]
@@ -503,6 +504,19 @@ class HypersphereClassifier:
         defaults = HypersphereClassifier().get_params()
         shown = ", ".join(f"{k}={v!r}" for k, v in params.items() if v != defaults[k])
         return f"HypersphereClassifier({shown})"
+
+    # ------------------------------------------------------------------ compaction
+    def compact(self, X: Any, y: Iterable[Any] | None = None, *, method: str = "exact",
+                max_error: float = 0.0, max_nodes: int | None = None,
+                sample_weight: Any = None, class_weight: str | None = None,
+                data: str | None = None) -> HypersphereClassifier:
+        """A smaller copy of this tree that keeps its behaviour on ``X`` (see ``rhbl.compact``):
+        ``method="exact"`` keeps every prediction on ``X``; ``"prune"`` deletes the weakest
+        spheres against the labels ``y`` (``max_error``, ``max_nodes``, ``sample_weight``,
+        ``class_weight="balanced"``). The copy is an ordinary
+        tree (``partial_fit``, ``save``); ``metadata["compaction"]`` records the step."""
+        return compact(self, X, y, method=method, max_error=max_error, max_nodes=max_nodes,
+                       sample_weight=sample_weight, class_weight=class_weight, data=data)
 
     # ------------------------------------------------------------------ snapshots
     def _snapshot(self, metadata: dict[str, Any] | None) -> snapshot.Snapshot:

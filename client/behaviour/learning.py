@@ -90,13 +90,15 @@ class DemonstrationLearner:
     ``stride``: offer every n-th observation (1 = all, the paper's dense stream).
     ``min_delta``: skip an observation whose features moved less than this (max-norm) from the
     last offered one while its label is unchanged (a robot standing still adds nothing).
+    ``record``: keep every vector offered to the tree (``recorded()`` returns them as ``(X, y)``),
+    the data a compaction step (``compact``) needs to preserve what the tree learned.
     ``**tree_params`` go to ``rhbl.HypersphereClassifier`` (spawn, distance, min_radius, max_nodes...).
     """
 
     def __init__(self, features: FeatureSpec, actions: ActionSet = DEFAULT_ACTIONS, *,
                  task: str | None = None, stride: int = 1, min_delta: float = 0.0,
                  classifier=None, parent: str | None = None, provenance: Mapping | None = None,
-                 **tree_params):
+                 record: bool = False, **tree_params):
         from rhbl import HypersphereClassifier
 
         if stride < 1:
@@ -121,6 +123,8 @@ class DemonstrationLearner:
         self._last_x: np.ndarray | None = None
         self._last_label: str | None = None
         self.session: dict = {}
+        self._rec_x: list[np.ndarray] | None = [] if record else None
+        self._rec_y: list[str] = []
 
     # -- learning --
     def observe(self, ranges, yaw: float, label: str) -> bool:
@@ -136,16 +140,44 @@ class DemonstrationLearner:
                 and float(np.max(np.abs(x - self._last_x))) < self.min_delta):
             return False
         self._last_x, self._last_label = x, label
+        self._learn(x, label)
+        return True
+
+    def _learn(self, x: np.ndarray, label: str) -> None:
         self.classifier.partial_fit(x.reshape(1, -1), [label])
         self.vectors += 1
-        return True
+        if self._rec_x is not None:
+            self._rec_x.append(x)
+            self._rec_y.append(label)
+
+    @property
+    def recording(self) -> bool:
+        """True when this learner keeps the vectors it offers (``record=True``)."""
+        return self._rec_x is not None
+
+    def recorded(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(X, y)``: every vector offered to the tree since this learner was made with
+        ``record=True`` (ValueError otherwise), in the order offered."""
+        if self._rec_x is None:
+            raise ValueError("this learner was made without record=True: it kept no vectors")
+        X = np.array(self._rec_x, dtype=np.float64).reshape(-1, self.features.dim)
+        return X, np.array(self._rec_y, dtype=str)
 
     def observe_vector(self, x: np.ndarray, label: str) -> bool:
         """Offer an already extracted feature vector (no sample selection)."""
-        self.classifier.partial_fit(np.asarray(x, dtype=np.float64).reshape(1, -1), [label])
-        self.vectors += 1
+        self._learn(np.asarray(x, dtype=np.float64).reshape(-1), label)
         self.seen += 1
         return True
+
+    def compact(self, method: str = "exact", **options) -> dict:
+        """Replace the tree by its compaction (``rhbl.compact``) on the recorded vectors (the
+        learner must have been made with ``record=True``); ``options`` go to
+        ``HypersphereClassifier.compact`` (``max_error``, ``max_nodes``). Returns the step's
+        provenance record (also in the snapshot's ``metadata["compaction"]``)."""
+        X, y = self.recorded()
+        self.classifier = self.classifier.compact(
+            X, y, method=method, data="the vectors this learner was trained on", **options)
+        return self.classifier.metadata["compaction"][-1]
 
     # -- using --
     def predict(self, ranges, yaw: float = 0.0) -> str:

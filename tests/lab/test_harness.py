@@ -69,3 +69,45 @@ def test_experiment_cli_small(capsys):
                 "--seconds", "10", "--episodes", "1", "--eval-world", "none"]) == 0
     out = capsys.readouterr().out
     assert "Table I" in out and "53.4" in out
+
+
+def test_train_compacts_on_the_vectors_it_learned(tmp_path, capsys):
+    spec = resolve_world(CORRIDOR)
+    short = RECIPES[spec.task].replace(seconds=20.0, rounds=1, round_seconds=5.0)
+    compacting = short.replace(compact="exact")
+    learner = make_learner(compacting)
+    assert learner.recording
+    train(spec, learner, compacting, seed=0)
+    rec = learner.session["compaction"]
+    assert rec["method"] == "exact" and rec["nodes_after"] == learner.nodes
+    assert rec["data"]["rows"] == learner.vectors
+    X, _ = learner.recorded()
+    full = make_learner(short)  # the same run without compaction: the same predictions
+    assert not full.recording
+    train(spec, full, short, seed=0)
+    assert full.session["compaction"] is None and full.nodes >= learner.nodes
+    assert list(full.classifier.predict(X)) == list(learner.classifier.predict(X))
+    # the CLI: --compact prune --compact-max-nodes N, recorded in the snapshot
+    tree = tmp_path / "c.rhbl"
+    assert cli(["train", "--world", CORRIDOR, "--seconds", "20", "--rounds", "0", "--out",
+                str(tree), "--compact", "prune-balanced", "--compact-max-nodes", "5"]) == 0
+    assert "compacted (prune) from" in capsys.readouterr().out
+    _, _, _, meta = load_snapshot(tree)
+    assert meta["compaction"][-1]["nodes_after"] <= 5
+    assert meta["compaction"][-1]["settings"]["class_weight"] == "balanced"
+    assert meta["provenance"]["sessions"][-1]["compaction"]["method"] == "prune"
+
+
+def test_experiment_reports_nodes_before_and_after_compaction(capsys):
+    assert cli(["experiment", "wall-following", "--trials", "1", "--train-seconds", "20",
+                "--seconds", "10", "--episodes", "1", "--eval-world", "none", "--rounds", "0",
+                "--compact", "exact"]) == 0
+    out = capsys.readouterr().out
+    assert "before compaction" in out and "s0 " in out and " -> " in out
+
+
+def test_a_compacting_recipe_needs_a_recording_learner():
+    spec = resolve_world(CORRIDOR)
+    recipe = RECIPES[spec.task].replace(seconds=5.0, rounds=0, compact="exact")
+    with pytest.raises(ValueError, match="compact 'exact' needs a learner"):
+        train(spec, make_learner(RECIPES[spec.task]), recipe, seed=0)

@@ -40,6 +40,12 @@ def test_replace_validates_and_names_the_field():
         with pytest.raises(ValueError, match=f"recipe {field} must be"):
             r.replace(**{field: bad})
     assert r.replace(round_scales=[1, 2]).round_scales == (1.0, 2.0)
+    for field, bad in [("compact", "shrink"), ("compact_max_nodes", 0),
+                       ("compact_max_error", 1.5)]:
+        with pytest.raises(ValueError, match=f"recipe {field} must be"):
+            r.replace(**{"compact": "prune", field: bad})
+    with pytest.raises(ValueError, match="apply to compact 'prune'.*got compact 'exact'"):
+        r.replace(compact="exact", compact_max_nodes=10)
     with pytest.raises(ValueError, match="no training recipe for task 'dance'"):
         recipe_for("dance")
 
@@ -53,6 +59,14 @@ def test_recipe_from_args_takes_the_flags_given():
                                         consistent=True)
     assert recipe_from_args("maze", parser.parse_args(["--world", "maze", "--out", "x"])) \
         == RECIPES["maze"]
+    for r in RECIPES.values():  # no compaction by default: Table I does not change
+        assert r.compact == "none" and r.compact_params() is None
+    args = build_parser("experiment").parse_args(
+        ["wall-following", "--compact", "prune-balanced", "--compact-max-nodes", "200"])
+    r = recipe_from_args("wall-following", args)
+    assert r.compact_params() == {"method": "prune", "class_weight": "balanced",
+                                  "max_nodes": 200}
+    assert make_learner(r).recording and not make_learner(RECIPES["maze"]).recording
 
 
 def test_learner_and_run_follow_the_recipe():
