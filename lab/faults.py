@@ -48,8 +48,9 @@ from lab.processes import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# a learner whose journal writes fail (ENOSPC) while the file $FULL_FLAG exists
-_FULL_DISK = """
+# a learner whose journal writes fail (ENOSPC) while the file $FULL_FLAG exists: the program
+# text for `python -c` (the campaign's full disk, and the learner robustness test's)
+FULL_DISK_LEARNER = """
 import errno, os, sys
 import client.journal as j
 flag = os.environ["FULL_FLAG"]
@@ -367,7 +368,7 @@ def disk_full(workdir: Path, full_for: float = 5.0) -> dict:
         c.watch()
         c.server("--speedup", "2")
         learner = c.start("learner", "learner", "--features", "wall", "--out", str(out),
-                          "--snapshot-every", "1", wrapper=_FULL_DISK,
+                          "--snapshot-every", "1", wrapper=FULL_DISK_LEARNER,
                           env={"FULL_FLAG": str(flag)})
         teacher = c.start("teacher", "teacher", "--policy", "wall-follower")
         if not c.wait(lambda: len(c.labels) > 20, 120):

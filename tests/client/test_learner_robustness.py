@@ -18,6 +18,7 @@ import pytest
 zenoh = pytest.importorskip("zenoh")
 
 from client.journal import Journal, journal_path  # noqa: E402
+from lab.faults import FULL_DISK_LEARNER  # noqa: E402
 from lab.processes import Child  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, TeacherAction  # noqa: E402
@@ -27,21 +28,7 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 ROOT = Path(__file__).resolve().parents[2]
 
 # runs the learner with journal writes failing (ENOSPC) while the file FULL_FLAG exists
-_WRAPPER = """
-import errno, os, sys
-import client.journal as j
-flag = os.environ["FULL_FLAG"]
-class _Os:
-    def __getattr__(self, name):
-        return getattr(os, name)
-    def write(self, fd, data):
-        if os.path.exists(flag):
-            raise OSError(errno.ENOSPC, "No space left on device")
-        return os.write(fd, data)
-j.os = _Os()
-from lab.cli import main
-sys.exit(main(sys.argv[1:]))
-"""
+_WRAPPER = FULL_DISK_LEARNER
 
 
 def _wait(cond, timeout: float, what: str, proc: Child | None = None) -> None:
