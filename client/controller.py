@@ -213,27 +213,38 @@ class ControllerProcess:
         if self.args.seconds is not None and scan.ts - self.t0 >= self.args.seconds:
             log.info("drove %.1f s of sim time: done", scan.ts - self.t0)
             return False
-        vel = self.answer(scan)
-        if vel is not None:
-            self.cmd_pub.put(VelCmd(vx=vel[0], va=vel[1], source=SOURCE, scan_id=scan.id,
+        answered = self.answer(scan)
+        if answered is not None:
+            (vx, va), policy, x = answered
+            self.cmd_pub.put(VelCmd(vx=vx, va=va, source=SOURCE, scan_id=scan.id,
                                     ts=scan.ts).encode())
             self.n += 1
             if self.n % 1000 == 0:
                 log.info("%d commands, %.0f s sim", self.n, scan.ts - self.t0)
+            self.publish_decision(policy, x, scan)  # after the command: for viewers only
         return True
 
-    def answer(self, scan: Scan) -> tuple[float, float] | None:
-        """The velocity of the tree's action for ``scan``; None (logged) when it cannot."""
+    def answer(self, scan: Scan):
+        """``((vx, va), policy, features)`` of the tree's action for ``scan`` (the policy that
+        answered: a follower may swap in another one meanwhile); None (logged) when it cannot."""
         p = self.policy
         try:
-            action = self.decider.decide(p, scan)  # classify, publish the decision
-            return p.actions[action]
+            x = p.features.extract(scan.ranges, scan.pose[2])
+            return p.actions[str(p.classifier.predict_one(x))], p, x
         except Exception as exc:  # noqa: BLE001 - a scan the tree cannot use: no command
             self.bad += 1
             if self.bad <= 10 or self.bad % 100 == 0:
                 log.warning("scan %d not answered (%d so far; the watchdog stops the robot): "
                             "%s: %s", scan.id, self.bad, type(exc).__name__, exc)
             return None
+
+    def publish_decision(self, policy, x, scan: Scan) -> None:
+        """The decision of the scan just answered, for viewers; a failure here is logged and
+        never stops the controller (the command is already out)."""
+        try:
+            self.decider.publish(policy, x, scan)
+        except Exception as exc:  # noqa: BLE001 - viewers only
+            log.debug("decision of scan %d not published: %s", scan.id, exc)
 
 
 class _Follower:

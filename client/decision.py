@@ -1,10 +1,10 @@
-"""The controller's decision for a scan, classified once and published for viewers.
+"""The controller's decision for a scan, published for viewers.
 
-``Decider(session, robot).decide(policy, scan) -> action`` classifies the scan's features with
-``decision_path`` (the root-to-winner path; the winner's label is what ``predict_one`` answers,
-at a few tens of microseconds more) and publishes a ``Decision`` on
-``rhbl/<robot>/controller/decision`` (docs/protocol.md) without blocking: a viewer that cannot
-keep up loses decisions, the controller never waits for it.
+``Decider(session, robot).publish(policy, x, scan)`` takes the root-to-winner path of the
+features ``x`` (``decision_path``: its winner's label is what ``predict_one`` answered) and
+publishes a ``Decision`` on ``rhbl/<robot>/controller/decision`` (docs/protocol.md) without
+blocking. The controller calls it after it has sent the scan's command, so the path and its
+encoding never delay the robot; a viewer that cannot keep up loses decisions.
 """
 
 from __future__ import annotations
@@ -34,10 +34,11 @@ class Decider:
         self._tree = None
         self._sid = ""
 
-    def decide(self, policy, scan: Scan) -> str:
-        """The action the policy's tree chooses for ``scan`` (published with its path)."""
+    def publish(self, policy, x, scan: Scan) -> str:
+        """Publish the decision of the policy's tree for the features ``x`` of ``scan``; returns
+        the action (the winner's label)."""
         clf = policy.classifier
-        path = clf.decision_path(policy.features.extract(scan.ranges, scan.pose[2]))
+        path = clf.decision_path(x)
         action = str(path[-1]["label"])
         if clf is not self._tree:  # a swapped-in tree (--follow)
             self._tree, self._sid = clf, snapshot_id(policy.metadata)
