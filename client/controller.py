@@ -137,6 +137,7 @@ class ControllerProcess:
         self.watch = ScanWatch("controller", self.scan_key, stale=1.0)
         ctx.scope.callback(self.watch.stop)
         self.decider = Decider(ctx.session, ctx.robot)
+        ctx.scope.callback(self.decider.close)
         self.t0: float | None = None
         self.n = self.bad = 0
 

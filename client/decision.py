@@ -4,7 +4,9 @@
 features ``x`` (``decision_path``: its winner's label is what ``predict_one`` answered) and
 publishes a ``Decision`` on ``rhbl/<robot>/controller/decision`` (docs/protocol.md) without
 blocking. The controller calls it after it has sent the scan's command, so the path and its
-encoding never delay the robot; a viewer that cannot keep up loses decisions.
+encoding never delay the robot; and it does that work only while something subscribes to the
+key (zenoh's matching status: a console, a recorder), so a controller nobody watches answers
+scans back to back as fast as without decisions. A viewer that cannot keep up loses decisions.
 """
 
 from __future__ import annotations
@@ -33,10 +35,18 @@ class Decider:
                                               congestion_control=zenoh.CongestionControl.DROP)
         self._tree = None
         self._sid = ""
+        # whether any subscriber matches the key: kept current by zenoh's matching listener
+        self._watched = self._pub.matching_status.matching
+        self._matching = self._pub.declare_matching_listener(self._on_matching)
 
-    def publish(self, policy, x, scan: Scan) -> str:
+    def _on_matching(self, status: zenoh.MatchingStatus) -> None:
+        self._watched = status.matching
+
+    def publish(self, policy, x, scan: Scan) -> str | None:
         """Publish the decision of the policy's tree for the features ``x`` of ``scan``; returns
-        the action (the winner's label)."""
+        the action (the winner's label), or None when nothing subscribes to decisions."""
+        if not self._watched:
+            return None
         clf = policy.classifier
         path = clf.decision_path(x)
         action = str(path[-1]["label"])
@@ -51,4 +61,6 @@ class Decider:
 
     def close(self) -> None:
         with contextlib.suppress(Exception):  # the session is closing
+            self._matching.undeclare()
+        with contextlib.suppress(Exception):
             self._pub.undeclare()
