@@ -107,6 +107,16 @@ def _every_robot(key_of) -> str:
     return key_of("_").replace(f"{keys.PREFIX}/_/", f"{keys.PREFIX}/*/", 1)
 
 
+def _decode(cls, sample, what: str):
+    """``cls`` decoded from a sample's payload, or None (logged): a malformed message never
+    stops the console."""
+    try:
+        return cls.decode(sample.payload.to_bytes())
+    except Exception as exc:  # noqa: BLE001 - never let a message kill the console
+        log.debug("dropped a malformed %s: %s", what, exc)
+        return None
+
+
 def _robot_of(key) -> str:
     return str(key).split("/", 2)[1]
 
@@ -169,10 +179,8 @@ class Console:
             self.loop.call_soon_threadsafe(self._deliver, robot, kind, text, scan)
 
     def _on_state(self, sample) -> None:
-        try:
-            st = State.decode(sample.payload.to_bytes())
-        except Exception as exc:  # noqa: BLE001 - never let a message kill the console
-            log.debug("dropped a malformed state: %s", exc)
+        st = _decode(State, sample, "state")
+        if st is None:
             return
         pose = st.truth if st.truth is not None else st.pos
         self._hand(_robot_of(sample.key_expr), "state", json.dumps({
@@ -181,10 +189,8 @@ class Console:
             "stall": st.stall, "driver": st.driver}))
 
     def _on_scan(self, sample) -> None:
-        try:
-            sc = Scan.decode(sample.payload.to_bytes())
-        except Exception as exc:  # noqa: BLE001
-            log.debug("dropped a malformed scan: %s", exc)
+        sc = _decode(Scan, sample, "scan")
+        if sc is None:
             return
         robot = _robot_of(sample.key_expr)
         pose = sc.truth if sc.truth is not None else sc.pose
@@ -196,10 +202,8 @@ class Console:
         self._hand(robot, "scan", text, (sc.id, sc.ts))
 
     def _on_notice(self, sample) -> None:
-        try:
-            n = TreeNotice.decode(sample.payload.to_bytes())
-        except Exception as exc:  # noqa: BLE001
-            log.debug("dropped a malformed notice: %s", exc)
+        n = _decode(TreeNotice, sample, "notice")
+        if n is None:
             return
         robot = _robot_of(sample.key_expr)
         self._hand(robot, "notice", json.dumps({
@@ -207,10 +211,8 @@ class Console:
             "vectors": n.vectors, "snapshot_id": n.snapshot_id, "ts": n.ts}))
 
     def _on_decision(self, sample) -> None:
-        try:
-            d = Decision.decode(sample.payload.to_bytes())
-        except Exception as exc:  # noqa: BLE001
-            log.debug("dropped a malformed decision: %s", exc)
+        d = _decode(Decision, sample, "decision")
+        if d is None:
             return
         robot = _robot_of(sample.key_expr)
         path = [{"index": i, "depth": dp, "label": lab,
@@ -221,10 +223,8 @@ class Console:
             "action": d.action, "snapshot_id": d.snapshot_id, "nodes": d.nodes, "path": path}))
 
     def _on_cmd(self, sample) -> None:
-        try:
-            c = VelCmd.decode(sample.payload.to_bytes())
-        except Exception as exc:  # noqa: BLE001
-            log.debug("dropped a malformed command: %s", exc)
+        c = _decode(VelCmd, sample, "command")
+        if c is None:
             return
         robot = _robot_of(sample.key_expr)
         source = keys.source_of_cmd_key(str(sample.key_expr)) or c.source
