@@ -19,9 +19,7 @@ from __future__ import annotations
 
 import argparse
 import csv
-import os
 import signal
-import subprocess
 import sys
 import tempfile
 import time
@@ -30,18 +28,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from lab.processes import free_port  # noqa: E402
-
-
-def _rss_kib(pid: int) -> int:
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1])
-    except OSError:
-        pass
-    return -1
-
+from lab.processes import Child, free_port, rhbl_argv  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -60,7 +47,6 @@ def main(argv: list[str] | None = None) -> int:
     work.mkdir(parents=True, exist_ok=True)
     tree = work / "tree.rhbl"
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     cmds = {
         "server": ["server", "--world", "room", "--speedup", str(args.speedup), "--listen",
                    endpoint, "--log-level", "WARNING"],
@@ -72,18 +58,16 @@ def main(argv: list[str] | None = None) -> int:
         "controller": ["controller", "--from-learner", "--follow", "--connect", endpoint,
                        "--log-level", "WARNING"],
     }
-    procs: dict[str, subprocess.Popen] = {}
-    logs = {}
+    procs: dict[str, Child] = {}
     try:
         for name, argv_ in cmds.items():
             if name == "controller":  # it needs the learner's first snapshot
                 deadline = time.monotonic() + 300
                 while not tree.exists() and time.monotonic() < deadline:
                     time.sleep(0.5)
-            logs[name] = open(work / f"{name}.log", "wb")  # noqa: SIM115
-            procs[name] = subprocess.Popen([sys.executable, "-m", "lab.cli", *argv_], cwd=ROOT,
-                                           env=env, stdout=logs[name], stderr=subprocess.STDOUT,
-                                           start_new_session=True)
+            procs[name] = Child(name, rhbl_argv(*argv_), work, cwd=ROOT,
+                                stop_signal=signal.SIGINT, stop_timeout=30.0,
+                                escalate=False).start()
             time.sleep(2.0 if name == "server" else 0.5)
         t0 = time.monotonic()
         rows = []
@@ -98,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
                     if name not in files:
                         files.append(name)
                 row = {"seconds": round(now, 1)}
-                row.update({f"rss_kib_{n}": _rss_kib(p.pid) for n, p in procs.items()})
+                row.update({f"rss_kib_{n}": p.rss_kib() for n, p in procs.items()})
                 row.update({f"bytes_{n}": sizes.get(n, 0) for n in files})
                 rows.append(row)
                 if w is None or set(row) != set(w.fieldnames):
@@ -111,16 +95,10 @@ def main(argv: list[str] | None = None) -> int:
                     break
                 time.sleep(args.every)
     finally:
+        for p in procs.values():  # all asked at once, then each waited for (SIGKILL after 30 s)
+            p.send_signal(signal.SIGINT)
         for p in procs.values():
-            if p.poll() is None:
-                os.kill(p.pid, signal.SIGINT)
-        for name, p in procs.items():
-            try:
-                p.wait(30)
-            except subprocess.TimeoutExpired:
-                os.kill(p.pid, signal.SIGKILL)
-                p.wait()
-            logs[name].close()
+            p.stop()
     print(f"soak: {len(rows)} samples over {rows[-1]['seconds']:.0f} s, folder {work}")
     half = len(rows) // 2
     for key in rows[-1]:
@@ -130,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
         second = [r.get(key, 0) for r in rows[half:] if r.get(key, 0) >= 0] or [0]
         print(f"  {key}: first half max {max(first)}, second half max {max(second)}, "
               f"last {rows[-1].get(key)}")
-    print("  exit statuses: " + ", ".join(f"{n} {p.returncode}" for n, p in procs.items()))
+    print("  exit statuses: " + ", ".join(f"{n} {p.poll()}" for n, p in procs.items()))
     return 0
 
 

@@ -32,11 +32,11 @@ The suite runs a CI-sized campaign (tests/fuzz/); the full one is this command.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import random
 import signal
-import subprocess
 import sys
 import tempfile
 import time
@@ -48,7 +48,7 @@ from typing import Any
 
 import msgpack
 
-from lab.processes import free_port
+from lab.processes import Child, free_port, rhbl_argv
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -153,28 +153,29 @@ class KeyResult:
                 f"{self.valid_processed} | {status} |")
 
 
-
 # ------------------------------------------------------------------------------------ server
-def fuzz_server(per_key: int, seed: int = 0, valid_every: int = 10) -> list[KeyResult]:
-    """Fuzz every key and queryable of a real ServerNode (see the module's text)."""
+@dataclass
+class _Served:
+    """A real ServerNode on a zenoh router (ticking in a thread) and a client session."""
+
+    node: Any
+    world: Any
+    runner: Any
+    cli: Any
+    start_pose: tuple[float, float, float]
+
+
+@contextlib.contextmanager
+def _served_node() -> Iterator[_Served]:
     import threading
 
     import zenoh
 
     import server as server_pkg
-    from protocol import keys
-    from protocol.messages import (
-        COMMAND_MAX_PAYLOAD,
-        MotorPower,
-        SetOdom,
-        SetPose,
-        VelCmd,
-    )
     from protocol.session import make_config
     from server.node import ServerNode
     from server.world import World, load_world
 
-    rng = random.Random(seed)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     srv_session = zenoh.open(make_config(mode="router", listen=[endpoint]))
     world = World(load_world(server_pkg.world_path("room")))
@@ -182,241 +183,305 @@ def fuzz_server(per_key: int, seed: int = 0, valid_every: int = 10) -> list[KeyR
     runner = threading.Thread(target=node.run, daemon=True)
     runner.start()
     start_pose = world.pose(0)
-    results: list[KeyResult] = []
     cli = zenoh.open(make_config(mode="client", connect=[endpoint]))
     try:
         time.sleep(0.5)
-
-        def still(source: str | None) -> bytes:
-            return VelCmd(vx=0.0, va=0.0, source=source or "fuzz-valid").encode()
-
-        def decode_cmd(data: bytes) -> VelCmd:
-            return VelCmd.decode(data, max_size=COMMAND_MAX_PAYLOAD)
-
-        valid_cmd = msgpack.unpackb(VelCmd(vx=0.1, va=0.2, source="fuzz", scan_id=3).encode())
-        for key, source in [(keys.cmd_vel_key("r0"), None),
-                            (keys.cmd_vel_key("r0", source="fuzz"), "fuzz")]:
-            res = KeyResult(key)
-            pub = cli.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
-            before = Counter(node.counters)
-            gen = hostile(valid_cmd, decode_cmd, rng)
-            for k in range(per_key):
-                pub.put(next(gen))
-                res.sent += 1
-                if k % valid_every == 0:
-                    pub.put(still(source))
-                    res.valid_sent += 1
-            # a command on a per-source key whose source differs is hostile too (not counted
-            # by the decoder oracle): leave it to the tests of the node
-            deadline = time.monotonic() + 30
-            while time.monotonic() < deadline:
-                rej = node.counters["rejected"] - before["rejected"]
-                got = node.counters["cmd_accepted"] - before["cmd_accepted"]
-                if got >= res.valid_sent and rej >= res.sent:
-                    break
-                time.sleep(0.05)
-            res.rejected = node.counters["rejected"] - before["rejected"]
-            # the node counts accepted commands under "cmd_accepted", rejected ones apart
-            res.valid_processed = node.counters["cmd_accepted"] - before["cmd_accepted"]
-            pub.undeclare()
-            results.append(res)
-
-        requests: list[tuple[str, Callable[[bytes], Any] | None, dict | None]] = [
-            (keys.request_key("r0", "position2d", "set_odom"),
-             lambda d: SetOdom.decode(d), msgpack.unpackb(SetOdom(pose=(1, 2, 0)).encode())),
-            (keys.request_key("r0", "position2d", "motor_power"),
-             lambda d: MotorPower.decode(d), msgpack.unpackb(MotorPower(state=True).encode())),
-            (keys.sim_request_key("r0", "set_pose"),
-             lambda d: SetPose.decode(d),
-             msgpack.unpackb(SetPose(pose=(3.0, 0.7, 0.0)).encode())),
-        ]
-        for name in ("get_geom", "reset_odom"):
-            requests.append((keys.request_key("r0", "position2d", name), None, None))
-        for name in ("get_geom", "get_config"):
-            requests.append((keys.request_key("r0", "laser", name), None, None))
-        for name in ("get_pose", "get_world"):
-            requests.append((keys.sim_request_key("r0", name), None, None))
-        anything = {"v": 1, "pose": [1.0, 2.0, 0.0], "state": True, "x": b"\x00" * 8}
-        for key, decode, valid in requests:
-            res = KeyResult(key)
-            if decode is None:  # the payload is ignored: only the size limit rejects
-                def decode(d: bytes, _limit=COMMAND_MAX_PAYLOAD) -> None:
-                    if len(d) > _limit:
-                        raise ValueError("oversized")
-                valid = anything
-            gen = mutations(valid, rng)
-            pending: list[tuple[bool, Any]] = []  # queries in flight (answered concurrently)
-
-            def drain(res=res, pending=pending) -> None:
-                for want_ok, handler in pending:
-                    replies = list(handler)
-                    got_ok = any(r.ok is not None for r in replies)
-                    got_err = any(r.err is not None for r in replies)
-                    if want_ok:
-                        res.valid_sent += 1
-                        res.valid_processed += got_ok
-                    else:
-                        res.sent += 1
-                        res.rejected += got_err and not got_ok
-                    if not replies and len(res.notes) < 3:
-                        res.notes.append("no reply (hang?)")
-                pending.clear()
-
-            n = 0
-            while n < per_key:
-                data = next(gen)
-                try:
-                    decode(data)
-                    want_ok = True
-                except Exception:  # noqa: BLE001
-                    want_ok = False
-                if want_ok and key.rsplit("/", 1)[1] in ("set_pose", "motor_power", "set_odom"):
-                    continue  # a valid teleport or motors-off would change the robot
-                n += 1
-                pending.append((want_ok, cli.get(key, payload=data, timeout=10.0)))
-                if len(pending) >= 32:
-                    drain()
-            drain()
-            results.append(res)
-        # the robot stood still (only stand-still commands and rejected requests), motors on
-        time.sleep(0.3)
-        x0, y0, _ = start_pose
-        x1, y1, _ = world.pose(0)
-        moved = math.hypot(x1 - x0, y1 - y0)
-        ticks = node.ticks
-        time.sleep(0.5)
-        alive = node.ticks > ticks and runner.is_alive()
-        for res in results:
-            if moved > 1e-9:
-                res.notes.append(f"the robot moved {moved:.3g} m")
-            if not node._robots[0].motors:
-                res.notes.append("motors switched off")
-            if not alive:
-                res.notes.append("the node stopped ticking")
+        yield _Served(node, world, runner, cli, start_pose)
     finally:
         node.stop()
         runner.join(10)
         node.close()
         cli.close()
         srv_session.close()
+
+
+def _command_keys() -> list[tuple[str, str | None]]:
+    """(key, source): the public command key and a per-source one."""
+    from protocol import keys
+
+    return [(keys.cmd_vel_key("r0"), None), (keys.cmd_vel_key("r0", source="fuzz"), "fuzz")]
+
+
+def _request_table() -> list[tuple[str, Callable[[bytes], Any] | None, dict | None]]:
+    """(key, decoder, a valid payload as a map) of every queryable of the server; decoder None:
+    the payload is ignored (only an oversized one is hostile)."""
+    from protocol import keys
+    from protocol.messages import MotorPower, SetOdom, SetPose
+
+    table: list[tuple[str, Callable[[bytes], Any] | None, dict | None]] = [
+        (keys.request_key("r0", "position2d", "set_odom"),
+         lambda d: SetOdom.decode(d), msgpack.unpackb(SetOdom(pose=(1, 2, 0)).encode())),
+        (keys.request_key("r0", "position2d", "motor_power"),
+         lambda d: MotorPower.decode(d), msgpack.unpackb(MotorPower(state=True).encode())),
+        (keys.sim_request_key("r0", "set_pose"),
+         lambda d: SetPose.decode(d),
+         msgpack.unpackb(SetPose(pose=(3.0, 0.7, 0.0)).encode())),
+    ]
+    for name in ("get_geom", "reset_odom"):
+        table.append((keys.request_key("r0", "position2d", name), None, None))
+    for name in ("get_geom", "get_config"):
+        table.append((keys.request_key("r0", "laser", name), None, None))
+    for name in ("get_pose", "get_world"):
+        table.append((keys.sim_request_key("r0", name), None, None))
+    return table
+
+
+def _fuzz_command_key(t: _Served, key: str, source: str | None, rng: random.Random,
+                      per_key: int, valid_every: int) -> KeyResult:
+    """Hostile commands on ``key``, a stand-still one every ``valid_every``; the node's
+    counters must rise by exactly those."""
+    import zenoh
+
+    from protocol.messages import COMMAND_MAX_PAYLOAD, VelCmd
+
+    def decode_cmd(data: bytes) -> VelCmd:
+        return VelCmd.decode(data, max_size=COMMAND_MAX_PAYLOAD)
+
+    still = VelCmd(vx=0.0, va=0.0, source=source or "fuzz-valid").encode()
+    valid_cmd = msgpack.unpackb(VelCmd(vx=0.1, va=0.2, source="fuzz", scan_id=3).encode())
+    node = t.node
+    res = KeyResult(key)
+    pub = t.cli.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+    before = Counter(node.counters)
+    gen = hostile(valid_cmd, decode_cmd, rng)
+    for k in range(per_key):
+        pub.put(next(gen))
+        res.sent += 1
+        if k % valid_every == 0:
+            pub.put(still)
+            res.valid_sent += 1
+    # a command on a per-source key whose source differs is hostile too (not counted by the
+    # decoder oracle): leave it to the tests of the node
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        rej = node.counters["rejected"] - before["rejected"]
+        got = node.counters["cmd_accepted"] - before["cmd_accepted"]
+        if got >= res.valid_sent and rej >= res.sent:
+            break
+        time.sleep(0.05)
+    res.rejected = node.counters["rejected"] - before["rejected"]
+    # the node counts accepted commands under "cmd_accepted", rejected ones apart
+    res.valid_processed = node.counters["cmd_accepted"] - before["cmd_accepted"]
+    pub.undeclare()
+    return res
+
+
+def _fuzz_request_key(t: _Served, key: str, decode: Callable[[bytes], Any] | None,
+                      valid: dict | None, rng: random.Random, per_key: int) -> KeyResult:
+    """``per_key`` queries derived from ``valid``: each one the decoder rejects must get a
+    NACK, each one it accepts (payload-free requests only) its answer."""
+    from protocol.messages import COMMAND_MAX_PAYLOAD
+
+    res = KeyResult(key)
+    if decode is None:  # the payload is ignored: only the size limit rejects
+        def decode(d: bytes, _limit=COMMAND_MAX_PAYLOAD) -> None:
+            if len(d) > _limit:
+                raise ValueError("oversized")
+        valid = {"v": 1, "pose": [1.0, 2.0, 0.0], "state": True, "x": b"\x00" * 8}
+    gen = mutations(valid, rng)
+    pending: list[tuple[bool, Any]] = []  # queries in flight (answered concurrently)
+    n = 0
+    while n < per_key:
+        data = next(gen)
+        try:
+            decode(data)
+            want_ok = True
+        except Exception:  # noqa: BLE001
+            want_ok = False
+        if want_ok and key.rsplit("/", 1)[1] in ("set_pose", "motor_power", "set_odom"):
+            continue  # a valid teleport or motors-off would change the robot
+        n += 1
+        pending.append((want_ok, t.cli.get(key, payload=data, timeout=10.0)))
+        if len(pending) >= 32:
+            _drain_replies(res, pending)
+    _drain_replies(res, pending)
+    return res
+
+
+def _drain_replies(res: KeyResult, pending: list[tuple[bool, Any]]) -> None:
+    """Count the replies of the queries in flight into ``res``; empties ``pending``."""
+    for want_ok, handler in pending:
+        replies = list(handler)
+        got_ok = any(r.ok is not None for r in replies)
+        got_err = any(r.err is not None for r in replies)
+        if want_ok:
+            res.valid_sent += 1
+            res.valid_processed += got_ok
+        else:
+            res.sent += 1
+            res.rejected += got_err and not got_ok
+        if not replies and len(res.notes) < 3:
+            res.notes.append("no reply (hang?)")
+    pending.clear()
+
+
+def _check_robot(t: _Served, results: list[KeyResult]) -> None:
+    """The robot stood still (only stand-still commands and rejected requests), its motors on,
+    the node still ticking: else a note on every result."""
+    time.sleep(0.3)
+    x0, y0, _ = t.start_pose
+    x1, y1, _ = t.world.pose(0)
+    moved = math.hypot(x1 - x0, y1 - y0)
+    ticks = t.node.ticks
+    time.sleep(0.5)
+    alive = t.node.ticks > ticks and t.runner.is_alive()
+    for res in results:
+        if moved > 1e-9:
+            res.notes.append(f"the robot moved {moved:.3g} m")
+        if not t.node._robots[0].motors:
+            res.notes.append("motors switched off")
+        if not alive:
+            res.notes.append("the node stopped ticking")
+
+
+def fuzz_server(per_key: int, seed: int = 0, valid_every: int = 10) -> list[KeyResult]:
+    """Fuzz every key and queryable of a real ServerNode (see the module's text)."""
+    rng = random.Random(seed)
+    with _served_node() as t:
+        results = [_fuzz_command_key(t, key, source, rng, per_key, valid_every)
+                   for key, source in _command_keys()]
+        results += [_fuzz_request_key(t, key, decode, valid, rng, per_key)
+                    for key, decode, valid in _request_table()]
+        _check_robot(t, results)
     return results
 
 
 # ----------------------------------------------------------------------------------- clients
-def fuzz_clients(per_key: int, seed: int = 0, valid_every: int = 10,
-                 workdir: Path | None = None) -> list[KeyResult]:
-    """Fuzz the keys the learner, teacher and controller processes listen to (module text)."""
-    import zenoh
+# who listens to what; the first one counts every message (the teacher's and controller's
+# scan subscriptions are rings of one, "latest scan wins": a burst is mostly dropped unread)
+_LISTENERS = {"scan": ("learner", "teacher", "controller"), "action": ("learner",),
+              "notice": ("controller",), "snapshot": ("learner",)}
+_DROPPED = {"scan": "dropped a malformed scan", "action": "dropped a malformed teacher action",
+            "notice": "dropped a malformed tree notice"}
 
+
+def _client_targets() -> list[tuple[str, Callable[[bytes], Any], dict]]:
+    """(key, decoder, a valid message as a map) of every subscription of the processes."""
     from protocol import keys
     from protocol.messages import Scan, TeacherAction, TreeNotice
-    from protocol.session import make_config
 
-    rng = random.Random(seed)
-    work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-"))
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    tree = work / "tree.rhbl"
-    procs: dict[str, subprocess.Popen] = {}
-    logs: dict[str, Path] = {}
+    scan = Scan(ts=1.0, id=5, ranges=[1.0] * 360, pose=(0, 0, 0))
+    return [
+        (keys.scan_key("r0"), lambda d: Scan.decode(d), msgpack.unpackb(scan.encode())),
+        (keys.teacher_action_key("r0"), lambda d: TeacherAction.decode(d),
+         msgpack.unpackb(TeacherAction(scan_id=5, action="forward").encode())),
+        (keys.learner_notice_key("r0"), lambda d: TreeNotice.decode(d),
+         msgpack.unpackb(TreeNotice(seq=1, nodes=3, height=1).encode())),
+    ]
+
+
+def _start_clients(procs: dict[str, Child], work: Path, endpoint: str, tree: Path) -> None:
+    """Server, learner and teacher; the controller once the learner wrote its first tree."""
 
     def start(name: str, *argv: str) -> None:
-        logs[name] = work / f"{name}.log"
-        with open(logs[name], "wb") as f:
-            procs[name] = subprocess.Popen(
-                [sys.executable, "-m", "lab.cli", *argv], cwd=ROOT, env=env, stdout=f,
-                stderr=subprocess.STDOUT, start_new_session=True)
+        procs[name] = Child(name, rhbl_argv(*argv), work, cwd=ROOT, stop_signal=signal.SIGINT,
+                            stop_timeout=30.0, escalate=False).start()
 
-    results: list[KeyResult] = []
-    try:
-        start("server", "server", "--world", "room", "--speedup", "2", "--listen", endpoint)
-        time.sleep(1.0)
-        start("learner", "learner", "--features", "wall", "--out", str(tree),
-              "--snapshot-every", "0.5", "--connect", endpoint)
-        start("teacher", "teacher", "--policy", "wall-follower", "--connect", endpoint)
-        deadline = time.monotonic() + 120
-        while not tree.exists() and time.monotonic() < deadline:
-            time.sleep(0.2)
-        if not tree.exists():
-            raise RuntimeError(f"the learner wrote no snapshot:\n{logs['learner'].read_text()}")
-        start("controller", "controller", "--from-learner", "--follow", "--robot", "r0",
-              "--connect", endpoint)
-        time.sleep(3.0)
-        with zenoh.open(make_config(mode="client", connect=[endpoint])) as s:
-            scan = Scan(ts=1.0, id=5, ranges=[1.0] * 360, pose=(0, 0, 0))
-            targets = [
-                (keys.scan_key("r0"), lambda d: Scan.decode(d),
-                 msgpack.unpackb(scan.encode())),
-                (keys.teacher_action_key("r0"), lambda d: TeacherAction.decode(d),
-                 msgpack.unpackb(TeacherAction(scan_id=5, action="forward").encode())),
-                (keys.learner_notice_key("r0"), lambda d: TreeNotice.decode(d),
-                 msgpack.unpackb(TreeNotice(seq=1, nodes=3, height=1).encode())),
-            ]
-            for key, decode, valid in targets:
-                res = KeyResult(key)
-                pub = s.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
-                gen = hostile(valid, decode, rng)
-                for _ in range(per_key):
-                    pub.put(next(gen))
-                    res.sent += 1
-                    if res.sent % 200 == 0:
-                        time.sleep(0.02)  # let the processes breathe; zenoh drops nothing
-                pub.undeclare()
-                results.append(res)
-            res = KeyResult(keys.learner_snapshot_key("r0"))
-            gen = mutations({"v": 1}, rng)
-            inflight: list[Any] = []
-            for k in range(per_key):
-                inflight.append(s.get(keys.learner_snapshot_key("r0"), payload=next(gen),
-                                      timeout=10.0))
-                if len(inflight) >= 32 or k == per_key - 1:
-                    for h in inflight:
-                        # the payload is ignored: every query gets the snapshot
-                        res.valid_sent += 1
-                        res.valid_processed += any(r.ok is not None for r in h)
-                    inflight.clear()
-            results.append(res)
-            time.sleep(2.0)
-            journal = tree.with_name(tree.name + ".journal")
-            size0 = journal.stat().st_size
-            time.sleep(3.0)
-            learning = journal.stat().st_size > size0
-    finally:
-        for name in ("controller", "teacher", "learner", "server"):
-            p = procs.get(name)
-            if p is not None and p.poll() is None:
-                os.kill(p.pid, signal.SIGINT)
-            if p is not None:
-                try:
-                    p.wait(30)
-                except subprocess.TimeoutExpired:
-                    os.kill(p.pid, signal.SIGKILL)
-                    p.wait(5)
-    text = {n: logs[n].read_text(errors="replace") for n in logs}
-    # who listens to what; the first one counts every message (the teacher's and controller's
-    # scan subscriptions are rings of one, "latest scan wins": a burst is mostly dropped unread)
-    who = {"scan": ("learner", "teacher", "controller"), "action": ("learner",),
-           "notice": ("controller",), "snapshot": ("learner",)}
+    start("server", "server", "--world", "room", "--speedup", "2", "--listen", endpoint)
+    time.sleep(1.0)
+    start("learner", "learner", "--features", "wall", "--out", str(tree),
+          "--snapshot-every", "0.5", "--connect", endpoint)
+    start("teacher", "teacher", "--policy", "wall-follower", "--connect", endpoint)
+    deadline = time.monotonic() + 120
+    while not tree.exists() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    if not tree.exists():
+        raise RuntimeError(f"the learner wrote no snapshot:\n{procs['learner'].output()}")
+    start("controller", "controller", "--from-learner", "--follow", "--robot", "r0",
+          "--connect", endpoint)
+    time.sleep(3.0)
+
+
+def _fuzz_subscription(s, key: str, decode: Callable[[bytes], Any], valid: dict,
+                       rng: random.Random, per_key: int) -> KeyResult:
+    """``per_key`` hostile messages on ``key`` (rejections are counted later, from the logs)."""
+    import zenoh
+
+    res = KeyResult(key)
+    pub = s.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+    gen = hostile(valid, decode, rng)
+    for _ in range(per_key):
+        pub.put(next(gen))
+        res.sent += 1
+        if res.sent % 200 == 0:
+            time.sleep(0.02)  # let the processes breathe; zenoh drops nothing
+    pub.undeclare()
+    return res
+
+
+def _fuzz_snapshot_queries(s, rng: random.Random, per_key: int) -> KeyResult:
+    """Queries with mutated payloads on the learner's snapshot queryable: the payload is
+    ignored, so every one must get the snapshot."""
+    from protocol import keys
+
+    res = KeyResult(keys.learner_snapshot_key("r0"))
+    gen = mutations({"v": 1}, rng)
+    inflight: list[Any] = []
+    for k in range(per_key):
+        inflight.append(s.get(keys.learner_snapshot_key("r0"), payload=next(gen), timeout=10.0))
+        if len(inflight) >= 32 or k == per_key - 1:
+            for h in inflight:
+                res.valid_sent += 1
+                res.valid_processed += any(r.ok is not None for r in h)
+            inflight.clear()
+    return res
+
+
+def _journal_grows(tree: Path) -> bool:
+    """The learner still journals labels: its journal grows within a few seconds."""
+    time.sleep(2.0)
+    journal = tree.with_name(tree.name + ".journal")
+    size0 = journal.stat().st_size
+    time.sleep(3.0)
+    return journal.stat().st_size > size0
+
+
+def _client_verdicts(results: list[KeyResult], procs: dict[str, Child], learning: bool) -> None:
+    """Exit statuses, tracebacks and rejections (counted from the logs) into ``results``."""
+    text = {n: p.logfile.read_text(errors="replace") for n, p in procs.items()}
     for res in results:
-        part = next(p for p in who if p in res.key)
-        for n in who[part]:
-            rc = procs[n].returncode
+        part = next(p for p in _LISTENERS if p in res.key)
+        for n in _LISTENERS[part]:
+            rc = procs[n].poll()
             if rc not in (0, -signal.SIGINT):
                 res.notes.append(f"{n} exited with {rc}")
             if "Traceback" in text[n]:
                 res.notes.append(f"{n} logged a traceback")
         if part != "snapshot":
-            res.rejected = text[who[part][0]].count(_DROPPED[part])
-            others = [f"{n} {text[n].count(_DROPPED[part])}" for n in who[part][1:]]
+            res.rejected = text[_LISTENERS[part][0]].count(_DROPPED[part])
+            others = [f"{n} {text[n].count(_DROPPED[part])}" for n in _LISTENERS[part][1:]]
             if others:
                 res.key += f" (read by the rings of: {', '.join(others)})"
         if not learning:
             res.notes.append("the learner stopped journaling labels")
+
+
+def fuzz_clients(per_key: int, seed: int = 0, valid_every: int = 10,
+                 workdir: Path | None = None) -> list[KeyResult]:
+    """Fuzz the keys the learner, teacher and controller processes listen to (module text)."""
+    import zenoh
+
+    from protocol.session import make_config
+
+    rng = random.Random(seed)
+    work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-"))
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    tree = work / "tree.rhbl"
+    procs: dict[str, Child] = {}
+    results: list[KeyResult] = []
+    try:
+        _start_clients(procs, work, endpoint, tree)
+        with zenoh.open(make_config(mode="client", connect=[endpoint])) as s:
+            for key, decode, valid in _client_targets():
+                results.append(_fuzz_subscription(s, key, decode, valid, rng, per_key))
+            results.append(_fuzz_snapshot_queries(s, rng, per_key))
+            learning = _journal_grows(tree)
+    finally:
+        for name in ("controller", "teacher", "learner", "server"):
+            if name in procs:
+                procs[name].stop()
+    _client_verdicts(results, procs, learning)
     return results
-
-
-_DROPPED = {"scan": "dropped a malformed scan", "action": "dropped a malformed teacher action",
-            "notice": "dropped a malformed tree notice"}
 
 
 # ------------------------------------------------------------------------------------- files

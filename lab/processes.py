@@ -8,6 +8,13 @@ and the benchmarks start, watch and stop their processes with these helpers.
     ...
     child.stop(signal.SIGINT)     # by PID; SIGTERM, then SIGKILL if it does not end in time
 
+For fault campaigns: :meth:`Child.pause` and :meth:`Child.resume` (SIGSTOP, SIGCONT),
+:meth:`Child.kill` (SIGKILL), :meth:`Child.start` again (the same command, the same log),
+:attr:`Child.started_at` (when it last started), :meth:`Child.mark` with ``since=`` (only the
+lines printed after a moment), :meth:`Child.rss_kib` (resident memory) and
+:func:`without_file_override` (a ``preexec_fn``: a child of root refused by file permissions as
+any other user is).
+
 A child runs in its own session (``start_new_session``: a Ctrl-C in the terminal reaches only
 the parent, which stops its children itself). A thread reads its merged stdout and stderr line
 by line: into ``lines`` (the last ``keep``), into ``logdir/<name>.log`` when a folder is given,
@@ -18,6 +25,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import ctypes
 import itertools
 import logging
 import os
@@ -30,7 +38,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
-__all__ = ["Child", "free_port", "rhbl_argv"]
+__all__ = ["Child", "free_port", "rhbl_argv", "rss_kib", "without_file_override"]
 
 log = logging.getLogger(__name__)
 
@@ -40,6 +48,42 @@ def free_port(host: str = "127.0.0.1") -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind((host, 0))
         return int(s.getsockname()[1])
+
+
+def rss_kib(pid: int) -> int:
+    """Resident memory of process ``pid`` in KiB (VmRSS of /proc/<pid>/status); -1 when it is
+    gone or unknown (no /proc, a kernel thread)."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1])
+    except (OSError, ValueError, IndexError):
+        pass
+    return -1
+
+
+# loaded here, in the parent: a preexec_fn runs between fork and exec, no place to load a library
+try:
+    _LIBC = ctypes.CDLL(None, use_errno=True)
+except OSError:  # pragma: no cover - no C library to ask (not Linux)
+    _LIBC = None
+_PR_CAPBSET_DROP = 24
+# CAP_DAC_OVERRIDE, CAP_DAC_READ_SEARCH, CAP_FOWNER (linux/capability.h)
+_FILE_OVERRIDES = (1, 2, 3)
+
+
+def without_file_override() -> None:
+    """A ``preexec_fn`` (Linux): drop the capabilities that let root read, write and chmod
+    files regardless of their permissions from the child's bounding set, so the command it runs
+    has none of them (a folder of mode 0555 refuses its writes with EACCES, as for any user).
+    Needs CAP_SETPCAP (root has it); raises OSError where it cannot."""
+    if _LIBC is None:
+        raise OSError("cannot drop capabilities here (no C library)")
+    for cap in _FILE_OVERRIDES:
+        if _LIBC.prctl(_PR_CAPBSET_DROP, cap, 0, 0, 0) != 0:
+            err = ctypes.get_errno()
+            raise OSError(err, f"prctl(PR_CAPBSET_DROP, {cap}): {os.strerror(err)}")
 
 
 def rhbl_argv(*args: str) -> list[str]:
@@ -82,6 +126,8 @@ class Child:
         self.rc: int | None = None
         self.expected_stop = False  # stop() was called: an exit from now on is no surprise
         self.starts = 0
+        self.started_at: float | None = None  # time.monotonic() of the last start
+        self.paused = False  # SIGSTOPped by pause(), not resumed yet
         self._changed = threading.Condition()  # a line arrived or the output ended
         self._count = 0  # lines read since the first start
         self._eof = True
@@ -110,6 +156,7 @@ class Child:
         with self._changed:
             self.proc, self.rc, self.expected_stop, self._eof = proc, None, False, False
             self.starts += 1
+            self.started_at, self.paused = time.monotonic(), False
         self._reader = threading.Thread(target=self._read, args=(proc, logf),
                                         name=f"child-{self.name}", daemon=True)
         self._reader.start()
@@ -160,12 +207,20 @@ class Child:
             self._reader.join(2.0)
         return self.rc
 
-    def wait_for_line(self, text: str, timeout: float = 10.0) -> bool:
+    def mark(self) -> int:
+        """How many lines were read so far (since the first start): pass it as ``since`` to
+        look only at the lines printed after this moment."""
+        with self._changed:
+            return self._count
+
+    def wait_for_line(self, text: str, timeout: float = 10.0, since: int = 0) -> bool:
         """True as soon as a line containing ``text`` was printed (now or before: among the
-        lines kept); False after ``timeout`` seconds, or once the output ended without it."""
+        lines kept, after the :meth:`mark` ``since``); False after ``timeout`` seconds, or once
+        the output ended without it."""
         deadline = time.monotonic() + timeout
         with self._changed:
-            checked = self._count - len(self.lines)  # lines older than the kept ones are gone
+            # lines older than the kept ones are gone
+            checked = max(since, self._count - len(self.lines))
             while True:
                 new = min(self._count - checked, len(self.lines))
                 if new and any(text in ln for ln in itertools.islice(
@@ -176,6 +231,10 @@ class Child:
                 if self._eof or left <= 0:
                     return False
                 self._changed.wait(left)
+
+    def rss_kib(self) -> int:
+        """Its resident memory in KiB (:func:`rss_kib`); -1 when not running."""
+        return rss_kib(self.proc.pid) if self.proc is not None and self.poll() is None else -1
 
     def output(self) -> str:
         """Every line kept, joined."""
@@ -197,12 +256,29 @@ class Child:
         with contextlib.suppress(ProcessLookupError):
             os.kill(self.proc.pid, sig)
 
+    def pause(self) -> None:
+        """SIGSTOP by PID (nothing if it already ended): it stays, frozen, until :meth:`resume`."""
+        if self.proc is not None and self.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.proc.pid, signal.SIGSTOP)
+            self.paused = True
+
+    def resume(self) -> None:
+        """SIGCONT by PID after :meth:`pause` (nothing if it already ended)."""
+        if self.proc is not None and self.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.proc.pid, signal.SIGCONT)
+        self.paused = False
+
     def stop(self, sig: int | None = None, timeout: float | None = None) -> int | None:
         """Send ``sig`` (default ``stop_signal``) by PID and wait ``timeout`` seconds (default
         ``stop_timeout``); then SIGTERM (if ``sig`` was gentler and ``escalate``) and SIGKILL,
-        each with its own wait. Returns the exit status (None if never started)."""
+        each with its own wait (a paused child is resumed first, so that it can end).
+        Returns the exit status (None if never started)."""
         if self.proc is None:
             return None
+        if self.paused and sig != signal.SIGKILL:
+            self.resume()
         sig = self.stop_signal if sig is None else sig
         timeout = self.stop_timeout if timeout is None else timeout
         later = (signal.SIGTERM, signal.SIGKILL) if self.escalate else (signal.SIGKILL,)

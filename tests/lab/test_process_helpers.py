@@ -122,3 +122,75 @@ def test_bad_command_lines():
             child.start()
     finally:
         child.stop()
+
+
+# prints "tick N" every 20 ms until stopped
+TICKER = """
+import itertools, time
+for i in itertools.count():
+    print("tick", i, flush=True)
+    time.sleep(0.02)
+"""
+
+
+def test_pause_resume_and_lines_since_a_mark(tmp_path):
+    child = Child("ticker", py(TICKER), tmp_path).start()
+    try:
+        assert child.started_at is not None and child.started_at <= time.monotonic()
+        assert child.wait_for_line("tick 3", timeout=30)
+        child.pause()
+        assert child.paused
+        time.sleep(0.3)  # let the pipe empty: nothing new arrives while it is stopped
+        mark = child.mark()
+        assert not child.wait_for_line("tick", timeout=0.5, since=mark)  # frozen
+        assert child.wait_for_line("tick 3", timeout=0)  # without since: the old lines count
+        child.resume()
+        assert not child.paused
+        assert child.wait_for_line("tick", timeout=30, since=mark)  # going again
+        assert child.rss_kib() > 0
+        child.pause()
+        # stop() resumes a paused child first, so that SIGTERM can end it
+        assert child.stop(timeout=30) == -signal.SIGTERM
+    finally:
+        child.kill()
+    assert child.rss_kib() == -1
+
+
+def test_rss_kib_of_this_process_and_of_none():
+    import os
+
+    from lab.processes import rss_kib
+
+    if not os.path.exists("/proc/self/status"):
+        pytest.skip("needs /proc")
+    assert rss_kib(os.getpid()) > 1000
+    assert rss_kib(2**22 + 12345) == -1  # beyond pid_max: no such process
+
+
+def test_started_again_the_same_command_keeps_counting_lines(tmp_path):
+    child = Child("again", py("print('hello', flush=True)"), tmp_path).start()
+    assert child.wait(30) == 0
+    first = child.started_at
+    mark = child.mark()
+    child.start()
+    assert child.wait(30) == 0 and child.started_at > first
+    assert child.wait_for_line("hello", timeout=0, since=mark)
+    assert not child.wait_for_line("hello", timeout=0, since=child.mark())
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "geteuid") or __import__("os").geteuid() != 0,
+                    reason="for root (any other user is refused by permissions anyway)")
+def test_without_file_override_root_is_refused_by_permissions(tmp_path):
+    from lab.processes import without_file_override
+
+    folder = tmp_path / "ro"
+    folder.mkdir(mode=0o555)
+    folder.chmod(0o555)
+    code = ("import sys\ntry:\n    open(sys.argv[1] + '/x', 'w')\nexcept PermissionError as e:\n"
+            "    print('refused', e.errno, flush=True)\nelse:\n    print('written', flush=True)")
+    child = Child("root", py(code) + [str(folder)]).start()
+    assert child.wait(30) == 0 and "written" in child.output()  # root writes anyway
+    (folder / "x").unlink()
+    child = Child("dropped", py(code) + [str(folder)], preexec_fn=without_file_override).start()
+    assert child.wait(30) == 0 and "refused 13" in child.output(), child.output()
+    assert not (folder / "x").exists()
