@@ -1,11 +1,13 @@
 """A repeatable fault campaign against the real processes: a seed, a command, a report.
 
     python -m lab.faults [--seed 0] [--only learner-kill,server-restart,controller-kill,
-                          learner-stop,disk-full] [--kills 20] [--restarts 5] [--out DIR]
+                          learner-stop,disk-full,readonly-folder,router-restart]
+                         [--kills 20] [--restarts 5] [--router-restarts 3] [--out DIR]
 
 The campaign process is the zenoh router (loopback); every ``rhbl`` process connects to it as a
 client, the server too (``rhbl server --mode client``), so the campaign sees all traffic across
-every fault and a killed server takes no one's network with it. Parts:
+every fault and a killed server takes no one's network with it (all parts but
+``router-restart``, which runs the compose scenario with its own router). Parts:
 
 - ``learner-kill``: a demonstration (teacher, ``--seconds`` of sim time, perturbed as usual)
   while the learner is SIGKILLed ``--kills`` times at random moments (seeded) and restarted with
@@ -23,6 +25,19 @@ every fault and a killed server takes no one's network with it. Parts:
   stops labelling (its last label after the stop), then SIGCONT: labelling resumes; labels lost.
 - ``disk-full``: the learner's journal writes fail (ENOSPC) for a few seconds during a
   demonstration: labels lost (the learner keeps them in memory and writes them later).
+- ``readonly-folder``: the learner's folder made read-only (mode 0555) for a few seconds during
+  a demonstration, then writable again: labels lost, the learner's error naming the folder, the
+  time until a snapshot is written again. Run as root, the learner is started without the
+  capabilities that let root write regardless of permissions, so the folder refuses it as it
+  would any other user.
+- ``router-restart``: docker/compose.yaml's scenario run as local processes
+  (docker/compose_local.py: its router stand-in with TLS, users and access control, every
+  service's command as in the compose file, restarts as their policy says); the router is
+  SIGKILLed and started again with the same command ``--router-restarts`` times. For each: the
+  time from the new router's start to the first command reaching the robot (the server's log:
+  driver '' -> a source), to the first label the learner journals, and until every service's
+  liveliness token is back (seen by an observer session with the learner's credentials); no
+  service may exit.
 
 Prints a markdown report; exit status 1 if any part failed its check (a process died, a robot
 did not stop, nothing resumed).
@@ -35,7 +50,6 @@ import math
 import os
 import random
 import signal
-import subprocess
 import sys
 import tempfile
 import threading
@@ -44,7 +58,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lab.processes import free_port
+from lab.processes import Child, free_port, rhbl_argv, without_file_override
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -68,45 +82,6 @@ sys.exit(main(sys.argv[1:]))
 
 
 
-class Proc:
-    """One ``rhbl`` process, output appended to ``<dir>/<name>.log``."""
-
-    def __init__(self, name: str, argv: list[str], workdir: Path, wrapper: str | None = None,
-                 env: dict | None = None) -> None:
-        self.name = name
-        self.log = workdir / f"{name}.log"
-        pre = [sys.executable, "-c", wrapper] if wrapper else [sys.executable, "-m", "lab.cli"]
-        with open(self.log, "ab") as f:
-            self.p = subprocess.Popen(pre + argv, cwd=ROOT, stdout=f, stderr=subprocess.STDOUT,
-                                      start_new_session=True,
-                                      env={**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})})
-        self.started = time.monotonic()
-
-    @property
-    def pid(self) -> int:
-        return self.p.pid
-
-    def alive(self) -> bool:
-        return self.p.poll() is None
-
-    def signal(self, sig: int) -> None:
-        if self.alive():
-            os.kill(self.p.pid, sig)
-
-    def kill(self) -> None:
-        self.signal(signal.SIGKILL)
-        self.p.wait(10)
-
-    def stop(self, timeout: float = 30.0) -> int:
-        self.signal(signal.SIGCONT)
-        self.signal(signal.SIGINT)
-        try:
-            return self.p.wait(timeout)
-        except subprocess.TimeoutExpired:
-            self.kill()
-            return self.p.returncode
-
-
 class Campaign:
     """The router session and the processes of one part."""
 
@@ -119,7 +94,7 @@ class Campaign:
         self.robot = robot
         self.endpoint = f"tcp/127.0.0.1:{free_port()}"
         self.session = zenoh.open(make_config(mode="router", listen=[self.endpoint]))
-        self.procs: list[Proc] = []
+        self.procs: list[Child] = []
         self.cond = threading.Condition()
         self.labels: list[tuple[float, int]] = []  # (arrival, scan id)
         self.drivers: list[tuple[float, str]] = []
@@ -155,12 +130,21 @@ class Campaign:
                        self.session.declare_subscriber(keys.driver_key(r), on_driver),
                        self.session.declare_subscriber(keys.state_key(r), on_state)]
 
-    def start(self, name: str, *argv: str, **kw) -> Proc:
-        p = Proc(name, [*argv, "--connect", self.endpoint], self.dir, **kw)
+    def start(self, name: str, *argv: str, wrapper: str | None = None,
+              env: dict | None = None, preexec_fn=None) -> Child:
+        """Start ``rhbl ARGV... --connect <the router>`` (or ``python -c WRAPPER ARGV...``),
+        logging into ``<dir>/<name>.log`` (appended to: a process started again under the same
+        name keeps one log); stopped with SIGINT, then SIGKILL. ``preexec_fn`` runs in the
+        child before the command (:func:`lab.processes.without_file_override`)."""
+        argv = [*argv, "--connect", self.endpoint]
+        cmd = [sys.executable, "-c", wrapper, *argv] if wrapper else rhbl_argv(*argv)
+        p = Child(name, cmd, self.dir, env={**os.environ, **(env or {})}, cwd=ROOT,
+                  stop_signal=signal.SIGINT, stop_timeout=30.0, escalate=False,
+                  preexec_fn=preexec_fn).start()
         self.procs.append(p)
         return p
 
-    def server(self, *extra: str) -> Proc:
+    def server(self, *extra: str) -> Child:
         return self.start("server", "server", "--world", "room", "--mode", "client",
                           "--robot", self.robot, *extra)
 
@@ -170,8 +154,7 @@ class Campaign:
 
     def close(self) -> None:
         for p in reversed(self.procs):
-            if p.alive():
-                p.stop()
+            p.stop()  # nothing if it already ended
         for s in self._subs:
             s.undeclare()
         self.session.close()
@@ -191,7 +174,7 @@ def journal_size(out: Path) -> int:
     return journal_path(out).stat().st_size
 
 
-def _learner(c: Campaign, out: Path, name: str = "learner", fold: bool = False, **kw) -> Proc:
+def _learner(c: Campaign, out: Path, name: str = "learner", fold: bool = False, **kw) -> Child:
     return c.start(name, "learner", "--features", "wall", "--out", str(out),
                    "--snapshot-every", "1", *(["--fold-journal"] if fold else []), **kw)
 
@@ -216,12 +199,12 @@ def learner_kill(workdir: Path, rng: random.Random, kills: int, speedup: float,
             learner.kill()
             time.sleep(rng.uniform(0.0, 1.0))
             learner = _learner(c, out, fold=fold)
-            killed.append((t_kill, learner.started))
+            killed.append((t_kill, learner.started_at))
         time.sleep(5.0)
         teacher.stop()
         n_pub = len(c.labels)
         time.sleep(1.0)
-        rc = learner.stop(60)
+        rc = learner.stop(timeout=60)
         published = {sid for _, sid in c.labels}
         journaled, total = _journal_ids(out)
         if fold:  # the folded records are in the snapshot only: count them
@@ -265,14 +248,14 @@ def server_restart(workdir: Path, rng: random.Random, restarts: int) -> dict:
             time.sleep(rng.uniform(0.5, 2.0))
             mark = len(c.drivers)
             srv = c.server("--speedup", "1")
-            t0 = srv.started
+            t0 = srv.started_at
             ok = c.wait(lambda m=mark: any(s == "teacher" for _, s in c.drivers[m:]), 60)
             if not ok:
                 times.append(math.nan)
                 continue
             t = next(t for t, s in c.drivers[mark:] if s == "teacher")
             times.append(t - t0)
-        alive = learner.alive() and teacher.alive()
+        alive = learner.poll() is None and teacher.poll() is None
         a = np.asarray(times)
         return {"part": "server-restart", "restarts": restarts,
                 "restart -> first command at the robot, s": [round(x, 2) for x in times],
@@ -336,12 +319,12 @@ def learner_stop(workdir: Path, stop_for: float = 20.0) -> dict:
             raise RuntimeError("no labels")
         time.sleep(3.0)
         t_stop = time.monotonic()
-        learner.signal(signal.SIGSTOP)
+        learner.pause()
         time.sleep(stop_for)
         after = [t for t, _ in c.labels if t > t_stop]
         noticed = (after[-1] - t_stop) if after else 0.0
         paused = not after or after[-1] < t_stop + stop_for - 2.0
-        learner.signal(signal.SIGCONT)
+        learner.resume()
         mark = len(c.labels)
         t_cont = time.monotonic()
         resumed = c.wait(lambda: len(c.labels) > mark + 10, 60)
@@ -349,7 +332,7 @@ def learner_stop(workdir: Path, stop_for: float = 20.0) -> dict:
         time.sleep(2.0)
         teacher.stop()
         time.sleep(1.0)
-        rc = learner.stop(60)
+        rc = learner.stop(timeout=60)
         lost = len({s for _, s in c.labels} - set(_journal_ids(out)[0]))
         return {"part": "learner-stop", "stopped for s": stop_for,
                 "SIGSTOP -> teacher's last label, s": round(noticed, 2),
@@ -379,9 +362,9 @@ def disk_full(workdir: Path, full_for: float = 5.0) -> dict:
         time.sleep(5.0)
         teacher.stop()
         time.sleep(1.0)
-        rc = learner.stop(60)
+        rc = learner.stop(timeout=60)
         lost = len({s for _, s in c.labels} - set(_journal_ids(out)[0]))
-        text = learner.log.read_text(errors="replace")
+        text = learner.output()
         return {"part": "disk-full", "full for s": full_for, "labels": len(c.labels),
                 "labels lost": lost, "ENOSPC reported": "No space left" in text,
                 "learner exit": rc, "ok": lost == 0 and rc == 0}
@@ -389,7 +372,238 @@ def disk_full(workdir: Path, full_for: float = 5.0) -> dict:
         c.close()
 
 
-PARTS = ["learner-kill", "server-restart", "controller-kill", "learner-stop", "disk-full"]
+def _snapshot_records(out: Path) -> int:
+    """How many journal records the snapshot ``out`` holds (-1: no snapshot yet)."""
+    from client.behaviour.learning import load_snapshot
+
+    if not out.exists():
+        return -1
+    meta = load_snapshot(out)[3]
+    return int(((meta.get("provenance") or {}).get("journal") or {}).get("records", -1))
+
+
+def _until(pred, timeout: float, step: float = 0.05) -> float:
+    """Seconds until ``pred()`` held (checked every ``step``); nan after ``timeout``."""
+    return _since(time.monotonic(), pred, timeout, step)
+
+
+def readonly_folder(workdir: Path, ro_for: float = 5.0) -> dict:
+    """The learner's folder made read-only (mode 0555) for ``ro_for`` seconds, then writable.
+    Run as root, the learner loses the capabilities that let root write anyway, so it is
+    refused as any other user would be (:func:`lab.processes.without_file_override`)."""
+    c = Campaign(workdir)
+    folder = workdir / "snapshots"
+    folder.mkdir(exist_ok=True)
+    folder.chmod(0o755)
+    out = folder / "tree.rhbl"
+    try:
+        c.watch()
+        c.server("--speedup", "2")
+        learner = _learner(c, out, preexec_fn=without_file_override if os.geteuid() == 0
+                           else None)
+        teacher = c.start("teacher", "teacher", "--policy", "wall-follower")
+        if not c.wait(lambda: len(c.labels) > 20, 120):
+            raise RuntimeError("no labels")
+        if math.isnan(_until(lambda: _snapshot_records(out) > 0, 30)):
+            raise RuntimeError(f"the learner wrote no snapshot:\n{learner.tail()}")
+        mark = learner.mark()
+        folder.chmod(0o555)
+        t_ro = time.monotonic()
+        reported = learner.wait_for_line("cannot write snapshot", ro_for + 5.0, since=mark)
+        time.sleep(max(0.0, t_ro + ro_for - time.monotonic()))
+        held = _snapshot_records(out)  # the snapshot of before: nothing new could be written
+        n_ro = sum(t >= t_ro for t, _ in c.labels)
+        folder.chmod(0o755)
+        from client.journal import Journal, journal_path
+
+        with Journal.open(journal_path(out), readonly=True) as j:
+            journaled = len(j)
+        again = _until(lambda: _snapshot_records(out) >= journaled, 30)
+        time.sleep(2.0)
+        teacher.stop()
+        time.sleep(1.0)
+        rc = learner.stop(timeout=60)
+        lost = len({s for _, s in c.labels} - set(_journal_ids(out)[0]))
+        said = [ln for ln in _lines_since(learner, mark) if "cannot write snapshot" in ln]
+        return {"part": "readonly-folder", "read-only for s": ro_for,
+                "labels": len(c.labels), "labels while read-only": n_ro,
+                "labels lost": lost, "error reported": reported,
+                "error names the folder": bool(said) and str(folder) in said[0],
+                "snapshot written while read-only": held >= journaled,
+                "writable -> snapshot written, s": round(again, 2),
+                "first error": said[0][said[0].index("cannot write"):] if said else None,
+                "learner exit": rc,
+                "ok": (lost == 0 and rc == 0 and reported and bool(said)
+                       and str(folder) in said[0] and not math.isnan(again))}
+    finally:
+        folder.chmod(0o755)
+        c.close()
+
+
+# ------------------------------------------------------------------ the compose scenario's router
+def _compose_local():
+    """docker/compose_local.py (the compose scenario as local processes), loaded from its file."""
+    import importlib.util
+
+    name = "compose_local"
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, ROOT / "docker" / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    return sys.modules[name]
+
+
+def _alive_roles(session) -> set[str]:
+    """The roles whose liveliness tokens the router knows now (``rhbl/alive/<role>/...``)."""
+    from protocol import keys
+
+    roles = set()
+    for r in session.liveliness().get(keys.alive_key("*", "**"), timeout=1.0):
+        if r.ok is not None:
+            roles.add(str(r.ok.key_expr).split("/")[2])
+    return roles
+
+
+def _observer(scenario):
+    """A client session with the learner's credentials (the router refuses anyone else),
+    retrying its connection every 100 ms (it must see the restarted router early)."""
+    import json
+
+    import zenoh
+
+    config = zenoh.Config.from_file(str(scenario.secrets / "learner.json5"))
+    config.insert_json5("mode", '"client"')
+    config.insert_json5("connect/endpoints", json.dumps([f"tls/127.0.0.1:{scenario.port}"]))
+    config.insert_json5("connect/retry", '{"period_init_ms": 100, "period_max_ms": 100, '
+                                         '"period_increase_factor": 1}')
+    config.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(config)
+
+
+class _Supervised:
+    """The compose scenario with docker's part done here: exited services are restarted as
+    their ``restart`` policy says, while the campaign waits (only from this thread)."""
+
+    def __init__(self, scenario) -> None:
+        self.sc = scenario
+
+    def wait(self, seconds: float, threads: tuple[threading.Thread, ...] = ()) -> None:
+        """Supervise for ``seconds``, or until every one of ``threads`` ended if that is
+        sooner."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.sc.poll(restart_delay=1.0)
+            if threads and not any(t.is_alive() for t in threads):
+                return
+            time.sleep(0.05)
+
+
+def _in_thread(fn) -> tuple[threading.Thread, list]:
+    out: list = []
+    t = threading.Thread(target=lambda: out.append(fn()), daemon=True)
+    t.start()
+    return t, out
+
+
+def _restart_router_once(sv: _Supervised, obs, journal: Path, down: float,
+                         roles: set[str]) -> dict:
+    """SIGKILL the router, ``down`` s later start it again (the same command); the seconds from
+    that start to the first command reaching the robot (the server's log: driver '' -> a
+    source), to the first label journaled, and until every service's token is back."""
+    sc = sv.sc
+    router, server = sc.procs["router"], sc.procs["server"].child
+    mark = server.mark()
+    size0 = journal.stat().st_size
+    router.exits.append(router.child.kill())  # killed here: restarted here, not by poll()
+    sv.wait(down)
+    router.child.start()
+    t0 = router.child.started_at
+
+    def command() -> float:
+        ok = server.wait_for_line("driver '' -> '", 60, since=mark)
+        return time.monotonic() - t0 if ok else math.nan
+
+    def label() -> float:
+        return _since(t0, lambda: journal.stat().st_size > size0)
+
+    def tokens() -> float:
+        return _since(t0, lambda: roles <= _alive_roles(obs), step=0.2)
+
+    waits = [_in_thread(f) for f in (command, label, tokens)]
+    sv.wait(90, tuple(t for t, _ in waits))
+    cmd, lab, tok = (out[0] if out else math.nan for _, out in waits)
+    who = [ln.rsplit("-> ", 1)[1].strip("'") for ln in _lines_since(server, mark)
+           if "driver '' -> '" in ln]
+    return {"command": cmd, "by": who[0] if who else None, "label": lab, "tokens": tok}
+
+
+def _lines_since(child: Child, mark: int) -> list[str]:
+    """The kept lines ``child`` printed after its :meth:`~lab.processes.Child.mark` ``mark``."""
+    lines = list(child.lines)
+    n = child.mark() - mark
+    return lines[len(lines) - min(n, len(lines)):] if n > 0 else []
+
+
+def _since(t0: float, pred, timeout: float = 60.0, step: float = 0.05) -> float:
+    """Seconds from ``t0`` until ``pred()`` held (checked every ``step``); nan after timeout."""
+    while not pred():
+        if time.monotonic() - t0 > timeout:
+            return math.nan
+        time.sleep(step)
+    return time.monotonic() - t0
+
+
+def router_restart(workdir: Path, rng: random.Random, restarts: int) -> dict:
+    """docker/compose.yaml's scenario as local processes (docker/compose_local.py: TLS, users,
+    access control); its router SIGKILLed and started again ``restarts`` times."""
+    compose_local = _compose_local()
+    env = {**os.environ, "RHBL_LOG_LEVEL": "INFO", "RHBL_TEACH_SECONDS": "3600",
+           "RHBL_DEMONSTRATE_SECONDS": "20"}
+    sc = compose_local.Scenario(workdir, free_port(), env=env)
+    sv = _Supervised(sc)
+    obs = None
+    try:
+        sc.start()
+        journal = sc.data / "tree.rhbl.journal"
+        roles = {n for n in sc.procs if n not in ("router", "secrets")}
+        server = sc.procs["server"].child
+        warm = [_in_thread(lambda: server.wait_for_line("driver '' -> '", 180)),
+                _in_thread(lambda: _until(lambda: journal.exists()
+                                          and journal.stat().st_size > 4096, 180))]
+        sv.wait(200, tuple(t for t, _ in warm))
+        obs = _observer(sc)
+        if not (warm[0][1] and warm[0][1][0]) or math.isnan(_until(
+                lambda: roles <= _alive_roles(obs), 120, step=0.5)):
+            raise RuntimeError(
+                f"the scenario did not start (tokens of {sorted(_alive_roles(obs))} of "
+                f"{sorted(roles)}); server log:\n{server.tail()}")
+        exits = {n: len(p.exits) for n, p in sc.procs.items()}
+        got = []
+        for _ in range(restarts):
+            sv.wait(rng.uniform(2.0, 6.0))
+            got.append(_restart_router_once(sv, obs, journal, rng.uniform(0.5, 2.0), roles))
+        died = sorted(n for n, p in sc.procs.items()
+                      if n not in ("router", "secrets") and len(p.exits) > exits[n])
+        cmd = np.asarray([g["command"] for g in got])
+        lab = np.asarray([g["label"] for g in got])
+        tok = np.asarray([g["tokens"] for g in got])
+        return {"part": "router-restart", "restarts": restarts,
+                "restart -> first command at the robot, s": [round(float(x), 2) for x in cmd],
+                "commanded by": [g["by"] for g in got],
+                "restart -> first label journaled, s": [round(float(x), 2) for x in lab],
+                "restart -> every service's token back, s": [round(float(x), 2) for x in tok],
+                "max s": round(float(np.nanmax(np.r_[cmd, lab, tok])), 2),
+                "services that exited": died,
+                "ok": not died and not np.isnan(np.r_[cmd, lab, tok]).any()}
+    finally:
+        if obs is not None:
+            obs.close()
+        sc.stop()
+
+
+PARTS = ["learner-kill", "server-restart", "controller-kill", "learner-stop", "disk-full",
+         "readonly-folder", "router-restart"]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -398,6 +612,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", default=",".join(PARTS), help="comma list of parts")
     ap.add_argument("--kills", type=int, default=20, help="learner SIGKILLs (20)")
     ap.add_argument("--restarts", type=int, default=5, help="server restarts (5)")
+    ap.add_argument("--router-restarts", type=int, default=3,
+                    help="router restarts in the compose scenario (3)")
     ap.add_argument("--fold-journal", action="store_true",
                     help="learner-kill with the learner folding its journal into snapshots")
     ap.add_argument("--speedup", type=float, default=2.0,
@@ -422,6 +638,10 @@ def main(argv: list[str] | None = None) -> int:
                 r = learner_stop(d)
             elif part == "disk-full":
                 r = disk_full(d)
+            elif part == "readonly-folder":
+                r = readonly_folder(d)
+            elif part == "router-restart":
+                r = router_restart(d, rng, args.router_restarts)
             else:
                 raise SystemExit(f"unknown part {part!r}; parts: {', '.join(PARTS)}")
         except Exception as e:  # noqa: BLE001 - reported, the campaign goes on

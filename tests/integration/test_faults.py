@@ -1,7 +1,9 @@
 """The fault campaign (``python -m lab.faults``) at CI size: learner SIGKILLs during a
 demonstration lose labels only around a kill (the design does not resend them; the full
 campaign measures how many: docs/reliability.md), none twice; a restarted server is driven
-again by the teacher."""
+again by the teacher; a learner whose folder turns read-only loses no label and writes its
+snapshot once it is writable again; the compose scenario's services reconnect to a restarted
+router."""
 
 from __future__ import annotations
 
@@ -35,3 +37,16 @@ def test_a_folding_learner_killed_recovers_with_a_bounded_journal(tmp_path):
     assert r["duplicates in journal"] == 0
     # folded: the file holds about one snapshot interval of records, not all of them
     assert r["journal bytes"] < r["journaled"] * 1538 / 2, r
+
+
+def test_a_read_only_folder_loses_no_label_and_is_written_again(tmp_path):
+    r = faults.readonly_folder(tmp_path, ro_for=3.0)
+    assert r["ok"], r
+    assert r["labels while read-only"] > 0 and r["labels lost"] == 0, r
+    assert r["error names the folder"] and not r["snapshot written while read-only"], r
+
+
+def test_the_compose_scenario_reconnects_after_a_router_restart(tmp_path):
+    r = faults.router_restart(tmp_path, random.Random(4), restarts=1)
+    assert r["ok"], r
+    assert r["services that exited"] == [] and r["max s"] < 30, r
