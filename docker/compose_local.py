@@ -230,6 +230,24 @@ class Scenario:
                 time.sleep(restart_delay)
                 proc.child.start()
 
+    def client_config(self, role: str = "learner", retry_ms: int | None = None):
+        """A zenoh client config for this scenario's router with one of its own credentials
+        (``role``: the router refuses anyone else), e.g. for an observer; ``retry_ms``: try to
+        reconnect that often after losing the router (default: zenoh's backoff)."""
+        import json
+
+        import zenoh
+
+        config = zenoh.Config.from_file(str(self.secrets / f"{role}.json5"))
+        config.insert_json5("mode", '"client"')
+        config.insert_json5("connect/endpoints", json.dumps([f"tls/127.0.0.1:{self.port}"]))
+        config.insert_json5("scouting/multicast/enabled", "false")
+        if retry_ms is not None:
+            config.insert_json5("connect/retry", json.dumps(
+                {"period_init_ms": retry_ms, "period_max_ms": retry_ms,
+                 "period_increase_factor": 1}))
+        return config
+
     def running(self, name: str) -> bool:
         return self.procs[name].child.poll() is None
 

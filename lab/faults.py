@@ -466,19 +466,11 @@ def _alive_roles(session) -> set[str]:
 
 
 def _observer(scenario):
-    """A client session with the learner's credentials (the router refuses anyone else),
-    retrying its connection every 100 ms (it must see the restarted router early)."""
-    import json
-
+    """A client session with the learner's credentials, retrying its connection every 100 ms
+    (it must see the restarted router early)."""
     import zenoh
 
-    config = zenoh.Config.from_file(str(scenario.secrets / "learner.json5"))
-    config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", json.dumps([f"tls/127.0.0.1:{scenario.port}"]))
-    config.insert_json5("connect/retry", '{"period_init_ms": 100, "period_max_ms": 100, '
-                                         '"period_increase_factor": 1}')
-    config.insert_json5("scouting/multicast/enabled", "false")
-    return zenoh.open(config)
+    return zenoh.open(scenario.client_config("learner", retry_ms=100))
 
 
 class _Supervised:

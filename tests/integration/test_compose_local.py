@@ -11,7 +11,6 @@ the scenario must end with a learned tree driving the robot.
 from __future__ import annotations
 
 import importlib.util
-import json
 import os
 import sys
 import threading
@@ -43,11 +42,7 @@ def _module(name):
 
 def _observer(scenario, role="learner") -> zenoh.Config:
     """A reader with one of the scenario's own credentials (the router refuses anyone else)."""
-    config = zenoh.Config.from_file(str(scenario.secrets / f"{role}.json5"))
-    config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", json.dumps([f"tls/127.0.0.1:{scenario.port}"]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    return config
+    return scenario.client_config(role)
 
 
 def test_compose_scenario_ends_with_a_learned_tree_driving_the_robot(tmp_path):
