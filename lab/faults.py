@@ -1,7 +1,8 @@
 """A repeatable fault campaign against the real processes: a seed, a command, a report.
 
     python -m lab.faults [--seed 0] [--only learner-kill,server-restart,controller-kill,
-                          learner-stop,disk-full,readonly-folder,router-restart]
+                          learner-stop,disk-full,readonly-folder,readonly-mount,
+                          router-restart]
                          [--kills 20] [--restarts 5] [--router-restarts 3] [--out DIR]
 
 The campaign process is the zenoh router (loopback); every ``rhbl`` process connects to it as a
@@ -29,7 +30,9 @@ every fault and a killed server takes no one's network with it (all parts but
   a demonstration, then writable again: labels lost, the learner's error naming the folder, the
   time until a snapshot is written again. Run as root, the learner is started without the
   capabilities that let root write regardless of permissions, so the folder refuses it as it
-  would any other user.
+  would any other user (EACCES).
+- ``readonly-mount``: the same with a read-only bind mount of the folder over itself (EROFS;
+  root only: skipped otherwise).
 - ``router-restart``: docker/compose.yaml's scenario run as local processes
   (docker/compose_local.py: its router stand-in with TLS, users and access control, every
   service's command as in the compose file, restarts as their policy says); the router is
@@ -50,6 +53,7 @@ import math
 import os
 import random
 import signal
+import subprocess
 import sys
 import tempfile
 import threading
@@ -387,15 +391,46 @@ def _until(pred, timeout: float, step: float = 0.05) -> float:
     return _since(time.monotonic(), pred, timeout, step)
 
 
-def readonly_folder(workdir: Path, ro_for: float = 5.0) -> dict:
-    """The learner's folder made read-only (mode 0555) for ``ro_for`` seconds, then writable.
-    Run as root, the learner loses the capabilities that let root write anyway, so it is
-    refused as any other user would be (:func:`lab.processes.without_file_override`)."""
+class _ReadOnly:
+    """Makes a folder read-only and writable again: ``mode`` (0555, then 0755) or ``mount`` (a
+    read-only bind mount of the folder over itself, then unmounted; root only)."""
+
+    def __init__(self, folder: Path, how: str) -> None:
+        if how not in ("mode", "mount"):
+            raise ValueError(f"read-only how: {how!r} (mode or mount)")
+        self.folder, self.how, self.on = folder, how, False
+
+    def set(self) -> None:
+        if self.how == "mode":
+            self.folder.chmod(0o555)
+        else:
+            self._run("mount", "--bind", "-o", "ro", str(self.folder), str(self.folder))
+        self.on = True
+
+    def clear(self) -> None:
+        if self.on and self.how == "mount":
+            self._run("umount", str(self.folder))
+        self.folder.chmod(0o755)
+        self.on = False
+
+    @staticmethod
+    def _run(*cmd: str) -> None:
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=30)
+        if r.returncode:
+            raise RuntimeError(f"{' '.join(cmd)}: {(r.stderr or r.stdout).strip()}")
+
+
+def readonly_folder(workdir: Path, ro_for: float = 5.0, how: str = "mode") -> dict:
+    """The learner's folder made read-only for ``ro_for`` seconds, then writable (``how``:
+    :class:`_ReadOnly`). With ``mode``, run as root, the learner loses the capabilities that
+    let root write anyway, so it is refused as any other user would be
+    (:func:`lab.processes.without_file_override`)."""
     c = Campaign(workdir)
     folder = workdir / "snapshots"
     folder.mkdir(exist_ok=True)
     folder.chmod(0o755)
     out = folder / "tree.rhbl"
+    ro = _ReadOnly(folder, how)
     try:
         c.watch()
         c.server("--speedup", "2")
@@ -407,17 +442,15 @@ def readonly_folder(workdir: Path, ro_for: float = 5.0) -> dict:
         if math.isnan(_until(lambda: _snapshot_records(out) > 0, 30)):
             raise RuntimeError(f"the learner wrote no snapshot:\n{learner.tail()}")
         mark = learner.mark()
-        folder.chmod(0o555)
+        ro.set()
         t_ro = time.monotonic()
+        before = _snapshot_records(out)  # none can be written from now on
         reported = learner.wait_for_line("cannot write snapshot", ro_for + 5.0, since=mark)
         time.sleep(max(0.0, t_ro + ro_for - time.monotonic()))
         held = _snapshot_records(out)  # the snapshot of before: nothing new could be written
         n_ro = sum(t >= t_ro for t, _ in c.labels)
-        folder.chmod(0o755)
-        from client.journal import Journal, journal_path
-
-        with Journal.open(journal_path(out), readonly=True) as j:
-            journaled = len(j)
+        ro.clear()
+        journaled = _journal_ids(out)[1]
         again = _until(lambda: _snapshot_records(out) >= journaled, 30)
         time.sleep(2.0)
         teacher.stop()
@@ -425,18 +458,17 @@ def readonly_folder(workdir: Path, ro_for: float = 5.0) -> dict:
         rc = learner.stop(timeout=60)
         lost = len({s for _, s in c.labels} - set(_journal_ids(out)[0]))
         said = [ln for ln in _lines_since(learner, mark) if "cannot write snapshot" in ln]
-        return {"part": "readonly-folder", "read-only for s": ro_for,
-                "labels": len(c.labels), "labels while read-only": n_ro,
-                "labels lost": lost, "error reported": reported,
-                "error names the folder": bool(said) and str(folder) in said[0],
-                "snapshot written while read-only": held >= journaled,
+        named = bool(said) and str(folder) in said[0]
+        return {"part": f"readonly-{'folder' if how == 'mode' else 'mount'}",
+                "read-only for s": ro_for, "labels": len(c.labels),
+                "labels while read-only": n_ro, "labels lost": lost, "error reported": reported,
+                "error names the folder": named, "snapshot written while read-only": held != before,
                 "writable -> snapshot written, s": round(again, 2),
                 "first error": said[0][said[0].index("cannot write"):] if said else None,
                 "learner exit": rc,
-                "ok": (lost == 0 and rc == 0 and reported and bool(said)
-                       and str(folder) in said[0] and not math.isnan(again))}
+                "ok": lost == 0 and rc == 0 and reported and named and not math.isnan(again)}
     finally:
-        folder.chmod(0o755)
+        ro.clear()
         c.close()
 
 
@@ -595,7 +627,7 @@ def router_restart(workdir: Path, rng: random.Random, restarts: int) -> dict:
 
 
 PARTS = ["learner-kill", "server-restart", "controller-kill", "learner-stop", "disk-full",
-         "readonly-folder", "router-restart"]
+         "readonly-folder", "readonly-mount", "router-restart"]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -632,6 +664,10 @@ def main(argv: list[str] | None = None) -> int:
                 r = disk_full(d)
             elif part == "readonly-folder":
                 r = readonly_folder(d)
+            elif part == "readonly-mount" and os.geteuid() != 0:
+                r = {"part": part, "skipped": "a bind mount needs root", "ok": True}
+            elif part == "readonly-mount":
+                r = readonly_folder(d, how="mount")
             elif part == "router-restart":
                 r = router_restart(d, rng, args.router_restarts)
             else:

@@ -1,12 +1,13 @@
 """The fault campaign (``python -m lab.faults``) at CI size: learner SIGKILLs during a
 demonstration lose labels only around a kill (the design does not resend them; the full
 campaign measures how many: docs/reliability.md), none twice; a restarted server is driven
-again by the teacher; a learner whose folder turns read-only loses no label and writes its
-snapshot once it is writable again; the compose scenario's services reconnect to a restarted
-router."""
+again by the teacher; a learner whose folder turns read-only (its mode, or a read-only bind
+mount) loses no label and writes its snapshot once it is writable again; the compose
+scenario's services reconnect to a restarted router."""
 
 from __future__ import annotations
 
+import os
 import random
 
 import pytest
@@ -39,9 +40,13 @@ def test_a_folding_learner_killed_recovers_with_a_bounded_journal(tmp_path):
     assert r["journal bytes"] < r["journaled"] * 1538 / 2, r
 
 
-def test_a_read_only_folder_loses_no_label_and_is_written_again(tmp_path):
-    r = faults.readonly_folder(tmp_path, ro_for=3.0)
+@pytest.mark.parametrize("how", ["mode", "mount"])
+def test_a_read_only_folder_loses_no_label_and_is_written_again(tmp_path, how):
+    if how == "mount" and os.geteuid() != 0:
+        pytest.skip("a bind mount needs root")
+    r = faults.readonly_folder(tmp_path, ro_for=3.0, how=how)
     assert r["ok"], r
+    assert ("Errno 13" if how == "mode" else "Errno 30") in r["first error"], r
     assert r["labels while read-only"] > 0 and r["labels lost"] == 0, r
     assert r["error names the folder"] and not r["snapshot written while read-only"], r
 
