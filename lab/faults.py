@@ -49,6 +49,7 @@ did not stop, nothing resumed).
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import os
 import random
@@ -65,6 +66,7 @@ import numpy as np
 from lab.processes import Child, free_port, rhbl_argv, without_file_override
 
 ROOT = Path(__file__).resolve().parents[1]
+log = logging.getLogger(__name__)
 
 # a learner whose journal writes fail (ENOSPC) while the file $FULL_FLAG exists: the program
 # text for `python -c` (the campaign's full disk, and the learner robustness test's)
@@ -386,9 +388,33 @@ def _snapshot_records(out: Path) -> int:
     return int(((meta.get("provenance") or {}).get("journal") or {}).get("records", -1))
 
 
+def _since(t0: float, pred, timeout: float = 60.0, step: float = 0.05) -> float:
+    """Seconds from ``t0`` until ``pred()`` held (checked every ``step``); nan after timeout."""
+    while not pred():
+        if time.monotonic() - t0 > timeout:
+            return math.nan
+        time.sleep(step)
+    return time.monotonic() - t0
+
+
 def _until(pred, timeout: float, step: float = 0.05) -> float:
     """Seconds until ``pred()`` held (checked every ``step``); nan after ``timeout``."""
     return _since(time.monotonic(), pred, timeout, step)
+
+
+def _lines_since(child: Child, mark: int) -> list[str]:
+    """The kept lines ``child`` printed after its :meth:`~lab.processes.Child.mark` ``mark``."""
+    lines = list(child.lines)
+    n = child.mark() - mark
+    return lines[len(lines) - min(n, len(lines)):] if n > 0 else []
+
+
+def _in_thread(fn) -> tuple[threading.Thread, list]:
+    """Run ``fn`` in a thread; the thread and a list that holds its result once it ended."""
+    out: list = []
+    t = threading.Thread(target=lambda: out.append(fn()), daemon=True)
+    t.start()
+    return t, out
 
 
 class _ReadOnly:
@@ -491,9 +517,12 @@ def _alive_roles(session) -> set[str]:
     from protocol import keys
 
     roles = set()
-    for r in session.liveliness().get(keys.alive_key("*", "**"), timeout=1.0):
-        if r.ok is not None:
-            roles.add(str(r.ok.key_expr).split("/")[2])
+    try:
+        for r in session.liveliness().get(keys.alive_key("*", "**"), timeout=1.0):
+            if r.ok is not None:
+                roles.add(str(r.ok.key_expr).split("/")[2])
+    except Exception as exc:  # noqa: BLE001 - no router yet: nobody is known
+        log.debug("liveliness query failed: %s", exc)
     return roles
 
 
@@ -521,13 +550,6 @@ class _Supervised:
             if threads and not any(t.is_alive() for t in threads):
                 return
             time.sleep(0.05)
-
-
-def _in_thread(fn) -> tuple[threading.Thread, list]:
-    out: list = []
-    t = threading.Thread(target=lambda: out.append(fn()), daemon=True)
-    t.start()
-    return t, out
 
 
 def _restart_router_once(sv: _Supervised, obs, journal: Path, down: float,
@@ -562,22 +584,6 @@ def _restart_router_once(sv: _Supervised, obs, journal: Path, down: float,
     return {"command": cmd, "by": who[0] if who else None, "label": lab, "tokens": tok}
 
 
-def _lines_since(child: Child, mark: int) -> list[str]:
-    """The kept lines ``child`` printed after its :meth:`~lab.processes.Child.mark` ``mark``."""
-    lines = list(child.lines)
-    n = child.mark() - mark
-    return lines[len(lines) - min(n, len(lines)):] if n > 0 else []
-
-
-def _since(t0: float, pred, timeout: float = 60.0, step: float = 0.05) -> float:
-    """Seconds from ``t0`` until ``pred()`` held (checked every ``step``); nan after timeout."""
-    while not pred():
-        if time.monotonic() - t0 > timeout:
-            return math.nan
-        time.sleep(step)
-    return time.monotonic() - t0
-
-
 def router_restart(workdir: Path, rng: random.Random, restarts: int) -> dict:
     """docker/compose.yaml's scenario as local processes (docker/compose_local.py: TLS, users,
     access control); its router SIGKILLed and started again ``restarts`` times."""
@@ -607,8 +613,8 @@ def router_restart(workdir: Path, rng: random.Random, restarts: int) -> dict:
         for _ in range(restarts):
             sv.wait(rng.uniform(2.0, 6.0))
             got.append(_restart_router_once(sv, obs, journal, rng.uniform(0.5, 2.0), roles))
-        died = sorted(n for n, p in sc.procs.items()
-                      if n not in ("router", "secrets") and len(p.exits) > exits[n])
+        sc.poll(restart_delay=1.0)
+        died = sorted(n for n in roles if len(sc.procs[n].exits) > exits[n] or not sc.running(n))
         cmd = np.asarray([g["command"] for g in got])
         lab = np.asarray([g["label"] for g in got])
         tok = np.asarray([g["tokens"] for g in got])
