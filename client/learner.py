@@ -209,12 +209,15 @@ class LearnerCore:
         return learner, len(self.journal)
 
     def learn(self, scan_id: int, ts: float, ranges, yaw: float, label: str,
-              origin: str | None = None, seq: int | None = None) -> bool:
+              origin: str | None = None, seq: int | None = None) -> bool | None:
         """Journal (flushed) then learn one labeled scan; True when it reached the tree. A label
-        with an identity (``origin``, ``seq``) is recorded in ``labels`` once journaled (the
-        caller skips one ``holds`` already). Raises FeatureError (a scan the features cannot
-        use: nothing written) or JournalError (the journal cannot be written, e.g. disk full:
-        nothing written, nothing learned; call again later with the same vector)."""
+        with an identity (``origin``, ``seq``) is recorded in ``labels`` once journaled; one
+        held already (a resend) is neither journaled nor learned again: None. Raises
+        FeatureError (a scan the features cannot use: nothing written) or JournalError (the
+        journal cannot be written, e.g. disk full: nothing written, nothing learned; call again
+        later with the same vector)."""
+        if self.holds(origin, seq):
+            return None
         x = self.learner.features.extract(ranges, yaw)
         self.journal.append(scan_id, ts, label, ranges, yaw, x.astype(np.float32), origin, seq)
         if origin is not None:
@@ -594,11 +597,6 @@ class LearnerProcess:
         """Journal and learn the waiting labeled scans, in order, until the journal fails."""
         while self.backlog:
             scan, act = self.backlog[0]
-            if self.core.holds(act.origin, act.seq):  # resent, or live and resent: once only
-                self.backlog.popleft()
-                self.stats["duplicates"] += 1
-                self._handled(act, journaled=True)  # acknowledged again
-                continue
             try:
                 learned = self.core.learn(scan.id, scan.ts, scan.ranges, float(scan.pose[2]),
                                           act.action, act.origin, act.seq)
@@ -612,7 +610,9 @@ class LearnerProcess:
                 self._journal_failed(exc)
                 return
             self.backlog.popleft()
-            self._handled(act, journaled=True)
+            self._handled(act, journaled=True)  # (again, for a duplicate: its ack was lost)
+            if learned is None:  # resent, or live and resent: journaled once only
+                self.stats["duplicates"] += 1
             self.stats["learned"] += bool(learned)
         if self.failures:
             log.warning("the journal is writable again after %d failed attempts", self.failures)
