@@ -10,6 +10,14 @@ restarted with the same command rebuilds exactly (last snapshot + the journal re
 It publishes a ``TreeNotice`` on ``rhbl/<robot>/learner/notice`` after each snapshot and answers
 queries on ``rhbl/<robot>/learner/snapshot`` with the latest snapshot's bytes.
 
+Labels with an identity (the teacher session's ``origin`` and ``seq``) are acknowledged once
+journaled: a ``LearnerAck`` on ``rhbl/<robot>/learner/ack`` (batched, every 0.15 s or 50 labels,
+and for everything held right after a restart's recovery, before the liveliness token). A teacher
+resends what is not acknowledged with its scan on ``rhbl/<robot>/teacher/labeled``
+(``LabeledScan``: learned without pairing); a label already held (``client.journal.LabelSet``,
+rebuilt on restart from the snapshot's provenance and the journal) is acknowledged again, not
+journaled or learned twice.
+
     rhbl learner --features wall --out tree.rhbl                 # new tree (or continue tree.rhbl)
     rhbl learner --resume tree.rhbl --out tree2.rhbl             # extend a tree: a new lineage
 """

@@ -19,6 +19,17 @@ When the last learner's token disappears while demonstrating (it stopped or cras
 pauses (no commands, no labels: the server's watchdog stops the robot) and waits for a learner the
 same way.
 
+Nor is a label lost in flight when a learner is killed: each label carries the session's identity
+(``origin``, a random id per process, and ``seq``, 0, 1, ...) and stays in the teacher's outbox
+(``Outbox``, owned by ``TeacherPublisher``) with the scan it answers until the learner
+acknowledges it (``LearnerAck`` on ``rhbl/<robot>/learner/ack``: the labels durably in its
+journal). A label unacknowledged after ``--resend-after`` (2 s), and every unacknowledged label
+when a learner's token appears again, is resent with its scan on ``rhbl/<robot>/teacher/labeled``
+(``LabeledScan``); the learner journals each label once. With ``--outbox`` (2000) labels
+unacknowledged the teacher pauses as above rather than drop one. On exit it waits up to 10 s for
+the last acknowledgements. The outbox lives in this process: a killed teacher loses the labels
+not yet acknowledged. ``--no-wait-learner`` keeps no outbox.
+
 Correcting mode (``--correct``, the corrective (DAgger) rounds of the training recipe, Player
 style "the teacher watches and corrects"): the controller drives; for every scan the teacher
 publishes its label (the expert's choice, ``executed`` unset) but commands the robot only while

@@ -309,7 +309,7 @@ def fuzz_clients(per_key: int, seed: int = 0, valid_every: int = 10,
     import zenoh
 
     from protocol import keys
-    from protocol.messages import Scan, TeacherAction, TreeNotice
+    from protocol.messages import LabeledScan, LearnerAck, Scan, TeacherAction, TreeNotice
     from protocol.session import make_config
 
     rng = random.Random(seed)
@@ -351,6 +351,11 @@ def fuzz_clients(per_key: int, seed: int = 0, valid_every: int = 10,
                  msgpack.unpackb(TeacherAction(scan_id=5, action="forward").encode())),
                 (keys.learner_notice_key("r0"), lambda d: TreeNotice.decode(d),
                  msgpack.unpackb(TreeNotice(seq=1, nodes=3, height=1).encode())),
+                (keys.teacher_labeled_key("r0"), lambda d: LabeledScan.decode(d),
+                 msgpack.unpackb(LabeledScan(scan_id=5, action="forward", origin="fuzz", seq=0,
+                                             ranges=scan.ranges).encode())),
+                (keys.learner_ack_key("r0"), lambda d: LearnerAck.decode(d),
+                 msgpack.unpackb(LearnerAck(origin="fuzz", upto=1, seqs=(3,)).encode())),
             ]
             for key, decode, valid in targets:
                 res = KeyResult(key)
@@ -396,7 +401,8 @@ def fuzz_clients(per_key: int, seed: int = 0, valid_every: int = 10,
     # who listens to what; the first one counts every message (the teacher's and controller's
     # scan subscriptions are rings of one, "latest scan wins": a burst is mostly dropped unread)
     who = {"scan": ("learner", "teacher", "controller"), "action": ("learner",),
-           "notice": ("controller",), "snapshot": ("learner",)}
+           "notice": ("controller",), "snapshot": ("learner",), "labeled": ("learner",),
+           "ack": ("teacher",)}
     for res in results:
         part = next(p for p in who if p in res.key)
         for n in who[part]:
@@ -416,7 +422,8 @@ def fuzz_clients(per_key: int, seed: int = 0, valid_every: int = 10,
 
 
 _DROPPED = {"scan": "dropped a malformed scan", "action": "dropped a malformed teacher action",
-            "notice": "dropped a malformed tree notice"}
+            "notice": "dropped a malformed tree notice",
+            "labeled": "dropped a malformed labeled scan", "ack": "dropped a malformed learner ack"}
 
 
 # ------------------------------------------------------------------------------------- files
