@@ -23,9 +23,9 @@ Nor is a label lost in flight when a learner is killed: each label carries the s
 (``origin``, a random id per process, and ``seq``, 0, 1, ...) and stays in the teacher's outbox
 (``Outbox``, owned by ``TeacherPublisher``) with the scan it answers until the learner
 acknowledges it (``LearnerAck`` on ``rhbl/<robot>/learner/ack``: the labels durably in its
-journal). A label unacknowledged after ``--resend-after`` (2 s), and every unacknowledged label
-when a learner's token appears again, is resent with its scan on ``rhbl/<robot>/teacher/labeled``
-(``LabeledScan``); the learner journals each label once. With ``--outbox`` (2000) labels
+journal). Every unacknowledged label when a learner's token appears again, and a label missed
+(unacknowledged after ``--resend-after``, 2 s, with backoff: ``Outbox``), is resent with its scan
+on ``rhbl/<robot>/teacher/labeled`` (``LabeledScan``); the learner journals each label once. With ``--outbox`` (2000) labels
 unacknowledged the teacher pauses as above rather than drop one. On exit it waits up to 10 s for
 the last acknowledgements. The outbox lives in this process: a killed teacher loses the labels
 not yet acknowledged. ``--no-wait-learner`` keeps no outbox.
@@ -48,7 +48,6 @@ import logging
 import threading
 import time
 import uuid
-from collections import OrderedDict
 
 import numpy as np
 import zenoh
@@ -350,11 +349,15 @@ class Outbox:
     """The labels a teacher session published and no learner acknowledged yet, each with the
     scan it answers (``LabeledScan``), to be resent until one does (no zenoh: testable alone).
 
-    ``origin`` is the session's identity (random), ``seq`` numbers its labels from 0. ``add`` at
-    publishing (a dict insert), ``ack`` removes what a ``LearnerAck`` names, ``due`` gives the
-    entries unacknowledged for ``resend_after`` s (and marks them sent again), ``everything``
-    all of them (a learner that (re)started). At most ``cap`` entries: ``full`` says the
-    publisher must stop labelling (nothing is ever dropped). Thread-safe."""
+    ``origin`` is the session's identity (random), ``seq`` numbers its labels from 0. ``label``
+    at publishing (a dict insert), ``ack`` removes what a ``LearnerAck`` names, ``due`` gives
+    the labels to resend now, ``everything`` all of them (a learner that (re)started). A label
+    is due ``resend_after`` s after it was sent, then after twice as long each time (at most 16
+    times), and only when the learner acknowledged a later label (this one was missed: its scan
+    never reached the learner, say) or acknowledged nothing for ``resend_after`` s (stuck): a
+    learner that is merely behind, acknowledging in order, gets no resends that would slow it
+    down further. At most ``cap`` entries: ``full`` says the publisher must stop labelling
+    (nothing is ever dropped). Thread-safe."""
 
     def __init__(self, cap: int = OUTBOX, resend_after: float = RESEND_AFTER,
                  origin: str | None = None, clock=time.monotonic):
@@ -362,8 +365,10 @@ class Outbox:
         self.cap, self.resend_after, self._clock = int(cap), float(resend_after), clock
         self._next = 0
         self._lock = threading.Lock()
-        # seq -> [the label with its scan, when last sent]; least recently sent first
-        self._entries: OrderedDict[int, list] = OrderedDict()
+        self._entries: dict[int, list] = {}  # seq -> [the label with its scan, due at, resends]
+        self._next_due = float("inf")  # no entry is due before this
+        self._acked_max = -1  # the highest seq acknowledged
+        self._progress = clock()  # when an acknowledgement last removed a label
         self.stats = {"published": 0, "acked": 0, "resent": 0, "max": 0}
 
     def label(self, scan: Scan, action: str, executed: str | None,
@@ -374,7 +379,9 @@ class Outbox:
             item = LabeledScan(scan_id=scan.id, action=action, origin=self.origin, seq=seq,
                                ranges=scan.ranges, yaw=float(scan.pose[2]), source=source,
                                ts=scan.ts, executed=executed)
-            self._entries[seq] = [item, self._clock()]
+            due = self._clock() + self.resend_after
+            self._entries[seq] = [item, due, 0]
+            self._next_due = min(self._next_due, due)
             self.stats["published"] += 1
             self.stats["max"] = max(self.stats["max"], len(self._entries))
         return item
@@ -386,31 +393,45 @@ class Outbox:
             gone += [q for q in seqs if q >= upto and q in self._entries]
             for q in gone:
                 del self._entries[q]
+            self._acked_max = max(self._acked_max, upto - 1, max(seqs, default=-1))
+            if gone:
+                self._progress = self._clock()
             self.stats["acked"] += len(gone)
             return len(gone)
 
     def due(self) -> list[LabeledScan]:
-        """The labels unacknowledged for ``resend_after`` s, marked sent now."""
+        """The labels to resend now (see the class), marked resent."""
         now = self._clock()
         out = []
         with self._lock:
+            if now < self._next_due:
+                return out
+            stalled = now - self._progress >= self.resend_after
+            nxt = float("inf")
             for q, e in self._entries.items():
-                if now - e[1] < self.resend_after:
-                    break  # least recently sent first: the rest are younger
-                out.append(q)
-            return self._resent(out, now)
+                if e[1] <= now:
+                    if q < self._acked_max or stalled:
+                        e[2] += 1
+                        e[1] = now + self.resend_after * 2 ** min(e[2], 4)
+                        out.append(e[0])
+                    else:  # waiting its turn at a learner that acknowledges in order
+                        e[1] = now + self.resend_after / 4
+                nxt = min(nxt, e[1])
+            self._next_due = nxt
+            self.stats["resent"] += len(out)
+        return out
 
     def everything(self) -> list[LabeledScan]:
         """Every unacknowledged label, marked sent now (for a learner that (re)started)."""
         with self._lock:
-            return self._resent(list(self._entries), self._clock())
-
-    def _resent(self, seqs: list[int], now: float) -> list[LabeledScan]:  # under the lock
-        for q in seqs:
-            self._entries[q][1] = now
-            self._entries.move_to_end(q)
-        self.stats["resent"] += len(seqs)
-        return [self._entries[q][0] for q in seqs]
+            now = self._clock()
+            for e in self._entries.values():
+                e[1], e[2] = now + self.resend_after, 0
+            if self._entries:
+                self._next_due = now + self.resend_after
+            self._progress = now  # a new learner: give it resend_after to acknowledge
+            self.stats["resent"] += len(self._entries)
+            return [e[0] for e in sorted(self._entries.values(), key=lambda e: e[0].seq)]
 
     @property
     def full(self) -> bool:
@@ -430,11 +451,10 @@ class TeacherPublisher:
     from the moment a learner of the robot is first seen (``learners``, its liveliness token),
     each label carries the session's ``origin`` and a ``seq`` and stays in the ``Outbox`` with
     its scan until a learner acknowledges it on ``rhbl/<robot>/learner/ack``; a background
-    thread resends (``rhbl/<robot>/teacher/labeled``, the label with its scan) every label
-    unacknowledged after ``resend_after`` s, and all of them at once when a learner's token
-    appears (a restarted learner), while a learner is up. The caller stops labelling while
-    ``outbox.full``. Before any learner was seen labels go out without identity, unkept
-    (nobody records)."""
+    thread resends (``rhbl/<robot>/teacher/labeled``, the label with its scan) all of them at
+    once when a learner's token appears (a restarted learner) and the missed ones
+    (``Outbox.due``), while a learner is up. The caller stops labelling while ``outbox.full``.
+    Before any learner was seen labels go out without identity, unkept (nobody records)."""
 
     def __init__(self, session, robot: str, outbox: int = OUTBOX,
                  resend_after: float = RESEND_AFTER):

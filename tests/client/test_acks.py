@@ -137,25 +137,38 @@ def _scan(i: int) -> Scan:
     return Scan(ts=0.1 * i, id=i, ranges=_ranges(i), pose=(0.0, 0.0, 0.1 * i))
 
 
-def test_outbox_acks_remove_timeouts_resend_and_the_bound_says_full():
+def test_outbox_acks_remove_gaps_and_stalls_resend_with_backoff_and_the_bound_says_full():
     clock = _Clock()
-    box = Outbox(cap=5, resend_after=2.0, origin="s1", clock=clock)
+    box = Outbox(cap=6, resend_after=2.0, origin="s1", clock=clock)
     items = [box.label(_scan(i), "fwd", None) for i in range(4)]
     assert [x.seq for x in items] == [0, 1, 2, 3] and items[2].origin == "s1"
     assert items[2].yaw == pytest.approx(0.2) and items[2].scan_id == 2
     assert box.ack(2, (3,)) == 3 and len(box) == 1  # seq 0, 1 below the watermark; 3 above
-    assert box.due() == []
+    assert box.due() == []  # seq 2 is a gap, but not 2 s old yet
+    clock.t = 1.0
+    box.label(_scan(4), "fwd", None)  # acknowledged in order, later
+    clock.t = 2.1
+    assert [x.seq for x in box.due()] == [2]  # a later label got through: 2 was missed
+    assert box.due() == []  # resent; the next time after 4 s (backoff)
     clock.t = 2.5
-    box.label(_scan(4), "fwd", None)
-    assert [x.seq for x in box.due()] == [2]  # unacknowledged for 2 s: resent once...
-    assert box.due() == []  # ...and not again before another 2 s
-    clock.t = 4.0
-    assert [x.seq for x in box.due()] == []
-    clock.t = 4.6
-    assert sorted(x.seq for x in box.due()) == [2, 4]
-    assert sorted(x.seq for x in box.everything()) == [2, 4]  # a learner (re)started
-    assert box.stats["resent"] == 5 and not box.full
+    assert box.ack(5) == 2  # seq 2 (the resend) and 4 acknowledged
+    # a learner that is behind but acknowledges in order gets no resends
     for i in range(5, 8):
         box.label(_scan(i), "fwd", None)
-    assert len(box) == 5 and box.full  # the caller pauses; nothing is dropped
-    assert box.ack(8) == 5 and not box.full
+    clock.t = 4.4
+    box.ack(6)
+    clock.t = 5.0
+    assert box.due() == []  # 6, 7 are 2.5 s old, but the learner progresses, in order
+    # a stuck learner (nothing acknowledged for 2 s) gets them again, with backoff
+    clock.t = 6.5
+    assert [x.seq for x in box.due()] == [6, 7]
+    clock.t = 10.0
+    assert box.due() == []
+    clock.t = 10.6
+    assert [x.seq for x in box.due()] == [6, 7]  # 4 s after the first resend
+    assert [x.seq for x in box.everything()] == [6, 7]  # a learner (re)started: all at once
+    assert box.stats["resent"] == 7 and not box.full
+    for i in range(8, 12):
+        box.label(_scan(i), "fwd", None)
+    assert len(box) == 6 and box.full  # the caller pauses; nothing is dropped
+    assert box.ack(12) == 6 and not box.full and box.due() == []
