@@ -770,9 +770,9 @@ class LearnerProcess:
     def report(self, lost: int) -> None:
         ps, st, core = self.pairing.stats, self.stats, self.core
         log.info("stopped: %d labeled vectors (%d this run, %d learned, %d unmatched "
-                 "labels, %d malformed, %d rejected, %d lost, %d resent by the teacher, %d "
-                 "duplicates skipped), %d nodes, height %d; snapshot %s; %d scans received, "
+                 "labels, %d malformed, %d rejected, %d resent by the teacher, %d duplicates "
+                 "skipped, %d lost), %d nodes, height %d; snapshot %s; %d scans received, "
                  "%d unlabeled ones forgotten, at most %d labeled scans waited to be learned",
                  core.applied, st["paired"], st["learned"], ps["unmatched"], ps["bad"],
-                 st["rejected"], lost, ps["resent"], st["duplicates"], core.learner.nodes,
+                 st["rejected"], ps["resent"], st["duplicates"], lost, core.learner.nodes,
                  core.learner.height, core.out, ps["scans"], ps["forgotten"], ps["max_ready"])
