@@ -514,8 +514,9 @@ class TeacherPublisher:
                     continue  # nobody to resend to: at once when a learner (re)appears
                 arrivals = self.learners.arrivals
                 if arrivals != self._arrivals:
+                    first = self._arrivals == 0 and arrivals == 1  # nothing sent to another
                     self._arrivals = arrivals
-                    items = self.outbox.everything()
+                    items = [] if first else self.outbox.everything()
                     if items:
                         log.info("a learner (re)started: resending the %d labels it has not "
                                  "acknowledged (seq %d..%d)", len(items), items[0].seq,
