@@ -10,8 +10,9 @@ every fault and a killed server takes no one's network with it. Parts:
 - ``learner-kill``: a demonstration (teacher, ``--seconds`` of sim time, perturbed as usual)
   while the learner is SIGKILLed ``--kills`` times at random moments (seeded) and restarted with
   the same command each time. Every label the teacher published (seen on
-  ``rhbl/<robot>/teacher/action``) is compared with the vectors in the learner's journal at the
-  end, by scan id: the difference is reported exactly.
+  ``rhbl/<robot>/teacher/action``) is compared with the labels the learner holds at the end (its
+  journal's records and its snapshot's label set), by (``origin``, ``seq``): lost labels and
+  duplicates are reported exactly, resends (``rhbl/<robot>/teacher/labeled``) counted.
 - ``server-restart``: the server SIGKILLed and restarted ``--restarts`` times during a
   demonstration; for each restart the time from starting the new server to the first command
   that reaches the robot again (the server's driver message naming the teacher), and whether
@@ -20,7 +21,8 @@ every fault and a killed server takes no one's network with it. Parts:
   5 times and restarted; the robot's stop time (kill -> first state with zero velocity) against
   the server's ``--watchdog``.
 - ``learner-stop``: the learner SIGSTOPped during a demonstration: the time until the teacher
-  stops labelling (its last label after the stop), then SIGCONT: labelling resumes; labels lost.
+  stops labelling (its last label after the stop), then SIGCONT: labelling resumes; labels lost
+  (none expected: they are resent) and resends.
 - ``disk-full``: the learner's journal writes fail (ENOSPC) for a few seconds during a
   demonstration: labels lost (the learner keeps them in memory and writes them later).
 
