@@ -544,7 +544,7 @@ class TeacherPublisher:
             time.sleep(0.05)
         left = len(self.outbox)
         if left:
-            log.error("%d labels not acknowledged by a learner (seq from %s): lost when this "
+            log.error("%d labels of session %s not acknowledged by a learner: lost when this "
                       "process exits", left, self.outbox.origin)
         elif self.outbox.stats["published"]:
             log.info("all %d labels acknowledged by the learner (%d resends)",

@@ -72,3 +72,36 @@ def test_a_folding_learner_killed_recovers_with_a_bounded_journal(tmp_path):
     assert r["duplicates in journal"] == 0
     # folded: the file holds about one snapshot interval of records, not all of them
     assert r["journal bytes"] < r["journaled"] * 1538 / 2, r
+
+
+def test_unacknowledged_labels_are_resent_and_a_full_outbox_pauses_the_teacher(tmp_path):
+    """A "learner" that holds the token but never acknowledges (this test's session): the
+    teacher resends its labels, stops labelling when its outbox (--outbox 30) is full, and
+    labels again once an acknowledgement comes."""
+    from protocol import keys
+    from protocol.messages import LearnerAck
+
+    c = faults.Campaign(tmp_path)
+    token = None
+    try:
+        c.watch()
+        token = c.session.liveliness().declare_token(keys.alive_key("learner", "r0-999999"))
+        c.server("--speedup", "2")
+        teacher = c.start("teacher", "teacher", "--policy", "wall-follower", "--outbox", "30",
+                          "--resend-after", "1", "--wait-learner-timeout", "60")
+        assert c.wait(lambda: len(c.labels) >= 30, 120), "no labels"
+        # nothing acknowledged for 1 s: all 30 resent (with their scans), and no 31st label
+        assert c.wait(lambda: c.resent >= 30, 30), c.resent
+        assert len(c.labels) == 30 and len(set(c.label_ids)) == 30
+        origin = c.label_ids[0][0]
+        c.session.put(keys.learner_ack_key("r0"),
+                      LearnerAck(origin=origin, upto=30).encode())
+        assert c.wait(lambda: len(c.labels) >= 40, 60), "the teacher did not resume"
+        assert [q for _, q in c.label_ids[:40]] == list(range(40))
+        token.undeclare()  # no learner: the teacher does not wait for acks on exit
+        token = None
+        assert teacher.stop() == 0
+    finally:
+        if token is not None:
+            token.undeclare()
+        c.close()
