@@ -10,7 +10,12 @@ File format (little-endian)::
     frame   := length:uint32  crc32(payload):uint32  payload[length]
     frame 0 := the header, a msgpack map {"kind": "rhbl-journal", "format": 1, "lineage": str, ...}
     frame i := record i-1, a msgpack map {"i", "scan", "ts", "label", "yaw", "ranges", "x"}
-               (ranges and x as float32 bytes)
+               (ranges and x as float32 bytes), plus "origin" and "seq" when the label carries
+               its identity (the teacher session and its number, for acknowledgements and
+               deduplication: ``LabelSet``); journals without them read the same
+
+A snapshot records which labels it holds (``LabelSet.to_dict`` in its provenance), so folding the
+journal keeps what deduplication needs.
 
 Folding (``Journal.fold(upto)``, ``rhbl learner --fold-journal``): once a durable snapshot holds
 records ``0 .. upto - 1`` they are dropped: the file is rewritten as a header with ``base`` =
@@ -49,6 +54,7 @@ __all__ = [
     "JournalCorruptError",
     "JournalError",
     "JournalRecord",
+    "LabelSet",
     "journal_path",
 ]
 
@@ -79,9 +85,11 @@ class JournalRecord:
     ranges: np.ndarray  # float32 raw laser ranges (lets a tree be relearned with other features)
     yaw: float
     features: np.ndarray  # float32 feature vector as extracted when it was learned
+    origin: str | None = None  # the label's identity (teacher session, its number), if any
+    seq: int | None = None
 
     def to_payload(self) -> dict:
-        return {
+        p = {
             "i": int(self.index),
             "scan": int(self.scan_id),
             "ts": float(self.ts),
@@ -90,9 +98,14 @@ class JournalRecord:
             "ranges": np.asarray(self.ranges, dtype="<f4").tobytes(),
             "x": np.asarray(self.features, dtype="<f4").tobytes(),
         }
+        if self.origin is not None:
+            p["origin"] = str(self.origin)
+            p["seq"] = int(self.seq)
+        return p
 
     @classmethod
     def from_payload(cls, p: Mapping) -> JournalRecord:
+        origin = p.get("origin")
         return cls(
             index=int(p["i"]),
             scan_id=int(p["scan"]),
@@ -101,7 +114,92 @@ class JournalRecord:
             yaw=float(p["yaw"]),
             ranges=np.frombuffer(p["ranges"], dtype="<f4"),
             features=np.frombuffer(p["x"], dtype="<f4"),
+            origin=None if origin is None else str(origin),
+            seq=None if origin is None else int(p["seq"]),
         )
+
+
+class LabelSet:
+    """Which labels (``origin``, ``seq``) a learner holds: per origin a watermark ``upto`` (every
+    seq below it is held) and the few held above it. Bounded: at most ``max_above`` seqs above a
+    watermark (beyond that the watermark jumps to the lowest held one, giving up the gap below:
+    logged; a teacher resends a missing label every few seconds, so only a teacher that died
+    leaves gaps) and ``max_origins`` origins (the least recently seen is forgotten: logged)."""
+
+    def __init__(self, max_above: int = 4096, max_origins: int = 256):
+        self.max_above, self.max_origins = int(max_above), int(max_origins)
+        self._o: dict[str, tuple[int, set[int]]] = {}  # insertion order = least recent first
+
+    def __contains__(self, label: tuple[str, int]) -> bool:
+        origin, seq = label
+        st = self._o.get(origin)
+        return st is not None and (seq < st[0] or seq in st[1])
+
+    def add(self, origin: str, seq: int) -> bool:
+        """Record a label; False when it was held already."""
+        if (origin, seq) in self:
+            self._touch(origin)
+            return False
+        upto, above = self._o.pop(origin, (0, set()))
+        if seq == upto:
+            upto += 1
+            while upto in above:
+                above.discard(upto)
+                upto += 1
+        else:
+            above.add(seq)
+            if len(above) > self.max_above:
+                low = min(above)
+                log.warning("labels of teacher session %s: %d held above seq %d, never "
+                            "received; giving up on seqs %d..%d", origin, len(above), upto,
+                            upto, low - 1)
+                upto = low
+                while upto in above:
+                    above.discard(upto)
+                    upto += 1
+        self._o[origin] = (upto, above)
+        while len(self._o) > self.max_origins:
+            old = next(iter(self._o))
+            log.warning("forgetting the labels of teacher session %s (more than %d sessions)",
+                        old, self.max_origins)
+            del self._o[old]
+        return True
+
+    def _touch(self, origin: str) -> None:
+        self._o[origin] = self._o.pop(origin)
+
+    def ack(self, origin: str) -> tuple[int, tuple[int, ...]]:
+        """(upto, sorted seqs held above it) of an origin."""
+        upto, above = self._o.get(origin, (0, set()))
+        return upto, tuple(sorted(above))
+
+    def origins(self) -> list[str]:
+        return list(self._o)
+
+    def __len__(self) -> int:
+        """Labels held (every origin)."""
+        return sum(upto + len(above) for upto, above in self._o.values())
+
+    def to_dict(self) -> dict:
+        return {o: [upto, sorted(above)] for o, (upto, above) in self._o.items()}
+
+    @classmethod
+    def from_dict(cls, d, **kw) -> LabelSet:
+        """From ``to_dict`` (a snapshot's provenance); entries of the wrong shape raise
+        ValueError."""
+        ls = cls(**kw)
+        if d is None:
+            return ls
+        if not isinstance(d, Mapping):
+            raise ValueError(f"label set: expected a map, got {type(d).__name__}")
+        for o, v in d.items():
+            ok = (isinstance(o, str) and isinstance(v, list | tuple) and len(v) == 2
+                  and isinstance(v[0], int) and isinstance(v[1], list | tuple)
+                  and all(isinstance(x, int) and not isinstance(x, bool) for x in v[1]))
+            if not ok:
+                raise ValueError(f"label set: entry {o!r}: expected [upto, [seqs]], got {v!r:.80}")
+            ls._o[o] = (int(v[0]), {int(x) for x in v[1] if x >= v[0]})
+        return ls
 
 
 def journal_path(snapshot: str | os.PathLike) -> Path:
@@ -226,13 +324,14 @@ class Journal:
 
     # ---- writing ------------------------------------------------------------------------
     def append(self, scan_id: int, ts: float, label: str, ranges, yaw: float,
-               features) -> int:
-        """Append one labeled vector; returns its index. Durable against a killed process
-        on return; fsync'd within ``fsync_interval`` seconds."""
+               features, origin: str | None = None, seq: int | None = None) -> int:
+        """Append one labeled vector (with the label's ``origin`` and ``seq`` when it has them);
+        returns its index. Durable against a killed process on return; fsync'd within
+        ``fsync_interval`` seconds."""
         if self._fd < 0:
             raise JournalError(f"journal {self.path} is closed")
         index = len(self)
-        rec = JournalRecord(index, scan_id, ts, label, ranges, yaw, features)
+        rec = JournalRecord(index, scan_id, ts, label, ranges, yaw, features, origin, seq)
         data = _frame(msgpack.packb(rec.to_payload(), use_bin_type=True))
         if self._torn:  # a failed append left bytes that a retry could not remove yet
             self._rollback(None)

@@ -10,6 +10,14 @@ restarted with the same command rebuilds exactly (last snapshot + the journal re
 It publishes a ``TreeNotice`` on ``rhbl/<robot>/learner/notice`` after each snapshot and answers
 queries on ``rhbl/<robot>/learner/snapshot`` with the latest snapshot's bytes.
 
+Labels with an identity (the teacher session's ``origin`` and ``seq``) are acknowledged once
+journaled: a ``LearnerAck`` on ``rhbl/<robot>/learner/ack`` (batched, every 0.15 s or 50 labels,
+and for everything held right after a restart's recovery, before the liveliness token). A teacher
+resends what is not acknowledged with its scan on ``rhbl/<robot>/teacher/labeled``
+(``LabeledScan``: learned without pairing); a label already held (``client.journal.LabelSet``,
+rebuilt on restart from the snapshot's provenance and the journal) is acknowledged again, not
+journaled or learned twice.
+
     rhbl learner --features wall --out tree.rhbl                 # new tree (or continue tree.rhbl)
     rhbl learner --resume tree.rhbl --out tree2.rhbl             # extend a tree: a new lineage
 """
@@ -44,9 +52,9 @@ from client.behaviour.learning import (
     check_compatible,
     load_snapshot,
 )
-from client.journal import Journal, JournalError, journal_path
+from client.journal import Journal, JournalError, LabelSet, journal_path
 from protocol import keys
-from protocol.messages import Scan, TeacherAction, TreeNotice
+from protocol.messages import LabeledScan, LearnerAck, Scan, TeacherAction, TreeNotice
 from protocol.process import on_stop_signal
 
 __all__ = ["LearnerCore", "LearnerProcess", "Pairing", "add_arguments", "main", "TASK_OF_FEATURES"]
@@ -60,6 +68,9 @@ MAX_BACKLOG = 36_000
 _RETRY = 1.0  # s between attempts to write the journal again
 # labeled scans waiting to be learned beyond which the learner says (error) it falls behind
 BEHIND = 600  # about a minute of demonstration at 10 Hz
+# acknowledgements are batched: published at most this often (s), or after this many labels
+ACK_EVERY = 0.15
+ACK_BATCH = 50
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -113,6 +124,7 @@ class LearnerCore:
         self.out.parent.mkdir(parents=True, exist_ok=True)
         spec = FEATURES[features] if features else None
         self.replayed = 0
+        self.labels = LabelSet()  # the labels (origin, seq) journaled: deduplication and acks
         if self.jpath.exists():
             self.journal = Journal.open(self.jpath, fsync_interval=fsync_interval)
             self.learner, self.applied = self._recover(spec, resume)
@@ -170,6 +182,10 @@ class LearnerCore:
             if j.get("lineage") == lineage:
                 learner = _resume(self.out, None)
                 start = int(j.get("records", 0))
+                try:  # the labels the snapshot holds (folded out of the journal, maybe)
+                    self.labels = LabelSet.from_dict(j.get("labels"))
+                except ValueError as exc:
+                    raise ProcessError(f"snapshot {self.out}: {exc}", EXIT_USAGE) from exc
             elif parent is None or Path(parent).resolve() != self.out.resolve():
                 raise ProcessError(
                     f"snapshot {self.out} does not belong to journal {self.jpath} (lineage "
@@ -192,22 +208,35 @@ class LearnerCore:
         t0 = time.monotonic()
         for rec in self.journal.records(start):
             learner.observe(rec.ranges, rec.yaw, rec.label)
+            if rec.origin is not None:
+                self.labels.add(rec.origin, rec.seq)
             self.replayed += 1
         log.info("recovered lineage %s: snapshot held %d journal records, replayed %d more in "
-                 "%.2f s (%d nodes)", lineage, start, self.replayed, time.monotonic() - t0,
-                 learner.nodes)
+                 "%.2f s (%d nodes); %d identified labels held", lineage, start, self.replayed,
+                 time.monotonic() - t0, learner.nodes, len(self.labels))
         return learner, len(self.journal)
 
-    def learn(self, scan_id: int, ts: float, ranges, yaw: float, label: str) -> bool:
-        """Journal (flushed) then learn one labeled scan; True when it reached the tree.
-        Raises FeatureError (a scan the features cannot use: nothing written) or JournalError
-        (the journal cannot be written, e.g. disk full: nothing written, nothing learned; call
-        again later with the same vector)."""
+    def learn(self, scan_id: int, ts: float, ranges, yaw: float, label: str,
+              origin: str | None = None, seq: int | None = None) -> bool | None:
+        """Journal (flushed) then learn one labeled scan; True when it reached the tree. A label
+        with an identity (``origin``, ``seq``) is recorded in ``labels`` once journaled; one
+        held already (a resend) is neither journaled nor learned again: None. Raises
+        FeatureError (a scan the features cannot use: nothing written) or JournalError (the
+        journal cannot be written, e.g. disk full: nothing written, nothing learned; call again
+        later with the same vector)."""
+        if self.holds(origin, seq):
+            return None
         x = self.learner.features.extract(ranges, yaw)
-        self.journal.append(scan_id, ts, label, ranges, yaw, x.astype(np.float32))
+        self.journal.append(scan_id, ts, label, ranges, yaw, x.astype(np.float32), origin, seq)
+        if origin is not None:
+            self.labels.add(origin, seq)
         learned = self.learner.observe(ranges, yaw, label)
         self.applied += 1
         return learned
+
+    def holds(self, origin: str | None, seq: int | None) -> bool:
+        """True when the label (origin, seq) is journaled already (or was refused)."""
+        return origin is not None and (origin, seq) in self.labels
 
     @property
     def dirty(self) -> bool:
@@ -218,7 +247,7 @@ class LearnerCore:
         meta = self.learner.metadata()
         prov = meta["provenance"]
         prov["journal"] = {"path": self.jpath.name, "lineage": self.journal.lineage,
-                           "records": self.applied}
+                           "records": self.applied, "labels": self.labels.to_dict()}
         prov["labeled"] = self.applied
         prov["time"] = time.time()
         return meta
@@ -291,7 +320,7 @@ class Pairing:
         self.last_id = -1
         self.forgot_upto = -1  # the newest scan id forgotten unlabeled
         self.stats = {"scans": 0, "labels": 0, "forgotten": 0, "unmatched": 0, "bad": 0,
-                      "lost": 0, "max_ready": 0}
+                      "lost": 0, "max_ready": 0, "resent": 0}
         self._said_behind = -1e9
 
     # -- the callbacks (zenoh threads) --
@@ -348,6 +377,26 @@ class Pairing:
                 self.pending[act.scan_id] = (act, self._clock())
                 if len(self.pending) > 64:
                     self._expire(self._clock())
+
+    def on_labeled(self, data: bytes) -> None:
+        """A label the teacher resent with its scan (``LabeledScan``: the learner had not
+        acknowledged it): ready at once, no pairing."""
+        try:
+            lab = LabeledScan.decode(data)
+        except Exception as exc:  # noqa: BLE001
+            with self._cond:
+                self.stats["bad"] += 1
+            log.warning("dropped a malformed labeled scan: %s", exc)
+            return
+        act = lab.action_message()
+        scan = Scan(ts=lab.ts, id=lab.scan_id, ranges=lab.ranges, pose=(0.0, 0.0, lab.yaw))
+        with self._cond:
+            self.stats["resent"] += 1
+            waiting = self.pending.get(act.scan_id)
+            if waiting is not None and (waiting[0].origin, waiting[0].seq) == (act.origin,
+                                                                              act.seq):
+                del self.pending[act.scan_id]  # the same label, its scan never came
+            self._ready(scan, act)
 
     def _ready(self, scan: Scan, act: TeacherAction) -> None:  # under the lock
         self.ready.append((scan, act))
@@ -440,14 +489,16 @@ class LearnerProcess:
         # labels are paired with their scans as they arrive: nothing but labeled scans is queued
         self.pairing = Pairing(self.args.scan_buffer, self.args.match_timeout,
                                on_scan_seen=self.watch.seen)
-        self.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0}
+        self.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0, "duplicates": 0}
         # labeled scans waiting to be journaled (in order): empty unless the journal cannot be
         # written (disk full); nothing is learned before it is journaled
         self.backlog: deque[tuple[Scan, TeacherAction]] = deque()
         self.retry_at = 0.0
         self.failures = 0  # journal writes failed in a row
         self.drain_until: float | None = None  # after a stop request: finish what arrived
-        self.notice_pub = self.subs = None
+        self.notice_pub = self.ack_pub = self.subs = None
+        self.ack_due: set[str] = set()  # origins with labels journaled since the last ack
+        self.ack_count, self.last_ack = 0, 0.0
 
     @staticmethod
     def _open_core(args: argparse.Namespace) -> LearnerCore:
@@ -468,11 +519,15 @@ class LearnerProcess:
     def declare(self) -> None:
         ctx, robot = self.ctx, self.ctx.robot
         self.notice_pub = ctx.publisher(keys.learner_notice_key(robot))
+        self.ack_pub = ctx.publisher(keys.learner_ack_key(robot))
         self.subs = [
             ctx.subscriber(keys.scan_key(robot), self.on_scan),
             ctx.subscriber(keys.teacher_action_key(robot), self.on_label),
+            ctx.subscriber(keys.teacher_labeled_key(robot), self.on_labeled),
         ]
         ctx.queryable(self.snap_key, self.on_query)
+        # what survived (journal + snapshot), for a teacher that resends what we do not hold
+        self.publish_acks(self.core.labels.origins())
         ctx.declare_token()  # after the subscriptions: the token means "ready to receive labels"
 
     def on_scan(self, sample) -> None:
@@ -480,6 +535,33 @@ class LearnerProcess:
 
     def on_label(self, sample) -> None:
         self.pairing.on_label(sample.payload.to_bytes())
+
+    def on_labeled(self, sample) -> None:
+        self.pairing.on_labeled(sample.payload.to_bytes())
+
+    def publish_acks(self, origins=None) -> None:
+        """Acknowledge the labels journaled (``LearnerAck``, the whole state of each origin
+        whose labels were journaled since the last ack, or of ``origins``)."""
+        todo = self.ack_due if origins is None else set(origins)
+        for origin in todo:
+            upto, seqs = self.core.labels.ack(origin)
+            try:
+                self.ack_pub.put(LearnerAck(origin=origin, upto=upto,
+                                            seqs=seqs[:LearnerAck.MAX_SEQS],
+                                            ts=time.time()).encode())
+            except Exception as exc:  # noqa: BLE001 - the session is closing; resent anyway
+                log.debug("ack not published: %s", exc)
+        self.ack_due = set()
+        self.ack_count, self.last_ack = 0, time.monotonic()
+
+    def _handled(self, act: TeacherAction, journaled: bool) -> None:
+        """A label journaled (or refused for good): acknowledged in the next batch."""
+        if act.origin is None:
+            return
+        if not journaled:  # refused (bad input): acknowledged too, so it is not resent forever
+            self.core.labels.add(act.origin, act.seq)
+        self.ack_due.add(act.origin)
+        self.ack_count += 1
 
     def on_query(self, query) -> None:
         data = self.latest
@@ -512,6 +594,7 @@ class LearnerProcess:
             self.stats["rejected"] += 1
             log.warning("label %r for scan %d is not an action of this tree %s: dropped",
                         act.action, act.scan_id, self.core.actions.names)
+            self._handled(act, journaled=False)
             return
         self.stats["paired"] += 1
         self.backlog.append((scan, act))
@@ -524,16 +607,20 @@ class LearnerProcess:
             scan, act = self.backlog[0]
             try:
                 learned = self.core.learn(scan.id, scan.ts, scan.ranges, float(scan.pose[2]),
-                                          act.action)
+                                          act.action, act.origin, act.seq)
             except FeatureError as exc:  # a scan the features cannot use (bad input)
                 self.backlog.popleft()
                 self.stats["rejected"] += 1
                 log.warning("label %r for scan %d dropped: %s", act.action, scan.id, exc)
+                self._handled(act, journaled=False)
                 continue
             except (JournalError, OSError) as exc:
                 self._journal_failed(exc)
                 return
             self.backlog.popleft()
+            self._handled(act, journaled=True)  # (again, for a duplicate: its ack was lost)
+            if learned is None:  # resent, or live and resent: journaled once only
+                self.stats["duplicates"] += 1
             self.stats["learned"] += bool(learned)
         if self.failures:
             log.warning("the journal is writable again after %d failed attempts", self.failures)
@@ -595,6 +682,9 @@ class LearnerProcess:
             if item is None or now - last_expire >= 0.5:
                 last_expire = now
                 self.pairing.expire()
+            if self.ack_due and (self.ack_count >= ACK_BATCH
+                                 or now - self.last_ack >= ACK_EVERY):
+                self.publish_acks()
             if self.core.dirty and now - last_snap >= self.args.snapshot_every:
                 self.publish()
                 last_snap = now
@@ -637,6 +727,8 @@ class LearnerProcess:
         code = 0
         try:
             self.learn_leftovers()
+            if self.ack_due:
+                self.publish_acks()
             lost = self.stats["lost"] + self.pairing.stats["lost"]
             if lost or (self.core.dirty and not self.publish()):
                 code = 1
@@ -678,9 +770,9 @@ class LearnerProcess:
     def report(self, lost: int) -> None:
         ps, st, core = self.pairing.stats, self.stats, self.core
         log.info("stopped: %d labeled vectors (%d this run, %d learned, %d unmatched "
-                 "labels, %d malformed, %d rejected, %d lost), %d nodes, height %d; "
-                 "snapshot %s; %d scans received, %d unlabeled ones forgotten, at most %d "
-                 "labeled scans waited to be learned", core.applied, st["paired"],
-                 st["learned"], ps["unmatched"], ps["bad"], st["rejected"], lost,
-                 core.learner.nodes, core.learner.height, core.out, ps["scans"],
-                 ps["forgotten"], ps["max_ready"])
+                 "labels, %d malformed, %d rejected, %d resent by the teacher, %d duplicates "
+                 "skipped, %d lost), %d nodes, height %d; snapshot %s; %d scans received, "
+                 "%d unlabeled ones forgotten, at most %d labeled scans waited to be learned",
+                 core.applied, st["paired"], st["learned"], ps["unmatched"], ps["bad"],
+                 st["rejected"], ps["resent"], st["duplicates"], lost, core.learner.nodes,
+                 core.learner.height, core.out, ps["scans"], ps["forgotten"], ps["max_ready"])

@@ -13,8 +13,9 @@ every fault and a killed server takes no one's network with it (all parts but
 - ``learner-kill``: a demonstration (teacher, ``--seconds`` of sim time, perturbed as usual)
   while the learner is SIGKILLed ``--kills`` times at random moments (seeded) and restarted with
   the same command each time. Every label the teacher published (seen on
-  ``rhbl/<robot>/teacher/action``) is compared with the vectors in the learner's journal at the
-  end, by scan id: the difference is reported exactly.
+  ``rhbl/<robot>/teacher/action``) is compared with the labels the learner holds at the end (its
+  journal's records and its snapshot's label set), by (``origin``, ``seq``): lost labels and
+  duplicates are reported exactly, resends (``rhbl/<robot>/teacher/labeled``) counted.
 - ``server-restart``: the server SIGKILLed and restarted ``--restarts`` times during a
   demonstration; for each restart the time from starting the new server to the first command
   that reaches the robot again (the server's driver message naming the teacher), and whether
@@ -23,7 +24,8 @@ every fault and a killed server takes no one's network with it (all parts but
   5 times and restarted; the robot's stop time (kill -> first state with zero velocity) against
   the server's ``--watchdog``.
 - ``learner-stop``: the learner SIGSTOPped during a demonstration: the time until the teacher
-  stops labelling (its last label after the stop), then SIGCONT: labelling resumes; labels lost.
+  stops labelling (its last label after the stop), then SIGCONT: labelling resumes; labels lost
+  (none expected: they are resent) and resends.
 - ``disk-full``: the learner's journal writes fail (ENOSPC) for a few seconds during a
   demonstration: labels lost (the learner keeps them in memory and writes them later).
 - ``readonly-folder``: the learner's folder made read-only (mode 0555) for a few seconds during
@@ -103,6 +105,8 @@ class Campaign:
         self.procs: list[Child] = []
         self.cond = threading.Condition()
         self.labels: list[tuple[float, int]] = []  # (arrival, scan id)
+        self.label_ids: list[tuple[str | None, int | None]] = []  # (origin, seq) of each
+        self.resent = 0  # labels resent with their scan (rhbl/<robot>/teacher/labeled)
         self.drivers: list[tuple[float, str]] = []
         self.states: list[tuple[float, tuple]] = []
         self._subs = []
@@ -115,7 +119,12 @@ class Campaign:
             a = TeacherAction.decode(s.payload.to_bytes())
             with self.cond:
                 self.labels.append((time.monotonic(), a.scan_id))
+                self.label_ids.append((a.origin, a.seq))
                 self.cond.notify_all()
+
+        def on_resent(_s):
+            with self.cond:
+                self.resent += 1
 
         def on_driver(s):
             d = DriverState.decode(s.payload.to_bytes())
@@ -133,6 +142,7 @@ class Campaign:
 
         r = self.robot
         self._subs += [self.session.declare_subscriber(keys.teacher_action_key(r), on_label),
+                       self.session.declare_subscriber(keys.teacher_labeled_key(r), on_resent),
                        self.session.declare_subscriber(keys.driver_key(r), on_driver),
                        self.session.declare_subscriber(keys.state_key(r), on_state)]
 
@@ -174,6 +184,24 @@ def _journal_ids(out: Path) -> tuple[list[int], int]:
         return [r.scan_id for r in j.records(j.base)], len(j)
 
 
+def _held_labels(out: Path) -> tuple[list[tuple[str, int]], set[tuple[str, int]]]:
+    """The labels (origin, seq) of the journal's records (from its base, in order: a repeat is
+    a duplicate) and every label the learner holds (the snapshot's label set: folded ones too)."""
+    from client.behaviour.learning import load_snapshot
+    from client.journal import Journal, LabelSet, journal_path
+
+    with Journal.open(journal_path(out), readonly=True) as j:
+        recs = [(r.origin, r.seq) for r in j.records(j.base) if r.origin is not None]
+    held = set(recs)
+    if out.exists():
+        prov = load_snapshot(out)[3].get("provenance") or {}
+        ls = LabelSet.from_dict((prov.get("journal") or {}).get("labels"))
+        for origin in ls.origins():
+            upto, above = ls.ack(origin)
+            held |= {(origin, q) for q in range(upto)} | {(origin, q) for q in above}
+    return recs, held
+
+
 def journal_size(out: Path) -> int:
     from client.journal import journal_path
 
@@ -211,27 +239,25 @@ def learner_kill(workdir: Path, rng: random.Random, kills: int, speedup: float,
         n_pub = len(c.labels)
         time.sleep(1.0)
         rc = learner.stop(timeout=60)
-        published = {sid for _, sid in c.labels}
-        journaled, total = _journal_ids(out)
-        if fold:  # the folded records are in the snapshot only: count them
-            lost = [None] * max(0, len(published) - total)
-            stray = []
-        else:
-            lost = sorted(published - set(journaled))
-            # a label can be lost only around a kill: published (seen here) from shortly
-            # before the kill (in flight, not yet journaled) until the teacher paused
-            seen = {sid: t for t, sid in c.labels}
-            stray = [sid for sid in lost
-                     if not any(k - 1.0 <= seen[sid] <= k + 2.0 for k, _ in killed)]
+        published = {x for x in c.label_ids if x[0] is not None}
+        seen = dict(zip(c.label_ids, (t for t, _ in c.labels), strict=True))
+        recs, held = _held_labels(out)
+        _, total = _journal_ids(out)
+        lost = sorted(published - held)
+        # a label can be lost only around a kill: published (seen here) from shortly before
+        # the kill (in flight, not yet journaled) until the teacher paused
+        stray = [x for x in lost if not any(k - 1.0 <= seen[x] <= k + 2.0 for k, _ in killed)]
         return {"part": "learner-kill", "kills": kills, "fold journal": fold,
                 "labels published": n_pub,
                 "distinct labels": len(published), "journaled": total,
+                "labels without identity": len(c.label_ids) - len(published),
                 "journal bytes": journal_size(out),
+                "resent": c.resent,
                 "lost": len(lost),
                 "lost away from a kill": len(stray),
-                "duplicates in journal": len(journaled) - len(set(journaled)),
-                "lost ids": [x for x in lost if x is not None][:20],
-                "learner exit": rc, "ok": rc == 0 and not stray}
+                "duplicates in journal": len(recs) - len(set(recs)) + max(0, total - len(held)),
+                "lost labels": [f"{o[:6]}:{q}" for o, q in lost][:20],
+                "learner exit": rc, "ok": rc == 0 and not lost}
     finally:
         c.close()
 
@@ -339,12 +365,12 @@ def learner_stop(workdir: Path, stop_for: float = 20.0) -> dict:
         teacher.stop()
         time.sleep(1.0)
         rc = learner.stop(timeout=60)
-        lost = len({s for _, s in c.labels} - set(_journal_ids(out)[0]))
+        lost = len(set(c.label_ids) - _held_labels(out)[1])
         return {"part": "learner-stop", "stopped for s": stop_for,
                 "SIGSTOP -> teacher's last label, s": round(noticed, 2),
                 "teacher paused": paused, "SIGCONT -> labels again, s": round(resume_s, 2),
-                "labels lost": lost, "learner exit": rc,
-                "ok": paused and resumed and rc == 0}
+                "labels lost": lost, "resent": c.resent, "learner exit": rc,
+                "ok": paused and resumed and rc == 0 and lost == 0}
     finally:
         c.close()
 
@@ -369,7 +395,7 @@ def disk_full(workdir: Path, full_for: float = 5.0) -> dict:
         teacher.stop()
         time.sleep(1.0)
         rc = learner.stop(timeout=60)
-        lost = len({s for _, s in c.labels} - set(_journal_ids(out)[0]))
+        lost = len(set(c.label_ids) - _held_labels(out)[1])
         text = learner.output()
         return {"part": "disk-full", "full for s": full_for, "labels": len(c.labels),
                 "labels lost": lost, "ENOSPC reported": "No space left" in text,
@@ -482,7 +508,7 @@ def readonly_folder(workdir: Path, ro_for: float = 5.0, how: str = "mode") -> di
         teacher.stop()
         time.sleep(1.0)
         rc = learner.stop(timeout=60)
-        lost = len({s for _, s in c.labels} - set(_journal_ids(out)[0]))
+        lost = len(set(c.label_ids) - _held_labels(out)[1])
         said = [ln for ln in _lines_since(learner, mark) if "cannot write snapshot" in ln]
         named = bool(said) and str(folder) in said[0]
         return {"part": f"readonly-{'folder' if how == 'mode' else 'mount'}",

@@ -350,15 +350,17 @@ def fuzz_server(per_key: int, seed: int = 0, valid_every: int = 10) -> list[KeyR
 # who listens to what; the first one counts every message (the teacher's and controller's
 # scan subscriptions are rings of one, "latest scan wins": a burst is mostly dropped unread)
 _LISTENERS = {"scan": ("learner", "teacher", "controller"), "action": ("learner",),
-              "notice": ("controller",), "snapshot": ("learner",)}
+              "notice": ("controller",), "snapshot": ("learner",), "labeled": ("learner",),
+              "ack": ("teacher",)}
 _DROPPED = {"scan": "dropped a malformed scan", "action": "dropped a malformed teacher action",
-            "notice": "dropped a malformed tree notice"}
+            "notice": "dropped a malformed tree notice",
+            "labeled": "dropped a malformed labeled scan", "ack": "dropped a malformed learner ack"}
 
 
 def _client_targets() -> list[tuple[str, Callable[[bytes], Any], dict]]:
     """(key, decoder, a valid message as a map) of every subscription of the processes."""
     from protocol import keys
-    from protocol.messages import Scan, TeacherAction, TreeNotice
+    from protocol.messages import LabeledScan, LearnerAck, Scan, TeacherAction, TreeNotice
 
     scan = Scan(ts=1.0, id=5, ranges=[1.0] * 360, pose=(0, 0, 0))
     return [
@@ -367,6 +369,11 @@ def _client_targets() -> list[tuple[str, Callable[[bytes], Any], dict]]:
          msgpack.unpackb(TeacherAction(scan_id=5, action="forward").encode())),
         (keys.learner_notice_key("r0"), lambda d: TreeNotice.decode(d),
          msgpack.unpackb(TreeNotice(seq=1, nodes=3, height=1).encode())),
+        (keys.teacher_labeled_key("r0"), lambda d: LabeledScan.decode(d),
+         msgpack.unpackb(LabeledScan(scan_id=5, action="forward", origin="fuzz", seq=0,
+                                     ranges=scan.ranges).encode())),
+        (keys.learner_ack_key("r0"), lambda d: LearnerAck.decode(d),
+         msgpack.unpackb(LearnerAck(origin="fuzz", upto=1, seqs=(3,)).encode())),
     ]
 
 

@@ -16,6 +16,7 @@ __all__ = [
     "cmd_vel_subscription",
     "controller_decision_key",
     "driver_key",
+    "learner_ack_key",
     "learner_notice_key",
     "learner_snapshot_key",
     "request_key",
@@ -25,6 +26,7 @@ __all__ = [
     "source_of_cmd_key",
     "state_key",
     "teacher_action_key",
+    "teacher_labeled_key",
 ]
 
 PREFIX = "rhbl"
@@ -118,6 +120,19 @@ def teacher_action_key(robot: str = "r0") -> str:
     """The teacher's label for a scan (``TeacherAction``), teacher -> learner."""
     check_chunk(robot, "robot")
     return f"{PREFIX}/{robot}/teacher/action"
+
+
+def teacher_labeled_key(robot: str = "r0") -> str:
+    """A label resent with its scan (``LabeledScan``), teacher -> learner: only for labels the
+    learner has not acknowledged."""
+    check_chunk(robot, "robot")
+    return f"{PREFIX}/{robot}/teacher/labeled"
+
+
+def learner_ack_key(robot: str = "r0") -> str:
+    """Which labels the learner holds in its journal (``LearnerAck``), learner -> teacher."""
+    check_chunk(robot, "robot")
+    return f"{PREFIX}/{robot}/learner/ack"
 
 
 def learner_notice_key(robot: str = "r0") -> str:

@@ -36,7 +36,9 @@ __all__ = [
     "DecodeError",
     "DriverState",
     "Geometry",
+    "LabeledScan",
     "LaserConfig",
+    "LearnerAck",
     "MotorPower",
     "Nack",
     "ProtocolError",
@@ -53,6 +55,7 @@ __all__ = [
 
 COMMAND_MAX_PAYLOAD = 64 * 1024  # bytes: commands and requests are small
 _MAX_BEAMS = 100_000
+MAX_ORIGIN = 64  # characters of a teacher session's identity (``origin``)
 
 
 class _Message:
@@ -163,19 +166,10 @@ class Scan(_Message):
     @classmethod
     def from_map(cls, m):
         w = cls.WHAT
-        raw = get_bytes(m, "ranges", w)
-        if len(raw) % 4 or not 0 < len(raw) // 4 <= _MAX_BEAMS:
-            raise DecodeError(
-                f"{w}: field 'ranges': expected 1..{_MAX_BEAMS} little-endian float32 values, "
-                f"got {len(raw)} bytes"
-            )
-        ranges = np.frombuffer(raw, dtype="<f4").astype(np.float32)
-        if not np.isfinite(ranges).all():
-            raise DecodeError(f"{w}: field 'ranges': expected finite values, got NaN or infinity")
         return cls(
             ts=get_float(m, "ts", w),
             id=get_int(m, "id", w, minimum=0),
-            ranges=ranges,
+            ranges=_get_ranges(m, "ranges", w),
             pose=get_vec(m, "pose", w, 3),
             min_angle=get_float(m, "min_angle", w),
             max_angle=get_float(m, "max_angle", w),
@@ -183,6 +177,20 @@ class Scan(_Message):
             max_range=get_float(m, "max_range", w),
             truth=_opt_vec3(m, "truth", w),
         )
+
+
+def _get_ranges(m: dict, name: str, what: str) -> np.ndarray:
+    """1..100,000 finite little-endian float32 values (bytes) as a float32 array."""
+    raw = get_bytes(m, name, what)
+    if len(raw) % 4 or not 0 < len(raw) // 4 <= _MAX_BEAMS:
+        raise DecodeError(
+            f"{what}: field '{name}': expected 1..{_MAX_BEAMS} little-endian float32 values, "
+            f"got {len(raw)} bytes"
+        )
+    ranges = np.frombuffer(raw, dtype="<f4").astype(np.float32)
+    if not np.isfinite(ranges).all():
+        raise DecodeError(f"{what}: field '{name}': expected finite values, got NaN or infinity")
+    return ranges
 
 
 @dataclass
@@ -251,9 +259,27 @@ class DriverState(_Message):
         )
 
 
+def _get_origin(m: dict, what: str, required: bool) -> tuple[str | None, int | None]:
+    """The label identity ``origin`` (a teacher session, 1..64 characters) and ``seq`` (int >= 0):
+    both or (unless ``required``) neither."""
+    origin = get_opt(m, "origin", get_str, what, max_len=MAX_ORIGIN)
+    seq = get_opt(m, "seq", get_int, what, minimum=0)
+    if origin == "":
+        raise DecodeError(f"{what}: field 'origin': expected a non-empty string, got ''")
+    if origin is None and (required or seq is not None):
+        with_seq = "" if required else " (with 'seq')"
+        raise DecodeError(f"{what}: field 'origin': expected a string{with_seq}, got nothing")
+    if seq is None and origin is not None:
+        raise DecodeError(f"{what}: field 'seq': expected an integer (with 'origin'), "
+                          f"got nothing")
+    return origin, seq
+
+
 @dataclass
 class TeacherAction(_Message):
-    """The teacher's label for a scan: ``action`` name (e.g. ``fwd-left``), ``scan_id``."""
+    """The teacher's label for a scan: ``action`` name (e.g. ``fwd-left``), ``scan_id``;
+    ``origin`` (the teacher session, a random id per process) and ``seq`` (its labels numbered
+    from 0) identify the label for acknowledgements and resends, both or neither."""
 
     WHAT: ClassVar[str] = "teacher/action"
     MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
@@ -262,6 +288,8 @@ class TeacherAction(_Message):
     source: str = "teacher"
     ts: float = 0.0
     executed: str | None = None  # the action actually executed (perturbed demonstrations)
+    origin: str | None = None
+    seq: int | None = None
 
     def to_map(self):
         m = {
@@ -272,18 +300,112 @@ class TeacherAction(_Message):
         }
         if self.executed is not None:
             m["executed"] = self.executed
+        if self.origin is not None:
+            m["origin"] = self.origin
+            m["seq"] = int(self.seq)
         return m
 
     @classmethod
     def from_map(cls, m):
         w = cls.WHAT
+        origin, seq = _get_origin(m, w, required=False)
         return cls(
             scan_id=get_int(m, "scan_id", w, minimum=0),
             action=get_str(m, "action", w),
             source=get_opt(m, "source", get_str, w, default=""),
             ts=get_opt(m, "ts", get_float, w, default=0.0),
             executed=get_opt(m, "executed", get_str, w),
+            origin=origin,
+            seq=seq,
         )
+
+
+@dataclass
+class LabeledScan(_Message):
+    """A label resent with the scan it answers (``rhbl/<robot>/teacher/labeled``): the
+    ``TeacherAction`` fields (``origin`` and ``seq`` required) plus the scan's ``ranges``
+    (float32 bytes) and ``yaw`` (its odometry heading), what the learner journals. Sent only for
+    a label the learner has not acknowledged: a restarted learner never saw that scan."""
+
+    WHAT: ClassVar[str] = "teacher/labeled"
+    scan_id: int
+    action: str
+    origin: str
+    seq: int
+    ranges: np.ndarray
+    yaw: float = 0.0
+    source: str = "teacher"
+    ts: float = 0.0
+    executed: str | None = None
+
+    @classmethod
+    def of(cls, act: TeacherAction, ranges, yaw: float) -> LabeledScan:
+        return cls(scan_id=act.scan_id, action=act.action, origin=act.origin, seq=act.seq,
+                   ranges=ranges, yaw=float(yaw), source=act.source, ts=act.ts,
+                   executed=act.executed)
+
+    def action_message(self) -> TeacherAction:
+        """The label alone, as it was first published."""
+        return TeacherAction(scan_id=self.scan_id, action=self.action, source=self.source,
+                             ts=self.ts, executed=self.executed, origin=self.origin,
+                             seq=self.seq)
+
+    def to_map(self):
+        m = self.action_message().to_map()
+        m["ranges"] = np.ascontiguousarray(self.ranges, dtype="<f4").tobytes()
+        m["yaw"] = float(self.yaw)
+        return m
+
+    @classmethod
+    def from_map(cls, m):
+        w = cls.WHAT
+        origin, seq = _get_origin(m, w, required=True)
+        return cls(
+            scan_id=get_int(m, "scan_id", w, minimum=0),
+            action=get_str(m, "action", w),
+            origin=origin,
+            seq=seq,
+            ranges=_get_ranges(m, "ranges", w),
+            yaw=get_float(m, "yaw", w),
+            source=get_opt(m, "source", get_str, w, default=""),
+            ts=get_opt(m, "ts", get_float, w, default=0.0),
+            executed=get_opt(m, "executed", get_str, w),
+        )
+
+
+@dataclass
+class LearnerAck(_Message):
+    """A learner's acknowledgement of a teacher session's labels (``rhbl/<robot>/learner/ack``):
+    the labels of ``origin`` with ``seq < upto`` and those in ``seqs`` (all above ``upto``) are
+    durably in its journal (or were refused as bad input, logged: never to be resent). The whole
+    state of that origin each time, so a later ack makes up for a lost one."""
+
+    WHAT: ClassVar[str] = "learner/ack"
+    MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
+    MAX_SEQS: ClassVar[int] = 4096
+    origin: str
+    upto: int
+    seqs: tuple[int, ...] = ()
+    ts: float = 0.0
+
+    def to_map(self):
+        return {"origin": self.origin, "upto": int(self.upto),
+                "seqs": [int(x) for x in self.seqs], "ts": float(self.ts)}
+
+    @classmethod
+    def from_map(cls, m):
+        w = cls.WHAT
+        origin, upto = get_str(m, "origin", w, max_len=MAX_ORIGIN), get_int(m, "upto", w, minimum=0)
+        if not origin:
+            raise DecodeError(f"{w}: field 'origin': expected a non-empty string, got ''")
+        raw = m.get("seqs", [])
+        if not isinstance(raw, list | tuple) or len(raw) > cls.MAX_SEQS:
+            raise DecodeError(f"{w}: field 'seqs': expected a list of at most {cls.MAX_SEQS} "
+                              f"integers, got {type(raw).__name__}"
+                              f"{' of ' + str(len(raw)) if isinstance(raw, list | tuple) else ''}")
+        seqs = tuple(get_int({"seqs": x}, "seqs", w, minimum=upto) for x in raw)
+        return cls(origin=origin, upto=upto, seqs=seqs,
+                   ts=get_opt(m, "ts", get_float, w, default=0.0))
 
 
 @dataclass

@@ -8,7 +8,8 @@ JS and a canvas, no network access beyond this process) shows the world, the rob
 laser, who drives and with which action, the learner's tree and the controller's decision; the
 person drives with the arrow keys/WASD, on-screen buttons or a gamepad. Commands go on the bus
 exactly as ``rhbl teacher`` sends them (``client.teacher.TeacherPublisher``): the velocity on
-``.../cmd/vel/teacher`` and the label for the scan the page displayed on ``.../teacher/action``.
+``.../cmd/vel/teacher`` and the label for the scan the page displayed on ``.../teacher/action``,
+kept and resent until a learner acknowledges it (once a learner of the robot was seen).
 
     rhbl console                                   # http://127.0.0.1:8080/
     rhbl console --http 0.0.0.0:8443 --tls-cert c.pem --tls-key k.pem   # token in the URL

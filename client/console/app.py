@@ -47,7 +47,7 @@ from aiohttp import WSMsgType, web
 
 from client._process import EXIT_USAGE, Context, ProcessError
 from client.behaviour.actions import DEFAULT_ACTIONS
-from client.teacher import TeacherPublisher, _Hold
+from client.teacher import DRAIN, TeacherPublisher, _Hold
 from protocol import keys
 from protocol.messages import Decision, Scan, State, TreeNotice, VelCmd, WorldInfo
 
@@ -143,7 +143,7 @@ class _Robot:
         self.world: str | None = None  # JSON of the WorldInfo
         self.world_asked = 0.0
         self.latest: dict[str, str] = {}  # kind -> JSON (for a page that starts watching)
-        self.scans: OrderedDict[int, float] = OrderedDict()  # id -> ts
+        self.scans: OrderedDict[int, Scan] = OrderedDict()  # id -> the scan (labels carry it)
         self.last_scan: tuple[int, float] | None = None
         self.holder: _Page | None = None
         self.action: str | None = None  # what the person commands now
@@ -199,7 +199,7 @@ class Console:
             "resolution": sc.resolution, "max_range": sc.max_range,
             "pose": [round(x, 4) for x in pose],
             "ranges": [round(x, 3) for x in sc.ranges.tolist()]})
-        self._hand(robot, "scan", text, (sc.id, sc.ts))
+        self._hand(robot, "scan", text, sc)
 
     def _on_notice(self, sample) -> None:
         n = _decode(TreeNotice, sample, "notice")
@@ -278,8 +278,8 @@ class Console:
         if r.world is None:  # the server came up after the console (asked at most every 5 s)
             self._ask_world(r)
         if scan is not None:
-            r.scans[scan[0]] = scan[1]
-            r.last_scan = scan
+            r.scans[scan.id] = scan
+            r.last_scan = (scan.id, scan.ts)
             while len(r.scans) > SCAN_MEMORY:
                 r.scans.popitem(last=False)
         r.latest[kind] = text
@@ -317,8 +317,8 @@ class Console:
         if r.holder is not None and r.holder is not page:
             return (f"page #{r.holder.id} holds robot {r.name}: watch, or take over "
                     f"explicitly")
-        ts = r.scans.get(scan_id)
-        if ts is None:
+        scan = r.scans.get(scan_id)
+        if scan is None:
             return (f"scan {scan_id} is not among the last {SCAN_MEMORY} scans of robot "
                     f"{r.name}: the page is behind, not driving on a stale view")
         if r.pubs is None:
@@ -326,13 +326,19 @@ class Console:
             # the teacher's hold token, one per robot driven (its ident names that robot)
             r.hold = _Hold(types.SimpleNamespace(session=self.session, scope=self.scope,
                                                  ident=f"{r.name}-{os.getpid()}"))
+        box = r.pubs.outbox
+        if box is not None and box.full:
+            return (f"{len(box)} labels wait for a learner's acknowledgement (at most "
+                    f"{box.cap}): not driving until one acknowledges them (they are resent "
+                    f"while a learner is up)")
+        ts = scan.ts
         changed = r.holder is not page or r.action != action
         r.holder = page
         vx, va = DEFAULT_ACTIONS[action]
         r.hold.acquire()  # before the command: the server may release the teacher at once
         r.pubs.command(vx, va, scan_id, ts)
         if scan_id > r.labelled:  # one label per scan (the learner learns it like any other)
-            r.pubs.label(scan_id, action, ts, action)
+            r.pubs.label(scan, action, action)
             r.labelled = scan_id
         r.action, r.last_drive = action, time.monotonic()
         if changed:
@@ -503,6 +509,7 @@ class Console:
         for r in self.robots.values():
             self._unhold(r, "the console stops")
             if r.pubs is not None:
+                r.pubs.drain(DRAIN)  # the person's last labels reach the learner
                 r.pubs.close()
         for sub in self.subs:
             with contextlib.suppress(Exception):

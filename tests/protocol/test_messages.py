@@ -192,3 +192,43 @@ def test_sim_requests_keys_and_set_pose_validation():
         SetPose.decode(msgpack.packb({"v": 1, "pose": [1, 2, 3], "reset_odom": "yes"}))
     p = SimPose.decode(SimPose((1.0, 2.0, 3.0), odom=(0.0, 0.0, 0.0), ts=4.5).encode())
     assert (p.pose, p.odom, p.ts) == ((1.0, 2.0, 3.0), (0.0, 0.0, 0.0), 4.5)
+
+
+def test_label_identity_resend_and_ack_messages():
+    from protocol.messages import LabeledScan, LearnerAck
+
+    assert keys.teacher_labeled_key("r0") == "rhbl/r0/teacher/labeled"
+    assert keys.learner_ack_key("r0") == "rhbl/r0/learner/ack"
+    act = TeacherAction(scan_id=4, action="fwd", ts=0.4, executed="rot-left", origin="ab12",
+                        seq=7)
+    assert _roundtrip(act) == act
+    old = TeacherAction(scan_id=4, action="fwd")  # without identity: as before
+    assert _roundtrip(old) == old and "origin" not in msgpack.unpackb(old.encode())
+    r = np.linspace(0.1, 8, 360).astype(np.float32)
+    lab = _roundtrip(LabeledScan.of(act, r, 1.25))
+    assert np.array_equal(lab.ranges, r) and lab.yaw == 1.25
+    assert lab.action_message() == act
+    ack = LearnerAck(origin="ab12", upto=10, seqs=(12, 15), ts=3.0)
+    assert _roundtrip(ack) == ack
+    base = {"v": 1, "scan_id": 4, "action": "fwd"}
+    for bad, field in [({"seq": 3}, "'origin'"), ({"origin": "a"}, "'seq'"),
+                       ({"origin": "", "seq": 1}, "'origin'"),
+                       ({"origin": "a" * 65, "seq": 1}, "'origin'"),
+                       ({"origin": 5, "seq": 1}, "'origin'"),
+                       ({"origin": "a", "seq": -1}, "'seq'"),
+                       ({"origin": "a", "seq": 1.5}, "'seq'")]:
+        with pytest.raises(DecodeError, match=field):
+            TeacherAction.decode(msgpack.packb({**base, **bad}))
+    good = msgpack.unpackb(lab.encode())
+    for bad, field in [({"origin": None}, "'origin'"), ({"seq": None}, "'seq'"),
+                       ({"ranges": b"\x00\x00\xc0\x7f"}, "'ranges'"),  # NaN
+                       ({"ranges": b"abc"}, "'ranges'"), ({"yaw": math.inf}, "'yaw'"),
+                       ({"yaw": None}, "'yaw'")]:
+        with pytest.raises(DecodeError, match=field):
+            LabeledScan.decode(msgpack.packb({**good, **bad}))
+    ok = {"v": 1, "origin": "a", "upto": 3, "seqs": [5]}
+    for bad, field in [({"upto": -1}, "'upto'"), ({"seqs": [2]}, "'seqs'"),
+                       ({"seqs": "x"}, "'seqs'"), ({"seqs": list(range(3, 5000))}, "'seqs'"),
+                       ({"seqs": [True]}, "'seqs'"), ({"origin": ""}, "'origin'")]:
+        with pytest.raises(DecodeError, match=field):
+            LearnerAck.decode(msgpack.packb({**ok, **bad}))

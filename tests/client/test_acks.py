@@ -1,0 +1,174 @@
+"""Labels delivered exactly once into the journal: the teacher's outbox (kept until acknowledged,
+resent after a timeout, bounded), the learner's deduplication (``LabelSet``: journal records,
+recovery, snapshot provenance across folding) and the pairing of resent labels."""
+
+from __future__ import annotations
+
+import msgpack
+import numpy as np
+import pytest
+
+from client.journal import Journal, LabelSet, _frame, journal_path
+from client.learner import LearnerCore, Pairing
+from client.teacher import Outbox
+from protocol.messages import LabeledScan, Scan, TeacherAction
+
+
+def _ranges(k: int) -> np.ndarray:
+    return np.random.default_rng(k).uniform(0.2, 3.0, 360).astype(np.float32)
+
+
+# ---- the label set ------------------------------------------------------------------------
+def test_label_set_keeps_a_watermark_and_the_few_above_it():
+    ls = LabelSet()
+    assert ls.add("a", 0) and ls.add("a", 1) and ls.add("a", 3)
+    assert not ls.add("a", 1)  # held already
+    assert ("a", 2) not in ls and ("a", 3) in ls and ("b", 0) not in ls
+    assert ls.ack("a") == (2, (3,))
+    assert ls.add("a", 2) and ls.ack("a") == (4, ())  # the gap filled: the watermark moves
+    assert len(ls) == 4
+    again = LabelSet.from_dict(msgpack.unpackb(msgpack.packb(ls.to_dict())))
+    assert again.ack("a") == (4, ()) and ("a", 3) in again and ("a", 4) not in again
+
+
+def test_label_set_is_bounded():
+    ls = LabelSet(max_above=10, max_origins=3)
+    ls.add("a", 0)
+    for q in range(2, 14):  # seq 1 never comes (its teacher died): the gap is given up
+        ls.add("a", q)
+    upto, above = ls.ack("a")
+    assert len(above) <= 10 and upto > 1 and ("a", 13) in ls
+    for o in "bcd":
+        ls.add(o, 0)
+    assert ls.origins() == ["b", "c", "d"]  # the least recently seen origin forgotten
+
+
+@pytest.mark.parametrize("bad", ["x", {"a": 3}, {"a": [1]}, {"a": [1, "x"]}, {"a": [1, [2.5]]},
+                                 {5: [1, []]}])
+def test_label_set_from_a_hostile_map_is_a_value_error(bad):
+    with pytest.raises(ValueError, match="label set"):
+        LabelSet.from_dict(bad)
+
+
+# ---- journal records ----------------------------------------------------------------------
+def test_journal_records_carry_the_label_identity_and_old_records_still_load(tmp_path):
+    path = tmp_path / "t.journal"
+    with Journal.create(path, fsync_interval=0.0) as j:
+        j.append(0, 0.0, "fwd", _ranges(0), 0.0, np.ones(5, np.float32))
+        j.append(1, 0.1, "fwd", _ranges(1), 0.0, np.ones(5, np.float32), "s1", 0)
+    # a record written by the code before identities: no "origin"/"seq" fields
+    old = {"i": 2, "scan": 2, "ts": 0.2, "label": "fwd", "yaw": 0.0,
+           "ranges": _ranges(2).tobytes(), "x": np.ones(5, "<f4").tobytes()}
+    with open(path, "ab") as f:
+        f.write(_frame(msgpack.packb(old, use_bin_type=True)))
+    with Journal.open(path) as j:
+        recs = list(j.records())
+    assert [(r.origin, r.seq) for r in recs] == [(None, None), ("s1", 0), (None, None)]
+
+
+# ---- the learner's deduplication ----------------------------------------------------------
+def _learn(core: LearnerCore, origin: str, seqs) -> list:
+    return [core.learn(100 + q, 0.1 * q, _ranges(q), 0.0, "fwd", origin, q) for q in seqs]
+
+
+def test_a_label_learned_twice_is_journaled_once_also_after_recovery(tmp_path):
+    out = tmp_path / "t.rhbl"
+    core = LearnerCore(out, features="wall")
+    assert None not in _learn(core, "s1", range(5))
+    assert _learn(core, "s1", [3]) == [None]  # resent: not journaled, not learned
+    assert core.applied == 5 and len(core.journal) == 5
+    core.journal.sync()  # "crash" before any snapshot: recovery from the journal alone
+    again = LearnerCore(out, features="wall")
+    assert again.labels.ack("s1") == (5, ())
+    got = _learn(again, "s1", [0, 4, 5])
+    assert got[:2] == [None, None] and got[2] is not None  # held twice; seq 5 is new
+    assert len(again.journal) == 6
+    # a label without identity (an old teacher) is never deduplicated
+    again.learn(1, 0.0, _ranges(1), 0.0, "fwd")
+    again.learn(1, 0.0, _ranges(1), 0.0, "fwd")
+    assert len(again.journal) == 8
+    for c in (core, again):
+        c.close()
+
+
+def test_folding_keeps_what_deduplication_needs(tmp_path):
+    out = tmp_path / "t.rhbl"
+    core = LearnerCore(out, features="wall", fold_journal=True)
+    _learn(core, "s1", [0, 1, 2, 4])
+    _learn(core, "s2", [0])
+    core.snapshot()  # folds every record into the snapshot
+    assert core.journal.base == 5 and list(core.journal.records(5)) == []
+    _learn(core, "s1", [5])  # only in the journal
+    core.journal.sync()
+    again = LearnerCore(out, features="wall", fold_journal=True)  # killed, restarted
+    assert again.labels.ack("s1") == (3, (4, 5)) and again.labels.ack("s2") == (1, ())
+    assert _learn(again, "s1", [1, 4, 5]) == [None, None, None]
+    assert _learn(again, "s1", [3])[0] is not None  # the missing one is learned
+    assert again.labels.ack("s1") == (6, ())
+    for c in (core, again):
+        c.close()
+    assert journal_path(out).exists()
+
+
+# ---- pairing a resent label -----------------------------------------------------------------
+def test_a_resent_label_is_ready_at_once_and_replaces_the_one_waiting_for_its_scan():
+    p = Pairing(scan_buffer=8, match_timeout=60.0)
+    act = TeacherAction(scan_id=40, action="fwd", origin="s1", seq=9)
+    p.on_label(act.encode())  # its scan never comes (the learner restarted)
+    assert p.pending and p.waiting() == 0
+    p.on_labeled(LabeledScan.of(act, _ranges(4), 0.5).encode())
+    scan, got = p.get(0.0)
+    assert got == act and scan.id == 40 and scan.pose[2] == 0.5
+    assert np.array_equal(scan.ranges, _ranges(4)) and not p.pending
+    p.on_labeled(b"\x81\xa1v\x01")  # malformed: counted, dropped
+    assert p.stats["resent"] == 1 and p.stats["bad"] == 1
+
+
+# ---- the teacher's outbox ---------------------------------------------------------------------
+class _Clock:
+    def __init__(self):
+        self.t = 0.0
+
+    def __call__(self):
+        return self.t
+
+
+def _scan(i: int) -> Scan:
+    return Scan(ts=0.1 * i, id=i, ranges=_ranges(i), pose=(0.0, 0.0, 0.1 * i))
+
+
+def test_outbox_acks_remove_gaps_and_stalls_resend_with_backoff_and_the_bound_says_full():
+    clock = _Clock()
+    box = Outbox(cap=6, resend_after=2.0, origin="s1", clock=clock)
+    items = [box.label(_scan(i), "fwd", None) for i in range(4)]
+    assert [x.seq for x in items] == [0, 1, 2, 3] and items[2].origin == "s1"
+    assert items[2].yaw == pytest.approx(0.2) and items[2].scan_id == 2
+    assert box.ack(2, (3,)) == 3 and len(box) == 1  # seq 0, 1 below the watermark; 3 above
+    assert box.due() == []  # seq 2 is a gap, but not 2 s old yet
+    clock.t = 1.0
+    box.label(_scan(4), "fwd", None)  # acknowledged in order, later
+    clock.t = 2.1
+    assert [x.seq for x in box.due()] == [2]  # a later label got through: 2 was missed
+    assert box.due() == []  # resent; the next time after 4 s (backoff)
+    clock.t = 2.5
+    assert box.ack(5) == 2  # seq 2 (the resend) and 4 acknowledged
+    # a learner that is behind but acknowledges in order gets no resends
+    for i in range(5, 8):
+        box.label(_scan(i), "fwd", None)
+    clock.t = 4.4
+    box.ack(6)
+    clock.t = 5.0
+    assert box.due() == []  # 6, 7 are 2.5 s old, but the learner progresses, in order
+    # a stuck learner (nothing acknowledged for 2 s) gets them again, with backoff
+    clock.t = 6.5
+    assert [x.seq for x in box.due()] == [6, 7]
+    clock.t = 10.0
+    assert box.due() == []
+    clock.t = 10.6
+    assert [x.seq for x in box.due()] == [6, 7]  # 4 s after the first resend
+    assert [x.seq for x in box.everything()] == [6, 7]  # a learner (re)started: all at once
+    assert box.stats["resent"] == 7 and not box.full
+    for i in range(8, 12):
+        box.label(_scan(i), "fwd", None)
+    assert len(box) == 6 and box.full  # the caller pauses; nothing is dropped
+    assert box.ack(12) == 6 and not box.full and box.due() == []
