@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import os
 import random
-import signal
 
 import pytest
 
@@ -41,7 +40,7 @@ def test_labels_in_flight_at_a_kill_are_resent_and_journaled_once(tmp_path):
         assert c.wait(lambda: len(c.labels) > 20, 120), "no labels"
         for _ in range(3):
             mark = len(c.labels)
-            os.kill(learner.pid, signal.SIGSTOP)
+            learner.pause()
             # labels published to the stopped learner: received by nobody who journals
             assert c.wait(lambda m=mark: len(c.labels) >= m + 5, 60), "no label in flight"
             learner.kill()
@@ -50,7 +49,7 @@ def test_labels_in_flight_at_a_kill_are_resent_and_journaled_once(tmp_path):
             assert c.wait(lambda m=mark: len(c.labels) >= m + 20, 120), "labelling not resumed"
         teacher_rc = teacher.stop()
         published = list(c.label_ids)
-        assert learner.stop(60) == 0 and teacher_rc == 0
+        assert learner.stop(timeout=60) == 0 and teacher_rc == 0
         recs, held = faults._held_labels(out)
         assert all(o is not None for o, _ in published)
         assert len(set(published)) == len(published) > 80
