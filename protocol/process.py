@@ -31,6 +31,7 @@ import os
 import signal
 import socket
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -141,12 +142,36 @@ def setup_logging(role: str, level: str = "INFO") -> None:
     )
 
 
+# how often a stop signal is delivered again while the main thread has not unwound
+REDELIVER_S = 1.0
+_stopping = threading.Event()
+
+
 def _raise_exit(signum, _frame) -> None:
+    if not _stopping.is_set():
+        _stopping.set()
+        threading.Thread(target=_redeliver, args=(signum,), name="stop-signal",
+                         daemon=True).start()
     raise SystemExit(EXIT_OK)
 
 
+def _redeliver(signum: int) -> None:
+    """Deliver the stop signal again every ``REDELIVER_S`` until its handler is gone (``run``
+    ignores stop signals once the body has unwound). The ``SystemExit`` a signal raises lands
+    wherever the main thread happens to be, and code there can swallow it: a signal that came
+    during numpy's first lazy ``import numpy.random`` was lost that way, and the teacher went on
+    waiting for a learner until it was killed."""
+    while True:
+        time.sleep(REDELIVER_S)
+        if signal.getsignal(signum) is not _raise_exit:
+            return
+        log.info("stop signal %d not acted on after %g s: delivered again", signum, REDELIVER_S)
+        signal.pthread_kill(threading.main_thread().ident, signum)
+
+
 def install_signal_handlers() -> None:
-    """SIGINT/SIGTERM -> SystemExit(0) in the main thread (a blocking ``recv`` is interrupted)."""
+    """SIGINT/SIGTERM -> SystemExit(0) in the main thread (a blocking ``recv`` is interrupted),
+    delivered again until the main thread has unwound (see ``_redeliver``)."""
     signal.signal(signal.SIGINT, _raise_exit)
     signal.signal(signal.SIGTERM, _raise_exit)
 
