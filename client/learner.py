@@ -324,15 +324,21 @@ class Pairing:
         self._said_behind = -1e9
 
     # -- the callbacks (zenoh threads) --
-    def on_scan(self, data: bytes) -> None:
-        if self._seen is not None:
-            self._seen()
+    def _decode(self, cls, data: bytes, what: str):
+        """The message, or None: a malformed one is counted (``bad``) and logged, dropped."""
         try:
-            scan = Scan.decode(data)
+            return cls.decode(data)
         except Exception as exc:  # noqa: BLE001 - DecodeError
             with self._cond:
                 self.stats["bad"] += 1
-            log.warning("dropped a malformed scan: %s", exc)
+            log.warning("dropped a malformed %s: %s", what, exc)
+            return None
+
+    def on_scan(self, data: bytes) -> None:
+        if self._seen is not None:
+            self._seen()
+        scan = self._decode(Scan, data, "scan")
+        if scan is None:
             return
         with self._cond:
             self.stats["scans"] += 1
@@ -353,12 +359,8 @@ class Pairing:
                 self.stats["forgotten"] += 1
 
     def on_label(self, data: bytes) -> None:
-        try:
-            act = TeacherAction.decode(data)
-        except Exception as exc:  # noqa: BLE001
-            with self._cond:
-                self.stats["bad"] += 1
-            log.warning("dropped a malformed teacher action: %s", exc)
+        act = self._decode(TeacherAction, data, "teacher action")
+        if act is None:
             return
         with self._cond:
             self.stats["labels"] += 1
@@ -381,12 +383,8 @@ class Pairing:
     def on_labeled(self, data: bytes) -> None:
         """A label the teacher resent with its scan (``LabeledScan``: the learner had not
         acknowledged it): ready at once, no pairing."""
-        try:
-            lab = LabeledScan.decode(data)
-        except Exception as exc:  # noqa: BLE001
-            with self._cond:
-                self.stats["bad"] += 1
-            log.warning("dropped a malformed labeled scan: %s", exc)
+        lab = self._decode(LabeledScan, data, "labeled scan")
+        if lab is None:
             return
         act = lab.action_message()
         scan = Scan(ts=lab.ts, id=lab.scan_id, ranges=lab.ranges, pose=(0.0, 0.0, lab.yaw))
