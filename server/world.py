@@ -435,6 +435,10 @@ class World:
         self._beam_dc = self._beam_ds = None
         self._inv_key: tuple[float, bytes] | None = None  # (heading, segments) of _inv
         self._inv = None
+        self._buf_tr, self._buf_u, self._buf_tmp = (
+            np.empty((n_seg, LASER.count), dtype=np.float32) for _ in range(3))
+        self._buf_hit, self._buf_ok = (np.empty((n_seg, LASER.count), dtype=bool)
+                                       for _ in range(2))
         self._bearings = LASER.bearings()
         self.reset()
 
@@ -749,24 +753,27 @@ class World:
         if len(idx) == 0:
             return np.full(LASER.count, max_r, dtype=np.float32), dc, ds
         # float32 for the (segments x beams) work: about 20% faster, ample for ranges <= 8 m
+        k = len(idx)
         a32 = a.take(idx, axis=1).astype(np.float32)
         e32 = self._seg_e32.take(idx, axis=1)
         ax, ay = a32[0][:, None], a32[1][:, None]
         ex, ey = e32[0][:, None], e32[1][:, None]
         key = (yaw, idx.tobytes())
+        tr, u, tmp = self._buf_tr[:k], self._buf_u[:k], self._buf_tmp[:k]
+        hit, ok = self._buf_hit[:k], self._buf_ok[:k]
         with np.errstate(divide="ignore", invalid="ignore"):
             if key != self._inv_key:
                 inv = ey * dc
-                inv -= ex * ds
+                inv -= np.multiply(ex, ds, out=tmp)
                 np.divide(1.0, inv, out=inv)
                 self._inv_key, self._inv = key, inv
             inv = self._inv
-            tr = (ax * ey - ay * ex) * inv
-            u = ax * ds
-            u -= ay * dc
+            np.multiply(ax * ey - ay * ex, inv, out=tr)
+            np.multiply(ax, ds, out=u)
+            u -= np.multiply(ay, dc, out=tmp)
             u *= inv
-        hit = u >= 0.0
-        hit &= u <= 1.0
-        hit &= tr > 0.0
+        np.greater_equal(u, 0.0, out=hit)
+        hit &= np.less_equal(u, 1.0, out=ok)
+        hit &= np.greater(tr, 0.0, out=ok)
         ranges = np.minimum.reduce(tr, axis=0, where=hit, initial=max_r)
         return ranges, dc, ds
