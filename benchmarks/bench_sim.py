@@ -201,6 +201,7 @@ def fleet_poses(spec, tiles: int, n: int) -> list[tuple[float, float, float]]:
 
 def serve_controller(endpoint: str) -> int:
     """Child process: one controller for every robot, answering each scan with its id."""
+    import os
     import signal
     import threading
 
@@ -219,6 +220,8 @@ def serve_controller(endpoint: str) -> int:
             robot = str(sample.key_expr).split("/")[1]
             scan = Scan.decode(sample.payload.to_bytes())
             vx, va = reflex(np.asarray(scan.ranges))
+            if done.is_set():  # stopping: the session may close under a late callback
+                return
             pub = pubs.get(robot)
             if pub is None:
                 pub = pubs[robot] = s.declare_publisher(
@@ -226,9 +229,12 @@ def serve_controller(endpoint: str) -> int:
             pub.put(VelCmd(vx=vx, va=va, source="controller", scan_id=scan.id).encode())
 
         sub = s.declare_subscriber(f"{keys.PREFIX}/*/laser/0/data/scan", on_scan)
+        t0 = os.times()
         print("ready", flush=True)
         done.wait()
         sub.undeclare()
+        t1 = os.times()  # CPU seconds while serving, for the parent's figures
+        print(f"cpu {t1.user + t1.system - t0.user - t0.system:.3f}", flush=True)
     return 0
 
 
@@ -283,9 +289,11 @@ def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
     child = subprocess.Popen(
         [sys.executable, __file__, "--serve-controller", endpoint],
         stdout=subprocess.PIPE, text=True, start_new_session=True)
+    tick_cpu: list[float] = []
     try:
         if child.stdout.readline().strip() != "ready":
             raise SystemExit("the controller process did not start")
+        ready = time.monotonic()
         ticks = missed = 0
         worst = 0.0
         warm = 10  # ticks before counting (connections, first publishers)
@@ -297,9 +305,10 @@ def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
                 time.sleep(delay)
             start = next_t
             next_t += _PERIOD
-            a = time.perf_counter()
+            a, c = time.perf_counter(), time.thread_time()
             node.tick()
             took = time.perf_counter() - a
+            tick_cpu.append(time.thread_time() - c)
             for r in node._robots:
                 scan_of[r.name] = r.scan_id
             ticks += 1
@@ -307,6 +316,8 @@ def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
                 lat.clear()
                 answered[0] = 0
                 counted_from = ticks
+                tick_cpu.clear()
+                cpu0, wall0 = os.times(), time.monotonic()
             if ticks > warm:
                 worst = max(worst, took)
                 if time.monotonic() - start > _PERIOD:
@@ -314,24 +325,31 @@ def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
                 if next_t < time.monotonic() - _PERIOD:  # behind by a whole tick: skip it
                     next_t = time.monotonic()
         counted = ticks - counted_from
+        cpu1, wall1 = os.times(), time.monotonic()
         ms = np.asarray(lat) * 1e3 if lat else np.asarray([math.nan])
-        return {
+        result = {
             "robots": n, "tiles": tiles, "ticks": counted, "missed": missed,
             "worst_ms": worst * 1e3, "answered": answered[0] / max(counted * n, 1),
             "p50": float(np.percentile(ms, 50)), "p90": float(np.percentile(ms, 90)),
             "p99": float(np.percentile(ms, 99)),
             "hz": counted / (time.monotonic() - t0 - warm * _PERIOD),
+            "tick_cpu_ms": float(np.median(tick_cpu)) * 1e3,
+            "server_cpu": (cpu1.user + cpu1.system - cpu0.user - cpu0.system) / (wall1 - wall0),
         }
     finally:
         os.kill(child.pid, signal.SIGTERM)
         try:
-            child.wait(10)
+            out, _ = child.communicate(timeout=10)
         except subprocess.TimeoutExpired:
             os.kill(child.pid, signal.SIGKILL)
-            child.wait()
+            out, _ = child.communicate()
         sub.undeclare()
         node.close()
         session.close()
+    # the controller's CPU seconds from its "ready" to its end (the warm-up ticks included)
+    cpu = [float(line.split()[1]) for line in out.splitlines() if line.startswith("cpu ")]
+    result["controller_cpu"] = cpu[0] / (time.monotonic() - ready) if cpu else math.nan
+    return result
 
 
 def compare_scans(spec, n: int, tiles: int, repeats: int = 5) -> tuple[float, float]:
@@ -426,7 +444,10 @@ def main(argv: list[str] | None = None) -> int:
               f"controller process for all, {r['ticks']} ticks ({r['hz']:.2f} Hz): "
               f"{r['missed']} ticks missed, worst tick {r['worst_ms']:.1f} ms; "
               f"{r['answered'] * 100:.1f}% of scans answered in time; sense-to-act "
-              f"p50 {r['p50']:.1f} ms, p90 {r['p90']:.1f} ms, p99 {r['p99']:.1f} ms")
+              f"p50 {r['p50']:.1f} ms, p90 {r['p90']:.1f} ms, p99 {r['p99']:.1f} ms; "
+              f"server tick CPU p50 {r['tick_cpu_ms']:.1f} ms, server process "
+              f"{r['server_cpu'] * 100:.0f}% of a core (zenoh and command callbacks included), "
+              f"controller process {r['controller_cpu'] * 100:.0f}%")
         return 0
 
     r = bench_in_process(args.world, args.seconds)

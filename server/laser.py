@@ -158,9 +158,11 @@ def walls(
     segs: np.ndarray,
     bearings: np.ndarray,
     max_range: float,
+    beams: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cast R lasers against the wall segments at once: (ranges, dc, ds), each (R, beams)
-    float32 (dc, ds: cosines and sines of the beams' world angles).
+    float32 (dc, ds: cosines and sines of the beams' world angles, computed here unless given
+    as ``beams``: ``float32(cos(bearings + yaw))`` and the sines, per laser).
 
     A segment is cast only for lasers that can see it (not wholly behind, within range: the
     culling of a one-laser cast) and only over the beams of its angular interval (one beam of
@@ -169,9 +171,12 @@ def walls(
     """
     n, count = len(yaws), len(bearings)
     resolution = (bearings[-1] - bearings[0]) / (count - 1)
-    ang = bearings[None, :] + yaws[:, None]
-    dc = np.cos(ang).astype(np.float32)
-    ds = np.sin(ang).astype(np.float32)
+    if beams is None:
+        ang = bearings[None, :] + yaws[:, None]
+        dc = np.cos(ang).astype(np.float32)
+        ds = np.sin(ang).astype(np.float32)
+    else:
+        dc, ds = beams
     ox, oy = origins[:, 0:1], origins[:, 1:2]
     ax = segs[None, :, 0] - ox  # (R, S) float64
     ay = segs[None, :, 1] - oy

@@ -458,6 +458,7 @@ class World:
         if len(poses) != self.n_robots:
             raise ValueError(f"reset needs {self.n_robots} poses, got {len(poses)}")
         self._rng = np.random.default_rng(self.seed)
+        self._fleet_yaw = None  # the fleet's kept beam directions (_fleet_beams)
         space = pymunk.Space()
         space.gravity = (0.0, 0.0)
         space.collision_slop = 0.001
@@ -691,7 +692,7 @@ class World:
                 out[k], dcs[k], dss[k] = self._scan_walls(*origins[k], yaws[k])
         else:
             out, dcs, dss = laser.walls(origins, yaws, self._segs, self._bearings,
-                                        LASER.max_range)
+                                        LASER.max_range, beams=self._fleet_beams(idx, yaws))
         if self.n_robots > 1:
             centres = np.asarray([r.body.position for r in self._robots], dtype=np.float64)
             out = laser.robots_into(out, origins, yaws, np.asarray(idx, dtype=np.intp), centres,
@@ -701,6 +702,24 @@ class World:
             for k in range(n):
                 out[k] = self._add_noise(out[k])
         return out
+
+    def _fleet_beams(self, idx: list[int], yaws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Float32 cosines and sines of the beams of robots ``idx`` at headings ``yaws``, (n,
+        beams) each; every robot's are kept and recomputed only when its heading changed (a
+        robot driving straight or standing costs nothing here)."""
+        if self._fleet_yaw is None:
+            self._fleet_yaw = np.full(self.n_robots, np.nan)  # NaN: never equal, none kept
+            self._fleet_dc = np.empty((self.n_robots, LASER.count), dtype=np.float32)
+            self._fleet_ds = np.empty((self.n_robots, LASER.count), dtype=np.float32)
+        rows = np.asarray(idx, dtype=np.intp)
+        turned = yaws != self._fleet_yaw[rows]
+        if turned.any():
+            rows_t, yaws_t = rows[turned], yaws[turned]
+            ang = self._bearings[None, :] + yaws_t[:, None]
+            self._fleet_dc[rows_t] = np.cos(ang)  # rounded to float32 as astype does
+            self._fleet_ds[rows_t] = np.sin(ang)
+            self._fleet_yaw[rows_t] = yaws_t
+        return self._fleet_dc[rows], self._fleet_ds[rows]
 
     def _add_noise(self, ranges: np.ndarray) -> np.ndarray:
         if self.range_noise > 0.0:
