@@ -10,8 +10,8 @@
 3. ``--fleet N``: N robots at 10 Hz real time for ``--fleet-seconds``, every robot driven by one
    controller process serving them all (a wall-avoiding reflex answering each scan with its id,
    over the same zenoh router as the server): ticks missed, worst tick, and sense-to-act
-   latency (a robot's scan put by the server -> its answer reaching the node's command
-   handler) percentiles; where the time goes: the server's tick CPU (median), the server
+   latency (a robot's scan put by the server -> its answer reaching the server's session, by
+   the timestamp zenoh's router gives it) percentiles; where the time goes: the server's tick CPU (median), the server
    process's CPU (zenoh's threads and the command handler included) and the controller
    process's. A world too small for N robots is tiled (``--tiles``: copies side by side,
    1 m apart; a robot sees only its own room's robots, the walls hide the rest).
@@ -248,7 +248,7 @@ class _TimedPub:
 
     def put(self, payload: bytes) -> None:
         self.pub.put(payload)
-        self.sent[self.name] = time.perf_counter()
+        self.sent[self.name] = time.time()  # the clock of zenoh's timestamps
 
 
 def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
@@ -276,12 +276,14 @@ def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
     for r in node._robots:
         r.pubs["scan"] = _TimedPub(r.pubs["scan"], r.name, sent)
 
-    # a command's arrival is timed in the node's own handler (a second subscriber decoding every
-    # command again would add its work to the server process being measured)
+    # a command's arrival is the timestamp the server's session (the router) gave it on the way
+    # in, read in the node's own handler (the node takes commands at its tick; a second
+    # subscriber decoding every command again would add its work to the server being measured)
     node_on_cmd = node._on_cmd
 
     def on_cmd(r, sample) -> None:
-        t = time.perf_counter()
+        stamp = sample.timestamp
+        t = stamp.get_time().timestamp() if stamp is not None else time.time()
         node_on_cmd(r, sample)
         if r.answers.get("controller") == scan_of.get(r.name) and r.name in sent:
             lat.append(t - sent[r.name])

@@ -10,6 +10,10 @@ world by ``1/rate`` s and publishes every robot's state and scan. Pacing:
   robot got a command answering scan ``k`` (``scan_id == k``) from its driving source (from any
   source when none holds it), or after ``lockstep_timeout`` real seconds.
 
+Commands: free-running, zenoh queues each robot's commands and the tick takes them all before
+applying (a command is offered at the sim time it would have had on arrival: only the tick moves
+sim time); in lock-step each command is handled on arrival, as the wait for answers needs.
+
 Everything arriving from the network is validated; a bad message is dropped with a log line
 and counted in ``counters`` (never raised, never applied).
 """
@@ -64,6 +68,7 @@ log = logging.getLogger(__name__)
 
 _LASER_SIZE = (0.156, 0.155)  # m, a SICK LMS200's footprint
 _DRIVER_REPEAT = 1.0  # s sim time between repeated driver messages
+_CMD_QUEUE = 1024  # commands queued per robot between two ticks (zenoh waits when it is full)
 
 
 def world_info(spec: WorldSpec) -> WorldInfo:
@@ -130,6 +135,7 @@ class _RobotIO:
         self.driver = ""
         self.driver_sent = -math.inf
         self.pubs: dict[str, Any] = {}
+        self.cmd_queue: Any = None  # the command subscriber's queue (not in lock-step)
 
 
 class ServerNode:
@@ -211,12 +217,19 @@ class ServerNode:
             r.pubs["state"] = self._keep(s.declare_publisher(keys.state_key(r.name)))
             r.pubs["scan"] = self._keep(s.declare_publisher(keys.scan_key(r.name)))
             r.pubs["driver"] = self._keep(s.declare_publisher(keys.driver_key(r.name)))
-            self._keep(
-                s.declare_subscriber(
-                    keys.cmd_vel_subscription(r.name),
-                    lambda sample, r=r: self._on_cmd(r, sample),
+            if self.lockstep:  # an answer wakes the lock-step wait at once
+                self._keep(
+                    s.declare_subscriber(
+                        keys.cmd_vel_subscription(r.name),
+                        lambda sample, r=r: self._on_cmd(r, sample),
+                    )
                 )
-            )
+            else:  # queued by zenoh, taken by the tick (_take_commands): no callback each
+                r.cmd_queue = self._keep(
+                    s.declare_subscriber(
+                        keys.cmd_vel_subscription(r.name), zenoh.handlers.FifoChannel(_CMD_QUEUE)
+                    )
+                )
             for iface, name in [
                 ("position2d", "get_geom"),
                 ("position2d", "set_odom"),
@@ -257,6 +270,9 @@ class ServerNode:
         Idempotent."""
         self._stop.set()
         self._scope.close()
+        with self._cond:  # drop the command queues: a zenoh thread waiting on a full one ends
+            for r in self._robots:
+                r.cmd_queue = None
 
     def __enter__(self) -> ServerNode:
         return self
@@ -481,9 +497,21 @@ class ServerNode:
                 return False
         return True
 
+    def _take_commands(self) -> None:
+        """Handle the commands queued since the last tick (free-running: a callback for each of
+        thousands of commands a second took the interpreter's lock from the tick every time).
+        A command is offered at the same sim time as from a callback: the tick alone moves it."""
+        for r in self._robots:
+            queue = r.cmd_queue
+            if queue is None:
+                continue
+            while (sample := queue.try_recv()) is not None:
+                self._on_cmd(r, sample)
+
     def tick(self) -> None:
-        """One tick: apply arbitrated commands, step, publish."""
+        """One tick: take the queued commands, apply the arbitrated ones, step, publish."""
         with self._cond:
+            self._take_commands()
             self._apply_commands()
             self.world.step(self.dt)
             self.ticks += 1
