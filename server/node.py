@@ -505,8 +505,13 @@ class ServerNode:
             queue = r.cmd_queue
             if queue is None:
                 continue
-            while (sample := queue.try_recv()) is not None:
-                self._on_cmd(r, sample)
+            try:
+                while (sample := queue.try_recv()) is not None:
+                    self._on_cmd(r, sample)
+            except zenoh.ZError as e:  # undeclared under a tick: the node is closing
+                r.cmd_queue = None
+                if not self._stop.is_set():
+                    log.warning("%s: the command queue is gone: %s", r.name, e)
 
     def tick(self) -> None:
         """One tick: take the queued commands, apply the arbitrated ones, step, publish."""

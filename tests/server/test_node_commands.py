@@ -69,3 +69,4 @@ def test_keep_freed_memory_is_set_where_the_c_library_allows_it():
     except (OSError, AttributeError):
         pytest.skip("no mallopt in this C library")
     assert keep_freed_memory() is True
+
