@@ -11,9 +11,9 @@
    controller process serving them all (a wall-avoiding reflex answering each scan with its id,
    over the same zenoh router as the server): ticks missed, worst tick, and sense-to-act
    latency (a robot's scan put by the server -> its answer reaching the server's session, by
-   the timestamp zenoh's router gives it) percentiles; where the time goes: the server's tick CPU (median), the server
-   process's CPU (zenoh's threads and the command handler included) and the controller
-   process's. A world too small for N robots is tiled (``--tiles``: copies side by side,
+   the timestamp zenoh's router gives it) percentiles; where the time goes: the server's tick
+   CPU (median), the server process's CPU (zenoh's threads and the command handler included)
+   and the controller process's. A world too small for N robots is tiled (``--tiles``: copies side by side,
    1 m apart; a robot sees only its own room's robots, the walls hide the rest).
 
 The laser of all robots is cast together (``World.scans``, ``server.laser``): the robots-seen-by-
