@@ -10,8 +10,10 @@
 3. ``--fleet N``: N robots at 10 Hz real time for ``--fleet-seconds``, every robot driven by one
    controller process serving them all (a wall-avoiding reflex answering each scan with its id,
    over the same zenoh router as the server): ticks missed, worst tick, and sense-to-act
-   latency (server's end of publishing a tick -> that tick's command arriving at the server)
-   percentiles. A world too small for N robots is tiled (``--tiles``: copies side by side,
+   latency (a robot's scan put by the server -> its answer reaching the server's session, by
+   the timestamp zenoh's router gives it) percentiles; where the time goes: the server's tick
+   CPU (median), the server process's CPU (zenoh's threads and the command handler included)
+   and the controller process's. A world too small for N robots is tiled (``--tiles``: copies side by side,
    1 m apart; a robot sees only its own room's robots, the walls hide the rest).
 
 The laser of all robots is cast together (``World.scans``, ``server.laser``): the robots-seen-by-
@@ -68,6 +70,9 @@ def reflex(ranges: np.ndarray) -> tuple[float, float]:
 
 
 def bench_in_process(world: str, seconds: float, repeats: int = 3) -> dict:
+    """Best of ``repeats`` runs of ``seconds`` sim seconds, then one more run timing the scan
+    and the step of every tick apart (the same ticks: the robot drives, turns and stops as in
+    the timed runs)."""
     spec = load_world(server.world_path(world))
     steps = int(round(seconds * 10))
     best = math.inf
@@ -78,22 +83,24 @@ def bench_in_process(world: str, seconds: float, repeats: int = 3) -> dict:
             w.set_command(0, *reflex(w.scan(0)))
             w.step(0.1)
         best = min(best, time.perf_counter() - t)
-    w = World(spec)
-    n = 2000
-    t = time.perf_counter()
-    for _ in range(n):
-        w.scan(0)
-    scan_us = (time.perf_counter() - t) / n * 1e6
-    w.set_command(0, 0.3, 0.2)
-    t = time.perf_counter()
-    for _ in range(n):
+    w = World(spec, robots=1, seed=0)
+    clock = time.perf_counter
+    scan_s = step_s = 0.0
+    for _ in range(steps):
+        t0 = clock()
+        r = w.scan(0)
+        t1 = clock()
+        w.set_command(0, *reflex(r))
+        t2 = clock()
         w.step(0.1)
-    step_us = (time.perf_counter() - t) / n * 1e6
+        t3 = clock()
+        scan_s += t1 - t0
+        step_s += t3 - t2
     return {
         "rtf": seconds / best,
         "tick_us": best / steps * 1e6,
-        "scan_us": scan_us,
-        "step_us": step_us,
+        "scan_us": scan_s / steps * 1e6,
+        "step_us": step_s / steps * 1e6,
         "segments": len(spec.segments()),
     }
 
@@ -196,6 +203,7 @@ def fleet_poses(spec, tiles: int, n: int) -> list[tuple[float, float, float]]:
 
 def serve_controller(endpoint: str) -> int:
     """Child process: one controller for every robot, answering each scan with its id."""
+    import os
     import signal
     import threading
 
@@ -214,6 +222,8 @@ def serve_controller(endpoint: str) -> int:
             robot = str(sample.key_expr).split("/")[1]
             scan = Scan.decode(sample.payload.to_bytes())
             vx, va = reflex(np.asarray(scan.ranges))
+            if done.is_set():  # stopping: the session may close under a late callback
+                return
             pub = pubs.get(robot)
             if pub is None:
                 pub = pubs[robot] = s.declare_publisher(
@@ -221,9 +231,12 @@ def serve_controller(endpoint: str) -> int:
             pub.put(VelCmd(vx=vx, va=va, source="controller", scan_id=scan.id).encode())
 
         sub = s.declare_subscriber(f"{keys.PREFIX}/*/laser/0/data/scan", on_scan)
+        t0 = os.times()
         print("ready", flush=True)
         done.wait()
         sub.undeclare()
+        t1 = os.times()  # CPU seconds while serving, for the parent's figures
+        print(f"cpu {t1.user + t1.system - t0.user - t0.system:.3f}", flush=True)
     return 0
 
 
@@ -235,7 +248,7 @@ class _TimedPub:
 
     def put(self, payload: bytes) -> None:
         self.pub.put(payload)
-        self.sent[self.name] = time.perf_counter()
+        self.sent[self.name] = time.time()  # the clock of zenoh's timestamps
 
 
 def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
@@ -247,8 +260,6 @@ def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
 
     import zenoh
 
-    from protocol import keys
-    from protocol.messages import VelCmd
     from protocol.session import make_config
     from server.node import ServerNode
 
@@ -265,22 +276,28 @@ def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
     for r in node._robots:
         r.pubs["scan"] = _TimedPub(r.pubs["scan"], r.name, sent)
 
-    def on_cmd(sample) -> None:
-        t = time.perf_counter()
-        robot = str(sample.key_expr).split("/")[1]
-        cmd = VelCmd.decode(sample.payload.to_bytes())
-        if cmd.scan_id is not None and cmd.scan_id == scan_of.get(robot) and robot in sent:
-            lat.append(t - sent[robot])
+    # a command's arrival is the timestamp the server's session (the router) gave it on the way
+    # in, read in the node's own handler (the node takes commands at its tick; a second
+    # subscriber decoding every command again would add its work to the server being measured)
+    node_on_cmd = node._on_cmd
+
+    def on_cmd(r, sample) -> None:
+        stamp = sample.timestamp
+        t = stamp.get_time().timestamp() if stamp is not None else time.time()
+        node_on_cmd(r, sample)
+        if r.answers.get("controller") == scan_of.get(r.name) and r.name in sent:
+            lat.append(t - sent[r.name])
             answered[0] += 1
 
-    sub = session.declare_subscriber(
-        f"{keys.PREFIX}/*/position2d/0/cmd/vel/controller", on_cmd)
+    node._on_cmd = on_cmd
     child = subprocess.Popen(
         [sys.executable, __file__, "--serve-controller", endpoint],
         stdout=subprocess.PIPE, text=True, start_new_session=True)
+    tick_cpu: list[float] = []
     try:
         if child.stdout.readline().strip() != "ready":
             raise SystemExit("the controller process did not start")
+        ready = time.monotonic()
         ticks = missed = 0
         worst = 0.0
         warm = 10  # ticks before counting (connections, first publishers)
@@ -292,9 +309,10 @@ def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
                 time.sleep(delay)
             start = next_t
             next_t += _PERIOD
-            a = time.perf_counter()
+            a, c = time.perf_counter(), time.thread_time()
             node.tick()
             took = time.perf_counter() - a
+            tick_cpu.append(time.thread_time() - c)
             for r in node._robots:
                 scan_of[r.name] = r.scan_id
             ticks += 1
@@ -302,6 +320,8 @@ def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
                 lat.clear()
                 answered[0] = 0
                 counted_from = ticks
+                tick_cpu.clear()
+                cpu0, wall0 = os.times(), time.monotonic()
             if ticks > warm:
                 worst = max(worst, took)
                 if time.monotonic() - start > _PERIOD:
@@ -309,24 +329,30 @@ def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
                 if next_t < time.monotonic() - _PERIOD:  # behind by a whole tick: skip it
                     next_t = time.monotonic()
         counted = ticks - counted_from
+        cpu1, wall1 = os.times(), time.monotonic()
         ms = np.asarray(lat) * 1e3 if lat else np.asarray([math.nan])
-        return {
+        result = {
             "robots": n, "tiles": tiles, "ticks": counted, "missed": missed,
             "worst_ms": worst * 1e3, "answered": answered[0] / max(counted * n, 1),
             "p50": float(np.percentile(ms, 50)), "p90": float(np.percentile(ms, 90)),
             "p99": float(np.percentile(ms, 99)),
             "hz": counted / (time.monotonic() - t0 - warm * _PERIOD),
+            "tick_cpu_ms": float(np.median(tick_cpu)) * 1e3,
+            "server_cpu": (cpu1.user + cpu1.system - cpu0.user - cpu0.system) / (wall1 - wall0),
         }
     finally:
         os.kill(child.pid, signal.SIGTERM)
         try:
-            child.wait(10)
+            out, _ = child.communicate(timeout=10)
         except subprocess.TimeoutExpired:
             os.kill(child.pid, signal.SIGKILL)
-            child.wait()
-        sub.undeclare()
+            out, _ = child.communicate()
         node.close()
         session.close()
+    # the controller's CPU seconds from its "ready" to its end (the warm-up ticks included)
+    cpu = [float(line.split()[1]) for line in out.splitlines() if line.startswith("cpu ")]
+    result["controller_cpu"] = cpu[0] / (time.monotonic() - ready) if cpu else math.nan
+    return result
 
 
 def compare_scans(spec, n: int, tiles: int, repeats: int = 5) -> tuple[float, float]:
@@ -421,7 +447,10 @@ def main(argv: list[str] | None = None) -> int:
               f"controller process for all, {r['ticks']} ticks ({r['hz']:.2f} Hz): "
               f"{r['missed']} ticks missed, worst tick {r['worst_ms']:.1f} ms; "
               f"{r['answered'] * 100:.1f}% of scans answered in time; sense-to-act "
-              f"p50 {r['p50']:.1f} ms, p90 {r['p90']:.1f} ms, p99 {r['p99']:.1f} ms")
+              f"p50 {r['p50']:.1f} ms, p90 {r['p90']:.1f} ms, p99 {r['p99']:.1f} ms; "
+              f"server tick CPU p50 {r['tick_cpu_ms']:.1f} ms, server process "
+              f"{r['server_cpu'] * 100:.0f}% of a core (zenoh and command callbacks included), "
+              f"controller process {r['controller_cpu'] * 100:.0f}%")
         return 0
 
     r = bench_in_process(args.world, args.seconds)

@@ -33,35 +33,40 @@ _BANDS = (1.0, 2.0, 3.5)  # m, distance bands of the nearest-first cast
 _BLOCK = 16  # beams per block of the occlusion bound
 
 
-def _block_max_table(ranges: np.ndarray) -> list[np.ndarray]:
-    """Sparse table over blocks of ``_BLOCK`` beams: ``table[k][row, j]`` is the maximum range
-    of blocks j .. j + 2**k - 1 of ``row``."""
+def _block_max_table(ranges: np.ndarray) -> np.ndarray:
+    """Sparse table over blocks of ``_BLOCK`` beams, (levels, rows, blocks):
+    ``table[k, row, j]`` is the maximum range of blocks j .. j + 2**k - 1 of ``row`` (j up to
+    blocks - 2**k; the rest of a level is unused)."""
     n, count = ranges.shape
     nb = -(-count // _BLOCK)
     padded = np.zeros((n, nb * _BLOCK), dtype=ranges.dtype)
     padded[:, :count] = ranges
-    table = [padded.reshape(n, nb, _BLOCK).max(axis=2)]
+    m = padded.reshape(n, nb, _BLOCK)
+    half = _BLOCK // 2
+    while half:  # the maximum of each block by halves: elementwise, not a short reduction
+        m = np.maximum(m[..., :half], m[..., half : 2 * half])
+        half //= 2
+    table = np.zeros((nb.bit_length(), n, nb), dtype=ranges.dtype)
+    table[0] = m[..., 0]
     span = 1
-    while 2 * span <= nb:
-        prev = table[-1]
-        nxt = np.maximum(prev[:, : nb - 2 * span + 1], prev[:, span : span + nb - 2 * span + 1])
-        table.append(nxt)
+    for k in range(1, len(table)):
+        w = nb - 2 * span + 1
+        np.maximum(table[k - 1, :, :w], table[k - 1, :, span : span + w], out=table[k, :, :w])
         span *= 2
     return table
 
 
-def _range_bound(table: list[np.ndarray], row: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+def _range_bound(table: np.ndarray, row: np.ndarray, lo: np.ndarray, hi: np.ndarray):
     """An upper bound (the maximum over whole blocks) of ``ranges[row, lo..hi]``, lo <= hi."""
+    levels, n, nb = table.shape
     blo, bhi = lo // _BLOCK, hi // _BLOCK
-    k = np.floor(np.log2(bhi - blo + 1)).astype(np.intp)
-    out = np.empty(len(row), dtype=table[0].dtype)
-    for level in np.unique(k):
-        sel = k == level
-        t = table[level]
-        r, a = row[sel], blo[sel]
-        b = bhi[sel] - (1 << int(level)) + 1
-        out[sel] = np.maximum(t[r, a], t[r, b])
-    return out
+    log2 = np.zeros(nb + 1, dtype=np.intp)  # floor(log2(i))
+    for i in range(2, nb + 1):
+        log2[i] = log2[i // 2] + 1
+    k = log2[bhi - blo + 1]
+    base = (k * n + row) * nb
+    flat = table.ravel()
+    return np.maximum(flat.take(base + blo), flat.take(base + bhi + 1 - np.left_shift(1, k)))
 
 
 def robots_into(
@@ -85,8 +90,8 @@ def robots_into(
     the new float32 ranges (R, beams).
     """
     n_lasers, count = ranges.shape
-    q = centres[None, :, :] - origins[:, None, :]  # (R, N, 2), float64
-    qx, qy = q[..., 0], q[..., 1]
+    qx = centres[None, :, 0] - origins[:, 0, None]  # (R, N), float64
+    qy = centres[None, :, 1] - origins[:, 1, None]
     qq = qx * qx + qy * qy
     c = qq - radius**2
     fx, fy = np.cos(yaws)[:, None], np.sin(yaws)[:, None]
@@ -131,14 +136,19 @@ def robots_into(
 def _cast(acc, count, li, lo, hi, pqx, pqy, pc, dc, ds, max_range) -> None:
     """Intersect each pair's beams lo..hi with its circle; fold the hits into ``acc``."""
     counts = hi - lo + 1
-    pair = np.repeat(np.arange(len(li)), counts)
-    flat = np.arange(len(pair)) + (li * count + lo - (np.cumsum(counts) - counts))[pair]
-    b = dc.ravel().take(flat) * pqx[pair] + ds.ravel().take(flat) * pqy[pair]  # float64
-    disc = b * b - pc[pair]
+    # element k of a pair is its beam lo + (k - the pair's first element); per-pair values
+    # are repeated (cheaper than a gather), per-beam ones gathered
+    flat = np.repeat(li * count + lo - (np.cumsum(counts) - counts), counts)
+    flat += np.arange(len(flat))
+    b = dc.ravel().take(flat) * np.repeat(pqx, counts)  # float64
+    b += ds.ravel().take(flat) * np.repeat(pqy, counts)
+    disc = b * b
+    disc -= np.repeat(pc, counts)
     with np.errstate(invalid="ignore"):
         t = b - np.sqrt(disc)
-    ok = (disc >= 0) & (t > 0)
-    t = np.where(ok, t, max_range)
+    ok = disc >= 0
+    ok &= t > 0
+    t[~ok] = max_range
     np.minimum.at(acc, flat, t)
 
 
@@ -148,9 +158,11 @@ def walls(
     segs: np.ndarray,
     bearings: np.ndarray,
     max_range: float,
+    beams: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cast R lasers against the wall segments at once: (ranges, dc, ds), each (R, beams)
-    float32 (dc, ds: cosines and sines of the beams' world angles).
+    float32 (dc, ds: cosines and sines of the beams' world angles, computed here unless given
+    as ``beams``: ``float32(cos(bearings + yaw))`` and the sines, per laser).
 
     A segment is cast only for lasers that can see it (not wholly behind, within range: the
     culling of a one-laser cast) and only over the beams of its angular interval (one beam of
@@ -159,9 +171,12 @@ def walls(
     """
     n, count = len(yaws), len(bearings)
     resolution = (bearings[-1] - bearings[0]) / (count - 1)
-    ang = bearings[None, :] + yaws[:, None]
-    dc = np.cos(ang).astype(np.float32)
-    ds = np.sin(ang).astype(np.float32)
+    if beams is None:
+        ang = bearings[None, :] + yaws[:, None]
+        dc = np.cos(ang).astype(np.float32)
+        ds = np.sin(ang).astype(np.float32)
+    else:
+        dc, ds = beams
     ox, oy = origins[:, 0:1], origins[:, 1:2]
     ax = segs[None, :, 0] - ox  # (R, S) float64
     ay = segs[None, :, 1] - oy
@@ -206,19 +221,27 @@ def walls(
         ok = np.flatnonzero(lo_i <= hi_i)
         li, sj, lo_i, hi_i = li[ok], sj[ok], lo_i[ok], hi_i[ok]
         counts = hi_i - lo_i + 1
-        pair = np.repeat(np.arange(len(li)), counts)
-        flat = np.arange(len(pair)) + (li * count + lo_i - (np.cumsum(counts) - counts))[pair]
+        # element k of pair p is beam lo_i[p] + (k - first element of p) of laser li[p]; the
+        # per-pair values are repeated (cheaper than a gather), the per-beam ones gathered
+        flat = np.repeat(li * count + lo_i - (np.cumsum(counts) - counts), counts)
+        flat += np.arange(len(flat))
         f4 = np.float32
-        pax = ax[li, sj].astype(f4)[pair]
-        pay = ay[li, sj].astype(f4)[pair]
-        pex = ex.astype(f4)[sj][pair]
-        pey = ey.astype(f4)[sj][pair]
+        qax, qay = ax[li, sj].astype(f4), ay[li, sj].astype(f4)
+        qex, qey = ex.astype(f4)[sj], ey.astype(f4)[sj]
+        num = qax * qey - qay * qex  # per pair: the same float32 value for all its beams
+        pax, pay = np.repeat(qax, counts), np.repeat(qay, counts)
+        pex, pey = np.repeat(qex, counts), np.repeat(qey, counts)
         bdc = dc.ravel().take(flat)
         bds = ds.ravel().take(flat)
         with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / (pey * bdc - pex * bds)
-            tr = (pax * pey - pay * pex) * inv
-            u = (pax * bds - pay * bdc) * inv
+            inv = pey * bdc
+            inv -= np.multiply(pex, bds, out=pey)
+            np.divide(1.0, inv, out=inv)
+            tr = np.repeat(num, counts)
+            tr *= inv
+            u = pax * bds
+            u -= np.multiply(pay, bdc, out=pex)
+            u *= inv
         bad = u < 0.0
         bad |= u > 1.0
         bad |= ~(tr > 0.0)

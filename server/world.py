@@ -373,6 +373,12 @@ def load_world(path: str | Path) -> WorldSpec:
 _WALL_RADIUS = 0.02  # m, physics half-thickness of a wall segment (the laser sees the centre line)
 _MAX_SUBSTEP = 0.025  # s
 _BATCH_WALLS = 8  # lasers from which World.scans casts the walls for all at once
+# pymunk's Body properties called directly: the same getters and setters without the
+# attribute lookup of every access (the step sets every robot's velocity at every substep)
+_body_position = pymunk.Body.position.fget
+_body_angle = pymunk.Body.angle.fget
+_body_set_velocity = pymunk.Body.velocity.fset
+_body_set_angular_velocity = pymunk.Body.angular_velocity.fset
 
 
 class _Robot:
@@ -415,16 +421,24 @@ class World:
         self.odom_noise = float(odom_noise)
         segs = spec.segments()
         self._segs = segs
-        self._seg_ax = segs[:, 0].copy()
-        self._seg_ay = segs[:, 1].copy()
-        self._seg_bx = segs[:, 2].copy()
-        self._seg_by = segs[:, 3].copy()
-        self._seg_ex = self._seg_bx - self._seg_ax
-        self._seg_ey = self._seg_by - self._seg_ay
-        ee = self._seg_ex**2 + self._seg_ey**2
-        self._seg_ee = np.where(ee > 0, ee, 1.0)
-        self._seg_ex32 = self._seg_ex.astype(np.float32)
-        self._seg_ey32 = self._seg_ey.astype(np.float32)
+        # the wall cast's tables (``_scan_walls``), computed once per world: endpoints A then B
+        # as rows x and y (2, 2S), edge vectors (2, S) in float64 and float32, and -|e|^2
+        n_seg = len(segs)
+        self._seg_ab = np.concatenate([segs[:, 0:2], segs[:, 2:4]]).T.copy()
+        self._seg_e = (segs[:, 2:4] - segs[:, 0:2]).T.copy()
+        self._seg_e32 = self._seg_e.astype(np.float32)
+        ee = self._seg_e[0] ** 2 + self._seg_e[1] ** 2
+        self._seg_neg_ee = -np.where(ee > 0, ee, 1.0)  # a / -ee is exactly -(a / ee)
+        self._n_seg = n_seg
+        self._origin = np.empty((2, 1))
+        self._beam_yaw: float | None = None  # the heading of the cached beam directions
+        self._beam_dc = self._beam_ds = None
+        self._inv_key: tuple[float, bytes] | None = None  # (heading, segments) of _inv
+        self._inv = None
+        self._buf_tr, self._buf_u, self._buf_tmp = (
+            np.empty((n_seg, LASER.count), dtype=np.float32) for _ in range(3))
+        self._buf_hit, self._buf_ok = (np.empty((n_seg, LASER.count), dtype=bool)
+                                       for _ in range(2))
         self._bearings = LASER.bearings()
         self.reset()
 
@@ -444,6 +458,7 @@ class World:
         if len(poses) != self.n_robots:
             raise ValueError(f"reset needs {self.n_robots} poses, got {len(poses)}")
         self._rng = np.random.default_rng(self.seed)
+        self._fleet_yaw = None  # the fleet's kept beam directions (_fleet_beams)
         space = pymunk.Space()
         space.gravity = (0.0, 0.0)
         space.collision_slop = 0.001
@@ -491,18 +506,22 @@ class World:
         n = max(1, math.ceil(dt / _MAX_SUBSTEP - 1e-9))
         h = dt / n
         robots = self._robots
+        position, angle = _body_position, _body_angle
+        set_velocity, set_angular_velocity = _body_set_velocity, _body_set_angular_velocity
+        cos, sin = math.cos, math.sin
         for r in robots:
             r.stall = False
-            x, y = r.body.position
-            r.last = (x, y, r.body.angle)
+            b = r.body
+            x, y = position(b)
+            r.last = (x, y, angle(b))
         space = self._space
         for _ in range(n):
             for r in robots:
                 b = r.body
                 vx, va = r.cmd
-                a = b.angle
-                b.velocity = (vx * math.cos(a), vx * math.sin(a))
-                b.angular_velocity = va
+                a = angle(b)
+                set_velocity(b, (vx * cos(a), vx * sin(a)))
+                set_angular_velocity(b, va)
             space.step(h)
         for r in robots:
             self._update_odometry(r, dt)
@@ -514,8 +533,8 @@ class World:
         # the step's motion as a rigid transform in the robot's frame at the step's start,
         # composed onto the odometry pose: exact without noise, whatever the path was
         b = r.body
-        x, y = b.position
-        a = b.angle
+        x, y = _body_position(b)
+        a = _body_angle(b)
         px, py, pa = r.last
         dxw, dyw = x - px, y - py
         c, s = math.cos(pa), math.sin(pa)
@@ -561,8 +580,8 @@ class World:
     def pose(self, i: int) -> tuple[float, float, float]:
         """True pose (x, y, yaw) of robot ``i``."""
         b = self._robots[i].body
-        x, y = b.position
-        return (float(x), float(y), wrap_angle(float(b.angle)))
+        x, y = _body_position(b)
+        return (float(x), float(y), wrap_angle(float(_body_angle(b))))
 
     def odom(self, i: int) -> tuple[float, float, float]:
         """Odometry pose of robot ``i`` (integrated from its start pose, optionally noisy)."""
@@ -673,7 +692,7 @@ class World:
                 out[k], dcs[k], dss[k] = self._scan_walls(*origins[k], yaws[k])
         else:
             out, dcs, dss = laser.walls(origins, yaws, self._segs, self._bearings,
-                                        LASER.max_range)
+                                        LASER.max_range, beams=self._fleet_beams(idx, yaws))
         if self.n_robots > 1:
             centres = np.asarray([r.body.position for r in self._robots], dtype=np.float64)
             out = laser.robots_into(out, origins, yaws, np.asarray(idx, dtype=np.intp), centres,
@@ -684,49 +703,96 @@ class World:
                 out[k] = self._add_noise(out[k])
         return out
 
+    def _fleet_beams(self, idx: list[int], yaws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Float32 cosines and sines of the beams of robots ``idx`` at headings ``yaws``, (n,
+        beams) each; every robot's are kept and recomputed only when its heading changed (a
+        robot driving straight or standing costs nothing here)."""
+        if self._fleet_yaw is None:
+            self._fleet_yaw = np.full(self.n_robots, np.nan)  # NaN: never equal, none kept
+            self._fleet_dc = np.empty((self.n_robots, LASER.count), dtype=np.float32)
+            self._fleet_ds = np.empty((self.n_robots, LASER.count), dtype=np.float32)
+        rows = np.asarray(idx, dtype=np.intp)
+        turned = yaws != self._fleet_yaw[rows]
+        if turned.any():
+            rows_t, yaws_t = rows[turned], yaws[turned]
+            ang = self._bearings[None, :] + yaws_t[:, None]
+            self._fleet_dc[rows_t] = np.cos(ang)  # rounded to float32 as astype does
+            self._fleet_ds[rows_t] = np.sin(ang)
+            self._fleet_yaw[rows_t] = yaws_t
+        return self._fleet_dc[rows], self._fleet_ds[rows]
+
     def _add_noise(self, ranges: np.ndarray) -> np.ndarray:
         if self.range_noise > 0.0:
             ranges = ranges + self._rng.normal(0.0, self.range_noise, LASER.count)
             np.clip(ranges, 0.0, LASER.max_range, out=ranges)
         return ranges.astype(np.float32, copy=False)
 
+    def _beams(self, yaw: float) -> tuple[np.ndarray, np.ndarray]:
+        """Float32 cosines and sines of the beams' world angles at heading ``yaw`` (read-only;
+        kept while the heading does not change: a robot driving straight reuses them)."""
+        if yaw != self._beam_yaw or self._beam_dc is None:
+            ang = self._bearings + yaw
+            dc = np.cos(ang).astype(np.float32)
+            ds = np.sin(ang).astype(np.float32)
+            dc.flags.writeable = ds.flags.writeable = False
+            self._beam_yaw, self._beam_dc, self._beam_ds = yaw, dc, ds
+        return self._beam_dc, self._beam_ds
+
     def _scan_walls(self, ox: float, oy: float, yaw: float):
         """Ranges to the walls from (ox, oy) facing ``yaw``: (float32 ranges, float32 cosines
-        and sines of the beams' world angles)."""
+        and sines of the beams' world angles, the last two read-only).
+
+        Segments wholly behind the laser or out of range are culled (float64), the rest cast
+        against every beam (float32, (segments, beams)). The per-heading part (beam directions
+        and the reciprocal of each segment's cross product with each beam) is kept while the
+        heading stays the same; the arithmetic of every element is that of a fresh cast."""
         max_r = LASER.max_range
-        ang = self._bearings + yaw
-        dc = np.cos(ang).astype(np.float32)
-        ds = np.sin(ang).astype(np.float32)
-        # segments: cull those wholly behind the laser or out of range
-        ax = self._seg_ax - ox
-        ay = self._seg_ay - oy
-        bx = self._seg_bx - ox
-        by = self._seg_by - oy
-        fx, fy = math.cos(yaw), math.sin(yaw)
-        ex, ey = self._seg_ex, self._seg_ey
-        ee = self._seg_ee
-        t = np.clip(-(ax * ex + ay * ey) / ee, 0.0, 1.0)
-        nx = ax + t * ex
-        ny = ay + t * ey
-        keep = ((ax * fx + ay * fy >= 0) | (bx * fx + by * fy >= 0)) & (
-            nx * nx + ny * ny < max_r * max_r
-        )
-        if keep.any():
-            # float32 for the (segments x beams) work: about 20% faster, ample for ranges <= 8 m
-            f4 = np.float32
-            ax, ay = ax[keep].astype(f4), ay[keep].astype(f4)
-            ex, ey = self._seg_ex32[keep], self._seg_ey32[keep]
-            # (S, beams) layout: the reduction runs over the short first axis
-            with np.errstate(divide="ignore", invalid="ignore"):
-                inv = 1.0 / (np.multiply.outer(ey, dc) - np.multiply.outer(ex, ds))
-                tr = ((ax * ey - ay * ex)[:, None]) * inv
-                u = (np.multiply.outer(ax, ds) - np.multiply.outer(ay, dc)) * inv
-                bad = u < 0.0
-                bad |= u > 1.0
-                bad |= tr <= 0.0
-                tr[bad] = max_r
-            ranges = tr.min(axis=0)
-            np.minimum(ranges, np.float32(max_r), out=ranges)
-        else:
-            ranges = np.full(LASER.count, max_r, dtype=np.float32)
+        dc, ds = self._beams(yaw)
+        n_seg = self._n_seg
+        o = self._origin
+        o[0, 0] = ox
+        o[1, 0] = oy
+        p = self._seg_ab - o  # (2, 2S): endpoints relative to the laser
+        fwd = p[0] * math.cos(yaw)
+        fwd += p[1] * math.sin(yaw)
+        front = fwd >= 0
+        keep = front[:n_seg] | front[n_seg:]  # not wholly behind the laser
+        a = p[:, :n_seg]
+        e = self._seg_e
+        ae = a * e
+        t = np.add(ae[0], ae[1])
+        np.divide(t, self._seg_neg_ee, out=t)
+        np.maximum(t, 0.0, out=t)
+        np.minimum(t, 1.0, out=t)
+        near = e * t
+        near += a  # the segment's point nearest the laser
+        near *= near
+        keep &= np.add(near[0], near[1]) < max_r * max_r
+        idx = keep.nonzero()[0]
+        if len(idx) == 0:
+            return np.full(LASER.count, max_r, dtype=np.float32), dc, ds
+        # float32 for the (segments x beams) work: about 20% faster, ample for ranges <= 8 m
+        k = len(idx)
+        a32 = a.take(idx, axis=1).astype(np.float32)
+        e32 = self._seg_e32.take(idx, axis=1)
+        ax, ay = a32[0][:, None], a32[1][:, None]
+        ex, ey = e32[0][:, None], e32[1][:, None]
+        key = (yaw, idx.tobytes())
+        tr, u, tmp = self._buf_tr[:k], self._buf_u[:k], self._buf_tmp[:k]
+        hit, ok = self._buf_hit[:k], self._buf_ok[:k]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if key != self._inv_key:
+                inv = ey * dc
+                inv -= np.multiply(ex, ds, out=tmp)
+                np.divide(1.0, inv, out=inv)
+                self._inv_key, self._inv = key, inv
+            inv = self._inv
+            np.multiply(ax * ey - ay * ex, inv, out=tr)
+            np.multiply(ax, ds, out=u)
+            u -= np.multiply(ay, dc, out=tmp)
+            u *= inv
+        np.greater_equal(u, 0.0, out=hit)
+        hit &= np.less_equal(u, 1.0, out=ok)
+        hit &= np.greater(tr, 0.0, out=ok)
+        ranges = np.minimum.reduce(tr, axis=0, where=hit, initial=max_r)
         return ranges, dc, ds

@@ -86,3 +86,21 @@ def test_range_noise_is_drawn_in_the_order_of_scan_calls():
     a.reset(poses=poses)
     b.reset(poses=poses)
     np.testing.assert_array_equal(a.scans(), np.stack([b.scan(i) for i in range(12)]))
+
+
+def test_robots_driving_straight_or_standing_keep_the_ranges_of_a_fresh_cast():
+    # the fleet keeps each robot's beam directions while its heading stays the same: robots
+    # standing, driving straight, turning, teleported, in changing subsets of lasers
+    spec = load_world(server.world_path("room"))
+    poses = random_fleet(spec, 16, np.random.default_rng(5))
+    world = World(spec, robots=len(poses))
+    world.reset(poses=poses)
+    for k in range(6):
+        np.testing.assert_array_equal(world.scans(), one_at_a_time(world))
+        subset = list(range(k % 2, len(poses), 2)) + [0]
+        np.testing.assert_array_equal(world.scans(subset), one_at_a_time(world)[subset])
+        for i in range(len(poses)):
+            world.set_command(i, 0.0 if i % 3 == 0 else 0.3, 0.5 if i % 3 == 1 and k % 2 else 0.0)
+        if k == 3:
+            world.set_pose(2, (*poses[2][:2], poses[2][2] + 1.0))
+        world.step(0.1)

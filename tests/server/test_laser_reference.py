@@ -46,3 +46,40 @@ def test_scan_matches_a_naive_ray_cast(name):
         assert ranges.dtype == np.float32 and ranges.shape == (LASER.count,)
         np.testing.assert_allclose(ranges, naive_scan(segments, *world.pose(0)), atol=1e-4)
         checked += 1
+
+
+def test_a_beam_along_a_wall_line_gets_a_finite_range():
+    # beam 0 of a laser facing exactly +y points exactly along +x: along the line of the
+    # protrusion's top wall (y = 1.5), which it meets end-on at (4.0, 1.5), 1 m away. The
+    # collinear segment's intersection is 0 * inf; it must not turn the range into NaN (a scan
+    # with NaN is not a valid message)
+    spec = load_world(server.world_path("room"))
+    world = World(spec)
+    pose = (3.0, 1.5, math.pi / 2)
+    assert world.pose_problem(0, pose) is None
+    world.reset(poses=[pose])
+    ranges = world.scan(0)
+    assert np.isfinite(ranges).all()
+    assert ranges[0] == pytest.approx(1.0, abs=1e-6)
+    fleet = World(spec, robots=8)  # the batched wall cast of 8 or more lasers agrees
+    fleet.reset(poses=[pose] + [(2.0 + 0.7 * k, 6.0, 0.0) for k in range(7)])
+    together = fleet.scans()
+    assert np.isfinite(together).all()
+    assert together[0][0] == ranges[0]
+
+
+def test_reusing_the_heading_gives_the_ranges_of_a_fresh_cast():
+    # a world keeps the beam directions and per-segment reciprocals of the last heading; a
+    # robot driving straight (or turning back to a heading) must get what a fresh world gets
+    spec = load_world(server.world_path("room"))
+    world = World(spec)
+    xmin, ymin, xmax, ymax = spec.bounds()
+    rng = np.random.default_rng(11)
+    yaw = 0.3
+    for k in range(200):
+        if k % 3 == 0:
+            yaw = float(rng.choice([rng.uniform(-math.pi, math.pi), 0.0, math.pi / 2, math.pi]))
+        x, y = rng.uniform(xmin, xmax), rng.uniform(ymin, ymax)
+        fresh = World(spec)._scan_walls(x, y, yaw)
+        for got, want in zip(world._scan_walls(x, y, yaw), fresh, strict=True):
+            np.testing.assert_array_equal(got, want)
