@@ -95,7 +95,11 @@ def main(argv: list[str] | None = None) -> int:
                     break
                 time.sleep(args.every)
     finally:
-        for p in procs.values():  # all asked at once, then each waited for (SIGKILL after 30 s)
+        # the teacher first: it waits for the learner to acknowledge its last labels (its
+        # outbox); then the others, all asked at once, each waited for (SIGKILL after 30 s)
+        if "teacher" in procs:
+            procs["teacher"].stop()
+        for p in procs.values():
             p.send_signal(signal.SIGINT)
         for p in procs.values():
             p.stop()
