@@ -86,6 +86,10 @@ class Recipe:
     compact: str = "none"           # "none" | "exact" | "prune" | "prune-balanced"
     compact_max_nodes: int | None = None    # prune: until at most this many spheres are left
     compact_max_error: float | None = None  # prune: fraction of the vectors it may make wrong
+    # compact also after the demonstrations and after every corrective round, so that the next
+    # round's teacher labels the states the compacted tree itself reaches (its errors there
+    # grow new spheres); the last round's compaction is the last step
+    compact_rounds: bool = False
 
     def __post_init__(self) -> None:
         def bad(name: str, expected: str) -> ValueError:
@@ -125,6 +129,11 @@ class Recipe:
         e = self.compact_max_error
         if e is not None and not (isinstance(e, int | float) and math.isfinite(e) and 0 <= e <= 1):
             raise bad("compact_max_error", "None or a fraction in [0, 1]")
+        if not isinstance(self.compact_rounds, bool):
+            raise bad("compact_rounds", "True or False")
+        if self.compact_rounds and self.compact == "none":
+            raise ValueError("recipe compact_rounds needs a compaction step (compact 'exact', "
+                             "'prune' or 'prune-balanced'), got compact 'none'")
         if (n is not None or e is not None) and not self.compact.startswith("prune"):
             raise ValueError(f"recipe compact_max_nodes/compact_max_error apply to compact "
                              f"'prune' or 'prune-balanced' only, got compact {self.compact!r}")
@@ -290,6 +299,9 @@ _FLAGS: list[tuple[str, str, dict, str]] = [
      "prune: delete the weakest spheres until at most N are left"),
     ("--compact-max-error", "compact_max_error", {"type": float},
      "prune: fraction of the learned vectors whose errors it may add"),
+    ("--compact-rounds", "compact_rounds", {"action": argparse.BooleanOptionalAction},
+     "with --compact: compact also after the demonstrations and after every corrective round, "
+     "so the next round corrects the states the compacted tree reaches"),
 ]
 
 
@@ -310,4 +322,11 @@ def recipe_from_args(task: str, args: argparse.Namespace) -> Recipe:
                is not None}
     if getattr(args, "recipe_seconds", None) is not None:
         changes["seconds"] = args.recipe_seconds
+    compact = changes.get("compact")
+    if compact is not None:  # --compact replaces the recipe's step: its other settings not
+        if not compact.startswith("prune"):  # given go with it
+            changes.setdefault("compact_max_nodes", None)
+            changes.setdefault("compact_max_error", None)
+        if compact == "none":
+            changes.setdefault("compact_rounds", False)
     return recipe_for(task).replace(**changes)
