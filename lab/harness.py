@@ -130,7 +130,13 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
     ``round_seconds`` (or until the goal) while the teacher labels every visited state, and the
     tree learns those labels (it only grows where it disagrees). The teacher takes over the
     wheels while any beam is closer than ``takeover`` metres (as the server's arbitration lets a
-    teacher override a controller), so a round never drives into a wall."""
+    teacher override a controller), so a round never drives into a wall.
+
+    ``recipe.compact`` (not "none") is the last step: the tree is compacted on every vector it
+    learned (``learner.compact``; ``learner.session["compaction"]`` is the record). With
+    ``recipe.compact_rounds`` it is compacted also after the demonstrations and after every
+    corrective round but the last (``learner.session["compact_rounds"]``), so each round drives,
+    and corrects, the compacted tree."""
     task = spec.task
     recipe = recipe_for(task) if recipe is None else recipe
     if recipe.task != task:

@@ -11,7 +11,8 @@ One training run (``lab.harness.train``): demonstrations from the ``starts`` pos
 ``segment`` seconds (or until the goal), then from sampled poses (``random_segment`` x
 ``segment`` each) until ``seconds`` of sim time are used; then ``rounds`` corrective (DAgger)
 rounds of ``round_seconds`` per start pose, first in copies of the world scaled by each of
-``round_scales``, each round also from ``round_free`` random free-space poses.
+``round_scales``, each round also from ``round_free`` random free-space poses; last, the
+``compact`` step (also after the demonstrations and after every round with ``compact_rounds``).
 """
 
 from __future__ import annotations
@@ -81,8 +82,8 @@ class Recipe:
     augment: int = 0
     augment_scale: float = 1.3
     # the last step: compact the tree on every vector it learned (``rhbl.compact``). None by
-    # default: every compaction measured lost closed-loop success on some world for some seed
-    # (docs/experiments.md, "Compact trees (issue)")
+    # default: every compaction measured, also between the rounds, lost closed-loop success on
+    # some world for some seed (docs/experiments.md, "Compact trees (issue)")
     compact: str = "none"           # "none" | "exact" | "prune" | "prune-balanced"
     compact_max_nodes: int | None = None    # prune: until at most this many spheres are left
     compact_max_error: float | None = None  # prune: fraction of the vectors it may make wrong
