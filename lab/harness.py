@@ -411,9 +411,10 @@ def main(args) -> int:
     if args.from_recording:
         from lab.recording import train_main
 
-        if getattr(args, "compact", None) not in (None, "none"):
-            raise ValueError(f"--compact {args.compact} applies to a simulated training run, "
-                             "not to --from-recording")
+        if getattr(args, "compact", None) not in (None, "none") or getattr(
+                args, "compact_rounds", None):
+            raise ValueError("--compact and --compact-rounds apply to a simulated training "
+                             "run, not to --from-recording")
         return train_main(args)
     if not args.world:
         raise ValueError("--world is required (or --from-recording FILE)")

@@ -170,3 +170,13 @@ def test_visited_states_label_what_the_tree_reaches_and_learn_nothing():
     assert learner.vectors == vectors
     after = learner.classifier.tree_arrays()
     assert all((before[k] == after[k]).all() for k in before)
+
+
+def test_compact_rounds_bad_combinations_are_named_errors(tmp_path, capsys):
+    out = str(tmp_path / "x.rhbl")
+    assert cli(["train", "--world", CORRIDOR, "--out", out, "--compact-rounds"]) == 2
+    assert "compact_rounds needs a compaction step" in capsys.readouterr().err
+    assert cli(["train", "--from-recording", str(tmp_path / "none.mcap"), "--out", out,
+                "--compact-rounds"]) == 2
+    assert "not to --from-recording" in capsys.readouterr().err
+    assert not (tmp_path / "x.rhbl").exists()
