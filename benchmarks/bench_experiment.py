@@ -17,7 +17,6 @@ import json
 import time
 
 from client.behaviour.features import FeatureSpec
-from client.behaviour.learning import DemonstrationLearner
 from lab.experiment import run_experiment
 from lab.recipe import COMPACT, RECIPES
 
@@ -125,7 +124,7 @@ def _selected_tree(name: str, clf, X, y):
 # recorded tree against all the states gathered so far; "roundsvisitedK:M[:N]" = both: the
 # "rounds:" training run, then its last compaction done again K times as in visitedK (the tree
 # before the last compaction against every vector it learned plus the visited states of the
-# tree compacted last)
+# tree compacted last; Recipe.compact_visits)
 VISIT_SCALES = (0.85, 1.2)
 VISIT_FREE = 4
 STAGED = ("rounds", "visited", "roundsvisited")
@@ -147,8 +146,8 @@ def _staged_tree(name: str, task: str, seed: int, folder, clf, feats, acts, meta
 
     import numpy as np
 
-    from client.behaviour.learning import load_snapshot
-    from lab.harness import resolve_world, train, visited_states
+    from client.behaviour.learning import DemonstrationLearner, load_snapshot
+    from lab.harness import make_learner, resolve_world, train, visited_states
 
     kind, times, kw = _staged(name)
     tag = Path(folder) / f"{task}-s{seed}-{name.replace(':', '-')}.rhbl"
@@ -156,18 +155,18 @@ def _staged_tree(name: str, task: str, seed: int, folder, clf, feats, acts, meta
         return load_snapshot(tag)[0]
     recipe = RECIPES[task]
     base, _, size = name.partition(":")[2].partition(":")
-    if kind in ("rounds", "roundsvisited"):
+    if kind in ("rounds", "roundsvisited"):  # the recipe's options: one training run
         r = recipe.replace(compact=base, compact_max_nodes=int(size) if size else None,
-                           compact_rounds=True)
-        learner = _KeepsLast(r.feature_spec(), r.task, r.tree_params())
+                           compact_rounds=True,
+                           compact_visits=times if kind == "roundsvisited" else 0,
+                           visit_scales=VISIT_SCALES, visit_free=VISIT_FREE)
+        learner = make_learner(r)
         train(resolve_world(r.world), learner, r, seed=seed)
-        if kind == "rounds":
-            learner.save(tag)
-            return learner.classifier
-        clf, (X, y), meta = learner.before, learner.recorded(), learner.metadata()
+        learner.save(tag)
+        return learner.classifier
     spec = resolve_world(recipe.world)
     visit = recipe.replace(round_free=VISIT_FREE)
-    xs, ys, small = [X], [y], (learner.classifier if kind == "roundsvisited" else clf)
+    xs, ys, small = [X], [y], clf
     for k in range(times):
         driver = DemonstrationLearner(feats, acts, task=task, classifier=small)
         vx, vy = visited_states(spec, driver, visit, seed=100 + seed + 1000 * k,
@@ -178,18 +177,6 @@ def _staged_tree(name: str, task: str, seed: int, folder, clf, feats, acts, meta
                             data=f"own vectors + {k + 1} x held-out visited states")
     small.save(str(tag), metadata=meta)
     return small
-
-
-class _KeepsLast(DemonstrationLearner):
-    """A recording learner that keeps the tree it had before its last compaction."""
-
-    def __init__(self, features, task, tree_params):
-        super().__init__(features, task=task, record=True, **tree_params)
-        self.before = None
-
-    def compact(self, method="exact", **options):
-        self.before = self.classifier
-        return super().compact(method, **options)
 
 
 def _compact_method(name: str) -> dict | None:

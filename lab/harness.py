@@ -136,7 +136,9 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
     learned (``learner.compact``; ``learner.session["compaction"]`` is the record). With
     ``recipe.compact_rounds`` it is compacted also after the demonstrations and after every
     corrective round but the last (``learner.session["compact_rounds"]``), so each round drives,
-    and corrects, the compacted tree."""
+    and corrects, the compacted tree. With ``recipe.compact_visits`` the last compaction is
+    redone against the learned vectors plus held-out states the compacted tree reaches
+    (``visited_states``)."""
     task = spec.task
     recipe = recipe_for(task) if recipe is None else recipe
     if recipe.task != task:
@@ -221,7 +223,10 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
                                           after_round=after_round)
     compaction = None
     if compact is not None:  # the last step
+        before = learner.classifier
         compaction = learner.compact(**compact, data="the last step")
+        if recipe.compact_visits > 0:
+            compaction = _compact_visits(spec, learner, before, compact, recipe, seed, policy)
     ep.wall_time = time.perf_counter() - t0
     augment = recipe.augment
     learner.session = {"world": spec.name, "world_path": str(spec.path) if spec.path else None,
@@ -239,8 +244,35 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
                        "augment_scale": recipe.augment_scale if augment else None,
                        "range_noise": range_noise, "odom_noise": odom_noise,
                        "vectors": ep.learned, "compaction": compaction,
-                       "compact_rounds": between if between else None}
+                       "compact_rounds": between if between else None,
+                       "compact_visits": ({"visits": recipe.compact_visits,
+                                           "scales": list(recipe.visit_scales),
+                                           "free": recipe.visit_free}
+                                          if compact is not None and recipe.compact_visits
+                                          else None)}
     return ep
+
+
+def _compact_visits(spec: WorldSpec, learner: DemonstrationLearner, before, compact: dict,
+                    recipe: Recipe, seed: int, policy) -> dict:
+    """``recipe.compact_visits`` (see ``Recipe``): the last compaction redone against every
+    learned vector plus the states the compacted tree reaches (``visited_states``, poses drawn
+    with ``seed + 100 + 1000 k`` for the k-th visit); ``before``: the tree before the last
+    compaction. Returns the last record."""
+    X, y = learner.recorded()
+    xs, ys = [X], [y]
+    visit = recipe.replace(round_free=recipe.visit_free)
+    for k in range(recipe.compact_visits):
+        vx, vy = visited_states(spec, learner, visit, seed=seed + 100 + 1000 * k,
+                                scales=recipe.visit_scales, policy=policy)
+        xs.append(vx)
+        ys.append(vy)
+        learner.classifier = before.compact(
+            np.concatenate(xs), np.concatenate(ys), **compact,
+            data=f"the vectors this learner was trained on and {sum(map(len, xs[1:]))} "
+                 f"held-out states its compacted tree reached ({k + 1} of "
+                 f"{recipe.compact_visits})")
+    return learner.classifier.metadata["compaction"][-1]
 
 
 class _Augmenter:

@@ -180,3 +180,24 @@ def test_compact_rounds_bad_combinations_are_named_errors(tmp_path, capsys):
                 "--compact-rounds"]) == 2
     assert "not to --from-recording" in capsys.readouterr().err
     assert not (tmp_path / "x.rhbl").exists()
+
+
+def test_compact_visits_redoes_the_last_compaction_with_held_out_states():
+    spec = resolve_world(CORRIDOR)
+    base = RECIPES[spec.task].replace(seconds=10.0, rounds=1, round_seconds=2.0,
+                                      compact="prune-balanced", compact_max_nodes=3,
+                                      compact_rounds=True)
+    plain = make_learner(base)
+    train(spec, plain, base, seed=0)
+    recipe = base.replace(compact_visits=2, visit_scales=(0.9,), visit_free=1)
+    learner = make_learner(recipe)
+    train(spec, learner, recipe, seed=0)
+    rec = learner.session["compaction"]
+    assert learner.session["compact_visits"] == {"visits": 2, "scales": [0.9], "free": 1}
+    # each visit: one 2 s round (20 steps) from every start pose and one free pose, in 2 worlds
+    visited = 2 * 2 * (len(spec.start_poses) + 1) * 20
+    assert rec["data"]["rows"] == learner.vectors + visited
+    assert "held-out states" in rec["data"]["source"] and "(2 of 2)" in rec["data"]["source"]
+    assert rec["nodes_before"] == plain.session["compaction"]["nodes_before"]  # the same tree
+    assert learner.nodes <= 3 and rec["nodes_after"] == learner.nodes
+    assert learner.vectors == plain.vectors  # the visits learned nothing

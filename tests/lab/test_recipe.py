@@ -120,3 +120,18 @@ def test_a_compact_flag_replaces_the_recipes_whole_compaction_step(monkeypatch):
     assert exact.compact_rounds and exact.compact_max_nodes is None
     kept = recipe_from_args("wall-following", parser.parse_args(["wall-following"]))
     assert kept == compacting["wall-following"]
+
+
+def test_compact_visits_needs_a_compaction_and_valid_scales():
+    r = RECIPES["wall-following"]
+    with pytest.raises(ValueError, match="compact_visits needs a compaction step"):
+        r.replace(compact_visits=2)
+    with pytest.raises(ValueError, match="recipe visit_scales must be finite factors > 0"):
+        r.replace(compact="exact", compact_visits=1, visit_scales=(0.0,))
+    with pytest.raises(ValueError, match="recipe compact_visits must be an integer >= 0"):
+        r.replace(compact="exact", compact_visits=-1)
+    args = build_parser("train").parse_args(
+        ["--world", "room", "--out", "x", "--compact", "prune-balanced", "--compact-visits",
+         "2", "--visit-scales", "none", "--visit-free", "0"])
+    got = recipe_from_args("wall-following", args)
+    assert (got.compact_visits, got.visit_scales, got.visit_free) == (2, (), 0)
