@@ -444,9 +444,9 @@ def main(args) -> int:
         from lab.recording import train_main
 
         if getattr(args, "compact", None) not in (None, "none") or getattr(
-                args, "compact_rounds", None):
-            raise ValueError("--compact and --compact-rounds apply to a simulated training "
-                             "run, not to --from-recording")
+                args, "compact_rounds", None) or getattr(args, "compact_visits", None):
+            raise ValueError("--compact, --compact-rounds and --compact-visits apply to a "
+                             "simulated training run, not to --from-recording")
         return train_main(args)
     if not args.world:
         raise ValueError("--world is required (or --from-recording FILE)")
