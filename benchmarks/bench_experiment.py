@@ -4,6 +4,7 @@
         [--study size|tradeoff|beams|compact]
     python benchmarks/bench_experiment.py --study compact --task wall-following --trials 5 \
         --dir DIR [--methods exact,prune,prune-balanced:400,...] [--offline]
+        (also rounds:prune-balanced:53, visited2:prune-balanced:53: see _staged_tree)
 
 Each row trains on the task's shipped world with one recipe (spawn rule, teacher style,
 perturbation, sample stride) for ``--trials`` seeds and evaluates from every start pose.
@@ -112,9 +113,77 @@ def _selected_tree(name: str, clf, X, y):
     return fresh
 
 
+# compaction with more data than the tree's own vectors: "rounds:M[:N]" = a new training run
+# of the recipe with compaction M (to at most N spheres) after the demonstrations and after
+# every corrective round (Recipe.compact_rounds; the next round corrects what the compacted
+# tree does); "visited:M[:N]" (and "visitedK:M[:N]") = M applied to the recorded tree against
+# its own vectors plus held-out visited states: the tree drives one corrective round (no
+# learning) from every start pose and 4 free-space poses in the world scaled by VISIT_SCALES
+# and in the world itself, poses drawn with seed 100 + trial seed, the teacher labelling;
+# visitedK repeats it K times, each time driving the last compacted tree and compacting the
+# recorded tree against all the states gathered so far; "roundsvisitedK:M[:N]" = both: the
+# "rounds:" training run, then its last compaction done again K times as in visitedK (the tree
+# before the last compaction against every vector it learned plus the visited states of the
+# tree compacted last; Recipe.compact_visits)
+VISIT_SCALES = (0.85, 1.2)
+VISIT_FREE = 4
+STAGED = ("rounds", "visited", "roundsvisited")
+
+
+def _staged(name: str) -> tuple[str, int, dict] | None:
+    """'visited2:prune-balanced:53' -> ("visited", 2, compaction keywords); None otherwise."""
+    head, _, rest = name.partition(":")
+    kind = head.rstrip("0123456789")
+    if kind not in STAGED or not rest:
+        return None
+    times = int(head[len(kind):] or 1)
+    return kind, times, _compact_method(rest) or {}
+
+
+def _staged_tree(name: str, task: str, seed: int, folder, clf, feats, acts, meta, X, y):
+    """The tree of a "rounds:" or "visited:" method (see above), cached in ``folder``."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from client.behaviour.learning import DemonstrationLearner, load_snapshot
+    from lab.harness import make_learner, resolve_world, train, visited_states
+
+    kind, times, kw = _staged(name)
+    tag = Path(folder) / f"{task}-s{seed}-{name.replace(':', '-')}.rhbl"
+    if tag.exists():
+        return load_snapshot(tag)[0]
+    recipe = RECIPES[task]
+    base, _, size = name.partition(":")[2].partition(":")
+    if kind in ("rounds", "roundsvisited"):  # the recipe's options: one training run
+        r = recipe.replace(compact=base, compact_max_nodes=int(size) if size else None,
+                           compact_rounds=True,
+                           compact_visits=times if kind == "roundsvisited" else 0,
+                           visit_scales=VISIT_SCALES, visit_free=VISIT_FREE)
+        learner = make_learner(r)
+        train(resolve_world(r.world), learner, r, seed=seed)
+        learner.save(tag)
+        return learner.classifier
+    spec = resolve_world(recipe.world)
+    visit = recipe.replace(round_free=VISIT_FREE)
+    xs, ys, small = [X], [y], clf
+    for k in range(times):
+        driver = DemonstrationLearner(feats, acts, task=task, classifier=small)
+        vx, vy = visited_states(spec, driver, visit, seed=100 + seed + 1000 * k,
+                                scales=VISIT_SCALES)
+        xs.append(vx)
+        ys.append(vy)
+        small = clf.compact(np.concatenate(xs), np.concatenate(ys), **kw,
+                            data=f"own vectors + {k + 1} x held-out visited states")
+    small.save(str(tag), metadata=meta)
+    return small
+
+
 def _compact_method(name: str) -> dict | None:
     """'prune-balanced:400' -> prune with class_weight='balanced' to at most 400 spheres,
     applied after the exact step."""
+    if _staged(name) is not None:
+        return {"staged": name}
     base, _, size = name.partition(":")
     if base in SELECTIONS:
         return {"select": name}
@@ -173,7 +242,9 @@ def compact_study(task: str, trials: int, folder: str, methods: list[str],
             kw = _compact_method(name)
             t0 = time.perf_counter()
             small = clf
-            if kw is not None and "select" in kw:
+            if kw is not None and "staged" in kw:
+                small = _staged_tree(name, task, seed, folder, clf, feats, acts, meta, X, y)
+            elif kw is not None and "select" in kw:
                 small = _selected_tree(name, clf, X, y)
             elif kw is not None:
                 small = clf.compact(X, None if kw["method"] == "exact" else y, **kw)
@@ -221,7 +292,10 @@ def main() -> int:
     ap.add_argument("--methods", default="none,exact,prune-balanced",
                     help="compact: comma-separated none, exact, prune, prune-balanced (each "
                          "optionally :N, at most N spheres), or the sample selections changes, "
-                         "dedup:Q, condense (fresh trees grown on part of the vectors)")
+                         "dedup:Q, condense (fresh trees grown on part of the vectors), or "
+                         "rounds:M[:N] (compaction M between the corrective rounds of a new "
+                         "training run), visited[K]:M[:N] (M against the tree's vectors and "
+                         "held-out visited states, K times)")
     ap.add_argument("--eval-world", action="append", default=None,
                     help="compact: evaluation world (repeatable; default: server/worlds/"
                          "eval-room* or eval-maze*)")

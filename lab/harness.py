@@ -44,6 +44,7 @@ __all__ = [
     "resolve_world",
     "run",
     "train",
+    "visited_states",
 ]
 
 log = logging.getLogger(__name__)
@@ -129,7 +130,15 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
     ``round_seconds`` (or until the goal) while the teacher labels every visited state, and the
     tree learns those labels (it only grows where it disagrees). The teacher takes over the
     wheels while any beam is closer than ``takeover`` metres (as the server's arbitration lets a
-    teacher override a controller), so a round never drives into a wall."""
+    teacher override a controller), so a round never drives into a wall.
+
+    ``recipe.compact`` (not "none") is the last step: the tree is compacted on every vector it
+    learned (``learner.compact``; ``learner.session["compaction"]`` is the record). With
+    ``recipe.compact_rounds`` it is compacted also after the demonstrations and after every
+    corrective round but the last (``learner.session["compact_rounds"]``), so each round drives,
+    and corrects, the compacted tree. With ``recipe.compact_visits`` the last compaction is
+    redone against the learned vectors plus held-out states the compacted tree reaches
+    (``visited_states``)."""
     task = spec.task
     recipe = recipe_for(task) if recipe is None else recipe
     if recipe.task != task:
@@ -186,21 +195,38 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
     round_stats = []
     if start is not None:
         rounds = 0  # a corrective demonstration from a given pose: no rounds
+    compact = recipe.compact_params()
+    if compact is not None and not learner.recording:
+        raise ValueError(f"recipe compact {recipe.compact!r} needs a learner that kept its "
+                         "vectors (make_learner(recipe), or record=True)")
+    between: list[dict] = []  # the compactions before the last step (compact_rounds)
+    after_round = None
+    if compact is not None and recipe.compact_rounds and rounds > 0:
+        between.append(learner.compact(**compact, data="after the demonstrations"))
+        todo = [rounds * (len(recipe.round_scales) + 1)]  # rounds left
+
+        def after_round(where: str) -> bool:  # every round but the last (whose compaction
+            todo[0] -= 1                      # is the last step)
+            if todo[0] > 0:
+                between.append(learner.compact(**compact, data=f"after {where}"))
+            return todo[0] > 0
     if rounds > 0:
         # scaled copies first, the training world last (its corrections are the latest)
         for f in recipe.round_scales:
             scaled = spec.scaled(f)
             for st in _corrective_rounds(scaled, learner, policy, scaled.start_poses, recipe,
-                                         seed, range_noise, odom_noise, ep, rng=rng, aug=aug):
+                                         seed, range_noise, odom_noise, ep, rng=rng, aug=aug,
+                                         after_round=after_round, scale=f):
                 round_stats.append(dict(st, scale=f))
         round_stats += _corrective_rounds(spec, learner, policy, fixed, recipe, seed,
-                                          range_noise, odom_noise, ep, rng=rng, aug=aug)
+                                          range_noise, odom_noise, ep, rng=rng, aug=aug,
+                                          after_round=after_round)
     compaction = None
-    if (compact := recipe.compact_params()) is not None:  # the last step
-        if not learner.recording:
-            raise ValueError(f"recipe compact {recipe.compact!r} needs a learner that kept its "
-                             "vectors (make_learner(recipe), or record=True)")
-        compaction = learner.compact(**compact)
+    if compact is not None:  # the last step
+        before = learner.classifier
+        compaction = learner.compact(**compact, data="the last step")
+        if recipe.compact_visits > 0:
+            compaction = _compact_visits(spec, learner, before, compact, recipe, seed, policy)
     ep.wall_time = time.perf_counter() - t0
     augment = recipe.augment
     learner.session = {"world": spec.name, "world_path": str(spec.path) if spec.path else None,
@@ -217,8 +243,36 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
                        "augment": augment,
                        "augment_scale": recipe.augment_scale if augment else None,
                        "range_noise": range_noise, "odom_noise": odom_noise,
-                       "vectors": ep.learned, "compaction": compaction}
+                       "vectors": ep.learned, "compaction": compaction,
+                       "compact_rounds": between if between else None,
+                       "compact_visits": ({"visits": recipe.compact_visits,
+                                           "scales": list(recipe.visit_scales),
+                                           "free": recipe.visit_free}
+                                          if compact is not None and recipe.compact_visits
+                                          else None)}
     return ep
+
+
+def _compact_visits(spec: WorldSpec, learner: DemonstrationLearner, before, compact: dict,
+                    recipe: Recipe, seed: int, policy) -> dict:
+    """``recipe.compact_visits`` (see ``Recipe``): the last compaction redone against every
+    learned vector plus the states the compacted tree reaches (``visited_states``, poses drawn
+    with ``seed + 100 + 1000 k`` for the k-th visit); ``before``: the tree before the last
+    compaction. Returns the last record."""
+    X, y = learner.recorded()
+    xs, ys = [X], [y]
+    visit = recipe.replace(round_free=recipe.visit_free)
+    for k in range(recipe.compact_visits):
+        vx, vy = visited_states(spec, learner, visit, seed=seed + 100 + 1000 * k,
+                                scales=recipe.visit_scales, policy=policy)
+        xs.append(vx)
+        ys.append(vy)
+        learner.classifier = before.compact(
+            np.concatenate(xs), np.concatenate(ys), **compact,
+            data=f"the vectors this learner was trained on and {sum(map(len, xs[1:]))} "
+                 f"held-out states its compacted tree reached ({k + 1} of "
+                 f"{recipe.compact_visits})")
+    return learner.classifier.metadata["compaction"][-1]
 
 
 class _Augmenter:
@@ -245,19 +299,26 @@ class _Augmenter:
 
 def _corrective_rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, poses,
                        recipe: Recipe, seed: int, range_noise: float, odom_noise: float,
-                       ep: Episode, rng=None, aug=None) -> list[dict]:
+                       ep: Episode, rng=None, aug=None, after_round=None,
+                       scale: float | None = None, collect: tuple[list, list] | None = None
+                       ) -> list[dict]:
     """DAgger rounds (see ``train``): the tree drives, the teacher labels; per round the number
     of steps, disagreements (learned labels that differed from the tree's choice) and takeovers.
     ``recipe.round_free`` > 0: each round also drives from that many fresh poses anywhere in the
-    free space (``free_pose``), so the corrections cover states the start poses never lead to."""
+    free space (``free_pose``), so the corrections cover states the start poses never lead to.
+    ``after_round(where)`` (optional) is called after each round (``where``: "round 2", "round
+    2 in the copy scaled 0.85"); it may replace the learner's tree (a compaction; it returns
+    True then): each round drives the learner's tree as it is when the round starts.
+    ``collect=(xs, ys)``: the learner learns nothing; each state's feature vector and the
+    teacher's label are appended to ``xs`` and ``ys`` instead (``visited_states``)."""
     rounds, seconds, takeover, free = (recipe.rounds, recipe.round_seconds, recipe.takeover,
                                        recipe.round_free)
     dt = ep.dt
     world = World(spec, robots=1, seed=seed, range_noise=range_noise, odom_noise=odom_noise)
-    tree = TreePolicy.from_learner(learner)
     side = followed_side(spec.task)
     stats = []
     for r in range(rounds):
+        tree = TreePolicy.from_learner(learner)
         steps = disagree = took = 0
         extra = [p for p in (free_pose(spec, rng) for _ in range(free)) if p is not None] \
             if free > 0 and rng is not None else []
@@ -271,9 +332,12 @@ def _corrective_rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, p
                 drive = tree.act(ranges, odom)
                 if drive != label:
                     disagree += 1
-                if learner.observe(ranges, odom[2], label):
+                if collect is not None:
+                    collect[0].append(learner.features.extract(ranges, odom[2]))
+                    collect[1].append(label)
+                elif learner.observe(ranges, odom[2], label):
                     ep.learned += 1
-                if aug is not None:
+                if aug is not None and collect is None:
                     ep.learned += aug.offer(learner, ranges, odom)
                 took_now = takes_over(ranges, takeover)
                 if took_now:
@@ -288,7 +352,37 @@ def _corrective_rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, p
         stats.append({"round": r + 1, "steps": steps, "disagreements": disagree, "takeovers": took,
                       "nodes": learner.nodes})
         log.debug("round %d: %s", r + 1, stats[-1])
+        if after_round is not None and after_round(
+                f"round {r + 1}" + ("" if scale is None else f" in the copy scaled {scale:g}")):
+            stats[-1]["nodes_compacted"] = learner.nodes
     return stats
+
+
+def visited_states(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None = None,
+                   *, seed: int = 0, scales: tuple[float, ...] | None = None, rounds: int = 1,
+                   policy=None) -> tuple[np.ndarray, np.ndarray]:
+    """Held-out states for pruning (``rhbl.compact``): the states ``learner``'s tree reaches when
+    it drives, labelled by the teacher, ``(X, y)``. The drives are ``rounds`` corrective rounds
+    as ``recipe`` runs them (from every start pose and ``recipe.round_free`` free-space poses,
+    ``round_seconds`` each, the teacher taking over near walls), first in copies of ``spec``
+    scaled by each of ``scales`` (default: ``recipe.round_scales``), then in ``spec``, but the
+    tree learns nothing. ``seed`` draws the poses (use one other than the training run's for
+    held-out states)."""
+    recipe = recipe_for(spec.task) if recipe is None else recipe
+    recipe = recipe.replace(rounds=rounds)
+    policy = policy or make_policy(spec.task, actions=learner.actions)
+    rng = np.random.default_rng(seed)
+    ep = Episode(start=tuple(spec.pose), kind="round")
+    xs: list = []
+    ys: list = []
+    for f in recipe.round_scales if scales is None else scales:
+        scaled = spec.scaled(f)
+        _corrective_rounds(scaled, learner, policy, scaled.start_poses, recipe, seed, 0.0, 0.0,
+                           ep, rng=rng, collect=(xs, ys))
+    _corrective_rounds(spec, learner, policy, demonstration_starts(spec, recipe.starts), recipe,
+                       seed, 0.0, 0.0, ep, rng=rng, collect=(xs, ys))
+    X = np.array(xs, dtype=np.float64).reshape(-1, learner.features.dim)
+    return X, np.array(ys, dtype=str)
 
 
 def run(spec: WorldSpec, driver, start, seconds: float, seed: int = 0, teacher=None,
@@ -349,9 +443,10 @@ def main(args) -> int:
     if args.from_recording:
         from lab.recording import train_main
 
-        if getattr(args, "compact", None) not in (None, "none"):
-            raise ValueError(f"--compact {args.compact} applies to a simulated training run, "
-                             "not to --from-recording")
+        if getattr(args, "compact", None) not in (None, "none") or getattr(
+                args, "compact_rounds", None) or getattr(args, "compact_visits", None):
+            raise ValueError("--compact, --compact-rounds and --compact-visits apply to a "
+                             "simulated training run, not to --from-recording")
         return train_main(args)
     if not args.world:
         raise ValueError("--world is required (or --from-recording FILE)")

@@ -11,7 +11,9 @@ One training run (``lab.harness.train``): demonstrations from the ``starts`` pos
 ``segment`` seconds (or until the goal), then from sampled poses (``random_segment`` x
 ``segment`` each) until ``seconds`` of sim time are used; then ``rounds`` corrective (DAgger)
 rounds of ``round_seconds`` per start pose, first in copies of the world scaled by each of
-``round_scales``, each round also from ``round_free`` random free-space poses.
+``round_scales``, each round also from ``round_free`` random free-space poses; last, the
+``compact`` step (also after the demonstrations and after every round with ``compact_rounds``;
+redone against held-out visited states with ``compact_visits``).
 """
 
 from __future__ import annotations
@@ -81,11 +83,23 @@ class Recipe:
     augment: int = 0
     augment_scale: float = 1.3
     # the last step: compact the tree on every vector it learned (``rhbl.compact``). None by
-    # default: every compaction measured lost closed-loop success on some world for some seed
-    # (docs/experiments.md, "Compact trees (issue)")
+    # default: every compaction measured, also between the rounds, lost closed-loop success on
+    # some world for some seed (docs/experiments.md, "Compact trees (issue)")
     compact: str = "none"           # "none" | "exact" | "prune" | "prune-balanced"
     compact_max_nodes: int | None = None    # prune: until at most this many spheres are left
     compact_max_error: float | None = None  # prune: fraction of the vectors it may make wrong
+    # compact also after the demonstrations and after every corrective round, so that the next
+    # round's teacher labels the states the compacted tree itself reaches (its errors there
+    # grow new spheres); the last round's compaction is the last step
+    compact_rounds: bool = False
+    # then redo the last compaction this many times against every learned vector plus held-out
+    # visited states: the compacted tree drives one corrective round without learning (the
+    # start poses and ``visit_free`` free-space poses) in copies scaled by ``visit_scales`` and
+    # in the world, the teacher labelling (``lab.harness.visited_states``); the tree as it was
+    # before the last compaction is compacted against all of them
+    compact_visits: int = 0
+    visit_scales: tuple[float, ...] = (0.85, 1.2)
+    visit_free: int = 4
 
     def __post_init__(self) -> None:
         def bad(name: str, expected: str) -> ValueError:
@@ -111,7 +125,7 @@ class Recipe:
                 raise bad(name, "a finite number >= 0")
         if not self.perturb <= 1:
             raise bad("perturb", "a fraction in [0, 1]")
-        for name in ("rounds", "round_free", "augment"):
+        for name in ("rounds", "round_free", "augment", "compact_visits", "visit_free"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise bad(name, "an integer >= 0")
@@ -125,13 +139,20 @@ class Recipe:
         e = self.compact_max_error
         if e is not None and not (isinstance(e, int | float) and math.isfinite(e) and 0 <= e <= 1):
             raise bad("compact_max_error", "None or a fraction in [0, 1]")
+        if not isinstance(self.compact_rounds, bool):
+            raise bad("compact_rounds", "True or False")
+        for name in ("compact_rounds", "compact_visits"):
+            if getattr(self, name) and self.compact == "none":
+                raise ValueError(f"recipe {name} needs a compaction step (compact 'exact', "
+                                 "'prune' or 'prune-balanced'), got compact 'none'")
         if (n is not None or e is not None) and not self.compact.startswith("prune"):
             raise ValueError(f"recipe compact_max_nodes/compact_max_error apply to compact "
                              f"'prune' or 'prune-balanced' only, got compact {self.compact!r}")
-        scales = tuple(float(v) for v in self.round_scales)
-        if not all(math.isfinite(v) and v > 0 for v in scales):
-            raise bad("round_scales", "finite factors > 0")
-        object.__setattr__(self, "round_scales", scales)
+        for name in ("round_scales", "visit_scales"):
+            scales = tuple(float(v) for v in getattr(self, name))
+            if not all(math.isfinite(v) and v > 0 for v in scales):
+                raise bad(name, "finite factors > 0")
+            object.__setattr__(self, name, scales)
 
     def replace(self, **changes) -> Recipe:
         """A copy with ``changes`` (field names; an unknown name is a TypeError naming it)."""
@@ -290,6 +311,17 @@ _FLAGS: list[tuple[str, str, dict, str]] = [
      "prune: delete the weakest spheres until at most N are left"),
     ("--compact-max-error", "compact_max_error", {"type": float},
      "prune: fraction of the learned vectors whose errors it may add"),
+    ("--compact-rounds", "compact_rounds", {"action": argparse.BooleanOptionalAction},
+     "with --compact: compact also after the demonstrations and after every corrective round, "
+     "so the next round corrects the states the compacted tree reaches"),
+    ("--compact-visits", "compact_visits", {"type": int},
+     "with --compact: then redo the last compaction K times against the learned vectors plus "
+     "the teacher's labels of the states the compacted tree reaches in one round without "
+     "learning in scaled copies (--visit-scales) and the world"),
+    ("--visit-scales", "visit_scales", {"type": parse_scales, "metavar": "F,F"},
+     "--compact-visits: the scaled copies ('none': only the world itself)"),
+    ("--visit-free", "visit_free", {"type": int},
+     "--compact-visits: the round also drives from this many random free-space poses"),
 ]
 
 
@@ -310,4 +342,12 @@ def recipe_from_args(task: str, args: argparse.Namespace) -> Recipe:
                is not None}
     if getattr(args, "recipe_seconds", None) is not None:
         changes["seconds"] = args.recipe_seconds
+    compact = changes.get("compact")
+    if compact is not None:  # --compact replaces the recipe's step: its other settings not
+        if not compact.startswith("prune"):  # given go with it
+            changes.setdefault("compact_max_nodes", None)
+            changes.setdefault("compact_max_error", None)
+        if compact == "none":
+            changes.setdefault("compact_rounds", False)
+            changes.setdefault("compact_visits", 0)
     return recipe_for(task).replace(**changes)

@@ -169,14 +169,16 @@ class DemonstrationLearner:
         self.seen += 1
         return True
 
-    def compact(self, method: str = "exact", **options) -> dict:
+    def compact(self, method: str = "exact", *, data: str | None = None, **options) -> dict:
         """Replace the tree by its compaction (``rhbl.compact``) on the recorded vectors (the
         learner must have been made with ``record=True``); ``options`` go to
-        ``HypersphereClassifier.compact`` (``max_error``, ``max_nodes``). Returns the step's
-        provenance record (also in the snapshot's ``metadata["compaction"]``)."""
+        ``HypersphereClassifier.compact`` (``max_error``, ``max_nodes``), ``data`` is added to
+        the record's note of the data (such as "after round 2"). Returns the step's provenance
+        record (also in the snapshot's ``metadata["compaction"]``). Learning goes on as before
+        on the compacted tree."""
         X, y = self.recorded()
-        self.classifier = self.classifier.compact(
-            X, y, method=method, data="the vectors this learner was trained on", **options)
+        note = "the vectors this learner was trained on" + (f", {data}" if data else "")
+        self.classifier = self.classifier.compact(X, y, method=method, data=note, **options)
         return self.classifier.metadata["compaction"][-1]
 
     # -- using --

@@ -7,7 +7,7 @@ import pytest
 from client.behaviour.learning import TreePolicy, load_snapshot
 from lab.cli import main as cli
 from lab.evaluate import evaluate
-from lab.harness import make_learner, parse_pose, resolve_world, train
+from lab.harness import make_learner, parse_pose, resolve_world, train, visited_states
 from lab.recipe import RECIPES
 
 CORRIDOR = "corridor"
@@ -111,3 +111,93 @@ def test_a_compacting_recipe_needs_a_recording_learner():
     recipe = RECIPES[spec.task].replace(seconds=5.0, rounds=0, compact="exact")
     with pytest.raises(ValueError, match="compact 'exact' needs a learner"):
         train(spec, make_learner(RECIPES[spec.task]), recipe, seed=0)
+
+
+def test_compact_rounds_compacts_between_rounds_and_keeps_learning(tmp_path):
+    spec = resolve_world(CORRIDOR)
+    recipe = RECIPES[spec.task].replace(seconds=20.0, rounds=2, round_seconds=5.0,
+                                        compact="prune-balanced", compact_max_nodes=4,
+                                        compact_rounds=True)
+    learner = make_learner(recipe)
+    train(spec, learner, recipe, seed=0)
+    # after the demonstrations, after round 1, the last step (after round 2)
+    records = learner.classifier.metadata["compaction"]
+    notes = [r["data"]["source"] for r in records]
+    assert len(records) == 3 and "after the demonstrations" in notes[0]
+    assert "after round 1" in notes[1] and "the last step" in notes[2]
+    assert [r["data"]["rows"] for r in records] == sorted(r["data"]["rows"] for r in records)
+    assert records[-1]["data"]["rows"] == learner.vectors
+    assert all(r["nodes_after"] <= 4 for r in records) and learner.nodes <= 4
+    assert learner.session["compaction"] == records[-1]
+    assert learner.session["compact_rounds"] == records[:2]
+    stats = learner.session["round_stats"]
+    # round 1 drove the compacted tree and grew it where the teacher disagreed, round 2 too
+    assert stats[0]["nodes"] > records[0]["nodes_after"]
+    assert stats[0]["nodes_compacted"] == records[1]["nodes_after"]
+    assert "nodes_compacted" not in stats[1]  # the last round's is the last step
+    assert records[2]["nodes_before"] == stats[1]["nodes"]
+    out = learner.save(tmp_path / "c.rhbl")  # the snapshot keeps every record
+    clf, _, _, meta = load_snapshot(out)
+    assert [r["data"]["source"] for r in meta["compaction"]] == notes
+    assert clf.node_count_ == learner.nodes
+
+
+def test_compact_rounds_in_scaled_copies_compacts_after_every_round_but_the_last():
+    spec = resolve_world(CORRIDOR)
+    recipe = RECIPES[spec.task].replace(seconds=10.0, rounds=1, round_seconds=3.0,
+                                        round_scales=(1.2,), compact="exact",
+                                        compact_rounds=True)
+    learner = make_learner(recipe)
+    train(spec, learner, recipe, seed=0)
+    notes = [r["data"]["source"] for r in learner.classifier.metadata["compaction"]]
+    assert len(notes) == 3
+    assert "after round 1 in the copy scaled 1.2" in notes[1] and "last step" in notes[2]
+
+
+def test_visited_states_label_what_the_tree_reaches_and_learn_nothing():
+    spec = resolve_world(CORRIDOR)
+    recipe = RECIPES[spec.task].replace(seconds=10.0, rounds=0, round_seconds=2.0,
+                                        round_free=1)
+    learner = make_learner(recipe)
+    train(spec, learner, recipe, seed=0)
+    before = learner.classifier.tree_arrays()
+    vectors = learner.vectors
+    X, y = visited_states(spec, learner, recipe, seed=3, scales=(0.9,))
+    # one round of 2 s (20 steps) from every start pose and one free pose, in 2 worlds
+    starts = len(spec.start_poses)
+    assert X.shape == ((2 * (starts + 1)) * 20, learner.features.dim) and len(y) == len(X)
+    assert set(y) <= set(learner.actions.names)
+    assert learner.vectors == vectors
+    after = learner.classifier.tree_arrays()
+    assert all((before[k] == after[k]).all() for k in before)
+
+
+def test_compact_rounds_bad_combinations_are_named_errors(tmp_path, capsys):
+    out = str(tmp_path / "x.rhbl")
+    assert cli(["train", "--world", CORRIDOR, "--out", out, "--compact-rounds"]) == 2
+    assert "compact_rounds needs a compaction step" in capsys.readouterr().err
+    assert cli(["train", "--from-recording", str(tmp_path / "none.mcap"), "--out", out,
+                "--compact-rounds"]) == 2
+    assert "not to --from-recording" in capsys.readouterr().err
+    assert not (tmp_path / "x.rhbl").exists()
+
+
+def test_compact_visits_redoes_the_last_compaction_with_held_out_states():
+    spec = resolve_world(CORRIDOR)
+    base = RECIPES[spec.task].replace(seconds=10.0, rounds=1, round_seconds=2.0,
+                                      compact="prune-balanced", compact_max_nodes=3,
+                                      compact_rounds=True)
+    plain = make_learner(base)
+    train(spec, plain, base, seed=0)
+    recipe = base.replace(compact_visits=2, visit_scales=(0.9,), visit_free=1)
+    learner = make_learner(recipe)
+    train(spec, learner, recipe, seed=0)
+    rec = learner.session["compaction"]
+    assert learner.session["compact_visits"] == {"visits": 2, "scales": [0.9], "free": 1}
+    # each visit: one 2 s round (20 steps) from every start pose and one free pose, in 2 worlds
+    visited = 2 * 2 * (len(spec.start_poses) + 1) * 20
+    assert rec["data"]["rows"] == learner.vectors + visited
+    assert "held-out states" in rec["data"]["source"] and "(2 of 2)" in rec["data"]["source"]
+    assert rec["nodes_before"] == plain.session["compaction"]["nodes_before"]  # the same tree
+    assert learner.nodes <= 3 and rec["nodes_after"] == learner.nodes
+    assert learner.vectors == plain.vectors  # the visits learned nothing

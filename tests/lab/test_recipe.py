@@ -85,3 +85,53 @@ def test_every_task_has_a_recipe_and_an_evaluation_length():
     assert set(RECIPES) == set(EVAL_SECONDS) == {"wall-following", "maze"}
     for task, r in RECIPES.items():
         assert isinstance(r, Recipe) and r.task == task and r.for_demo().task == task
+
+
+def test_compact_rounds_needs_a_compaction_and_has_a_flag_both_ways():
+    r = RECIPES["wall-following"]
+    with pytest.raises(ValueError, match="compact_rounds needs a compaction step"):
+        r.replace(compact_rounds=True)
+    with pytest.raises(ValueError, match="recipe compact_rounds must be True or False"):
+        r.replace(compact="exact", compact_rounds=1)
+    parser = build_parser("experiment")
+    on = recipe_from_args("wall-following", parser.parse_args(
+        ["wall-following", "--compact", "prune-balanced", "--compact-max-nodes", "53",
+         "--compact-rounds"]))
+    assert on.compact_rounds and on.compact_max_nodes == 53
+    off = on.replace(compact_rounds=False)
+    assert recipe_from_args("wall-following", parser.parse_args(
+        ["wall-following", "--compact", "prune-balanced", "--compact-max-nodes", "53",
+         "--no-compact-rounds"])) == off
+
+
+def test_a_compact_flag_replaces_the_recipes_whole_compaction_step(monkeypatch):
+    # a recipe that compacts by default: --compact none / exact drop the settings that no
+    # longer apply unless they are given too
+    compacting = dict(RECIPES, **{"wall-following": RECIPES["wall-following"].replace(
+        compact="prune-balanced", compact_max_nodes=53, compact_rounds=True)})
+    monkeypatch.setattr("lab.recipe.RECIPES", compacting)
+    parser = build_parser("experiment")
+    none = recipe_from_args("wall-following", parser.parse_args(
+        ["wall-following", "--compact", "none"]))
+    assert none.compact == "none" and not none.compact_rounds
+    assert none.compact_max_nodes is None and none.compact_params() is None
+    exact = recipe_from_args("wall-following", parser.parse_args(
+        ["wall-following", "--compact", "exact"]))
+    assert exact.compact_rounds and exact.compact_max_nodes is None
+    kept = recipe_from_args("wall-following", parser.parse_args(["wall-following"]))
+    assert kept == compacting["wall-following"]
+
+
+def test_compact_visits_needs_a_compaction_and_valid_scales():
+    r = RECIPES["wall-following"]
+    with pytest.raises(ValueError, match="compact_visits needs a compaction step"):
+        r.replace(compact_visits=2)
+    with pytest.raises(ValueError, match="recipe visit_scales must be finite factors > 0"):
+        r.replace(compact="exact", compact_visits=1, visit_scales=(0.0,))
+    with pytest.raises(ValueError, match="recipe compact_visits must be an integer >= 0"):
+        r.replace(compact="exact", compact_visits=-1)
+    args = build_parser("train").parse_args(
+        ["--world", "room", "--out", "x", "--compact", "prune-balanced", "--compact-visits",
+         "2", "--visit-scales", "none", "--visit-free", "0"])
+    got = recipe_from_args("wall-following", args)
+    assert (got.compact_visits, got.visit_scales, got.visit_free) == (2, (), 0)
