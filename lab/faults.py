@@ -333,7 +333,8 @@ def controller_kill(workdir: Path, rng: random.Random, watchdog: float = 0.5) ->
         return {"part": "controller-kill", "watchdog s": watchdog,
                 "kill -> robot stopped, s": [round(x, 3) for x in stops],
                 "max s": round(float(np.nanmax(a)), 3),
-                "ok": not np.isnan(a).any() and float(np.nanmax(a)) < watchdog + 0.5}
+                # the guarantee: stopped within the watchdog (the token's release is faster)
+                "ok": not np.isnan(a).any() and float(np.nanmax(a)) < watchdog}
     finally:
         c.close()
 

@@ -331,6 +331,9 @@ class ServerNode:
             # robot's when the ident names none of ours)
             mine = [r for r in self._robots if ident.startswith(f"{r.name}-")] or self._robots
             with self._cond:
+                # the commands it sent before it went are still queued: take them first, or the
+                # next tick would take them after the release and drive on until the watchdog
+                self._take_commands(mine)
                 for r in mine:
                     r.arbiter.release_role(role)
                 self._cond.notify_all()
@@ -497,11 +500,12 @@ class ServerNode:
                 return False
         return True
 
-    def _take_commands(self) -> None:
+    def _take_commands(self, robots: list[_RobotIO] | None = None) -> None:
         """Handle the commands queued since the last tick (free-running: a callback for each of
         thousands of commands a second took the interpreter's lock from the tick every time).
-        A command is offered at the same sim time as from a callback: the tick alone moves it."""
-        for r in self._robots:
+        A command is offered at the same sim time as from a callback: the tick alone moves it.
+        Also before a hold is released (``_on_liveliness``), for the ``robots`` concerned."""
+        for r in self._robots if robots is None else robots:
             queue = r.cmd_queue
             if queue is None:
                 continue

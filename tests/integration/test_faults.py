@@ -66,6 +66,13 @@ def test_a_restarted_server_is_driven_again(tmp_path):
     assert r["max s"] < 30
 
 
+def test_a_killed_controller_stops_the_robot_within_the_watchdog(tmp_path):
+    """Its liveliness token goes with it: the server takes the commands it sent before, then
+    releases its hold (taken the other way round, the robot drove on until the watchdog)."""
+    r = faults.controller_kill(tmp_path, random.Random(5))
+    assert r["ok"] and r["max s"] < r["watchdog s"], r
+
+
 def test_a_folding_learner_killed_recovers_with_a_bounded_journal(tmp_path):
     r = faults.learner_kill(tmp_path, random.Random(3), kills=2, speedup=2.0, fold=True)
     assert r["ok"] and r["labels published"] > 50, r
