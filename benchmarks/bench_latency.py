@@ -84,94 +84,113 @@ def main() -> int:
     tmp = Path(tempfile.mkdtemp(prefix="rhbl-bench-"))
     tree = tmp / "tree.rhbl"
     _train_tree(tree)
-    world = World(resolve_world("room"))
-    ranges = world.scan(0)
+    probe = _Probe(World(resolve_world("room")).scan(0))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    robot = "r0"
     children = [
         Child("echo", [sys.executable, __file__, "--echo", endpoint]),
         Child("controller", rhbl_argv("controller", "--tree", str(tree), "--connect", endpoint,
                                       "--log-level", "WARNING"), cwd=ROOT),
     ]
-    got = threading.Event()
-    box: dict = {}
+    raw, s2a, lost = _measure(endpoint, children, probe, args.n)
+    _report(raw, s2a, lost, probe.size, args.n, tree)
+    return 0
 
-    def on_pong(sample):
-        box["t"] = time.perf_counter()
-        got.set()
 
-    def on_cmd(sample):
+class _Probe:
+    """One message in flight at a time: a scan the controller answers with a command carrying
+    its id (sense-to-act), or a scan-sized ping the echo process sends back (raw)."""
+
+    def __init__(self, ranges) -> None:
+        self.ranges = ranges
+        self.got = threading.Event()
+        self.box: dict = {}
+        self.sid = 0
+        self.scan_pub = self.ping_pub = None  # set once the session is open
+        self.size = len(self.scan_payload(1))
+
+    def scan_payload(self, i: int) -> bytes:
+        return Scan(ts=i * 0.1, id=i, ranges=self.ranges, pose=(3.0, 0.7, 0.0)).encode()
+
+    def on_pong(self, sample) -> None:
+        self.box["t"] = time.perf_counter()
+        self.got.set()
+
+    def on_cmd(self, sample) -> None:
         t = time.perf_counter()
         cmd = VelCmd.decode(sample.payload.to_bytes())
-        if cmd.scan_id == box.get("want"):
-            box["t"] = t
-            got.set()
+        if cmd.scan_id == self.box.get("want"):
+            self.box["t"] = t
+            self.got.set()
 
+    def one_scan(self) -> float | None:
+        self.sid += 1
+        self.box["want"] = self.sid
+        data = self.scan_payload(self.sid)
+        self.got.clear()
+        t0 = time.perf_counter()
+        self.scan_pub.put(data)
+        return (self.box["t"] - t0) if self.got.wait(1.0) else None
+
+    def one_ping(self) -> float | None:
+        data = os.urandom(self.size)
+        self.box.pop("want", None)
+        self.got.clear()
+        t0 = time.perf_counter()
+        self.ping_pub.put(data)
+        return (self.box["t"] - t0) if self.got.wait(1.0) else None
+
+
+def _measure(endpoint: str, children: list[Child], probe: _Probe, n: int):
+    """This process as the router on ``endpoint``: start ``children``, then n round trips of
+    each kind, interleaved. Returns (raw seconds, sense-to-act seconds, lost)."""
+    robot = "r0"
     with zenoh.open(make_config(mode="router", listen=[endpoint])) as s:
-        scan_pub = s.declare_publisher(keys.scan_key(robot), express=True)
-        ping_pub = s.declare_publisher(PING, express=True)
-        subs = [s.declare_subscriber(PONG, on_pong),
-                s.declare_subscriber(keys.cmd_vel_key(robot, source="controller"), on_cmd)]
+        probe.scan_pub = s.declare_publisher(keys.scan_key(robot), express=True)
+        probe.ping_pub = s.declare_publisher(PING, express=True)
+        subs = [s.declare_subscriber(PONG, probe.on_pong),
+                s.declare_subscriber(keys.cmd_vel_key(robot, source="controller"), probe.on_cmd)]
         try:
             for c in children:
                 c.start()
-            sid = 0
-
-            def scan_payload(i: int) -> bytes:
-                return Scan(ts=i * 0.1, id=i, ranges=ranges, pose=(3.0, 0.7, 0.0)).encode()
-
-            size = len(scan_payload(1))
-
-            def one_scan() -> float | None:
-                nonlocal sid
-                sid += 1
-                box["want"] = sid
-                data = scan_payload(sid)
-                got.clear()
-                t0 = time.perf_counter()
-                scan_pub.put(data)
-                return (box["t"] - t0) if got.wait(1.0) else None
-
-            def one_ping() -> float | None:
-                data = os.urandom(size)
-                box.pop("want", None)
-                got.clear()
-                t0 = time.perf_counter()
-                ping_pub.put(data)
-                return (box["t"] - t0) if got.wait(1.0) else None
-
-            # warm up: both children answering
-            deadline = time.monotonic() + 60
-            while time.monotonic() < deadline and (one_scan() is None or one_ping() is None):
-                time.sleep(0.05)
-            for _ in range(50):
-                one_scan(), one_ping()
-            raw, s2a, lost = [], [], 0
-            for _ in range(args.n):
-                a, b = one_ping(), one_scan()
-                lost += (a is None) + (b is None)
-                if a is not None:
-                    raw.append(a)
-                if b is not None:
-                    s2a.append(b)
+            return _round_trips(probe, n)
         finally:
             for sub in subs:
                 sub.undeclare()
             for c in children:
                 c.stop()
+
+
+def _round_trips(probe: _Probe, n: int) -> tuple[list[float], list[float], int]:
+    # warm up: both children answering
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and (probe.one_scan() is None or probe.one_ping() is None):
+        time.sleep(0.05)
+    for _ in range(50):
+        probe.one_scan(), probe.one_ping()
+    raw, s2a, lost = [], [], 0
+    for _ in range(n):
+        a, b = probe.one_ping(), probe.one_scan()
+        lost += (a is None) + (b is None)
+        if a is not None:
+            raw.append(a)
+        if b is not None:
+            s2a.append(b)
+    return raw, s2a, lost
+
+
+def _report(raw, s2a, lost: int, size: int, n: int, tree: Path) -> None:
     r50, r99 = _pct(raw)
     c50, c99 = _pct(s2a)
     from rhbl import load
 
     nodes = load(tree).node_count_
-    print(f"payload {size} bytes (360-beam scan), {args.n} round trips each, one in flight; "
+    print(f"payload {size} bytes (360-beam scan), {n} round trips each, one in flight; "
           f"tree {nodes} nodes; lost {lost}")
     print("| path | p50 us | p99 us |")
     print("|---|---|---|")
     print(f"| raw zenoh round trip (echo process) | {r50:.0f} | {r99:.0f} |")
     print(f"| scan -> rhbl controller -> command | {c50:.0f} | {c99:.0f} |")
     print(f"ratio p50 {c50 / r50:.2f}x (target <= 3x), p99 {c99 / r99:.2f}x")
-    return 0
 
 
 if __name__ == "__main__":

@@ -254,105 +254,142 @@ class _TimedPub:
 def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
     """n robots at 10 Hz real time, driven by one controller process: missed ticks and
     sense-to-act latency (a robot's scan out -> its answer in at the server)."""
-    import os
-    import signal
     import subprocess
 
-    import zenoh
-
-    from protocol.session import make_config
-    from server.node import ServerNode
-
-    world_spec = tiled(spec, tiles)
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    session = zenoh.open(make_config(mode="router", listen=[endpoint]))
-    w = World(world_spec, robots=n)
-    w.reset(poses=fleet_poses(spec, tiles, n))
-    node = ServerNode(session, w, rate=10.0, speedup=1.0, watchdog=0.5)
-    sent: dict[str, float] = {}  # robot -> when its last scan went out
-    scan_of: dict[str, int] = {}
-    lat: list[float] = []
-    answered = [0]
-    for r in node._robots:
-        r.pubs["scan"] = _TimedPub(r.pubs["scan"], r.name, sent)
-
-    # a command's arrival is the timestamp the server's session (the router) gave it on the way
-    # in, read in the node's own handler (the node takes commands at its tick; a second
-    # subscriber decoding every command again would add its work to the server being measured)
-    node_on_cmd = node._on_cmd
-
-    def on_cmd(r, sample) -> None:
-        stamp = sample.timestamp
-        t = stamp.get_time().timestamp() if stamp is not None else time.time()
-        node_on_cmd(r, sample)
-        if r.answers.get("controller") == scan_of.get(r.name) and r.name in sent:
-            lat.append(t - sent[r.name])
-            answered[0] += 1
-
-    node._on_cmd = on_cmd
+    session, node, endpoint = _fleet_node(spec, n, tiles)
+    probe = _Latency(node)
     child = subprocess.Popen(
         [sys.executable, __file__, "--serve-controller", endpoint],
         stdout=subprocess.PIPE, text=True, start_new_session=True)
-    tick_cpu: list[float] = []
     try:
         if child.stdout.readline().strip() != "ready":
             raise SystemExit("the controller process did not start")
         ready = time.monotonic()
-        ticks = missed = 0
-        worst = 0.0
-        warm = 10  # ticks before counting (connections, first publishers)
-        t0 = time.monotonic()
-        next_t = t0
-        while time.monotonic() - t0 < seconds + warm * _PERIOD:
-            delay = next_t - time.monotonic()
-            if delay > 0:
-                time.sleep(delay)
-            start = next_t
-            next_t += _PERIOD
-            a, c = time.perf_counter(), time.thread_time()
-            node.tick()
-            took = time.perf_counter() - a
-            tick_cpu.append(time.thread_time() - c)
-            for r in node._robots:
-                scan_of[r.name] = r.scan_id
-            ticks += 1
-            if ticks == warm:
-                lat.clear()
-                answered[0] = 0
-                counted_from = ticks
-                tick_cpu.clear()
-                cpu0, wall0 = os.times(), time.monotonic()
-            if ticks > warm:
-                worst = max(worst, took)
-                if time.monotonic() - start > _PERIOD:
-                    missed += 1
-                if next_t < time.monotonic() - _PERIOD:  # behind by a whole tick: skip it
-                    next_t = time.monotonic()
-        counted = ticks - counted_from
-        cpu1, wall1 = os.times(), time.monotonic()
-        ms = np.asarray(lat) * 1e3 if lat else np.asarray([math.nan])
+        t = _tick_at_10hz(node, probe, seconds)
+        ms = np.asarray(probe.lat) * 1e3 if probe.lat else np.asarray([math.nan])
         result = {
-            "robots": n, "tiles": tiles, "ticks": counted, "missed": missed,
-            "worst_ms": worst * 1e3, "answered": answered[0] / max(counted * n, 1),
+            "robots": n, "tiles": tiles, "ticks": t["ticks"], "missed": t["missed"],
+            "worst_ms": t["worst_ms"], "answered": probe.answered / max(t["ticks"] * n, 1),
             "p50": float(np.percentile(ms, 50)), "p90": float(np.percentile(ms, 90)),
             "p99": float(np.percentile(ms, 99)),
-            "hz": counted / (time.monotonic() - t0 - warm * _PERIOD),
-            "tick_cpu_ms": float(np.median(tick_cpu)) * 1e3,
-            "server_cpu": (cpu1.user + cpu1.system - cpu0.user - cpu0.system) / (wall1 - wall0),
+            "hz": t["hz"], "tick_cpu_ms": t["tick_cpu_ms"], "server_cpu": t["server_cpu"],
         }
     finally:
-        os.kill(child.pid, signal.SIGTERM)
-        try:
-            out, _ = child.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            os.kill(child.pid, signal.SIGKILL)
-            out, _ = child.communicate()
+        out = _stop_controller(child)
         node.close()
         session.close()
     # the controller's CPU seconds from its "ready" to its end (the warm-up ticks included)
     cpu = [float(line.split()[1]) for line in out.splitlines() if line.startswith("cpu ")]
     result["controller_cpu"] = cpu[0] / (time.monotonic() - ready) if cpu else math.nan
     return result
+
+
+def _fleet_node(spec, n: int, tiles: int):
+    """A router session listening on a free loopback port, a server node for n robots on it,
+    and the port's endpoint."""
+    import zenoh
+
+    from protocol.session import make_config
+    from server.node import ServerNode
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    session = zenoh.open(make_config(mode="router", listen=[endpoint]))
+    w = World(tiled(spec, tiles), robots=n)
+    w.reset(poses=fleet_poses(spec, tiles, n))
+    return session, ServerNode(session, w, rate=10.0, speedup=1.0, watchdog=0.5), endpoint
+
+
+class _Latency:
+    """Sense-to-act latency at the server: a robot's scan out (``_TimedPub``) -> the answer to
+    that scan in, for every robot of ``node``; ``lat`` (seconds), ``answered`` (count)."""
+
+    def __init__(self, node) -> None:
+        self.sent: dict[str, float] = {}  # robot -> when its last scan went out
+        self.scan_of: dict[str, int] = {}
+        self.lat: list[float] = []
+        self.answered = 0
+        for r in node._robots:
+            r.pubs["scan"] = _TimedPub(r.pubs["scan"], r.name, self.sent)
+        # a command's arrival is the timestamp the server's session (the router) gave it on the
+        # way in, read in the node's own handler (the node takes commands at its tick; a second
+        # subscriber decoding every command again would add its work to the server measured)
+        node_on_cmd = node._on_cmd
+
+        def on_cmd(r, sample) -> None:
+            stamp = sample.timestamp
+            t = stamp.get_time().timestamp() if stamp is not None else time.time()
+            node_on_cmd(r, sample)
+            if r.answers.get("controller") == self.scan_of.get(r.name) and r.name in self.sent:
+                self.lat.append(t - self.sent[r.name])
+                self.answered += 1
+
+        node._on_cmd = on_cmd
+
+    def ticked(self, node) -> None:
+        """Note each robot's scan of this tick (the one its answer must carry)."""
+        for r in node._robots:
+            self.scan_of[r.name] = r.scan_id
+
+    def restart(self) -> None:
+        self.lat.clear()
+        self.answered = 0
+
+
+def _tick_at_10hz(node, probe: _Latency, seconds: float, warm: int = 10) -> dict:
+    """Tick ``node`` at 10 Hz real time for ``seconds`` after ``warm`` ticks (connections,
+    first publishers; ``probe`` restarts then): ticks counted, missed, the worst, the achieved
+    rate, the tick's median thread CPU and the process's CPU share."""
+    import os
+
+    tick_cpu: list[float] = []
+    ticks = missed = 0
+    worst = 0.0
+    t0 = time.monotonic()
+    next_t = t0
+    while time.monotonic() - t0 < seconds + warm * _PERIOD:
+        delay = next_t - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        start = next_t
+        next_t += _PERIOD
+        a, c = time.perf_counter(), time.thread_time()
+        node.tick()
+        took = time.perf_counter() - a
+        tick_cpu.append(time.thread_time() - c)
+        probe.ticked(node)
+        ticks += 1
+        if ticks == warm:
+            probe.restart()
+            counted_from = ticks
+            tick_cpu.clear()
+            cpu0, wall0 = os.times(), time.monotonic()
+        if ticks > warm:
+            worst = max(worst, took)
+            if time.monotonic() - start > _PERIOD:
+                missed += 1
+            if next_t < time.monotonic() - _PERIOD:  # behind by a whole tick: skip it
+                next_t = time.monotonic()
+    counted = ticks - counted_from
+    cpu1, wall1 = os.times(), time.monotonic()
+    return {"ticks": counted, "missed": missed, "worst_ms": worst * 1e3,
+            "hz": counted / (time.monotonic() - t0 - warm * _PERIOD),
+            "tick_cpu_ms": float(np.median(tick_cpu)) * 1e3,
+            "server_cpu": (cpu1.user + cpu1.system - cpu0.user - cpu0.system) / (wall1 - wall0)}
+
+
+def _stop_controller(child) -> str:
+    """Stop the controller process (SIGTERM, SIGKILL after 10 s); its output."""
+    import os
+    import signal
+    import subprocess
+
+    os.kill(child.pid, signal.SIGTERM)
+    try:
+        out, _ = child.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        os.kill(child.pid, signal.SIGKILL)
+        out, _ = child.communicate()
+    return out
 
 
 def compare_scans(spec, n: int, tiles: int, repeats: int = 5) -> tuple[float, float]:
@@ -389,6 +426,29 @@ def compare_scans(spec, n: int, tiles: int, repeats: int = 5) -> tuple[float, fl
 
 
 def main(argv: list[str] | None = None) -> int:
+    args = _parse(argv)
+    if args.serve_controller:
+        return serve_controller(args.serve_controller)
+    spec = load_world(server.world_path(args.world))
+    capacity = len(free_poses(spec, 10_000))
+
+    def tiles_for(n: int) -> int:
+        return args.tiles if args.tiles else max(1, math.ceil(n / capacity))
+
+    # one measurement only, when asked for
+    for only, report in (("compare", _report_compare), ("tick_cpu", _report_tick_cpu),
+                         ("real_time", _report_real_time), ("fleet", _report_fleet)):
+        if getattr(args, only):
+            report(args, spec, tiles_for)
+            return 0
+    _report_in_process(args)
+    if args.no_server:
+        return 0
+    _report_server(args, tiles_for)
+    return 0
+
+
+def _parse(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -410,49 +470,47 @@ def main(argv: list[str] | None = None) -> int:
                    help="copies of the world side by side (default: as few as fit the fleet)")
     p.add_argument("--fleet-seconds", type=float, default=20.0, help="real seconds (20)")
     p.add_argument("--serve-controller", metavar="ENDPOINT", help=argparse.SUPPRESS)
-    args = p.parse_args(argv)
-    if args.serve_controller:
-        return serve_controller(args.serve_controller)
-    spec = load_world(server.world_path(args.world))
-    capacity = len(free_poses(spec, 10_000))
+    return p.parse_args(argv)
 
-    def tiles_for(n: int) -> int:
-        return args.tiles if args.tiles else max(1, math.ceil(n / capacity))
 
-    if args.compare:
-        for n in (int(x) for x in args.compare.split(",")):
-            one, batch = compare_scans(spec, n, tiles_for(n))
-            print(f"{n:4d} robots ({tiles_for(n)} x {args.world!r}): all lasers, CPU per tick: "
-                  f"one robot at a time {one * 1e3:8.2f} ms, together {batch * 1e3:7.2f} ms "
-                  f"({one / batch:.1f}x)", flush=True)
-        return 0
-    if args.tick_cpu:
-        for n in (int(x) for x in args.tick_cpu.split(",")):
-            c = min(tick_cost(spec, n, ticks=20, tiles=tiles_for(n), clock=time.process_time)
-                    for _ in range(3))
-            print(f"{n:4d} robots ({tiles_for(n)} x {args.world!r}): server tick CPU "
-                  f"{c * 1e3:8.2f} ms ({c / n * 1e3:.3f} ms per robot; real time needs "
-                  f"< 100 ms)", flush=True)
-        return 0
-    if args.real_time:
-        n = args.real_time
-        hz, worst = real_time_run(spec, n, seconds=args.fleet_seconds, tiles=tiles_for(n))
-        print(f"server node, {n} robots in {tiles_for(n)} x {args.world!r}, commanded "
-              f"in-process, {args.fleet_seconds:g} s at 10 Hz: achieved {hz:.2f} Hz, worst tick "
-              f"{worst * 1e3:.1f} ms")
-        return 0
-    if args.fleet:
-        r = fleet_run(spec, args.fleet, tiles_for(args.fleet), args.fleet_seconds)
-        print(f"fleet: {r['robots']} robots in {r['tiles']} x {args.world!r} at 10 Hz, one "
-              f"controller process for all, {r['ticks']} ticks ({r['hz']:.2f} Hz): "
-              f"{r['missed']} ticks missed, worst tick {r['worst_ms']:.1f} ms; "
-              f"{r['answered'] * 100:.1f}% of scans answered in time; sense-to-act "
-              f"p50 {r['p50']:.1f} ms, p90 {r['p90']:.1f} ms, p99 {r['p99']:.1f} ms; "
-              f"server tick CPU p50 {r['tick_cpu_ms']:.1f} ms, server process "
-              f"{r['server_cpu'] * 100:.0f}% of a core (zenoh and command callbacks included), "
-              f"controller process {r['controller_cpu'] * 100:.0f}%")
-        return 0
+def _report_compare(args, spec, tiles_for) -> None:
+    for n in (int(x) for x in args.compare.split(",")):
+        one, batch = compare_scans(spec, n, tiles_for(n))
+        print(f"{n:4d} robots ({tiles_for(n)} x {args.world!r}): all lasers, CPU per tick: "
+              f"one robot at a time {one * 1e3:8.2f} ms, together {batch * 1e3:7.2f} ms "
+              f"({one / batch:.1f}x)", flush=True)
 
+
+def _report_tick_cpu(args, spec, tiles_for) -> None:
+    for n in (int(x) for x in args.tick_cpu.split(",")):
+        c = min(tick_cost(spec, n, ticks=20, tiles=tiles_for(n), clock=time.process_time)
+                for _ in range(3))
+        print(f"{n:4d} robots ({tiles_for(n)} x {args.world!r}): server tick CPU "
+              f"{c * 1e3:8.2f} ms ({c / n * 1e3:.3f} ms per robot; real time needs "
+              f"< 100 ms)", flush=True)
+
+
+def _report_real_time(args, spec, tiles_for) -> None:
+    n = args.real_time
+    hz, worst = real_time_run(spec, n, seconds=args.fleet_seconds, tiles=tiles_for(n))
+    print(f"server node, {n} robots in {tiles_for(n)} x {args.world!r}, commanded "
+          f"in-process, {args.fleet_seconds:g} s at 10 Hz: achieved {hz:.2f} Hz, worst tick "
+          f"{worst * 1e3:.1f} ms")
+
+
+def _report_fleet(args, spec, tiles_for) -> None:
+    r = fleet_run(spec, args.fleet, tiles_for(args.fleet), args.fleet_seconds)
+    print(f"fleet: {r['robots']} robots in {r['tiles']} x {args.world!r} at 10 Hz, one "
+          f"controller process for all, {r['ticks']} ticks ({r['hz']:.2f} Hz): "
+          f"{r['missed']} ticks missed, worst tick {r['worst_ms']:.1f} ms; "
+          f"{r['answered'] * 100:.1f}% of scans answered in time; sense-to-act "
+          f"p50 {r['p50']:.1f} ms, p90 {r['p90']:.1f} ms, p99 {r['p99']:.1f} ms; "
+          f"server tick CPU p50 {r['tick_cpu_ms']:.1f} ms, server process "
+          f"{r['server_cpu'] * 100:.0f}% of a core (zenoh and command callbacks included), "
+          f"controller process {r['controller_cpu'] * 100:.0f}%")
+
+
+def _report_in_process(args) -> None:
     r = bench_in_process(args.world, args.seconds)
     print(
         f"in-process, world {args.world!r} ({r['segments']} wall segments), 1 robot, "
@@ -463,8 +521,11 @@ def main(argv: list[str] | None = None) -> int:
         f"step {r['step_us']:.0f} us, scan {r['scan_us']:.0f} us)"
     )
     print("  Stage's published figure for one simple robot: about 1000x")
-    if args.no_server:
-        return 0
+
+
+def _report_server(args, tiles_for) -> None:
+    """The server node's tick cost for 1, 10, 40 robots and the largest fleet it keeps at
+    real time (estimated from the cost's slope, then checked, 20% fewer each time it fails)."""
     spec = load_world(server.world_path(args.world))
     per = {n: tick_cost(spec, n) for n in (1, 10, 40)}
     for n, c in per.items():
@@ -481,7 +542,6 @@ def main(argv: list[str] | None = None) -> int:
         f"server node at real time (10 Hz): {n} robots in {tiles_for(n)} x world "
         f"{args.world!r} (achieved {hz:.2f} Hz, worst tick {worst * 1e3:.1f} ms)"
     )
-    return 0
 
 
 if __name__ == "__main__":

@@ -32,6 +32,21 @@ from lab.processes import Child, free_port, rhbl_argv  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
+    args = _parse(argv)
+    work = Path(args.dir) if args.dir else Path(tempfile.mkdtemp(prefix="rhbl-soak-"))
+    work.mkdir(parents=True, exist_ok=True)
+    tree = work / "tree.rhbl"
+    procs: dict[str, Child] = {}
+    try:
+        _start(_commands(args, tree, f"tcp/127.0.0.1:{free_port()}"), procs, tree, work)
+        rows = _sample_until_done(args, procs, work)
+    finally:
+        _stop(procs)
+    _report(rows, procs, work)
+    return 0
+
+
+def _parse(argv: list[str] | None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--minutes", type=float, default=30.0, help="wall minutes (30)")
     ap.add_argument("--speedup", type=float, default=5.0, help="server speed-up (5)")
@@ -41,13 +56,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fold-journal", action="store_true",
                     help="the learner folds its journal into each snapshot")
     ap.add_argument("--dir", default=None, help="the learner's folder (default: a temp dir)")
-    args = ap.parse_args(argv)
+    return ap.parse_args(argv)
 
-    work = Path(args.dir) if args.dir else Path(tempfile.mkdtemp(prefix="rhbl-soak-"))
-    work.mkdir(parents=True, exist_ok=True)
-    tree = work / "tree.rhbl"
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    cmds = {
+
+def _commands(args: argparse.Namespace, tree: Path, endpoint: str) -> dict[str, list[str]]:
+    """The four processes' ``rhbl`` arguments, in start order."""
+    return {
         "server": ["server", "--world", "room", "--speedup", str(args.speedup), "--listen",
                    endpoint, "--log-level", "WARNING"],
         "learner": ["learner", "--features", "wall", "--out", str(tree), "--max-nodes",
@@ -58,51 +72,70 @@ def main(argv: list[str] | None = None) -> int:
         "controller": ["controller", "--from-learner", "--follow", "--connect", endpoint,
                        "--log-level", "WARNING"],
     }
-    procs: dict[str, Child] = {}
-    try:
-        for name, argv_ in cmds.items():
-            if name == "controller":  # it needs the learner's first snapshot
-                deadline = time.monotonic() + 300
-                while not tree.exists() and time.monotonic() < deadline:
-                    time.sleep(0.5)
-            procs[name] = Child(name, rhbl_argv(*argv_), work, cwd=ROOT,
-                                stop_signal=signal.SIGINT, stop_timeout=30.0,
-                                escalate=False).start()
-            time.sleep(2.0 if name == "server" else 0.5)
-        t0 = time.monotonic()
-        rows = []
-        files: list[str] = []
-        with open(args.out, "w", newline="") as f:
-            w = None
-            while True:
-                now = time.monotonic() - t0
-                sizes = {p.name: p.stat().st_size for p in sorted(work.iterdir())
-                         if p.is_file() and not p.name.endswith(".log")}
-                for name in sizes:
-                    if name not in files:
-                        files.append(name)
-                row = {"seconds": round(now, 1)}
-                row.update({f"rss_kib_{n}": p.rss_kib() for n, p in procs.items()})
-                row.update({f"bytes_{n}": sizes.get(n, 0) for n in files})
-                rows.append(row)
-                if w is None or set(row) != set(w.fieldnames):
-                    w = csv.DictWriter(f, fieldnames=list(row))
-                    w.writeheader()
-                w.writerow(row)
-                f.flush()
-                dead = [n for n, p in procs.items() if p.poll() is not None]
-                if dead or now >= args.minutes * 60:
-                    break
-                time.sleep(args.every)
-    finally:
-        # the teacher first: it waits for the learner to acknowledge its last labels (its
-        # outbox); then the others, all asked at once, each waited for (SIGKILL after 30 s)
-        if "teacher" in procs:
-            procs["teacher"].stop()
-        for p in procs.values():
-            p.send_signal(signal.SIGINT)
-        for p in procs.values():
-            p.stop()
+
+
+def _start(cmds: dict[str, list[str]], procs: dict[str, Child], tree: Path, work: Path) -> None:
+    """Start each process in order (into ``procs``, so that a failure stops those started)."""
+    for name, argv_ in cmds.items():
+        if name == "controller":  # it needs the learner's first snapshot
+            deadline = time.monotonic() + 300
+            while not tree.exists() and time.monotonic() < deadline:
+                time.sleep(0.5)
+        procs[name] = Child(name, rhbl_argv(*argv_), work, cwd=ROOT,
+                            stop_signal=signal.SIGINT, stop_timeout=30.0,
+                            escalate=False).start()
+        time.sleep(2.0 if name == "server" else 0.5)
+
+
+def _sample_until_done(args: argparse.Namespace, procs: dict[str, Child], work: Path) -> list[dict]:
+    """One CSV row every ``--every`` seconds until ``--minutes`` or a process exits."""
+    t0 = time.monotonic()
+    rows = []
+    files: list[str] = []
+    with open(args.out, "w", newline="") as f:
+        w = None
+        while True:
+            now = time.monotonic() - t0
+            row = _sample(now, procs, work, files)
+            rows.append(row)
+            if w is None or set(row) != set(w.fieldnames):
+                w = csv.DictWriter(f, fieldnames=list(row))
+                w.writeheader()
+            w.writerow(row)
+            f.flush()
+            dead = [n for n, p in procs.items() if p.poll() is not None]
+            if dead or now >= args.minutes * 60:
+                break
+            time.sleep(args.every)
+    return rows
+
+
+def _sample(now: float, procs: dict[str, Child], work: Path, files: list[str]) -> dict:
+    """A row: the time, each process's memory, the size of every file seen so far (``files``,
+    in order of appearance)."""
+    sizes = {p.name: p.stat().st_size for p in sorted(work.iterdir())
+             if p.is_file() and not p.name.endswith(".log")}
+    for name in sizes:
+        if name not in files:
+            files.append(name)
+    row = {"seconds": round(now, 1)}
+    row.update({f"rss_kib_{n}": p.rss_kib() for n, p in procs.items()})
+    row.update({f"bytes_{n}": sizes.get(n, 0) for n in files})
+    return row
+
+
+def _stop(procs: dict[str, Child]) -> None:
+    # the teacher first: it waits for the learner to acknowledge its last labels (its
+    # outbox); then the others, all asked at once, each waited for (SIGKILL after 30 s)
+    if "teacher" in procs:
+        procs["teacher"].stop()
+    for p in procs.values():
+        p.send_signal(signal.SIGINT)
+    for p in procs.values():
+        p.stop()
+
+
+def _report(rows: list[dict], procs: dict[str, Child], work: Path) -> None:
     print(f"soak: {len(rows)} samples over {rows[-1]['seconds']:.0f} s, folder {work}")
     half = len(rows) // 2
     for key in rows[-1]:
@@ -113,7 +146,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  {key}: first half max {max(first)}, second half max {max(second)}, "
               f"last {rows[-1].get(key)}")
     print("  exit statuses: " + ", ".join(f"{n} {p.poll()}" for n, p in procs.items()))
-    return 0
 
 
 if __name__ == "__main__":

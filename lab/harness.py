@@ -144,39 +144,54 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
     if recipe.task != task:
         raise ValueError(f"the recipe is for task {recipe.task!r} but world {spec.name!r} is a "
                          f"{task!r} world")
-    seconds, starts, segment = recipe.seconds, recipe.starts, recipe.segment
-    rounds, random_starts = recipe.rounds, recipe.random_segment
     policy = policy or make_policy(task, actions=learner.actions)
     rng = np.random.default_rng(seed)
     aug = (_Augmenter(policy, recipe.augment, recipe.augment_scale, seed)
            if recipe.augment > 0 else None)
-    demo = Demonstrator(policy, perturb=recipe.perturb, rng=rng, dt=dt)
-    fixed = [tuple(start)] if start is not None else demonstration_starts(spec, starts)
-    if start is not None:
-        segment = seconds
-    world = World(spec, robots=1, seed=seed, range_noise=range_noise, odom_noise=odom_noise)
-    first = fixed[0]
-    ep = Episode(start=first, dt=dt, kind="training")
-    side = followed_side(task)
-    total = int(round(seconds / dt))
-    done = 0
+    fixed = [tuple(start)] if start is not None else demonstration_starts(spec, recipe.starts)
+    segment = recipe.seconds if start is not None else recipe.segment
+    ep = Episode(start=fixed[0], dt=dt, kind="training")
     t0 = time.perf_counter()
+    noise = (range_noise, odom_noise)
+    _demonstrations(spec, learner, recipe, policy, fixed, segment, ep, rng=rng, aug=aug,
+                    seed=seed, noise=noise)
+    demo_vectors = ep.learned
+    rounds = 0 if start is not None else recipe.rounds  # a corrective demonstration: no rounds
+    compact = recipe.compact_params()
+    if compact is not None and not learner.recording:
+        raise ValueError(f"recipe compact {recipe.compact!r} needs a learner that kept its "
+                         "vectors (make_learner(recipe), or record=True)")
+    round_stats, between = _rounds(spec, learner, policy, fixed, recipe, rounds, compact, ep,
+                                   rng=rng, aug=aug, seed=seed, noise=noise)
+    compaction = _last_compaction(spec, learner, recipe, compact, seed, policy)
+    ep.wall_time = time.perf_counter() - t0
+    learner.session = _session_record(
+        spec, recipe, ep, seed=seed, given=start is not None, segment=segment,
+        demo_vectors=demo_vectors, rounds=rounds, round_stats=round_stats, noise=noise,
+        compaction=compaction, between=between, compacted=compact is not None)
+    return ep
+
+
+def _demonstrations(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe, policy,
+                    fixed: list, segment: float, ep: Episode, *, rng, aug, seed: int,
+                    noise: tuple[float, float]) -> None:
+    """The demonstrations of ``train`` until ``recipe.seconds`` of sim time are used: the teacher
+    restarts from each pose of ``fixed``, then (``recipe.random_segment`` > 0) from sampled
+    poses; ``learner`` observes every step; ``ep`` records them."""
+    demo = Demonstrator(policy, perturb=recipe.perturb, rng=rng, dt=ep.dt)
+    world = World(spec, robots=1, seed=seed, range_noise=noise[0], odom_noise=noise[1])
+    side = followed_side(spec.task)
+    total = int(round(recipe.seconds / ep.dt))
+    done = 0
     k = 0
     while done < total:
-        if k < len(fixed) or random_starts <= 0:
-            pose, limit = fixed[k % len(fixed)], segment
-        else:
-            if starts == "free":
-                pose = free_pose(spec, rng) or fixed[k % len(fixed)]
-            else:
-                pose = sample_pose(spec, ep.poses, rng, turn=recipe.turn) or fixed[k % len(fixed)]
-            limit = segment * random_starts
+        pose, limit = _demonstration_start(spec, recipe, fixed, segment, ep, k, rng)
         world.reset(poses=[pose], seed=seed * 1000 + k)
         demo.reset()
         if k > 0 and hasattr(policy, "resume_following"):
             policy.resume_following()
         ep.segments.append(list(pose))
-        steps = min(total - done, max(1, int(round(limit / dt))))
+        steps = min(total - done, max(1, int(round(limit / ep.dt))))
         for _ in range(steps):
             ranges = world.scan(0)
             odom = world.odom(0)
@@ -191,17 +206,35 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
             if spec.goal is not None and world.at_goal(0):
                 break
         k += 1
-    demo_vectors = ep.learned
-    round_stats = []
-    if start is not None:
-        rounds = 0  # a corrective demonstration from a given pose: no rounds
-    compact = recipe.compact_params()
-    if compact is not None and not learner.recording:
-        raise ValueError(f"recipe compact {recipe.compact!r} needs a learner that kept its "
-                         "vectors (make_learner(recipe), or record=True)")
+
+
+def _demonstration_start(spec: WorldSpec, recipe: Recipe, fixed: list, segment: float,
+                         ep: Episode, k: int, rng) -> tuple[tuple, float]:
+    """The k-th demonstration's start pose and time limit: the fixed poses first, then (with
+    ``recipe.random_segment`` > 0) poses sampled near the teacher's path or, ``starts`` "free",
+    anywhere in the free space (a fixed pose when none is found)."""
+    if k < len(fixed) or recipe.random_segment <= 0:
+        return fixed[k % len(fixed)], segment
+    if recipe.starts == "free":
+        pose = free_pose(spec, rng) or fixed[k % len(fixed)]
+    else:
+        pose = sample_pose(spec, ep.poses, rng, turn=recipe.turn) or fixed[k % len(fixed)]
+    return pose, segment * recipe.random_segment
+
+
+def _rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, fixed: list, recipe: Recipe,
+            rounds: int, compact: dict | None, ep: Episode, *, rng, aug, seed: int,
+            noise: tuple[float, float]) -> tuple[list[dict], list[dict]]:
+    """The corrective rounds of ``train``: in each copy scaled by ``recipe.round_scales``, then
+    in the training world (its corrections are the latest); with ``recipe.compact_rounds`` the
+    tree is compacted after the demonstrations and after every round but the last. Returns the
+    rounds' statistics and the compactions between them."""
     between: list[dict] = []  # the compactions before the last step (compact_rounds)
+    round_stats: list[dict] = []
+    if rounds <= 0:
+        return round_stats, between
     after_round = None
-    if compact is not None and recipe.compact_rounds and rounds > 0:
+    if compact is not None and recipe.compact_rounds:
         between.append(learner.compact(**compact, data="after the demonstrations"))
         todo = [rounds * (len(recipe.round_scales) + 1)]  # rounds left
 
@@ -210,47 +243,60 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
             if todo[0] > 0:
                 between.append(learner.compact(**compact, data=f"after {where}"))
             return todo[0] > 0
-    if rounds > 0:
-        # scaled copies first, the training world last (its corrections are the latest)
-        for f in recipe.round_scales:
-            scaled = spec.scaled(f)
-            for st in _corrective_rounds(scaled, learner, policy, scaled.start_poses, recipe,
-                                         seed, range_noise, odom_noise, ep, rng=rng, aug=aug,
-                                         after_round=after_round, scale=f):
-                round_stats.append(dict(st, scale=f))
-        round_stats += _corrective_rounds(spec, learner, policy, fixed, recipe, seed,
-                                          range_noise, odom_noise, ep, rng=rng, aug=aug,
-                                          after_round=after_round)
-    compaction = None
-    if compact is not None:  # the last step
-        before = learner.classifier
-        compaction = learner.compact(**compact, data="the last step")
-        if recipe.compact_visits > 0:
-            compaction = _compact_visits(spec, learner, before, compact, recipe, seed, policy)
-    ep.wall_time = time.perf_counter() - t0
+    range_noise, odom_noise = noise
+    for f in recipe.round_scales:
+        scaled = spec.scaled(f)
+        for st in _corrective_rounds(scaled, learner, policy, scaled.start_poses, recipe,
+                                     seed, range_noise, odom_noise, ep, rng=rng, aug=aug,
+                                     after_round=after_round, scale=f):
+            round_stats.append(dict(st, scale=f))
+    round_stats += _corrective_rounds(spec, learner, policy, fixed, recipe, seed,
+                                      range_noise, odom_noise, ep, rng=rng, aug=aug,
+                                      after_round=after_round)
+    return round_stats, between
+
+
+def _last_compaction(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe,
+                     compact: dict | None, seed: int, policy) -> dict | None:
+    """The last step of ``train``: the tree compacted on every vector it learned, redone against
+    held-out visited states with ``recipe.compact_visits``. Returns its record (None: no
+    compaction)."""
+    if compact is None:
+        return None
+    before = learner.classifier
+    compaction = learner.compact(**compact, data="the last step")
+    if recipe.compact_visits > 0:
+        compaction = _compact_visits(spec, learner, before, compact, recipe, seed, policy)
+    return compaction
+
+
+def _session_record(spec: WorldSpec, recipe: Recipe, ep: Episode, *, seed: int, given: bool,
+                    segment: float, demo_vectors: int, rounds: int, round_stats: list[dict],
+                    noise: tuple[float, float], compaction: dict | None, between: list[dict],
+                    compacted: bool) -> dict:
+    """``learner.session`` after ``train``: the run's settings and what it did (``given``: a
+    single demonstration from a given start)."""
     augment = recipe.augment
-    learner.session = {"world": spec.name, "world_path": str(spec.path) if spec.path else None,
-                       "seconds": seconds, "seed": seed, "perturb": recipe.perturb,
-                       "start": list(first), "starts": starts if start is None else "given",
-                       "demonstrations": len(ep.segments), "segment": segment,
-                       "consistent": recipe.consistent, "demonstration_vectors": demo_vectors,
-                       "rounds": rounds,
-                       "round_seconds": recipe.round_seconds if rounds else None,
-                       "takeover": recipe.takeover if rounds else None,
-                       "round_stats": round_stats,
-                       "round_free": recipe.round_free if rounds else None,
-                       "round_scales": list(recipe.round_scales) if rounds else None,
-                       "augment": augment,
-                       "augment_scale": recipe.augment_scale if augment else None,
-                       "range_noise": range_noise, "odom_noise": odom_noise,
-                       "vectors": ep.learned, "compaction": compaction,
-                       "compact_rounds": between if between else None,
-                       "compact_visits": ({"visits": recipe.compact_visits,
-                                           "scales": list(recipe.visit_scales),
-                                           "free": recipe.visit_free}
-                                          if compact is not None and recipe.compact_visits
-                                          else None)}
-    return ep
+    return {"world": spec.name, "world_path": str(spec.path) if spec.path else None,
+            "seconds": recipe.seconds, "seed": seed, "perturb": recipe.perturb,
+            "start": list(ep.start), "starts": "given" if given else recipe.starts,
+            "demonstrations": len(ep.segments), "segment": segment,
+            "consistent": recipe.consistent, "demonstration_vectors": demo_vectors,
+            "rounds": rounds,
+            "round_seconds": recipe.round_seconds if rounds else None,
+            "takeover": recipe.takeover if rounds else None,
+            "round_stats": round_stats,
+            "round_free": recipe.round_free if rounds else None,
+            "round_scales": list(recipe.round_scales) if rounds else None,
+            "augment": augment,
+            "augment_scale": recipe.augment_scale if augment else None,
+            "range_noise": noise[0], "odom_noise": noise[1],
+            "vectors": ep.learned, "compaction": compaction,
+            "compact_rounds": between if between else None,
+            "compact_visits": ({"visits": recipe.compact_visits,
+                                "scales": list(recipe.visit_scales),
+                                "free": recipe.visit_free}
+                               if compacted and recipe.compact_visits else None)}
 
 
 def _compact_visits(spec: WorldSpec, learner: DemonstrationLearner, before, compact: dict,

@@ -170,13 +170,26 @@ def walls(
     arithmetic of a full ``segments x beams`` cast, so the ranges are the same.
     """
     n, count = len(yaws), len(bearings)
-    resolution = (bearings[-1] - bearings[0]) / (count - 1)
     if beams is None:
         ang = bearings[None, :] + yaws[:, None]
         dc = np.cos(ang).astype(np.float32)
         ds = np.sin(ang).astype(np.float32)
     else:
         dc, ds = beams
+    ends, ex, ey, li, sj = _visible_segments(origins, yaws, segs, max_range)
+    acc = np.full(n * count, max_range, dtype=np.float32)
+    if len(li):
+        li, sj, lo_i, hi_i = _segment_beams(ends, yaws, li, sj, bearings)
+        _cast_segments(acc, count, li, sj, lo_i, hi_i, ends[0], ends[1], ex, ey, dc, ds,
+                       max_range)
+    return acc.reshape(n, count), dc, ds
+
+
+def _visible_segments(origins: np.ndarray, yaws: np.ndarray, segs: np.ndarray,
+                      max_range: float):
+    """The culling of ``walls``: the segments' ends relative to each laser ``(ax, ay, bx, by)``
+    (R, S) float64, the segments' vectors ``ex, ey`` (S,) and the (laser, segment) pairs
+    ``li, sj`` whose segment is not wholly behind the laser and comes within range."""
     ox, oy = origins[:, 0:1], origins[:, 1:2]
     ax = segs[None, :, 0] - ox  # (R, S) float64
     ay = segs[None, :, 1] - oy
@@ -194,60 +207,73 @@ def walls(
         nx * nx + ny * ny < max_range * max_range
     )
     li, sj = np.nonzero(keep)
-    acc = np.full(n * count, max_range, dtype=np.float32)
-    if len(li):
-        yl = yaws[li]
-        a0 = np.arctan2(ay[li, sj], ax[li, sj]) - yl
-        a1 = np.arctan2(by[li, sj], bx[li, sj]) - yl
-        a0 = (a0 + np.pi) % (2.0 * np.pi) - np.pi
-        a1 = (a1 + np.pi) % (2.0 * np.pi) - np.pi
-        amin, amax = np.minimum(a0, a1), np.maximum(a0, a1)
-        wrap = amax - amin > np.pi  # the short way round passes behind the laser: two parts
-        start = bearings[0]
-        lo = np.where(wrap, amax, amin)
-        hi = np.where(wrap, np.pi, amax)
-        lo_i = np.floor((lo - start) / resolution).astype(np.intp) - 1
-        hi_i = np.ceil((hi - start) / resolution).astype(np.intp) + 1
-        w = np.flatnonzero(wrap)
-        if len(w):
-            lo_i = np.concatenate([lo_i, np.floor((-np.pi - start) / resolution).astype(np.intp)
-                                   - 1 + np.zeros(len(w), np.intp)])
-            hi_i = np.concatenate([hi_i, np.ceil((amin[w] - start) / resolution).astype(np.intp)
-                                   + 1])
-            li = np.concatenate([li, li[w]])
-            sj = np.concatenate([sj, sj[w]])
-        np.maximum(lo_i, 0, out=lo_i)
-        np.minimum(hi_i, count - 1, out=hi_i)
-        ok = np.flatnonzero(lo_i <= hi_i)
-        li, sj, lo_i, hi_i = li[ok], sj[ok], lo_i[ok], hi_i[ok]
-        counts = hi_i - lo_i + 1
-        # element k of pair p is beam lo_i[p] + (k - first element of p) of laser li[p]; the
-        # per-pair values are repeated (cheaper than a gather), the per-beam ones gathered
-        flat = np.repeat(li * count + lo_i - (np.cumsum(counts) - counts), counts)
-        flat += np.arange(len(flat))
-        f4 = np.float32
-        qax, qay = ax[li, sj].astype(f4), ay[li, sj].astype(f4)
-        qex, qey = ex.astype(f4)[sj], ey.astype(f4)[sj]
-        num = qax * qey - qay * qex  # per pair: the same float32 value for all its beams
-        pax, pay = np.repeat(qax, counts), np.repeat(qay, counts)
-        pex, pey = np.repeat(qex, counts), np.repeat(qey, counts)
-        bdc = dc.ravel().take(flat)
-        bds = ds.ravel().take(flat)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = pey * bdc
-            inv -= np.multiply(pex, bds, out=pey)
-            np.divide(1.0, inv, out=inv)
-            tr = np.repeat(num, counts)
-            tr *= inv
-            u = pax * bds
-            u -= np.multiply(pay, bdc, out=pex)
-            u *= inv
-        bad = u < 0.0
-        bad |= u > 1.0
-        bad |= ~(tr > 0.0)
-        tr[bad] = max_range
-        np.minimum.at(acc, flat, tr)
-    return acc.reshape(n, count), dc, ds
+    return (ax, ay, bx, by), ex, ey, li, sj
+
+
+def _segment_beams(ends, yaws: np.ndarray, li: np.ndarray, sj: np.ndarray,
+                   bearings: np.ndarray):
+    """The beams each (laser, segment) pair covers: its angular interval, one beam of margin on
+    each side, clipped to the field of view; an interval passing behind the laser is split in
+    two pairs. Returns ``li, sj, lo_i, hi_i`` of the pairs left (lo_i <= hi_i)."""
+    ax, ay, bx, by = ends
+    count = len(bearings)
+    resolution = (bearings[-1] - bearings[0]) / (count - 1)
+    yl = yaws[li]
+    a0 = np.arctan2(ay[li, sj], ax[li, sj]) - yl
+    a1 = np.arctan2(by[li, sj], bx[li, sj]) - yl
+    a0 = (a0 + np.pi) % (2.0 * np.pi) - np.pi
+    a1 = (a1 + np.pi) % (2.0 * np.pi) - np.pi
+    amin, amax = np.minimum(a0, a1), np.maximum(a0, a1)
+    wrap = amax - amin > np.pi  # the short way round passes behind the laser: two parts
+    start = bearings[0]
+    lo = np.where(wrap, amax, amin)
+    hi = np.where(wrap, np.pi, amax)
+    lo_i = np.floor((lo - start) / resolution).astype(np.intp) - 1
+    hi_i = np.ceil((hi - start) / resolution).astype(np.intp) + 1
+    w = np.flatnonzero(wrap)
+    if len(w):
+        lo_i = np.concatenate([lo_i, np.floor((-np.pi - start) / resolution).astype(np.intp)
+                               - 1 + np.zeros(len(w), np.intp)])
+        hi_i = np.concatenate([hi_i, np.ceil((amin[w] - start) / resolution).astype(np.intp)
+                               + 1])
+        li = np.concatenate([li, li[w]])
+        sj = np.concatenate([sj, sj[w]])
+    np.maximum(lo_i, 0, out=lo_i)
+    np.minimum(hi_i, count - 1, out=hi_i)
+    ok = np.flatnonzero(lo_i <= hi_i)
+    return li[ok], sj[ok], lo_i[ok], hi_i[ok]
+
+
+def _cast_segments(acc, count, li, sj, lo_i, hi_i, ax, ay, ex, ey, dc, ds, max_range) -> None:
+    """Intersect each pair's beams lo_i..hi_i with its segment in float32; fold the hits into
+    ``acc`` (the reduction: a minimum per beam)."""
+    counts = hi_i - lo_i + 1
+    # element k of pair p is beam lo_i[p] + (k - first element of p) of laser li[p]; the
+    # per-pair values are repeated (cheaper than a gather), the per-beam ones gathered
+    flat = np.repeat(li * count + lo_i - (np.cumsum(counts) - counts), counts)
+    flat += np.arange(len(flat))
+    f4 = np.float32
+    qax, qay = ax[li, sj].astype(f4), ay[li, sj].astype(f4)
+    qex, qey = ex.astype(f4)[sj], ey.astype(f4)[sj]
+    num = qax * qey - qay * qex  # per pair: the same float32 value for all its beams
+    pax, pay = np.repeat(qax, counts), np.repeat(qay, counts)
+    pex, pey = np.repeat(qex, counts), np.repeat(qey, counts)
+    bdc = dc.ravel().take(flat)
+    bds = ds.ravel().take(flat)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = pey * bdc
+        inv -= np.multiply(pex, bds, out=pey)
+        np.divide(1.0, inv, out=inv)
+        tr = np.repeat(num, counts)
+        tr *= inv
+        u = pax * bds
+        u -= np.multiply(pay, bdc, out=pex)
+        u *= inv
+    bad = u < 0.0
+    bad |= u > 1.0
+    bad |= ~(tr > 0.0)
+    tr[bad] = max_range
+    np.minimum.at(acc, flat, tr)
 
 
 def robots_dense(
