@@ -275,6 +275,20 @@ def _get_origin(m: dict, what: str, required: bool) -> tuple[str | None, int | N
     return origin, seq
 
 
+def _label_fields(m: dict, what: str, required: bool) -> dict[str, Any]:
+    """The fields a label and a resent label share (``TeacherAction``, ``LabeledScan``)."""
+    origin, seq = _get_origin(m, what, required=required)
+    return {
+        "scan_id": get_int(m, "scan_id", what, minimum=0),
+        "action": get_str(m, "action", what),
+        "source": get_opt(m, "source", get_str, what, default=""),
+        "ts": get_opt(m, "ts", get_float, what, default=0.0),
+        "executed": get_opt(m, "executed", get_str, what),
+        "origin": origin,
+        "seq": seq,
+    }
+
+
 @dataclass
 class TeacherAction(_Message):
     """The teacher's label for a scan: ``action`` name (e.g. ``fwd-left``), ``scan_id``;
@@ -307,17 +321,7 @@ class TeacherAction(_Message):
 
     @classmethod
     def from_map(cls, m):
-        w = cls.WHAT
-        origin, seq = _get_origin(m, w, required=False)
-        return cls(
-            scan_id=get_int(m, "scan_id", w, minimum=0),
-            action=get_str(m, "action", w),
-            source=get_opt(m, "source", get_str, w, default=""),
-            ts=get_opt(m, "ts", get_float, w, default=0.0),
-            executed=get_opt(m, "executed", get_str, w),
-            origin=origin,
-            seq=seq,
-        )
+        return cls(**_label_fields(m, cls.WHAT, required=False))
 
 
 @dataclass
@@ -359,18 +363,8 @@ class LabeledScan(_Message):
     @classmethod
     def from_map(cls, m):
         w = cls.WHAT
-        origin, seq = _get_origin(m, w, required=True)
-        return cls(
-            scan_id=get_int(m, "scan_id", w, minimum=0),
-            action=get_str(m, "action", w),
-            origin=origin,
-            seq=seq,
-            ranges=_get_ranges(m, "ranges", w),
-            yaw=get_float(m, "yaw", w),
-            source=get_opt(m, "source", get_str, w, default=""),
-            ts=get_opt(m, "ts", get_float, w, default=0.0),
-            executed=get_opt(m, "executed", get_str, w),
-        )
+        return cls(**_label_fields(m, w, required=True), ranges=_get_ranges(m, "ranges", w),
+                   yaw=get_float(m, "yaw", w))
 
 
 @dataclass
