@@ -123,8 +123,12 @@ class LabelSet:
     """Which labels (``origin``, ``seq``) a learner holds: per origin a watermark ``upto`` (every
     seq below it is held) and the few held above it. Bounded: at most ``max_above`` seqs above a
     watermark (beyond that the watermark jumps to the lowest held one, giving up the gap below:
-    logged; a teacher resends a missing label every few seconds, so only a teacher that died
-    leaves gaps) and ``max_origins`` origins (the least recently seen is forgotten: logged)."""
+    logged; a teacher resends a missing label every few seconds, so a gap lasts only while a
+    label is on its way, except after a teacher died, a label refused as bad input before a
+    restart (not journaled), or a learner that joined a teacher's session midway; a gap that
+    stays makes every later label a seq above it, and after ``max_above`` of them a label of
+    the gap still on its way would be taken as held) and ``max_origins`` origins (the least
+    recently seen is forgotten: logged)."""
 
     def __init__(self, max_above: int = 4096, max_origins: int = 256):
         self.max_above, self.max_origins = int(max_above), int(max_origins)

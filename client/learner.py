@@ -491,6 +491,7 @@ class LearnerProcess:
         # labeled scans waiting to be journaled (in order): empty unless the journal cannot be
         # written (disk full); nothing is learned before it is journaled
         self.backlog: deque[tuple[Scan, TeacherAction]] = deque()
+        self.waiting: set[tuple[str, int]] = set()  # (origin, seq) of the backlog's labels
         self.retry_at = 0.0
         self.failures = 0  # journal writes failed in a row
         self.drain_until: float | None = None  # after a stop request: finish what arrived
@@ -594,8 +595,20 @@ class LearnerProcess:
                         act.action, act.scan_id, self.core.actions.names)
             self._handled(act, journaled=False)
             return
+        key = (act.origin, act.seq)
+        if act.origin is not None and (self.core.holds(act.origin, act.seq)
+                                       or key in self.waiting):
+            # a resend of a label journaled already (acknowledged again: the ack was lost), or
+            # of one waiting in the backlog (the journal cannot be written and the teacher
+            # resends what it does not see acknowledged): one copy is kept, not one per resend
+            self.stats["duplicates"] += 1
+            if key not in self.waiting:
+                self._handled(act, journaled=True)
+            return
         self.stats["paired"] += 1
         self.backlog.append((scan, act))
+        if act.origin is not None:
+            self.waiting.add(key)
         if len(self.backlog) == 1 or time.monotonic() >= self.retry_at:
             self.flush_backlog()
 
@@ -607,7 +620,7 @@ class LearnerProcess:
                 learned = self.core.learn(scan.id, scan.ts, scan.ranges, float(scan.pose[2]),
                                           act.action, act.origin, act.seq)
             except FeatureError as exc:  # a scan the features cannot use (bad input)
-                self.backlog.popleft()
+                self._pop()
                 self.stats["rejected"] += 1
                 log.warning("label %r for scan %d dropped: %s", act.action, scan.id, exc)
                 self._handled(act, journaled=False)
@@ -615,7 +628,7 @@ class LearnerProcess:
             except (JournalError, OSError) as exc:
                 self._journal_failed(exc)
                 return
-            self.backlog.popleft()
+            self._pop()
             self._handled(act, journaled=True)  # (again, for a duplicate: its ack was lost)
             if learned is None:  # resent, or live and resent: journaled once only
                 self.stats["duplicates"] += 1
@@ -623,6 +636,11 @@ class LearnerProcess:
         if self.failures:
             log.warning("the journal is writable again after %d failed attempts", self.failures)
             self.failures = 0
+
+    def _pop(self) -> None:
+        """Take the oldest labeled scan off the backlog."""
+        _, act = self.backlog.popleft()
+        self.waiting.discard((act.origin, act.seq))
 
     def _journal_failed(self, exc: Exception) -> None:
         self.retry_at = time.monotonic() + _RETRY
@@ -633,7 +651,7 @@ class LearnerProcess:
                       "(at most %d), retrying every %.0f s; nothing is learned before "
                       "it is journaled", exc, len(self.backlog), MAX_BACKLOG, _RETRY)
         while len(self.backlog) > MAX_BACKLOG:
-            self.backlog.popleft()
+            self._pop()
             self.stats["lost"] += 1
             if self.stats["lost"] <= 3 or self.stats["lost"] % 1000 == 0:
                 log.error("journal still failing: dropped the oldest labeled vector "

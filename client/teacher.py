@@ -22,7 +22,7 @@ same way.
 Nor is a label lost in flight when a learner is killed: each label carries the session's identity
 (``origin``, a random id per process, and ``seq``, 0, 1, ...) and stays in the teacher's outbox
 (``Outbox``, owned by ``TeacherPublisher``) with the scan it answers until the learner
-acknowledges it (``LearnerAck`` on ``rhbl/<robot>/learner/ack``: the labels durably in its
+acknowledges it (``LearnerAck`` on ``rhbl/<robot>/learner/ack``: the labels in its
 journal). Every unacknowledged label when a learner's token appears again, and a label missed
 (unacknowledged after ``--resend-after``, 2 s, with backoff: ``Outbox``), is resent with its scan
 on ``rhbl/<robot>/teacher/labeled`` (``LabeledScan``); the learner journals each label once. With ``--outbox`` (2000) labels
@@ -204,8 +204,8 @@ class TeacherProcess:
             self.close()
         return 0
 
-    def wait_learner(self) -> None:
-        found = wait_for_learner(self.ctx)
+    def wait_learner(self, timeout: float | None = None) -> None:
+        found = wait_for_learner(self.ctx, timeout)
         end = time.monotonic() + 2.0  # the subscriber sees the token too (normally at once)
         while not self.learners and time.monotonic() < end:
             time.sleep(0.01)
@@ -243,7 +243,13 @@ class TeacherProcess:
                     "labels)", self.ctx.robot)
         self.cmd_pub.put(VelCmd(vx=0.0, va=0.0, source=SOURCE, scan_id=scan.id,
                                 ts=scan.ts).encode())
-        self.wait_learner()
+        box = self.pubs.outbox
+        if box is not None and len(box):  # giving up would drop them: wait for a learner
+            log.warning("teacher: %d labels unacknowledged: waiting for a learner without a "
+                        "time limit (--wait-learner-timeout applies when none are)", len(box))
+            self.wait_learner(timeout=0)
+        else:
+            self.wait_learner()
         self.last_id = -1  # the scans of the pause were skipped on purpose, not missed
 
     def pause_full(self, scan: Scan) -> None:
@@ -390,7 +396,7 @@ class Outbox:
         """Forget the labels with ``seq < upto`` and those in ``seqs``; how many were held."""
         with self._lock:
             gone = [q for q in self._entries if q < upto]
-            gone += [q for q in seqs if q >= upto and q in self._entries]
+            gone += [q for q in set(seqs) if q >= upto and q in self._entries]
             for q in gone:
                 del self._entries[q]
             self._acked_max = max(self._acked_max, upto - 1, max(seqs, default=-1))

@@ -371,8 +371,9 @@ class LabeledScan(_Message):
 class LearnerAck(_Message):
     """A learner's acknowledgement of a teacher session's labels (``rhbl/<robot>/learner/ack``):
     the labels of ``origin`` with ``seq < upto`` and those in ``seqs`` (all above ``upto``) are
-    durably in its journal (or were refused as bad input, logged: never to be resent). The whole
-    state of that origin each time, so a later ack makes up for a lost one."""
+    in its journal (written to the kernel, so a killed learner keeps them; fsync'd within a
+    second) or were refused as bad input (logged: never to be resent). The whole state of that
+    origin each time, so a later ack makes up for a lost one."""
 
     WHAT: ClassVar[str] = "learner/ack"
     MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD

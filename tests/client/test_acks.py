@@ -172,3 +172,36 @@ def test_outbox_acks_remove_gaps_and_stalls_resend_with_backoff_and_the_bound_sa
         box.label(_scan(i), "fwd", None)
     assert len(box) == 6 and box.full  # the caller pauses; nothing is dropped
     assert box.ack(12) == 6 and not box.full and box.due() == []
+
+
+def test_resends_to_a_learner_that_cannot_journal_are_kept_once(tmp_path):
+    """The journal cannot be written (here: closed), so nothing is acknowledged and the teacher
+    resends: the learner keeps one copy of each label in its backlog, not one per resend (a
+    stuck learner's backlog filled with copies and dropped them as "lost"), and a resent label
+    it journaled already is acknowledged again."""
+    from collections import deque
+
+    from client.learner import LearnerProcess
+
+    core = LearnerCore(tmp_path / "t.rhbl", features="wall")
+    assert None not in _learn(core, "s1", [0])
+    core.journal.close()  # every append now raises JournalError
+    p = LearnerProcess.__new__(LearnerProcess)
+    p.core, p.backlog, p.waiting = core, deque(), set()
+    p.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0, "duplicates": 0}
+    p.retry_at, p.failures, p.ack_due, p.ack_count = 0.0, 0, set(), 0
+    for _ in range(10):  # seq 1, resent ten times while the journal fails
+        p.learn(_scan(1), TeacherAction(scan_id=1, action="fwd", origin="s1", seq=1))
+    assert len(p.backlog) == 1 and p.stats["duplicates"] == 9 and p.stats["lost"] == 0
+    assert p.failures >= 1 and p.ack_due == set()  # nothing journaled, nothing acknowledged
+    p.learn(_scan(0), TeacherAction(scan_id=0, action="fwd", origin="s1", seq=0))  # held
+    assert p.stats["duplicates"] == 10 and p.ack_due == {"s1"} and len(p.backlog) == 1
+
+
+def test_an_ack_naming_a_seq_twice_is_taken_once():
+    """A hostile or buggy ack (the decoder lets repeated seqs through): no KeyError in the
+    teacher's subscription callback, the label forgotten once."""
+    box = Outbox(cap=6, resend_after=2.0, origin="s1", clock=_Clock())
+    for i in range(3):
+        box.label(_scan(i), "fwd", None)
+    assert box.ack(0, (1, 1)) == 1 and len(box) == 2 and box.stats["acked"] == 1
