@@ -506,10 +506,11 @@ class Console:
                     await page.ws.send_str(text)
 
     def close(self) -> None:
+        end = time.monotonic() + DRAIN  # one wait for every robot's last acknowledgements
         for r in self.robots.values():
             self._unhold(r, "the console stops")
             if r.pubs is not None:
-                r.pubs.drain(DRAIN)  # the person's last labels reach the learner
+                r.pubs.drain(max(0.0, end - time.monotonic()))  # the person's last labels
                 r.pubs.close()
         for sub in self.subs:
             with contextlib.suppress(Exception):
