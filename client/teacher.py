@@ -17,7 +17,7 @@ Nothing demonstrated is lost: before its first label the teacher waits (``--wait
 a learner declares only once it subscribes to the labels; with no learner it exits with status 5.
 When the last learner's token disappears while demonstrating (it stopped or crashed), the teacher
 pauses (no commands, no labels: the server's watchdog stops the robot) and waits for a learner the
-same way.
+same way, or without a time limit while it holds labels no learner has acknowledged.
 
 Nor is a label lost in flight when a learner is killed: each label carries the session's identity
 (``origin``, a random id per process, and ``seq``, 0, 1, ...) and stays in the teacher's outbox
@@ -126,7 +126,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--wait-learner-timeout", type=float, default=30.0, metavar="SECONDS",
                         help="how long to wait for a learner's liveliness token before "
                              "demonstrating; then exit with status 5 (0 = wait forever, "
-                             "logging every few seconds; default: 30)")
+                             "logging every few seconds; default: 30; a paused teacher "
+                             "holding unacknowledged labels waits forever)")
 
 
 def main(args: argparse.Namespace) -> int:
