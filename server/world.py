@@ -372,13 +372,14 @@ def load_world(path: str | Path) -> WorldSpec:
 
 _WALL_RADIUS = 0.02  # m, physics half-thickness of a wall segment (the laser sees the centre line)
 _MAX_SUBSTEP = 0.025  # s
-_BATCH_WALLS = 8  # lasers from which World.scans casts the walls for all at once
 # pymunk's Body properties called directly: the same getters and setters without the
 # attribute lookup of every access (the step sets every robot's velocity at every substep)
 _body_position = pymunk.Body.position.fget
 _body_angle = pymunk.Body.angle.fget
 _body_set_velocity = pymunk.Body.velocity.fset
 _body_set_angular_velocity = pymunk.Body.angular_velocity.fset
+_NO_CENTRES = np.zeros((0, 2))  # a world of one robot: the laser sees walls only
+_ROW0 = np.zeros(1, dtype=np.intp)
 
 
 class _Robot:
@@ -419,27 +420,10 @@ class World:
         self.seed = int(seed)
         self.range_noise = float(range_noise)
         self.odom_noise = float(odom_noise)
-        segs = spec.segments()
-        self._segs = segs
-        # the wall cast's tables (``_scan_walls``), computed once per world: endpoints A then B
-        # as rows x and y (2, 2S), edge vectors (2, S) in float64 and float32, and -|e|^2
-        n_seg = len(segs)
-        self._seg_ab = np.concatenate([segs[:, 0:2], segs[:, 2:4]]).T.copy()
-        self._seg_e = (segs[:, 2:4] - segs[:, 0:2]).T.copy()
-        self._seg_e32 = self._seg_e.astype(np.float32)
-        ee = self._seg_e[0] ** 2 + self._seg_e[1] ** 2
-        self._seg_neg_ee = -np.where(ee > 0, ee, 1.0)  # a / -ee is exactly -(a / ee)
-        self._n_seg = n_seg
-        self._origin = np.empty((2, 1))
-        self._beam_yaw: float | None = None  # the heading of the cached beam directions
-        self._beam_dc = self._beam_ds = None
-        self._inv_key: tuple[float, bytes] | None = None  # (heading, segments) of _inv
-        self._inv = None
-        self._buf_tr, self._buf_u, self._buf_tmp = (
-            np.empty((n_seg, LASER.count), dtype=np.float32) for _ in range(3))
-        self._buf_hit, self._buf_ok = (np.empty((n_seg, LASER.count), dtype=bool)
-                                       for _ in range(2))
+        self._segs = spec.segments()
         self._bearings = LASER.bearings()
+        # a laser for any pose (``_scan_walls``): walls only
+        self._probe = laser.Laser(self._segs, self._bearings, LASER.max_range, ROBOT.radius)
         self.reset()
 
     # -- lifecycle --------------------------------------------------------------------------
@@ -458,7 +442,10 @@ class World:
         if len(poses) != self.n_robots:
             raise ValueError(f"reset needs {self.n_robots} poses, got {len(poses)}")
         self._rng = np.random.default_rng(self.seed)
-        self._fleet_yaw = None  # the fleet's kept beam directions (_fleet_beams)
+        # the robots' lasers: their beam directions kept per robot while its heading holds
+        self._laser = laser.Laser(self._segs, self._bearings, LASER.max_range, ROBOT.radius,
+                                  robots=len(poses))
+        self._rows = np.arange(len(poses), dtype=np.intp)
         space = pymunk.Space()
         space.gravity = (0.0, 0.0)
         space.collision_slop = 0.001
@@ -514,14 +501,16 @@ class World:
             b = r.body
             x, y = position(b)
             r.last = (x, y, angle(b))
+            # a robot's moment of inertia is infinite and the space undamped: nothing but this
+            # changes its angular velocity, so it is set once a step
+            set_angular_velocity(b, r.cmd[1])
         space = self._space
         for _ in range(n):
             for r in robots:
                 b = r.body
-                vx, va = r.cmd
+                vx = r.cmd[0]
                 a = angle(b)
                 set_velocity(b, (vx * cos(a), vx * sin(a)))
-                set_angular_velocity(b, va)
             space.step(h)
         for r in robots:
             self._update_odometry(r, dt)
@@ -660,66 +649,37 @@ class World:
 
     def scan(self, i: int) -> np.ndarray:
         """Ray-cast robot ``i``'s laser: float32 ranges, ``ranges[0]`` at ``LASER.min_angle``."""
-        if self.n_robots == 1:
-            x, y, yaw = self.pose(i)
-            ox = x + LASER.offset * math.cos(yaw)
-            oy = y + LASER.offset * math.sin(yaw)
-            ranges, _, _ = self._scan_walls(ox, oy, yaw)
-            return self._add_noise(ranges) if self.range_noise > 0.0 else ranges
         return self.scans([i])[0]
 
     def scans(self, indices: list[int] | None = None) -> np.ndarray:
         """Ray-cast the lasers of robots ``indices`` (default: all) together: float32 array
         (len(indices), LASER.count); row k equals ``scan(indices[k])`` (and draws range noise in
-        the same order as those calls would). The robots are cast against each other for the
-        whole fleet at once (``server.laser``), so a tick's cost grows with the robots seen,
-        not with the square of the fleet."""
-        idx = list(range(self.n_robots)) if indices is None else [int(i) for i in indices]
-        n = len(idx)
-        out = np.empty((n, LASER.count), dtype=np.float32)
+        the same order as those calls would). One compiled call casts every laser against the
+        walls and the other robots (``server.laser``), each only over what it can see, so a
+        tick's cost grows with the robots seen, not with the square of the fleet."""
+        rows = self._rows if indices is None else np.asarray(indices, dtype=np.intp).reshape(-1)
+        n = len(rows)
         if n == 0:
-            return out
+            return np.empty((0, LASER.count), dtype=np.float32)
         origins = np.empty((n, 2))
         yaws = np.empty(n)
-        for k, i in enumerate(idx):
-            x, y, yaw = self.pose(i)
-            origins[k] = (x + LASER.offset * math.cos(yaw), y + LASER.offset * math.sin(yaw))
+        robots = self._robots
+        for k in range(n):
+            b = robots[rows[k]].body
+            x, y = _body_position(b)
+            yaw = wrap_angle(_body_angle(b))
+            origins[k, 0] = x + LASER.offset * math.cos(yaw)
+            origins[k, 1] = y + LASER.offset * math.sin(yaw)
             yaws[k] = yaw
-        if n < _BATCH_WALLS:  # a few lasers: one at a time has less overhead (same ranges)
-            dcs = np.empty((n, LASER.count), dtype=np.float32)
-            dss = np.empty((n, LASER.count), dtype=np.float32)
-            for k in range(n):
-                out[k], dcs[k], dss[k] = self._scan_walls(*origins[k], yaws[k])
-        else:
-            out, dcs, dss = laser.walls(origins, yaws, self._segs, self._bearings,
-                                        LASER.max_range, beams=self._fleet_beams(idx, yaws))
         if self.n_robots > 1:
-            centres = np.asarray([r.body.position for r in self._robots], dtype=np.float64)
-            out = laser.robots_into(out, origins, yaws, np.asarray(idx, dtype=np.intp), centres,
-                              dcs, dss, ROBOT.radius, LASER.min_angle, LASER.resolution,
-                              LASER.max_range)
+            centres = np.asarray([_body_position(r.body) for r in robots], dtype=np.float64)
+        else:
+            centres = _NO_CENTRES
+        out = self._laser.cast(origins, yaws, rows, centres)
         if self.range_noise > 0.0:
             for k in range(n):
                 out[k] = self._add_noise(out[k])
         return out
-
-    def _fleet_beams(self, idx: list[int], yaws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Float32 cosines and sines of the beams of robots ``idx`` at headings ``yaws``, (n,
-        beams) each; every robot's are kept and recomputed only when its heading changed (a
-        robot driving straight or standing costs nothing here)."""
-        if self._fleet_yaw is None:
-            self._fleet_yaw = np.full(self.n_robots, np.nan)  # NaN: never equal, none kept
-            self._fleet_dc = np.empty((self.n_robots, LASER.count), dtype=np.float32)
-            self._fleet_ds = np.empty((self.n_robots, LASER.count), dtype=np.float32)
-        rows = np.asarray(idx, dtype=np.intp)
-        turned = yaws != self._fleet_yaw[rows]
-        if turned.any():
-            rows_t, yaws_t = rows[turned], yaws[turned]
-            ang = self._bearings[None, :] + yaws_t[:, None]
-            self._fleet_dc[rows_t] = np.cos(ang)  # rounded to float32 as astype does
-            self._fleet_ds[rows_t] = np.sin(ang)
-            self._fleet_yaw[rows_t] = yaws_t
-        return self._fleet_dc[rows], self._fleet_ds[rows]
 
     def _add_noise(self, ranges: np.ndarray) -> np.ndarray:
         if self.range_noise > 0.0:
@@ -727,72 +687,9 @@ class World:
             np.clip(ranges, 0.0, LASER.max_range, out=ranges)
         return ranges.astype(np.float32, copy=False)
 
-    def _beams(self, yaw: float) -> tuple[np.ndarray, np.ndarray]:
-        """Float32 cosines and sines of the beams' world angles at heading ``yaw`` (read-only;
-        kept while the heading does not change: a robot driving straight reuses them)."""
-        if yaw != self._beam_yaw or self._beam_dc is None:
-            ang = self._bearings + yaw
-            dc = np.cos(ang).astype(np.float32)
-            ds = np.sin(ang).astype(np.float32)
-            dc.flags.writeable = ds.flags.writeable = False
-            self._beam_yaw, self._beam_dc, self._beam_ds = yaw, dc, ds
-        return self._beam_dc, self._beam_ds
-
     def _scan_walls(self, ox: float, oy: float, yaw: float):
         """Ranges to the walls from (ox, oy) facing ``yaw``: (float32 ranges, float32 cosines
-        and sines of the beams' world angles, the last two read-only).
-
-        Segments wholly behind the laser or out of range are culled (float64), the rest cast
-        against every beam (float32, (segments, beams)). The per-heading part (beam directions
-        and the reciprocal of each segment's cross product with each beam) is kept while the
-        heading stays the same; the arithmetic of every element is that of a fresh cast."""
-        max_r = LASER.max_range
-        dc, ds = self._beams(yaw)
-        n_seg = self._n_seg
-        o = self._origin
-        o[0, 0] = ox
-        o[1, 0] = oy
-        p = self._seg_ab - o  # (2, 2S): endpoints relative to the laser
-        fwd = p[0] * math.cos(yaw)
-        fwd += p[1] * math.sin(yaw)
-        front = fwd >= 0
-        keep = front[:n_seg] | front[n_seg:]  # not wholly behind the laser
-        a = p[:, :n_seg]
-        e = self._seg_e
-        ae = a * e
-        t = np.add(ae[0], ae[1])
-        np.divide(t, self._seg_neg_ee, out=t)
-        np.maximum(t, 0.0, out=t)
-        np.minimum(t, 1.0, out=t)
-        near = e * t
-        near += a  # the segment's point nearest the laser
-        near *= near
-        keep &= np.add(near[0], near[1]) < max_r * max_r
-        idx = keep.nonzero()[0]
-        if len(idx) == 0:
-            return np.full(LASER.count, max_r, dtype=np.float32), dc, ds
-        # float32 for the (segments x beams) work: about 20% faster, ample for ranges <= 8 m
-        k = len(idx)
-        a32 = a.take(idx, axis=1).astype(np.float32)
-        e32 = self._seg_e32.take(idx, axis=1)
-        ax, ay = a32[0][:, None], a32[1][:, None]
-        ex, ey = e32[0][:, None], e32[1][:, None]
-        key = (yaw, idx.tobytes())
-        tr, u, tmp = self._buf_tr[:k], self._buf_u[:k], self._buf_tmp[:k]
-        hit, ok = self._buf_hit[:k], self._buf_ok[:k]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            if key != self._inv_key:
-                inv = ey * dc
-                inv -= np.multiply(ex, ds, out=tmp)
-                np.divide(1.0, inv, out=inv)
-                self._inv_key, self._inv = key, inv
-            inv = self._inv
-            np.multiply(ax * ey - ay * ex, inv, out=tr)
-            np.multiply(ax, ds, out=u)
-            u -= np.multiply(ay, dc, out=tmp)
-            u *= inv
-        np.greater_equal(u, 0.0, out=hit)
-        hit &= np.less_equal(u, 1.0, out=ok)
-        hit &= np.greater(tr, 0.0, out=ok)
-        ranges = np.minimum.reduce(tr, axis=0, where=hit, initial=max_r)
-        return ranges, dc, ds
+        and sines of the beams' world angles; ``server.laser``)."""
+        ranges = self._probe.cast(np.array([[ox, oy]]), np.array([yaw]), _ROW0, _NO_CENTRES)[0]
+        dc, ds = self._probe.directions(0)
+        return ranges, dc.copy(), ds.copy()

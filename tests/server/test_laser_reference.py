@@ -12,6 +12,50 @@ import server
 from server.world import LASER, World, load_world
 
 
+def dense_walls(segments, x, y, dc, ds) -> np.ndarray:
+    """Every segment against every beam (float32 directions ``dc``, ``ds``), nothing culled,
+    in numpy: float32 intersections with the arithmetic the compiled cast documents
+    (server/laser.py)."""
+    f4 = np.float32
+    ax, ay = (segments[:, 0] - x).astype(f4)[:, None], (segments[:, 1] - y).astype(f4)[:, None]
+    ex = (segments[:, 2] - segments[:, 0]).astype(f4)[:, None]
+    ey = (segments[:, 3] - segments[:, 1]).astype(f4)[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = f4(1.0) / (ey * dc - ex * ds)
+        tr = (ax * ey - ay * ex) * inv
+        u = (ax * ds - ay * dc) * inv
+    hit = (u >= 0.0) & (u <= 1.0) & (tr > 0.0)
+    return np.min(np.where(hit, tr, f4(LASER.max_range)), axis=0)
+
+
+@pytest.mark.parametrize("name", server.world_names())
+def test_the_culled_cast_equals_the_dense_cast_bit_for_bit(name):
+    # the compiled cast skips segments behind the laser or out of range and the beams outside
+    # a segment's angular interval; what it skips must never have been a hit
+    spec = load_world(server.world_path(name))
+    world = World(spec)
+    segments = spec.segments()
+    xmin, ymin, xmax, ymax = spec.bounds()
+    rng = np.random.default_rng(3)
+    checked = 0
+    while checked < 300:
+        yaw = float(rng.uniform(-math.pi, math.pi))
+        if checked % 4 == 0:  # beams along the walls' lines
+            yaw = float(rng.choice([0.0, math.pi / 2, -math.pi / 2, math.pi, math.pi / 4]))
+        pose = (rng.uniform(xmin, xmax), rng.uniform(ymin, ymax), yaw)
+        if world.pose_problem(0, pose):
+            continue
+        world.reset(poses=[pose])
+        x, y, yaw = world.pose(0)
+        ranges = world.scan(0)
+        dc, ds = world._laser.directions(0)
+        ang = LASER.bearings() + yaw  # the directions are those of the heading, to float32
+        np.testing.assert_allclose(dc, np.cos(ang), atol=1e-7)
+        np.testing.assert_allclose(ds, np.sin(ang), atol=1e-7)
+        np.testing.assert_array_equal(ranges, dense_walls(segments, x, y, dc, ds))
+        checked += 1
+
+
 def naive_scan(segments, x, y, yaw) -> np.ndarray:
     out = np.full(LASER.count, LASER.max_range)
     for i, b in enumerate(LASER.bearings()):
@@ -61,7 +105,7 @@ def test_a_beam_along_a_wall_line_gets_a_finite_range():
     ranges = world.scan(0)
     assert np.isfinite(ranges).all()
     assert ranges[0] == pytest.approx(1.0, abs=1e-6)
-    fleet = World(spec, robots=8)  # the batched wall cast of 8 or more lasers agrees
+    fleet = World(spec, robots=8)  # a fleet's cast agrees
     fleet.reset(poses=[pose] + [(2.0 + 0.7 * k, 6.0, 0.0) for k in range(7)])
     together = fleet.scans()
     assert np.isfinite(together).all()
@@ -69,8 +113,8 @@ def test_a_beam_along_a_wall_line_gets_a_finite_range():
 
 
 def test_reusing_the_heading_gives_the_ranges_of_a_fresh_cast():
-    # a world keeps the beam directions and per-segment reciprocals of the last heading; a
-    # robot driving straight (or turning back to a heading) must get what a fresh world gets
+    # a laser keeps the beam directions of the last heading; a robot driving straight (or
+    # turning back to a heading) must get what a fresh world gets
     spec = load_world(server.world_path("room"))
     world = World(spec)
     xmin, ymin, xmax, ymax = spec.bounds()
