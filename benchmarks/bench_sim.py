@@ -16,9 +16,10 @@
    and the controller process's. A world too small for N robots is tiled (``--tiles``: copies side by side,
    1 m apart; a robot sees only its own room's robots, the walls hide the rest).
 
-The laser of all robots is cast together (``World.scans``, ``server.laser``): the robots-seen-by-
-robots part no longer grows with the square of the fleet. ``--compare`` times that batched cast
-against one ``scan(i)`` per robot in the same run.
+The laser of all robots is cast together, in one compiled call per tick (``World.scans``,
+``server.laser``): the robots-seen-by-robots part no longer grows with the square of the fleet.
+``--compare`` times that cast against one laser at a time, each against every other robot in
+numpy (``server.laser.robots_dense``), in the same run.
 """
 
 from __future__ import annotations
@@ -393,9 +394,10 @@ def _stop_controller(child) -> str:
 
 
 def compare_scans(spec, n: int, tiles: int, repeats: int = 5) -> tuple[float, float]:
-    """Best-of ``repeats`` CPU seconds to cast all n lasers: one robot at a time against every other
-    robot (``server.laser.robots_dense``, the simulator's cast before ``World.scans``) vs all
-    together (``World.scans``), side by side in one run. Checks both give the same ranges."""
+    """Best-of ``repeats`` CPU seconds to cast all n lasers: one robot at a time, its walls then
+    every other robot in numpy (``server.laser.robots_dense``, the simulator's robot cast before
+    ``World.scans``) vs all together (``World.scans``), side by side in one run. Checks both
+    give the same ranges."""
     from server import laser
 
     w = World(tiled(spec, tiles), robots=n)
