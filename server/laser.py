@@ -28,10 +28,13 @@ in numba's cache folder) and loaded from there by every later process.
 
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
 from numba import njit
+
+log = logging.getLogger(__name__)
 
 __all__ = ["Laser", "robots_dense"]
 
@@ -146,7 +149,15 @@ def _directions(dc, ds, bearings, yaw):
 @_jit
 def _cast(out, origins, yaws, rows, centres, segs, bearings, kept, dc, ds, radius, start,
           resolution, max_range):
-    for i in range(out.shape[0]):
+    n = out.shape[0]
+    if origins.shape[0] != n or yaws.shape[0] != n or rows.shape[0] != n:
+        raise ValueError("cast: origins, yaws, rows and out need one row per laser")
+    if origins.shape[1] != 2 or out.shape[1] != bearings.shape[0]:
+        raise ValueError("cast: origins are (x, y) and out has one column per beam")
+    for i in range(n):
+        if rows[i] < 0 or rows[i] >= kept.shape[0]:
+            raise ValueError("cast: a laser's robot row is outside 0 .. robots - 1")
+    for i in range(n):
         ox, oy, yaw, row = origins[i, 0], origins[i, 1], yaws[i], rows[i]
         if kept[row] != yaw:  # NaN (none kept) is never equal
             _directions(dc[row], ds[row], bearings, yaw)
@@ -157,18 +168,32 @@ def _cast(out, origins, yaws, rows, centres, segs, bearings, kept, dc, ds, radiu
                     resolution, max_range)
 
 
+_KERNELS = (_beam_index, _cast_segment, _walls, _robots, _directions, _cast)
+
+
 class Laser:
     """The lasers of one world's ``robots`` robots: the wall segments ``segs`` (S, 4: x0, y0,
-    x1, y1), the beams' ``bearings`` in the robot frame (evenly spaced, at most 180 degrees),
-    ``max_range``, the robots' ``radius``; and per robot the float32 cosines and sines of its
-    beams' world angles at its last heading (recomputed only when the heading changes: a robot
-    driving straight or standing reuses them)."""
+    x1, y1), the beams' ``bearings`` in the robot frame (at least 2, evenly spaced, spanning at
+    most 180 degrees), ``max_range``, the robots' ``radius``; and per robot the float32 cosines
+    and sines of its beams' world angles at its last heading (recomputed only when the heading
+    changes: a robot driving straight or standing reuses them).
+
+    The ranges equal the dense cast's (every segment against every beam) for a laser farther
+    than about a micrometre from every wall and a heading in [-pi, pi] (``World`` wraps it): at
+    a wall, the dense cast finds hits of 1e-7 m on beams outside the segment's angular interval,
+    which this cast skips. Not re-entrant: one ``Laser`` is cast from one thread at a time (the
+    kept directions are updated in place; the server casts under its lock)."""
 
     def __init__(self, segs: np.ndarray, bearings: np.ndarray, max_range: float,
                  radius: float, robots: int = 1) -> None:
         self.segs = np.ascontiguousarray(segs, dtype=np.float64).reshape(-1, 4)
         self.bearings = np.ascontiguousarray(bearings, dtype=np.float64)
         count = len(self.bearings)
+        steps = np.diff(self.bearings)
+        if count < 2 or not np.all(steps > 0) or not np.allclose(steps, steps[0]) or \
+                self.bearings[-1] - self.bearings[0] > math.pi + 1e-9:
+            raise ValueError("a laser's bearings are at least 2, evenly spaced and span at most "
+                             "180 degrees")
         self.start = float(self.bearings[0])
         self.resolution = float(self.bearings[-1] - self.bearings[0]) / max(count - 1, 1)
         self.max_range = float(max_range)
@@ -178,6 +203,16 @@ class Laser:
         self.ds = np.zeros((robots, count), dtype=np.float32)
         # compile (first process on a machine, about 2 s) or load the kernels now, not in the
         # first tick
+        try:
+            self._warm_up()
+        except OSError as e:  # the cache folder took the index, not the code (disk full, ...)
+            log.warning("cannot cache the laser's compiled code (%s): compiled in this process",
+                        e)
+            for kernel in _KERNELS:
+                kernel._cache.disable()
+            self._warm_up()
+
+    def _warm_up(self) -> None:
         self.cast(np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=np.intp), np.zeros((0, 2)))
 
     def cast(self, origins: np.ndarray, yaws: np.ndarray, rows: np.ndarray,
@@ -193,8 +228,9 @@ class Laser:
         return out
 
     def directions(self, row: int) -> tuple[np.ndarray, np.ndarray]:
-        """Robot ``row``'s beam directions at its last cast heading (float32 cosines, sines)."""
-        return self.dc[row], self.ds[row]
+        """Robot ``row``'s beam directions at its last cast heading (float32 cosines, sines;
+        copies)."""
+        return self.dc[row].copy(), self.ds[row].copy()
 
 
 def robots_dense(

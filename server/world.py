@@ -14,7 +14,8 @@ Conventions (docs/protocol.md): SI units, x forward, y left, angles counter-cloc
 
 Robot model. A Pioneer 3DX (0.511 x 0.4 m) is modelled for collisions as a circle of radius
 ``ROBOT.radius`` = 0.25 m (between its half width and half length), a dynamic pymunk body whose
-velocity is set to the commanded (vx, va) at every physics substep; walls are static segments.
+velocity is set to the commanded vx along its heading at every physics substep (its angular
+velocity to va once a step: nothing else changes it); walls are static segments.
 Contact handling, chosen deliberately (the prototype's dominant failure was a robot pinned against
 a wall): the physics removes the part of the motion that would go into the wall, so the robot never
 passes through a wall; contacts are frictionless, so a robot driving at a wall at an angle slides
@@ -688,8 +689,9 @@ class World:
         return ranges.astype(np.float32, copy=False)
 
     def _scan_walls(self, ox: float, oy: float, yaw: float):
-        """Ranges to the walls from (ox, oy) facing ``yaw``: (float32 ranges, float32 cosines
-        and sines of the beams' world angles; ``server.laser``)."""
-        ranges = self._probe.cast(np.array([[ox, oy]]), np.array([yaw]), _ROW0, _NO_CENTRES)[0]
-        dc, ds = self._probe.directions(0)
-        return ranges, dc.copy(), ds.copy()
+        """Ranges to the walls from (ox, oy) facing ``yaw`` (wrapped to (-pi, pi]): (float32
+        ranges, float32 cosines and sines of the beams' world angles; ``server.laser``)."""
+        yaw = wrap_angle(float(yaw))
+        ranges = self._probe.cast(np.array([[ox, oy]], dtype=np.float64),
+                                  np.array([yaw], dtype=np.float64), _ROW0, _NO_CENTRES)[0]
+        return (ranges, *self._probe.directions(0))

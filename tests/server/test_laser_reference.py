@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import server
+from server import laser
 from server.world import LASER, World, load_world
 
 
@@ -127,3 +128,21 @@ def test_reusing_the_heading_gives_the_ranges_of_a_fresh_cast():
         fresh = World(spec)._scan_walls(x, y, yaw)
         for got, want in zip(world._scan_walls(x, y, yaw), fresh, strict=True):
             np.testing.assert_array_equal(got, want)
+
+
+def test_a_laser_refuses_what_it_cannot_cast():
+    spec = load_world(server.world_path("room"))
+    beams = LASER.bearings()
+    lasers = laser.Laser(spec.segments(), beams, LASER.max_range, 0.25, robots=2)
+    origins, yaws, centres = np.zeros((1, 2)), np.zeros(1), np.zeros((2, 2))
+    for bad in (-1, 2):  # a robot row outside the laser's robots would read another's state
+        with pytest.raises(ValueError, match="robot row"):
+            lasers.cast(origins, yaws, np.array([bad], dtype=np.intp), centres)
+    with pytest.raises(ValueError, match="one row per laser"):
+        lasers.cast(origins, np.zeros(2), np.zeros(1, dtype=np.intp), centres)
+    for bearings in (beams[:1], beams[::-1], np.linspace(-math.pi, math.pi, 360),
+                     np.concatenate([beams[:10], beams[11:]])):
+        with pytest.raises(ValueError, match="evenly spaced"):
+            laser.Laser(spec.segments(), bearings, LASER.max_range, 0.25)
+    good = lasers.cast(origins + [[3.0, 3.0]], yaws, np.zeros(1, dtype=np.intp), centres)
+    assert good.shape == (1, LASER.count) and np.isfinite(good).all()
