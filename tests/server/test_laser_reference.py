@@ -29,32 +29,36 @@ def dense_walls(segments, x, y, dc, ds) -> np.ndarray:
     return np.min(np.where(hit, tr, f4(LASER.max_range)), axis=0)
 
 
+def placed(world, rng, n, axis_every=0):
+    """Put ``world``'s robot at ``n`` random free poses in turn (every ``axis_every``-th facing
+    along the axes or a diagonal: beams along the walls' lines); yield its pose each time."""
+    xmin, ymin, xmax, ymax = world.spec.bounds()
+    checked = 0
+    while checked < n:
+        yaw = float(rng.uniform(-math.pi, math.pi))
+        if axis_every and checked % axis_every == 0:
+            yaw = float(rng.choice([0.0, math.pi / 2, -math.pi / 2, math.pi, math.pi / 4]))
+        pose = (rng.uniform(xmin, xmax), rng.uniform(ymin, ymax), yaw)
+        if world.pose_problem(0, pose):
+            continue
+        world.reset(poses=[pose])
+        yield world.pose(0)
+        checked += 1
+
+
 @pytest.mark.parametrize("name", server.world_names())
 def test_the_culled_cast_equals_the_dense_cast_bit_for_bit(name):
     # the compiled cast skips segments behind the laser or out of range and the beams outside
     # a segment's angular interval; what it skips must never have been a hit
     spec = load_world(server.world_path(name))
     world = World(spec)
-    segments = spec.segments()
-    xmin, ymin, xmax, ymax = spec.bounds()
-    rng = np.random.default_rng(3)
-    checked = 0
-    while checked < 300:
-        yaw = float(rng.uniform(-math.pi, math.pi))
-        if checked % 4 == 0:  # beams along the walls' lines
-            yaw = float(rng.choice([0.0, math.pi / 2, -math.pi / 2, math.pi, math.pi / 4]))
-        pose = (rng.uniform(xmin, xmax), rng.uniform(ymin, ymax), yaw)
-        if world.pose_problem(0, pose):
-            continue
-        world.reset(poses=[pose])
-        x, y, yaw = world.pose(0)
+    for x, y, yaw in placed(world, np.random.default_rng(3), 300, axis_every=4):
         ranges = world.scan(0)
         dc, ds = world._laser.directions(0)
         ang = LASER.bearings() + yaw  # the directions are those of the heading, to float32
         np.testing.assert_allclose(dc, np.cos(ang), atol=1e-7)
         np.testing.assert_allclose(ds, np.sin(ang), atol=1e-7)
-        np.testing.assert_array_equal(ranges, dense_walls(segments, x, y, dc, ds))
-        checked += 1
+        np.testing.assert_array_equal(ranges, dense_walls(spec.segments(), x, y, dc, ds))
 
 
 def naive_scan(segments, x, y, yaw) -> np.ndarray:
@@ -78,19 +82,10 @@ def naive_scan(segments, x, y, yaw) -> np.ndarray:
 def test_scan_matches_a_naive_ray_cast(name):
     spec = load_world(server.world_path(name))
     world = World(spec)
-    segments = spec.segments()
-    xmin, ymin, xmax, ymax = spec.bounds()
-    rng = np.random.default_rng(7)
-    checked = 0
-    while checked < 6:
-        pose = (rng.uniform(xmin, xmax), rng.uniform(ymin, ymax), rng.uniform(-math.pi, math.pi))
-        if world.pose_problem(0, pose):
-            continue
-        world.reset(poses=[pose])
+    for pose in placed(world, np.random.default_rng(7), 6):
         ranges = world.scan(0)
         assert ranges.dtype == np.float32 and ranges.shape == (LASER.count,)
-        np.testing.assert_allclose(ranges, naive_scan(segments, *world.pose(0)), atol=1e-4)
-        checked += 1
+        np.testing.assert_allclose(ranges, naive_scan(spec.segments(), *pose), atol=1e-4)
 
 
 def test_a_beam_along_a_wall_line_gets_a_finite_range():
