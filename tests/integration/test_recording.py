@@ -303,20 +303,32 @@ def test_retraining_from_the_recording_rebuilds_the_live_tree(live_run, tmp_path
                         str(live_run["recording"]), "--features", "wall", "--out", str(out)],
                        cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stdout + r.stderr
-    assert f"{live_run['labels']} labeled scans" in r.stdout, r.stdout
+    msgs = list(read_recording(live_run["recording"]))
+    scans = [m.message() for m in msgs if m.kind == "scan"]
+    # a scan the bus dropped on its way to the recorder (zenoh drops for a subscriber that
+    # falls behind, as under a heavily loaded machine; `rhbl inspect` reports the gap) leaves
+    # its label out of the retraining, said in the summary; the learner, which got the scan,
+    # learned it
+    recorded = {s.id for s in scans}
+    dropped = sum(m.message().scan_id not in recorded for m in msgs if m.kind == "label")
+    n = live_run["labels"] - dropped
+    assert f"{n} labeled scans" in r.stdout, r.stdout
+    assert f"{dropped} labels without their scan" in r.stdout, r.stdout
+    assert dropped <= 0.02 * live_run["labels"], r.stdout
     live, again = load(live_run["tree"]), load(out)
-    a, b = live.tree_arrays(), again.tree_arrays()
     assert live.node_count_ > 20
-    for k in a:
-        assert np.array_equal(a[k], b[k]), k
-    scans = [m.message() for m in read_recording(live_run["recording"]) if m.kind == "scan"]
+    if dropped == 0:  # the same labeled scans in the same order: the same tree
+        a, b = live.tree_arrays(), again.tree_arrays()
+        for k in a:
+            assert np.array_equal(a[k], b[k]), k
     from client.behaviour.features import FEATURES
 
     X = np.array([FEATURES["wall"].extract(s.ranges, s.pose[2]) for s in scans])
-    assert list(live.predict(X)) == list(again.predict(X))
+    agree = np.mean(np.asarray(live.predict(X)) == np.asarray(again.predict(X)))
+    assert agree == 1.0 if dropped == 0 else agree > 0.9
     prov = again.metadata["provenance"]
     assert prov["recordings"] == [str(live_run["recording"].resolve())]
-    assert prov["labeled"] == live_run["labels"]
+    assert prov["labeled"] == n
     # another feature spec and tree setting from the same recording: a different tree
     out2 = tmp_path / "other.rhbl"
     r = subprocess.run([sys.executable, "-m", "lab.cli", "train", "--from-recording",
@@ -328,7 +340,7 @@ def test_retraining_from_the_recording_rebuilds_the_live_tree(live_run, tmp_path
     assert other.metadata["features"]["beams"] != live.metadata["features"]["beams"] or \
         other.node_count_ != live.node_count_
     assert len(other.metadata["provenance"]["recordings"]) == 2
-    assert other.metadata["provenance"]["labeled"] == 2 * live_run["labels"]
+    assert other.metadata["provenance"]["labeled"] == 2 * n
 
 
 # ---- replay -------------------------------------------------------------------------------
