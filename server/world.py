@@ -268,6 +268,41 @@ def _point_segment_distance(p: np.ndarray, segs: np.ndarray) -> np.ndarray:
     return np.sqrt(np.einsum("ij,ij->i", d, d))
 
 
+def _parse_walls(src: str, walls_raw: Any) -> list[Wall]:
+    if not isinstance(walls_raw, list) or not walls_raw:
+        raise _err(
+            src, "walls", "at least one [[walls]] table with points = [[x, y], ...]", walls_raw
+        )
+    walls = []
+    for i, w in enumerate(walls_raw):
+        key = f"walls[{i}]"
+        if not isinstance(w, dict):
+            raise _err(src, key, "a table with points = [[x, y], ...]", w)
+        pts_raw = w.get("points")
+        if not isinstance(pts_raw, list) or len(pts_raw) < 2:
+            raise _err(src, f"{key}.points", "a list of at least 2 [x, y] points", pts_raw)
+        pts = tuple(
+            _vec(src, f"{key}.points[{j}]", p, 2, "[x, y] in m") for j, p in enumerate(pts_raw)
+        )
+        closed = w.get("closed", False)
+        if not isinstance(closed, bool):
+            raise _err(src, f"{key}.closed", "true or false", closed)
+        walls.append(Wall(points=pts, closed=closed))  # type: ignore[arg-type]
+    return walls
+
+
+def _parse_goal(src: str, goal_raw: Any) -> Goal | None:
+    if goal_raw is None:
+        return None
+    if not isinstance(goal_raw, dict):
+        raise _err(src, "goal", "a [goal] table with center and radius", goal_raw)
+    center = _vec(src, "goal.center", goal_raw.get("center"), 2, "[x, y] in m")
+    radius = _number(src, "goal.radius", goal_raw.get("radius"))
+    if radius <= 0:
+        raise _err(src, "goal.radius", "a positive number (m)", radius)
+    return Goal(center=center, radius=radius)  # type: ignore[arg-type]
+
+
 def parse_world(
     data: dict[str, Any], source: str = "<world>", path: Path | None = None
 ) -> WorldSpec:
@@ -294,36 +329,8 @@ def parse_world(
         _vec(src, f"robot.starts[{i}]", s, 3, "[x, y, yaw] in m, m, rad")
         for i, s in enumerate(starts_raw)
     )
-    walls_raw = data.get("walls")
-    if not isinstance(walls_raw, list) or not walls_raw:
-        raise _err(
-            src, "walls", "at least one [[walls]] table with points = [[x, y], ...]", walls_raw
-        )
-    walls = []
-    for i, w in enumerate(walls_raw):
-        key = f"walls[{i}]"
-        if not isinstance(w, dict):
-            raise _err(src, key, "a table with points = [[x, y], ...]", w)
-        pts_raw = w.get("points")
-        if not isinstance(pts_raw, list) or len(pts_raw) < 2:
-            raise _err(src, f"{key}.points", "a list of at least 2 [x, y] points", pts_raw)
-        pts = tuple(
-            _vec(src, f"{key}.points[{j}]", p, 2, "[x, y] in m") for j, p in enumerate(pts_raw)
-        )
-        closed = w.get("closed", False)
-        if not isinstance(closed, bool):
-            raise _err(src, f"{key}.closed", "true or false", closed)
-        walls.append(Wall(points=pts, closed=closed))  # type: ignore[arg-type]
-    goal = None
-    goal_raw = data.get("goal")
-    if goal_raw is not None:
-        if not isinstance(goal_raw, dict):
-            raise _err(src, "goal", "a [goal] table with center and radius", goal_raw)
-        center = _vec(src, "goal.center", goal_raw.get("center"), 2, "[x, y] in m")
-        radius = _number(src, "goal.radius", goal_raw.get("radius"))
-        if radius <= 0:
-            raise _err(src, "goal.radius", "a positive number (m)", radius)
-        goal = Goal(center=center, radius=radius)  # type: ignore[arg-type]
+    walls = _parse_walls(src, data.get("walls"))
+    goal = _parse_goal(src, data.get("goal"))
     if task == "maze" and goal is None:
         raise _err(src, "goal", "a [goal] table (required for task = 'maze')", None)
     known = {"name", "task", "robot", "walls", "goal"}
