@@ -49,6 +49,7 @@ def _jit(func):
     except RuntimeError:  # numba: "cannot cache function ...: no locator available"
         return njit(nogil=True, error_model="numpy")(func)
 
+
 _F32 = np.float32
 _TWO_PI = 2.0 * math.pi
 
@@ -216,13 +217,12 @@ class Laser:
         self.cast(np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=np.intp), np.zeros((0, 2)))
 
     def cast(self, origins: np.ndarray, yaws: np.ndarray, rows: np.ndarray,
-             centres: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+             centres: np.ndarray) -> np.ndarray:
         """Ranges (R, beams) float32 of R lasers against the walls and the robots: the lasers
         at ``origins`` (R, 2) facing ``yaws`` (R,) belong to robots ``rows`` (R, intp; a laser
         never sees its own robot); ``centres`` (N, 2) are every robot's positions (fewer than
-        two: walls only). Written into ``out`` if given."""
-        if out is None:
-            out = np.empty((len(rows), len(self.bearings)), dtype=np.float32)
+        two: walls only)."""
+        out = np.empty((len(rows), len(self.bearings)), dtype=np.float32)
         _cast(out, origins, yaws, rows, centres, self.segs, self.bearings, self.kept, self.dc,
               self.ds, self.radius, self.start, self.resolution, self.max_range)
         return out

@@ -430,8 +430,11 @@ class World:
         self.odom_noise = float(odom_noise)
         self._segs = spec.segments()
         self._bearings = LASER.bearings()
-        # a laser for any pose (``_scan_walls``): walls only
-        self._probe = laser.Laser(self._segs, self._bearings, LASER.max_range, ROBOT.radius)
+        # the robots' lasers: their beam directions kept per robot while its heading holds
+        # (keyed by the heading alone, so they outlive a reset)
+        self._laser = laser.Laser(self._segs, self._bearings, LASER.max_range, ROBOT.radius,
+                                  robots=self.n_robots)
+        self._rows = np.arange(self.n_robots, dtype=np.intp)
         self.reset()
 
     # -- lifecycle --------------------------------------------------------------------------
@@ -450,10 +453,6 @@ class World:
         if len(poses) != self.n_robots:
             raise ValueError(f"reset needs {self.n_robots} poses, got {len(poses)}")
         self._rng = np.random.default_rng(self.seed)
-        # the robots' lasers: their beam directions kept per robot while its heading holds
-        self._laser = laser.Laser(self._segs, self._bearings, LASER.max_range, ROBOT.radius,
-                                  robots=len(poses))
-        self._rows = np.arange(len(poses), dtype=np.intp)
         space = pymunk.Space()
         space.gravity = (0.0, 0.0)
         space.collision_slop = 0.001
@@ -697,8 +696,9 @@ class World:
 
     def _scan_walls(self, ox: float, oy: float, yaw: float):
         """Ranges to the walls from (ox, oy) facing ``yaw`` (wrapped to (-pi, pi]): (float32
-        ranges, float32 cosines and sines of the beams' world angles; ``server.laser``)."""
+        ranges, float32 cosines and sines of the beams' world angles; ``server.laser``: robot
+        0's laser, walls only)."""
         yaw = wrap_angle(float(yaw))
-        ranges = self._probe.cast(np.array([[ox, oy]], dtype=np.float64),
+        ranges = self._laser.cast(np.array([[ox, oy]], dtype=np.float64),
                                   np.array([yaw], dtype=np.float64), _ROW0, _NO_CENTRES)[0]
-        return (ranges, *self._probe.directions(0))
+        return (ranges, *self._laser.directions(0))
