@@ -40,12 +40,27 @@ from protocol.ros2.names import (
     check_topic_name,
     dds_type_name,
     demangle,
+    fully_qualified,
     mangle,
     ros_type_name,
 )
-from protocol.ros2.qos import Qos, qos_from_keyexpr, qos_to_keyexpr
+from protocol.ros2.qos import (
+    DEFAULT_QOS,
+    SENSOR_DATA_QOS,
+    Qos,
+    qos_from_keyexpr,
+    qos_to_keyexpr,
+)
 
-__all__ = ["ADMIN_SPACE", "EntityKind", "LivelinessToken", "Node", "Topic", "liveliness_space"]
+__all__ = [
+    "ADMIN_SPACE",
+    "EntityKind",
+    "LivelinessToken",
+    "Node",
+    "RobotTopics",
+    "Topic",
+    "liveliness_space",
+]
 
 ADMIN_SPACE = "@ros2_lv"
 _ZID = re.compile(r"^[0-9a-f]{1,32}$")
@@ -119,6 +134,33 @@ class Topic:
         """The zenoh key of this topic's samples in ``domain``."""
         return (f"{_domain(domain)}/{self.name[1:]}/{dds_type_name(self.typename)}/"
                 f"{self.type_hash}")
+
+
+@dataclass(frozen=True)
+class RobotTopics:
+    """The ROS 2 topics of one rhbl robot, with the QoS ROS 2 nodes use for them (docs/ros2.md,
+    "Mapping"): ``scan`` (sensor data: best effort, depth 5), ``odom`` and ``cmd_vel`` (ROS 2's
+    default: reliable, depth 10), ``tf`` (tf2's broadcaster: reliable, depth 100) and ``clock``
+    (rclcpp's clock QoS: best effort, depth 1)."""
+
+    scan: Topic
+    odom: Topic
+    cmd_vel: Topic
+    tf: Topic
+    clock: Topic
+
+    @classmethod
+    def of(cls, robot: str, namespace: str = "/") -> RobotTopics:
+        """``<namespace>/<robot>/scan``, ``.../odom``, ``.../cmd_vel``; ``/tf`` and ``/clock``
+        are shared by every robot. ``robot`` must be a ROS 2 name token (no ``-`` or ``.``)."""
+        ns = fully_qualified(robot, namespace)
+        return cls(
+            scan=Topic(f"{ns}/scan", cdr.LASER_SCAN, SENSOR_DATA_QOS),
+            odom=Topic(f"{ns}/odom", cdr.ODOMETRY, DEFAULT_QOS),
+            cmd_vel=Topic(f"{ns}/cmd_vel", cdr.TWIST, DEFAULT_QOS),
+            tf=Topic("/tf", cdr.TF_MESSAGE, DEFAULT_QOS._replace(depth=100)),
+            clock=Topic("/clock", cdr.CLOCK, SENSOR_DATA_QOS._replace(depth=1)),
+        )
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,14 @@ from hypothesis import strategies as st
 from protocol import DecodeError
 from protocol.ros2 import cdr
 from protocol.ros2.attachment import Attachment
-from protocol.ros2.graph import EntityKind, LivelinessToken, Node, Topic, liveliness_space
+from protocol.ros2.graph import (
+    EntityKind,
+    LivelinessToken,
+    Node,
+    RobotTopics,
+    Topic,
+    liveliness_space,
+)
 from protocol.ros2.names import dds_type_name, fully_qualified, ros_type_name
 from protocol.ros2.qos import (
     DEFAULT_QOS,
@@ -73,6 +80,18 @@ def test_our_topics_keys():
     assert Topic("/tf", cdr.TF_MESSAGE, DEFAULT_QOS).key(7).startswith(
         "7/tf/tf2_msgs::msg::dds_::TFMessage_/RIHS01_e369d0f0")
     zenoh.KeyExpr(scan.key(0))  # a valid zenoh key (raises otherwise)
+
+
+def test_a_robots_topics():
+    t = RobotTopics.of("r0")
+    assert [x.name for x in (t.scan, t.odom, t.cmd_vel, t.tf, t.clock)] == [
+        "/r0/scan", "/r0/odom", "/r0/cmd_vel", "/tf", "/clock"]
+    assert [qos_to_keyexpr(x.qos) for x in (t.scan, t.odom, t.cmd_vel, t.tf, t.clock)] == [
+        "2::,5:,:,:,,", "::,10:,:,:,,", "::,10:,:,:,,", "::,100:,:,:,,", "2::,1:,:,:,,"]
+    assert t.cmd_vel.key(0).startswith("0/r0/cmd_vel/geometry_msgs::msg::dds_::Twist_/RIHS01_")
+    assert RobotTopics.of("r1", "/fleet").scan.name == "/fleet/r1/scan"
+    with pytest.raises(ValueError, match="ROS 2 topic name"):
+        RobotTopics.of("robot-1")  # a valid rhbl robot name, not a ROS 2 one
 
 
 @pytest.mark.parametrize("key", DESIGN_TOKENS)

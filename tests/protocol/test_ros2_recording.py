@@ -18,14 +18,13 @@ from protocol.ros2.convert import (
     odometry_from_state,
     tf_from_state,
 )
-from protocol.ros2.graph import Topic
-from protocol.ros2.qos import DEFAULT_QOS, SENSOR_DATA_QOS, adapt
+from protocol.ros2.graph import RobotTopics, Topic
+from protocol.ros2.qos import DEFAULT_QOS, adapt
 from protocol.ros2.recording import Ros2McapWriter
 
 FRAMES = Frames.for_robot("r0")
-TOPICS = [Topic("/r0/scan", cdr.LASER_SCAN, SENSOR_DATA_QOS),
-          Topic("/r0/odom", cdr.ODOMETRY, DEFAULT_QOS),
-          Topic("/tf", cdr.TF_MESSAGE, DEFAULT_QOS._replace(depth=100))]
+_R0 = RobotTopics.of("r0")
+TOPICS = [_R0.scan, _R0.odom, _R0.tf]
 T0 = 1_733_000_000_000_000_000  # ns since the Unix epoch
 
 
