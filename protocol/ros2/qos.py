@@ -48,19 +48,6 @@ __all__ = [
 INFINITE = QosTime(9223372036, 854775807)  # RMW_DURATION_INFINITE
 UNSPECIFIED = QosTime(0, 0)  # RMW_DURATION_UNSPECIFIED: "the middleware's default"
 
-# rmw_zenoh's own defaults (qos.cpp): what an empty field in a token means.
-RMW_ZENOH_DEFAULT = Qos(
-    history=QosHistory.KEEP_LAST,
-    depth=42,
-    reliability=QosReliability.RELIABLE,
-    durability=QosDurability.VOLATILE,
-    deadline=INFINITE,
-    lifespan=INFINITE,
-    liveliness=QosLiveliness.AUTOMATIC,
-    liveliness_lease_duration=INFINITE,
-    avoid_ros_namespace_conventions=False,
-)
-
 # rmw's rmw_qos_profile_default and rmw_qos_profile_sensor_data (rmw/qos_profiles.h), what
 # rclcpp passes for QoS(10) and SensorDataQoS().
 DEFAULT_QOS = Qos(
@@ -75,6 +62,11 @@ DEFAULT_QOS = Qos(
     avoid_ros_namespace_conventions=False,
 )
 SENSOR_DATA_QOS = DEFAULT_QOS._replace(depth=5, reliability=QosReliability.BEST_EFFORT)
+
+# rmw_zenoh's own defaults (qos.cpp): what an empty field in a token means.
+RMW_ZENOH_DEFAULT = DEFAULT_QOS._replace(
+    depth=42, deadline=INFINITE, lifespan=INFINITE, liveliness=QosLiveliness.AUTOMATIC,
+    liveliness_lease_duration=INFINITE)
 
 _UNKNOWN = (QosHistory.UNKNOWN, QosReliability.UNKNOWN, QosDurability.UNKNOWN,
             QosLiveliness.UNKNOWN)
