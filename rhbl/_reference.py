@@ -83,7 +83,7 @@ def _scan(tree: SphereTree, x: np.ndarray) -> tuple[np.ndarray, list[int], list[
     always agree on which spheres enclose a vector.
     """
     n = tree.node_count
-    buf = np.subtract(tree._centers_t[:, :n], x[:, None])
+    buf = np.subtract(tree.centers_t(), x[:, None])
     np.multiply(buf, buf, out=buf)
     d = np.add.reduce(buf, axis=0)
     if tree._euclidean:

@@ -318,6 +318,14 @@ class HypersphereClassifier:
             raise ValueError(f"{what} has {X.shape[1]} features, the tree expects {n}")
         if X.size == 0:
             return X
+        if X.shape[0] == 1:  # one row (a learner's vector): cheaper in Python than in numpy
+            xs = X[0].tolist()
+            lo, hi, total = min(xs), max(xs), sum(xs)
+        else:
+            lo, hi = X.min(), X.max()  # NaN propagates
+            total = 0.0
+        if lo >= 0.0 and hi <= 1.0 and total == total:  # in the cube (NaN fails total == total)
+            return X
         if not np.isfinite(X).all():
             row, col = np.argwhere(~np.isfinite(X))[0]
             raise ValueError(f"{what}[{row}, {col}] is {X[row, col]}: values must be finite")
@@ -418,6 +426,12 @@ class HypersphereClassifier:
     # ------------------------------------------------------------------ prediction
     def predict_one(self, x: Any) -> Any:
         """The label of one vector (the fast path for controllers). Returns a plain str/int."""
+        tree = getattr(self, "tree_", None)
+        if (self.compiled and tree is not None and type(x) is np.ndarray
+                and x.shape == (self.n_features_in_,) and x.dtype == np.float64):
+            label = tree.predict_one(x)  # the kernel checks that x is in the cube
+            if label >= 0:
+                return self._labels[label]
         self._check_fitted()
         x = self._check_x(x)
         return self._labels[self.tree_.predict_one(x, compiled=self.compiled)]
@@ -432,6 +446,10 @@ class HypersphereClassifier:
         ):
             # one row: the single-query path (only for valid rows; others get the full
             # checks and their error messages below)
+            if self.compiled:
+                label = self.tree_.predict_one(X[0])  # -1: outside the cube, checked below
+                if label >= 0:
+                    return self._label_values[[label]]
             xs = X[0].tolist()
             total = sum(xs)
             if min(xs) >= 0.0 and max(xs) <= 1.0 and total == total:

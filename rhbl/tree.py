@@ -80,8 +80,8 @@ class SphereTree:
     ``radii``, ``parent``, ``depth`` and ``label`` are read-only views of the first
     ``node_count`` spheres; ``children[i]`` lists the children of sphere ``i`` in creation order.
 
-    The spheres live in two tables, one row per sphere (see :mod:`rhbl._kernels`): floats
-    (centre, radius) and integers (parent, depth, label, children as linked lists). Every
+    The spheres live in one table, a row per sphere (see :mod:`rhbl._kernels`): centre,
+    radius, parent, depth, label and the children as linked lists. Every
     search and training method takes ``compiled`` (default ``True``): ``False`` runs the numpy
     reference instead (same results, slower; the tests and benchmarks compare the two).
     """
@@ -91,7 +91,7 @@ class SphereTree:
             raise ValueError(f"distance must be one of {DISTANCES}, got {distance!r}")
         if not (isinstance(n_features, int | np.integer) and n_features >= 1):
             raise ValueError(f"need at least one feature, got {n_features}")
-        self._k = _kernels()
+        _kernels()  # loaded once per process, before any tree needs them
         self.n_features = int(n_features)
         self.distance = distance
         self.eps = eps
@@ -105,26 +105,57 @@ class SphereTree:
         self._add(np.full(n_features, 0.5), root_radius, -1, root_label)
 
     def _allocate(self, capacity: int) -> None:
-        """Empty tables for ``capacity`` spheres (the views below follow them)."""
-        k, n_feat = self._k, self.n_features
-        self._nodes_f = np.empty((capacity, n_feat + 1), dtype=np.float64)
-        self._nodes_i = np.empty((capacity, k.I_COLUMNS), dtype=np.int64)
-        # (features, capacity) copy of the centres, kept up to date for the numpy training scan
+        """An empty table for ``capacity`` spheres."""
+        n_feat = self.n_features
+        self._table = np.empty((capacity, n_feat + 1 + _kernels().INT_COLUMNS), dtype=np.int64)
+        # (features, capacity) copy of the centres for the numpy training scan, filled lazily
         self._centers_t = np.empty((n_feat, capacity), dtype=np.float64)
-        self._centers = self._nodes_f[:, :n_feat]
-        self._radii = self._nodes_f[:, n_feat]
-        self._parent = self._nodes_i[:, k.PARENT]
-        self._depth = self._nodes_i[:, k.DEPTH]
-        self._label = self._nodes_i[:, k.LABEL]
+        self._transposed = 0  # columns of _centers_t that are up to date
+        self._bind()
+
+    def _bind(self) -> None:
+        """The views of the table's columns (rebuilt with the table, and after unpickling)."""
+        k, n_feat = _kernels(), self.n_features
+        base = n_feat + 1  # the first integer column
+        floats = self._table.view(np.float64)
+        self._centers = floats[:, :n_feat]
+        self._radii = floats[:, n_feat]
+        self._parent = self._table[:, base + k.PARENT]
+        self._depth = self._table[:, base + k.DEPTH]
+        self._label = self._table[:, base + k.LABEL]
+        self._label_column = base + k.LABEL
+        self._links = self._table[:, base + k.FIRST : base + k.LAST + 1]  # first, next, last
+
+    _VIEWS = ("_centers", "_radii", "_parent", "_depth", "_label", "_label_column", "_links")
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickle (and ``copy.deepcopy``) the table, not its views or derived caches."""
+        state = {k: v for k, v in self.__dict__.items() if k not in self._VIEWS}
+        state.update(_creation=None, _preorder=None, _children=None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        _kernels()
+        self._bind()
 
     def _grow(self, capacity: int) -> None:
-        """Move the spheres into tables of ``capacity`` rows."""
-        n = self.node_count
-        nodes_f, nodes_i, centers_t = self._nodes_f, self._nodes_i, self._centers_t
+        """Move the spheres into a table of ``capacity`` rows."""
+        n, done = self.node_count, self._transposed
+        table, centers_t = self._table, self._centers_t
         self._allocate(capacity)
-        self._nodes_f[:n] = nodes_f[:n]
-        self._nodes_i[:n] = nodes_i[:n]
-        self._centers_t[:, :n] = centers_t[:, :n]
+        self._table[:n] = table[:n]
+        self._centers_t[:, :done] = centers_t[:, :done]
+        self._transposed = done
+
+    def centers_t(self) -> np.ndarray:
+        """The centres as (features, spheres), for the numpy reference (kept in step lazily:
+        the kernels do not write it)."""
+        n, done = self.node_count, self._transposed
+        if done < n:
+            self._centers_t[:, done:n] = self._centers[done:n].T
+            self._transposed = n
+        return self._centers_t[:, :n]
 
     # ------------------------------------------------------------------ the arrays
     @property
@@ -218,7 +249,6 @@ class SphereTree:
         tree = cls(centers.shape[1], int(label[0]), distance=distance, eps=eps)
         tree._allocate(max(64, n))
         tree._centers[:n] = centers
-        tree._centers_t[:, :n] = centers.T
         tree._radii[:n] = radii
         tree._parent[:n] = parent
         tree._label[:n] = label
@@ -235,16 +265,18 @@ class SphereTree:
 
     def _link(self, n: int) -> None:
         """The children's linked lists of the first ``n`` spheres, from their parents."""
-        k, nodes = self._k, self._nodes_i
-        nodes[:n, [k.FIRST, k.NEXT, k.LAST]] = -1
+        first, after, last = 0, 1, 2  # the columns of _links
+        links = self._links
+        links[:n] = -1
         if n < 2:
             return
         by_parent = np.argsort(self._parent[1:n], kind="stable") + 1  # creation order kept
         p = self._parent[by_parent]
-        last = np.r_[p[1:] != p[:-1], True]  # the last child of its parent
-        nodes[p[np.r_[True, last[:-1]]], k.FIRST] = by_parent[np.r_[True, last[:-1]]]
-        nodes[p[last], k.LAST] = by_parent[last]
-        nodes[by_parent[:-1][~last[:-1]], k.NEXT] = by_parent[1:][~last[:-1]]
+        is_last = np.r_[p[1:] != p[:-1], True]  # the last child of its parent
+        is_first = np.r_[True, is_last[:-1]]
+        links[p[is_first], first] = by_parent[is_first]
+        links[p[is_last], last] = by_parent[is_last]
+        links[by_parent[:-1][~is_last[:-1]], after] = by_parent[1:][~is_last[:-1]]
 
     def equal(self, other: SphereTree) -> bool:
         """True if ``other`` has the same distance, eps and spheres (exactly)."""
@@ -258,20 +290,19 @@ class SphereTree:
         i = self.node_count
         if i == len(self._radii):  # full: double the capacity
             self._grow(2 * i)
-        k, row = self._k, self._nodes_i[i]
+        first, after, last = 0, 1, 2  # the columns of _links
         self._centers[i] = center
-        self._centers_t[:, i] = center
         self._radii[i] = radius
         depth = 0 if parent < 0 else int(self._depth[parent]) + 1
-        row[:] = -1
-        row[k.PARENT], row[k.DEPTH], row[k.LABEL] = parent, depth, label
+        self._parent[i], self._depth[i], self._label[i] = parent, depth, label
+        self._links[i] = -1
         if parent >= 0:
-            up = self._nodes_i[parent]
-            if up[k.FIRST] < 0:
-                up[k.FIRST] = i
+            up = self._links[parent]
+            if up[first] < 0:
+                up[first] = i
             else:
-                self._nodes_i[up[k.LAST], k.NEXT] = i
-            up[k.LAST] = i
+                self._links[up[last], after] = i
+            up[last] = i
         self.node_count = i + 1
         if depth > self.height:
             self.height = depth
@@ -331,23 +362,21 @@ class SphereTree:
                 spawned, relabelled = spawned + g.spawned, relabelled + g.relabelled
                 skipped += g.suppressed
             return Totals(spawned, relabelled, skipped)
-        k = self._k
-        X, labels = _table(X), _table(labels, np.int64)
+        X = _queries(X)
+        labels = np.array(labels, dtype=np.int64)  # a fresh array: the type the kernel takes
         limits = (float(min_radius),
                   _UNLIMITED if max_nodes is None else min(int(max_nodes), _UNLIMITED),
                   _UNLIMITED if max_depth is None else min(int(max_depth), _UNLIMITED))
-        totals = np.zeros(6, dtype=np.int64)
-        start = 0
+        start = spawned = relabelled = skipped = 0
         while True:
-            done = k.learn(self._nodes_f, self._nodes_i, self._centers_t, X, labels, start,
-                           self.node_count, self.height, self._eps, self._euclidean,
-                           spawn == "winner", *limits, totals)
-            self.node_count, self.height = int(totals[k.NODES]), int(totals[k.HEIGHT])
-            start += done
+            rows, self.node_count, self.height, s, r, k = _kernels().learn(
+                self._table, X, labels, start, self.node_count, self.height, self._eps,
+                self._euclidean, spawn == "winner", *limits)
+            spawned, relabelled, skipped = spawned + s, relabelled + r, skipped + k
+            start += rows
             if start == X.shape[0]:
                 break
             self._grow(2 * len(self._radii))  # the next row might not fit
-        spawned, relabelled, skipped = totals[[k.SPAWNED, k.RELABELLED, k.SKIPPED]].tolist()
         if spawned or relabelled:
             self._changed()
         return Totals(spawned, relabelled, skipped)
@@ -362,20 +391,24 @@ class SphereTree:
     def apply_one(self, x: np.ndarray, *, compiled: bool = True) -> int:
         """The winning sphere (creation index) for one checked query vector.
 
-        Compiled: the descent (only the children of enclosing spheres are tested). Numpy: every
-        sphere is tested at once (one vectorised ``sum((x - c)**2)`` over the features, in
-        feature order), then the enclosing ones are walked in creation order in Python.
+        Compiled: the descent (only the children of enclosing spheres are tested); -1 for a
+        vector outside the unit cube or with a NaN, so that a caller may check its input only
+        when the search rejects it. Numpy: every sphere is tested at once (one vectorised
+        ``sum((x - c)**2)`` over the features, in feature order), then the enclosing ones are
+        walked in creation order in Python.
         """
         if not compiled:
             return _reference.apply_one(self, x)
-        if not (x.flags.c_contiguous and x.flags.writeable):
+        flags = x.flags
+        if not (flags.c_contiguous and flags.writeable):
             x = x.copy()
-        return self._k.winner(self._nodes_f, self._nodes_i, self.node_count, x, self._eps,
-                              self._euclidean)
+        return _kernels().winner(self._table, self.node_count, x, self._eps, self._euclidean)
 
     def predict_one(self, x: np.ndarray, *, compiled: bool = True) -> int:
-        """The label index of the winning sphere for one checked query vector."""
-        return int(self._label[self.apply_one(x, compiled=compiled)])
+        """The label index of the winning sphere for one checked query vector (compiled: -1
+        for a vector outside the unit cube, as :meth:`apply_one`)."""
+        node = self.apply_one(x, compiled=compiled)
+        return -1 if node < 0 else self._table.item(node, self._label_column)
 
     def path(self, node: int) -> list[int]:
         """Creation indices from the root down to ``node``."""
@@ -409,11 +442,11 @@ class SphereTree:
             raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
         if not compiled:
             return _reference.apply(self, X, algorithm), None
-        X = _table(X)
+        X = _queries(X)
         out = np.empty(X.shape[0], dtype=np.int64)
         visited = np.empty(X.shape[0], dtype=np.int64)
-        self._k.winners(self._nodes_f, self._nodes_i, self.node_count, X, self._eps,
-                        self._euclidean, algorithm == "brute", out, visited)
+        _kernels().winners(self._table, self.node_count, X, self._eps, self._euclidean,
+                        algorithm == "brute", out, visited)
         return out, visited
 
     def predict(self, X: np.ndarray, algorithm: str = "auto", *, compiled: bool = True
@@ -422,7 +455,9 @@ class SphereTree:
         return self._label[self.apply(X, algorithm, compiled=compiled)]
 
 
-def _table(a: Any, dtype: type = np.float64) -> np.ndarray:
-    """``a`` as the kernels take it: ``dtype``, C order, writable (a copy only if needed; other
+def _queries(X: np.ndarray) -> np.ndarray:
+    """``X`` as the kernels take it: float64, C order, writable (a copy only if needed: other
     array types would make numba compile another version of a kernel)."""
-    return np.require(a, dtype=dtype, requirements=("C", "W"))
+    if X.dtype == np.float64 and X.flags.c_contiguous and X.flags.writeable:
+        return X
+    return np.array(X, dtype=np.float64, order="C")

@@ -222,3 +222,18 @@ def test_importing_rhbl_does_not_import_numba():
             "rhbl.HypersphereClassifier('a').fit([[0.5]], ['b']); "
             "assert 'numba' in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_pickled_and_copied_trees_grow_on_alike():
+    """The tree's column views are rebuilt after unpickling: a copy is a whole tree of its own."""
+    import copy
+    import pickle
+
+    X, y = noisy_labels(400, 3, 0.1, seed=6)
+    clf = HypersphereClassifier(0).fit(X[:200], y[:200])
+    for other in (pickle.loads(pickle.dumps(clf)), copy.deepcopy(clf)):
+        assert_same_tree(other, clf)
+        other.partial_fit(X[200:], y[200:])
+        assert other.node_count_ > clf.node_count_  # the original did not grow with it
+        assert_same_tree(other, HypersphereClassifier(0, compiled=False).fit(X, y))
+        assert other.predict(X).tolist() == [other.predict_one(x) for x in X]
