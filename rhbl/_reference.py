@@ -120,14 +120,8 @@ def learn(
     max_nodes: int | None = None,
     max_depth: int | None = None,
 ) -> tuple[int, int, bool]:
-    """Train on one checked vector ``x`` with label index ``label``; returns the spheres
-    spawned and relabelled, and whether a growth limit suppressed a spawn.
-
-    Every candidate (``spawn="all"``) or only the winning candidate (``spawn="winner"``)
-    whose label differs spawns a child, unless a limit suppresses it: the child's radius
-    below ``min_radius`` (0 = none), ``max_nodes`` spheres reached, or the child deeper than
-    ``max_depth``. A candidate whose centre is within ``eps`` of ``x`` is relabelled instead.
-    """
+    """:meth:`rhbl.tree.SphereTree.learn` in numpy (the same rule); returns the spheres spawned
+    and relabelled, and whether a growth limit suppressed a spawn."""
     d_all, reach, parents = _scan(tree, x)
     cands = _candidates(reach, parents)
     if spawn == "winner":
