@@ -39,7 +39,7 @@ import numpy as np
 from . import snapshot
 from ._errors import NotFittedError, SnapshotError
 from .compact import compact
-from .tree import ALGORITHMS, DISTANCES, SphereTree, Totals
+from .tree import ALGORITHMS, DISTANCES, SphereTree, Totals, load_kernels
 
 __all__ = ["HypersphereClassifier", "load", "loads"]
 
@@ -126,7 +126,7 @@ class HypersphereClassifier:
         Not saved in snapshots (a loaded classifier has ``"auto"``).
     compiled:
         ``True`` (default): training and every search run compiled kernels (numba; compiled
-        once per machine and cached, loaded once per process when the first tree is built).
+        once per machine and cached, loaded once per process by the first classifier made).
         ``False``: the pure numpy code that preceded them, kept as the reference the tests
         compare the kernels with; the same trees and answers, bit for bit, only slower. Not
         saved in snapshots (a loaded classifier has ``True``).
@@ -164,6 +164,10 @@ class HypersphereClassifier:
         self.algorithm = algorithm
         self.compiled = compiled
         self.metadata: dict[str, Any] = {}
+        if compiled is True:
+            # once per process: a learner or controller pays it when it makes its classifier
+            # (at start), not in its first training call or prediction
+            load_kernels()
 
     # ------------------------------------------------------------------ parameters
     def get_params(self, deep: bool = True) -> dict[str, Any]:

@@ -28,7 +28,7 @@ import numpy as np
 
 from . import _reference
 
-__all__ = ["ALGORITHMS", "DISTANCES", "Growth", "SphereTree", "Totals"]
+__all__ = ["ALGORITHMS", "DISTANCES", "Growth", "SphereTree", "Totals", "load_kernels"]
 
 DISTANCES = ("squared", "euclidean")
 ALGORITHMS = ("auto", "brute", "descent")
@@ -39,11 +39,18 @@ _UNLIMITED = 1 << 62
 @functools.cache
 def _kernels() -> ModuleType:
     """The compiled kernels, imported, compiled or loaded from numba's cache on the first call
-    in a process (the first tree built): importing rhbl does not import numba, which a process
-    that only reads snapshots or prints help does not need."""
+    in a process (the first classifier or tree made): importing rhbl does not import numba,
+    which a process that only reads snapshot files or prints help does not need."""
     kernels = importlib.import_module("._kernels", __package__)
     kernels.load()
     return kernels
+
+
+def load_kernels() -> None:
+    """Import numba and compile the kernels or load them from its cache, now: once per process
+    (about a second, most of it numba's own set-up); later calls return at once. Building a
+    tree does it anyway; a process calls it to pay it before it serves."""
+    _kernels()
 
 
 class Growth(NamedTuple):

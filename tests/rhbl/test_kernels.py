@@ -217,10 +217,15 @@ def test_compiled_parameter():
 
 
 def test_importing_rhbl_does_not_import_numba():
-    """numba is imported (and the kernels loaded) when the first tree is built, not before."""
+    """numba is imported (and the kernels loaded) by the first classifier made (or tree built),
+    not by ``import rhbl``."""
     code = ("import sys, rhbl; assert 'numba' not in sys.modules, 'numba imported'; "
-            "rhbl.HypersphereClassifier('a').fit([[0.5]], ['b']); "
-            "assert 'numba' in sys.modules")
+            "rhbl.load({path!r}); assert 'numba' in sys.modules")
+    subprocess.run([sys.executable, "-c", code.format(path=str(DATA / "main-v1-int.rhbl"))],
+                   check=True)
+    code = ("import sys, rhbl; rhbl.HypersphereClassifier('a', compiled=False); "
+            "assert 'numba' not in sys.modules; rhbl.HypersphereClassifier('a'); "
+            "assert 'rhbl._kernels' in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
