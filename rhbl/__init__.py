@@ -5,7 +5,8 @@ from rhbl import HypersphereClassifier, load
 clf = HypersphereClassifier(default_label="fwd").fit(X, y)
 clf.predict_one(x); clf.save("tree.rhbl"); clf2 = load("tree.rhbl")
 ```
-See ``docs/rhbl.md``. This package imports only numpy and msgpack.
+See ``docs/rhbl.md``. This package imports only numpy, msgpack and (with the first classifier
+made) numba.
 """
 
 from ._errors import NotFittedError, RhblError, SnapshotError

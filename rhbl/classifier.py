@@ -39,7 +39,7 @@ import numpy as np
 from . import snapshot
 from ._errors import NotFittedError, SnapshotError
 from .compact import compact
-from .tree import ALGORITHMS, DISTANCES, SphereTree
+from .tree import ALGORITHMS, DISTANCES, SphereTree, Totals, load_kernels
 
 __all__ = ["HypersphereClassifier", "load", "loads"]
 
@@ -54,9 +54,10 @@ _PARAMS = (
     "clip",
     "eps",
     "algorithm",
+    "compiled",
 )
 # the parameters that shape the tree (saved in snapshots, compared by ``tree_equal``);
-# ``algorithm`` only chooses how predictions are searched
+# ``algorithm`` and ``compiled`` only choose how the same answers are computed
 _TREE_PARAMS = snapshot.PARAMS
 
 
@@ -116,12 +117,19 @@ class HypersphereClassifier:
     algorithm:
         How ``predict`` and ``score`` find the winning sphere of several rows (like
         ``algorithm=`` of scikit-learn's ``KNeighborsClassifier``): ``"brute"`` tests every
-        (query, sphere) pair at once; ``"descent"`` walks down the tree carrying the queries
-        each sphere encloses, testing only children of enclosing spheres; ``"auto"`` (default)
-        uses ``"brute"`` for trees of at most 64 spheres, else ``"descent"``. Every choice gives
-        exactly the same answers; only the speed differs. Single queries (``predict_one``,
-        ``predict`` of one row, ``decision_path``) always test every sphere in one vectorised
-        pass. Not saved in snapshots (a loaded classifier has ``"auto"``).
+        sphere; ``"descent"`` walks down the tree from the root, testing only the children of
+        spheres that enclose the query (a subtree whose sphere does not is skipped);
+        ``"auto"`` (default) is ``"descent"`` (with ``compiled=False``: ``"brute"`` for trees
+        of at most 64 spheres). Every choice gives exactly the same answers; only the speed
+        differs. Single queries (``predict_one``, ``predict`` of one row, ``decision_path``)
+        always descend (with ``compiled=False``: test every sphere in one vectorised pass).
+        Not saved in snapshots (a loaded classifier has ``"auto"``).
+    compiled:
+        ``True`` (default): training and every search run compiled kernels (numba; compiled
+        once per machine and cached, loaded once per process by the first classifier made).
+        ``False``: the pure numpy code that preceded them, kept as the reference the tests
+        compare the kernels with; the same trees and answers, bit for bit, only slower. Not
+        saved in snapshots (a loaded classifier has ``True``).
 
     Learned attributes: ``tree_`` (the :class:`rhbl.tree.SphereTree`), ``n_features_in_``,
     ``classes_`` (labels in order of first appearance, the default label first),
@@ -143,6 +151,7 @@ class HypersphereClassifier:
         clip: bool = False,
         eps: float = 1e-9,
         algorithm: str = "auto",
+        compiled: bool = True,
     ) -> None:
         self.default_label = default_label
         self.distance = distance
@@ -153,7 +162,12 @@ class HypersphereClassifier:
         self.clip = clip
         self.eps = eps
         self.algorithm = algorithm
+        self.compiled = compiled
         self.metadata: dict[str, Any] = {}
+        if compiled is True:
+            # once per process: a learner or controller pays it when it makes its classifier
+            # (at start), not in its first training call or prediction
+            load_kernels()
 
     # ------------------------------------------------------------------ parameters
     def get_params(self, deep: bool = True) -> dict[str, Any]:
@@ -187,6 +201,8 @@ class HypersphereClassifier:
             raise ValueError(f"eps must be a number in [0, 0.5), got {self.eps!r}")
         if self.algorithm not in ALGORITHMS:
             raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {self.algorithm!r}")
+        if not isinstance(self.compiled, bool | np.bool_):
+            raise ValueError(f"compiled must be True or False, got {self.compiled!r}")
         if self.default_label is not None:
             _plain_label(self.default_label)
 
@@ -306,6 +322,14 @@ class HypersphereClassifier:
             raise ValueError(f"{what} has {X.shape[1]} features, the tree expects {n}")
         if X.size == 0:
             return X
+        if X.shape[0] == 1:  # one row (a learner's vector): cheaper in Python than in numpy
+            xs = X[0].tolist()
+            lo, hi, total = min(xs), max(xs), sum(xs)
+        else:
+            lo, hi = X.min(), X.max()  # NaN propagates
+            total = 0.0
+        if lo >= 0.0 and hi <= 1.0 and total == total:  # in the cube (NaN fails total == total)
+            return X
         if not np.isfinite(X).all():
             row, col = np.argwhere(~np.isfinite(X))[0]
             raise ValueError(f"{what}[{row}, {col}] is {X[row, col]}: values must be finite")
@@ -373,8 +397,7 @@ class HypersphereClassifier:
         if classes is not None:
             for c in classes:
                 self._intern(c)
-        for x, label in zip(X, y_idx_src, strict=True):
-            self._learn(x, self._intern(label))
+        self._learn(X, [self._intern(label) for label in y_idx_src])
         return self
 
     def learn_one(self, x: Any, label: Any) -> int:
@@ -384,30 +407,38 @@ class HypersphereClassifier:
         """
         self._check_fitted()
         self._check_tree_params()
-        x = self._check_X(np.asarray(x, dtype=np.float64).reshape(1, -1))[0]
-        return self._learn(x, self._intern(label))
+        X = self._check_X(np.asarray(x, dtype=np.float64).reshape(1, -1))
+        totals = self._learn(X, [self._intern(label)])
+        return totals.spawned + totals.relabelled
 
-    def _learn(self, x: np.ndarray, label: int) -> int:
-        growth = self.tree_.learn(
-            x,
-            label,
+    def _learn(self, X: np.ndarray, labels: list[int]) -> Totals:
+        """Train the tree on checked rows with label indices, in order; count them."""
+        totals = self.tree_.learn_many(
+            X,
+            labels,
             spawn=self.spawn,
             min_radius=self.min_radius,
             max_nodes=self.max_nodes,
             max_depth=self.max_depth,
+            compiled=self.compiled,
         )
-        self.n_seen_ += 1
-        self.n_relabelled_ += growth.relabelled
-        if growth.suppressed:
-            self.n_skipped_ += 1
-        return growth.spawned + growth.relabelled
+        self.n_seen_ += X.shape[0]
+        self.n_relabelled_ += totals.relabelled
+        self.n_skipped_ += totals.skipped
+        return totals
 
     # ------------------------------------------------------------------ prediction
     def predict_one(self, x: Any) -> Any:
         """The label of one vector (the fast path for controllers). Returns a plain str/int."""
+        tree = getattr(self, "tree_", None)
+        if (self.compiled and tree is not None and type(x) is np.ndarray
+                and x.shape == (self.n_features_in_,) and x.dtype == np.float64):
+            label = tree.predict_one(x)  # the kernel checks that x is in the cube
+            if label >= 0:
+                return self._labels[label]
         self._check_fitted()
         x = self._check_x(x)
-        return self._labels[self.tree_.predict_one(x)]
+        return self._labels[self.tree_.predict_one(x, compiled=self.compiled)]
 
     def predict(self, X: Any) -> np.ndarray:
         """Labels of the rows of ``X`` as a numpy array."""
@@ -419,14 +450,18 @@ class HypersphereClassifier:
         ):
             # one row: the single-query path (only for valid rows; others get the full
             # checks and their error messages below)
+            if self.compiled:
+                label = self.tree_.predict_one(X[0])  # -1: outside the cube, checked below
+                if label >= 0:
+                    return self._label_values[[label]]
             xs = X[0].tolist()
             total = sum(xs)
             if min(xs) >= 0.0 and max(xs) <= 1.0 and total == total:
-                return self._label_values[[self.tree_.predict_one(X[0])]]
+                return self._label_values[[self.tree_.predict_one(X[0], compiled=self.compiled)]]
         X = self._check_X(X)
         if X.shape[0] == 1:
-            return self._label_values[[self.tree_.predict_one(X[0])]]
-        return self._label_values[self.tree_.predict(X, self.algorithm)]
+            return self._label_values[[self.tree_.predict_one(X[0], compiled=self.compiled)]]
+        return self._label_values[self.tree_.predict(X, self.algorithm, compiled=self.compiled)]
 
     def decision_path(self, x: Any) -> list[dict[str, Any]]:
         """The spheres from the root to the winning sphere for ``x``.
@@ -447,7 +482,7 @@ class HypersphereClassifier:
                 "center": tree.centers[node].tolist(),
                 "distance": tree.distance_to(node, x),
             }
-            for node in tree.path(tree.apply_one(x))
+            for node in tree.path(tree.apply_one(x, compiled=self.compiled))
         ]
 
     def label_counts(self) -> dict[Any, int]:
@@ -466,7 +501,7 @@ class HypersphereClassifier:
         if not y:
             return float("nan")
         want = np.array([self._label_index.get(v, -1) for v in y], dtype=np.int64)
-        return float(np.mean(self.tree_.predict(X, self.algorithm) == want))
+        return float(np.mean(self.tree_.predict(X, self.algorithm, compiled=self.compiled) == want))
 
     # ------------------------------------------------------------------ inspection
     def tree_arrays(self) -> dict[str, np.ndarray]:

@@ -318,10 +318,14 @@ def compact(clf: HypersphereClassifier, X: Any, y: Any = None, *, method: str = 
 
 def _predict_index(clf: HypersphereClassifier, X: np.ndarray) -> np.ndarray:
     """The label index each row of a checked ``X`` gets (the tree's own batch prediction)."""
-    return clf.tree_.predict(X, clf.algorithm)
+    return clf.tree_.predict(X, clf.algorithm, compiled=clf.compiled)
 
 
-def _exact(tree: _Tree) -> None:
+def _exact(tree: _Tree, deleted: list | None = None) -> None:
+    """Delete every sphere whose deletion changes no prediction (passes in reverse creation
+    order until one deletes nothing); ``deleted`` receives ``(sphere, height after)`` in the
+    order of deletion (each changed no prediction *at its turn*, so only prefixes of that
+    order keep every prediction)."""
     lab = tree.label
     changed = True
     while changed:
@@ -334,6 +338,8 @@ def _exact(tree: _Tree) -> None:
             if np.array_equal(lab[new_win], lab[tree.win[rows]]):
                 tree.apply(s, res)
                 changed = True
+                if deleted is not None:
+                    deleted.append((s, tree.height()))
 
 
 def _cost(tree: _Tree, res, yi: np.ndarray, w: np.ndarray) -> float:
@@ -391,12 +397,10 @@ def removal_curve(clf: HypersphereClassifier, X: Any, y: Any, *, exact_first: bo
     tree = _Tree(clf, X)
     curve: list = []
     if exact_first:
-        alive0 = tree.alive.copy()
-        _exact(tree)
+        dead: list[tuple[int, int]] = []
+        _exact(tree, dead)
         errs = round(float(w @ (tree.label[tree.win] != yi)), 6)
-        dead = np.flatnonzero(alive0 & ~tree.alive).tolist()
-        height = tree.height()
-        curve += [(s, tree.n - k - 1, height, errs) for k, s in enumerate(dead)]
+        curve += [(s, tree.n - k - 1, height, errs) for k, (s, height) in enumerate(dead)]
     _prune(tree, yi, w, budget=None, max_nodes=1, curve=curve)
     return curve
 

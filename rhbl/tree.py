@@ -1,11 +1,16 @@
 """The sphere tree of RHBL, apart from the estimator: its arrays, spawning and winner searches.
 
 :class:`SphereTree` holds the spheres in creation order (centres, radii, parents, depths, label
-indices, children lists), grows them one training vector at a time (:meth:`SphereTree.learn`)
-and finds the winning sphere of query vectors (:meth:`SphereTree.apply_one`,
-:meth:`SphereTree.apply`). It knows labels only as indices; parameters, input checks and label
-values belong to :class:`rhbl.HypersphereClassifier`, which keeps its tree in ``tree_`` (as
-scikit-learn keeps ``Tree`` apart from ``DecisionTreeClassifier``).
+indices, children), grows them one training vector at a time (:meth:`SphereTree.learn`,
+:meth:`SphereTree.learn_many`) and finds the winning sphere of query vectors
+(:meth:`SphereTree.apply_one`, :meth:`SphereTree.apply`). It knows labels only as indices;
+parameters, input checks and label values belong to :class:`rhbl.HypersphereClassifier`, which
+keeps its tree in ``tree_`` (as scikit-learn keeps ``Tree`` apart from
+``DecisionTreeClassifier``).
+
+Searches and training run compiled kernels (:mod:`rhbl._kernels`, numba) by default; with
+``compiled=False`` they run the numpy code of :mod:`rhbl._reference` instead, the code before
+the kernels, which gives exactly the same trees and answers (the tests compare them).
 
 Inputs are checked vectors in ``[0, 1]^n``: this module does no input validation of its own
 except in :meth:`SphereTree.from_arrays`, which rebuilds a tree from untrusted arrays.
@@ -13,21 +18,39 @@ except in :meth:`SphereTree.from_arrays`, which rebuilds a tree from untrusted a
 
 from __future__ import annotations
 
+import functools
+import importlib
 import math
-from dataclasses import dataclass
+from types import ModuleType
 from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["ALGORITHMS", "DISTANCES", "Growth", "SphereTree"]
+from . import _reference
+
+__all__ = ["ALGORITHMS", "DISTANCES", "Growth", "SphereTree", "Totals", "load_kernels"]
 
 DISTANCES = ("squared", "euclidean")
 ALGORITHMS = ("auto", "brute", "descent")
-# "auto" tests every (query, sphere) pair at once for trees of at most this many spheres and
-# descends the tree for larger ones
-_BRUTE_MAX_NODES = 64
-# the brute search works in chunks of queries of about this many (query, sphere) pairs
-_CHUNK_PAIRS = 1 << 21
+# no limit, for the kernels (which take integers)
+_UNLIMITED = 1 << 62
+
+
+@functools.cache
+def _kernels() -> ModuleType:
+    """The compiled kernels, imported, compiled or loaded from numba's cache on the first call
+    in a process (the first classifier or tree made): importing rhbl does not import numba,
+    which a process that only reads snapshot files or prints help does not need."""
+    kernels = importlib.import_module("._kernels", __package__)
+    kernels.load()
+    return kernels
+
+
+def load_kernels() -> None:
+    """Import numba and compile the kernels or load them from its cache, now: once per process
+    (about a second, most of it numba's own set-up); later calls return at once. Building a
+    tree does it anyway; a process calls it to pay it before it serves."""
+    _kernels()
 
 
 class Growth(NamedTuple):
@@ -38,50 +61,12 @@ class Growth(NamedTuple):
     suppressed: bool  # a growth limit suppressed at least one spawn
 
 
-@dataclass(slots=True)
-class _CreationLayout:
-    """Creation-order arrays for single queries (rebuilt lazily after a change)."""
+class Totals(NamedTuple):
+    """What several training vectors changed (:meth:`SphereTree.learn_many`)."""
 
-    centers_t: np.ndarray  # (features, nodes) centres
-    reach: np.ndarray  # radius + eps per sphere
-    diff: np.ndarray  # scratch (features, nodes): differences to the query
-    dist: np.ndarray  # scratch (nodes,): distances to the query
-    enclosed: np.ndarray  # scratch (nodes,): the enclosure test
-    parent: list[int]
-    rank: list[int]  # tie-break rank per sphere: 0 wins over 1 wins over 2 ...
-    node_of_rank: list[int]
-
-
-@dataclass(slots=True)
-class _PreorderLayout:
-    """Pre-order arrays for the batch searches (rebuilt lazily after a change).
-
-    Position ``p`` is a sphere's place in a depth-first pre-order walk (children in creation
-    order); the subtree of the sphere at ``p`` covers positions ``p .. subtree_end[p] - 1``.
-    Per-position lists of the children are ``None`` for leaves.
-    """
-
-    centers_t: np.ndarray  # (features, nodes) centres in pre-order
-    reach: np.ndarray  # radius + eps
-    subtree_end: np.ndarray
-    position: np.ndarray  # 0, 1, ..., nodes - 1
-    rank: np.ndarray  # tie-break rank
-    no_rank: np.int64  # a rank worse than every sphere's (the number of spheres)
-    node_of_rank: np.ndarray  # rank -> creation index
-    child_positions: list[np.ndarray | None]
-    child_centers_t: list[np.ndarray | None]  # (features, children): for the exact recheck
-    child_centers: list[np.ndarray | None]  # (children, features): for the matrix product
-    child_sq_norms: list[np.ndarray | None]  # squared norms of the children's centres
-    child_reach: list[np.ndarray | None]
-    # bounds on the expanded squared distance: at or below ``child_sure`` the child surely
-    # encloses the query; above ``child_maybe`` it surely does not; in between, recheck exactly
-    child_sure: list[np.ndarray | None]
-    child_maybe: list[np.ndarray | None]
-
-
-def _tie_break_order(radii: np.ndarray, depth: np.ndarray) -> np.ndarray:
-    """Creation indices from best to worst: smallest radius, then deepest, then earliest."""
-    return np.lexsort((np.arange(len(radii)), -depth, radii))
+    spawned: int  # spheres added
+    relabelled: int  # spheres relabelled in place
+    skipped: int  # vectors of which a growth limit suppressed at least one spawn
 
 
 class SphereTree:
@@ -101,6 +86,11 @@ class SphereTree:
     ``distance`` and ``eps`` are fixed for the life of the tree. The arrays ``centers``,
     ``radii``, ``parent``, ``depth`` and ``label`` are read-only views of the first
     ``node_count`` spheres; ``children[i]`` lists the children of sphere ``i`` in creation order.
+
+    The spheres live in one table, a row per sphere (see :mod:`rhbl._kernels`): centre,
+    radius, parent, depth, label and the children as linked lists. Every
+    search and training method takes ``compiled`` (default ``True``): ``False`` runs the numpy
+    reference instead (same results, slower; the tests and benchmarks compare the two).
     """
 
     def __init__(self, n_features: int, root_label: int, *, distance: str, eps: float) -> None:
@@ -108,27 +98,71 @@ class SphereTree:
             raise ValueError(f"distance must be one of {DISTANCES}, got {distance!r}")
         if not (isinstance(n_features, int | np.integer) and n_features >= 1):
             raise ValueError(f"need at least one feature, got {n_features}")
+        _kernels()  # loaded once per process, before any tree needs them
         self.n_features = int(n_features)
         self.distance = distance
         self.eps = eps
+        self._eps = float(eps)  # what the kernels take
         self._euclidean = distance == "euclidean"
         self._allocate(64)
-        self.children: list[list[int]] = []
         self.node_count = 0
         self.height = 0
-        self._creation: _CreationLayout | None = None
-        self._preorder: _PreorderLayout | None = None
+        self._changed()
         root_radius = math.sqrt(n_features) / 2 if self._euclidean else n_features / 4
         self._add(np.full(n_features, 0.5), root_radius, -1, root_label)
 
     def _allocate(self, capacity: int) -> None:
-        self._centers = np.empty((capacity, self.n_features), dtype=np.float64)
-        # (features, capacity) copy of the centres, kept up to date for the training scan
-        self._centers_t = np.empty((self.n_features, capacity), dtype=np.float64)
-        self._radii = np.empty(capacity, dtype=np.float64)
-        self._parent = np.empty(capacity, dtype=np.int64)
-        self._depth = np.empty(capacity, dtype=np.int64)
-        self._label = np.empty(capacity, dtype=np.int64)
+        """An empty table for ``capacity`` spheres."""
+        n_feat = self.n_features
+        self._table = np.empty((capacity, n_feat + 1 + _kernels().INT_COLUMNS), dtype=np.int64)
+        # (features, capacity) copy of the centres for the numpy training scan, filled lazily
+        self._centers_t = np.empty((n_feat, capacity), dtype=np.float64)
+        self._transposed = 0  # columns of _centers_t that are up to date
+        self._bind()
+
+    def _bind(self) -> None:
+        """The views of the table's columns (rebuilt with the table, and after unpickling)."""
+        k, n_feat = _kernels(), self.n_features
+        base = n_feat + 1  # the first integer column
+        floats = self._table.view(np.float64)
+        self._centers = floats[:, :n_feat]
+        self._radii = floats[:, n_feat]
+        self._parent = self._table[:, base + k.PARENT]
+        self._depth = self._table[:, base + k.DEPTH]
+        self._label = self._table[:, base + k.LABEL]
+        self._label_column = base + k.LABEL
+        self._links = self._table[:, base + k.FIRST : base + k.LAST + 1]  # first, next, last
+
+    _VIEWS = ("_centers", "_radii", "_parent", "_depth", "_label", "_label_column", "_links")
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickle (and ``copy.deepcopy``) the table, not its views or derived caches."""
+        state = {k: v for k, v in self.__dict__.items() if k not in self._VIEWS}
+        state.update(_creation=None, _preorder=None, _children=None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        _kernels()
+        self._bind()
+
+    def _grow(self, capacity: int) -> None:
+        """Move the spheres into a table of ``capacity`` rows."""
+        n, done = self.node_count, self._transposed
+        table, centers_t = self._table, self._centers_t
+        self._allocate(capacity)
+        self._table[:n] = table[:n]
+        self._centers_t[:, :done] = centers_t[:, :done]
+        self._transposed = done
+
+    def centers_t(self) -> np.ndarray:
+        """The centres as (features, spheres), for the numpy reference (kept in step lazily:
+        the kernels do not write it)."""
+        n, done = self.node_count, self._transposed
+        if done < n:
+            self._centers_t[:, done:n] = self._centers[done:n].T
+            self._transposed = n
+        return self._centers_t[:, :n]
 
     # ------------------------------------------------------------------ the arrays
     @property
@@ -155,6 +189,17 @@ class SphereTree:
         v = a[: self.node_count]
         v.flags.writeable = False
         return v
+
+    @property
+    def children(self) -> list[list[int]]:
+        """``children[i]``: the children of sphere ``i`` in creation order (built when asked
+        for after a change; do not modify)."""
+        if self._children is None:
+            kids: list[list[int]] = [[] for _ in range(self.node_count)]
+            for i, p in enumerate(self._parent[1 : self.node_count].tolist(), start=1):
+                kids[p].append(i)
+            self._children = kids
+        return self._children
 
     def to_arrays(self) -> dict[str, np.ndarray]:
         """Copies of the sphere data in creation order: centers, radii, parent, depth, label."""
@@ -211,20 +256,34 @@ class SphereTree:
         tree = cls(centers.shape[1], int(label[0]), distance=distance, eps=eps)
         tree._allocate(max(64, n))
         tree._centers[:n] = centers
-        tree._centers_t[:, :n] = centers.T
         tree._radii[:n] = radii
         tree._parent[:n] = parent
         tree._label[:n] = label
         tree._depth[0] = 0
-        tree.children = [[] for _ in range(n)]
         for i, p in enumerate(parent[1:].tolist(), start=1):
             tree._depth[i] = tree._depth[p] + 1
-            tree.children[p].append(i)
+        tree._link(n)
         tree.node_count = n
+        tree._changed()
         if depth is not None and not np.array_equal(np.asarray(depth), tree._depth[:n]):
             raise ValueError("depth does not follow from parent")
         tree.height = int(tree._depth[:n].max())
         return tree
+
+    def _link(self, n: int) -> None:
+        """The children's linked lists of the first ``n`` spheres, from their parents."""
+        first, after, last = 0, 1, 2  # the columns of _links
+        links = self._links
+        links[:n] = -1
+        if n < 2:
+            return
+        by_parent = np.argsort(self._parent[1:n], kind="stable") + 1  # creation order kept
+        p = self._parent[by_parent]
+        is_last = np.r_[p[1:] != p[:-1], True]  # the last child of its parent
+        is_first = np.r_[True, is_last[:-1]]
+        links[p[is_first], first] = by_parent[is_first]
+        links[p[is_last], last] = by_parent[is_last]
+        links[by_parent[:-1][~is_last[:-1]], after] = by_parent[1:][~is_last[:-1]]
 
     def equal(self, other: SphereTree) -> bool:
         """True if ``other`` has the same distance, eps and spheres (exactly)."""
@@ -237,24 +296,20 @@ class SphereTree:
     def _add(self, center: np.ndarray, radius: float, parent: int, label: int) -> int:
         i = self.node_count
         if i == len(self._radii):  # full: double the capacity
-            centers, centers_t = self._centers, self._centers_t
-            rows = (self._radii, self._parent, self._depth, self._label)
-            self._allocate(2 * i)
-            self._centers[:i] = centers
-            self._centers_t[:, :i] = centers_t
-            for old, new in zip(rows, (self._radii, self._parent, self._depth, self._label),
-                                strict=True):
-                new[:i] = old
+            self._grow(2 * i)
+        first, after, last = 0, 1, 2  # the columns of _links
         self._centers[i] = center
-        self._centers_t[:, i] = center
         self._radii[i] = radius
-        self._parent[i] = parent
         depth = 0 if parent < 0 else int(self._depth[parent]) + 1
-        self._depth[i] = depth
-        self._label[i] = label
-        self.children.append([])
+        self._parent[i], self._depth[i], self._label[i] = parent, depth, label
+        self._links[i] = -1
         if parent >= 0:
-            self.children[parent].append(i)
+            up = self._links[parent]
+            if up[first] < 0:
+                up[first] = i
+            else:
+                self._links[up[last], after] = i
+            up[last] = i
         self.node_count = i + 1
         if depth > self.height:
             self.height = depth
@@ -262,43 +317,10 @@ class SphereTree:
         return i
 
     def _changed(self) -> None:
+        """Forget what was derived from the spheres (the reference's layouts, children)."""
         self._creation = None
         self._preorder = None
-
-    def _scan(self, x: np.ndarray) -> tuple[np.ndarray, list[int], list[int]]:
-        """Distances from ``x`` to every centre, and the spheres reachable through enclosing
-        ancestors, in creation order, with their parents.
-
-        The arithmetic is exactly that of :meth:`apply_one`: one ``sum((c - x)**2)`` over the
-        features in feature order and the test ``d <= r + eps``, so training and prediction
-        always agree on which spheres enclose a vector.
-        """
-        n = self.node_count
-        buf = np.subtract(self._centers_t[:, :n], x[:, None])
-        np.multiply(buf, buf, out=buf)
-        d = np.add.reduce(buf, axis=0)
-        if self._euclidean:
-            np.sqrt(d, out=d)
-        enc = np.flatnonzero(d <= self._radii[:n] + self.eps)
-        ok = {-1}
-        reach: list[int] = []
-        parents: list[int] = []
-        for i, p in zip(enc.tolist(), self._parent[enc].tolist(), strict=True):
-            if p in ok:
-                ok.add(i)
-                reach.append(i)
-                parents.append(p)
-        return d, reach, parents
-
-    @staticmethod
-    def _candidates(reach: list[int], parents: list[int]) -> list[int]:
-        """Reachable spheres none of whose children are reachable, in the order of a
-        depth-first search that visits children in creation order (the paper's traversal)."""
-        inner = set(parents)
-        path: dict[int, tuple[int, ...]] = {-1: ()}
-        for i, p in zip(reach, parents, strict=True):
-            path[i] = path[p] + (i,)
-        return sorted((i for i in reach if i not in inner), key=path.__getitem__)
+        self._children = None
 
     def learn(
         self,
@@ -309,6 +331,7 @@ class SphereTree:
         min_radius: float = 0.0,
         max_nodes: int | None = None,
         max_depth: int | None = None,
+        compiled: bool = True,
     ) -> Growth:
         """Train on one checked vector ``x`` with label index ``label``.
 
@@ -317,35 +340,53 @@ class SphereTree:
         below ``min_radius`` (0 = none), ``max_nodes`` spheres reached, or the child deeper than
         ``max_depth``. A candidate whose centre is within ``eps`` of ``x`` is relabelled instead.
         """
-        d_all, reach, parents = self._scan(x)
-        cands = self._candidates(reach, parents)
-        if spawn == "winner":
-            radii, depth = self._radii, self._depth
-            w = min(cands, key=lambda i: (radii[i], -depth[i], i))
-            targets = [w] if self._label[w] != label else []
-        else:
-            targets = [c for c in cands if self._label[c] != label]
-        spawned = relabelled = 0
-        suppressed = False
-        eps = self.eps
-        for p in targets:
-            d = float(d_all[p])
-            if d <= eps:
-                self._label[p] = label  # coincides with the centre: relabel in place
-                self._changed()
-                relabelled += 1
-                continue
-            r = max(float(self._radii[p]) - d, 0.0)
-            if (
-                (min_radius and r < min_radius)
-                or (max_nodes is not None and self.node_count >= max_nodes)
-                or (max_depth is not None and self._depth[p] + 1 > max_depth)
-            ):
-                suppressed = True
-                continue
-            self._add(x, r, p, label)
-            spawned += 1
-        return Growth(spawned, relabelled, suppressed)
+        if not compiled:
+            return Growth(*_reference.learn(self, x, label, spawn=spawn, min_radius=min_radius,
+                                            max_nodes=max_nodes, max_depth=max_depth))
+        t = self.learn_many(x.reshape(1, -1), np.array([label], dtype=np.int64), spawn=spawn,
+                            min_radius=min_radius, max_nodes=max_nodes, max_depth=max_depth)
+        return Growth(t.spawned, t.relabelled, t.skipped > 0)
+
+    def learn_many(
+        self,
+        X: np.ndarray,
+        labels: Any,
+        *,
+        spawn: str = "all",
+        min_radius: float = 0.0,
+        max_nodes: int | None = None,
+        max_depth: int | None = None,
+        compiled: bool = True,
+    ) -> Totals:
+        """Train on the rows of a checked ``X`` in order, with label indices ``labels``: the
+        same tree as :meth:`learn` on each row, in one compiled call (``compiled=False``: a
+        loop over :meth:`learn` in numpy)."""
+        if not compiled:
+            spawned = relabelled = skipped = 0
+            for x, label in zip(X, np.asarray(labels).tolist(), strict=True):
+                g = self.learn(x, label, spawn=spawn, min_radius=min_radius, max_nodes=max_nodes,
+                               max_depth=max_depth, compiled=False)
+                spawned, relabelled = spawned + g.spawned, relabelled + g.relabelled
+                skipped += g.suppressed
+            return Totals(spawned, relabelled, skipped)
+        X = _queries(X)
+        labels = np.array(labels, dtype=np.int64)  # a fresh array: the type the kernel takes
+        limits = (float(min_radius),
+                  _UNLIMITED if max_nodes is None else min(int(max_nodes), _UNLIMITED),
+                  _UNLIMITED if max_depth is None else min(int(max_depth), _UNLIMITED))
+        start = spawned = relabelled = skipped = 0
+        while True:
+            rows, self.node_count, self.height, s, r, k = _kernels().learn(
+                self._table, X, labels, start, self.node_count, self.height, self._eps,
+                self._euclidean, spawn == "winner", *limits)
+            spawned, relabelled, skipped = spawned + s, relabelled + r, skipped + k
+            start += rows
+            if start == X.shape[0]:
+                break
+            self._grow(2 * len(self._radii))  # the next row might not fit
+        if spawned or relabelled:
+            self._changed()
+        return Totals(spawned, relabelled, skipped)
 
     # ------------------------------------------------------------------ single queries
     def distance_to(self, node: int, x: np.ndarray) -> float:
@@ -354,55 +395,27 @@ class SphereTree:
         d = float(np.dot(diff, diff))
         return math.sqrt(d) if self._euclidean else d
 
-    def _build_creation(self) -> _CreationLayout:
-        n = self.node_count
-        ct = np.ascontiguousarray(self._centers[:n].T)
-        by_rank = _tie_break_order(self._radii[:n], self._depth[:n])
-        rank = np.empty(n, dtype=np.int64)
-        rank[by_rank] = np.arange(n)
-        self._creation = _CreationLayout(
-            centers_t=ct,
-            reach=self._radii[:n] + self.eps,
-            diff=np.empty_like(ct),
-            dist=np.empty(n),
-            enclosed=np.empty(n, dtype=bool),
-            parent=self._parent[:n].tolist(),
-            rank=rank.tolist(),
-            node_of_rank=by_rank.tolist(),
-        )
-        return self._creation
-
-    def apply_one(self, x: np.ndarray) -> int:
+    def apply_one(self, x: np.ndarray, *, compiled: bool = True) -> int:
         """The winning sphere (creation index) for one checked query vector.
 
-        Every sphere is tested at once (one vectorised ``sum((x - c)**2)`` over the features,
-        in feature order); the few enclosing spheres are then walked in creation order in
-        Python: a sphere is reachable iff it encloses ``x`` and its parent is reachable.
+        Compiled: the descent (only the children of enclosing spheres are tested); -1 for a
+        vector outside the unit cube or with a NaN, so that a caller may check its input only
+        when the search rejects it. Numpy: every sphere is tested at once (one vectorised
+        ``sum((x - c)**2)`` over the features, in feature order), then the enclosing ones are
+        walked in creation order in Python.
         """
-        lay = self._creation
-        if lay is None:
-            lay = self._build_creation()
-        buf, d, enc = lay.diff, lay.dist, lay.enclosed
-        np.subtract(lay.centers_t, x[:, None], out=buf)
-        np.multiply(buf, buf, out=buf)
-        np.add.reduce(buf, axis=0, out=d)
-        if self._euclidean:
-            np.sqrt(d, out=d)
-        np.less_equal(d, lay.reach, out=enc)
-        parent, rank = lay.parent, lay.rank
-        best = len(rank)
-        ok = {-1}
-        for i in np.flatnonzero(enc).tolist():
-            if parent[i] in ok:
-                ok.add(i)
-                r = rank[i]
-                if r < best:
-                    best = r
-        return lay.node_of_rank[best]
+        if not compiled:
+            return _reference.apply_one(self, x)
+        flags = x.flags
+        if not (flags.c_contiguous and flags.writeable):
+            x = x.copy()
+        return _kernels().winner(self._table, self.node_count, x, self._eps, self._euclidean)
 
-    def predict_one(self, x: np.ndarray) -> int:
-        """The label index of the winning sphere for one checked query vector."""
-        return int(self._label[self.apply_one(x)])
+    def predict_one(self, x: np.ndarray, *, compiled: bool = True) -> int:
+        """The label index of the winning sphere for one checked query vector (compiled: -1
+        for a vector outside the unit cube, as :meth:`apply_one`)."""
+        node = self.apply_one(x, compiled=compiled)
+        return -1 if node < 0 else self._table.item(node, self._label_column)
 
     def path(self, node: int) -> list[int]:
         """Creation indices from the root down to ``node``."""
@@ -413,179 +426,45 @@ class SphereTree:
         return out[::-1]
 
     # ------------------------------------------------------------------ batch queries
-    def apply(self, X: np.ndarray, algorithm: str = "auto") -> np.ndarray:
+    def apply(self, X: np.ndarray, algorithm: str = "auto", *, compiled: bool = True
+              ) -> np.ndarray:
         """The winning sphere (creation index) of each row of a checked ``X`` (m, features).
 
-        ``algorithm``: ``"brute"`` tests every (query, sphere) pair at once; ``"descent"``
-        walks down the tree carrying the queries each sphere encloses and tests only the
-        children of enclosing spheres; ``"auto"`` uses ``"brute"`` for trees of at most
-        64 spheres, else ``"descent"``. All give exactly the same answers.
+        ``algorithm``: ``"brute"`` tests every sphere; ``"descent"`` walks down the tree and
+        tests only the children of enclosing spheres. ``"auto"``: compiled, the descent; numpy,
+        brute force for trees of at most 64 spheres, else the descent (the numpy brute force
+        tests every (query, sphere) pair at once; its descent carries the queries each sphere
+        encloses). All give exactly the same answers.
         """
+        return self._search(X, algorithm, compiled)[0]
+
+    def visits(self, X: np.ndarray, algorithm: str = "auto") -> np.ndarray:
+        """How many spheres the compiled search computed the distance of, per row of ``X``
+        (the root is never tested: it encloses the whole cube)."""
+        return self._search(X, algorithm, True)[1]
+
+    def _search(self, X: np.ndarray, algorithm: str, compiled: bool
+                ) -> tuple[np.ndarray, np.ndarray | None]:
         if algorithm not in ALGORITHMS:
             raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
-        if X.shape[0] == 0:
-            return np.zeros(0, dtype=np.int64)
-        if algorithm == "auto":
-            algorithm = "brute" if self.node_count <= _BRUTE_MAX_NODES else "descent"
-        lay = self._preorder
-        if lay is None:
-            lay = self._build_preorder()
-        if algorithm == "brute":
-            return self._apply_brute(X, lay)
-        return self._apply_descent(X, lay)
-
-    def predict(self, X: np.ndarray, algorithm: str = "auto") -> np.ndarray:
-        """The label index of the winning sphere of each row of a checked ``X``."""
-        return self._label[self.apply(X, algorithm)]
-
-    def _build_preorder(self) -> _PreorderLayout:
-        n = self.node_count
-        order = np.empty(n, dtype=np.int64)
-        end = np.empty(n, dtype=np.int64)
-        children = self.children
-        # iterative pre-order DFS, children in creation order
-        pos = 0
-        stack = [(0, False)]
-        while stack:
-            node, done = stack.pop()
-            if done:
-                end[node] = pos
-                continue
-            order[pos] = node
-            pos += 1
-            stack.append((node, True))
-            for c in reversed(children[node]):
-                stack.append((c, False))
-        position_of = np.empty(n, dtype=np.int64)
-        position_of[order] = np.arange(n)
-        radii = self._radii[:n]
-        by_rank = _tie_break_order(radii, self._depth[:n])
-        rank = np.empty(n, dtype=np.int64)
-        rank[by_rank] = np.arange(n)
-        centers_t = np.ascontiguousarray(self._centers[order].T)
-        reach = radii[order] + self.eps
-        # per pre-order position: the children's positions, centres and reach
-        kids: list[np.ndarray | None] = []
-        kids_ct: list[np.ndarray | None] = []
-        kids_reach: list[np.ndarray | None] = []
-        for i in order.tolist():
-            if children[i]:
-                k = position_of[children[i]]
-                kids.append(k)
-                kids_ct.append(np.ascontiguousarray(centers_t[:, k]))
-                kids_reach.append(reach[k])
-            else:
-                kids.append(None)
-                kids_ct.append(None)
-                kids_reach.append(None)
-        # the band of rounding error of the expanded squared distance around each child's reach
-        n_feat = self.n_features
-        tol = 16 * 2.0**-53 * (n_feat * n_feat + 4 * n_feat)
-        sure: list[np.ndarray | None] = []
-        maybe: list[np.ndarray | None] = []
-        for r in kids_reach:
-            if r is None:
-                sure.append(None)
-                maybe.append(None)
-                continue
-            lim = r * r if self._euclidean else r
-            band = tol + (8 * 2.0**-53 * lim if self._euclidean else 0.0)
-            sure.append(lim - band)
-            maybe.append(lim + band)
-        self._preorder = _PreorderLayout(
-            centers_t=centers_t,
-            reach=reach,
-            subtree_end=end[order],
-            position=np.arange(n),
-            rank=rank[order],
-            no_rank=np.int64(n),
-            node_of_rank=by_rank,
-            child_positions=kids,
-            child_centers_t=kids_ct,
-            child_centers=[None if k is None else np.ascontiguousarray(k.T) for k in kids_ct],
-            child_sq_norms=[None if k is None else np.einsum("ij,ij->j", k, k) for k in kids_ct],
-            child_reach=kids_reach,
-            child_sure=sure,
-            child_maybe=maybe,
-        )
-        return self._preorder
-
-    def _apply_brute(self, X: np.ndarray, lay: _PreorderLayout) -> np.ndarray:
-        """Every (query, sphere) pair at once, in chunks of queries."""
-        n_nodes = self.node_count
-        ct = lay.centers_t
+        if not compiled:
+            return _reference.apply(self, X, algorithm), None
+        X = _queries(X)
         out = np.empty(X.shape[0], dtype=np.int64)
-        step = max(1, _CHUNK_PAIRS // max(n_nodes, 1))
-        for s in range(0, X.shape[0], step):
-            Q = X[s : s + step]
-            d = np.zeros((Q.shape[0], n_nodes))
-            for k in range(ct.shape[0]):
-                t = Q[:, k, None] - ct[k]
-                t *= t
-                d += t
-            if self._euclidean:
-                np.sqrt(d, out=d)
-            # a sphere is unreachable if it or an ancestor does not enclose the query: the
-            # running maximum of the subtree ends of non-enclosing spheres covers exactly those
-            bad = d > lay.reach
-            reach_end = np.maximum.accumulate(lay.subtree_end * bad, axis=1)
-            key = np.where(reach_end > lay.position, lay.no_rank, lay.rank)
-            out[s : s + step] = lay.node_of_rank[key.min(axis=1)]
-        return out
+        visited = np.empty(X.shape[0], dtype=np.int64)
+        _kernels().winners(self._table, self.node_count, X, self._eps, self._euclidean,
+                        algorithm == "brute", out, visited)
+        return out, visited
 
-    def _apply_descent(self, X: np.ndarray, lay: _PreorderLayout) -> np.ndarray:
-        """Descend sphere by sphere, carrying the queries each sphere encloses.
+    def predict(self, X: np.ndarray, algorithm: str = "auto", *, compiled: bool = True
+                ) -> np.ndarray:
+        """The label index of the winning sphere of each row of a checked ``X``."""
+        return self._label[self.apply(X, algorithm, compiled=compiled)]
 
-        Only the children of spheres that enclose some query are tested. Children are tested
-        against many queries at once with a matrix product (the expanded form of the squared
-        distance) as a *filter*: every (query, child) pair whose expanded distance lies within
-        a rounding-error band of the radius is recomputed exactly as ``sum((x - c)**2)``, so
-        the answers are exactly those of the direct form.
-        """
-        m = X.shape[0]
-        rank = lay.rank
-        kids_of = lay.child_positions
-        kids_c = lay.child_centers
-        kids_cc = lay.child_sq_norms
-        kids_sure = lay.child_sure
-        kids_maybe = lay.child_maybe
-        kids_reach = lay.child_reach
-        euclidean = self._euclidean
-        XT = np.ascontiguousarray(X.T)
-        XX = np.einsum("ij,ij->i", X, X)
-        best = np.full(m, rank[0], dtype=np.int64)
-        stack: list[tuple[int, np.ndarray | None]] = [(0, None)]
-        while stack:
-            node, q = stack.pop()
-            kids = kids_of[node]
-            if kids is None:  # a leaf (only the root can get here)
-                continue
-            if q is None:
-                q = np.arange(m)
-                xt, xx = XT, XX
-            else:
-                xt = XT[:, q]
-                xx = XX[q]
-            d = np.einsum("kn,nq->kq", kids_c[node], xt)  # (no BLAS threads)
-            d *= -2.0
-            d += kids_cc[node][:, None]
-            d += xx
-            enc = d <= kids_sure[node][:, None]
-            maybe = d <= kids_maybe[node][:, None]
-            if not np.array_equal(enc, maybe):
-                jj, ii = np.nonzero(maybe & ~enc)
-                ct = lay.child_centers_t[node]
-                exact = (ct[0][jj] - xt[0][ii]) ** 2
-                for k in range(1, ct.shape[0]):
-                    exact += (ct[k][jj] - xt[k][ii]) ** 2
-                if euclidean:
-                    np.sqrt(exact, out=exact)
-                ok = exact <= kids_reach[node][jj]
-                enc[jj[ok], ii[ok]] = True
-            for j in np.flatnonzero(enc.any(axis=1)).tolist():
-                qj = q[enc[j]]
-                c = int(kids[j])
-                best[qj] = np.minimum(best[qj], rank[c])
-                if kids_of[c] is not None:
-                    stack.append((c, qj))
-        return lay.node_of_rank[best]
+
+def _queries(X: np.ndarray) -> np.ndarray:
+    """``X`` as the kernels take it: float64, C order, writable (a copy only if needed: other
+    array types would make numba compile another version of a kernel)."""
+    if X.dtype == np.float64 and X.flags.c_contiguous and X.flags.writeable:
+        return X
+    return np.array(X, dtype=np.float64, order="C")

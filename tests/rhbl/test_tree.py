@@ -140,16 +140,19 @@ def _imports(path: Path) -> tuple[set[str], list[int]]:
 
 
 def test_snapshots_store_every_parameter_but_the_search():
-    assert set(rhbl.snapshot.PARAMS) == set(HypersphereClassifier().get_params()) - {"algorithm"}
+    assert set(rhbl.snapshot.PARAMS) == set(HypersphereClassifier().get_params()) - {"algorithm", "compiled"}
     with pytest.raises(ValueError, match="need at least one feature"):
         HypersphereClassifier("a").fit(np.zeros((0, 0)), [])
 
 
 def test_modules_import_one_way():
-    """tree <- snapshot, compact <- classifier: no import circle, and no import hidden in a
-    function."""
+    """_reference <- tree <- snapshot, compact <- classifier: no import circle, and no import
+    hidden in a function; the kernels (numba) are the one module loaded on first use."""
     root = Path(rhbl.__file__).parent
-    assert _imports(root / "tree.py") == (set(), [])
+    assert _imports(root / "_kernels.py") == (set(), [])
+    assert _imports(root / "_reference.py") == (set(), [])
+    assert _imports(root / "tree.py") == ({"_reference"}, [])
+    assert 'importlib.import_module("._kernels", __package__)' in (root / "tree.py").read_text()
     assert _imports(root / "snapshot.py") == ({"_errors"}, [])
     assert _imports(root / "compact.py") == ({"tree"}, [])
     assert _imports(root / "classifier.py") == ({"snapshot", "_errors", "tree", "compact"}, [])
