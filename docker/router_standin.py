@@ -71,7 +71,9 @@ def open_router(config_file, secrets_dir=None, listen=None, cfg=None) -> zenoh.S
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--config", required=True, help="zenoh router config (json5)")
+    parser.add_argument(
+        "-c", "--config", required=True, help="zenoh router config (json5; zenohd's -c)"
+    )
     parser.add_argument("--secrets", help=f"directory replacing {SECRETS_PREFIX} in the config")
     parser.add_argument("--listen", action="append", help="listen endpoint (repeatable)")
     parser.add_argument(
