@@ -17,11 +17,5 @@ fi
 if command -v docker >/dev/null && docker info >/dev/null 2>&1; then
     exit 0  # Docker runs the scenario (and pulls the upstream images)
 fi
-if [ "$(id -u)" -ne 0 ] || ! command -v apt-get >/dev/null; then
-    echo "ci-containers: missing ${missing[*]} and this is not root on Debian: install the" \
-         "packages podman runc mmdebstrap (or use Docker)" >&2
-    exit 1
-fi
-export DEBIAN_FRONTEND=noninteractive
-apt-get update
-apt-get install -y podman runc uidmap fuse-overlayfs slirp4netns mmdebstrap
+exec "$(dirname "$0")/apt-install.sh" ci-containers "${missing[*]} missing" \
+    podman runc uidmap fuse-overlayfs slirp4netns mmdebstrap
