@@ -359,3 +359,18 @@ def test_gen_dev_secrets(tmp_path):
 def test_interpolation():
     env = {"A": "1", "E": ""}
     assert compose_local.interpolate("${A}-${B:-2}-${E:-3}-${E-4}-${B}", env) == "1-2-3--"
+
+
+def test_healthcheck_reads_every_argument_of_the_process():
+    """An empty argument (compose passes `--token ""` to the console) is kept: without it the
+    next flag would be taken for the token's value."""
+    healthcheck = _module("healthcheck")
+    code = "import sys; print('up', flush=True); sys.stdin.read()"
+    proc = subprocess.Popen([sys.executable, "-c", code, "--token", "", "--connect", "x"],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline() == "up\n"  # it runs its own command line now
+        assert healthcheck._argv(proc.pid) == [sys.executable, "-c", code, "--token", "",
+                                               "--connect", "x"]
+    finally:
+        proc.communicate(timeout=30)
