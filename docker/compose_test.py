@@ -644,11 +644,14 @@ class Scenario:
         user = self.engine.run("image", "inspect", "--format", "{{.Config.User}}",
                                self.image).stdout.strip()
         rootless = user.split(":")[0] not in ("", "0", "root")
+        # the containers of our image run as that user (compose sets no other)
+        users = {r["Config"].get("User") for n, r in found.items() if n != "router"}
         read_only = {n: bool(r["HostConfig"].get("ReadonlyRootfs")) for n, r in found.items()}
         wrong = [n for n in READ_ONLY if not read_only.get(n)]
         self.report.check(
-            "image", rootless and not wrong,
-            f"{self.image} {size_mb(self.engine, self.image):.0f} MB, user {user}; read-only "
+            "image", rootless and users == {user} and not wrong,
+            f"{self.image} {size_mb(self.engine, self.image):.0f} MB, user {user} (containers: "
+            f"{', '.join(sorted(str(u) for u in users))}); read-only "
             f"root filesystem: {', '.join(n for n in read_only if read_only[n])}; writable: "
             f"{', '.join(n for n in read_only if not read_only[n])}"
             + (f"; NOT read-only: {', '.join(wrong)}" if wrong else ""))
