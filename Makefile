@@ -5,9 +5,11 @@
 #   make PYTHON=python3.12 demo      build the environment from another interpreter
 #   make VENV=$VIRTUAL_ENV test       install into (and use) an environment you already have
 #   make demo DEMO_ARGS='--scenario maze'
+#   make compose-test                 docker/compose.yaml in real containers (podman or Docker)
 PYTHON ?= python3
 VENV ?= .venv
 DEMO_ARGS ?=
+COMPOSE_TEST_ARGS ?=
 BIN := $(VENV)/bin
 # installed once per change of pyproject.toml; removing $(VENV) starts afresh
 STAMP := $(VENV)/.rhbl-installed
@@ -32,4 +34,10 @@ test: $(STAMP)
 lint: $(STAMP)
 	$(RUN) $(BIN)/ruff check .
 
-.PHONY: install demo test lint
+# builds the images, runs the compose scenario, checks it from outside, removes what it made
+# (as root on Debian, scripts/ci-containers.sh first installs podman, runc and mmdebstrap)
+compose-test: $(STAMP)
+	@bash scripts/ci-containers.sh
+	$(RUN) $(BIN)/python docker/compose_test.py $(COMPOSE_TEST_ARGS)
+
+.PHONY: install demo test lint compose-test

@@ -34,7 +34,9 @@ COMPOSE_FILE = HERE / "compose.yaml"
 ROUTER_HOST = "router"
 ROUTER_PORT = 7447
 
-__all__ = ["Scenario", "interpolate", "load_compose", "rhbl_argv", "start_order"]
+__all__ = [
+    "Scenario", "client_config", "interpolate", "load_compose", "rhbl_argv", "start_order"
+]
 
 _VAR = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)(?:(:?-)([^}]*))?\}")
 
@@ -68,8 +70,8 @@ def load_compose(path: Path = COMPOSE_FILE, env: dict[str, str] | None = None) -
 
 def rhbl_argv(service: dict) -> list[str] | None:
     """The ``rhbl`` arguments of a service built from our image (None for other services)."""
-    image = str(service.get("image", ""))
-    if not image.startswith("rhbl:") or "entrypoint" in service:
+    build = service.get("build") or {}
+    if build.get("dockerfile") != "docker/Dockerfile" or "entrypoint" in service:
         return None
     command = service.get("command", [])
     return list(command) if isinstance(command, list) else command.split()
@@ -92,6 +94,22 @@ def start_order(services: dict) -> list[str]:
     for name in services:
         visit(name)
     return order
+
+
+def client_config(config, endpoint: str, retry_ms: int | None = None):
+    """``config`` (a ``zenoh.Config``, e.g. a role's credentials) made a client of the router at
+    ``endpoint`` only, multicast scouting off; ``retry_ms``: try to reconnect that often after
+    losing the router (default: zenoh's backoff)."""
+    import json
+
+    config.insert_json5("mode", '"client"')
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    if retry_ms is not None:
+        config.insert_json5("connect/retry", json.dumps(
+            {"period_init_ms": retry_ms, "period_max_ms": retry_ms,
+             "period_increase_factor": 1}))
+    return config
 
 
 @dataclass
@@ -166,7 +184,7 @@ class Scenario:
 
     def argv_of(self, name: str) -> list[str]:
         service = self.services[name]
-        if str(service.get("image", "")).startswith("eclipse/zenoh:"):
+        if name == ROUTER_HOST:  # the router service, reached by its name
             return self._router_argv(service)
         if service.get("entrypoint") == ["rhbl-gen-dev-secrets"]:
             return [
@@ -234,19 +252,10 @@ class Scenario:
         """A zenoh client config for this scenario's router with one of its own credentials
         (``role``: the router refuses anyone else), e.g. for an observer; ``retry_ms``: try to
         reconnect that often after losing the router (default: zenoh's backoff)."""
-        import json
-
         import zenoh
 
         config = zenoh.Config.from_file(str(self.secrets / f"{role}.json5"))
-        config.insert_json5("mode", '"client"')
-        config.insert_json5("connect/endpoints", json.dumps([f"tls/127.0.0.1:{self.port}"]))
-        config.insert_json5("scouting/multicast/enabled", "false")
-        if retry_ms is not None:
-            config.insert_json5("connect/retry", json.dumps(
-                {"period_init_ms": retry_ms, "period_max_ms": retry_ms,
-                 "period_increase_factor": 1}))
-        return config
+        return client_config(config, f"tls/127.0.0.1:{self.port}", retry_ms)
 
     def running(self, name: str) -> bool:
         return self.procs[name].child.poll() is None

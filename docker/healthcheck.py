@@ -13,13 +13,14 @@ import json
 import sys
 from pathlib import Path
 
-ROLES = ("server", "teacher", "learner", "controller")
+ROLES = ("server", "teacher", "learner", "controller", "console")
 TIMEOUT = 3.0
 
 
 def _argv(pid: int) -> list[str]:
     raw = Path(f"/proc/{pid}/cmdline").read_bytes()
-    return [a.decode() for a in raw.split(b"\0") if a]
+    # NUL-terminated arguments; an empty one (compose's `--token ""`) is an argument too
+    return [a.decode() for a in raw.removesuffix(b"\0").split(b"\0")] if raw else []
 
 
 def _state(pid: int) -> str:

@@ -1,9 +1,11 @@
 """A Python zenoh session in router mode, standing in for the ``eclipse/zenoh`` router image.
 
-No Docker engine runs on our development machines, so the tests (and anyone without Docker)
-run the *shipped* router configuration (``docker/zenoh/router.json5``) in a Python session
-opened in ``router`` mode, which applies TLS, user/password authentication and access control
-exactly as zenohd does (the same Rust code underneath)::
+The tests (and anyone without Docker) run the *shipped* router configuration
+(``docker/zenoh/router.json5``) in a Python session opened in ``router`` mode, which applies
+TLS, user/password authentication and access control exactly as zenohd does (the same Rust code
+underneath); where the ``eclipse/zenoh`` image cannot be pulled, ``make compose-test`` runs it
+in a container of its own (docker/router-standin.Dockerfile), given zenohd's own arguments
+(``-c FILE --cfg KEY:VALUE``). On this machine::
 
     python docker/router_standin.py --config docker/zenoh/router.json5 \
         --secrets docker/secrets --listen tls/127.0.0.1:7447
@@ -71,7 +73,9 @@ def open_router(config_file, secrets_dir=None, listen=None, cfg=None) -> zenoh.S
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--config", required=True, help="zenoh router config (json5)")
+    parser.add_argument(
+        "-c", "--config", required=True, help="zenoh router config (json5; zenohd's -c)"
+    )
     parser.add_argument("--secrets", help=f"directory replacing {SECRETS_PREFIX} in the config")
     parser.add_argument("--listen", action="append", help="listen endpoint (repeatable)")
     parser.add_argument(

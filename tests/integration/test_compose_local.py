@@ -116,7 +116,7 @@ def test_compose_scenario_ends_with_a_learned_tree_driving_the_robot(tmp_path):
         # after the hand-over the controller alone drives, and the robot moves
         assert {d for d, _ in recent} == {"controller"}, logs()
         assert max(v for _, v in recent) > 0.05, logs()
-        for name in ("server", "learner", "controller"):
+        for name in ("server", "learner", "controller", "console"):
             assert scenario.running(name), logs()
             ok, why = healthcheck.check(scenario.procs[name].child.pid)
             assert ok, why
