@@ -17,8 +17,8 @@ import logging
 import threading
 import time
 
-from client._process import EXIT_USAGE, Context, ProcessError, run
 from client.recording import BusRecorder, classify, decode
+from client.roles.common import EXIT_USAGE, Context, ProcessError, run
 from client.viewer import ViewerFeed, ViewerMessage
 from protocol import keys
 from protocol.process import add_logging_arguments

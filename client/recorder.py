@@ -17,8 +17,8 @@ import os
 import sys
 import time
 
-from client._process import EXIT_FAILURE, EXIT_USAGE, Context, ProcessError, run
 from client.recording import CHUNK_SECONDS, BusRecorder, RecordingError, RecordingWriter
+from client.roles.common import EXIT_FAILURE, EXIT_USAGE, Context, ProcessError, run
 from protocol import keys
 from protocol.process import add_logging_arguments
 from protocol.session import add_zenoh_arguments

@@ -19,8 +19,8 @@ import time
 
 import zenoh
 
-from client._process import EXIT_USAGE, Context, ProcessError, run
 from client.recording import RecordingError, classify, read_recording
+from client.roles.common import EXIT_USAGE, Context, ProcessError, run
 from protocol import keys
 from protocol.messages import Scan, VelCmd
 from protocol.process import add_logging_arguments

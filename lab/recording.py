@@ -7,7 +7,7 @@
         train(spec, learner, ...)
 
 Retraining replays the live learner's pairing: the recorded scans and teacher labels go, in the
-order the recorder received them, through ``client.learner.Pairing`` (a label is paired with
+order the recorder received them, through ``client.roles.learner.Pairing`` (a label is paired with
 exactly the scan it answers) into ``DemonstrationLearner.observe``, the learner's code path; so
 with the live learner's features and settings the tree is the one it built.
 """
@@ -102,8 +102,8 @@ def labeled_scans(path: str | Path, robots: list[str] | None = None,
                   match_timeout: float = 2.0, scan_buffer: int = 512,
                   stats: dict | None = None) -> Iterator[tuple[str, Scan, TeacherAction]]:
     """(robot, scan, label) in the order the live learner paired them: the recording's scans
-    and labels through ``client.learner.Pairing`` (one per robot), clocked by receive time."""
-    from client.learner import Pairing  # (imports zenoh: only when retraining)
+    and labels through ``client.roles.learner.Pairing`` (one per robot), clocked by receive time."""
+    from client.roles.learner import Pairing  # (imports zenoh: only when retraining)
 
     pairings: dict[str, tuple[Pairing, _Clock]] = {}
     for m in read_recording(path):
@@ -135,7 +135,7 @@ def retrain(paths, features: str = "wall", robots: list[str] | None = None,
     """A tree learned from the recordings' teacher labels (in order, files in the order
     given), as ``rhbl learner`` learns: labels that are no action of the tree and scans the
     features cannot use are skipped and counted. Returns (learner, stats)."""
-    from client.learner import TASK_OF_FEATURES
+    from client.roles.learner import TASK_OF_FEATURES
 
     spec = FEATURES[features]
     params = {"spawn": "winner", **(tree_params or {})}

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from client.journal import Journal, LabelSet, _frame, journal_path
-from client.learner import LearnerCore, Pairing
-from client.teacher import Outbox
+from client.roles.learner import LearnerCore, Pairing
+from client.roles.teacher import Outbox
 from protocol.messages import LabeledScan, Scan, TeacherAction
 
 
@@ -181,7 +181,7 @@ def test_resends_to_a_learner_that_cannot_journal_are_kept_once(tmp_path):
     it journaled already is acknowledged again."""
     from collections import deque
 
-    from client.learner import LearnerProcess
+    from client.roles.learner import LearnerProcess
 
     core = LearnerCore(tmp_path / "t.rhbl", features="wall")
     assert None not in _learn(core, "s1", [0])

@@ -6,7 +6,7 @@ import pytest
 
 pytest.importorskip("aiohttp")
 
-from client.console.app import _action_of, _every_robot, access_token, parse_http  # noqa: E402
+from client.roles.console.app import _action_of, _every_robot, access_token, parse_http  # noqa: E402
 from lab.cli import build_parser  # noqa: E402
 from protocol import keys  # noqa: E402
 
@@ -20,7 +20,7 @@ def test_parse_http():
 
 
 def test_host_name():
-    from client.console.app import host_name
+    from client.roles.console.app import host_name
 
     assert host_name("[::1]:8080") == "::1" and host_name("[::1]") == "::1"
     assert host_name("localhost:80") == "localhost" and host_name("127.0.0.1") == "127.0.0.1"

@@ -107,7 +107,7 @@ def test_disk_full_keeps_labels_in_memory_and_journals_them_later(free_port, tmp
 # runs the learner with every learning step slowed down (a learner that falls behind)
 _SLOW = """
 import sys, time
-import client.learner as L
+import client.roles.learner as L
 _learn = L.LearnerCore.learn
 def slow(self, *args, **kwargs):
     time.sleep(0.02)

@@ -10,10 +10,10 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from client._process import ProcessError
 from client.behaviour.learning import load_snapshot
 from client.journal import Journal, journal_path
-from client.learner import LearnerCore, Pairing
+from client.roles.common import ProcessError
+from client.roles.learner import LearnerCore, Pairing
 from protocol.messages import Scan, TeacherAction
 
 LABELS = ["fwd", "fwd-left", "rot-left", "fwd-right", "rot-right"]
@@ -192,7 +192,7 @@ def test_a_scan_flood_stays_bounded_and_every_label_whose_scan_arrived_is_learne
 def test_pairing_says_when_the_learner_falls_behind_and_counts_what_it_drops(caplog):
     pairing = Pairing(scan_buffer=8, max_ready=10, behind=4)
     ranges = np.ones(360, np.float32)
-    with caplog.at_level(logging.WARNING, logger="client.learner"):
+    with caplog.at_level(logging.WARNING, logger="client.roles.learner"):
         for sid in range(1, 16):
             pairing.on_scan(_scan(sid, ranges))
             pairing.on_label(_label(sid))

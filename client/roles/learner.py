@@ -35,15 +35,6 @@ from pathlib import Path
 
 import numpy as np
 
-from client._process import (
-    EXIT_USAGE,
-    Context,
-    ProcessError,
-    ScanWatch,
-    add_process_arguments,
-    run,
-    wait_for_server,
-)
 from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
 from client.behaviour.features import FEATURES, FeatureError, FeatureSpec
 from client.behaviour.learning import (
@@ -53,6 +44,15 @@ from client.behaviour.learning import (
     load_snapshot,
 )
 from client.journal import Journal, JournalError, LabelSet, journal_path
+from client.roles.common import (
+    EXIT_USAGE,
+    Context,
+    ProcessError,
+    ScanWatch,
+    add_process_arguments,
+    run,
+    wait_for_server,
+)
 from protocol import keys
 from protocol.messages import LabeledScan, LearnerAck, Scan, TeacherAction, TreeNotice
 from protocol.process import on_stop_signal

@@ -45,9 +45,9 @@ from pathlib import Path
 
 from aiohttp import WSMsgType, web
 
-from client._process import EXIT_USAGE, Context, ProcessError
 from client.behaviour.actions import DEFAULT_ACTIONS
-from client.teacher import DRAIN, TeacherPublisher, _Hold
+from client.roles.common import EXIT_USAGE, Context, ProcessError
+from client.roles.teacher import DRAIN, TeacherPublisher, _Hold
 from protocol import keys
 from protocol.messages import Decision, Scan, State, TreeNotice, VelCmd, WorldInfo
 

@@ -21,7 +21,11 @@ import time
 
 import zenoh
 
-from client._process import (
+from client.behaviour.actions import ActionSet
+from client.behaviour.features import FEATURES, FeatureSpec
+from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, check_compatible
+from client.decision import Decider
+from client.roles.common import (
     EXIT_NO_SERVER,
     EXIT_USAGE,
     Context,
@@ -32,10 +36,6 @@ from client._process import (
     run,
     wait_for_server,
 )
-from client.behaviour.actions import ActionSet
-from client.behaviour.features import FEATURES, FeatureSpec
-from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, check_compatible
-from client.decision import Decider
 from protocol import keys
 from protocol.messages import Scan, TreeNotice, VelCmd
 

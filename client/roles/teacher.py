@@ -52,7 +52,9 @@ import uuid
 import numpy as np
 import zenoh
 
-from client._process import (
+from client.behaviour.actions import DEFAULT_ACTIONS
+from client.behaviour.policies import STYLES, TAKEOVER, Demonstrator, make_policy, takes_over
+from client.roles.common import (
     EXIT_USAGE,
     Context,
     ProcessError,
@@ -63,8 +65,6 @@ from client._process import (
     wait_for_learner,
     wait_for_server,
 )
-from client.behaviour.actions import DEFAULT_ACTIONS
-from client.behaviour.policies import STYLES, TAKEOVER, Demonstrator, make_policy, takes_over
 from protocol import keys
 from protocol.messages import LabeledScan, LearnerAck, Scan, TeacherAction, VelCmd
 
@@ -149,7 +149,7 @@ def _demonstrator(args: argparse.Namespace):
     if not (args.demonstrate >= 0 and args.takeover >= 0):
         raise ProcessError("teacher: --demonstrate and --takeover must be >= 0", EXIT_USAGE)
     if args.policy == "keyboard":
-        from client.keyboard import KeyboardPolicy
+        from client.roles.keyboard import KeyboardPolicy
 
         return KeyboardPolicy(DEFAULT_ACTIONS)
     try:
