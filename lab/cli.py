@@ -26,10 +26,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": ("lab.evaluate", "in-process: run a tree (and the teacher) from a world's start poses"),
     "compact": ("lab.compact", "make an existing tree smaller, keeping its behaviour on its data"),
     "experiment": ("lab.experiment", "repeat train-then-evaluate over seeds; the paper's Table I"),
-    "record": ("client.recorder", "record every message of the robots' keys into an MCAP file"),
-    "replay": ("client.replay", "republish a recording's sensor stream on zenoh with its timing"),
+    "record": ("client.recording.record", "record every message of the robots' keys into an MCAP file"),
+    "replay": ("client.recording.replay", "republish a recording's sensor stream on zenoh with its timing"),
     "inspect": ("lab.recording", "print what an MCAP recording holds"),
-    "foxglove": ("client.foxglove_bridge", "serve the live bus to Foxglove/Lichtblick (WebSocket)"),
+    "foxglove": ("client.recording.bridge", "serve the live bus to Foxglove/Lichtblick (WebSocket)"),
     "example": ("lab.example", "a small end-to-end example of the learner on synthetic data"),
 }
 

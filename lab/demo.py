@@ -497,7 +497,7 @@ class Demo:
         self.say(f"rendezvous (router) on {self.endpoint}; children log into {self.out / 'logs'}")
         from client.behaviour.actions import DEFAULT_ACTIONS
         from client.player import PlayerClient
-        from client.recorder import finish_demo_recording, start_demo_recording
+        from client.recording.record import finish_demo_recording, start_demo_recording
         from lab.harness import followed_side
 
         with zenoh.open(make_config(mode="router", listen=[self.endpoint])) as session:

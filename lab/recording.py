@@ -1,7 +1,7 @@
 """Recordings offline: ``rhbl inspect``, retraining from recordings (``rhbl train
 --from-recording``) and recording the in-process runs (``rhbl train/evaluate --record``).
 
-    summary = client.recording.recording_summary("run.mcap")      # what ``rhbl inspect`` prints
+    summary = client.recording.mcap_file.recording_summary("run.mcap")      # what ``rhbl inspect`` prints
     learner, stats = retrain(["run.mcap"], features="wall")       # the live learner's tree again
     with record_run("train.mcap", "rhbl train"):                  # the harness records its steps
         train(spec, learner, ...)
@@ -25,7 +25,12 @@ from pathlib import Path
 from client.behaviour.actions import DEFAULT_ACTIONS
 from client.behaviour.features import FEATURES, FeatureError
 from client.behaviour.learning import DemonstrationLearner
-from client.recording import RecordingError, RecordingWriter, read_recording, recording_summary
+from client.recording.mcap_file import (
+    RecordingError,
+    RecordingWriter,
+    read_recording,
+    recording_summary,
+)
 from protocol import keys
 from protocol.messages import DriverState, Scan, State, TeacherAction, VelCmd
 

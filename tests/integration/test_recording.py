@@ -35,7 +35,7 @@ zenoh = pytest.importorskip("zenoh")
 mcap_reader = pytest.importorskip("mcap.reader")
 pytest.importorskip("google.protobuf")
 
-from client.recording import RecordingError, read_recording  # noqa: E402
+from client.recording.mcap_file import RecordingError, read_recording  # noqa: E402
 from lab.processes import Child, rhbl_argv  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, VelCmd  # noqa: E402

@@ -19,7 +19,7 @@ import time
 
 import zenoh
 
-from client.recording import RecordingError, classify, read_recording
+from client.recording.mcap_file import RecordingError, classify, read_recording
 from client.roles.common import EXIT_USAGE, Context, ProcessError, run
 from protocol import keys
 from protocol.messages import Scan, VelCmd

@@ -12,7 +12,7 @@ The format (written with the official ``mcap`` package, read back with ``mcap.re
 - liveliness tokens (``rhbl/alive/<role>/<id>``) appear as their key's channel with a
   ``rhbl.v1.Liveliness`` message ``{v, key, alive}`` when they appear and disappear; the sim
   world (``sim/req/get_world``'s ``WorldInfo`` reply) on ``rhbl/<robot>/sim/req/get_world``.
-- viewer channels beside them (``client.viewer``: laser, pose, path, world scene, status in
+- viewer channels beside them (``client.recording.foxglove_schemas``: laser, pose, path, world scene, status in
   Foxglove's well-known schemas), so Foxglove and Lichtblick show a recording without a plugin.
 - chunked (zstd), indexed, with a summary; a chunk is closed at least every ``chunk_seconds``
   (1 s), so a recorder killed with SIGKILL leaves every message up to its last chunk readable.
@@ -211,7 +211,7 @@ class RecordingWriter:
         self._last_flush = time.monotonic()
         self.feed = None
         if viewer:
-            from client.viewer import ViewerFeed
+            from client.recording.foxglove_schemas import ViewerFeed
 
             self.feed = ViewerFeed()
         self._guard(self._start, recorder, metadata or {})

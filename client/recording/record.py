@@ -17,7 +17,7 @@ import os
 import sys
 import time
 
-from client.recording import CHUNK_SECONDS, BusRecorder, RecordingError, RecordingWriter
+from client.recording.mcap_file import CHUNK_SECONDS, BusRecorder, RecordingError, RecordingWriter
 from client.roles.common import EXIT_FAILURE, EXIT_USAGE, Context, ProcessError, run
 from protocol import keys
 from protocol.process import add_logging_arguments

@@ -3,8 +3,8 @@ protocol (``foxglove-sdk``'s server), on localhost.
 
     rhbl foxglove --connect tcp/127.0.0.1:7447           # then open ws://127.0.0.1:8765
 
-It subscribes like ``rhbl record`` (``client.recording.BusRecorder``: every robot seen, or
-``--robot``) and converts with ``client.viewer`` (the same viewer channels a recording holds):
+It subscribes like ``rhbl record`` (``client.recording.mcap_file.BusRecorder``: every robot seen, or
+``--robot``) and converts with ``client.recording.foxglove_schemas`` (the same viewer channels a recording holds):
 ``/world`` (walls, goal, robots), ``/tf``, ``/<robot>/laser``, ``/<robot>/pose``,
 ``/<robot>/path``, ``/<robot>/status`` (who drives, the tree's size). The world scene is sent
 again every few seconds, so a viewer that connects late draws the walls too.
@@ -17,9 +17,9 @@ import logging
 import threading
 import time
 
-from client.recording import BusRecorder, classify, decode
+from client.recording.foxglove_schemas import ViewerFeed, ViewerMessage
+from client.recording.mcap_file import BusRecorder, classify, decode
 from client.roles.common import EXIT_USAGE, Context, ProcessError, run
-from client.viewer import ViewerFeed, ViewerMessage
 from protocol import keys
 from protocol.process import add_logging_arguments
 from protocol.session import add_zenoh_arguments
