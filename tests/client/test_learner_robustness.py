@@ -17,8 +17,8 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
+from campaigns.faults import FULL_DISK_LEARNER  # noqa: E402
 from client.journal import Journal, journal_path  # noqa: E402
-from lab.faults import FULL_DISK_LEARNER  # noqa: E402
 from lab.processes import Child  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, TeacherAction  # noqa: E402

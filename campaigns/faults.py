@@ -1,6 +1,6 @@
 """A repeatable fault campaign against the real processes: a seed, a command, a report.
 
-    python -m lab.faults [--seed 0] [--only learner-kill,server-restart,controller-kill,
+    python -m campaigns.faults [--seed 0] [--only learner-kill,server-restart,controller-kill,
                           learner-stop,disk-full,readonly-folder,readonly-mount,
                           router-restart]
                          [--kills 20] [--restarts 5] [--router-restarts 3] [--out DIR]
@@ -68,6 +68,8 @@ import numpy as np
 from lab.processes import Child, free_port, rhbl_argv, without_file_override
 
 ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # `python campaigns/faults.py`: the campaigns are not installed
+    sys.path.insert(0, str(ROOT))
 log = logging.getLogger(__name__)
 
 # a learner whose journal writes fail (ENOSPC) while the file $FULL_FLAG exists: the program

@@ -1,6 +1,6 @@
 """Structure-aware fuzzing of every key the rhbl processes listen to, and of their files.
 
-    python -m lab.fuzz [--per-key 10000] [--seed 0] [--only server,clients,files]
+    python -m campaigns.fuzz [--per-key 10000] [--seed 0] [--only server,clients,files]
 
 Messages. From a valid message of each kind the generator derives hostile ones: a field of the
 wrong type, a field missing, extra fields, NaN and infinities, huge and negative numbers and
@@ -51,6 +51,8 @@ import msgpack
 from lab.processes import Child, free_port, rhbl_argv
 
 ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # `python campaigns/fuzz.py`: the campaigns are not installed
+    sys.path.insert(0, str(ROOT))
 
 _WEIRD: list[Any] = [
     None, True, False, 0, -1, 1, 2**31, -(2**31), 2**63 - 1, -(2**63), 2**64 - 1,
