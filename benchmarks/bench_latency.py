@@ -33,7 +33,7 @@ import zenoh
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from lab.processes import Child, free_port, rhbl_argv  # noqa: E402
+from lab.children import Child, free_port, rhbl_argv  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, VelCmd  # noqa: E402
 from protocol.session import make_config  # noqa: E402

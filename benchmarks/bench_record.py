@@ -32,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from client.recording.mcap_file import RecordingError, RecordingWriter, read_recording  # noqa: E402
-from lab.processes import Child, free_port, rhbl_argv  # noqa: E402
+from lab.children import Child, free_port, rhbl_argv  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, State, TeacherAction, VelCmd  # noqa: E402
 

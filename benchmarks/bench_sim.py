@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 import server  # noqa: E402
-from lab.processes import free_port  # noqa: E402
+from lab.children import free_port  # noqa: E402
 from server.world import LASER, ROBOT, Wall, World, load_world  # noqa: E402
 
 _PERIOD = 0.1  # s, 10 Hz

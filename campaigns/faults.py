@@ -65,7 +65,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lab.processes import Child, free_port, rhbl_argv, without_file_override
+from lab.children import Child, free_port, rhbl_argv, without_file_override
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # `python campaigns/faults.py`: the campaigns are not installed
@@ -153,7 +153,7 @@ class Campaign:
         """Start ``rhbl ARGV... --connect <the router>`` (or ``python -c WRAPPER ARGV...``),
         logging into ``<dir>/<name>.log`` (appended to: a process started again under the same
         name keeps one log); stopped with SIGINT, then SIGKILL. ``preexec_fn`` runs in the
-        child before the command (:func:`lab.processes.without_file_override`)."""
+        child before the command (:func:`lab.children.without_file_override`)."""
         argv = [*argv, "--connect", self.endpoint]
         cmd = [sys.executable, "-c", wrapper, *argv] if wrapper else rhbl_argv(*argv)
         p = Child(name, cmd, self.dir, env={**os.environ, **(env or {})}, cwd=ROOT,
@@ -432,7 +432,7 @@ def _until(pred, timeout: float, step: float = 0.05) -> float:
 
 
 def _lines_since(child: Child, mark: int) -> list[str]:
-    """The kept lines ``child`` printed after its :meth:`~lab.processes.Child.mark` ``mark``."""
+    """The kept lines ``child`` printed after its :meth:`~lab.children.Child.mark` ``mark``."""
     lines = list(child.lines)
     n = child.mark() - mark
     return lines[len(lines) - min(n, len(lines)):] if n > 0 else []
@@ -479,7 +479,7 @@ def readonly_folder(workdir: Path, ro_for: float = 5.0, how: str = "mode") -> di
     """The learner's folder made read-only for ``ro_for`` seconds, then writable (``how``:
     :class:`_ReadOnly`). With ``mode``, run as root, the learner loses the capabilities that
     let root write anyway, so it is refused as any other user would be
-    (:func:`lab.processes.without_file_override`)."""
+    (:func:`lab.children.without_file_override`)."""
     c = Campaign(workdir)
     folder = workdir / "snapshots"
     folder.mkdir(exist_ok=True)

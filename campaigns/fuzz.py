@@ -48,7 +48,7 @@ from typing import Any
 
 import msgpack
 
-from lab.processes import Child, free_port, rhbl_argv
+from lab.children import Child, free_port, rhbl_argv
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # `python campaigns/fuzz.py`: the campaigns are not installed

@@ -38,10 +38,10 @@ from pathlib import Path
 
 import numpy as np
 
-from lab import processes
+from lab import children
+from lab.children import free_port
+from lab.children import rhbl_argv as _rhbl
 from lab.episode import DT, Episode
-from lab.processes import free_port
-from lab.processes import rhbl_argv as _rhbl
 from lab.recipe import EVAL_SECONDS, RECIPES, Recipe, per_task
 
 __all__ = ["SCENARIOS", "Scenario", "add_arguments", "main", "free_port"]
@@ -165,7 +165,7 @@ class DemoError(Exception):
     pass
 
 
-class Child(processes.Child):
+class Child(children.Child):
     """One child process, logging into the output folder; stopped with SIGINT first (the
     learner then writes its final snapshot), SIGTERM and SIGKILL by PID if it does not end."""
 

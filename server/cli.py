@@ -1,6 +1,6 @@
 """``rhbl server``: serve a world over zenoh (Player-like position2d + laser per robot).
 
-It runs through ``protocol.process.run``, as the client processes do: the same log lines and exit
+It runs through ``protocol.runtime.run``, as the client processes do: the same log lines and exit
 codes (0 ok, also after SIGINT/SIGTERM once the session is closed; 2 bad world or flags; 3 a
 connect endpoint unreachable, the session refused or a listen endpoint taken).
 """
@@ -11,7 +11,7 @@ import argparse
 import logging
 
 from protocol import keys
-from protocol.process import (
+from protocol.runtime import (
     EXIT_OK,
     EXIT_USAGE,
     Context,

@@ -21,7 +21,7 @@ from client.recording.foxglove_schemas import ViewerFeed, ViewerMessage
 from client.recording.mcap_file import BusRecorder, classify, decode
 from client.roles.common import EXIT_USAGE, Context, ProcessError, run
 from protocol import keys
-from protocol.process import add_logging_arguments
+from protocol.runtime import add_logging_arguments
 from protocol.session import add_zenoh_arguments
 
 __all__ = ["FoxgloveSink", "add_arguments", "main"]

@@ -20,7 +20,7 @@ import time
 from client.recording.mcap_file import CHUNK_SECONDS, BusRecorder, RecordingError, RecordingWriter
 from client.roles.common import EXIT_FAILURE, EXIT_USAGE, Context, ProcessError, run
 from protocol import keys
-from protocol.process import add_logging_arguments
+from protocol.runtime import add_logging_arguments
 from protocol.session import add_zenoh_arguments
 
 __all__ = ["add_arguments", "finish_demo_recording", "main", "start_demo_recording",

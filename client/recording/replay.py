@@ -23,7 +23,7 @@ from client.recording.mcap_file import RecordingError, classify, read_recording
 from client.roles.common import EXIT_USAGE, Context, ProcessError, run
 from protocol import keys
 from protocol.messages import Scan, VelCmd
-from protocol.process import add_logging_arguments
+from protocol.runtime import add_logging_arguments
 from protocol.session import add_zenoh_arguments
 
 __all__ = ["SENSOR_KINDS", "add_arguments", "main"]

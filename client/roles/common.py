@@ -1,12 +1,12 @@
-"""Plumbing the teacher, learner and controller processes share beyond ``protocol.process``.
+"""Plumbing the teacher, learner and controller processes share beyond ``protocol.runtime``.
 
 The generic parts (exit codes ``EXIT_*``, ``ProcessError``, logging, signals, ``open_session``,
-``Context`` and its scope) live in ``protocol.process``, shared with ``rhbl server``; they are
+``Context`` and its scope) live in ``protocol.runtime``, shared with ``rhbl server``; they are
 re-exported here. The client-only parts:
 
 - ``add_process_arguments(parser)``: the common flags (zenoh flags from ``protocol.session``,
   ``--robot``, ``--wait-server``, ``--log-level``).
-- ``run(role, args, body)``: ``protocol.process.run`` with the robot checked (``--robot`` must be
+- ``run(role, args, body)``: ``protocol.runtime.run`` with the robot checked (``--robot`` must be
   a key chunk: exit 2) and the liveliness token ``rhbl/alive/<role>/<robot>-<pid>``.
 - ``wait_for_server(ctx)``: waits for the first scan of the robot, logging what it waits for,
   and fails with a message naming the endpoint and the key when the server is not up.
@@ -31,7 +31,7 @@ import zenoh
 
 from protocol import keys
 from protocol.messages import Scan
-from protocol.process import (
+from protocol.runtime import (
     EXIT_FAILURE,
     EXIT_NO_LEARNER,
     EXIT_NO_SERVER,
@@ -43,7 +43,7 @@ from protocol.process import (
     add_logging_arguments,
     open_session,
 )
-from protocol.process import run as run_process
+from protocol.runtime import run as run_process
 from protocol.session import add_zenoh_arguments
 
 __all__ = [
@@ -238,7 +238,7 @@ class ScanWatch:
 # ---- the main wrapper ---------------------------------------------------------------------
 def run(role: str, args: argparse.Namespace, body: Callable[[Context], int | None],
         early_token: bool = True) -> int:
-    """``protocol.process.run`` for a process of one robot (``--robot``): the token is
+    """``protocol.runtime.run`` for a process of one robot (``--robot``): the token is
     ``rhbl/alive/<role>/<robot>-<pid>``, declared before ``body`` runs (or by the body with
     ``ctx.declare_token()`` if not ``early_token``)."""
     robot = getattr(args, "robot", "r0")

@@ -55,7 +55,7 @@ from client.roles.common import (
 )
 from protocol import keys
 from protocol.messages import LabeledScan, LearnerAck, Scan, TeacherAction, TreeNotice
-from protocol.process import on_stop_signal
+from protocol.runtime import on_stop_signal
 
 __all__ = ["LearnerCore", "LearnerProcess", "Pairing", "add_arguments", "main", "TASK_OF_FEATURES"]
 

@@ -19,7 +19,7 @@ zenoh = pytest.importorskip("zenoh")
 
 from campaigns.faults import FULL_DISK_LEARNER  # noqa: E402
 from client.journal import Journal, journal_path  # noqa: E402
-from lab.processes import Child  # noqa: E402
+from lab.children import Child  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, TeacherAction  # noqa: E402
 from protocol.session import make_config  # noqa: E402

@@ -16,7 +16,7 @@ import pytest
 zenoh = pytest.importorskip("zenoh")
 
 from client.roles.common import EXIT_NO_SERVER, EXIT_UNREACHABLE, EXIT_USAGE  # noqa: E402
-from lab.processes import Child, rhbl_argv  # noqa: E402
+from lab.children import Child, rhbl_argv  # noqa: E402
 from protocol.session import make_config  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]

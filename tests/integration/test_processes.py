@@ -23,7 +23,7 @@ zenoh = pytest.importorskip("zenoh")
 from client.behaviour.learning import DemonstrationLearner, load_snapshot  # noqa: E402
 from client.journal import Journal, journal_path  # noqa: E402
 from client.player import PlayerClient  # noqa: E402
-from lab.processes import Child, rhbl_argv  # noqa: E402
+from lab.children import Child, rhbl_argv  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import DriverState, State, TeacherAction, VelCmd  # noqa: E402
 from protocol.session import make_config  # noqa: E402

@@ -36,7 +36,7 @@ mcap_reader = pytest.importorskip("mcap.reader")
 pytest.importorskip("google.protobuf")
 
 from client.recording.mcap_file import RecordingError, read_recording  # noqa: E402
-from lab.processes import Child, rhbl_argv  # noqa: E402
+from lab.children import Child, rhbl_argv  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, VelCmd  # noqa: E402
 from protocol.session import make_config  # noqa: E402

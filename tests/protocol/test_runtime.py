@@ -1,4 +1,4 @@
-"""Stop signals of every rhbl process (``protocol.process``), with a real process and real
+"""Stop signals of every rhbl process (``protocol.runtime``), with a real process and real
 signals: a SIGTERM that lands where code swallows the ``SystemExit`` it raises (a signal during
 numpy's first lazy import of ``numpy.random`` was lost that way) is delivered again until the
 process stops."""
@@ -10,14 +10,14 @@ import signal
 import sys
 from pathlib import Path
 
-from lab.processes import Child
+from lab.children import Child
 
 ROOT = Path(__file__).resolve().parents[2]
 
 # the first SystemExit is swallowed, as library code can; only a second one ends the program
 PROGRAM = """
 import sys, time
-from protocol.process import install_signal_handlers
+from protocol.runtime import install_signal_handlers
 install_signal_handlers()
 try:
     print("ready", flush=True)  # inside: a signal right after it must land in this block

@@ -1,4 +1,4 @@
-"""lab.processes: real child processes (small Python scripts), stopped by PID."""
+"""lab.children: real child processes (small Python scripts), stopped by PID."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from lab.processes import Child, free_port, rhbl_argv
+from lab.children import Child, free_port, rhbl_argv
 
 
 def py(code: str) -> list[str]:
@@ -159,7 +159,7 @@ def test_pause_resume_and_lines_since_a_mark(tmp_path):
 def test_rss_kib_of_this_process_and_of_none():
     import os
 
-    from lab.processes import rss_kib
+    from lab.children import rss_kib
 
     if not os.path.exists("/proc/self/status"):
         pytest.skip("needs /proc")
@@ -181,7 +181,7 @@ def test_started_again_the_same_command_keeps_counting_lines(tmp_path):
 @pytest.mark.skipif(not hasattr(__import__("os"), "geteuid") or __import__("os").geteuid() != 0,
                     reason="for root (any other user is refused by permissions anyway)")
 def test_without_file_override_root_is_refused_by_permissions(tmp_path):
-    from lab.processes import without_file_override
+    from lab.children import without_file_override
 
     folder = tmp_path / "ro"
     folder.mkdir(mode=0o555)
