@@ -147,7 +147,8 @@ def _staged_tree(name: str, task: str, seed: int, folder, clf, feats, acts, meta
     import numpy as np
 
     from client.behaviour.learning import DemonstrationLearner, load_snapshot
-    from lab.harness import make_learner, resolve_world, train, visited_states
+    from lab.harness import make_learner, resolve_world
+    from lab.train import train, visited_states
 
     kind, times, kw = _staged(name)
     tag = Path(folder) / f"{task}-s{seed}-{name.replace(':', '-')}.rhbl"
@@ -202,7 +203,8 @@ def record_trial(task: str, seed: int, folder) -> tuple:
     import numpy as np
 
     from client.behaviour.learning import load_snapshot
-    from lab.harness import make_learner, resolve_world, train
+    from lab.harness import make_learner, resolve_world
+    from lab.train import train
 
     tag = Path(folder) / f"{task}-s{seed}"
     tree, data = tag.with_suffix(".rhbl"), tag.with_suffix(".npz")

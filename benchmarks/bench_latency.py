@@ -56,8 +56,9 @@ def echo(endpoint: str) -> int:
 
 
 def _train_tree(path: Path) -> None:
-    from lab.harness import make_learner, resolve_world, train
+    from lab.harness import make_learner, resolve_world
     from lab.recipe import RECIPES
+    from lab.train import train
 
     spec = resolve_world("room")
     learner = make_learner(spec.task)

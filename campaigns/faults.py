@@ -300,8 +300,9 @@ def server_restart(workdir: Path, rng: random.Random, restarts: int) -> dict:
 
 
 def _train_tree(path: Path) -> None:
-    from lab.harness import make_learner, resolve_world, train
+    from lab.harness import make_learner, resolve_world
     from lab.recipe import recipe_for
+    from lab.train import train
 
     spec = resolve_world("room")
     learner = make_learner(spec.task)

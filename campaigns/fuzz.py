@@ -502,8 +502,9 @@ def fuzz_files(per_file: int, seed: int = 0, workdir: Path | None = None) -> lis
     import server as server_pkg
     from client.behaviour.learning import IncompatibleSnapshotError, load_snapshot
     from client.journal import Journal, JournalError
-    from lab.harness import make_learner, resolve_world, train
+    from lab.harness import make_learner, resolve_world
     from lab.recipe import recipe_for
+    from lab.train import train
     from rhbl.snapshot import SnapshotError
     from server.world import WorldError, load_world
 

@@ -23,9 +23,10 @@ from client.behaviour.learning import TreePolicy
 from client.behaviour.policies import make_policy
 from lab import metrics
 from lab.evaluate import evaluate
-from lab.harness import make_learner, resolve_world, train
+from lab.harness import make_learner, resolve_world
 from lab.recipe import Recipe, add_recipe_arguments, recipe_for, recipe_from_args
 from lab.report import table
+from lab.train import train
 
 __all__ = ["PAPER", "TEACHERS", "add_arguments", "main", "run_experiment", "run_trial", "table_i"]
 

@@ -64,7 +64,6 @@ __all__ = [
     "classify",
     "decode",
     "read_recording",
-    "recording_summary",
 ]
 
 log = logging.getLogger(__name__)
@@ -547,61 +546,3 @@ def read_recording(path: str | os.PathLike, viewer: bool = False,
                 return
             raise RecordingError(f"{path} is damaged after {n} messages (at byte {f.tell()}): "
                                  f"{name}: {exc}") from exc
-
-
-def recording_summary(path: str | os.PathLike) -> dict:
-    """What a recording holds (``rhbl inspect``): robots, keys and counts, the sim-time span,
-    teacher labels per action, gaps in the scan stream, the metadata."""
-    from mcap.reader import NonSeekingReader
-
-    notes: list[str] = []
-    keys_: dict[str, dict] = {}
-    robots: dict[str, dict] = {}
-    viewer: dict[str, int] = defaultdict(int)
-    labels: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
-    last_scan: dict[str, tuple[int, float]] = {}
-    gaps: list[dict] = []
-    t_first = t_last = None
-    for m in read_recording(path, viewer=True, notes=notes):
-        if m.kind == "viewer":
-            viewer[m.key] += 1
-            continue
-        k = keys_.setdefault(m.key, {"kind": m.kind, "schema": m.schema, "messages": 0})
-        k["messages"] += 1
-        t_first = m.log_time if t_first is None else min(t_first, m.log_time)
-        t_last = m.log_time if t_last is None else max(t_last, m.log_time)
-        if not m.robot or m.kind == "alive":
-            continue
-        r = robots.setdefault(m.robot, {"sim_start": None, "sim_end": None, "scans": 0})
-        if m.kind in ("scan", "state"):
-            s = m.sim_time
-            r["sim_start"] = s if r["sim_start"] is None else min(r["sim_start"], s)
-            r["sim_end"] = s if r["sim_end"] is None else max(r["sim_end"], s)
-        if m.kind == "scan":
-            r["scans"] += 1
-            try:
-                scan = m.message()
-            except Exception:  # noqa: BLE001
-                continue
-            prev = last_scan.get(m.robot)
-            if prev is not None and scan.id > prev[0] + 1:
-                gaps.append({"robot": m.robot, "after_scan": prev[0], "missing": scan.id - prev[0] - 1,
-                             "sim_time": round(prev[1], 3)})
-            last_scan[m.robot] = (scan.id, scan.ts)
-        elif m.kind == "label":
-            try:
-                labels[m.robot][m.message().action] += 1
-            except Exception:  # noqa: BLE001
-                labels[m.robot]["<malformed>"] += 1
-    meta = {}
-    try:
-        with open(path, "rb") as f:
-            for rec in NonSeekingReader(f).iter_metadata():
-                if rec.name == "rhbl":
-                    meta = dict(rec.metadata)
-    except Exception:  # noqa: BLE001 - an unclosed file: metadata still read above if present
-        pass
-    return {"path": str(path), "metadata": meta, "robots": robots, "keys": keys_,
-            "viewer": dict(viewer), "labels": {r: dict(v) for r, v in labels.items()},
-            "gaps": gaps, "notes": notes,
-            "wall_seconds": (t_last - t_first) / 1e9 if t_first is not None else 0.0}

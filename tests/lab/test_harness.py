@@ -7,8 +7,9 @@ import pytest
 from client.behaviour.learning import TreePolicy, load_snapshot
 from lab.cli import main as cli
 from lab.evaluate import evaluate
-from lab.harness import make_learner, parse_pose, resolve_world, train, visited_states
+from lab.harness import make_learner, parse_pose, resolve_world
 from lab.recipe import RECIPES
+from lab.train import train, visited_states
 
 CORRIDOR = "corridor"
 
