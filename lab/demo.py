@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from client.behaviour.tasks import TASKS
 from lab import children
 from lab.children import free_port
 from lab.children import rhbl_argv as _rhbl
@@ -48,8 +49,6 @@ __all__ = ["SCENARIOS", "Scenario", "add_arguments", "main", "free_port"]
 
 log = logging.getLogger(__name__)
 
-# teacher policy of each task (``rhbl teacher --policy``)
-TEACHER_POLICY = {"wall-following": "wall-follower", "maze": "maze"}
 
 
 @dataclass(frozen=True)
@@ -73,7 +72,7 @@ class Scenario:
 
     @property
     def policy(self) -> str:
-        return TEACHER_POLICY[self.recipe.task]
+        return TASKS[self.recipe.task].teacher
 
     def replace(self, teach: float | None = None, rounds: int | None = None,
                 round_seconds: float | None = None, drive: float | None = None) -> Scenario:
@@ -498,13 +497,12 @@ class Demo:
         from client.behaviour.actions import DEFAULT_ACTIONS
         from client.player import PlayerClient
         from client.recording.record import finish_demo_recording, start_demo_recording
-        from lab.harness import followed_side
 
         with zenoh.open(make_config(mode="router", listen=[self.endpoint])) as session:
             self.session = session
             self.sim = PlayerClient(session=session, robot="r0", source="demo").simulation
             # the learner's actions (``rhbl learner`` has no other set)
-            self.rec = Recorder(session, "r0", DEFAULT_ACTIONS, followed_side(self.spec.task))
+            self.rec = Recorder(session, "r0", DEFAULT_ACTIONS, TASKS[self.spec.task].side)
             recording = start_demo_recording(session, a.record, self.out, self.say)
             try:
                 return self._phases()

@@ -18,7 +18,7 @@ import json
 from pathlib import Path
 
 from client.behaviour.learning import TreePolicy
-from client.behaviour.policies import make_policy
+from client.behaviour.tasks import make_policy
 from lab import metrics
 from lab.harness import DT, OnStep, drive, resolve_world
 from lab.recipe import EVAL_SECONDS, per_task

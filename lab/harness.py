@@ -22,6 +22,7 @@ from pathlib import Path
 
 from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
 from client.behaviour.learning import DemonstrationLearner, TreePolicy
+from client.behaviour.tasks import TASKS
 from lab import metrics
 from lab.episode import DT, Episode
 from lab.recipe import Recipe, parse_floats, recipe_for
@@ -33,7 +34,6 @@ __all__ = [
     "TreePolicy",
     "demonstration_starts",
     "drive",
-    "followed_side",
     "make_learner",
     "parse_pose",
     "resolve_world",
@@ -43,10 +43,6 @@ __all__ = [
 # what sees each step before the world moves: (world, executed action, ranges, actions, label=,
 # source=) (lab.sim_tap.SimTap.step)
 OnStep = Callable[..., None]
-
-
-def followed_side(task: str) -> str | None:
-    return "right" if task == "wall-following" else None
 
 
 def resolve_world(path_or_name: str) -> WorldSpec:
@@ -121,7 +117,7 @@ def drive(spec: WorldSpec, driver, start, seconds: float, seed: int = 0, teacher
     if teacher is not None:
         teacher.reset()
     ep = Episode(start=start, dt=dt, kind=kind)
-    side = followed_side(spec.task)
+    side = TASKS[spec.task].side
     t0 = time.perf_counter()
     for _ in range(int(round(seconds / dt))):
         ranges = world.scan(0)

@@ -19,6 +19,7 @@ from pathlib import Path
 from client.behaviour.actions import DEFAULT_ACTIONS
 from client.behaviour.features import FEATURES, FeatureError
 from client.behaviour.learning import DemonstrationLearner
+from client.behaviour.tasks import task_of_features
 from client.recording.mcap_file import RecordingError, read_recording
 from protocol.messages import Scan, TeacherAction
 
@@ -73,12 +74,10 @@ def retrain(paths, features: str = "wall", robots: list[str] | None = None,
     """A tree learned from the recordings' teacher labels (in order, files in the order
     given), as ``rhbl learner`` learns: labels that are no action of the tree and scans the
     features cannot use are skipped and counted. Returns (learner, stats)."""
-    from client.roles.learner import TASK_OF_FEATURES
-
     spec = FEATURES[features]
     params = {"spawn": "winner", **(tree_params or {})}
     learner = DemonstrationLearner(spec, DEFAULT_ACTIONS,
-                                   task=task or TASK_OF_FEATURES.get(features),
+                                   task=task or task_of_features(features),
                                    stride=stride, min_delta=min_delta, **params)
     stats = {"paired": 0, "learned": 0, "rejected": 0, "recordings": []}
     t0 = time.perf_counter()

@@ -22,12 +22,12 @@ import time
 import numpy as np
 
 from client.behaviour.learning import DemonstrationLearner, TreePolicy
-from client.behaviour.policies import Demonstrator, make_policy, takes_over
+from client.behaviour.policies import Demonstrator, takes_over
+from client.behaviour.tasks import TASKS, make_policy
 from lab.episode import DT, Episode
 from lab.harness import (
     OnStep,
     demonstration_starts,
-    followed_side,
     make_learner,
     parse_pose,
     resolve_world,
@@ -113,7 +113,7 @@ def _demonstrations(spec: WorldSpec, learner: DemonstrationLearner, recipe: Reci
     poses; ``learner`` observes every step; ``ep`` records them."""
     demo = Demonstrator(policy, perturb=recipe.perturb, rng=rng, dt=ep.dt)
     world = World(spec, robots=1, seed=seed, range_noise=noise[0], odom_noise=noise[1])
-    side = followed_side(spec.task)
+    side = TASKS[spec.task].side
     total = int(round(recipe.seconds / ep.dt))
     done = 0
     k = 0
@@ -298,7 +298,7 @@ def _corrective_rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, p
                                        recipe.round_free)
     dt = ep.dt
     world = World(spec, robots=1, seed=seed, range_noise=range_noise, odom_noise=odom_noise)
-    side = followed_side(spec.task)
+    side = TASKS[spec.task].side
     stats = []
     for r in range(rounds):
         tree = TreePolicy.from_learner(learner)

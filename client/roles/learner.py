@@ -43,6 +43,7 @@ from client.behaviour.learning import (
     check_compatible,
     load_snapshot,
 )
+from client.behaviour.tasks import task_of_features
 from client.journal import Journal, JournalError, LabelSet, journal_path
 from client.roles.common import (
     EXIT_USAGE,
@@ -57,11 +58,10 @@ from protocol import keys
 from protocol.messages import LabeledScan, LearnerAck, Scan, TeacherAction, TreeNotice
 from protocol.runtime import on_stop_signal
 
-__all__ = ["LearnerCore", "LearnerProcess", "Pairing", "add_arguments", "main", "TASK_OF_FEATURES"]
+__all__ = ["LearnerCore", "LearnerProcess", "Pairing", "add_arguments", "main"]
 
 log = logging.getLogger(__name__)
 
-TASK_OF_FEATURES = {"wall": "wall-following", "maze": "maze"}
 # labeled scans kept in memory while the journal cannot be written (disk full): about an hour
 # of demonstration at 10 Hz (~2 KB each); beyond that the oldest are dropped, counted and logged
 MAX_BACKLOG = 36_000
@@ -141,7 +141,7 @@ class LearnerCore:
                     raise ProcessError("a new tree needs --features (wall or maze)", EXIT_USAGE)
                 params = {"spawn": "winner", **(tree_params or {})}
                 learner = DemonstrationLearner(
-                    spec, actions, task=task or TASK_OF_FEATURES.get(features or ""),
+                    spec, actions, task=task or task_of_features(features),
                     stride=stride, min_delta=min_delta, **params)
                 parent = None
             header = {"parent": parent, "meta": learner.metadata()}

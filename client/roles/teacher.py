@@ -53,7 +53,8 @@ import numpy as np
 import zenoh
 
 from client.behaviour.actions import DEFAULT_ACTIONS
-from client.behaviour.policies import STYLES, TAKEOVER, Demonstrator, make_policy, takes_over
+from client.behaviour.policies import STYLES, TAKEOVER, Demonstrator, takes_over
+from client.behaviour.tasks import TASKS, make_policy, task_of_teacher
 from client.roles.common import (
     EXIT_USAGE,
     Context,
@@ -68,7 +69,7 @@ from client.roles.common import (
 from protocol import keys
 from protocol.messages import LabeledScan, LearnerAck, Scan, TeacherAction, VelCmd
 
-__all__ = ["OUTBOX", "POLICIES", "Outbox", "TeacherPublisher", "add_arguments", "main"]
+__all__ = ["OUTBOX", "Outbox", "TeacherPublisher", "add_arguments", "main"]
 
 log = logging.getLogger(__name__)
 
@@ -82,13 +83,13 @@ CORRECT_QUEUE = 64
 OUTBOX = 2000
 RESEND_AFTER = 2.0  # s without an acknowledgement before a label is resent with its scan
 DRAIN = 10.0  # s a stopping teacher waits for the acknowledgements of its last labels
-# --policy name -> the behaviour package's task name
-POLICIES = {"wall-follower": "wall-following", "maze": "maze", "keyboard": None}
+# --policy: a task's scripted expert, or a person at the keyboard
+POLICIES = (*(t.teacher for t in TASKS.values()), "keyboard")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_process_arguments(parser)
-    parser.add_argument("--policy", choices=list(POLICIES), default="wall-follower",
+    parser.add_argument("--policy", choices=POLICIES, default="wall-follower",
                         help="scripted expert of a task, or keyboard teleop")
     parser.add_argument("--seconds", type=float, default=None, metavar="S",
                         help="stop after demonstrating S seconds of sim time (default: until "
@@ -153,7 +154,7 @@ def _demonstrator(args: argparse.Namespace):
 
         return KeyboardPolicy(DEFAULT_ACTIONS)
     try:
-        policy = make_policy(POLICIES[args.policy], DEFAULT_ACTIONS, style=args.style)
+        policy = make_policy(task_of_teacher(args.policy), DEFAULT_ACTIONS, style=args.style)
     except ValueError as exc:
         raise ProcessError(f"teacher: {exc}", EXIT_USAGE) from exc
     return Demonstrator(policy, perturb=args.perturb, rng=np.random.default_rng(args.seed))

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from client.behaviour.features import FEATURES
-from client.behaviour.policies import Demonstrator, make_policy
+from client.behaviour.policies import Demonstrator
+from client.behaviour.tasks import make_policy
 from lab.harness import make_learner, resolve_world
 from lab.recipe import RECIPES, parse_scales
 from lab.train import train
