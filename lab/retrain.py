@@ -41,8 +41,8 @@ def labeled_scans(path: str | Path, robots: list[str] | None = None,
                   match_timeout: float = 2.0, scan_buffer: int = 512,
                   stats: dict | None = None) -> Iterator[tuple[str, Scan, TeacherAction]]:
     """(robot, scan, label) in the order the live learner paired them: the recording's scans
-    and labels through ``client.roles.learner.Pairing`` (one per robot), clocked by receive time."""
-    from client.roles.learner import Pairing  # (imports zenoh: only when retraining)
+    and labels through ``client.labels.Pairing`` (one per robot), clocked by receive time."""
+    from client.labels import Pairing
 
     pairings: dict[str, tuple[Pairing, _Clock]] = {}
     for m in read_recording(path):

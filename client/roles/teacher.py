@@ -21,7 +21,7 @@ same way, or without a time limit while it holds labels no learner has acknowled
 
 Nor is a label lost in flight when a learner is killed: each label carries the session's identity
 (``origin``, a random id per process, and ``seq``, 0, 1, ...) and stays in the teacher's outbox
-(``Outbox``, owned by ``TeacherPublisher``) with the scan it answers until the learner
+(``client.labels``: ``Outbox``, owned by ``TeacherPublisher``) with the scan it answers until the learner
 acknowledges it (``LearnerAck`` on ``rhbl/<robot>/learner/ack``: the labels in its
 journal). Every unacknowledged label when a learner's token appears again, and a label missed
 (unacknowledged after ``--resend-after``, 2 s, with backoff: ``Outbox``), is resent with its scan
@@ -43,11 +43,8 @@ drives again on the very next tick instead of after the watchdog timeout.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import logging
-import threading
 import time
-import uuid
 
 import numpy as np
 import zenoh
@@ -55,6 +52,7 @@ import zenoh
 from client.behaviour.actions import DEFAULT_ACTIONS
 from client.behaviour.policies import STYLES, TAKEOVER, Demonstrator, takes_over
 from client.behaviour.tasks import TASKS, make_policy, task_of_teacher
+from client.labels import DRAIN, OUTBOX, RESEND_AFTER, Hold, TeacherPublisher
 from client.roles.common import (
     EXIT_USAGE,
     Context,
@@ -67,9 +65,9 @@ from client.roles.common import (
     wait_for_server,
 )
 from protocol import keys
-from protocol.messages import LabeledScan, LearnerAck, Scan, TeacherAction, VelCmd
+from protocol.messages import Scan, VelCmd
 
-__all__ = ["OUTBOX", "Outbox", "TeacherPublisher", "add_arguments", "main"]
+__all__ = ["TeacherProcess", "add_arguments", "main"]
 
 log = logging.getLogger(__name__)
 
@@ -78,11 +76,6 @@ SOURCE = "teacher"
 # lock-step server runs at the controller's pace, ~10x real time, so 64 scans let the teacher be
 # descheduled for ~0.6 s on a loaded machine without a state the controller visited going unlabelled
 CORRECT_QUEUE = 64
-# labels published and not yet acknowledged by a learner, at most (then the teacher pauses):
-# about 3 minutes of labels at 10 Hz, ~1.5 KB each (the label and its scan)
-OUTBOX = 2000
-RESEND_AFTER = 2.0  # s without an acknowledgement before a label is resent with its scan
-DRAIN = 10.0  # s a stopping teacher waits for the acknowledgements of its last labels
 # --policy: a task's scripted expert, or a person at the keyboard
 POLICIES = (*(t.teacher for t in TASKS.values()), "keyboard")
 
@@ -183,7 +176,9 @@ class TeacherProcess:
         self.sub = ctx.subscriber(
             self.scan_key, zenoh.handlers.RingChannel(CORRECT_QUEUE if self.args.correct else 1))
         self.learners = pubs.learners  # None with --no-wait-learner
-        self.hold = _Hold(ctx) if self.args.correct else None
+        self.hold = Hold(ctx.session, ctx.ident) if self.args.correct else None
+        if self.hold is not None:
+            ctx.scope.callback(self.hold.release)
         self.watch = ScanWatch("teacher", self.scan_key, stale=1.0)
         ctx.scope.callback(self.watch.stop)
         self.t0: float | None = None
@@ -353,277 +348,9 @@ class TeacherProcess:
                  f"; {box.stats['resent']} resends, {len(box)} unacknowledged at exit")
 
 
-class Outbox:
-    """The labels a teacher session published and no learner acknowledged yet, each with the
-    scan it answers (``LabeledScan``), to be resent until one does (no zenoh: testable alone).
-
-    ``origin`` is the session's identity (random), ``seq`` numbers its labels from 0. ``label``
-    at publishing (a dict insert), ``ack`` removes what a ``LearnerAck`` names, ``due`` gives
-    the labels to resend now, ``everything`` all of them (a learner that (re)started). A label
-    is due ``resend_after`` s after it was sent, then after twice as long each time (at most 16
-    times), and only when the learner acknowledged a later label (this one was missed: its scan
-    never reached the learner, say) or acknowledged nothing for ``resend_after`` s (stuck): a
-    learner that is merely behind, acknowledging in order, gets no resends that would slow it
-    down further. At most ``cap`` entries: ``full`` says the publisher must stop labelling
-    (nothing is ever dropped). Thread-safe."""
-
-    def __init__(self, cap: int = OUTBOX, resend_after: float = RESEND_AFTER,
-                 origin: str | None = None, clock=time.monotonic):
-        self.origin = origin or uuid.uuid4().hex[:16]
-        self.cap, self.resend_after, self._clock = int(cap), float(resend_after), clock
-        self._next = 0
-        self._lock = threading.Lock()
-        self._entries: dict[int, list] = {}  # seq -> [the label with its scan, due at, resends]
-        self._next_due = float("inf")  # no entry is due before this
-        self._acked_max = -1  # the highest seq acknowledged
-        self._progress = clock()  # when an acknowledgement last removed a label
-        self.stats = {"published": 0, "acked": 0, "resent": 0, "max": 0}
-
-    def label(self, scan: Scan, action: str, executed: str | None,
-              source: str = "teacher") -> LabeledScan:
-        """The next label of this session for ``scan``, kept until acknowledged."""
-        with self._lock:
-            seq, self._next = self._next, self._next + 1
-            item = LabeledScan(scan_id=scan.id, action=action, origin=self.origin, seq=seq,
-                               ranges=scan.ranges, yaw=float(scan.pose[2]), source=source,
-                               ts=scan.ts, executed=executed)
-            due = self._clock() + self.resend_after
-            self._entries[seq] = [item, due, 0]
-            self._next_due = min(self._next_due, due)
-            self.stats["published"] += 1
-            self.stats["max"] = max(self.stats["max"], len(self._entries))
-        return item
-
-    def ack(self, upto: int, seqs=()) -> int:
-        """Forget the labels with ``seq < upto`` and those in ``seqs``; how many were held."""
-        with self._lock:
-            gone = [q for q in self._entries if q < upto]
-            gone += [q for q in set(seqs) if q >= upto and q in self._entries]
-            for q in gone:
-                del self._entries[q]
-            self._acked_max = max(self._acked_max, upto - 1, max(seqs, default=-1))
-            if gone:
-                self._progress = self._clock()
-            self.stats["acked"] += len(gone)
-            return len(gone)
-
-    def due(self) -> list[LabeledScan]:
-        """The labels to resend now (see the class), marked resent."""
-        now = self._clock()
-        out = []
-        with self._lock:
-            if now < self._next_due:
-                return out
-            stalled = now - self._progress >= self.resend_after
-            nxt = float("inf")
-            for q, e in self._entries.items():
-                if e[1] <= now:
-                    if q < self._acked_max or stalled:
-                        e[2] += 1
-                        e[1] = now + self.resend_after * 2 ** min(e[2], 4)
-                        out.append(e[0])
-                    else:  # waiting its turn at a learner that acknowledges in order
-                        e[1] = now + self.resend_after / 4
-                nxt = min(nxt, e[1])
-            self._next_due = nxt
-            self.stats["resent"] += len(out)
-        return out
-
-    def everything(self) -> list[LabeledScan]:
-        """Every unacknowledged label, marked sent now (for a learner that (re)started)."""
-        with self._lock:
-            now = self._clock()
-            for e in self._entries.values():
-                e[1], e[2] = now + self.resend_after, 0
-            if self._entries:
-                self._next_due = now + self.resend_after
-            self._progress = now  # a new learner: give it resend_after to acknowledge
-            self.stats["resent"] += len(self._entries)
-            return [e[0] for e in sorted(self._entries.values(), key=lambda e: e[0].seq)]
-
-    @property
-    def full(self) -> bool:
-        return len(self) >= self.cap
-
-    def __len__(self) -> int:
-        with self._lock:
-            return len(self._entries)
 
 
-class TeacherPublisher:
-    """A teacher's outputs for a robot: the executed velocity on the per-source key
-    ``.../cmd/vel/teacher`` (express, never dropped) and the label on ``.../teacher/action``.
-    Shared by ``rhbl teacher`` and ``rhbl console``, so both publish alike.
-
-    With an ``outbox`` (its size; 0 = none, pure teleop) labels are delivered at least once:
-    from the moment a learner of the robot is first seen (``learners``, its liveliness token),
-    each label carries the session's ``origin`` and a ``seq`` and stays in the ``Outbox`` with
-    its scan until a learner acknowledges it on ``rhbl/<robot>/learner/ack``; a background
-    thread resends (``rhbl/<robot>/teacher/labeled``, the label with its scan) all of them at
-    once when a learner's token appears (a restarted learner) and the missed ones
-    (``Outbox.due``), while a learner is up. The caller stops labelling while ``outbox.full``.
-    Before any learner was seen labels go out without identity, unkept (nobody records)."""
-
-    def __init__(self, session, robot: str, outbox: int = OUTBOX,
-                 resend_after: float = RESEND_AFTER):
-        self.robot = robot
-        self.cmd_pub = session.declare_publisher(keys.cmd_vel_key(robot, source=SOURCE),
-                                                 congestion_control=zenoh.CongestionControl.BLOCK,
-                                                 express=True)
-        self.act_pub = session.declare_publisher(keys.teacher_action_key(robot),
-                                                 congestion_control=zenoh.CongestionControl.BLOCK)
-        self.outbox: Outbox | None = None
-        self.learners: _Learners | None = None
-        self._decls = [self.cmd_pub, self.act_pub]
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        if outbox:
-            self.outbox = Outbox(outbox, resend_after)
-            self.resend_pub = session.declare_publisher(
-                keys.teacher_labeled_key(robot), congestion_control=zenoh.CongestionControl.BLOCK)
-            self.learners = _Learners(session, robot)
-            self._decls += [self.resend_pub, self.learners.sub,
-                            session.declare_subscriber(keys.learner_ack_key(robot), self._on_ack)]
-            self._arrivals = 0
-            self._thread = threading.Thread(target=self._resender, daemon=True,
-                                            name=f"teacher-resend-{robot}")
-            self._thread.start()
-            log.info("labels of robot %s carry session %s; kept until a learner acknowledges "
-                     "them (at most %d), resent after %g s", robot, self.outbox.origin,
-                     outbox, resend_after)
-
-    def command(self, vx: float, va: float, scan_id: int, ts: float) -> None:
-        self.cmd_pub.put(VelCmd(vx=vx, va=va, source=SOURCE, scan_id=scan_id, ts=ts).encode())
-
-    def label(self, scan: Scan, action: str, executed: str | None) -> None:
-        """Publish the label of ``scan`` (kept in the outbox once a learner was seen)."""
-        if self.outbox is None or not self.learners.arrivals:
-            act = TeacherAction(scan_id=scan.id, action=action, source=SOURCE, ts=scan.ts,
-                                executed=executed)
-        else:  # kept before it is published: an acknowledgement cannot come first
-            act = self.outbox.label(scan, action, executed, SOURCE).action_message()
-        self.act_pub.put(act.encode())
-
-    # -- acknowledgements and resends --
-    def _on_ack(self, sample) -> None:
-        try:
-            ack = LearnerAck.decode(sample.payload.to_bytes())
-        except Exception as exc:  # noqa: BLE001 - DecodeError
-            log.warning("dropped a malformed learner ack: %s", exc)
-            return
-        if ack.origin == self.outbox.origin:
-            self.outbox.ack(ack.upto, ack.seqs)
-
-    def _resender(self) -> None:
-        said = 0.0
-        while not self._stop.wait(0.1):
-            try:
-                if not self.learners:
-                    continue  # nobody to resend to: at once when a learner (re)appears
-                arrivals = self.learners.arrivals
-                if arrivals != self._arrivals:
-                    first = self._arrivals == 0 and arrivals == 1  # nothing sent to another
-                    self._arrivals = arrivals
-                    items = [] if first else self.outbox.everything()
-                    if items:
-                        log.info("a learner (re)started: resending the %d labels it has not "
-                                 "acknowledged (seq %d..%d)", len(items), items[0].seq,
-                                 items[-1].seq)
-                else:
-                    items = self.outbox.due()
-                    if items and time.monotonic() - said >= 5.0:
-                        said = time.monotonic()
-                        log.info("resending %d labels not acknowledged within %g s (%d "
-                                 "resends so far)", len(items), self.outbox.resend_after,
-                                 self.outbox.stats["resent"])
-                for item in items:
-                    self.resend_pub.put(item.encode())
-            except Exception as exc:  # noqa: BLE001 - the session is closing
-                if not self._stop.is_set():
-                    log.warning("resending failed: %s", exc)
-
-    def drain(self, timeout: float) -> bool:
-        """Wait (at most ``timeout`` s, while a learner is up) until every label is
-        acknowledged; True when none is left. The resend thread keeps working meanwhile."""
-        if self.outbox is None:
-            return True
-        end = time.monotonic() + timeout
-        while len(self.outbox) and self.learners and time.monotonic() < end:
-            time.sleep(0.05)
-        left = len(self.outbox)
-        if left:
-            log.error("%d labels of session %s not acknowledged by a learner: lost when this "
-                      "process exits", left, self.outbox.origin)
-        elif self.outbox.stats["published"]:
-            log.info("all %d labels acknowledged by the learner (%d resends)",
-                     self.outbox.stats["published"], self.outbox.stats["resent"])
-        return not left
-
-    def close(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(2.0)
-        for decl in self._decls:
-            with contextlib.suppress(Exception):  # the session is closing
-                decl.undeclare()
 
 
-class _Hold:
-    """While the correcting teacher commands the robot it holds the liveliness token
-    ``rhbl/alive/teacher/<robot>-<pid>-hold``; withdrawing it makes the server end the teacher's
-    hold at once (docs/protocol.md section 6), so the controller drives on the next tick rather
-    than after the watchdog timeout (and a lock-step server does not wait for answers the
-    teacher no longer gives)."""
-
-    def __init__(self, ctx: Context):
-        self._session = ctx.session
-        self._key = keys.alive_key("teacher", f"{ctx.ident}-hold")
-        self._token = None
-        self.handbacks = 0
-        ctx.scope.callback(self.release)
-
-    def acquire(self) -> None:
-        if self._token is None:
-            self._token = self._session.liveliness().declare_token(self._key)
-
-    def release(self) -> None:
-        if self._token is not None:
-            token, self._token = self._token, None
-            with contextlib.suppress(Exception):  # the session is closing
-                token.undeclare()
-            self.handbacks += 1
 
 
-class _Learners:
-    """The liveliness tokens of the robot's learners now up (``rhbl/alive/learner/<robot>-*``),
-    kept current by a liveliness subscriber (a callback of a few microseconds); ``arrivals``
-    counts the tokens that appeared (a learner started or restarted)."""
-
-    def __init__(self, session, robot: str):
-        self._prefix = f"{robot}-"
-        self._keys: set[str] = set()
-        self._lock = threading.Lock()
-        self.arrivals = 0
-        self.sub = session.liveliness().declare_subscriber(
-            keys.alive_key("learner", "*"), self._on_token, history=True)
-
-    def _on_token(self, sample) -> None:
-        key = str(sample.key_expr)
-        if not key.rsplit("/", 1)[-1].startswith(self._prefix):
-            return
-        with self._lock:
-            if sample.kind == zenoh.SampleKind.DELETE:
-                self._keys.discard(key)
-            elif key not in self._keys:
-                self._keys.add(key)
-                self.arrivals += 1
-
-    def add(self, found) -> None:
-        with self._lock:
-            new = set(found) - self._keys
-            self._keys |= new
-            self.arrivals += len(new)
-
-    def __bool__(self) -> bool:
-        with self._lock:
-            return bool(self._keys)

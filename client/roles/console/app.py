@@ -39,15 +39,14 @@ import secrets
 import signal
 import ssl
 import time
-import types
 from collections import OrderedDict
 from pathlib import Path
 
 from aiohttp import WSMsgType, web
 
 from client.behaviour.actions import DEFAULT_ACTIONS
+from client.labels import DRAIN, Hold, TeacherPublisher
 from client.roles.common import EXIT_USAGE, Context, ProcessError
-from client.roles.teacher import DRAIN, TeacherPublisher, _Hold
 from protocol import keys
 from protocol.messages import Decision, Scan, State, TreeNotice, VelCmd, WorldInfo
 
@@ -150,7 +149,7 @@ class _Robot:
         self.last_drive = 0.0
         self.labelled = -1  # the last scan id labelled
         self.pubs: TeacherPublisher | None = None
-        self.hold: _Hold | None = None
+        self.hold: Hold | None = None
 
 
 class Console:
@@ -162,7 +161,6 @@ class Console:
         self.pages: dict[int, _Page] = {}
         self._next_page = 1
         self._tasks: set[asyncio.Task] = set()  # kept referenced until done
-        self.scope = contextlib.ExitStack()  # what the console's publishers leave to undo
         self.default_robot = ctx.robot
         self._robot(self.default_robot)
         self.subs = []
@@ -324,8 +322,7 @@ class Console:
         if r.pubs is None:
             r.pubs = TeacherPublisher(self.session, r.name)
             # the teacher's hold token, one per robot driven (its ident names that robot)
-            r.hold = _Hold(types.SimpleNamespace(session=self.session, scope=self.scope,
-                                                 ident=f"{r.name}-{os.getpid()}"))
+            r.hold = Hold(self.session, f"{r.name}-{os.getpid()}")
         box = r.pubs.outbox
         if box is not None and box.full:
             return (f"{len(box)} labels wait for a learner's acknowledgement (at most "
@@ -509,13 +506,14 @@ class Console:
         end = time.monotonic() + DRAIN  # one wait for every robot's last acknowledgements
         for r in self.robots.values():
             self._unhold(r, "the console stops")
+            if r.hold is not None:  # held or not: no token outlives the console
+                r.hold.release()
             if r.pubs is not None:
                 r.pubs.drain(max(0.0, end - time.monotonic()))  # the person's last labels
                 r.pubs.close()
         for sub in self.subs:
             with contextlib.suppress(Exception):
                 sub.undeclare()
-        self.scope.close()
 
 
 def _ssl_context(args) -> ssl.SSLContext | None:
