@@ -1,8 +1,8 @@
 """What every rhbl process shares: exit codes, logging, signals, opening the session, a scope.
 
-``rhbl server`` and the client processes (teacher, learner, controller) run through ``run``:
+``rhbl server`` and the client processes (teacher, learner, controller) run through ``run_process``:
 
-- ``run(role, args, body, check=..., robot=..., ident=..., early_token=...)``: configures
+- ``run_process(role, args, body, check=..., robot=..., ident=..., early_token=...)``: configures
   logging (``--log-level``), turns SIGINT/SIGTERM into ``SystemExit(0)``, calls ``check()``
   (flags and files checked before any network: bad input exits 2 before an unreachable router
   exits 3), opens the zenoh session with an error naming the endpoint and the likely reason,
@@ -55,7 +55,7 @@ __all__ = [
     "install_signal_handlers",
     "on_stop_signal",
     "open_session",
-    "run",
+    "run_process",
     "setup_logging",
 ]
 
@@ -84,7 +84,7 @@ def _undeclare(thing: Any) -> None:
 
 @dataclass
 class Context:
-    """What ``run`` hands to a process body: the session and the scope its declarations live in."""
+    """What ``run_process`` hands to a process body: the session and the scope its declarations live in."""
 
     role: str
     ident: str
@@ -97,7 +97,7 @@ class Context:
     token: Any = None  # the liveliness token (kept referenced while declared)
 
     def declare_token(self) -> None:
-        """Declare the liveliness token ``rhbl/alive/<role>/<ident>`` (once). ``run(...,
+        """Declare the liveliness token ``rhbl/alive/<role>/<ident>`` (once). ``run_process(...,
         early_token=False)`` leaves it to the body, to declare when the process is ready (the
         learner: after its label subscription, so the token means "ready to receive")."""
         if self.token is None:
@@ -156,7 +156,7 @@ def _raise_exit(signum, _frame) -> None:
 
 
 def _redeliver(signum: int) -> None:
-    """Deliver the stop signal again every ``REDELIVER_S`` until its handler is gone (``run``
+    """Deliver the stop signal again every ``REDELIVER_S`` until its handler is gone (``run_process``
     ignores stop signals once the body has unwound). The ``SystemExit`` a signal raises lands
     wherever the main thread happens to be, and code there can swallow it: a signal that came
     during numpy's first lazy ``import numpy.random`` was lost that way, and the teacher went on
@@ -290,7 +290,7 @@ def _close_session(session: zenoh.Session) -> None:
 
 
 # ---- the main wrapper ---------------------------------------------------------------------
-def run(role: str, args: argparse.Namespace, body: Callable[[Context], int | None], *,
+def run_process(role: str, args: argparse.Namespace, body: Callable[[Context], int | None], *,
         check: Callable[[], None] | None = None, robot: str = "", ident: str | None = None,
         early_token: bool = True) -> int:
     """Run a process body with logging, signals, a session and a scope; the exit code.

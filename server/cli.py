@@ -1,6 +1,6 @@
 """``rhbl server``: serve a world over zenoh (Player-like position2d + laser per robot).
 
-It runs through ``protocol.runtime.run``, as the client processes do: the same log lines and exit
+It runs through ``protocol.runtime.run_process``, as the client processes do: the same log lines and exit
 codes (0 ok, also after SIGINT/SIGTERM once the session is closed; 2 bad world or flags; 3 a
 connect endpoint unreachable, the session refused or a listen endpoint taken).
 """
@@ -18,7 +18,7 @@ from protocol.runtime import (
     ProcessError,
     add_logging_arguments,
     on_stop_signal,
-    run,
+    run_process,
 )
 from protocol.session import DEFAULT_ENDPOINT, add_zenoh_arguments
 
@@ -84,7 +84,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     server = ServerProcess(args)
-    return run("server", args, server.serve, check=server.prepare,
+    return run_process("server", args, server.serve, check=server.prepare,
                early_token=False)  # the node declares rhbl/alive/server/<ident>/<robot> itself
 
 

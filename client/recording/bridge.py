@@ -19,9 +19,9 @@ import time
 
 from client.recording.foxglove_schemas import ViewerFeed, ViewerMessage
 from client.recording.mcap_file import BusRecorder, classify, decode
-from client.roles.common import EXIT_USAGE, Context, ProcessError, run
+from client.roles.common import run_role
 from protocol import keys
-from protocol.runtime import add_logging_arguments
+from protocol.runtime import EXIT_USAGE, Context, ProcessError, add_logging_arguments
 from protocol.session import add_zenoh_arguments
 
 __all__ = ["FoxgloveSink", "add_arguments", "main"]
@@ -115,7 +115,7 @@ def main(args: argparse.Namespace) -> int:
     for r in args.robots or []:
         keys.check_chunk(r, "--robot")  # ValueError: one line, exit 2
     args.robot = "all" if not args.robots else args.robots[0]
-    return run("foxglove", args, _body)
+    return run_role("foxglove", args, _body)
 
 
 def _body(ctx: Context) -> int:

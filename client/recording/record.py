@@ -18,9 +18,9 @@ import sys
 import time
 
 from client.recording.mcap_file import CHUNK_SECONDS, BusRecorder, RecordingError, RecordingWriter
-from client.roles.common import EXIT_FAILURE, EXIT_USAGE, Context, ProcessError, run
+from client.roles.common import run_role
 from protocol import keys
-from protocol.runtime import add_logging_arguments
+from protocol.runtime import EXIT_FAILURE, EXIT_USAGE, Context, ProcessError, add_logging_arguments
 from protocol.session import add_zenoh_arguments
 
 __all__ = ["add_arguments", "finish_demo_recording", "main", "start_demo_recording",
@@ -90,7 +90,7 @@ def main(args: argparse.Namespace) -> int:
         print("rhbl record: error: --duration must be > 0", file=sys.stderr)
         return EXIT_USAGE
     args.robot = "all" if not args.robots else args.robots[0]  # the liveliness token's name
-    return run("recorder", args, _body)
+    return run_role("recorder", args, _body)
 
 
 def _body(ctx: Context) -> int:

@@ -20,10 +20,10 @@ import time
 import zenoh
 
 from client.recording.mcap_file import RecordingError, classify, read_recording
-from client.roles.common import EXIT_USAGE, Context, ProcessError, run
+from client.roles.common import run_role
 from protocol import keys
 from protocol.messages import Scan, VelCmd
-from protocol.runtime import add_logging_arguments
+from protocol.runtime import EXIT_USAGE, Context, ProcessError, add_logging_arguments
 from protocol.session import add_zenoh_arguments
 
 __all__ = ["SENSOR_KINDS", "add_arguments", "main"]
@@ -60,7 +60,7 @@ def main(args: argparse.Namespace) -> int:
     if not os.path.exists(args.recording):
         raise ValueError(f"recording {args.recording} does not exist")
     args.robot = "replay"  # the liveliness token's name
-    return run("replay", args, _body, early_token=False)
+    return run_role("replay", args, _body, early_token=False)
 
 
 def _body(ctx: Context) -> int:

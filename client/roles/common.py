@@ -1,13 +1,12 @@
-"""Plumbing the teacher, learner and controller processes share beyond ``protocol.runtime``.
-
-The generic parts (exit codes ``EXIT_*``, ``ProcessError``, logging, signals, ``open_session``,
-``Context`` and its scope) live in ``protocol.runtime``, shared with ``rhbl server``; they are
-re-exported here. The client-only parts:
+"""What the client's processes (teacher, learner, controller, console, record, replay, foxglove)
+share beyond ``protocol.runtime`` (exit codes ``EXIT_*``, ``ProcessError``, logging, signals,
+``open_session``, ``Context`` and its scope, shared with ``rhbl server``: import those from
+there):
 
 - ``add_process_arguments(parser)``: the common flags (zenoh flags from ``protocol.session``,
   ``--robot``, ``--wait-server``, ``--log-level``).
-- ``run(role, args, body)``: ``protocol.runtime.run`` with the robot checked (``--robot`` must be
-  a key chunk: exit 2) and the liveliness token ``rhbl/alive/<role>/<robot>-<pid>``.
+- ``run_role(role, args, body)``: ``protocol.runtime.run_process`` with the robot checked
+  (``--robot`` must be a key chunk: exit 2) and the liveliness token ``rhbl/alive/<role>/<robot>-<pid>``.
 - ``wait_for_server(ctx)``: waits for the first scan of the robot, logging what it waits for,
   and fails with a message naming the endpoint and the key when the server is not up.
 - ``wait_for_learner(ctx, timeout)``: waits for a learner's liveliness token of the robot
@@ -32,34 +31,20 @@ import zenoh
 from protocol import keys
 from protocol.messages import Scan
 from protocol.runtime import (
-    EXIT_FAILURE,
     EXIT_NO_LEARNER,
     EXIT_NO_SERVER,
-    EXIT_OK,
-    EXIT_UNREACHABLE,
-    EXIT_USAGE,
     Context,
     ProcessError,
     add_logging_arguments,
-    open_session,
+    run_process,
 )
-from protocol.runtime import run as run_process
 from protocol.session import add_zenoh_arguments
 
 __all__ = [
-    "EXIT_FAILURE",
-    "EXIT_NO_LEARNER",
-    "EXIT_NO_SERVER",
-    "EXIT_OK",
-    "EXIT_UNREACHABLE",
-    "EXIT_USAGE",
-    "Context",
-    "ProcessError",
     "ScanWatch",
     "add_process_arguments",
     "decode_scan",
-    "open_session",
-    "run",
+    "run_role",
     "wait_for_learner",
     "wait_for_server",
 ]
@@ -236,9 +221,9 @@ class ScanWatch:
 
 
 # ---- the main wrapper ---------------------------------------------------------------------
-def run(role: str, args: argparse.Namespace, body: Callable[[Context], int | None],
+def run_role(role: str, args: argparse.Namespace, body: Callable[[Context], int | None],
         early_token: bool = True) -> int:
-    """``protocol.runtime.run`` for a process of one robot (``--robot``): the token is
+    """``protocol.runtime.run_process`` for a process of one robot (``--robot``): the token is
     ``rhbl/alive/<role>/<robot>-<pid>``, declared before ``body`` runs (or by the body with
     ``ctx.declare_token()`` if not ``early_token``)."""
     robot = getattr(args, "robot", "r0")

@@ -26,18 +26,15 @@ from client.behaviour.features import FEATURES, FeatureSpec
 from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, check_compatible
 from client.decision import Decider
 from client.roles.common import (
-    EXIT_NO_SERVER,
-    EXIT_USAGE,
-    Context,
-    ProcessError,
     ScanWatch,
     add_process_arguments,
     decode_scan,
-    run,
+    run_role,
     wait_for_server,
 )
 from protocol import keys
 from protocol.messages import Scan, TreeNotice, VelCmd
+from protocol.runtime import EXIT_NO_SERVER, EXIT_USAGE, Context, ProcessError
 
 __all__ = ["ControllerProcess", "add_arguments", "fetch_snapshot", "load_tree", "main"]
 
@@ -68,7 +65,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    return run("controller", args, lambda ctx: ControllerProcess(ctx).run())
+    return run_role("controller", args, lambda ctx: ControllerProcess(ctx).run())
 
 
 def _policy_from(clf_bytes_or_path, features: str | None) -> TreePolicy:

@@ -45,18 +45,10 @@ from client.behaviour.learning import (
 from client.behaviour.tasks import task_of_features
 from client.journal import Journal, JournalError, LabelSet, journal_path
 from client.labels import MAX_BACKLOG, Acknowledgements, Pairing
-from client.roles.common import (
-    EXIT_USAGE,
-    Context,
-    ProcessError,
-    ScanWatch,
-    add_process_arguments,
-    run,
-    wait_for_server,
-)
+from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
 from protocol import keys
 from protocol.messages import Scan, TeacherAction, TreeNotice
-from protocol.runtime import on_stop_signal
+from protocol.runtime import EXIT_USAGE, Context, ProcessError, on_stop_signal
 
 __all__ = ["LearnerCore", "LearnerProcess", "Pairing", "add_arguments", "main"]
 
@@ -278,7 +270,7 @@ def _resume(path, spec: FeatureSpec | None) -> DemonstrationLearner:
 def main(args: argparse.Namespace) -> int:
     # the token is declared once the label subscription is in place: a teacher that waits for
     # it (rhbl teacher) then loses no label
-    return run("learner", args, lambda ctx: LearnerProcess(ctx).run(), early_token=False)
+    return run_role("learner", args, lambda ctx: LearnerProcess(ctx).run(), early_token=False)
 
 
 class LearnerProcess:

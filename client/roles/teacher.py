@@ -54,18 +54,16 @@ from client.behaviour.policies import STYLES, TAKEOVER, Demonstrator, takes_over
 from client.behaviour.tasks import TASKS, make_policy, task_of_teacher
 from client.labels import DRAIN, OUTBOX, RESEND_AFTER, Hold, TeacherPublisher
 from client.roles.common import (
-    EXIT_USAGE,
-    Context,
-    ProcessError,
     ScanWatch,
     add_process_arguments,
     decode_scan,
-    run,
+    run_role,
     wait_for_learner,
     wait_for_server,
 )
 from protocol import keys
 from protocol.messages import Scan, VelCmd
+from protocol.runtime import EXIT_USAGE, Context, ProcessError
 
 __all__ = ["TeacherProcess", "add_arguments", "main"]
 
@@ -125,7 +123,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    return run("teacher", args, _body)
+    return run_role("teacher", args, _body)
 
 
 def _body(ctx: Context) -> int:

@@ -13,9 +13,9 @@ import pytest
 from client.behaviour.learning import load_snapshot
 from client.journal import Journal, journal_path
 from client.labels import Pairing
-from client.roles.common import ProcessError
 from client.roles.learner import LearnerCore
 from protocol.messages import Scan, TeacherAction
+from protocol.runtime import ProcessError
 
 LABELS = ["fwd", "fwd-left", "rot-left", "fwd-right", "rot-right"]
 

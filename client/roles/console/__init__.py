@@ -23,7 +23,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from client.roles.common import add_process_arguments, run
+from client.roles.common import add_process_arguments, run_role
 
 __all__ = ["add_arguments", "main"]
 
@@ -56,4 +56,4 @@ def main(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"rhbl console: error: {exc}", file=sys.stderr)
         return 2
-    return run("console", args, body, early_token=False)
+    return run_role("console", args, body, early_token=False)

@@ -46,9 +46,9 @@ from aiohttp import WSMsgType, web
 
 from client.behaviour.actions import DEFAULT_ACTIONS
 from client.labels import DRAIN, Hold, TeacherPublisher
-from client.roles.common import EXIT_USAGE, Context, ProcessError
 from protocol import keys
 from protocol.messages import Decision, Scan, State, TreeNotice, VelCmd, WorldInfo
+from protocol.runtime import EXIT_USAGE, Context, ProcessError
 
 __all__ = ["STALE", "Console", "access_token", "body", "host_name", "parse_http"]
 
