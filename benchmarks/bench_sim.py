@@ -220,7 +220,7 @@ def serve_controller(endpoint: str) -> int:
         pubs: dict[str, object] = {}
 
         def on_scan(sample) -> None:
-            robot = str(sample.key_expr).split("/")[1]
+            robot = keys.parse(sample.key_expr).robot
             scan = Scan.decode(sample.payload.to_bytes())
             vx, va = reflex(np.asarray(scan.ranges))
             if done.is_set():  # stopping: the session may close under a late callback
@@ -231,7 +231,7 @@ def serve_controller(endpoint: str) -> int:
                     keys.cmd_vel_key(robot, source="controller"), express=True)
             pub.put(VelCmd(vx=vx, va=va, source="controller", scan_id=scan.id).encode())
 
-        sub = s.declare_subscriber(f"{keys.PREFIX}/*/laser/0/data/scan", on_scan)
+        sub = s.declare_subscriber(keys.scan_key(keys.EVERY), on_scan)
         t0 = os.times()
         print("ready", flush=True)
         done.wait()

@@ -72,26 +72,6 @@ if str(ROOT) not in sys.path:  # `python campaigns/faults.py`: the campaigns are
     sys.path.insert(0, str(ROOT))
 log = logging.getLogger(__name__)
 
-# a learner whose journal writes fail (ENOSPC) while the file $FULL_FLAG exists: the program
-# text for `python -c` (the campaign's full disk, and the learner robustness test's)
-FULL_DISK_LEARNER = """
-import errno, os, sys
-import client.journal as j
-flag = os.environ["FULL_FLAG"]
-class _Os:
-    def __getattr__(self, name):
-        return getattr(os, name)
-    def write(self, fd, data):
-        if os.path.exists(flag):
-            raise OSError(errno.ENOSPC, "No space left on device")
-        return os.write(fd, data)
-j.os = _Os()
-from lab.cli import main
-sys.exit(main(sys.argv[1:]))
-"""
-
-
-
 class Campaign:
     """The router session and the processes of one part."""
 
@@ -148,14 +128,15 @@ class Campaign:
                        self.session.declare_subscriber(keys.driver_key(r), on_driver),
                        self.session.declare_subscriber(keys.state_key(r), on_state)]
 
-    def start(self, name: str, *argv: str, wrapper: str | None = None,
+    def start(self, name: str, *argv: str, prefix: list[str] | None = None,
               env: dict | None = None, preexec_fn=None) -> Child:
-        """Start ``rhbl ARGV... --connect <the router>`` (or ``python -c WRAPPER ARGV...``),
+        """Start ``rhbl ARGV... --connect <the router>`` (or ``PREFIX ARGV...``: another entry
+        point to the same commands, ``campaigns.full_disk.ARGV``),
         logging into ``<dir>/<name>.log`` (appended to: a process started again under the same
         name keeps one log); stopped with SIGINT, then SIGKILL. ``preexec_fn`` runs in the
         child before the command (:func:`lab.children.without_file_override`)."""
         argv = [*argv, "--connect", self.endpoint]
-        cmd = [sys.executable, "-c", wrapper, *argv] if wrapper else rhbl_argv(*argv)
+        cmd = [*prefix, *argv] if prefix else rhbl_argv(*argv)
         p = Child(name, cmd, self.dir, env={**os.environ, **(env or {})}, cwd=ROOT,
                   stop_signal=signal.SIGINT, stop_timeout=30.0, escalate=False,
                   preexec_fn=preexec_fn).start()
@@ -380,6 +361,8 @@ def learner_stop(workdir: Path, stop_for: float = 20.0) -> dict:
 
 
 def disk_full(workdir: Path, full_for: float = 5.0) -> dict:
+    from campaigns import full_disk
+
     c = Campaign(workdir)
     out = workdir / "tree.rhbl"
     flag = workdir / "full"
@@ -387,7 +370,7 @@ def disk_full(workdir: Path, full_for: float = 5.0) -> dict:
         c.watch()
         c.server("--speedup", "2")
         learner = c.start("learner", "learner", "--features", "wall", "--out", str(out),
-                          "--snapshot-every", "1", wrapper=FULL_DISK_LEARNER,
+                          "--snapshot-every", "1", prefix=full_disk.ARGV,
                           env={"FULL_FLAG": str(flag)})
         teacher = c.start("teacher", "teacher", "--policy", "wall-follower")
         if not c.wait(lambda: len(c.labels) > 20, 120):
@@ -550,7 +533,7 @@ def _alive_roles(session) -> set[str]:
     try:
         for r in session.liveliness().get(keys.alive_key("*", "**"), timeout=1.0):
             if r.ok is not None:
-                roles.add(str(r.ok.key_expr).split("/")[2])
+                roles.add(keys.parse(r.ok.key_expr).role)
     except Exception as exc:  # noqa: BLE001 - no router yet: nobody is known
         log.debug("liveliness query failed: %s", exc)
     return roles

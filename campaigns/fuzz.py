@@ -272,6 +272,7 @@ def _fuzz_request_key(t: _Served, key: str, decode: Callable[[bytes], Any] | Non
                       valid: dict | None, rng: random.Random, per_key: int) -> KeyResult:
     """``per_key`` queries derived from ``valid``: each one the decoder rejects must get a
     NACK, each one it accepts (payload-free requests only) its answer."""
+    from protocol import keys
     from protocol.messages import COMMAND_MAX_PAYLOAD
 
     res = KeyResult(key)
@@ -290,7 +291,7 @@ def _fuzz_request_key(t: _Served, key: str, decode: Callable[[bytes], Any] | Non
             want_ok = True
         except Exception:  # noqa: BLE001
             want_ok = False
-        if want_ok and key.rsplit("/", 1)[1] in ("set_pose", "motor_power", "set_odom"):
+        if want_ok and keys.parse(key).name in ("set_pose", "motor_power", "set_odom"):
             continue  # a valid teleport or motors-off would change the robot
         n += 1
         pending.append((want_ok, t.cli.get(key, payload=data, timeout=10.0)))

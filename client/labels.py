@@ -4,7 +4,7 @@ The teacher's end (``rhbl teacher``, ``rhbl console``):
 
 - ``Outbox``: the labels a teacher session published and no learner acknowledged yet, each with
   the scan it answers, to be resent until one does (no zenoh: testable alone).
-- ``TeacherPublisher``: publishes a robot's labels (``rhbl/<robot>/teacher/action``), keeps
+- ``LabelPublisher``: publishes a robot's labels (``rhbl/<robot>/teacher/action``), keeps
   them in the outbox once a learner was seen, takes the acknowledgements
   (``rhbl/<robot>/learner/ack``) and resends what was missed (``rhbl/<robot>/teacher/labeled``).
 - ``Learners``: which learners of the robot are up (their liveliness tokens).
@@ -30,7 +30,8 @@ from collections import OrderedDict, deque
 
 from client.journal import LabelSet
 from protocol import keys
-from protocol.messages import LabeledScan, LearnerAck, Scan, TeacherAction, VelCmd
+from protocol.decoding import Decoder
+from protocol.messages import LabeledScan, LearnerAck, Scan, TeacherAction
 
 __all__ = [
     "ACK_BATCH",
@@ -45,7 +46,7 @@ __all__ = [
     "Learners",
     "Outbox",
     "Pairing",
-    "TeacherPublisher",
+    "LabelPublisher",
 ]
 
 log = logging.getLogger(__name__)
@@ -175,10 +176,10 @@ class Outbox:
             return len(self._entries)
 
 
-class TeacherPublisher:
-    """A teacher's outputs for a robot: the executed velocity on the per-source key
-    ``.../cmd/vel/teacher`` (express, never dropped) and the label on ``.../teacher/action``.
-    Shared by ``rhbl teacher`` and ``rhbl console``, so both publish alike.
+class LabelPublisher:
+    """A teacher's labels for a robot, on ``.../teacher/action`` (never dropped). Shared by
+    ``rhbl teacher`` and ``rhbl console``, so both label alike (their commands go through
+    ``client.player.PlayerClient``).
 
     With an ``outbox`` (its size; 0 = none, pure teleop) labels are delivered at least once:
     from the moment a learner of the robot is first seen (``learners``, its liveliness token),
@@ -194,14 +195,13 @@ class TeacherPublisher:
         import zenoh
 
         self.robot = robot
-        self.cmd_pub = session.declare_publisher(keys.cmd_vel_key(robot, source=SOURCE),
-                                                 congestion_control=zenoh.CongestionControl.BLOCK,
-                                                 express=True)
         self.act_pub = session.declare_publisher(keys.teacher_action_key(robot),
                                                  congestion_control=zenoh.CongestionControl.BLOCK)
         self.outbox: Outbox | None = None
         self.learners: Learners | None = None
-        self._decls = [self.cmd_pub, self.act_pub]
+        self.decoder = Decoder(log)  # malformed acknowledgements, dropped and counted
+        self.published = 0  # labels published (kept in the outbox or not)
+        self._decls = [self.act_pub]
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         if outbox:
@@ -219,11 +219,9 @@ class TeacherPublisher:
                      "them (at most %d), resent after %g s", robot, self.outbox.origin,
                      outbox, resend_after)
 
-    def command(self, vx: float, va: float, scan_id: int, ts: float) -> None:
-        self.cmd_pub.put(VelCmd(vx=vx, va=va, source=SOURCE, scan_id=scan_id, ts=ts).encode())
-
     def label(self, scan: Scan, action: str, executed: str | None) -> None:
         """Publish the label of ``scan`` (kept in the outbox once a learner was seen)."""
+        self.published += 1
         if self.outbox is None or not self.learners.arrivals:
             act = TeacherAction(scan_id=scan.id, action=action, source=SOURCE, ts=scan.ts,
                                 executed=executed)
@@ -233,12 +231,8 @@ class TeacherPublisher:
 
     # -- acknowledgements and resends --
     def _on_ack(self, sample) -> None:
-        try:
-            ack = LearnerAck.decode(sample.payload.to_bytes())
-        except Exception as exc:  # noqa: BLE001 - DecodeError
-            log.warning("dropped a malformed learner ack: %s", exc)
-            return
-        if ack.origin == self.outbox.origin:
+        ack = self.decoder.decode(LearnerAck, sample.payload.to_bytes())
+        if ack is not None and ack.origin == self.outbox.origin:
             self.outbox.ack(ack.upto, ack.seqs)
 
     def _resender(self) -> None:
@@ -329,7 +323,7 @@ class Learners:
         import zenoh
 
         self._delete = zenoh.SampleKind.DELETE
-        self._prefix = f"{robot}-"
+        self._robot = robot
         self._keys: set[str] = set()
         self._lock = threading.Lock()
         self.arrivals = 0
@@ -338,7 +332,7 @@ class Learners:
 
     def _on_token(self, sample) -> None:
         key = str(sample.key_expr)
-        if not key.rsplit("/", 1)[-1].startswith(self._prefix):
+        if not keys.parse(key).names_robot(self._robot):
             return
         with self._lock:
             if sample.kind == self._delete:
@@ -396,25 +390,16 @@ class Pairing:
         self.ready: deque[tuple[Scan, TeacherAction]] = deque()  # labeled, to be learned
         self.last_id = -1
         self.forgot_upto = -1  # the newest scan id forgotten unlabeled
-        self.stats = {"scans": 0, "labels": 0, "forgotten": 0, "unmatched": 0, "bad": 0,
+        self.stats = {"scans": 0, "labels": 0, "forgotten": 0, "unmatched": 0,
                       "lost": 0, "max_ready": 0, "resent": 0}
+        self.decoder = Decoder(log)  # malformed scans and labels: dropped, counted by kind
         self._said_behind = -1e9
 
     # -- the callbacks (zenoh threads) --
-    def _decode(self, cls, data: bytes, what: str):
-        """The message, or None: a malformed one is counted (``bad``) and logged, dropped."""
-        try:
-            return cls.decode(data)
-        except Exception as exc:  # noqa: BLE001 - DecodeError
-            with self._cond:
-                self.stats["bad"] += 1
-            log.warning("dropped a malformed %s: %s", what, exc)
-            return None
-
     def on_scan(self, data: bytes) -> None:
         if self._seen is not None:
             self._seen()
-        scan = self._decode(Scan, data, "scan")
+        scan = self.decoder.decode(Scan, data)
         if scan is None:
             return
         with self._cond:
@@ -436,7 +421,7 @@ class Pairing:
                 self.stats["forgotten"] += 1
 
     def on_label(self, data: bytes) -> None:
-        act = self._decode(TeacherAction, data, "teacher action")
+        act = self.decoder.decode(TeacherAction, data)
         if act is None:
             return
         with self._cond:
@@ -460,7 +445,7 @@ class Pairing:
     def on_labeled(self, data: bytes) -> None:
         """A label the teacher resent with its scan (``LabeledScan``: the learner had not
         acknowledged it): ready at once, no pairing."""
-        lab = self._decode(LabeledScan, data, "labeled scan")
+        lab = self.decoder.decode(LabeledScan, data)
         if lab is None:
             return
         act = lab.action_message()

@@ -25,15 +25,13 @@ Children are killed by PID on every exit path; the exit status is non-zero if an
 from __future__ import annotations
 
 import argparse
-import contextlib
 import datetime as _dt
 import json
 import logging
 import signal
 import sys
-import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +40,7 @@ from client.behaviour.tasks import TASKS
 from lab import children
 from lab.children import free_port
 from lab.children import rhbl_argv as _rhbl
-from lab.episode import DT, Episode
+from lab.episode import Episode, EpisodeCollector
 from lab.recipe import EVAL_SECONDS, RECIPES, Recipe, per_task
 
 __all__ = ["SCENARIOS", "Scenario", "add_arguments", "main", "free_port"]
@@ -170,150 +168,6 @@ class Child(children.Child):
 
     def __init__(self, name: str, argv: list[str], logdir: Path) -> None:
         super().__init__(name, argv, logdir, stop_signal=signal.SIGINT)
-
-
-# ---- recording -----------------------------------------------------------------------------
-@dataclass
-class _Raw:
-    """What arrives for the current episode besides its scans, keyed until it ends."""
-
-    stalls: dict = field(default_factory=dict)  # ts -> stall
-    cmds: dict = field(default_factory=dict)  # scan id -> (source, vx, va) (teacher's first)
-    drivers: dict = field(default_factory=dict)  # ts -> driving source (State.driver)
-    first_id: int = 0  # scans before this one (the old pose, before a teleport) are ignored
-
-
-class Recorder:
-    """Records the server's scans, states and commands into the current episode (callbacks
-    of a few microseconds: the heavier work happens after the run)."""
-
-    def __init__(self, session, robot: str, actions, side: str | None):
-        from protocol import keys
-
-        self.episode: Episode | None = None
-        self.raw = _Raw()
-        self.names = {tuple(v): k for k, v in actions.items()}  # (vx, va) -> action name
-        self.side = side  # the followed side (lab.episode.Episode.side), None: not recorded
-        self.lock = threading.Lock()
-        self.notice: dict = {}
-        self.sources: dict[str, int] = {}  # commands seen per source (recording or not)
-        self.labels = 0  # teacher labels seen (recording or not)
-        self.subs = [
-            session.declare_subscriber(keys.scan_key(robot), self._on_scan),
-            session.declare_subscriber(keys.state_key(robot), self._on_state),
-            session.declare_subscriber(keys.cmd_vel_subscription(robot), self._on_cmd),
-            session.declare_subscriber(keys.learner_notice_key(robot), self._on_notice),
-            session.declare_subscriber(keys.teacher_action_key(robot), self._on_label),
-        ]
-
-    def _on_scan(self, sample) -> None:
-        from lab.metrics import side_distance
-        from protocol.messages import Scan
-
-        ep = self.episode
-        if ep is None:
-            return
-        try:
-            s = Scan.decode(sample.payload.to_bytes())
-        except Exception:  # noqa: BLE001
-            return
-        with self.lock:
-            if ep is self.episode and s.id >= self.raw.first_id:
-                ep.ts.append(s.ts)
-                ep.poses.append(s.truth if s.truth is not None else s.pose)
-                if self.side is not None:
-                    ep.side.append(side_distance(s.ranges, self.side))
-                ep.ids.append(s.id)
-
-    def _on_state(self, sample) -> None:
-        from protocol.messages import State
-
-        ep, raw = self.episode, self.raw
-        if ep is None:
-            return
-        try:
-            st = State.decode(sample.payload.to_bytes())
-        except Exception:  # noqa: BLE001
-            return
-        raw.stalls[round(st.ts, 6)] = bool(st.stall)
-        raw.drivers[round(st.ts, 6)] = st.driver
-
-    def _on_label(self, sample) -> None:
-        from protocol.messages import TeacherAction
-
-        self.labels += 1
-        ep = self.episode
-        if ep is not None:
-            try:
-                action = TeacherAction.decode(sample.payload.to_bytes()).action
-            except Exception:  # noqa: BLE001
-                action = None  # still a label the learner was offered
-            ep.labels.append(action)
-
-    def _on_cmd(self, sample) -> None:
-        from protocol.messages import VelCmd
-
-        ep, raw = self.episode, self.raw
-        try:
-            c = VelCmd.decode(sample.payload.to_bytes())
-        except Exception:  # noqa: BLE001
-            return
-        self.sources[c.source] = self.sources.get(c.source, 0) + 1
-        if ep is not None and c.scan_id is not None:
-            # the teacher outranks the controller (the server's arbitration)
-            old = raw.cmds.get(c.scan_id)
-            if old is None or old[0] != "teacher" or c.source == "teacher":
-                raw.cmds[c.scan_id] = (c.source, c.vx, c.va)
-
-    def _on_notice(self, sample) -> None:
-        from protocol.messages import TreeNotice
-
-        try:
-            n = TreeNotice.decode(sample.payload.to_bytes())
-        except Exception:  # noqa: BLE001
-            return
-        self.notice = {"nodes": n.nodes, "height": n.height, "vectors": n.vectors}
-
-    def begin(self, kind: str, start, round_: int = 0) -> Episode:
-        with self.lock:
-            self.raw = _Raw()
-            self.episode = Episode(start=tuple(start), dt=DT, kind=kind, round=round_)
-            return self.episode
-
-    def trim(self, ep: Episode, first_id: int) -> None:
-        """Forget what ``ep`` recorded before scan ``first_id`` (scans of the old pose that
-        arrived between ``begin`` and a teleport)."""
-        with self.lock:
-            raw = self.raw
-            raw.first_id = first_id  # and a late scan of the old pose is not recorded either
-            keep = [k for k, i in enumerate(ep.ids) if i >= first_id]
-            for f in ("ts", "poses", "side", "ids"):
-                col = getattr(ep, f)
-                if col:
-                    setattr(ep, f, [col[k] for k in keep])
-            raw.cmds = {i: c for i, c in raw.cmds.items() if i >= first_id}
-            if ep.ts:
-                raw.stalls = {t: v for t, v in raw.stalls.items() if t >= round(ep.ts[0], 6)}
-                raw.drivers = {t: v for t, v in raw.drivers.items() if t >= round(ep.ts[0], 6)}
-
-    def end(self) -> None:
-        """Close the current episode: each recorded scan gets the action executed on it (the
-        teacher's over the controller's; "none" if no command came), its stall and its driver."""
-        with self.lock:
-            ep, raw = self.episode, self.raw
-            self.episode = None
-            if ep is None:
-                return
-            for ts, sid in zip(ep.ts, ep.ids, strict=True):
-                cmd = raw.cmds.get(sid)
-                ep.actions.append(self.names.get((cmd[1], cmd[2]), "none") if cmd else "none")
-                ep.stalls.append(raw.stalls.get(round(ts, 6), False))
-                ep.drivers.append(raw.drivers.get(round(ts, 6)))
-
-    def close(self) -> None:
-        for s in self.subs:
-            with contextlib.suppress(Exception):
-                s.undeclare()
 
 
 # ---- the demo ------------------------------------------------------------------------------
@@ -473,9 +327,11 @@ class Demo:
         """One episode from each start pose (teleported there), ``seconds`` or until the goal."""
         out = []
         for k, pose in enumerate(starts):
+            self.tap.sync()  # what arrived before belongs to no episode
             ep = self.rec.begin(kind, pose, round_)
             self.rec.trim(ep, self.teleport(pose, *cs))
             self.wait_episode(ep, seconds, f"{what}, start {k + 1}/{len(starts)}", *cs)
+            self.tap.sync()  # what arrived until now belongs to it
             self.rec.end()
             out.append(ep)
         return out
@@ -496,19 +352,22 @@ class Demo:
         self.say(f"rendezvous (router) on {self.endpoint}; children log into {self.out / 'logs'}")
         from client.behaviour.actions import DEFAULT_ACTIONS
         from client.player import PlayerClient
-        from client.recording.record import finish_demo_recording, start_demo_recording
+        from client.recording.record import demo_recording, say_demo_recording
+        from client.recording.tap import BusTap
 
         with zenoh.open(make_config(mode="router", listen=[self.endpoint])) as session:
             self.session = session
             self.sim = PlayerClient(session=session, robot="r0", source="demo").simulation
             # the learner's actions (``rhbl learner`` has no other set)
-            self.rec = Recorder(session, "r0", DEFAULT_ACTIONS, TASKS[self.spec.task].side)
-            recording = start_demo_recording(session, a.record, self.out, self.say)
+            self.rec = EpisodeCollector("r0", DEFAULT_ACTIONS, TASKS[self.spec.task].side)
+            writer = demo_recording(a.record, self.out, self.say)  # None without --record
+            self.tap = BusTap(session, [self.rec, *([writer] if writer else [])],
+                              world=writer is not None)  # one tap: episodes and the recording
             try:
                 return self._phases()
             finally:
-                self.rec.close()
-                finish_demo_recording(recording, self.say)
+                self.tap.close()
+                say_demo_recording(self.tap, writer, self.say)
 
     def _phases(self) -> int:
         from client.behaviour.learning import load_snapshot

@@ -16,7 +16,7 @@ from protocol.runtime import (
     EXIT_USAGE,
     Context,
     ProcessError,
-    add_logging_arguments,
+    add_report_arguments,
     on_stop_signal,
     run_process,
 )
@@ -78,7 +78,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="server id in its liveliness tokens rhbl/alive/server/<id>/<robot>, one per robot "
         "(default: <host>-<pid>, unique on the network)",
     )
-    add_logging_arguments(parser)
+    add_report_arguments(parser)
     add_zenoh_arguments(parser, default_listen=[DEFAULT_ENDPOINT], default_mode="router")
 
 
@@ -129,6 +129,8 @@ class ServerProcess:
 
     def serve(self, ctx: Context) -> int:
         node = self._node(ctx)
+        ctx.report(lambda: {"ticks": node.ticks, "sim_time": round(self.world.time, 3),
+                            "counters": dict(node.counters)})
         ctx.scope.callback(self._report, node)  # after the node is closed (the scope is LIFO)
         ctx.scope.callback(node.close)
         on_stop_signal(node.stop)

@@ -6,8 +6,9 @@ against it without a simulator; commands are not replayed (the new controller ma
     rhbl replay run.mcap --listen tcp/127.0.0.1:7447 --mode router   # be the rendezvous
     rhbl controller --tree tree.rhbl --connect tcp/127.0.0.1:7447      # drives the replay
 
-It answers ``sim/req/get_world`` with the recorded world (viewers draw the walls) and holds the
-liveliness token ``rhbl/alive/server/replay-<pid>`` while it plays.
+The recording is read before any connection (a file that is not a recording: one line, exit
+2). It answers ``sim/req/get_world`` with the recorded world (viewers draw the walls) and holds
+the liveliness token ``rhbl/alive/server/replay-<pid>`` while it plays.
 """
 
 from __future__ import annotations
@@ -15,18 +16,20 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import threading
 import time
 
 import zenoh
 
-from client.recording.mcap_file import RecordingError, classify, read_recording
+from client.recording.mcap_file import RecordedMessage, RecordingError, read_recording
 from client.roles.common import run_role
 from protocol import keys
+from protocol.decoding import Decoder
 from protocol.messages import Scan, VelCmd
-from protocol.runtime import EXIT_USAGE, Context, ProcessError, add_logging_arguments
+from protocol.runtime import Context, add_report_arguments
 from protocol.session import add_zenoh_arguments
 
-__all__ = ["SENSOR_KINDS", "add_arguments", "main"]
+__all__ = ["SENSOR_KINDS", "ReplayProcess", "add_arguments", "load_stream", "main"]
 
 log = logging.getLogger(__name__)
 
@@ -51,124 +54,148 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lockstep-timeout", type=float, default=1.0, metavar="SECONDS",
                         help="with --lockstep: go on after this long without an answer "
                              "(default 1)")
-    add_logging_arguments(parser)
+    add_report_arguments(parser)
+
+
+def load_stream(path: str, robots: list[str] | None = None
+                ) -> tuple[list[RecordedMessage], dict[str, bytes]]:
+    """The sensor messages of a recording (``SENSOR_KINDS``, of ``robots`` or every robot) in
+    the order received, and each robot's recorded world (``WorldInfo`` payload). ValueError
+    naming the file when it is no recording or holds no sensor message."""
+    try:
+        msgs = [m for m in read_recording(path)
+                if m.kind in (*SENSOR_KINDS, "world") and (not robots or m.robot in robots)]
+    except RecordingError as exc:
+        raise ValueError(str(exc)) from None
+    stream = [m for m in msgs if m.kind in SENSOR_KINDS]
+    if not stream:
+        raise ValueError(f"{path} holds no sensor messages"
+                         f"{' of robot ' + ', '.join(robots) if robots else ''}")
+    return stream, {m.robot: m.data for m in msgs if m.kind == "world"}
 
 
 def main(args: argparse.Namespace) -> int:
     if not args.speed >= 0:
         raise ValueError(f"--speed must be >= 0, got {args.speed}")
+    for r in args.robots or []:
+        keys.check_chunk(r, "--robot")
     if not os.path.exists(args.recording):
         raise ValueError(f"recording {args.recording} does not exist")
+    stream, worlds = load_stream(args.recording, args.robots)  # before any connection
     args.robot = "replay"  # the liveliness token's name
-    return run_role("replay", args, _body, early_token=False)
+    return run_role("replay", args, lambda ctx: ReplayProcess(ctx, stream, worlds).run(),
+                    early_token=False)
 
 
-def _body(ctx: Context) -> int:
-    args, session = ctx.args, ctx.session
-    try:
-        msgs = [m for m in read_recording(args.recording)
-                if m.kind in (*SENSOR_KINDS, "world")
-                and (not args.robots or m.robot in args.robots)]
-    except RecordingError as exc:
-        raise ProcessError(f"replay: {exc}", EXIT_USAGE) from exc
-    stream = [m for m in msgs if m.kind in SENSOR_KINDS]
-    if not stream:
-        raise ProcessError(f"replay: {args.recording} holds no sensor messages"
-                           f"{' of robot ' + ', '.join(args.robots) if args.robots else ''}",
-                           EXIT_USAGE)
-    worlds = {m.robot: m.data for m in msgs if m.kind == "world"}
-    queryables = []
-    for robot, data in worlds.items():
-        key = keys.sim_request_key(robot, "get_world")
+class ReplayProcess:
+    """Publishers for the recorded keys, the recorded worlds served, the stream played."""
 
-        def answer(query, key=key, data=data):
-            try:
-                query.reply(key, data)
-            except Exception as exc:  # noqa: BLE001 - the querier went away
-                log.debug("get_world reply failed: %s", exc)
-
-        queryables.append(session.declare_queryable(key, answer))
-    pubs: dict[str, zenoh.Publisher] = {}
-    for m in stream:
-        if m.key not in pubs:
-            pubs[m.key] = session.declare_publisher(
-                m.key, congestion_control=zenoh.CongestionControl.BLOCK)
-    token = session.liveliness().declare_token(keys.alive_key("server", f"replay-{os.getpid()}"))
-    robots = sorted({m.robot for m in stream})
-    scan_pubs = [p for k, p in pubs.items() if classify(k)[0] == "scan"]
-    if args.wait_subscriber > 0 and scan_pubs:
-        deadline = time.monotonic() + args.wait_subscriber
-        while not any(p.matching_status.matching for p in scan_pubs):
-            if time.monotonic() >= deadline:
-                log.info("nobody subscribes to the scans after %.0f s: replaying anyway",
-                         args.wait_subscriber)
-                break
-            time.sleep(0.02)
-    log.info("replaying %d messages of %s (robots %s) at %s", len(stream), args.recording,
-             ", ".join(robots), f"{args.speed:g}x" if args.speed else "full speed")
-    answers = _Answers(session, robots) if args.lockstep else None
-    t_rec0 = stream[0].log_time
-    t0 = time.monotonic()
-    sent = unanswered = 0
-    try:
+    def __init__(self, ctx: Context, stream: list[RecordedMessage], worlds: dict[str, bytes]):
+        self.args, self.session, self.stream = ctx.args, ctx.session, stream
+        for robot, data in worlds.items():
+            key = keys.sim_request_key(robot, "get_world")
+            ctx.queryable(key, lambda q, key=key, data=data: self._answer(q, key, data))
+        self.pubs: dict[str, zenoh.Publisher] = {}
         for m in stream:
-            if args.speed > 0:
-                due = t0 + (m.log_time - t_rec0) / 1e9 / args.speed
-                delay = due - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)
-            pubs[m.key].put(m.data)
-            sent += 1
-            if answers is not None and m.kind == "scan":
-                waited = time.monotonic()
-                if not answers.wait(m.robot, m.data, args.lockstep_timeout):
-                    unanswered += 1
-                t0 += time.monotonic() - waited  # the recorded spacing after the answer
-    finally:
-        if answers is not None:
-            answers.close()
-            log.info("lock-step: %d scans without an answer within %.1f s", unanswered,
-                     args.lockstep_timeout)
-        span = (stream[-1].log_time - t_rec0) / 1e9
-        log.info("replay stopped: %d of %d messages sent (%.1f s recorded, %.1f s played)", sent,
-                 len(stream), span, time.monotonic() - t0)
-        token.undeclare()
-        for q in queryables:
-            q.undeclare()
-    return 0
+            if m.key not in self.pubs:
+                self.pubs[m.key] = ctx.publisher(
+                    m.key, congestion_control=zenoh.CongestionControl.BLOCK)
+        ctx.keep(self.session.liveliness().declare_token(
+            keys.alive_key("server", f"replay-{os.getpid()}")))
+        self.robots = sorted({m.robot for m in stream})
+        self.answers = _Answers(self.session, self.robots) if self.args.lockstep else None
+        self.sent = self.unanswered = 0
+        self.t0 = time.monotonic()
+        ctx.scope.callback(self.close)  # on every path, after "stopping (signal)"
+        ctx.report(self.counters)
 
+    @staticmethod
+    def _answer(query, key: str, data: bytes) -> None:
+        try:
+            query.reply(key, data)
+        except Exception as exc:  # noqa: BLE001 - the querier went away
+            log.debug("get_world reply failed: %s", exc)
+
+    def run(self) -> int:
+        self.wait_for_subscriber()
+        log.info("replaying %d messages of %s (robots %s) at %s", len(self.stream),
+                 self.args.recording, ", ".join(self.robots),
+                 f"{self.args.speed:g}x" if self.args.speed else "full speed")
+        self.t0 = time.monotonic()
+        for m in self.stream:
+            self.play(m)
+        return 0
+
+    def wait_for_subscriber(self) -> None:
+        """Until something subscribes to a recorded scan key (at most ``--wait-subscriber``)."""
+        wait = self.args.wait_subscriber
+        scans = [p for k, p in self.pubs.items() if keys.parse(k).kind == "scan"]
+        if wait <= 0 or not scans:
+            return
+        deadline = time.monotonic() + wait
+        while not any(p.matching_status.matching for p in scans):
+            if time.monotonic() >= deadline:
+                log.info("nobody subscribes to the scans after %.0f s: replaying anyway", wait)
+                return
+            time.sleep(0.02)
+
+    def play(self, m: RecordedMessage) -> None:
+        """Publish ``m`` at its recorded time (scaled by ``--speed``); with ``--lockstep`` a
+        scan then waits for its answer, and the recorded spacing goes on after it."""
+        speed = self.args.speed
+        if speed > 0:
+            due = self.t0 + (m.log_time - self.stream[0].log_time) / 1e9 / speed
+            delay = due - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+        self.pubs[m.key].put(m.data)
+        self.sent += 1
+        if self.answers is not None and m.kind == "scan":
+            waited = time.monotonic()
+            if not self.answers.wait(m.robot, m.data, self.args.lockstep_timeout):
+                self.unanswered += 1
+            self.t0 += time.monotonic() - waited
+
+    def close(self) -> None:
+        if self.answers is not None:
+            self.answers.close()
+            log.info("lock-step: %d scans without an answer within %.1f s", self.unanswered,
+                     self.args.lockstep_timeout)
+            self.answers = None
+        span = (self.stream[-1].log_time - self.stream[0].log_time) / 1e9
+        log.info("replay stopped: %d of %d messages sent (%.1f s recorded, %.1f s played)",
+                 self.sent, len(self.stream), span, time.monotonic() - self.t0)
+
+    def counters(self) -> dict:
+        return {"sent": self.sent, "messages": len(self.stream), "unanswered": self.unanswered,
+                "robots": self.robots}
 
 
 class _Answers:
     """The scan ids the robots' commands answered (``--lockstep``)."""
 
     def __init__(self, session, robots):
-        import threading
-
         self._cond = threading.Condition()
         self._seen: dict[str, int] = {}
+        self.decoder = Decoder(log, level=logging.DEBUG)  # a malformed command answers nothing
         self._subs = [session.declare_subscriber(keys.cmd_vel_subscription(r),
                                                  lambda s, r=r: self._on(r, s))
                       for r in robots]
 
     def _on(self, robot: str, sample) -> None:
-        try:
-            cmd = VelCmd.decode(sample.payload.to_bytes())
-        except Exception:  # noqa: BLE001 - a malformed command answers nothing
-            return
-        if cmd.scan_id is None:
+        cmd = self.decoder.decode(VelCmd, sample.payload.to_bytes())
+        if cmd is None or cmd.scan_id is None:
             return
         with self._cond:
             self._seen[robot] = max(self._seen.get(robot, -1), cmd.scan_id)
             self._cond.notify_all()
 
     def wait(self, robot: str, scan_payload: bytes, timeout: float) -> bool:
-        try:
-            sid = Scan.decode(scan_payload).id
-        except Exception:  # noqa: BLE001
+        scan = self.decoder.decode(Scan, scan_payload)
+        if scan is None:
             return True
         with self._cond:
-            return self._cond.wait_for(lambda: self._seen.get(robot, -1) >= sid, timeout)
+            return self._cond.wait_for(lambda: self._seen.get(robot, -1) >= scan.id, timeout)
 
     def close(self) -> None:
         for s in self._subs:

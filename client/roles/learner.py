@@ -101,7 +101,7 @@ class LearnerCore:
                  resume: str | None = None, task: str | None = None,
                  tree_params: dict | None = None, stride: int = 1, min_delta: float = 0.0,
                  fsync_interval: float = 1.0, actions: ActionSet = DEFAULT_ACTIONS,
-                 fold_journal: bool = False):
+                 fold_journal: bool = False, journal_write=os.write):
         self.out = Path(out)
         self.fold_journal = bool(fold_journal)
         self.jpath = journal_path(self.out)
@@ -110,7 +110,8 @@ class LearnerCore:
         self.replayed = 0
         self.labels = LabelSet()  # the labels (origin, seq) journaled: deduplication and acks
         if self.jpath.exists():
-            self.journal = Journal.open(self.jpath, fsync_interval=fsync_interval)
+            self.journal = Journal.open(self.jpath, fsync_interval=fsync_interval,
+                                        write=journal_write)
             self.learner, self.applied = self._recover(spec, resume)
         else:
             if self.out.exists() and (resume is None or Path(resume).resolve() != self.out.resolve()):
@@ -129,7 +130,8 @@ class LearnerCore:
                     stride=stride, min_delta=min_delta, **params)
                 parent = None
             header = {"parent": parent, "meta": learner.metadata()}
-            self.journal = Journal.create(self.jpath, header, fsync_interval=fsync_interval)
+            self.journal = Journal.create(self.jpath, header, fsync_interval=fsync_interval,
+                                          write=journal_write)
             self.learner, self.applied = learner, 0
             log.info("new tree lineage %s at %s%s", self.journal.lineage, self.out,
                      f" (extending {parent})" if parent else "")
@@ -267,10 +269,13 @@ def _resume(path, spec: FeatureSpec | None) -> DemonstrationLearner:
 
 
 # ---- the process --------------------------------------------------------------------------
-def main(args: argparse.Namespace) -> int:
+def main(args: argparse.Namespace, *, journal_write=os.write) -> int:
+    """``rhbl learner``; ``journal_write`` writes the journal's records (``client.journal``'s
+    seam for injected write failures: campaigns/full_disk.py)."""
     # the token is declared once the label subscription is in place: a teacher that waits for
     # it (rhbl teacher) then loses no label
-    return run_role("learner", args, lambda ctx: LearnerProcess(ctx).run(), early_token=False)
+    return run_role("learner", args, lambda ctx: LearnerProcess(ctx, journal_write).run(),
+                    early_token=False)
 
 
 class LearnerProcess:
@@ -280,11 +285,11 @@ class LearnerProcess:
     SIGINT/SIGTERM set ``stopping``: the loop withdraws the token, learns what already arrived
     (up to ``--drain`` s), writes the final snapshot and returns."""
 
-    def __init__(self, ctx: Context):
+    def __init__(self, ctx: Context, journal_write=os.write):
         self.ctx, self.args = ctx, ctx.args
         self.stopping = False
         on_stop_signal(self.request_stop)
-        self.core = self._open_core(self.args)
+        self.core = self._open_core(self.args, journal_write)
         ctx.scope.callback(self.close_journal)  # also on a path that never reaches finish()
         self.latest = self.core.out.read_bytes() if self.core.out.exists() else None
         self.snap_key = keys.learner_snapshot_key(ctx.robot)
@@ -293,6 +298,7 @@ class LearnerProcess:
         self.pairing = Pairing(self.args.scan_buffer, self.args.match_timeout,
                                on_scan_seen=self.watch.seen)
         self.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0, "duplicates": 0}
+        ctx.report(self.counters)
         # labeled scans waiting to be journaled (in order): empty unless the journal cannot be
         # written (disk full); nothing is learned before it is journaled
         self.backlog: deque[tuple[Scan, TeacherAction]] = deque()
@@ -304,14 +310,15 @@ class LearnerProcess:
         self.acks: Acknowledgements | None = None  # once the ack publisher is declared
 
     @staticmethod
-    def _open_core(args: argparse.Namespace) -> LearnerCore:
+    def _open_core(args: argparse.Namespace, journal_write=os.write) -> LearnerCore:
         try:
             return LearnerCore(
                 args.out, features=args.features, resume=args.resume, task=args.task,
                 tree_params={"spawn": args.spawn,
                              **({"max_nodes": args.max_nodes} if args.max_nodes else {})},
                 stride=args.stride, min_delta=args.min_delta,
-                fsync_interval=args.fsync_interval, fold_journal=args.fold_journal)
+                fsync_interval=args.fsync_interval, fold_journal=args.fold_journal,
+                journal_write=journal_write)
         except JournalError as exc:
             raise ProcessError(f"learner: {exc}") from exc
 
@@ -563,12 +570,20 @@ class LearnerProcess:
                       "writable) and are lost", len(self.backlog))
         self.pairing.close()
 
+    def counters(self) -> dict:
+        """The learner's counters (``--stats``): this run's, the pairing's and the tree's."""
+        core = self.core
+        return {**self.stats, "vectors": core.applied, "replayed": core.replayed,
+                "nodes": core.learner.nodes, "height": core.learner.height,
+                "pairing": dict(self.pairing.stats), "backlog": len(self.backlog),
+                "dropped": dict(self.pairing.decoder.counts)}
+
     def report(self, lost: int) -> None:
         ps, st, core = self.pairing.stats, self.stats, self.core
         log.info("stopped: %d labeled vectors (%d this run, %d learned, %d unmatched "
                  "labels, %d malformed, %d rejected, %d resent by the teacher, %d duplicates "
                  "skipped, %d lost), %d nodes, height %d; snapshot %s; %d scans received, "
                  "%d unlabeled ones forgotten, at most %d labeled scans waited to be learned",
-                 core.applied, st["paired"], st["learned"], ps["unmatched"], ps["bad"],
+                 core.applied, st["paired"], st["learned"], ps["unmatched"], self.pairing.decoder.total,
                  st["rejected"], ps["resent"], st["duplicates"], lost, core.learner.nodes,
                  core.learner.height, core.out, ps["scans"], ps["forgotten"], ps["max_ready"])

@@ -21,7 +21,7 @@ same way, or without a time limit while it holds labels no learner has acknowled
 
 Nor is a label lost in flight when a learner is killed: each label carries the session's identity
 (``origin``, a random id per process, and ``seq``, 0, 1, ...) and stays in the teacher's outbox
-(``client.labels``: ``Outbox``, owned by ``TeacherPublisher``) with the scan it answers until the learner
+(``client.labels``: ``Outbox``, owned by ``LabelPublisher``) with the scan it answers until the learner
 acknowledges it (``LearnerAck`` on ``rhbl/<robot>/learner/ack``: the labels in its
 journal). Every unacknowledged label when a learner's token appears again, and a label missed
 (unacknowledged after ``--resend-after``, 2 s, with backoff: ``Outbox``), is resent with its scan
@@ -47,22 +47,20 @@ import logging
 import time
 
 import numpy as np
-import zenoh
 
 from client.behaviour.actions import DEFAULT_ACTIONS
 from client.behaviour.policies import STYLES, TAKEOVER, Demonstrator, takes_over
 from client.behaviour.tasks import TASKS, make_policy, task_of_teacher
-from client.labels import DRAIN, OUTBOX, RESEND_AFTER, Hold, TeacherPublisher
+from client.labels import DRAIN, OUTBOX, RESEND_AFTER, Hold, LabelPublisher
+from client.player import PlayerClient
 from client.roles.common import (
     ScanWatch,
     add_process_arguments,
-    decode_scan,
     run_role,
     wait_for_learner,
     wait_for_server,
 )
-from protocol import keys
-from protocol.messages import Scan, VelCmd
+from protocol.messages import Scan
 from protocol.runtime import EXIT_USAGE, Context, ProcessError
 
 __all__ = ["TeacherProcess", "add_arguments", "main"]
@@ -162,27 +160,31 @@ class TeacherProcess:
             raise ProcessError("teacher: --outbox must be >= 1 and --resend-after > 0",
                                EXIT_USAGE)
         # the outbox (labels kept until acknowledged, resent) only when a learner records
-        self.pubs = pubs = TeacherPublisher(
+        self.labels = LabelPublisher(
             ctx.session, robot, outbox=self.args.outbox if self.args.wait_learner else 0,
             resend_after=self.args.resend_after)
-        ctx.scope.callback(pubs.close)
-        self.cmd_pub = pubs.cmd_pub
-        self.scan_key = keys.scan_key(robot)
+        ctx.scope.callback(self.labels.close)
+        # commands on .../cmd/vel/teacher, express and never dropped
+        self.client = PlayerClient(session=ctx.session, robot=robot, source=SOURCE,
+                                   express=True, block=True)
+        ctx.scope.callback(self.client.close)
         # the latest scan wins (a teacher never acts on a backlog); correcting, a short queue:
         # the server does not wait for a teacher that does not drive, and every state the
         # controller visits should get its label (a lock-step run only falls a scan or two behind)
-        self.sub = ctx.subscriber(
-            self.scan_key, zenoh.handlers.RingChannel(CORRECT_QUEUE if self.args.correct else 1))
-        self.learners = pubs.learners  # None with --no-wait-learner
+        self.scans = self.client.scans(depth=CORRECT_QUEUE if self.args.correct else 1)
+        self.learners = self.labels.learners  # None with --no-wait-learner
         self.hold = Hold(ctx.session, ctx.ident) if self.args.correct else None
         if self.hold is not None:
             ctx.scope.callback(self.hold.release)
-        self.watch = ScanWatch("teacher", self.scan_key, stale=1.0)
+        self.watch = ScanWatch("teacher", self.scans.key, stale=1.0)
         ctx.scope.callback(self.watch.stop)
         self.t0: float | None = None
         self.n = self.perturbed = self.took = self.bad = 0
+        self.first_scan: int | None = None  # the scan the first label answered
         self.correcting = False
         self.last_id, self.missed = -1, 0  # correcting: scans dropped from the queue unlabelled
+        ctx.scope.callback(self.close)  # on every path, after "stopping (signal)"
+        ctx.report(self.counters)
 
     def run(self) -> int:
         wait_for_server(self.ctx)
@@ -192,11 +194,8 @@ class TeacherProcess:
             log.info("not waiting for a learner (--no-wait-learner): labels go to whoever "
                      "listens")
         self.watch.start()
-        try:
-            while self.step():
-                pass
-        finally:
-            self.close()
+        while self.step():
+            pass
         return 0
 
     def wait_learner(self, timeout: float | None = None) -> None:
@@ -207,21 +206,27 @@ class TeacherProcess:
         if not self.learners:
             self.learners.add(found)
         # a scan kept from before the learner subscribed never reached it: its label could not
-        # be paired. Drop it and start with the next scan.
-        while self.sub.handler.try_recv() is not None:
-            pass
+        # be paired. Skip it and start with the next scan.
+        self.skip_stale()
 
+    def skip_stale(self) -> None:
+        """Scans that waited while the teacher could not label (before a learner subscribed,
+        or paused) are skipped: their labels could not be paired. A demonstrating teacher
+        answers the latest with a stop, so a lock-step server steps on at once rather than
+        after its timeout (the scans stopped meanwhile; the watch would say so)."""
+        stale = self.scans.latest()
+        if stale is not None and not self.args.correct:
+            self.client.answer(stale, 0.0, 0.0)
     def step(self) -> bool:
         """Answer the next scan; False when done (``--seconds``)."""
-        sample = self.sub.handler.recv()
+        scan = self.scans.recv()  # None: a malformed one (dropped, counted)
         self.watch.seen()
-        scan = decode_scan(sample.payload.to_bytes())
         if scan is None:
             return True
         if self.learners is not None and not self.learners:
             self.pause(scan)
             return True
-        if self.pubs.outbox is not None and self.pubs.outbox.full:
+        if self.labels.outbox is not None and self.labels.outbox.full:
             self.pause_full(scan)
             return True
         if not self.track(scan):
@@ -236,9 +241,8 @@ class TeacherProcess:
         after the watchdog) and wait until a learner is up again."""
         log.warning("teacher: no learner of robot %s is up any more: pausing (no commands, no "
                     "labels)", self.ctx.robot)
-        self.cmd_pub.put(VelCmd(vx=0.0, va=0.0, source=SOURCE, scan_id=scan.id,
-                                ts=scan.ts).encode())
-        box = self.pubs.outbox
+        self.client.answer(scan, 0.0, 0.0)
+        box = self.labels.outbox
         if box is not None and len(box):  # giving up would drop them: wait for a learner
             log.warning("teacher: %d labels unacknowledged: waiting for a learner without a "
                         "time limit (--wait-learner-timeout applies when none are)", len(box))
@@ -251,11 +255,10 @@ class TeacherProcess:
         """The outbox is full (the learner acknowledges nothing: stuck, or its journal cannot
         be written): a label now could not be kept. Stand still until acknowledgements come
         (the outbox resends meanwhile), or a learner is gone (then ``pause``)."""
-        box = self.pubs.outbox
+        box = self.labels.outbox
         log.warning("teacher: %d labels wait for the learner's acknowledgement (--outbox %d): "
                     "pausing (no commands, no labels) until it acknowledges", len(box), box.cap)
-        self.cmd_pub.put(VelCmd(vx=0.0, va=0.0, source=SOURCE, scan_id=scan.id,
-                                ts=scan.ts).encode())
+        self.client.answer(scan, 0.0, 0.0)
         t0 = next_note = time.monotonic()
         while box.full and self.learners:
             time.sleep(0.05)
@@ -265,8 +268,7 @@ class TeacherProcess:
                             len(box), next_note - t0)
         log.info("teacher: %d labels unacknowledged after %.1f s: demonstrating again",
                  len(box), time.monotonic() - t0)
-        while self.sub.handler.try_recv() is not None:  # scans of the pause: stale
-            pass
+        self.skip_stale()  # the scans of the pause
         self.last_id = -1
 
     def track(self, scan: Scan) -> bool:
@@ -314,16 +316,16 @@ class TeacherProcess:
     def publish(self, scan: Scan, label: str, executed: str | None,
                 vel: tuple[float, float]) -> None:
         if self.n == 0:
+            self.first_scan = scan.id
             log.info("first label: scan %d, %s", scan.id, label)
         if executed is not None:
             vx, va = vel
             if self.hold is not None:
                 self.hold.acquire()  # before the command: the server may release at once
-            self.cmd_pub.put(VelCmd(vx=vx, va=va, source=SOURCE, scan_id=scan.id,
-                                    ts=scan.ts).encode())
+            self.client.answer(scan, vx, va)
         elif self.hold is not None:
             self.hold.release()  # the controller drives from the next tick on
-        self.pubs.label(scan, label, executed)
+        self.labels.label(scan, label, executed)
         self.n += 1
         if self.correcting:
             self.took += executed is not None
@@ -337,18 +339,19 @@ class TeacherProcess:
         self.watch.stop()
         if self.hold is not None:
             self.hold.release()
-        self.pubs.drain(DRAIN)
-        box = self.pubs.outbox
+        self.labels.drain(DRAIN)
+        box = self.labels.outbox
         log.info("teacher stopped after %d labels (%d perturbed, %d taken over)%s%s", self.n,
                  self.perturbed, self.took,
                  f"; {self.missed} scans not labelled (fell behind)" if self.missed else "",
                  "" if box is None else
                  f"; {box.stats['resent']} resends, {len(box)} unacknowledged at exit")
 
-
-
-
-
-
-
-
+    def counters(self) -> dict:
+        box = self.labels.outbox
+        return {"labels": self.n, "first_label_scan": self.first_scan,
+                "perturbed": self.perturbed, "taken_over": self.took,
+                "missed": self.missed, "not_demonstrated": self.bad,
+                "handbacks": 0 if self.hold is None else self.hold.handbacks,
+                "outbox": None if box is None else {**box.stats, "unacknowledged": len(box)},
+                "dropped": {**self.client.decoder.counts, **self.labels.decoder.counts}}

@@ -121,7 +121,7 @@ def test_a_resent_label_is_ready_at_once_and_replaces_the_one_waiting_for_its_sc
     assert got == act and scan.id == 40 and scan.pose[2] == 0.5
     assert np.array_equal(scan.ranges, _ranges(4)) and not p.pending
     p.on_labeled(b"\x81\xa1v\x01")  # malformed: counted, dropped
-    assert p.stats["resent"] == 1 and p.stats["bad"] == 1
+    assert p.stats["resent"] == 1 and p.decoder.counts == {"teacher/labeled": 1}
 
 
 # ---- the teacher's outbox ---------------------------------------------------------------------

@@ -17,7 +17,7 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
-from campaigns.faults import FULL_DISK_LEARNER  # noqa: E402
+from campaigns import full_disk  # noqa: E402
 from client.journal import Journal, journal_path  # noqa: E402
 from lab.children import Child  # noqa: E402
 from protocol import keys  # noqa: E402
@@ -27,8 +27,6 @@ from protocol.session import make_config  # noqa: E402
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 ROOT = Path(__file__).resolve().parents[2]
 
-# runs the learner with journal writes failing (ENOSPC) while the file FULL_FLAG exists
-_WRAPPER = FULL_DISK_LEARNER
 
 
 def _wait(cond, timeout: float, what: str, proc: Child | None = None) -> None:
@@ -58,7 +56,8 @@ def test_disk_full_keeps_labels_in_memory_and_journals_them_later(free_port, tmp
     with zenoh.open(make_config(mode="router", listen=[endpoint])) as session:
         scan_pub = session.declare_publisher(keys.scan_key("r0"))
         act_pub = session.declare_publisher(keys.teacher_action_key("r0"))
-        proc = Child("learner", [sys.executable, "-c", _WRAPPER, "learner", "--features", "wall",
+        # the learner with journal writes failing (ENOSPC) while the file FULL_FLAG exists
+        proc = Child("learner", [*full_disk.ARGV, "learner", "--features", "wall",
                                  "--out", str(out), "--connect", endpoint, "--snapshot-every",
                                  "0.2"], tmp_path, cwd=ROOT,
                      env={**os.environ, "FULL_FLAG": str(flag)}).start()

@@ -193,7 +193,7 @@ def test_a_scan_flood_stays_bounded_and_every_label_whose_scan_arrived_is_learne
 def test_pairing_says_when_the_learner_falls_behind_and_counts_what_it_drops(caplog):
     pairing = Pairing(scan_buffer=8, max_ready=10, behind=4)
     ranges = np.ones(360, np.float32)
-    with caplog.at_level(logging.WARNING, logger="client.roles.learner"):
+    with caplog.at_level(logging.WARNING, logger="client.labels"):
         for sid in range(1, 16):
             pairing.on_scan(_scan(sid, ranges))
             pairing.on_label(_label(sid))
@@ -205,7 +205,7 @@ def test_pairing_says_when_the_learner_falls_behind_and_counts_what_it_drops(cap
     # malformed input is counted and logged, never raised into the zenoh callback
     pairing.on_scan(b"not a scan")
     pairing.on_label(b"not a label")
-    assert pairing.stats["bad"] == 2
+    assert pairing.decoder.counts == {"scan": 1, "teacher/action": 1}
     # a label whose scan never arrives expires after match_timeout, counted
     clock = [0.0]
     late = Pairing(match_timeout=1.0, clock=lambda: clock[0])

@@ -121,12 +121,12 @@ def protobuf_class(schema_name: str, descriptor_set: bytes):
     return message_factory.GetMessageClass(pool.FindMessageTypeByName(schema_name))
 
 
-def teach(procs, endpoint: str, seconds: float, *extra: str) -> int:
+def teach(procs, endpoint: str, seconds: float, *extra: str, stats: Path) -> int:
+    """A teacher's demonstration of ``seconds``; how many labels it published (``--stats``)."""
     t = procs("teacher", "teacher", "--policy", "wall-follower", "--seconds", str(seconds),
-              "--connect", endpoint, *extra)
+              "--connect", endpoint, "--stats", str(stats), *extra)
     assert t.wait(120) == 0, t.output()
-    line = [ln for ln in t.output().splitlines() if "teacher stopped after" in ln][-1]
-    return int(line.split("after ")[1].split()[0])
+    return json.loads(stats.read_text())["labels"]
 
 
 # ---- record -------------------------------------------------------------------------------
@@ -139,7 +139,8 @@ def test_record_keeps_every_message_and_viewer_channels_decode(start_server, pro
         tap = Tap(session)
         rec = procs("recorder", "record", "--out", str(out), "--connect", srv.endpoint)
         wait_recorded(out)
-        labels = teach(procs, srv.endpoint, 8.0, "--no-wait-learner")
+        labels = teach(procs, srv.endpoint, 8.0, "--no-wait-learner",
+                       stats=tmp_path / "teacher.json")
         teacher_key = keys.teacher_action_key("r0")
         end = time.monotonic() + 10  # the tap and the recorder both got the last label
         while tap.count(teacher_key) < labels and time.monotonic() < end:
@@ -285,7 +286,8 @@ def live_run(start_module_server, tmp_path_factory):
         wait_recorded(rec_path)
         learner = start("learner", "learner", "--features", "wall", "--out", str(tree),
                         "--connect", srv.endpoint)
-        n = teach(start, srv.endpoint, 25.0) + teach(start, srv.endpoint, 10.0, "--seed", "3")
+        n = (teach(start, srv.endpoint, 25.0, stats=tmp / "teacher-1.json")
+             + teach(start, srv.endpoint, 10.0, "--seed", "3", stats=tmp / "teacher-2.json"))
         assert learner.stop() == 0, learner.output()
         assert rec.stop() == 0, rec.output()
         yield {"srv": srv, "tmp": tmp, "recording": rec_path, "tree": tree, "labels": n,
