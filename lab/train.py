@@ -393,11 +393,7 @@ def main(args) -> int:
     if args.from_recording:
         from lab.retrain import train_main
 
-        if getattr(args, "compact", None) not in (None, "none") or getattr(
-                args, "compact_rounds", None) or getattr(args, "compact_visits", None):
-            raise ValueError("--compact, --compact-rounds and --compact-visits apply to a "
-                             "simulated training run, not to --from-recording")
-        return train_main(args)
+        return train_main(args)  # every flag that cannot apply is a named error there
     if not args.world:
         raise ValueError("--world is required (or --from-recording FILE)")
     spec = resolve_world(args.world)

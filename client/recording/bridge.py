@@ -15,16 +15,16 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import threading
 import time
 
 from client.recording.foxglove_schemas import ViewerFeed, ViewerMessage
 from client.recording.mcap_file import KINDS, classify
 from client.recording.tap import BusTap
-from client.roles.common import run_role
 from protocol import keys
 from protocol.decoding import Decoder
-from protocol.runtime import EXIT_USAGE, Context, ProcessError, add_report_arguments
+from protocol.runtime import EXIT_USAGE, Context, ProcessError, add_report_arguments, run_process
 from protocol.session import add_zenoh_arguments
 
 __all__ = ["FoxgloveSink", "add_arguments", "main"]
@@ -121,8 +121,9 @@ def main(args: argparse.Namespace) -> int:
         raise ValueError(f"--port must be 0..65535, got {args.port}")
     if args.duration is not None and not args.duration > 0:
         raise ValueError("--duration must be > 0")
-    args.robot = "all" if not args.robots else args.robots[0]
-    return run_role("foxglove", args, lambda ctx: BridgeProcess(ctx).run())
+    name = "all" if not args.robots else args.robots[0]  # in its liveliness token
+    return run_process("foxglove", args, lambda ctx: BridgeProcess(ctx).run(),
+                       ident=f"{name}-{os.getpid()}")
 
 
 class BridgeProcess:

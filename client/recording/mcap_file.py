@@ -60,6 +60,7 @@ log = logging.getLogger(__name__)
 CHUNK_SECONDS = 1.0  # a chunk is closed (written, readable) at least this often
 CHUNK_SIZE = 256 * 1024  # ... or when it holds this many uncompressed bytes
 ENCODING = "msgpack"
+MAGIC = b"\x89MCAP0\r\n"  # how every MCAP file begins (the MCAP specification)
 
 # kind -> message class: what each key carries (``protocol.messages.CARRIES``, whose
 # descriptions give the schemas), plus the recording's own kinds: "alive" (a liveliness token's
@@ -358,6 +359,10 @@ def read_recording(path: str | os.PathLike, viewer: bool = False,
     with f:
         if os.fstat(f.fileno()).st_size == 0:
             raise RecordingError(f"{path} is empty: not an MCAP recording")
+        if f.read(len(MAGIC)) != MAGIC:
+            raise RecordingError(f"{path} is not an MCAP recording (it does not begin with "
+                                 f"MCAP's magic bytes)")
+        f.seek(0)
         try:
             reader = NonSeekingReader(f, validate_crcs=True)
             for schema, channel, m in reader.iter_messages(log_time_order=False):

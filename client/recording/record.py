@@ -21,9 +21,15 @@ from pathlib import Path
 
 from client.recording.mcap_file import CHUNK_SECONDS, RecordingError, RecordingWriter
 from client.recording.tap import BusTap
-from client.roles.common import run_role
 from protocol import keys
-from protocol.runtime import EXIT_FAILURE, EXIT_USAGE, Context, ProcessError, add_report_arguments
+from protocol.runtime import (
+    EXIT_FAILURE,
+    EXIT_USAGE,
+    Context,
+    ProcessError,
+    add_report_arguments,
+    run_process,
+)
 from protocol.session import add_zenoh_arguments
 
 __all__ = ["RecordProcess", "add_arguments", "check_out", "demo_recording", "main",
@@ -81,9 +87,9 @@ def main(args: argparse.Namespace) -> int:
         check_out(args.out, args.overwrite)
 
     check()  # a ValueError is one line, exit 2, before anything is opened (lab.cli)
-    args.robot = "all" if not args.robots else args.robots[0]  # the liveliness token's name
-    return run_role("recorder", args, lambda ctx: RecordProcess(ctx).run(),
-                    wait_router=args.wait_router)
+    name = "all" if not args.robots else args.robots[0]  # in its liveliness token
+    return run_process("recorder", args, lambda ctx: RecordProcess(ctx).run(),
+                       ident=f"{name}-{os.getpid()}", wait_router=args.wait_router)
 
 
 class RecordProcess:

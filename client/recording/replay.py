@@ -22,11 +22,10 @@ import time
 import zenoh
 
 from client.recording.mcap_file import RecordedMessage, RecordingError, read_recording
-from client.roles.common import run_role
 from protocol import keys
 from protocol.decoding import Decoder
 from protocol.messages import Scan, VelCmd
-from protocol.runtime import Context, add_report_arguments
+from protocol.runtime import Context, add_report_arguments, run_process
 from protocol.session import add_zenoh_arguments
 
 __all__ = ["SENSOR_KINDS", "ReplayProcess", "add_arguments", "load_stream", "main"]
@@ -82,9 +81,9 @@ def main(args: argparse.Namespace) -> int:
     if not os.path.exists(args.recording):
         raise ValueError(f"recording {args.recording} does not exist")
     stream, worlds = load_stream(args.recording, args.robots)  # before any connection
-    args.robot = "replay"  # the liveliness token's name
-    return run_role("replay", args, lambda ctx: ReplayProcess(ctx, stream, worlds).run(),
-                    early_token=False)
+    # it holds a server's token (rhbl/alive/server/replay-<pid>), not one of its own
+    return run_process("replay", args, lambda ctx: ReplayProcess(ctx, stream, worlds).run(),
+                       early_token=False)
 
 
 class ReplayProcess:

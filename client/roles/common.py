@@ -189,6 +189,9 @@ class ScanWatch:
         self._thread = threading.Thread(target=self._loop, name=f"{role}-scanwatch", daemon=True)
 
     def start(self) -> ScanWatch:
+        """Watch from now on (a process that waited for a server or a learner first did not
+        go without scans meanwhile)."""
+        self._last = time.monotonic()
         self._thread.start()
         return self
 

@@ -118,9 +118,13 @@ class LearnerCore:
                 raise ProcessError(
                     f"{self.out} exists but has no journal {self.jpath.name}: it was not written "
                     f"by a learner. Extend it with --resume {self.out} --out NEW_PATH", EXIT_USAGE)
+            fork = None  # where the parent's journal stood when it was extended
             if resume is not None:
                 learner = _resume(resume, spec)
                 parent = str(Path(resume).resolve())
+                j = (load_snapshot(resume)[3].get("provenance") or {}).get("journal") or {}
+                if j.get("lineage"):
+                    fork = {"lineage": j["lineage"], "records": int(j.get("records", 0))}
             else:
                 if spec is None:
                     raise ProcessError("a new tree needs --features (wall or maze)", EXIT_USAGE)
@@ -129,7 +133,7 @@ class LearnerCore:
                     spec, actions, task=task or task_of_features(features),
                     stride=stride, min_delta=min_delta, **params)
                 parent = None
-            header = {"parent": parent, "meta": learner.metadata()}
+            header = {"parent": parent, "fork": fork, "meta": learner.metadata()}
             self.journal = Journal.create(self.jpath, header, fsync_interval=fsync_interval,
                                           write=journal_write)
             self.learner, self.applied = learner, 0
@@ -223,6 +227,15 @@ class LearnerCore:
     def holds(self, origin: str | None, seq: int | None) -> bool:
         """True when the label (origin, seq) is journaled already (or was refused)."""
         return origin is not None and (origin, seq) in self.labels
+
+    def describe(self) -> str:
+        """What the tree is, for the learner's first line: its features, the vectors it was
+        learned from (a tree extended with ``--resume`` holds its parent's too) and how many of
+        them this lineage's journal holds, its size."""
+        learner = self.learner
+        return (f"features {self.features.to_dict()['beams']}, {learner.vectors} vectors so far "
+                f"({self.applied} journaled in lineage {self.journal.lineage}), "
+                f"{learner.nodes} nodes")
 
     @property
     def dirty(self) -> bool:
@@ -466,8 +479,7 @@ class LearnerProcess:
                 self.latest = core.snapshot()
             except OSError as exc:  # the journal holds every vector; retried while learning
                 log.error("cannot write snapshot %s (%s); retrying later", core.out, exc)
-        log.info("learning: features %s, %d vectors so far, %d nodes; snapshot %s",
-                 core.features.to_dict()["beams"], core.applied, core.learner.nodes, core.out)
+        log.info("learning: %s; snapshot %s", core.describe(), core.out)
 
     def loop(self) -> None:
         now = time.monotonic()

@@ -217,3 +217,23 @@ def test_pairing_says_when_the_learner_falls_behind_and_counts_what_it_drops(cap
     late.on_scan(_scan(1, ranges))
     late.on_label(_label(500))
     assert late.waiting() == 0 and 500 in late.pending
+
+
+def test_a_resumed_learner_says_the_vectors_its_tree_holds(tmp_path):
+    """A new lineage extending a tree starts with that tree's vectors, not with "0 vectors"
+    (its own journal is empty: the first line said "0 vectors so far, 776 nodes")."""
+    base = tmp_path / "base.rhbl"
+    core = LearnerCore(base, features="wall")
+    _feed(core, 30, seed=4)
+    core.snapshot()
+    nodes = core.learner.nodes
+    core.close()
+    ext = LearnerCore(tmp_path / "ext.rhbl", resume=str(base))
+    said = ext.describe()
+    assert f"30 vectors so far (0 journaled in lineage {ext.journal.lineage}), {nodes} nodes" in said
+    assert ext.journal.header["fork"] == {"lineage": core.journal.lineage, "records": 30}
+    ext.close()
+    fresh = LearnerCore(tmp_path / "fresh.rhbl", features="wall")
+    assert "0 vectors so far (0 journaled" in fresh.describe() and fresh.describe().endswith(
+        "1 nodes")
+    fresh.close()

@@ -371,6 +371,7 @@ def test_replay_makes_a_controller_send_the_same_commands(live_run, procs, tmp_p
         rp = procs("replay", "replay", str(live_rec), "--lockstep", "--lockstep-timeout", "10",
                    "--connect", endpoint, "--wait-subscriber", "60")  # 10 s: a loaded machine
         assert rp.wait(180) == 0, rp.output()
+        assert rp.output().count("replay up") == 1, rp.output()  # it said so twice
         last = max(live)
         end = time.monotonic() + 10
         while time.monotonic() < end:
