@@ -565,11 +565,43 @@ class _Supervised:
             time.sleep(0.05)
 
 
-def _restart_router_once(sv: _Supervised, obs, journal: Path, down: float,
+class _Drivers:
+    """Who drives the robot, as the bus says (``DriverState`` on its driver key), and when."""
+
+    def __init__(self, session, robot: str = "r0") -> None:
+        from protocol import keys
+        from protocol.decoding import Decoder
+
+        self.seen: list[tuple[float, str]] = []
+        self.cond = threading.Condition()
+        self.decoder = Decoder(log)
+        self.sub = session.declare_subscriber(keys.driver_key(robot), self._on)
+
+    def _on(self, sample) -> None:
+        from protocol.messages import DriverState
+
+        d = self.decoder.decode(DriverState, sample.payload.to_bytes())
+        if d is not None:
+            with self.cond:
+                self.seen.append((time.monotonic(), d.source))
+                self.cond.notify_all()
+
+    def first_after(self, t0: float, timeout: float) -> str | None:
+        """The first source that drove after ``t0`` (waiting at most ``timeout`` s)."""
+        def first():
+            return next((s for t, s in self.seen if t >= t0 and s), None)
+
+        with self.cond:
+            self.cond.wait_for(lambda: first() is not None, timeout)
+            return first()
+
+
+def _restart_router_once(sv: _Supervised, obs, drivers: _Drivers, journal: Path, down: float,
                          roles: set[str]) -> dict:
     """SIGKILL the router, ``down`` s later start it again (the same command); the seconds from
     that start to the first command reaching the robot (the server's log: driver '' -> a
-    source), to the first label journaled, and until every service's token is back."""
+    source; who it was, from the bus), to the first label journaled, and until every
+    service's token is back."""
     sc = sv.sc
     router, server = sc.procs["router"], sc.procs["server"].child
     mark = server.mark()
@@ -592,9 +624,7 @@ def _restart_router_once(sv: _Supervised, obs, journal: Path, down: float,
     waits = [_in_thread(f) for f in (command, label, tokens)]
     sv.wait(90, tuple(t for t, _ in waits))
     cmd, lab, tok = (out[0] if out else math.nan for _, out in waits)
-    who = [ln.rsplit("-> ", 1)[1].strip("'") for ln in _lines_since(server, mark)
-           if "driver '' -> '" in ln]
-    return {"command": cmd, "by": who[0] if who else None, "label": lab, "tokens": tok}
+    return {"command": cmd, "by": drivers.first_after(t0, 10.0), "label": lab, "tokens": tok}
 
 
 def router_restart(workdir: Path, rng: random.Random, restarts: int) -> dict:
@@ -622,10 +652,12 @@ def router_restart(workdir: Path, rng: random.Random, restarts: int) -> dict:
                 f"the scenario did not start (tokens of {sorted(_alive_roles(obs))} of "
                 f"{sorted(roles)}); server log:\n{server.tail()}")
         exits = {n: len(p.exits) for n, p in sc.procs.items()}
+        drivers = _Drivers(obs)
         got = []
         for _ in range(restarts):
             sv.wait(rng.uniform(2.0, 6.0))
-            got.append(_restart_router_once(sv, obs, journal, rng.uniform(0.5, 2.0), roles))
+            got.append(_restart_router_once(sv, obs, drivers, journal, rng.uniform(0.5, 2.0),
+                                            roles))
         sc.poll(restart_delay=1.0)
         died = sorted(n for n in roles if len(sc.procs[n].exits) > exits[n] or not sc.running(n))
         cmd = np.asarray([g["command"] for g in got])

@@ -124,6 +124,12 @@ def test_bad_command_lines():
         child.stop()
 
 
+def _state(pid: int) -> str:
+    """The process state letter of /proc/<pid>/stat ("T": stopped)."""
+    with open(f"/proc/{pid}/stat") as f:
+        return f.read().rsplit(")", 1)[1].split()[0]
+
+
 # prints "tick N" every 20 ms until stopped
 TICKER = """
 import itertools, time
@@ -140,8 +146,14 @@ def test_pause_resume_and_lines_since_a_mark(tmp_path):
         assert child.wait_for_line("tick 3", timeout=30)
         child.pause()
         assert child.paused
-        time.sleep(0.3)  # let the pipe empty: nothing new arrives while it is stopped
-        mark = child.mark()
+        deadline = time.monotonic() + 30  # the kernel says it is stopped ...
+        while _state(child.pid) != "T":
+            assert time.monotonic() < deadline, _state(child.pid)
+            time.sleep(0.01)
+        mark = child.mark()  # ... and what it printed before has been read: quiet for 0.2 s
+        while child.wait_for_line("tick", timeout=0.2, since=mark):
+            assert time.monotonic() < deadline
+            mark = child.mark()
         assert not child.wait_for_line("tick", timeout=0.5, since=mark)  # frozen
         assert child.wait_for_line("tick 3", timeout=0)  # without since: the old lines count
         child.resume()
