@@ -183,10 +183,10 @@ class Demo:
                 raise ValueError(f"{flag} must be > 0, got {v:g}")
         if args.rounds is not None and args.rounds < 0:
             raise ValueError(f"--rounds must be >= 0, got {args.rounds}")
-        self.sc = SCENARIOS[args.scenario].replace(
+        self.scenario = SCENARIOS[args.scenario].replace(
             teach=args.teach_seconds, rounds=args.rounds, round_seconds=args.round_seconds,
             drive=args.drive_seconds)
-        self.spec = resolve_world(args.world or self.sc.world)
+        self.spec = resolve_world(args.world or self.scenario.world)
         stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
         self.out = Path(args.out or Path("rhbl-out") / f"{stamp}-{args.scenario}")
         self.out.mkdir(parents=True, exist_ok=True)
@@ -197,10 +197,11 @@ class Demo:
         self.failures: list[str] = []
         self.t0 = time.monotonic()
         self.tree = self.out / "tree.rhbl"
-        self.teach = self.sc.recipe.segment
-        self.drive = self.sc.drive
-        self.rounds = self.sc.recipe.rounds
-        self.round_seconds = self.sc.recipe.round_seconds
+        self.teach = self.scenario.recipe.segment
+        self.drive = self.scenario.drive
+        self.rounds = self.scenario.recipe.rounds
+        self.round_seconds = self.scenario.recipe.round_seconds
+        self.recording: Path | None = None  # --record: the recording's file
 
     # -- helpers --
     def say(self, msg: str) -> None:
@@ -297,7 +298,7 @@ class Demo:
             if not ep.ts and time.monotonic() > first_scan_by:
                 raise DemoError(f"{what}: no scan from the server within 20 s")
             if until_exit is None and t >= seconds:
-                self.say(f"{what}: sim {t:5.0f}/{seconds:g} s{self.sc_notice()}")
+                self.say(f"{what}: sim {t:5.0f}/{seconds:g} s{self.tree_notice()}")
                 return
             if goal is not None and ep.poses and until_exit is None:
                 x, y, _ = ep.poses[-1]
@@ -305,7 +306,7 @@ class Demo:
                     self.say(f"{what}: goal reached at {t:.0f} s")
                     return
             if time.monotonic() >= next_note:
-                n = self.sc_notice()
+                n = self.tree_notice()
                 self.say(f"{what}: sim {t:5.0f}/{seconds:g} s{n}")
                 next_note = time.monotonic() + 2.0
             time.sleep(0.05)
@@ -336,7 +337,7 @@ class Demo:
             out.append(ep)
         return out
 
-    def sc_notice(self) -> str:
+    def tree_notice(self) -> str:
         n = self.rec.notice
         return (f", tree {n['nodes']} nodes, height {n['height']}, {n['vectors']} vectors"
                 if n else "")
@@ -347,8 +348,9 @@ class Demo:
 
         from protocol.session import make_config
 
-        a = self.args
-        self.say(f"rhbl demo: scenario {a.scenario}, world {self.spec.name}, output {self.out}")
+        args = self.args
+        self.say(f"rhbl demo: scenario {args.scenario}, world {self.spec.name}, output "
+                 f"{self.out}")
         self.say(f"rendezvous (router) on {self.endpoint}; children log into {self.out / 'logs'}")
         from client.behaviour.actions import DEFAULT_ACTIONS
         from client.player import PlayerClient
@@ -360,7 +362,8 @@ class Demo:
             self.sim = PlayerClient(session=session, robot="r0", source="demo").simulation
             # the learner's actions (``rhbl learner`` has no other set)
             self.rec = EpisodeCollector("r0", DEFAULT_ACTIONS, TASKS[self.spec.task].side)
-            writer = demo_recording(a.record, self.out, self.say)  # None without --record
+            writer = demo_recording(args.record, self.out, self.say)  # None without --record
+            self.recording = None if writer is None else Path(writer.path)
             self.tap = BusTap(session, [self.rec, *([writer] if writer else [])],
                               world=writer is not None)  # one tap: episodes and the recording
             try:
@@ -370,51 +373,69 @@ class Demo:
                 say_demo_recording(self.tap, writer, self.say)
 
     def _phases(self) -> int:
-        from client.behaviour.learning import load_snapshot
+        args = self.args
+        starts = self.spec.start_poses[: args.starts] if args.starts else self.spec.start_poses
+        server, learner, demos = self.teach_phase(starts)
+        rounds = self.round_phase(starts, server, learner)
+        clf, actions, meta = self.final_tree(learner)
+        learned = self.drive_phase(starts, server)
+        for c in self.children:
+            if c.rc not in (0, None) and not (c.expected_stop and c.rc in (-2, 130)):
+                raise DemoError(f"{c.name} exited with status {c.rc}:\n{c.tail()}")
+        return self.report(clf, actions, meta, demos, rounds, learned)
 
-        a, sc = self.args, self.sc
-        starts = self.spec.start_poses[: a.starts] if a.starts else self.spec.start_poses
-        # 1. learner, server, the teacher demonstrates from each start pose
-        learner = self.child("learner", "learner", *sc.learner_args(), "--out",
+    def teach_phase(self, starts) -> tuple[Child, Child, list[Episode]]:
+        """1. The learner, the server and the teacher, who demonstrates from each start pose;
+        (server, learner, the demonstrations)."""
+        args, scenario = self.args, self.scenario
+        learner = self.child("learner", "learner", *scenario.learner_args(), "--out",
                              str(self.tree), "--wait-server", "60", "--snapshot-every", "0.5")
         self.wait_token("learner", learner)  # no demonstration before the learner listens
-        if a.console:
+        if args.console:
             self.start_console()
         server = self.start_server()
-        teacher = self.child("teacher", "teacher", *sc.teacher_args(a.style, a.seed),
+        teacher = self.child("teacher", "teacher", *scenario.teacher_args(args.style, args.seed),
                              "--wait-server", "30")
-        self.say(f"teaching: the {a.style} {sc.policy} teacher demonstrates from each of "
-                 f"{len(starts)} start poses, {self.teach:g} s of sim time each (pids: server "
-                 f"{server.pid}, learner {learner.pid}, teacher {teacher.pid})")
+        self.say(f"teaching: the {args.style} {scenario.policy} teacher demonstrates from each "
+                 f"of {len(starts)} start poses, {self.teach:g} s of sim time each (pids: "
+                 f"server {server.pid}, learner {learner.pid}, teacher {teacher.pid})")
         self.wait_labels(server, learner, teacher)
         demos = self.episodes("teacher", starts, self.teach, "teaching", server, learner, teacher)
         teacher.stop()
         self.say(f"demonstrations done ({sum(ep.sim_time for ep in demos):.0f} s sim, "
-                 f"{sum(len(ep.labels) for ep in demos)} labels){self.sc_notice()}")
+                 f"{sum(len(ep.labels) for ep in demos)} labels){self.tree_notice()}")
+        return server, learner, demos
 
-        # 2. corrective rounds: the controller drives the latest tree, the teacher corrects
+    def round_phase(self, starts, server: Child, learner: Child) -> list[Episode]:
+        """2. Corrective rounds: the controller drives the latest tree, the teacher corrects."""
         rounds: list[Episode] = []
-        if self.rounds > 0:
-            follower = self.child("controller-follow", "controller", "--from-learner", "--follow",
-                                  "--wait-server", "60", "--query-timeout", "10")
-            self.wait_commands("controller", server, learner, follower)
-            corrector = self.child("teacher-correct", "teacher", *sc.corrector_args(a.style),
-                                   "--wait-server", "30")
-            self.say(f"corrective rounds: the controller drives the learner's latest tree "
-                     f"(pid {follower.pid}), the teacher labels every scan and takes over near "
-                     f"walls (pid {corrector.pid}); {self.rounds} rounds x {len(starts)} starts, "
-                     f"{self.round_seconds:g} s each")
-            self.wait_labels(server, learner, follower, corrector)
-            for r in range(1, self.rounds + 1):
-                eps = self.episodes("round", starts, self.round_seconds, f"round {r}", server,
-                                    learner, follower, corrector, round_=r)
-                rounds.extend(eps)
-                took = sum(ep.teacher_ticks for ep in eps)
-                ticks = sum(len(ep.ts) for ep in eps)
-                self.say(f"round {r} done: {ticks} scans, {sum(len(ep.labels) for ep in eps)} labels, "
-                         f"teacher took over {took} ticks{self.sc_notice()}")
-            corrector.stop()
-            follower.stop()
+        if self.rounds <= 0:
+            return rounds
+        follower = self.child("controller-follow", "controller", "--from-learner", "--follow",
+                              "--wait-server", "60", "--query-timeout", "10")
+        self.wait_commands("controller", server, learner, follower)
+        corrector = self.child("teacher-correct", "teacher",
+                               *self.scenario.corrector_args(self.args.style), "--wait-server", "30")
+        self.say(f"corrective rounds: the controller drives the learner's latest tree "
+                 f"(pid {follower.pid}), the teacher labels every scan and takes over near "
+                 f"walls (pid {corrector.pid}); {self.rounds} rounds x {len(starts)} starts, "
+                 f"{self.round_seconds:g} s each")
+        self.wait_labels(server, learner, follower, corrector)
+        for r in range(1, self.rounds + 1):
+            eps = self.episodes("round", starts, self.round_seconds, f"round {r}", server,
+                                learner, follower, corrector, round_=r)
+            rounds.extend(eps)
+            self.say(f"round {r} done: {sum(len(ep.ts) for ep in eps)} scans, "
+                     f"{sum(len(ep.labels) for ep in eps)} labels, teacher took over "
+                     f"{sum(ep.teacher_ticks for ep in eps)} ticks{self.tree_notice()}")
+        corrector.stop()
+        follower.stop()
+        return rounds
+
+    def final_tree(self, learner: Child):
+        """The learner stopped (its final snapshot); the tree, its actions and metadata."""
+        from client.behaviour.learning import load_snapshot
+
         self.say("stopping the learner (SIGINT: final snapshot)")
         rc = learner.stop(timeout=30)
         if rc != 0:
@@ -425,8 +446,10 @@ class Demo:
         prov = meta.get("provenance") or {}
         self.say(f"learned tree: {clf.node_count_} nodes, height {clf.height_}, "
                  f"{prov.get('vectors')} labeled vectors -> {self.tree}")
+        return clf, actions, meta
 
-        # 3. the final tree alone from each start pose
+    def drive_phase(self, starts, server: Child) -> list[Episode]:
+        """3. The final tree alone from each start pose; then the server stops."""
         controller = self.child("controller", "controller", "--tree", str(self.tree),
                                 "--wait-server", "60")
         self.wait_commands("controller", server, controller)
@@ -434,23 +457,55 @@ class Demo:
                                 controller)
         controller.stop()
         server.stop()
-        for c in self.children:
-            if c.rc not in (0, None) and not (c.expected_stop and c.rc in (-2, 130)):
-                raise DemoError(f"{c.name} exited with status {c.rc}:\n{c.tail()}")
-
-        # 4. report
-        return self.report(clf, actions, meta, demos, rounds, learned)
+        return learned
 
     def report(self, clf, actions, meta, demos: list[Episode], rounds: list[Episode],
                learned: list[Episode]) -> int:
-        from lab.metrics import BAND
-        from lab.plot import plot_paths
-        from lab.report import episode_table, table
-
+        """4. The output folder (summary.json, trajectories.npz, paths.png) and the tables."""
         goal = self.spec.goal
         tms = [ep.metrics(goal) for ep in demos]
-        rms = [ep.metrics(goal) for ep in rounds]
         lms = [ep.metrics(goal) for ep in learned]
+        per_round = self.round_rows(rounds)
+        wall_time = time.monotonic() - self.t0
+        picture = self.write_outputs(clf, meta, demos, rounds, learned, tms, lms, per_round,
+                                     wall_time)
+        self.print_tables(clf, meta, demos, tms, lms, per_round)
+        ok = sum(1 for m in lms if m["collisions"] == 0 and m["goal_reached"] is not False)
+        print()
+        print(f"learned robot: {ok}/{len(lms)} starts without collision"
+              f"{'' if goal is None else ' and reaching the goal'}")
+        made = ["tree.rhbl", "tree.rhbl.journal", "paths.png", "summary.json",
+                "trajectories.npz", "logs/"]
+        if self.recording is not None:  # --record: in the folder, or where it was asked for
+            rec = self.recording
+            made.insert(-1, rec.name if rec.parent.resolve() == self.out.resolve() else str(rec))
+        print(f"output: {self.out}  ({', '.join(made)})")
+        print(f"picture: {picture}")
+        print(f"wall time {wall_time:.1f} s")
+        return 0
+
+    def round_rows(self, rounds: list[Episode]) -> list[dict]:
+        """Per corrective round: its episodes, sim seconds, scans, labels, the teacher's
+        ticks, collisions and goals reached."""
+        goal = self.spec.goal
+        out = []
+        for r in range(1, self.rounds + 1):
+            eps = [ep for ep in rounds if ep.round == r]
+            ms = [ep.metrics(goal) for ep in eps]
+            out.append({
+                "round": r, "episodes": len(eps),
+                "seconds": round(sum(m["seconds"] for m in ms), 1),
+                "scans": sum(len(ep.ts) for ep in eps), "labels": sum(len(ep.labels) for ep in eps),
+                "teacher_ticks": sum(ep.teacher_ticks for ep in eps),
+                "collisions": sum(m["collisions"] for m in ms),
+                "goals": (None if goal is None else sum(bool(m["goal_reached"]) for m in ms))})
+        return out
+
+    def write_outputs(self, clf, meta, demos, rounds, learned, tms, lms, per_round,
+                      wall_time: float) -> Path:
+        """summary.json, trajectories.npz and the picture (its path) in the output folder."""
+        from lab.plot import plot_paths
+
         prov = meta.get("provenance") or {}
         paths = {"teacher": [np.asarray(ep.poses).reshape(-1, 3) for ep in demos]}
         if rounds:
@@ -459,26 +514,13 @@ class Demo:
         picture = plot_paths(
             self.spec, paths, self.out / "paths.png",
             title=f"{self.args.scenario}: teacher, corrective rounds and the final tree")
-        per_round = []
-        for r in range(1, self.rounds + 1):
-            eps = [ep for ep in rounds if ep.round == r]
-            ms = [m for ep, m in zip(rounds, rms, strict=True) if ep.round == r]
-            ticks = sum(len(ep.ts) for ep in eps)
-            per_round.append({
-                "round": r, "episodes": len(eps), "seconds": round(sum(m["seconds"] for m in ms), 1),
-                "scans": ticks, "labels": sum(len(ep.labels) for ep in eps),
-                "teacher_ticks": sum(ep.teacher_ticks for ep in eps),
-                "collisions": sum(m["collisions"] for m in ms),
-                "goals": (None if goal is None else sum(bool(m["goal_reached"]) for m in ms))})
-        wall_time = time.monotonic() - self.t0
-        demo_labels = sum(len(ep.labels) for ep in demos)
         summary = {
-            "scenario": self.args.scenario, "task": self.sc.task, "world": self.spec.name,
+            "scenario": self.args.scenario, "task": self.scenario.task, "world": self.spec.name,
             "tree": {"nodes": int(clf.node_count_), "height": int(clf.height_),
                      "task": meta.get("task"), "vectors": prov.get("vectors"),
                      "labeled": prov.get("labeled"), "path": str(self.tree)},
             "teacher": tms, "rounds": per_round, "learned": lms,
-            "demonstration_labels": demo_labels,
+            "demonstration_labels": sum(len(ep.labels) for ep in demos),
             "wall_time": round(wall_time, 1), "teach_seconds": self.teach,
             "rounds_count": self.rounds, "round_seconds": self.round_seconds,
             "drive_seconds": self.drive, "style": self.args.style,
@@ -489,6 +531,15 @@ class Demo:
             self.out / "trajectories.npz",
             **{f"{ep.kind}{k}_{f}": np.asarray(getattr(ep, f))
                for k, ep in enumerate(eps) for f in ("ts", "poses", "side", "ids", "stalls")})
+        return picture
+
+    def print_tables(self, clf, meta, demos, tms, lms, per_round) -> None:
+        """Table I, the corrective rounds and what the robots did."""
+        from lab.metrics import BAND
+        from lab.report import episode_table, table
+
+        prov = meta.get("provenance") or {}
+        demo_labels = sum(len(ep.labels) for ep in demos)
         print()
         print(table(["scenario", "nodes", "tree height", "demonstration vectors"],
                     [[self.args.scenario, clf.node_count_, clf.height_, prov.get("vectors")]],
@@ -507,20 +558,11 @@ class Demo:
                          "goal"], rows,
                         title="Corrective rounds (the controller drives the latest tree; the "
                               "teacher labels every scan and takes over while a beam is closer "
-                              f"than {self.sc.recipe.takeover:g} m)"))
+                              f"than {self.scenario.recipe.takeover:g} m)"))
         print()
         print(episode_table([("teacher", m) for m in tms] + [("learned", m) for m in lms],
                             title="What the robots did (sim seconds per episode; band = time "
                                   f"with the right-hand wall within {BAND[0]:g}-{BAND[1]:g} m)"))
-        ok = sum(1 for m in lms if m["collisions"] == 0 and m["goal_reached"] is not False)
-        print()
-        print(f"learned robot: {ok}/{len(lms)} starts without collision"
-              f"{'' if goal is None else ' and reaching the goal'}")
-        print(f"output: {self.out}  (tree.rhbl, tree.rhbl.journal, paths.png, summary.json, "
-              f"logs/)")
-        print(f"picture: {picture}")
-        print(f"wall time {wall_time:.1f} s")
-        return 0
 
     def cleanup(self) -> None:
         for c in reversed(self.children):

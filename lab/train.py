@@ -72,12 +72,8 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
     and corrects, the compacted tree. With ``recipe.compact_visits`` the last compaction is
     redone against the learned vectors plus held-out states the compacted tree reaches
     (``visited_states``)."""
-    task = spec.task
-    recipe = recipe_for(task) if recipe is None else recipe
-    if recipe.task != task:
-        raise ValueError(f"the recipe is for task {recipe.task!r} but world {spec.name!r} is a "
-                         f"{task!r} world")
-    policy = policy or make_policy(task, actions=learner.actions)
+    recipe, compact = _checked(spec, learner, recipe)
+    policy = policy or make_policy(spec.task, actions=learner.actions)
     rng = np.random.default_rng(seed)
     aug = (_Augmenter(policy, recipe.augment, recipe.augment_scale, seed)
            if recipe.augment > 0 else None)
@@ -90,10 +86,6 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
                     seed=seed, noise=noise, on_step=on_step)
     demo_vectors = ep.learned
     rounds = 0 if start is not None else recipe.rounds  # a corrective demonstration: no rounds
-    compact = recipe.compact_params()
-    if compact is not None and not learner.recording:
-        raise ValueError(f"recipe compact {recipe.compact!r} needs a learner that kept its "
-                         "vectors (make_learner(recipe), or record=True)")
     round_stats, between = _rounds(spec, learner, policy, fixed, recipe, rounds, compact, ep,
                                    rng=rng, aug=aug, seed=seed, noise=noise, on_step=on_step)
     compaction = _last_compaction(spec, learner, recipe, compact, seed, policy, on_step)
@@ -103,6 +95,21 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
         demo_vectors=demo_vectors, rounds=rounds, round_stats=round_stats, noise=noise,
         compaction=compaction, between=between, compacted=compact is not None)
     return ep
+
+
+def _checked(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None
+             ) -> tuple[Recipe, dict | None]:
+    """The recipe (default: the world's task's) and its compaction step's settings; ValueError
+    when the recipe is another task's, or compacts with a learner that keeps no vectors."""
+    recipe = recipe_for(spec.task) if recipe is None else recipe
+    if recipe.task != spec.task:
+        raise ValueError(f"the recipe is for task {recipe.task!r} but world {spec.name!r} is a "
+                         f"{spec.task!r} world")
+    compact = recipe.compact_params()
+    if compact is not None and not learner.recording:
+        raise ValueError(f"recipe compact {recipe.compact!r} needs a learner that kept its "
+                         "vectors (make_learner(recipe), or record=True)")
+    return recipe, compact
 
 
 def _demonstrations(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe, policy,
