@@ -84,6 +84,45 @@ def _tie_break_order(radii: np.ndarray, depth: np.ndarray) -> np.ndarray:
     return np.lexsort((np.arange(len(radii)), -depth, radii))
 
 
+def _preorder(children: list[list[int]], n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The nodes in pre-order (children in creation order) and, per node, the pre-order
+    position just after its subtree (an iterative depth-first walk)."""
+    order = np.empty(n, dtype=np.int64)
+    end = np.empty(n, dtype=np.int64)
+    pos = 0
+    stack = [(0, False)]
+    while stack:
+        node, done = stack.pop()
+        if done:
+            end[node] = pos
+            continue
+        order[pos] = node
+        pos += 1
+        stack.append((node, True))
+        for c in reversed(children[node]):
+            stack.append((c, False))
+    return order, end
+
+
+def _reach_bands(kids_reach: list, n_feat: int, euclidean: bool
+                 ) -> tuple[list[np.ndarray | None], list[np.ndarray | None]]:
+    """Per node, the (sure, maybe) bounds of its children's reach: the band of rounding error
+    of the expanded squared distance around each reach (None for a leaf)."""
+    tol = 16 * 2.0**-53 * (n_feat * n_feat + 4 * n_feat)
+    sure: list[np.ndarray | None] = []
+    maybe: list[np.ndarray | None] = []
+    for r in kids_reach:
+        if r is None:
+            sure.append(None)
+            maybe.append(None)
+            continue
+        lim = r * r if euclidean else r
+        band = tol + (8 * 2.0**-53 * lim if euclidean else 0.0)
+        sure.append(lim - band)
+        maybe.append(lim + band)
+    return sure, maybe
+
+
 class SphereTree:
     """The spheres of one RHBL tree, in creation order (root 0; every parent precedes its child).
 
@@ -440,22 +479,8 @@ class SphereTree:
 
     def _build_preorder(self) -> _PreorderLayout:
         n = self.node_count
-        order = np.empty(n, dtype=np.int64)
-        end = np.empty(n, dtype=np.int64)
         children = self.children
-        # iterative pre-order DFS, children in creation order
-        pos = 0
-        stack = [(0, False)]
-        while stack:
-            node, done = stack.pop()
-            if done:
-                end[node] = pos
-                continue
-            order[pos] = node
-            pos += 1
-            stack.append((node, True))
-            for c in reversed(children[node]):
-                stack.append((c, False))
+        order, end = _preorder(children, n)
         position_of = np.empty(n, dtype=np.int64)
         position_of[order] = np.arange(n)
         radii = self._radii[:n]
@@ -478,20 +503,7 @@ class SphereTree:
                 kids.append(None)
                 kids_ct.append(None)
                 kids_reach.append(None)
-        # the band of rounding error of the expanded squared distance around each child's reach
-        n_feat = self.n_features
-        tol = 16 * 2.0**-53 * (n_feat * n_feat + 4 * n_feat)
-        sure: list[np.ndarray | None] = []
-        maybe: list[np.ndarray | None] = []
-        for r in kids_reach:
-            if r is None:
-                sure.append(None)
-                maybe.append(None)
-                continue
-            lim = r * r if self._euclidean else r
-            band = tol + (8 * 2.0**-53 * lim if self._euclidean else 0.0)
-            sure.append(lim - band)
-            maybe.append(lim + band)
+        sure, maybe = _reach_bands(kids_reach, self.n_features, self._euclidean)
         self._preorder = _PreorderLayout(
             centers_t=centers_t,
             reach=reach,
