@@ -7,8 +7,9 @@ line ``console: <URL>`` with the URL to open. The page (``client/roles/console/s
 JS and a canvas, no network access beyond this process) shows the world, the robot, its trail and
 laser, who drives and with which action, the learner's tree and the controller's decision; the
 person drives with the arrow keys/WASD, on-screen buttons or a gamepad. Commands go on the bus
-exactly as ``rhbl teacher`` sends them (``client.labels.TeacherPublisher``): the velocity on
-``.../cmd/vel/teacher`` and the label for the scan the page displayed on ``.../teacher/action``,
+exactly as ``rhbl teacher`` sends them (``client.player.PlayerClient``,
+``client.labels.LabelPublisher``): the velocity on ``.../cmd/vel/teacher`` and the label for
+the scan the page displayed on ``.../teacher/action``,
 kept and resent until a learner acknowledges it (once a learner of the robot was seen).
 
     rhbl console                                   # http://127.0.0.1:8080/
