@@ -31,7 +31,6 @@ from server.world import World, WorldSpec, load_world
 __all__ = [
     "DT",
     "OnStep",
-    "TreePolicy",
     "demonstration_starts",
     "drive",
     "make_learner",
