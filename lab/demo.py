@@ -209,7 +209,11 @@ class Demo:
             print(f"[{time.monotonic() - self.t0:6.1f}s] {msg}", flush=True)
 
     def child(self, name: str, *args: str) -> Child:
-        c = Child(name, _rhbl(*args, "--connect", self.endpoint), self.out / "logs").start()
+        """``rhbl ARGS...`` connected to the rendezvous, logging into logs/<name>.log, its
+        counters at exit in logs/<name>.json (``--stats``)."""
+        stats = self.out / "logs" / f"{name}.json"
+        c = Child(name, _rhbl(*args, "--connect", self.endpoint, "--stats", str(stats)),
+                  self.out / "logs").start()
         self.children.append(c)
         return c
 
@@ -524,6 +528,7 @@ class Demo:
             "wall_time": round(wall_time, 1), "teach_seconds": self.teach,
             "rounds_count": self.rounds, "round_seconds": self.round_seconds,
             "drive_seconds": self.drive, "style": self.args.style,
+            "processes": self.process_counters(),
         }
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
         eps = [*demos, *rounds, *learned]
@@ -532,6 +537,15 @@ class Demo:
             **{f"{ep.kind}{k}_{f}": np.asarray(getattr(ep, f))
                for k, ep in enumerate(eps) for f in ("ts", "poses", "side", "ids", "stalls")})
         return picture
+
+    def process_counters(self) -> dict:
+        """Each child's counters (its ``--stats``), of those that have written them."""
+        out = {}
+        for c in self.children:
+            stats = self.out / "logs" / f"{c.name}.json"
+            if stats.exists():
+                out[c.name] = json.loads(stats.read_text())
+        return out
 
     def print_tables(self, clf, meta, demos, tms, lms, per_round) -> None:
         """Table I, the corrective rounds and what the robots did."""

