@@ -70,6 +70,55 @@ def decision_cost(n: int = 2000) -> str:
             f"{np.median(decided) * 1e6:.0f} us ({size / n:.0f} bytes)")
 
 
+class _Commands:
+    """The teacher's commands on the bus, with their arrival (wall) time."""
+
+    def __init__(self, session) -> None:
+        self.arrivals: list[tuple[float, float]] = []  # (wall time, vx)
+        self.cond = threading.Condition()
+        self.sub = session.declare_subscriber(keys.cmd_vel_key("r0", source="teacher"),
+                                              self._on)
+
+    def _on(self, sample) -> None:
+        t = time.time()
+        c = VelCmd.decode(sample.payload.to_bytes())
+        with self.cond:
+            self.arrivals.append((t, c.vx))
+            self.cond.notify_all()
+
+    def first(self, pred, seen: int) -> float:
+        """When the first command after the ``seen`` first ones with ``pred(vx)`` arrived."""
+        with self.cond:
+            if not self.cond.wait_for(lambda: any(pred(v) for _, v in self.arrivals[seen:]),
+                                      5.0):
+                raise SystemExit("no command arrived within 5 s")
+            return next(t for t, v in self.arrivals[seen:] if pred(v))
+
+
+def key_latency(drv, cmds: _Commands, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Key press -> the teacher's command, key release -> its stop (ms), ``n`` times."""
+    press, release = [], []
+    for _ in range(n):
+        seen = len(cmds.arrivals)
+        t0 = drv.execute_script(KEY, "keydown") / 1000.0
+        press.append(cmds.first(lambda v: v > 0, seen) - t0)
+        seen = len(cmds.arrivals)
+        t0 = drv.execute_script(KEY, "keyup") / 1000.0
+        release.append(cmds.first(lambda v: v == 0, seen) - t0)
+    return np.array(press) * 1e3, np.array(release) * 1e3
+
+
+def frame_rate(drv, seconds: float) -> tuple[float, float, int]:
+    """Frames per second drawn over ``seconds``, ms to draw one, beams per scan drawn."""
+    f0 = int(drv.find_element("id", "fps").get_attribute("data-frames"))
+    t0 = time.monotonic()
+    time.sleep(seconds)  # the measuring window itself, not a wait for an event
+    f1 = int(drv.find_element("id", "fps").get_attribute("data-frames"))
+    fps = (f1 - f0) / (time.monotonic() - t0)
+    draw_ms = float(drv.find_element("id", "fps").get_attribute("data-draw-ms"))
+    return fps, draw_ms, drv.execute_script("return S.scan.ranges.length")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--n", type=int, default=200, help="key presses measured (default 200)")
@@ -82,18 +131,8 @@ def main() -> int:
     drv = None
     try:
         url = console.wait_url()
-        arrivals: list[tuple[float, float]] = []  # (wall time, vx)
-        cond = threading.Condition()
-
-        def on_cmd(sample):
-            t = time.time()
-            c = VelCmd.decode(sample.payload.to_bytes())
-            with cond:
-                arrivals.append((t, c.vx))
-                cond.notify_all()
-
         with zenoh.open(make_config(mode="client", connect=[srv.endpoint])) as session:
-            sub = session.declare_subscriber(keys.cmd_vel_key("r0", source="teacher"), on_cmd)
+            cmds = _Commands(session)
             drv = chromium()
             drv.get(url)
             end = time.monotonic() + 20
@@ -101,33 +140,9 @@ def main() -> int:
                 if time.monotonic() > end:
                     raise SystemExit("the page shows no scan")
                 time.sleep(0.05)
-
-            def wait(pred, seen: int) -> float:
-                with cond:
-                    if not cond.wait_for(lambda: any(pred(v) for _, v in arrivals[seen:]), 5.0):
-                        raise SystemExit("no command arrived within 5 s")
-                    return next(t for t, v in arrivals[seen:] if pred(v))
-
-            press, release = [], []
-            for _ in range(args.n):
-                seen = len(arrivals)
-                t0 = drv.execute_script(KEY, "keydown") / 1000.0
-                press.append(wait(lambda v: v > 0, seen) - t0)
-                seen = len(arrivals)
-                t0 = drv.execute_script(KEY, "keyup") / 1000.0
-                release.append(wait(lambda v: v == 0, seen) - t0)
-            sub.undeclare()
-
-            f0 = int(drv.find_element("id", "fps").get_attribute("data-frames"))
-            t0 = time.monotonic()
-            time.sleep(args.seconds)  # the measuring window itself, not a wait for an event
-            f1 = int(drv.find_element("id", "fps").get_attribute("data-frames"))
-            fps = (f1 - f0) / (time.monotonic() - t0)
-            draw_ms = float(drv.find_element("id", "fps").get_attribute("data-draw-ms"))
-            beams = drv.execute_script("return S.scan.ranges.length")
-
-        p = np.array(press) * 1e3
-        r = np.array(release) * 1e3
+            p, r = key_latency(drv, cmds, args.n)
+            cmds.sub.undeclare()
+            fps, draw_ms, beams = frame_rate(drv, args.seconds)
         print(f"key press -> VelCmd on the bus ({args.n} presses): p50 {np.percentile(p, 50):.2f} "
               f"ms, p99 {np.percentile(p, 99):.2f} ms")
         print(f"key release -> stop command: p50 {np.percentile(r, 50):.2f} ms, "
@@ -142,7 +157,6 @@ def main() -> int:
         for s in started:
             s.stop()
     return 0
-
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -147,7 +147,8 @@ def _staged_tree(name: str, task: str, seed: int, folder, clf, feats, acts, meta
     import numpy as np
 
     from client.behaviour.learning import DemonstrationLearner, load_snapshot
-    from lab.harness import make_learner, resolve_world, train, visited_states
+    from lab.harness import make_learner, resolve_world
+    from lab.train import train, visited_states
 
     kind, times, kw = _staged(name)
     tag = Path(folder) / f"{task}-s{seed}-{name.replace(':', '-')}.rhbl"
@@ -202,7 +203,8 @@ def record_trial(task: str, seed: int, folder) -> tuple:
     import numpy as np
 
     from client.behaviour.learning import load_snapshot
-    from lab.harness import make_learner, resolve_world, train
+    from lab.harness import make_learner, resolve_world
+    from lab.train import train
 
     tag = Path(folder) / f"{task}-s{seed}"
     tree, data = tag.with_suffix(".rhbl"), tag.with_suffix(".npz")
@@ -278,7 +280,7 @@ def compact_study(task: str, trials: int, folder: str, methods: list[str],
     return out
 
 
-def main() -> int:
+def _parse() -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--trials", type=int, default=3)
     ap.add_argument("--task", default="wall-following", choices=["wall-following", "maze"])
@@ -302,54 +304,60 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0, help="compact: first trial's seed")
     ap.add_argument("--offline", action="store_true",
                     help="compact: sizes and agreement only, no closed-loop evaluation")
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def beams_study(task: str, trials: int) -> list[dict]:
+    """Each beam choice of ``BEAMS`` in the task's recipe: success, size."""
     out = []
-    if args.study == "compact":
-        out = compact_study(args.task, args.trials, args.dir, args.methods.split(","),
-                            offline=args.offline, eval_worlds=args.eval_world,
-                            first_seed=args.seed)
-        if args.json:
-            with open(args.json, "w") as fh:
-                json.dump(out, fh, indent=1)
-        return 0
-    if args.study == "size":
-        out = size_study(args.task, args.trials)
-        if args.json:
-            with open(args.json, "w") as fh:
-                json.dump(out, fh, indent=1)
-        return 0
-    if args.study == "beams":
-        print(f"{'beams':32} {'success':>8} {'min':>5} {'nodes':>7} {'height':>6} {'collisions':>10}")
-        for name, beams in BEAMS:
-            res = run_experiment(args.task, trials=args.trials, eval_worlds=[],
-                                 recipe=RECIPES[args.task].replace(
-                                     features=FeatureSpec(beams=beams)))
-            s = res["summary"]
-            w = next(iter(s["worlds"].values()))
-            out.append({"beams": list(beams), "success": w["success_rate"]["mean"],
-                        "nodes": s["nodes"]["mean"], "height": s["height"]["mean"]})
-            print(f"{name:32} {w['success_rate']['mean']:>8.1%} {w['success_rate']['min']:>5.0%} "
-                  f"{s['nodes']['mean']:>7.0f} {s['height']['mean']:>6.1f} {w['collisions']:>10}",
-                  flush=True)
-        if args.json:
-            with open(args.json, "w") as fh:
-                json.dump(out, fh, indent=1)
-        return 0
+    print(f"{'beams':32} {'success':>8} {'min':>5} {'nodes':>7} {'height':>6} {'collisions':>10}")
+    for name, beams in BEAMS:
+        res = run_experiment(task, trials=trials, eval_worlds=[],
+                             recipe=RECIPES[task].replace(features=FeatureSpec(beams=beams)))
+        s = res["summary"]
+        w = next(iter(s["worlds"].values()))
+        out.append({"beams": list(beams), "success": w["success_rate"]["mean"],
+                    "nodes": s["nodes"]["mean"], "height": s["height"]["mean"]})
+        print(f"{name:32} {w['success_rate']['mean']:>8.1%} {w['success_rate']['min']:>5.0%} "
+              f"{s['nodes']['mean']:>7.0f} {s['height']['mean']:>6.1f} {w['collisions']:>10}",
+              flush=True)
+    return out
+
+
+def tradeoff_study(task: str, trials: int) -> list[dict]:
+    """Each recipe of ``ROWS`` (teacher, spawn rule, perturbation, stride): success, size."""
+    out = []
     print(f"{'recipe':36} {'success':>8} {'min':>5} {'nodes':>7} {'height':>6} {'collisions':>10}")
     for name, teacher, spawn, perturb, stride in ROWS:
         t0 = time.perf_counter()
-        recipe = RECIPES[args.task].replace(perturb=perturb, stride=stride, spawn=spawn)
-        res = run_experiment(args.task, trials=args.trials, eval_worlds=[], teacher=teacher,
+        recipe = RECIPES[task].replace(perturb=perturb, stride=stride, spawn=spawn)
+        res = run_experiment(task, trials=trials, eval_worlds=[], teacher=teacher,
                              recipe=recipe)
         s = res["summary"]
         w = next(iter(s["worlds"].values()))
         row = {"recipe": name, "teacher": teacher, "spawn": spawn, "perturb": perturb,
-               "stride": stride, "success": w["success_rate"]["mean"], "success_min": w["success_rate"]["min"],
-               "nodes": s["nodes"]["mean"], "height": s["height"]["mean"], "collisions": w["collisions"],
+               "stride": stride, "success": w["success_rate"]["mean"],
+               "success_min": w["success_rate"]["min"], "nodes": s["nodes"]["mean"],
+               "height": s["height"]["mean"], "collisions": w["collisions"],
                "seconds": round(time.perf_counter() - t0, 1)}
         out.append(row)
         print(f"{name:36} {row['success']:>8.1%} {row['success_min']:>5.0%} {row['nodes']:>7.0f} "
               f"{row['height']:>6.1f} {row['collisions']:>10}", flush=True)
+    return out
+
+
+def main() -> int:
+    args = _parse()
+    if args.study == "compact":
+        out = compact_study(args.task, args.trials, args.dir, args.methods.split(","),
+                            offline=args.offline, eval_worlds=args.eval_world,
+                            first_seed=args.seed)
+    elif args.study == "size":
+        out = size_study(args.task, args.trials)
+    elif args.study == "beams":
+        out = beams_study(args.task, args.trials)
+    else:
+        out = tradeoff_study(args.task, args.trials)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(out, fh, indent=1)

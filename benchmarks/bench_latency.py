@@ -33,7 +33,7 @@ import zenoh
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from lab.processes import Child, free_port, rhbl_argv  # noqa: E402
+from lab.children import Child, free_port, rhbl_argv  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, VelCmd  # noqa: E402
 from protocol.session import make_config  # noqa: E402
@@ -56,8 +56,9 @@ def echo(endpoint: str) -> int:
 
 
 def _train_tree(path: Path) -> None:
-    from lab.harness import make_learner, resolve_world, train
+    from lab.harness import make_learner, resolve_world
     from lab.recipe import RECIPES
+    from lab.train import train
 
     spec = resolve_world("room")
     learner = make_learner(spec.task)

@@ -2,7 +2,7 @@
 
 1. writer throughput: how many scans per second (each with its tick's State, a teacher's
    VelCmd and label: what one robot under demonstration publishes) the recorder's writer
-   (``client.recording.RecordingWriter``, the thread ``rhbl record`` writes with) keeps up
+   (``client.recording.mcap_file.RecordingWriter``, the thread ``rhbl record`` writes with) keeps up
    with, with and without the viewer channels, on this machine's CPU.
 2. the live bus: a ``rhbl server --speedup 0`` (as fast as it can) with a ``rhbl record``
    process subscribed: scans per second the server published, the share the recorder kept
@@ -31,8 +31,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from client.recording import RecordingError, RecordingWriter, read_recording  # noqa: E402
-from lab.processes import Child, free_port, rhbl_argv  # noqa: E402
+from client.recording.mcap_file import RecordingError, RecordingWriter, read_recording  # noqa: E402
+from lab.children import Child, free_port, rhbl_argv  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, State, TeacherAction, VelCmd  # noqa: E402
 
@@ -170,7 +170,7 @@ def size_per_minute(tmp: Path) -> tuple[float, float]:
 def main() -> int:
     import logging
 
-    logging.getLogger("client.recording").setLevel(logging.ERROR)  # polling unfinished files
+    logging.getLogger("client.recording.mcap_file").setLevel(logging.ERROR)  # polling unfinished files
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=10.0, help="seconds per live measurement")
     ap.add_argument("--scans", type=int, default=3000, help="scans for the writer throughput")

@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 import server  # noqa: E402
-from lab.processes import free_port  # noqa: E402
+from lab.children import free_port  # noqa: E402
 from server.world import LASER, ROBOT, Wall, World, load_world  # noqa: E402
 
 _PERIOD = 0.1  # s, 10 Hz
@@ -220,7 +220,7 @@ def serve_controller(endpoint: str) -> int:
         pubs: dict[str, object] = {}
 
         def on_scan(sample) -> None:
-            robot = str(sample.key_expr).split("/")[1]
+            robot = keys.parse(sample.key_expr).robot
             scan = Scan.decode(sample.payload.to_bytes())
             vx, va = reflex(np.asarray(scan.ranges))
             if done.is_set():  # stopping: the session may close under a late callback
@@ -231,7 +231,7 @@ def serve_controller(endpoint: str) -> int:
                     keys.cmd_vel_key(robot, source="controller"), express=True)
             pub.put(VelCmd(vx=vx, va=va, source="controller", scan_id=scan.id).encode())
 
-        sub = s.declare_subscriber(f"{keys.PREFIX}/*/laser/0/data/scan", on_scan)
+        sub = s.declare_subscriber(keys.scan_key(keys.EVERY), on_scan)
         t0 = os.times()
         print("ready", flush=True)
         done.wait()

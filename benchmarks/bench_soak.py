@@ -28,7 +28,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from lab.processes import Child, free_port, rhbl_argv  # noqa: E402
+from lab.children import Child, free_port, rhbl_argv  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -220,12 +220,17 @@ class Journal:
 
     Create with ``Journal.create(path, header)`` (fails if the file exists) or open an existing
     one with ``Journal.open(path)`` (validates every frame, truncates a torn tail).
+
+    ``write`` (default ``os.write``, same signature) writes the appended records' bytes: the
+    seam through which a fault campaign makes them fail as a full disk would
+    (campaigns/full_disk.py).
     """
 
     def __init__(self, path: Path, fd: int, header: dict, offsets: list[int], end: int,
-                 fsync_interval: float, truncated: int = 0):
+                 fsync_interval: float, truncated: int = 0, write=os.write):
         self.path = path
         self._fd = fd
+        self._write = write
         self.header = header
         self.base = int(header.get("base", 0))  # index of the first record held (fold)
         self._offsets = offsets  # file offset of each record's frame (record base + k)
@@ -239,7 +244,7 @@ class Journal:
     # ---- construction -------------------------------------------------------------------
     @classmethod
     def create(cls, path: str | os.PathLike, header: Mapping | None = None, *,
-               fsync_interval: float = 1.0) -> Journal:
+               fsync_interval: float = 1.0, write=os.write) -> Journal:
         """A new, empty journal whose header holds ``header`` plus a fresh ``lineage`` id."""
         path = Path(path)
         head = {"kind": KIND, "format": FORMAT, "lineage": uuid.uuid4().hex,
@@ -268,11 +273,11 @@ class Journal:
         except OSError as exc:
             raise JournalError(f"cannot create journal {path}: {exc}") from exc
         _fsync_dir(path)
-        return cls(path, fd, head, [], len(data), fsync_interval)
+        return cls(path, fd, head, [], len(data), fsync_interval, write=write)
 
     @classmethod
     def open(cls, path: str | os.PathLike, *, fsync_interval: float = 1.0,
-             readonly: bool = False) -> Journal:
+             readonly: bool = False, write=os.write) -> Journal:
         """Open an existing journal for appending (or reading), after validating every frame."""
         path = Path(path)
         try:
@@ -297,7 +302,7 @@ class Journal:
         except BaseException:
             os.close(fd)
             raise
-        return cls(path, fd, header, offsets, end, fsync_interval, truncated)
+        return cls(path, fd, header, offsets, end, fsync_interval, truncated, write)
 
     # ---- reading ------------------------------------------------------------------------
     @property
@@ -340,9 +345,9 @@ class Journal:
         if self._torn:  # a failed append left bytes that a retry could not remove yet
             self._rollback(None)
         try:
-            n = os.write(self._fd, data)
+            n = self._write(self._fd, data)
             while n < len(data):  # a short write (disk full / signal): finish or fail loudly
-                w = os.write(self._fd, data[n:])
+                w = self._write(self._fd, data[n:])
                 if w <= 0:
                     raise OSError(errno.ENOSPC, "short write")
                 n += w

@@ -18,6 +18,14 @@
 used) and refreshes every proxy from the latest messages; in between, proxies do not change.
 Messages are decoded as they arrive (a few microseconds) and only the latest is kept, so a slow
 reader never stalls the session.
+
+What the processes need (``rhbl controller``, ``rhbl teacher``, ``rhbl console`` are built on
+it): a ``ScanChannel`` (``client.scans(depth)``: the scans through a zenoh ring channel, the
+latest only with ``depth`` 1, decoded in the reader's thread: the controller's hot path),
+publisher options (``express``, ``block``: a command is never dropped under congestion) and
+``answer(scan, vx, va)``, the command that answers a scan (its id and sim time: a lock-step
+server steps once every driver answered). Malformed messages are dropped and counted
+(``client.decoder``, ``protocol.decoding``).
 """
 
 from __future__ import annotations
@@ -32,6 +40,7 @@ import zenoh
 
 from protocol import keys
 from protocol.codec import DecodeError, ProtocolError
+from protocol.decoding import Decoder
 from protocol.messages import (
     Ack,
     DriverState,
@@ -49,7 +58,8 @@ from protocol.messages import (
 )
 from protocol.session import make_config
 
-__all__ = ["LaserProxy", "PlayerClient", "Position2dProxy", "RequestError", "SimulationProxy"]
+__all__ = ["LaserProxy", "PlayerClient", "Position2dProxy", "RequestError", "ScanChannel",
+           "SimulationProxy"]
 
 log = logging.getLogger(__name__)
 
@@ -64,7 +74,8 @@ class PlayerClient:
     ``config`` is a ``zenoh.Config`` (default: a client of ``tcp/127.0.0.1:7447``), or pass an
     open ``session`` to share it. ``source`` names this client in its commands (``teacher``,
     ``controller``, ...; the server's arbitration rule uses it); with ``per_source_key`` the
-    commands go to ``.../cmd/vel/<source>``.
+    commands go to ``.../cmd/vel/<source>``. The command publisher's options: ``express``
+    (sent at once, not batched) and ``block`` (congestion control BLOCK: never dropped).
     """
 
     def __init__(
@@ -75,6 +86,8 @@ class PlayerClient:
         session: zenoh.Session | None = None,
         index: int = 0,
         per_source_key: bool = True,
+        express: bool = False,
+        block: bool = False,
     ) -> None:
         self.robot = keys.check_chunk(robot, "robot")
         self.source = source
@@ -86,10 +99,14 @@ class PlayerClient:
         self._arrived: dict[str, int] = {"state": 0, "scan": 0}
         self._read_mark = 0
         self._proxies: list[_Proxy] = []
+        self._channels: list[ScanChannel] = []
         self._subs: dict[str, Any] = {}
-        self.dropped = 0
+        self.decoder = Decoder(log)  # malformed messages dropped, counted by kind
         cmd_key = keys.cmd_vel_key(robot, index, source if per_source_key and source else None)
-        self._cmd_pub = self.session.declare_publisher(cmd_key)
+        opts: dict[str, Any] = {"express": True} if express else {}
+        if block:
+            opts["congestion_control"] = zenoh.CongestionControl.BLOCK
+        self._cmd_pub = self.session.declare_publisher(cmd_key, **opts)
         self._position2d: Position2dProxy | None = None
         self._laser: LaserProxy | None = None
         self._simulation: SimulationProxy | None = None
@@ -106,12 +123,8 @@ class PlayerClient:
         }[kind]
 
         def on_sample(sample: zenoh.Sample, kind=kind, cls=cls) -> None:
-            try:
-                msg = cls.decode(sample.payload.to_bytes())
-            except DecodeError as e:
-                self.dropped += 1
-                if self.dropped <= 10 or self.dropped % 100 == 0:
-                    log.warning("dropped a %s message (%d so far): %s", kind, self.dropped, e)
+            msg = self.decoder.decode(cls, sample.payload.to_bytes())
+            if msg is None:
                 return
             with self._cond:
                 self._latest[kind] = msg
@@ -191,14 +204,34 @@ class PlayerClient:
             msg = self._latest.get("driver")
         return None if msg is None else msg.source
 
+    @property
+    def dropped(self) -> int:
+        """Malformed messages dropped so far (every kind; ``decoder.counts`` by kind)."""
+        return self.decoder.total
+
+    def scans(self, depth: int = 1) -> ScanChannel:
+        """The robot's scans through a channel of ``depth``: 1, the latest only (a reader never
+        acts on a backlog); more, a short queue (the oldest dropped when it is full). Decoded in
+        the reader's thread; undeclared by ``close``."""
+        channel = ScanChannel(self, depth)
+        self._channels.append(channel)
+        return channel
+
     def send_command(
-        self, vx: float, va: float, state: bool = True, scan_id: int | None = None
+        self, vx: float, va: float, state: bool = True, scan_id: int | None = None,
+        ts: float | None = None,
     ) -> None:
-        """Publish a velocity command (prefer :meth:`Position2dProxy.set_speed`)."""
+        """Publish a velocity command (prefer :meth:`Position2dProxy.set_speed` or
+        :meth:`answer`)."""
         if not (math.isfinite(vx) and math.isfinite(va)):
             raise ValueError(f"speeds must be finite, got vx={vx!r}, va={va!r}")
-        msg = VelCmd(vx=vx, va=va, state=state, source=self.source, scan_id=scan_id)
+        msg = VelCmd(vx=vx, va=va, state=state, source=self.source, scan_id=scan_id, ts=ts)
         self._cmd_pub.put(msg.encode())
+
+    def answer(self, scan: Scan, vx: float, va: float) -> None:
+        """Command ``(vx, va)`` as the answer to ``scan``: the command names its id and sim
+        time (a lock-step server steps once every driver answered its scan)."""
+        self.send_command(vx, va, True, scan.id, scan.ts)
 
     def request(
         self, iface: str, name: str, payload: bytes | None = None, timeout: float = 2.0
@@ -227,6 +260,9 @@ class PlayerClient:
             return bool(self._cond.wait_for(lambda: "state" in self._latest, timeout))
 
     def close(self) -> None:
+        for ch in self._channels:
+            ch.close()
+        self._channels.clear()
         for s in self._subs.values():
             try:
                 s.undeclare()
@@ -245,6 +281,44 @@ class PlayerClient:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class ScanChannel:
+    """The scans of a client's robot through a zenoh ring channel (``PlayerClient.scans``).
+
+    ``recv()`` blocks for the next scan and decodes it here, in the reader's thread (None: it
+    was malformed, dropped and counted by the client's decoder); ``try_recv()`` the same
+    without blocking (None also when nothing is there); ``latest()`` takes everything waiting
+    and returns the last."""
+
+    def __init__(self, client: PlayerClient, depth: int = 1) -> None:
+        if int(depth) < 1:
+            raise ValueError(f"a scan channel holds at least one scan, got depth {depth}")
+        self._decoder = client.decoder
+        self.key = keys.scan_key(client.robot, client.index)
+        self._sub = client.session.declare_subscriber(self.key,
+                                                      zenoh.handlers.RingChannel(int(depth)))
+        self._recv, self._try = self._sub.handler.recv, self._sub.handler.try_recv
+
+    def recv(self) -> Scan | None:
+        return self._decoder.decode(Scan, self._recv().payload.to_bytes())
+
+    def try_recv(self) -> Scan | None:
+        sample = self._try()
+        return None if sample is None else self._decoder.decode(Scan, sample.payload.to_bytes())
+
+    def latest(self) -> Scan | None:
+        """Take every scan waiting; the last of them (None: none, or it was malformed)."""
+        last = None
+        while (sample := self._try()) is not None:
+            last = sample
+        return None if last is None else self._decoder.decode(Scan, last.payload.to_bytes())
+
+    def close(self) -> None:
+        try:
+            self._sub.undeclare()
+        except Exception:  # the session may be closed already
+            log.debug("undeclare failed", exc_info=True)
 
 
 class _Proxy:

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import yaml
 
-from lab import processes
+from lab import children
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -118,7 +118,7 @@ class Proc:
 
     name: str
     restart: str
-    child: processes.Child
+    child: children.Child
     exits: list[int] = field(default_factory=list)
 
     @property
@@ -195,16 +195,16 @@ class Scenario:
         argv = rhbl_argv(service)
         if argv is None:
             raise ValueError(f"service {name}: do not know how to run it locally")
-        return processes.rhbl_argv(*[self.localize(a) for a in argv])
+        return children.rhbl_argv(*[self.localize(a) for a in argv])
 
     # ---- running ----------------------------------------------------------------------------
-    def _child(self, name: str) -> processes.Child:
+    def _child(self, name: str) -> children.Child:
         service = self.services[name]
         env = dict(self.env)
         env.update({k: str(v) for k, v in (service.get("environment") or {}).items()})
         env["SECRETS_PREFIX"] = str(self.secrets)  # the generated configs point here
         env["RUST_LOG"] = env.get("RUST_LOG", "warn")
-        return processes.Child(name, self.argv_of(name), self.logs, env=env, cwd=self.data)
+        return children.Child(name, self.argv_of(name), self.logs, env=env, cwd=self.data)
 
     def start(self, wait_completed: float = 60.0) -> Scenario:
         for d in (self.secrets, self.data, self.logs):

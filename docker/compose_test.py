@@ -53,7 +53,7 @@ from pathlib import Path
 import compose_local
 import router_standin
 
-from lab.processes import free_port
+from lab.children import free_port
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent

@@ -50,6 +50,7 @@ def check(pid: int = 1) -> tuple[bool, str]:
     import zenoh
 
     from lab.cli import build_parser
+    from protocol import keys
     from protocol.session import config_from_args
 
     args = build_parser(role).parse_args(rest)
@@ -62,7 +63,7 @@ def check(pid: int = 1) -> tuple[bool, str]:
     config.insert_json5("listen/endpoints", "[]")
     zenoh.init_log_from_env_or("off")
     with zenoh.open(config) as session:
-        key = f"rhbl/alive/{role}/**"
+        key = keys.alive_key(role, "**")
         tokens = [
             str(r.ok.key_expr) for r in session.liveliness().get(key, timeout=TIMEOUT) if r.ok
         ]

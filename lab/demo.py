@@ -25,31 +25,28 @@ Children are killed by PID on every exit path; the exit status is non-zero if an
 from __future__ import annotations
 
 import argparse
-import contextlib
 import datetime as _dt
 import json
 import logging
 import signal
 import sys
-import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from lab import processes
-from lab.episode import DT, Episode
-from lab.processes import free_port
-from lab.processes import rhbl_argv as _rhbl
+from client.behaviour.tasks import TASKS
+from lab import children
+from lab.children import free_port
+from lab.children import rhbl_argv as _rhbl
+from lab.episode import Episode, EpisodeCollector
 from lab.recipe import EVAL_SECONDS, RECIPES, Recipe, per_task
 
 __all__ = ["SCENARIOS", "Scenario", "add_arguments", "main", "free_port"]
 
 log = logging.getLogger(__name__)
 
-# teacher policy of each task (``rhbl teacher --policy``)
-TEACHER_POLICY = {"wall-following": "wall-follower", "maze": "maze"}
 
 
 @dataclass(frozen=True)
@@ -73,7 +70,7 @@ class Scenario:
 
     @property
     def policy(self) -> str:
-        return TEACHER_POLICY[self.recipe.task]
+        return TASKS[self.recipe.task].teacher
 
     def replace(self, teach: float | None = None, rounds: int | None = None,
                 round_seconds: float | None = None, drive: float | None = None) -> Scenario:
@@ -165,156 +162,12 @@ class DemoError(Exception):
     pass
 
 
-class Child(processes.Child):
+class Child(children.Child):
     """One child process, logging into the output folder; stopped with SIGINT first (the
     learner then writes its final snapshot), SIGTERM and SIGKILL by PID if it does not end."""
 
     def __init__(self, name: str, argv: list[str], logdir: Path) -> None:
         super().__init__(name, argv, logdir, stop_signal=signal.SIGINT)
-
-
-# ---- recording -----------------------------------------------------------------------------
-@dataclass
-class _Raw:
-    """What arrives for the current episode besides its scans, keyed until it ends."""
-
-    stalls: dict = field(default_factory=dict)  # ts -> stall
-    cmds: dict = field(default_factory=dict)  # scan id -> (source, vx, va) (teacher's first)
-    drivers: dict = field(default_factory=dict)  # ts -> driving source (State.driver)
-    first_id: int = 0  # scans before this one (the old pose, before a teleport) are ignored
-
-
-class Recorder:
-    """Records the server's scans, states and commands into the current episode (callbacks
-    of a few microseconds: the heavier work happens after the run)."""
-
-    def __init__(self, session, robot: str, actions, side: str | None):
-        from protocol import keys
-
-        self.episode: Episode | None = None
-        self.raw = _Raw()
-        self.names = {tuple(v): k for k, v in actions.items()}  # (vx, va) -> action name
-        self.side = side  # the followed side (lab.episode.Episode.side), None: not recorded
-        self.lock = threading.Lock()
-        self.notice: dict = {}
-        self.sources: dict[str, int] = {}  # commands seen per source (recording or not)
-        self.labels = 0  # teacher labels seen (recording or not)
-        self.subs = [
-            session.declare_subscriber(keys.scan_key(robot), self._on_scan),
-            session.declare_subscriber(keys.state_key(robot), self._on_state),
-            session.declare_subscriber(keys.cmd_vel_subscription(robot), self._on_cmd),
-            session.declare_subscriber(keys.learner_notice_key(robot), self._on_notice),
-            session.declare_subscriber(keys.teacher_action_key(robot), self._on_label),
-        ]
-
-    def _on_scan(self, sample) -> None:
-        from lab.metrics import side_distance
-        from protocol.messages import Scan
-
-        ep = self.episode
-        if ep is None:
-            return
-        try:
-            s = Scan.decode(sample.payload.to_bytes())
-        except Exception:  # noqa: BLE001
-            return
-        with self.lock:
-            if ep is self.episode and s.id >= self.raw.first_id:
-                ep.ts.append(s.ts)
-                ep.poses.append(s.truth if s.truth is not None else s.pose)
-                if self.side is not None:
-                    ep.side.append(side_distance(s.ranges, self.side))
-                ep.ids.append(s.id)
-
-    def _on_state(self, sample) -> None:
-        from protocol.messages import State
-
-        ep, raw = self.episode, self.raw
-        if ep is None:
-            return
-        try:
-            st = State.decode(sample.payload.to_bytes())
-        except Exception:  # noqa: BLE001
-            return
-        raw.stalls[round(st.ts, 6)] = bool(st.stall)
-        raw.drivers[round(st.ts, 6)] = st.driver
-
-    def _on_label(self, sample) -> None:
-        from protocol.messages import TeacherAction
-
-        self.labels += 1
-        ep = self.episode
-        if ep is not None:
-            try:
-                action = TeacherAction.decode(sample.payload.to_bytes()).action
-            except Exception:  # noqa: BLE001
-                action = None  # still a label the learner was offered
-            ep.labels.append(action)
-
-    def _on_cmd(self, sample) -> None:
-        from protocol.messages import VelCmd
-
-        ep, raw = self.episode, self.raw
-        try:
-            c = VelCmd.decode(sample.payload.to_bytes())
-        except Exception:  # noqa: BLE001
-            return
-        self.sources[c.source] = self.sources.get(c.source, 0) + 1
-        if ep is not None and c.scan_id is not None:
-            # the teacher outranks the controller (the server's arbitration)
-            old = raw.cmds.get(c.scan_id)
-            if old is None or old[0] != "teacher" or c.source == "teacher":
-                raw.cmds[c.scan_id] = (c.source, c.vx, c.va)
-
-    def _on_notice(self, sample) -> None:
-        from protocol.messages import TreeNotice
-
-        try:
-            n = TreeNotice.decode(sample.payload.to_bytes())
-        except Exception:  # noqa: BLE001
-            return
-        self.notice = {"nodes": n.nodes, "height": n.height, "vectors": n.vectors}
-
-    def begin(self, kind: str, start, round_: int = 0) -> Episode:
-        with self.lock:
-            self.raw = _Raw()
-            self.episode = Episode(start=tuple(start), dt=DT, kind=kind, round=round_)
-            return self.episode
-
-    def trim(self, ep: Episode, first_id: int) -> None:
-        """Forget what ``ep`` recorded before scan ``first_id`` (scans of the old pose that
-        arrived between ``begin`` and a teleport)."""
-        with self.lock:
-            raw = self.raw
-            raw.first_id = first_id  # and a late scan of the old pose is not recorded either
-            keep = [k for k, i in enumerate(ep.ids) if i >= first_id]
-            for f in ("ts", "poses", "side", "ids"):
-                col = getattr(ep, f)
-                if col:
-                    setattr(ep, f, [col[k] for k in keep])
-            raw.cmds = {i: c for i, c in raw.cmds.items() if i >= first_id}
-            if ep.ts:
-                raw.stalls = {t: v for t, v in raw.stalls.items() if t >= round(ep.ts[0], 6)}
-                raw.drivers = {t: v for t, v in raw.drivers.items() if t >= round(ep.ts[0], 6)}
-
-    def end(self) -> None:
-        """Close the current episode: each recorded scan gets the action executed on it (the
-        teacher's over the controller's; "none" if no command came), its stall and its driver."""
-        with self.lock:
-            ep, raw = self.episode, self.raw
-            self.episode = None
-            if ep is None:
-                return
-            for ts, sid in zip(ep.ts, ep.ids, strict=True):
-                cmd = raw.cmds.get(sid)
-                ep.actions.append(self.names.get((cmd[1], cmd[2]), "none") if cmd else "none")
-                ep.stalls.append(raw.stalls.get(round(ts, 6), False))
-                ep.drivers.append(raw.drivers.get(round(ts, 6)))
-
-    def close(self) -> None:
-        for s in self.subs:
-            with contextlib.suppress(Exception):
-                s.undeclare()
 
 
 # ---- the demo ------------------------------------------------------------------------------
@@ -330,10 +183,10 @@ class Demo:
                 raise ValueError(f"{flag} must be > 0, got {v:g}")
         if args.rounds is not None and args.rounds < 0:
             raise ValueError(f"--rounds must be >= 0, got {args.rounds}")
-        self.sc = SCENARIOS[args.scenario].replace(
+        self.scenario = SCENARIOS[args.scenario].replace(
             teach=args.teach_seconds, rounds=args.rounds, round_seconds=args.round_seconds,
             drive=args.drive_seconds)
-        self.spec = resolve_world(args.world or self.sc.world)
+        self.spec = resolve_world(args.world or self.scenario.world)
         stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
         self.out = Path(args.out or Path("rhbl-out") / f"{stamp}-{args.scenario}")
         self.out.mkdir(parents=True, exist_ok=True)
@@ -344,10 +197,11 @@ class Demo:
         self.failures: list[str] = []
         self.t0 = time.monotonic()
         self.tree = self.out / "tree.rhbl"
-        self.teach = self.sc.recipe.segment
-        self.drive = self.sc.drive
-        self.rounds = self.sc.recipe.rounds
-        self.round_seconds = self.sc.recipe.round_seconds
+        self.teach = self.scenario.recipe.segment
+        self.drive = self.scenario.drive
+        self.rounds = self.scenario.recipe.rounds
+        self.round_seconds = self.scenario.recipe.round_seconds
+        self.recording: Path | None = None  # --record: the recording's file
 
     # -- helpers --
     def say(self, msg: str) -> None:
@@ -355,7 +209,11 @@ class Demo:
             print(f"[{time.monotonic() - self.t0:6.1f}s] {msg}", flush=True)
 
     def child(self, name: str, *args: str) -> Child:
-        c = Child(name, _rhbl(*args, "--connect", self.endpoint), self.out / "logs").start()
+        """``rhbl ARGS...`` connected to the rendezvous, logging into logs/<name>.log, its
+        counters at exit in logs/<name>.json (``--stats``)."""
+        stats = self.out / "logs" / f"{name}.json"
+        c = Child(name, _rhbl(*args, "--connect", self.endpoint, "--stats", str(stats)),
+                  self.out / "logs").start()
         self.children.append(c)
         return c
 
@@ -444,7 +302,7 @@ class Demo:
             if not ep.ts and time.monotonic() > first_scan_by:
                 raise DemoError(f"{what}: no scan from the server within 20 s")
             if until_exit is None and t >= seconds:
-                self.say(f"{what}: sim {t:5.0f}/{seconds:g} s{self.sc_notice()}")
+                self.say(f"{what}: sim {t:5.0f}/{seconds:g} s{self.tree_notice()}")
                 return
             if goal is not None and ep.poses and until_exit is None:
                 x, y, _ = ep.poses[-1]
@@ -452,7 +310,7 @@ class Demo:
                     self.say(f"{what}: goal reached at {t:.0f} s")
                     return
             if time.monotonic() >= next_note:
-                n = self.sc_notice()
+                n = self.tree_notice()
                 self.say(f"{what}: sim {t:5.0f}/{seconds:g} s{n}")
                 next_note = time.monotonic() + 2.0
             time.sleep(0.05)
@@ -474,14 +332,16 @@ class Demo:
         """One episode from each start pose (teleported there), ``seconds`` or until the goal."""
         out = []
         for k, pose in enumerate(starts):
+            self.tap.sync()  # what arrived before belongs to no episode
             ep = self.rec.begin(kind, pose, round_)
             self.rec.trim(ep, self.teleport(pose, *cs))
             self.wait_episode(ep, seconds, f"{what}, start {k + 1}/{len(starts)}", *cs)
+            self.tap.sync()  # what arrived until now belongs to it
             self.rec.end()
             out.append(ep)
         return out
 
-    def sc_notice(self) -> str:
+    def tree_notice(self) -> str:
         n = self.rec.notice
         return (f", tree {n['nodes']} nodes, height {n['height']}, {n['vectors']} vectors"
                 if n else "")
@@ -492,72 +352,94 @@ class Demo:
 
         from protocol.session import make_config
 
-        a = self.args
-        self.say(f"rhbl demo: scenario {a.scenario}, world {self.spec.name}, output {self.out}")
+        args = self.args
+        self.say(f"rhbl demo: scenario {args.scenario}, world {self.spec.name}, output "
+                 f"{self.out}")
         self.say(f"rendezvous (router) on {self.endpoint}; children log into {self.out / 'logs'}")
         from client.behaviour.actions import DEFAULT_ACTIONS
         from client.player import PlayerClient
-        from client.recorder import finish_demo_recording, start_demo_recording
-        from lab.harness import followed_side
+        from client.recording.record import demo_recording, say_demo_recording
+        from client.recording.tap import BusTap
 
         with zenoh.open(make_config(mode="router", listen=[self.endpoint])) as session:
             self.session = session
             self.sim = PlayerClient(session=session, robot="r0", source="demo").simulation
             # the learner's actions (``rhbl learner`` has no other set)
-            self.rec = Recorder(session, "r0", DEFAULT_ACTIONS, followed_side(self.spec.task))
-            recording = start_demo_recording(session, a.record, self.out, self.say)
+            self.rec = EpisodeCollector("r0", DEFAULT_ACTIONS, TASKS[self.spec.task].side)
+            writer = demo_recording(args.record, self.out, self.say)  # None without --record
+            self.recording = None if writer is None else Path(writer.path)
+            self.tap = BusTap(session, [self.rec, *([writer] if writer else [])],
+                              world=writer is not None)  # one tap: episodes and the recording
             try:
                 return self._phases()
             finally:
-                self.rec.close()
-                finish_demo_recording(recording, self.say)
+                self.tap.close()
+                say_demo_recording(self.tap, writer, self.say)
 
     def _phases(self) -> int:
-        from client.behaviour.learning import load_snapshot
+        args = self.args
+        starts = self.spec.start_poses[: args.starts] if args.starts else self.spec.start_poses
+        server, learner, demos = self.teach_phase(starts)
+        rounds = self.round_phase(starts, server, learner)
+        clf, actions, meta = self.final_tree(learner)
+        learned = self.drive_phase(starts, server)
+        for c in self.children:
+            if c.rc not in (0, None) and not (c.expected_stop and c.rc in (-2, 130)):
+                raise DemoError(f"{c.name} exited with status {c.rc}:\n{c.tail()}")
+        return self.report(clf, actions, meta, demos, rounds, learned)
 
-        a, sc = self.args, self.sc
-        starts = self.spec.start_poses[: a.starts] if a.starts else self.spec.start_poses
-        # 1. learner, server, the teacher demonstrates from each start pose
-        learner = self.child("learner", "learner", *sc.learner_args(), "--out",
+    def teach_phase(self, starts) -> tuple[Child, Child, list[Episode]]:
+        """1. The learner, the server and the teacher, who demonstrates from each start pose;
+        (server, learner, the demonstrations)."""
+        args, scenario = self.args, self.scenario
+        learner = self.child("learner", "learner", *scenario.learner_args(), "--out",
                              str(self.tree), "--wait-server", "60", "--snapshot-every", "0.5")
         self.wait_token("learner", learner)  # no demonstration before the learner listens
-        if a.console:
+        if args.console:
             self.start_console()
         server = self.start_server()
-        teacher = self.child("teacher", "teacher", *sc.teacher_args(a.style, a.seed),
+        teacher = self.child("teacher", "teacher", *scenario.teacher_args(args.style, args.seed),
                              "--wait-server", "30")
-        self.say(f"teaching: the {a.style} {sc.policy} teacher demonstrates from each of "
-                 f"{len(starts)} start poses, {self.teach:g} s of sim time each (pids: server "
-                 f"{server.pid}, learner {learner.pid}, teacher {teacher.pid})")
+        self.say(f"teaching: the {args.style} {scenario.policy} teacher demonstrates from each "
+                 f"of {len(starts)} start poses, {self.teach:g} s of sim time each (pids: "
+                 f"server {server.pid}, learner {learner.pid}, teacher {teacher.pid})")
         self.wait_labels(server, learner, teacher)
         demos = self.episodes("teacher", starts, self.teach, "teaching", server, learner, teacher)
         teacher.stop()
         self.say(f"demonstrations done ({sum(ep.sim_time for ep in demos):.0f} s sim, "
-                 f"{sum(len(ep.labels) for ep in demos)} labels){self.sc_notice()}")
+                 f"{sum(len(ep.labels) for ep in demos)} labels){self.tree_notice()}")
+        return server, learner, demos
 
-        # 2. corrective rounds: the controller drives the latest tree, the teacher corrects
+    def round_phase(self, starts, server: Child, learner: Child) -> list[Episode]:
+        """2. Corrective rounds: the controller drives the latest tree, the teacher corrects."""
         rounds: list[Episode] = []
-        if self.rounds > 0:
-            follower = self.child("controller-follow", "controller", "--from-learner", "--follow",
-                                  "--wait-server", "60", "--query-timeout", "10")
-            self.wait_commands("controller", server, learner, follower)
-            corrector = self.child("teacher-correct", "teacher", *sc.corrector_args(a.style),
-                                   "--wait-server", "30")
-            self.say(f"corrective rounds: the controller drives the learner's latest tree "
-                     f"(pid {follower.pid}), the teacher labels every scan and takes over near "
-                     f"walls (pid {corrector.pid}); {self.rounds} rounds x {len(starts)} starts, "
-                     f"{self.round_seconds:g} s each")
-            self.wait_labels(server, learner, follower, corrector)
-            for r in range(1, self.rounds + 1):
-                eps = self.episodes("round", starts, self.round_seconds, f"round {r}", server,
-                                    learner, follower, corrector, round_=r)
-                rounds.extend(eps)
-                took = sum(ep.teacher_ticks for ep in eps)
-                ticks = sum(len(ep.ts) for ep in eps)
-                self.say(f"round {r} done: {ticks} scans, {sum(len(ep.labels) for ep in eps)} labels, "
-                         f"teacher took over {took} ticks{self.sc_notice()}")
-            corrector.stop()
-            follower.stop()
+        if self.rounds <= 0:
+            return rounds
+        follower = self.child("controller-follow", "controller", "--from-learner", "--follow",
+                              "--wait-server", "60", "--query-timeout", "10")
+        self.wait_commands("controller", server, learner, follower)
+        corrector = self.child("teacher-correct", "teacher",
+                               *self.scenario.corrector_args(self.args.style), "--wait-server", "30")
+        self.say(f"corrective rounds: the controller drives the learner's latest tree "
+                 f"(pid {follower.pid}), the teacher labels every scan and takes over near "
+                 f"walls (pid {corrector.pid}); {self.rounds} rounds x {len(starts)} starts, "
+                 f"{self.round_seconds:g} s each")
+        self.wait_labels(server, learner, follower, corrector)
+        for r in range(1, self.rounds + 1):
+            eps = self.episodes("round", starts, self.round_seconds, f"round {r}", server,
+                                learner, follower, corrector, round_=r)
+            rounds.extend(eps)
+            self.say(f"round {r} done: {sum(len(ep.ts) for ep in eps)} scans, "
+                     f"{sum(len(ep.labels) for ep in eps)} labels, teacher took over "
+                     f"{sum(ep.teacher_ticks for ep in eps)} ticks{self.tree_notice()}")
+        corrector.stop()
+        follower.stop()
+        return rounds
+
+    def final_tree(self, learner: Child):
+        """The learner stopped (its final snapshot); the tree, its actions and metadata."""
+        from client.behaviour.learning import load_snapshot
+
         self.say("stopping the learner (SIGINT: final snapshot)")
         rc = learner.stop(timeout=30)
         if rc != 0:
@@ -568,8 +450,10 @@ class Demo:
         prov = meta.get("provenance") or {}
         self.say(f"learned tree: {clf.node_count_} nodes, height {clf.height_}, "
                  f"{prov.get('vectors')} labeled vectors -> {self.tree}")
+        return clf, actions, meta
 
-        # 3. the final tree alone from each start pose
+    def drive_phase(self, starts, server: Child) -> list[Episode]:
+        """3. The final tree alone from each start pose; then the server stops."""
         controller = self.child("controller", "controller", "--tree", str(self.tree),
                                 "--wait-server", "60")
         self.wait_commands("controller", server, controller)
@@ -577,23 +461,55 @@ class Demo:
                                 controller)
         controller.stop()
         server.stop()
-        for c in self.children:
-            if c.rc not in (0, None) and not (c.expected_stop and c.rc in (-2, 130)):
-                raise DemoError(f"{c.name} exited with status {c.rc}:\n{c.tail()}")
-
-        # 4. report
-        return self.report(clf, actions, meta, demos, rounds, learned)
+        return learned
 
     def report(self, clf, actions, meta, demos: list[Episode], rounds: list[Episode],
                learned: list[Episode]) -> int:
-        from lab.metrics import BAND
-        from lab.plot import plot_paths
-        from lab.report import episode_table, table
-
+        """4. The output folder (summary.json, trajectories.npz, paths.png) and the tables."""
         goal = self.spec.goal
         tms = [ep.metrics(goal) for ep in demos]
-        rms = [ep.metrics(goal) for ep in rounds]
         lms = [ep.metrics(goal) for ep in learned]
+        per_round = self.round_rows(rounds)
+        wall_time = time.monotonic() - self.t0
+        picture = self.write_outputs(clf, meta, demos, rounds, learned, tms, lms, per_round,
+                                     wall_time)
+        self.print_tables(clf, meta, demos, tms, lms, per_round)
+        ok = sum(1 for m in lms if m["collisions"] == 0 and m["goal_reached"] is not False)
+        print()
+        print(f"learned robot: {ok}/{len(lms)} starts without collision"
+              f"{'' if goal is None else ' and reaching the goal'}")
+        made = ["tree.rhbl", "tree.rhbl.journal", "paths.png", "summary.json",
+                "trajectories.npz", "logs/"]
+        if self.recording is not None:  # --record: in the folder, or where it was asked for
+            rec = self.recording
+            made.insert(-1, rec.name if rec.parent.resolve() == self.out.resolve() else str(rec))
+        print(f"output: {self.out}  ({', '.join(made)})")
+        print(f"picture: {picture}")
+        print(f"wall time {wall_time:.1f} s")
+        return 0
+
+    def round_rows(self, rounds: list[Episode]) -> list[dict]:
+        """Per corrective round: its episodes, sim seconds, scans, labels, the teacher's
+        ticks, collisions and goals reached."""
+        goal = self.spec.goal
+        out = []
+        for r in range(1, self.rounds + 1):
+            eps = [ep for ep in rounds if ep.round == r]
+            ms = [ep.metrics(goal) for ep in eps]
+            out.append({
+                "round": r, "episodes": len(eps),
+                "seconds": round(sum(m["seconds"] for m in ms), 1),
+                "scans": sum(len(ep.ts) for ep in eps), "labels": sum(len(ep.labels) for ep in eps),
+                "teacher_ticks": sum(ep.teacher_ticks for ep in eps),
+                "collisions": sum(m["collisions"] for m in ms),
+                "goals": (None if goal is None else sum(bool(m["goal_reached"]) for m in ms))})
+        return out
+
+    def write_outputs(self, clf, meta, demos, rounds, learned, tms, lms, per_round,
+                      wall_time: float) -> Path:
+        """summary.json, trajectories.npz and the picture (its path) in the output folder."""
+        from lab.plot import plot_paths
+
         prov = meta.get("provenance") or {}
         paths = {"teacher": [np.asarray(ep.poses).reshape(-1, 3) for ep in demos]}
         if rounds:
@@ -602,29 +518,17 @@ class Demo:
         picture = plot_paths(
             self.spec, paths, self.out / "paths.png",
             title=f"{self.args.scenario}: teacher, corrective rounds and the final tree")
-        per_round = []
-        for r in range(1, self.rounds + 1):
-            eps = [ep for ep in rounds if ep.round == r]
-            ms = [m for ep, m in zip(rounds, rms, strict=True) if ep.round == r]
-            ticks = sum(len(ep.ts) for ep in eps)
-            per_round.append({
-                "round": r, "episodes": len(eps), "seconds": round(sum(m["seconds"] for m in ms), 1),
-                "scans": ticks, "labels": sum(len(ep.labels) for ep in eps),
-                "teacher_ticks": sum(ep.teacher_ticks for ep in eps),
-                "collisions": sum(m["collisions"] for m in ms),
-                "goals": (None if goal is None else sum(bool(m["goal_reached"]) for m in ms))})
-        wall_time = time.monotonic() - self.t0
-        demo_labels = sum(len(ep.labels) for ep in demos)
         summary = {
-            "scenario": self.args.scenario, "task": self.sc.task, "world": self.spec.name,
+            "scenario": self.args.scenario, "task": self.scenario.task, "world": self.spec.name,
             "tree": {"nodes": int(clf.node_count_), "height": int(clf.height_),
                      "task": meta.get("task"), "vectors": prov.get("vectors"),
                      "labeled": prov.get("labeled"), "path": str(self.tree)},
             "teacher": tms, "rounds": per_round, "learned": lms,
-            "demonstration_labels": demo_labels,
+            "demonstration_labels": sum(len(ep.labels) for ep in demos),
             "wall_time": round(wall_time, 1), "teach_seconds": self.teach,
             "rounds_count": self.rounds, "round_seconds": self.round_seconds,
             "drive_seconds": self.drive, "style": self.args.style,
+            "processes": self.process_counters(),
         }
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
         eps = [*demos, *rounds, *learned]
@@ -632,6 +536,24 @@ class Demo:
             self.out / "trajectories.npz",
             **{f"{ep.kind}{k}_{f}": np.asarray(getattr(ep, f))
                for k, ep in enumerate(eps) for f in ("ts", "poses", "side", "ids", "stalls")})
+        return picture
+
+    def process_counters(self) -> dict:
+        """Each child's counters (its ``--stats``), of those that have written them."""
+        out = {}
+        for c in self.children:
+            stats = self.out / "logs" / f"{c.name}.json"
+            if stats.exists():
+                out[c.name] = json.loads(stats.read_text())
+        return out
+
+    def print_tables(self, clf, meta, demos, tms, lms, per_round) -> None:
+        """Table I, the corrective rounds and what the robots did."""
+        from lab.metrics import BAND
+        from lab.report import episode_table, table
+
+        prov = meta.get("provenance") or {}
+        demo_labels = sum(len(ep.labels) for ep in demos)
         print()
         print(table(["scenario", "nodes", "tree height", "demonstration vectors"],
                     [[self.args.scenario, clf.node_count_, clf.height_, prov.get("vectors")]],
@@ -650,20 +572,11 @@ class Demo:
                          "goal"], rows,
                         title="Corrective rounds (the controller drives the latest tree; the "
                               "teacher labels every scan and takes over while a beam is closer "
-                              f"than {self.sc.recipe.takeover:g} m)"))
+                              f"than {self.scenario.recipe.takeover:g} m)"))
         print()
         print(episode_table([("teacher", m) for m in tms] + [("learned", m) for m in lms],
                             title="What the robots did (sim seconds per episode; band = time "
                                   f"with the right-hand wall within {BAND[0]:g}-{BAND[1]:g} m)"))
-        ok = sum(1 for m in lms if m["collisions"] == 0 and m["goal_reached"] is not False)
-        print()
-        print(f"learned robot: {ok}/{len(lms)} starts without collision"
-              f"{'' if goal is None else ' and reaching the goal'}")
-        print(f"output: {self.out}  (tree.rhbl, tree.rhbl.journal, paths.png, summary.json, "
-              f"logs/)")
-        print(f"picture: {picture}")
-        print(f"wall time {wall_time:.1f} s")
-        return 0
 
     def cleanup(self) -> None:
         for c in reversed(self.children):

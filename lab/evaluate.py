@@ -18,12 +18,12 @@ import json
 from pathlib import Path
 
 from client.behaviour.learning import TreePolicy
-from client.behaviour.policies import make_policy
+from client.behaviour.tasks import make_policy
 from lab import metrics
-from lab.harness import DT, resolve_world, run
+from lab.harness import DT, OnStep, drive, resolve_world
 from lab.recipe import EVAL_SECONDS, per_task
-from lab.recording import finish_run_recording, start_run_recording
 from lab.report import episode_table
+from lab.sim_tap import record_run
 from server.world import WorldSpec
 
 __all__ = ["add_arguments", "evaluate", "format_table", "main"]
@@ -39,7 +39,8 @@ _TEACHER_CACHE: dict = {}
 
 
 def _teacher_episode(spec: WorldSpec, actions, start, seconds: float, seed: int,
-                     range_noise: float, odom_noise: float, dt: float):
+                     range_noise: float, odom_noise: float, dt: float,
+                     on_step: OnStep | None = None):
     """The scripted teacher's episode from ``start``. Without noise it does not depend on the
     seed (and not on the tree), so it is computed once per world, start and length."""
     key = None
@@ -49,8 +50,9 @@ def _teacher_episode(spec: WorldSpec, actions, start, seconds: float, seed: int,
         hit = _TEACHER_CACHE.get(key)
         if hit is not None:
             return hit
-    tt = run(spec, make_policy(spec.task, actions=actions), start, seconds, seed=seed,
-             range_noise=range_noise, odom_noise=odom_noise, dt=dt, kind="teacher")
+    tt = drive(spec, make_policy(spec.task, actions=actions), start, seconds, seed=seed,
+               range_noise=range_noise, odom_noise=odom_noise, dt=dt, kind="teacher",
+               on_step=on_step)
     if key is not None:
         if len(_TEACHER_CACHE) > 256:
             _TEACHER_CACHE.clear()
@@ -60,8 +62,10 @@ def _teacher_episode(spec: WorldSpec, actions, start, seconds: float, seed: int,
 
 def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
              seconds: float | None = None, seed: int = 0, range_noise: float = 0.0,
-             odom_noise: float = 0.0, keep_paths: bool = False, dt: float = DT) -> dict:
-    """Run ``policy`` and the world's teacher from the start poses (cycled over ``episodes``)."""
+             odom_noise: float = 0.0, keep_paths: bool = False, dt: float = DT,
+             on_step: OnStep | None = None) -> dict:
+    """Run ``policy`` and the world's teacher from the start poses (cycled over ``episodes``);
+    ``on_step`` sees every step (``lab.harness.step_world``)."""
     task = spec.task
     starts = spec.start_poses
     episodes = len(starts) if episodes is None else int(episodes)
@@ -71,12 +75,12 @@ def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
         start = starts[k % len(starts)]
         ep_seed = seed * 1000 + k
         tt = _teacher_episode(spec, policy.actions, start, seconds, ep_seed, range_noise,
-                              odom_noise, dt)
+                              odom_noise, dt, on_step)
         tm = tt.metrics(spec.goal)
         tm["success"] = _success(task, tm, None)
-        lt = run(spec, policy, start, seconds, seed=ep_seed,
-                 teacher=make_policy(task, actions=policy.actions), range_noise=range_noise,
-                 odom_noise=odom_noise, dt=dt, kind="learner")
+        lt = drive(spec, policy, start, seconds, seed=ep_seed,
+                   teacher=make_policy(task, actions=policy.actions), range_noise=range_noise,
+                   odom_noise=odom_noise, dt=dt, kind="learner", on_step=on_step)
         lm = lt.metrics(spec.goal)
         lm["success"] = _success(task, lm, tm)
         learner_eps.append(lm)
@@ -150,11 +154,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main(args) -> int:
     spec = resolve_world(args.world)
     policy = TreePolicy.load(args.tree)
-    recording = start_run_recording(args.record, "rhbl evaluate")  # None without --record
-    report = evaluate(spec, policy, episodes=args.episodes, seconds=args.seconds, seed=args.seed,
-                      range_noise=args.range_noise, odom_noise=args.odom_noise,
-                      keep_paths=bool(args.plot))
-    finish_run_recording(recording)
+    with record_run(args.record, "rhbl evaluate") as tap:  # None without --record
+        report = evaluate(spec, policy, episodes=args.episodes, seconds=args.seconds,
+                          seed=args.seed, range_noise=args.range_noise,
+                          odom_noise=args.odom_noise, keep_paths=bool(args.plot),
+                          on_step=None if tap is None else tap.step)
     paths = report.pop("_paths", None)
     print(format_table(report))
     if args.json:

@@ -20,12 +20,13 @@ import time
 from pathlib import Path
 
 from client.behaviour.learning import TreePolicy
-from client.behaviour.policies import make_policy
+from client.behaviour.tasks import TASKS, make_policy
 from lab import metrics
 from lab.evaluate import evaluate
-from lab.harness import make_learner, resolve_world, train
+from lab.harness import make_learner, resolve_world
 from lab.recipe import Recipe, add_recipe_arguments, recipe_for, recipe_from_args
 from lab.report import table
+from lab.train import train
 
 __all__ = ["PAPER", "TEACHERS", "add_arguments", "main", "run_experiment", "run_trial", "table_i"]
 
@@ -40,8 +41,7 @@ def _worlds_dir() -> Path:
 
 
 def default_eval_worlds(task: str) -> list[str]:
-    pat = "eval-room*.toml" if task == "wall-following" else "eval-maze*.toml"
-    return sorted(glob.glob(str(_worlds_dir() / pat)))
+    return sorted(glob.glob(str(_worlds_dir() / TASKS[task].eval_worlds)))
 
 
 def run_trial(task: str, seed: int, recipe: Recipe | None = None, world: str | None = None,
@@ -142,7 +142,7 @@ def format_worlds(res: dict) -> str:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("task", choices=["wall-following", "maze", "both"])
+    parser.add_argument("task", choices=[*TASKS, "both"])
     parser.add_argument("--trials", type=int, default=5)
     parser.add_argument("--seed", type=int, default=0, help="first trial's seed")
     parser.add_argument("--world", default=None,
@@ -162,7 +162,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args) -> int:
-    tasks = ["wall-following", "maze"] if args.task == "both" else [args.task]
+    tasks = list(TASKS) if args.task == "both" else [args.task]
     results = {}
     t0 = time.perf_counter()
     for task in tasks:

@@ -24,7 +24,7 @@ import math
 from dataclasses import dataclass
 
 from client.behaviour.features import FEATURES, FeatureSpec
-from server.world import TASKS
+from client.behaviour.tasks import TASKS
 
 __all__ = [
     "DEMO",

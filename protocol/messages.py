@@ -27,8 +27,10 @@ from protocol.codec import (
     pack,
     unpack,
 )
+from protocol.keys import parse as parse_key
 
 __all__ = [
+    "CARRIES",
     "COMMAND_MAX_PAYLOAD",
     "Decision",
     "PROTOCOL_VERSION",
@@ -51,16 +53,41 @@ __all__ = [
     "TreeNotice",
     "VelCmd",
     "WorldInfo",
+    "kind_of",
 ]
 
 COMMAND_MAX_PAYLOAD = 64 * 1024  # bytes: commands and requests are small
 _MAX_BEAMS = 100_000
 MAX_ORIGIN = 64  # characters of a teacher session's identity (``origin``)
 
+# JSON-schema fragments of the field kinds the decoders check (``_Message.FIELDS``)
+NUM = {"type": "number"}
+INT = {"type": "integer"}
+UINT = {"type": "integer", "minimum": 0}
+BOOL = {"type": "boolean"}
+STR = {"type": "string", "maxLength": 256}
+ORIGIN = {"type": "string", "minLength": 1, "maxLength": MAX_ORIGIN}
+RANGES = {"description": "msgpack bin: 1..100000 little-endian float32 values, finite (m)"}
+
+
+def vec(n: int) -> dict:
+    return {"type": "array", "items": NUM, "minItems": n, "maxItems": n}
+
+
+VEC3 = vec(3)
+
 
 class _Message:
+    """A message: ``WHAT`` names it in errors; ``FIELDS`` (wire name -> JSON-schema fragment) and
+    ``REQUIRED`` are its map, the one description of it from which ``json_schema`` derives the
+    recordings' schemas (tests/protocol/test_schemas.py holds them against ``to_map`` and
+    ``from_map``); ``NAME`` is its schema's name (``rhbl.v<version>.<NAME>``)."""
+
     WHAT: ClassVar[str] = "message"
+    NAME: ClassVar[str] = ""  # default: the class name
     MAX_SIZE: ClassVar[int] = MAX_PAYLOAD
+    FIELDS: ClassVar[dict[str, dict]] = {}
+    REQUIRED: ClassVar[tuple[str, ...]] = ()
 
     def to_map(self) -> dict[str, Any]:  # pragma: no cover - overridden
         raise NotImplementedError
@@ -77,6 +104,23 @@ class _Message:
         m = unpack(data, cls.WHAT, cls.MAX_SIZE if max_size is None else max_size)
         return cls.from_map(m)
 
+    @classmethod
+    def schema_name(cls) -> str:
+        return f"rhbl.v{PROTOCOL_VERSION}.{cls.NAME or cls.__name__}"
+
+    @classmethod
+    def json_schema(cls) -> dict:
+        """The JSON schema of the message's map (``FIELDS``, ``REQUIRED`` and the version
+        ``v``); other fields are allowed, as receivers ignore them."""
+        return {
+            "title": cls.schema_name(),
+            "description": (f"rhbl wire protocol version {PROTOCOL_VERSION} (docs/protocol.md): "
+                            f"{cls.WHAT}, a msgpack map as published on the bus"),
+            "type": "object",
+            "properties": {"v": {"const": PROTOCOL_VERSION}, **cls.FIELDS},
+            "required": ["v", *cls.REQUIRED],
+        }
+
 
 def _opt_vec3(m, name, what):
     return get_opt(m, name, get_vec, what, 3)
@@ -89,6 +133,9 @@ class State(_Message):
     ``driver`` the command source driving (``""``: none), ``truth`` the true pose (simulation)."""
 
     WHAT: ClassVar[str] = "state"
+    FIELDS = {"ts": NUM, "seq": UINT, "pos": VEC3, "vel": VEC3, "stall": BOOL, "driver": STR,
+              "truth": VEC3}
+    REQUIRED = ("ts", "seq", "pos", "vel", "stall")
     ts: float
     seq: int
     pos: tuple[float, float, float]
@@ -131,6 +178,10 @@ class Scan(_Message):
     the scan, ``truth`` the true pose (simulation)."""
 
     WHAT: ClassVar[str] = "scan"
+    FIELDS = {"ts": NUM, "id": UINT, "min_angle": NUM, "max_angle": NUM, "resolution": NUM,
+              "max_range": NUM, "ranges": RANGES, "pose": VEC3, "truth": VEC3}
+    REQUIRED = ("ts", "id", "min_angle", "max_angle", "resolution", "max_range", "ranges",
+                "pose")
     ts: float
     id: int
     ranges: np.ndarray
@@ -200,6 +251,8 @@ class VelCmd(_Message):
     ``controller``, ...), ``scan_id`` the scan this command answers (lock-step), optional."""
 
     WHAT: ClassVar[str] = "cmd/vel"
+    FIELDS = {"vel": VEC3, "state": BOOL, "source": STR, "scan_id": UINT, "ts": NUM}
+    REQUIRED = ("vel", "state")
     MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
     vx: float = 0.0
     va: float = 0.0
@@ -242,6 +295,9 @@ class DriverState(_Message):
     ``driver_key``; ``priority`` of that source; ``ts`` sim time."""
 
     WHAT: ClassVar[str] = "driver"
+    NAME: ClassVar[str] = "Driver"
+    FIELDS = {"source": STR, "ts": NUM, "priority": INT}
+    REQUIRED = ("source", "ts", "priority")
     source: str
     ts: float = 0.0
     priority: int = 0
@@ -296,6 +352,9 @@ class TeacherAction(_Message):
     from 0) identify the label for acknowledgements and resends, both or neither."""
 
     WHAT: ClassVar[str] = "teacher/action"
+    FIELDS = {"scan_id": UINT, "action": STR, "source": STR, "ts": NUM, "executed": STR,
+              "origin": ORIGIN, "seq": UINT}
+    REQUIRED = ("scan_id", "action")
     MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
     scan_id: int
     action: str
@@ -332,6 +391,8 @@ class LabeledScan(_Message):
     a label the learner has not acknowledged: a restarted learner never saw that scan."""
 
     WHAT: ClassVar[str] = "teacher/labeled"
+    FIELDS = {**TeacherAction.FIELDS, "ranges": RANGES, "yaw": NUM}
+    REQUIRED = ("scan_id", "action", "origin", "seq", "ranges", "yaw")
     scan_id: int
     action: str
     origin: str
@@ -376,6 +437,9 @@ class LearnerAck(_Message):
     origin each time, so a later ack makes up for a lost one."""
 
     WHAT: ClassVar[str] = "learner/ack"
+    FIELDS = {"origin": ORIGIN, "upto": UINT,
+              "seqs": {"type": "array", "items": UINT, "maxItems": 4096}, "ts": NUM}
+    REQUIRED = ("origin", "upto")
     MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
     MAX_SEQS: ClassVar[int] = 4096
     origin: str
@@ -408,6 +472,9 @@ class TreeNotice(_Message):
     """A learner's "tree updated" notice: size of the tree and the snapshot to fetch."""
 
     WHAT: ClassVar[str] = "learner/notice"
+    FIELDS = {"seq": UINT, "nodes": UINT, "height": UINT, "vectors": UINT, "snapshot_id": STR,
+              "ts": NUM}
+    REQUIRED = ("seq", "nodes", "height")
     seq: int
     nodes: int
     height: int
@@ -447,6 +514,11 @@ class Decision(_Message):
     when unknown) and ``nodes`` its size."""
 
     WHAT: ClassVar[str] = "controller/decision"
+    FIELDS = {"scan_id": UINT, "ts": NUM, "action": STR, "snapshot_id": STR, "nodes": UINT,
+              "path": {"type": "array", "maxItems": 1024,
+                       "description": "[index, depth, radius, label] per node, root to winner",
+                       "items": {"type": "array", "minItems": 4, "maxItems": 4}}}
+    REQUIRED = ("scan_id", "action")
     MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
     MAX_PATH: ClassVar[int] = 1024
     scan_id: int
@@ -500,6 +572,8 @@ class Geometry(_Message):
     width] (m); for position2d also the collision ``radius``."""
 
     WHAT: ClassVar[str] = "geom"
+    FIELDS = {"pose": VEC3, "size": vec(2), "radius": NUM}
+    REQUIRED = ("pose", "size")
     pose: tuple[float, float, float]
     size: tuple[float, float]
     radius: float | None = None
@@ -525,6 +599,9 @@ class LaserConfig(_Message):
     """Reply to the laser's ``get_config``."""
 
     WHAT: ClassVar[str] = "laser config"
+    FIELDS = {"min_angle": NUM, "max_angle": NUM, "resolution": NUM, "max_range": NUM,
+              "count": {"type": "integer", "minimum": 1}, "rate": NUM}
+    REQUIRED = ("min_angle", "max_angle", "resolution", "max_range", "count", "rate")
     min_angle: float
     max_angle: float
     resolution: float
@@ -560,6 +637,8 @@ class SetOdom(_Message):
     """Request payload of ``set_odom``: the new odometry ``pose`` [x, y, yaw]."""
 
     WHAT: ClassVar[str] = "set_odom"
+    FIELDS = {"pose": VEC3}
+    REQUIRED = ("pose",)
     MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
     pose: tuple[float, float, float]
 
@@ -577,6 +656,8 @@ class SetPose(_Message):
     [x, y, yaw] (world frame); ``reset_odom`` (default true) also sets the odometry to it."""
 
     WHAT: ClassVar[str] = "set_pose"
+    FIELDS = {"pose": VEC3, "reset_odom": BOOL}
+    REQUIRED = ("pose",)
     MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
     pose: tuple[float, float, float]
     reset_odom: bool = True
@@ -599,6 +680,8 @@ class SimPose(_Message):
     and the sim time ``ts`` of the last published tick."""
 
     WHAT: ClassVar[str] = "sim pose"
+    FIELDS = {"pose": VEC3, "odom": VEC3, "ts": NUM}
+    REQUIRED = ("pose",)
     pose: tuple[float, float, float]
     odom: tuple[float, float, float] = (0.0, 0.0, 0.0)
     ts: float = 0.0
@@ -627,6 +710,9 @@ class WorldInfo(_Message):
     ``starts`` the world's start poses ``[x, y, yaw]`` (the default one first)."""
 
     WHAT: ClassVar[str] = "world info"
+    FIELDS = {"name": STR, "task": STR, "walls": {"type": "array", "items": vec(4)},
+              "goal": VEC3, "starts": {"type": "array", "items": VEC3}}
+    REQUIRED = ("name", "task")
     name: str
     task: str
     walls: tuple[tuple[float, float, float, float], ...] = ()
@@ -670,6 +756,8 @@ class MotorPower(_Message):
     """Request payload of ``motor_power``: ``state`` true to enable the motors."""
 
     WHAT: ClassVar[str] = "motor_power"
+    FIELDS = {"state": BOOL}
+    REQUIRED = ("state",)
     MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
     state: bool
 
@@ -686,6 +774,8 @@ class Ack(_Message):
     """A successful reply without data (``ok`` true); ``info`` optional free text."""
 
     WHAT: ClassVar[str] = "ack"
+    FIELDS = {"ok": {"const": True}, "info": STR}
+    REQUIRED = ("ok",)
     info: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
 
@@ -708,6 +798,8 @@ class Nack(_Message):
     """A refused request, sent as a zenoh error reply: ``reason`` says why."""
 
     WHAT: ClassVar[str] = "nack"
+    FIELDS = {"ok": {"const": False}, "reason": {"type": "string", "maxLength": 4096}}
+    REQUIRED = ("reason",)
     reason: str
 
     def to_map(self):
@@ -716,3 +808,22 @@ class Nack(_Message):
     @classmethod
     def from_map(cls, m):
         return cls(reason=get_str(m, "reason", cls.WHAT, max_len=4096))
+
+
+# the message each kind of key carries (``protocol.keys.parse(key).kind``; the replies of the
+# requests are not published, except the world, which recorders keep on its request's key)
+CARRIES: dict[str, type[_Message]] = {
+    "state": State, "scan": Scan, "driver": DriverState, "cmd": VelCmd, "label": TeacherAction,
+    "labeled": LabeledScan, "ack": LearnerAck, "notice": TreeNotice, "decision": Decision,
+    "world": WorldInfo}
+
+
+def kind_of(key) -> tuple[str, str]:
+    """``(kind, robot)`` of a bus key for what it carries: a key of ``CARRIES`` (``world`` for
+    ``rhbl/<robot>/sim/req/get_world``), ``alive`` (a liveliness token), or ``other``."""
+    k = parse_key(key)
+    if k.kind == "sim":
+        return ("world" if k.name == "get_world" else "other"), k.robot
+    if k.kind in CARRIES or k.kind == "alive":
+        return k.kind, k.robot
+    return "other", k.robot

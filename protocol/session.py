@@ -85,6 +85,8 @@ def add_zenoh_arguments(
     """Add the common zenoh flags: ``--mode``, ``--connect``, ``--listen``, ``--zenoh-config``,
     ``--multicast-scouting``, ``--namespace``. Endpoint flags repeat and accept comma lists."""
     g = parser.add_argument_group("zenoh")
+    connect_default = (", ".join(default_connect) if default_connect
+                       else f"{DEFAULT_ENDPOINT} in client mode, none in the others")
     g.add_argument(
         "--mode",
         choices=MODES,
@@ -97,8 +99,8 @@ def add_zenoh_arguments(
         action="append",
         default=None,
         metavar="ENDPOINT",
-        help="endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable; default: "
-        f"{', '.join(default_connect) if default_connect else 'none'})",
+        help=f"endpoint to connect to (repeatable, or a comma list; default: {connect_default}; "
+        "a --zenoh-config file's endpoints replace the default)",
     )
     g.add_argument(
         "--listen",

@@ -1,6 +1,6 @@
 """``rhbl server``: serve a world over zenoh (Player-like position2d + laser per robot).
 
-It runs through ``protocol.process.run``, as the client processes do: the same log lines and exit
+It runs through ``protocol.runtime.run_process``, as the client processes do: the same log lines and exit
 codes (0 ok, also after SIGINT/SIGTERM once the session is closed; 2 bad world or flags; 3 a
 connect endpoint unreachable, the session refused or a listen endpoint taken).
 """
@@ -11,14 +11,14 @@ import argparse
 import logging
 
 from protocol import keys
-from protocol.process import (
+from protocol.runtime import (
     EXIT_OK,
     EXIT_USAGE,
     Context,
     ProcessError,
-    add_logging_arguments,
+    add_report_arguments,
     on_stop_signal,
-    run,
+    run_process,
 )
 from protocol.session import DEFAULT_ENDPOINT, add_zenoh_arguments
 
@@ -78,13 +78,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="server id in its liveliness tokens rhbl/alive/server/<id>/<robot>, one per robot "
         "(default: <host>-<pid>, unique on the network)",
     )
-    add_logging_arguments(parser)
+    add_report_arguments(parser)
     add_zenoh_arguments(parser, default_listen=[DEFAULT_ENDPOINT], default_mode="router")
 
 
 def main(args: argparse.Namespace) -> int:
     server = ServerProcess(args)
-    return run("server", args, server.serve, check=server.prepare,
+    return run_process("server", args, server.serve, check=server.prepare,
                early_token=False)  # the node declares rhbl/alive/server/<ident>/<robot> itself
 
 
@@ -129,6 +129,8 @@ class ServerProcess:
 
     def serve(self, ctx: Context) -> int:
         node = self._node(ctx)
+        ctx.report(lambda: {"ticks": node.ticks, "sim_time": round(self.world.time, 3),
+                            "counters": dict(node.counters)})
         ctx.scope.callback(self._report, node)  # after the node is closed (the scope is LIFO)
         ctx.scope.callback(node.close)
         on_stop_signal(node.stop)

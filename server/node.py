@@ -37,6 +37,7 @@ import zenoh
 
 from protocol import keys
 from protocol.codec import DecodeError
+from protocol.decoding import Decoder
 from protocol.messages import (
     COMMAND_MAX_PAYLOAD,
     Ack,
@@ -117,9 +118,9 @@ def hosted_robots(session: zenoh.Session, timeout: float = 1.0) -> dict[str, lis
     for reply in session.liveliness().get(keys.alive_key("server", "**"), timeout=timeout):
         if reply.ok is None:
             continue
-        parts = str(reply.ok.key_expr).split("/")
-        if len(parts) == 5:
-            out.setdefault(parts[4], []).append(parts[3])
+        k = keys.parse(reply.ok.key_expr)
+        if k.role == "server" and k.name:
+            out.setdefault(k.name, []).append(k.ident)
     return out
 
 
@@ -179,6 +180,8 @@ class ServerNode:
         self.ident = keys.check_chunk(default_ident() if ident is None else ident,
                                       "server ident")
         self.counters: Counter[str] = Counter()
+        # refusals (malformed or not allowed), counted in ``counters`` ("rejected": all of them)
+        self.drops = Decoder(log, counts=self.counters, total="rejected", verb="rejected")
         self.ticks = 0
         self.lockstep_timeouts = 0
         self._cond = threading.Condition()
@@ -258,7 +261,7 @@ class ServerNode:
             self._keep(s.liveliness().declare_token(
                 f"{keys.alive_key('server', self.ident)}/{r.name}"))
         self._keep(
-            s.liveliness().declare_subscriber(f"{keys.PREFIX}/alive/**", self._on_liveliness)
+            s.liveliness().declare_subscriber(keys.every_token(), self._on_liveliness)
         )
 
     def _keep(self, declared: Any) -> Any:
@@ -283,17 +286,15 @@ class ServerNode:
     # -- input ------------------------------------------------------------------------------
 
     def _reject(self, what: str, reason: str) -> None:
-        self.counters[what] += 1
-        self.counters["rejected"] += 1
-        n = self.counters[what]
-        if n <= 10 or n % 100 == 0:
-            log.warning("rejected %s (%d so far): %s", what, n, reason)
+        self.drops.drop(what, reason)
 
     def _on_cmd(self, r: _RobotIO, sample: zenoh.Sample) -> None:
         try:
-            payload = sample.payload.to_bytes()
             key = str(sample.key_expr)
-            msg = VelCmd.decode(payload, max_size=COMMAND_MAX_PAYLOAD)
+            msg = self.drops.decode(VelCmd, sample.payload.to_bytes(), what="cmd", where=key,
+                                    max_size=COMMAND_MAX_PAYLOAD)
+            if msg is None:
+                return
             key_source = keys.source_of_cmd_key(key)
             if key_source is not None and key_source != msg.source:
                 self._reject(
@@ -309,27 +310,24 @@ class ServerNode:
                     r.answers[msg.source] = msg.scan_id
                 self.counters["cmd_accepted"] += 1
                 self._cond.notify_all()
-        except DecodeError as e:
-            self._reject("cmd", f"{sample.key_expr}: {e}")
         except Exception as e:  # never let a message kill the node
             self._reject("cmd", f"{sample.key_expr}: unexpected {type(e).__name__}: {e}")
 
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
         try:
-            parts = str(sample.key_expr).split("/")
+            k = keys.parse(sample.key_expr)
             if sample.kind != zenoh.SampleKind.DELETE:
-                if (len(parts) == 5 and parts[2] == "server" and parts[3] != self.ident
-                        and parts[4] in self._by_name):
+                if k.role == "server" and k.name in self._by_name and k.ident != self.ident:
                     self.counters["duplicate_robot"] += 1
                     log.error("robot %r is also hosted by server %r: two servers publish its "
-                              "scans (stop one)", parts[4], parts[3])
+                              "scans (stop one)", k.name, k.ident)
                 return
-            if len(parts) < 4:
+            if not k.ident:
                 return
-            role, ident = parts[2], parts[3]
+            role = k.role
             # a process's ident is "<robot>-<pid>": release only that robot's holds (every
             # robot's when the ident names none of ours)
-            mine = [r for r in self._robots if ident.startswith(f"{r.name}-")] or self._robots
+            mine = [r for r in self._robots if k.names_robot(r.name)] or self._robots
             with self._cond:
                 # the commands it sent before it went are still queued: take them first, or the
                 # next tick would take them after the release and drive on until the watchdog

@@ -369,7 +369,7 @@ def load_world(path: str | Path) -> WorldSpec:
         raise WorldError(f"{p}: world file not found") from None
     except tomllib.TOMLDecodeError as e:
         raise WorldError(f"{p}: not valid TOML: {e}") from None
-    except UnicodeDecodeError as e:  # found by lab.fuzz: tomllib lets it through
+    except UnicodeDecodeError as e:  # found by campaigns.fuzz: tomllib lets it through
         raise WorldError(f"{p}: not valid TOML (not UTF-8 text: {e})") from None
     except OSError as e:
         raise WorldError(f"{p}: cannot read: {e}") from None

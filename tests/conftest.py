@@ -16,8 +16,8 @@ from collections.abc import Callable
 
 import pytest
 
-from lab.processes import Child
-from lab.processes import free_port as find_free_port
+from lab.children import Child
+from lab.children import free_port as find_free_port
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -29,7 +29,7 @@ def free_port() -> Callable[[], int]:
 
 
 class ServerProcess(Child):
-    """A running ``rhbl server`` (a ``lab.processes.Child``: stdout and stderr in ``lines``)."""
+    """A running ``rhbl server`` (a ``lab.children.Child``: stdout and stderr in ``lines``)."""
 
     def __init__(self, args: list[str], endpoint: str) -> None:
         super().__init__("rhbl server", args, cwd=ROOT)

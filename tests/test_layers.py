@@ -53,3 +53,16 @@ def test_behaviour_code_is_pure():
             elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
                 names.add(node.module.split(".")[0])
         assert "zenoh" not in names, f"{f} imports zenoh"
+
+
+def test_offline_commands_load_no_zenoh():
+    """Retraining from a recording and compacting pair labels with scans (client.labels) and
+    read recordings without a session: no zenoh is imported."""
+    import subprocess
+    import sys
+
+    code = ("import sys, lab.retrain, lab.compact, client.labels, client.recording.inspect; "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'zenoh'))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120, cwd=ROOT, check=True).stdout.strip()
+    assert out == "[]"

@@ -1,6 +1,6 @@
 """Scripted experts (teachers) and perturbed demonstrations.
 
-    policy = make_policy("wall-following")     # or "maze"
+    policy = make_policy("wall-following")     # or "maze" (client.behaviour.tasks)
     policy.reset()
     name = policy.act(ranges, pose)            # ranges: 360-beam float32 scan, ranges[0] at -90 deg
                                                # (robot's right); pose: odometry (x, y, yaw)
@@ -34,19 +34,14 @@ __all__ = [
     "WallFollower",
     "MazeTeacher",
     "Demonstrator",
-    "make_policy",
     "ReactiveFollower",
     "ReactiveMazeTeacher",
     "STYLES",
     "scan_points",
     "side_wall_distance",
-    "TASKS",
     "TAKEOVER",
     "takes_over",
 ]
-
-TASKS = ("wall-following", "maze")
-
 
 def _bearings(count: int, fov_deg: float = 180.0) -> np.ndarray:
     half = math.radians(fov_deg) / 2.0
@@ -250,24 +245,7 @@ class MazeTeacher(WallFollower):
         super().__init__(target=target, actions=actions, **kw)
 
 
-STYLES = ("reactive", "smooth")
-
-
-def make_policy(task: str, actions: ActionSet = DEFAULT_ACTIONS, style: str = "reactive",
-                **kw) -> Policy:
-    """The scripted expert of a world's task: "wall-following" or "maze".
-
-    ``style="reactive"`` (default): ``ReactiveFollower`` / ``ReactiveMazeTeacher``, labels a pure
-    function of the scan's sectors (docs/experiments.md: the learnable teacher).
-    ``style="smooth"``: the earlier history-dependent ``WallFollower`` / ``MazeTeacher``
-    (hysteresis, dwell, committed rotations, lost-wall memory)."""
-    if style not in STYLES:
-        raise ValueError(f"teacher style must be one of {STYLES}, got {style!r}")
-    if task == "wall-following":
-        return (ReactiveFollower if style == "reactive" else WallFollower)(actions=actions, **kw)
-    if task == "maze":
-        return (ReactiveMazeTeacher if style == "reactive" else MazeTeacher)(actions=actions, **kw)
-    raise ValueError(f"no scripted teacher for task {task!r}; known: {', '.join(TASKS)}")
+STYLES = ("reactive", "smooth")  # the experts' styles (client.behaviour.tasks.make_policy)
 
 
 TAKEOVER = 0.3  # m: the corrective rounds' takeover distance (docs/experiments.md)

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from client.journal import Journal, LabelSet, _frame, journal_path
-from client.learner import LearnerCore, Pairing
-from client.teacher import Outbox
+from client.labels import Acknowledgements, Outbox, Pairing
+from client.roles.learner import LearnerCore
 from protocol.messages import LabeledScan, Scan, TeacherAction
 
 
@@ -121,7 +121,7 @@ def test_a_resent_label_is_ready_at_once_and_replaces_the_one_waiting_for_its_sc
     assert got == act and scan.id == 40 and scan.pose[2] == 0.5
     assert np.array_equal(scan.ranges, _ranges(4)) and not p.pending
     p.on_labeled(b"\x81\xa1v\x01")  # malformed: counted, dropped
-    assert p.stats["resent"] == 1 and p.stats["bad"] == 1
+    assert p.stats["resent"] == 1 and p.decoder.counts == {"teacher/labeled": 1}
 
 
 # ---- the teacher's outbox ---------------------------------------------------------------------
@@ -181,7 +181,7 @@ def test_resends_to_a_learner_that_cannot_journal_are_kept_once(tmp_path):
     it journaled already is acknowledged again."""
     from collections import deque
 
-    from client.learner import LearnerProcess
+    from client.roles.learner import LearnerProcess
 
     core = LearnerCore(tmp_path / "t.rhbl", features="wall")
     assert None not in _learn(core, "s1", [0])
@@ -189,13 +189,14 @@ def test_resends_to_a_learner_that_cannot_journal_are_kept_once(tmp_path):
     p = LearnerProcess.__new__(LearnerProcess)
     p.core, p.backlog, p.waiting = core, deque(), set()
     p.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0, "duplicates": 0}
-    p.retry_at, p.failures, p.ack_due, p.ack_count = 0.0, 0, set(), 0
+    p.retry_at, p.failures = 0.0, 0
+    p.acks = Acknowledgements(lambda _data: None, core.labels)
     for _ in range(10):  # seq 1, resent ten times while the journal fails
         p.learn(_scan(1), TeacherAction(scan_id=1, action="fwd", origin="s1", seq=1))
     assert len(p.backlog) == 1 and p.stats["duplicates"] == 9 and p.stats["lost"] == 0
-    assert p.failures >= 1 and p.ack_due == set()  # nothing journaled, nothing acknowledged
+    assert p.failures >= 1 and p.acks.pending == set()  # nothing journaled, nothing acknowledged
     p.learn(_scan(0), TeacherAction(scan_id=0, action="fwd", origin="s1", seq=0))  # held
-    assert p.stats["duplicates"] == 10 and p.ack_due == {"s1"} and len(p.backlog) == 1
+    assert p.stats["duplicates"] == 10 and p.acks.pending == {"s1"} and len(p.backlog) == 1
 
 
 def test_an_ack_naming_a_seq_twice_is_taken_once():

@@ -6,9 +6,8 @@ import pytest
 
 pytest.importorskip("aiohttp")
 
-from client.console.app import _action_of, _every_robot, access_token, parse_http  # noqa: E402
+from client.roles.console.app import _action_of, access_token, parse_http  # noqa: E402
 from lab.cli import build_parser  # noqa: E402
-from protocol import keys  # noqa: E402
 
 
 def test_parse_http():
@@ -20,7 +19,7 @@ def test_parse_http():
 
 
 def test_host_name():
-    from client.console.app import host_name
+    from client.roles.console.app import host_name
 
     assert host_name("[::1]:8080") == "::1" and host_name("[::1]") == "::1"
     assert host_name("localhost:80") == "localhost" and host_name("127.0.0.1") == "127.0.0.1"
@@ -36,10 +35,7 @@ def test_a_token_is_required_beyond_loopback():
     assert access_token("0.0.0.0", "") != ""  # an empty --token (compose's default) is none
 
 
-def test_keys_of_every_robot_and_action_names():
-    assert _every_robot(keys.scan_key) == "rhbl/*/laser/0/data/scan"
-    assert _every_robot(keys.cmd_vel_subscription) == "rhbl/*/position2d/0/cmd/vel/**"
-    assert _every_robot(keys.controller_decision_key) == "rhbl/*/controller/decision"
+def test_action_names():
     from client.behaviour.actions import DEFAULT_ACTIONS
 
     for name, (vx, va) in DEFAULT_ACTIONS.items():

@@ -142,30 +142,30 @@ def _writer(path: str, n: int, ready) -> None:  # pragma: no cover - runs in a c
         time.sleep(0.0005)
 
 
-def test_disk_full_mid_append_leaves_no_partial_record(tmp_path, monkeypatch):
+def test_disk_full_mid_append_leaves_no_partial_record(tmp_path):
     """A write cut short by ENOSPC is cut back out: the append can be retried and the journal
-    still opens with every record (before: a partial frame stayed in the middle -> corrupt)."""
+    still opens with every record (before: a partial frame stayed in the middle -> corrupt).
+    The failing disk comes through the journal's seam, ``write``."""
     import errno
 
-    from client import journal as jmod
-
     p = tmp_path / "t.journal"
-    j = Journal.create(p)
-    _fill(j, 2)
-    real_write = os.write
-    calls = {"n": 0}
+    disk = {"full": False, "calls": 0}
 
-    def full_disk(fd, data):
-        calls["n"] += 1
-        if calls["n"] == 1:
-            return real_write(fd, bytes(data)[:7])  # a short write...
+    def write(fd, data):
+        if not disk["full"]:
+            return os.write(fd, data)
+        disk["calls"] += 1
+        if disk["calls"] == 1:
+            return os.write(fd, bytes(data)[:7])  # a short write...
         raise OSError(errno.ENOSPC, "No space left on device")  # ...then the disk is full
 
-    monkeypatch.setattr(jmod.os, "write", full_disk)
+    j = Journal.create(p, write=write)
+    _fill(j, 2)
+    disk["full"] = True
     with pytest.raises(JournalError, match="No space left"):
         _fill(j, 1, start=2)
-    monkeypatch.setattr(jmod.os, "write", real_write)
-    assert len(j) == 2
+    disk["full"] = False
+    assert len(j) == 2 and disk["calls"] == 2
     _fill(j, 1, start=2)  # the retry (space freed)
     assert [r.index for r in j.records()] == [0, 1, 2]
     j.close()

@@ -8,7 +8,7 @@ import pty
 import time
 
 from client.behaviour.actions import DEFAULT_ACTIONS
-from client.keyboard import KeyboardPolicy, parse_keys
+from client.roles.keyboard import KeyboardPolicy, parse_keys
 
 
 def _until(cond, timeout=5.0):

@@ -17,9 +17,9 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
+from campaigns import full_disk  # noqa: E402
 from client.journal import Journal, journal_path  # noqa: E402
-from lab.faults import FULL_DISK_LEARNER  # noqa: E402
-from lab.processes import Child  # noqa: E402
+from lab.children import Child  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, TeacherAction  # noqa: E402
 from protocol.session import make_config  # noqa: E402
@@ -27,8 +27,6 @@ from protocol.session import make_config  # noqa: E402
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 ROOT = Path(__file__).resolve().parents[2]
 
-# runs the learner with journal writes failing (ENOSPC) while the file FULL_FLAG exists
-_WRAPPER = FULL_DISK_LEARNER
 
 
 def _wait(cond, timeout: float, what: str, proc: Child | None = None) -> None:
@@ -58,7 +56,8 @@ def test_disk_full_keeps_labels_in_memory_and_journals_them_later(free_port, tmp
     with zenoh.open(make_config(mode="router", listen=[endpoint])) as session:
         scan_pub = session.declare_publisher(keys.scan_key("r0"))
         act_pub = session.declare_publisher(keys.teacher_action_key("r0"))
-        proc = Child("learner", [sys.executable, "-c", _WRAPPER, "learner", "--features", "wall",
+        # the learner with journal writes failing (ENOSPC) while the file FULL_FLAG exists
+        proc = Child("learner", [*full_disk.ARGV, "learner", "--features", "wall",
                                  "--out", str(out), "--connect", endpoint, "--snapshot-every",
                                  "0.2"], tmp_path, cwd=ROOT,
                      env={**os.environ, "FULL_FLAG": str(flag)}).start()
@@ -88,7 +87,9 @@ def test_disk_full_keeps_labels_in_memory_and_journals_them_later(free_port, tmp
             held = teach(20)
             assert proc.wait_for_line("cannot write the journal", 20), (
                 f"timed out waiting for the journal error:\n{proc.output()}")
-            time.sleep(0.5)
+            # it keeps trying (every second) and keeps running
+            assert proc.wait_for_line("cannot write the journal", 20, since=proc.mark()), (
+                f"timed out waiting for the second attempt:\n{proc.output()}")
             assert proc.poll() is None, proc.output()
             assert _records(out) == first
             flag.unlink()  # space is back
@@ -107,7 +108,7 @@ def test_disk_full_keeps_labels_in_memory_and_journals_them_later(free_port, tmp
 # runs the learner with every learning step slowed down (a learner that falls behind)
 _SLOW = """
 import sys, time
-import client.learner as L
+import client.roles.learner as L
 _learn = L.LearnerCore.learn
 def slow(self, *args, **kwargs):
     time.sleep(0.02)
@@ -158,9 +159,8 @@ def test_a_flood_of_scans_keeps_a_slow_learner_bounded_and_every_label_learned(f
                               for r in session.liveliness().get(token, timeout=0.5)),
                   30, "the learner's token", proc)
             scan_pub.put(Scan(ts=0.0, id=0, ranges=ranges[0]).encode())  # the server is up
-            assert proc.wait_for_line("server is up", 20), (
-                f"timed out waiting for the first scan:\n{proc.output()}")
-            time.sleep(0.5)
+            act_pub.put(TeacherAction(scan_id=0, action="fwd").encode())  # and learning is
+            _wait(lambda: _records(out) == [0], 30, "the first label learned", proc)
             before = peak = _rss_mb(proc.pid)
             for sid in range(1, n + 1):
                 scan_pub.put(Scan(ts=0.01 * sid, id=sid, ranges=ranges[sid % 8]).encode())
@@ -168,12 +168,15 @@ def test_a_flood_of_scans_keeps_a_slow_learner_bounded_and_every_label_learned(f
                     act_pub.put(TeacherAction(scan_id=sid, action="fwd").encode())
                 if sid % 1000 == 0:
                     peak = max(peak, _rss_mb(proc.pid))
-            for _ in range(10):  # the scans still on their way
+            labeled = [0, *range(every, n + 1, every)]
+
+            def learned() -> bool:  # the memory watched until the last scans are taken in
+                nonlocal peak
                 peak = max(peak, _rss_mb(proc.pid))
-                time.sleep(0.1)
+                return _records(out) == labeled
+
+            _wait(learned, 60, "every label learned", proc)
             assert peak - before < 20, (before, peak)
-            labeled = list(range(every, n + 1, every))
-            _wait(lambda: _records(out) == labeled, 60, "every label learned", proc)
             proc.send_signal(signal.SIGINT)
             assert proc.wait(30) == 0, proc.output()
         finally:

@@ -15,8 +15,8 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
-from client._process import EXIT_NO_SERVER, EXIT_UNREACHABLE, EXIT_USAGE  # noqa: E402
-from lab.processes import Child, rhbl_argv  # noqa: E402
+from lab.children import Child, rhbl_argv  # noqa: E402
+from protocol.runtime import EXIT_NO_SERVER, EXIT_UNREACHABLE, EXIT_USAGE  # noqa: E402
 from protocol.session import make_config  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]

@@ -10,11 +10,12 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from client._process import ProcessError
 from client.behaviour.learning import load_snapshot
 from client.journal import Journal, journal_path
-from client.learner import LearnerCore, Pairing
+from client.labels import Pairing
+from client.roles.learner import LearnerCore
 from protocol.messages import Scan, TeacherAction
+from protocol.runtime import ProcessError
 
 LABELS = ["fwd", "fwd-left", "rot-left", "fwd-right", "rot-right"]
 
@@ -192,7 +193,7 @@ def test_a_scan_flood_stays_bounded_and_every_label_whose_scan_arrived_is_learne
 def test_pairing_says_when_the_learner_falls_behind_and_counts_what_it_drops(caplog):
     pairing = Pairing(scan_buffer=8, max_ready=10, behind=4)
     ranges = np.ones(360, np.float32)
-    with caplog.at_level(logging.WARNING, logger="client.learner"):
+    with caplog.at_level(logging.WARNING, logger="client.labels"):
         for sid in range(1, 16):
             pairing.on_scan(_scan(sid, ranges))
             pairing.on_label(_label(sid))
@@ -204,7 +205,7 @@ def test_pairing_says_when_the_learner_falls_behind_and_counts_what_it_drops(cap
     # malformed input is counted and logged, never raised into the zenoh callback
     pairing.on_scan(b"not a scan")
     pairing.on_label(b"not a label")
-    assert pairing.stats["bad"] == 2
+    assert pairing.decoder.counts == {"scan": 1, "teacher/action": 1}
     # a label whose scan never arrives expires after match_timeout, counted
     clock = [0.0]
     late = Pairing(match_timeout=1.0, clock=lambda: clock[0])
@@ -216,3 +217,23 @@ def test_pairing_says_when_the_learner_falls_behind_and_counts_what_it_drops(cap
     late.on_scan(_scan(1, ranges))
     late.on_label(_label(500))
     assert late.waiting() == 0 and 500 in late.pending
+
+
+def test_a_resumed_learner_says_the_vectors_its_tree_holds(tmp_path):
+    """A new lineage extending a tree starts with that tree's vectors, not with "0 vectors"
+    (its own journal is empty: the first line said "0 vectors so far, 776 nodes")."""
+    base = tmp_path / "base.rhbl"
+    core = LearnerCore(base, features="wall")
+    _feed(core, 30, seed=4)
+    core.snapshot()
+    nodes = core.learner.nodes
+    core.close()
+    ext = LearnerCore(tmp_path / "ext.rhbl", resume=str(base))
+    said = ext.describe()
+    assert f"30 vectors so far (0 journaled in lineage {ext.journal.lineage}), {nodes} nodes" in said
+    assert ext.journal.header["fork"] == {"lineage": core.journal.lineage, "records": 30}
+    ext.close()
+    fresh = LearnerCore(tmp_path / "fresh.rhbl", features="wall")
+    assert "0 vectors so far (0 journaled" in fresh.describe() and fresh.describe().endswith(
+        "1 nodes")
+    fresh.close()

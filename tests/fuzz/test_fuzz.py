@@ -1,4 +1,4 @@
-"""The fuzz campaign of ``lab.fuzz`` at CI size (the full one: ``python -m lab.fuzz``, 10,000
+"""The fuzz campaign of ``campaigns.fuzz`` at CI size (the full one: ``python -m campaigns.fuzz``, 10,000
 hostile messages per key): every key and queryable of the server, learner, teacher and
 controller, and the snapshot, journal and world files."""
 
@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from lab import fuzz
+from campaigns import fuzz
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(280)]
 

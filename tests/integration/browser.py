@@ -13,7 +13,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from lab.processes import Child, rhbl_argv
+from lab.children import Child, rhbl_argv
 
 ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -67,7 +67,7 @@ def close_chromium(drv) -> None:
 
 
 class ConsoleProcess(Child):
-    """``rhbl console --connect ENDPOINT --http 127.0.0.1:0 ...`` (a ``lab.processes.Child``:
+    """``rhbl console --connect ENDPOINT --http 127.0.0.1:0 ...`` (a ``lab.children.Child``:
     stopped by PID with SIGTERM, then SIGKILL); ``url`` once it printed it."""
 
     def __init__(self, endpoint: str, *extra: str):

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from lab.processes import Child
+from lab.children import Child
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 zenoh = pytest.importorskip("zenoh")
-from lab.processes import free_port  # noqa: E402
+from lab.children import free_port  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import DriverState, State  # noqa: E402
 

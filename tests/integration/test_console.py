@@ -32,7 +32,7 @@ from browser import ConsoleProcess, chromium, close_chromium, find_chromium, in_
 
 from client.journal import Journal, journal_path  # noqa: E402
 from client.player import PlayerClient  # noqa: E402
-from lab.processes import Child, rhbl_argv  # noqa: E402
+from lab.children import Child, rhbl_argv  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Decision, State, TeacherAction, TreeNotice  # noqa: E402
 from protocol.session import make_config  # noqa: E402

@@ -1,4 +1,4 @@
-"""The fault campaign (``python -m lab.faults``) at CI size: no label the teacher publishes is
+"""The fault campaign (``python -m campaigns.faults``) at CI size: no label the teacher publishes is
 lost when the learner is SIGKILLed (acknowledged or resent with its scan until journaled, once),
 also with labels in flight at the kill; a restarted server is driven again by the teacher; a
 learner whose folder turns read-only (its mode, or a read-only bind mount) loses no label and
@@ -12,7 +12,7 @@ import random
 
 import pytest
 
-from lab import faults
+from campaigns import faults
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 

@@ -32,8 +32,9 @@ ROOT = Path(__file__).resolve().parents[2]
 
 @pytest.fixture(scope="module")
 def tree(tmp_path_factory) -> Path:
-    from lab.harness import make_learner, resolve_world, train
+    from lab.harness import make_learner, resolve_world
     from lab.recipe import recipe_for
+    from lab.train import train
 
     path = tmp_path_factory.mktemp("fleet") / "tree.rhbl"
     spec = resolve_world("room")

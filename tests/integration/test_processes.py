@@ -11,6 +11,7 @@ near a wall.
 
 from __future__ import annotations
 
+import json
 import signal
 import time
 from pathlib import Path
@@ -23,7 +24,7 @@ zenoh = pytest.importorskip("zenoh")
 from client.behaviour.learning import DemonstrationLearner, load_snapshot  # noqa: E402
 from client.journal import Journal, journal_path  # noqa: E402
 from client.player import PlayerClient  # noqa: E402
-from lab.processes import Child, rhbl_argv  # noqa: E402
+from lab.children import Child, rhbl_argv  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import DriverState, State, TeacherAction, VelCmd  # noqa: E402
 from protocol.session import make_config  # noqa: E402
@@ -40,9 +41,12 @@ def env(start_module_server, tmp_path_factory):
     procs: list[Child] = []
 
     def start(name, *args):
-        # SIGINT, then SIGKILL after 30 s: stop() returns 0 only if SIGINT alone ended it
-        p = Child(name, rhbl_argv(*args, "--connect", srv.endpoint), tmp, cwd=ROOT,
-                  stop_signal=signal.SIGINT, stop_timeout=30.0, escalate=False).start()
+        # SIGINT, then SIGKILL after 30 s: stop() returns 0 only if SIGINT alone ended it;
+        # its counters at exit in a file of its own (--stats)
+        stats = tmp / f"{name}-{len(procs)}.stats.json"
+        p = Child(name, rhbl_argv(*args, "--connect", srv.endpoint, "--stats", str(stats)), tmp,
+                  cwd=ROOT, stop_signal=signal.SIGINT, stop_timeout=30.0, escalate=False).start()
+        p.stats_file = stats
         procs.append(p)
         return p
 
@@ -74,12 +78,17 @@ def _wait_token(session, role: str, proc: Child, timeout: float = 30.0) -> None:
     raise AssertionError(f"no liveliness token {key}:\n{proc.output()}")
 
 
+def _stats(p: Child) -> dict:
+    """The counters a process wrote at exit (``--stats``)."""
+    assert p.poll() is not None, f"{p.name} is still running"
+    return json.loads(p.stats_file.read_text())
+
+
 def _teach(env, seconds: float, seed: int = 0) -> int:
     t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--seconds",
                      str(seconds), "--seed", str(seed))
     assert t.wait(60) == 0, t.output()
-    line = [ln for ln in t.output().splitlines() if "teacher stopped after" in ln][-1]
-    return int(line.split("after ")[1].split()[0])
+    return _stats(t)["labels"]
 
 
 def _journal_len(out: Path) -> int:
@@ -124,13 +133,10 @@ def test_teacher_waits_for_a_learner_and_no_label_is_lost(env):
     t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--seconds", "5",
                      "--wait-learner-timeout", "60")
     assert t.wait_for_line("waiting for a learner", 30), t.output()
-    time.sleep(1.0)
     assert t.poll() is None and "first label" not in t.output(), t.output()
     learner = env["start"]("learner", "learner", "--features", "wall", "--out", str(out))
     assert t.wait(60) == 0, t.output()
-    first = int(t.output().split("first label: scan ")[1].split(",")[0])
-    n = int([ln for ln in t.output().splitlines() if "teacher stopped after" in ln][-1]
-            .split("after ")[1].split()[0])
+    first, n = _stats(t)["first_label_scan"], _stats(t)["labels"]
     _wait_journal(out, n)
     assert learner.stop() == 0, learner.output()
     with Journal.open(journal_path(out), readonly=True) as j:
@@ -182,11 +188,6 @@ def test_learner_grows_a_tree_and_survives_sigkill(env):
     assert ref.classifier.tree_equal(clf)
 
 
-def _labels(t: Child) -> int:
-    line = [ln for ln in t.output().splitlines() if "teacher stopped after" in ln][-1]
-    return int(line.split("after ")[1].split()[0])
-
-
 def test_controller_drives_without_collision(env):
     """The recipe over zenoh: the demonstrated tree (tests above) plus, from each start pose of
     the world, a demonstration and two corrective rounds (the controller drives the learner's
@@ -212,7 +213,7 @@ def test_controller_drives_without_collision(env):
             t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--correct",
                              *phase)
             assert t.wait(120) == 0, t.output()
-            labels += _labels(t)
+            labels += _stats(t)["labels"]
     _wait_journal(out, n0 + labels)
     assert follow.wait_for_line("swapped in a newer tree", 5), follow.output()  # 5 s: the pipe
     assert follow.stop() == 0, follow.output()
@@ -294,7 +295,18 @@ def test_teacher_pauses_while_no_learner_is_up(env):
     assert learner.stop(signal.SIGTERM) == 0, learner.output()
     assert t.wait_for_line("pausing", 10) and t.poll() is None, t.output()
     paused = _journal_len(out)
-    time.sleep(1.0)  # nobody records: nothing may be demonstrated now
+    # nobody records: nothing may be demonstrated now, while the server goes on (two scans)
+    seen = {"scans": 0, "labels": 0}
+    subs = [env["session"].declare_subscriber(keys.scan_key("r0"), lambda _s: seen.update(
+                scans=seen["scans"] + 1)),
+            env["session"].declare_subscriber(keys.teacher_action_key("r0"), lambda _s: seen.update(
+                labels=seen["labels"] + 1))]
+    end = time.monotonic() + 30
+    while seen["scans"] < 2 and time.monotonic() < end:
+        time.sleep(0.05)
+    for sub in subs:
+        sub.undeclare()
+    assert seen == {"scans": seen["scans"], "labels": 0} and seen["scans"] >= 2, seen
     learner = env["start"]("learner", *args)
     _wait_token(env["session"], "learner", learner)
     end = time.monotonic() + 10
@@ -303,8 +315,7 @@ def test_teacher_pauses_while_no_learner_is_up(env):
     assert t.output().count("learner is up") == 2, t.output()
     _wait_journal(out, paused + 20)  # demonstrating again
     assert t.stop() == 0, t.output()
-    n = int([ln for ln in t.output().splitlines() if "teacher stopped after" in ln][-1]
-            .split("after ")[1].split()[0])
+    n = _stats(t)["labels"]
     _wait_journal(out, n)
     assert learner.stop() == 0, learner.output()
     assert _journal_len(out) == n > paused > 0
@@ -350,7 +361,7 @@ def test_correcting_teacher_labels_while_the_controller_drives(env):
     t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--correct",
                      "--seconds", "40")
     assert t.wait(90) == 0, t.output()
-    n = _labels(t)
+    n = _stats(t)["labels"]
     _wait_journal(out, n)
     assert c.stop() == 0, c.output()
     assert learner.stop() == 0, learner.output()
@@ -358,12 +369,15 @@ def test_correcting_teacher_labels_while_the_controller_drives(env):
         sub.undeclare()
     sim.set_pose2d(*start)
 
-    took = int(t.output().split("taken over)")[0].rsplit(", ", 1)[1].split()[0])
+    took = _stats(t)["taken_over"]
     assert 0 < took < n / 2, t.output()
     # every label the teacher published is journaled, tied to its scan
     with Journal.open(journal_path(out), readonly=True) as j:
         records = list(j.records())
-    assert len(records) == n >= 350, (len(records), n, t.output()[-600:])
+    # 40 s at 10 Hz: each scan labelled or, when the teacher fell behind the lock-step
+    # controller on a busy machine (its queue holds 64), counted as missed; none silently
+    missed = _stats(t)["missed"]
+    assert len(records) == n and n + missed >= 390 and n >= 100, (n, missed, t.output()[-600:])
     mine = [lb for lb in labels if lb.source == "teacher"]
     assert {r.scan_id for r in records} == {lb.scan_id for lb in mine}
     # taking over: the command is the label; otherwise no command (executed unset)

@@ -35,8 +35,8 @@ zenoh = pytest.importorskip("zenoh")
 mcap_reader = pytest.importorskip("mcap.reader")
 pytest.importorskip("google.protobuf")
 
-from client.recording import RecordingError, read_recording  # noqa: E402
-from lab.processes import Child, rhbl_argv  # noqa: E402
+from client.recording.mcap_file import RecordingError, read_recording  # noqa: E402
+from lab.children import Child, rhbl_argv  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, VelCmd  # noqa: E402
 from protocol.session import make_config  # noqa: E402
@@ -121,12 +121,12 @@ def protobuf_class(schema_name: str, descriptor_set: bytes):
     return message_factory.GetMessageClass(pool.FindMessageTypeByName(schema_name))
 
 
-def teach(procs, endpoint: str, seconds: float, *extra: str) -> int:
+def teach(procs, endpoint: str, seconds: float, *extra: str, stats: Path) -> int:
+    """A teacher's demonstration of ``seconds``; how many labels it published (``--stats``)."""
     t = procs("teacher", "teacher", "--policy", "wall-follower", "--seconds", str(seconds),
-              "--connect", endpoint, *extra)
+              "--connect", endpoint, "--stats", str(stats), *extra)
     assert t.wait(120) == 0, t.output()
-    line = [ln for ln in t.output().splitlines() if "teacher stopped after" in ln][-1]
-    return int(line.split("after ")[1].split()[0])
+    return json.loads(stats.read_text())["labels"]
 
 
 # ---- record -------------------------------------------------------------------------------
@@ -139,7 +139,8 @@ def test_record_keeps_every_message_and_viewer_channels_decode(start_server, pro
         tap = Tap(session)
         rec = procs("recorder", "record", "--out", str(out), "--connect", srv.endpoint)
         wait_recorded(out)
-        labels = teach(procs, srv.endpoint, 8.0, "--no-wait-learner")
+        labels = teach(procs, srv.endpoint, 8.0, "--no-wait-learner",
+                       stats=tmp_path / "teacher.json")
         teacher_key = keys.teacher_action_key("r0")
         end = time.monotonic() + 10  # the tap and the recorder both got the last label
         while tap.count(teacher_key) < labels and time.monotonic() < end:
@@ -285,7 +286,8 @@ def live_run(start_module_server, tmp_path_factory):
         wait_recorded(rec_path)
         learner = start("learner", "learner", "--features", "wall", "--out", str(tree),
                         "--connect", srv.endpoint)
-        n = teach(start, srv.endpoint, 25.0) + teach(start, srv.endpoint, 10.0, "--seed", "3")
+        n = (teach(start, srv.endpoint, 25.0, stats=tmp / "teacher-1.json")
+             + teach(start, srv.endpoint, 10.0, "--seed", "3", stats=tmp / "teacher-2.json"))
         assert learner.stop() == 0, learner.output()
         assert rec.stop() == 0, rec.output()
         yield {"srv": srv, "tmp": tmp, "recording": rec_path, "tree": tree, "labels": n,
@@ -369,6 +371,7 @@ def test_replay_makes_a_controller_send_the_same_commands(live_run, procs, tmp_p
         rp = procs("replay", "replay", str(live_rec), "--lockstep", "--lockstep-timeout", "10",
                    "--connect", endpoint, "--wait-subscriber", "60")  # 10 s: a loaded machine
         assert rp.wait(180) == 0, rp.output()
+        assert rp.output().count("replay up") == 1, rp.output()  # it said so twice
         last = max(live)
         end = time.monotonic() + 10
         while time.monotonic() < end:

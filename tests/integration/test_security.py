@@ -3,7 +3,8 @@
 A Python session in router mode (docker/router_standin.py) runs the very config file the compose
 router uses, with secrets freshly made by scripts/gen-dev-secrets.sh in a temporary directory.
 Clients use the generated per-role configs, as the processes do with ``--zenoh-config``.
-Every wait is bounded.
+Every wait is bounded, and none is a fixed time: that a message did NOT arrive is known once a
+message sent after it, on a path it would have taken, has (``_passed``).
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from pathlib import Path
 import pytest
 
 zenoh = pytest.importorskip("zenoh")
-from lab.processes import free_port  # noqa: E402
+from lab.children import free_port  # noqa: E402
 from protocol import keys  # noqa: E402
 
 pytestmark = pytest.mark.integration
@@ -30,7 +31,9 @@ ROUTER_CONFIG = ROOT / "docker" / "zenoh" / "router.json5"
 GEN_SECRETS = ROOT / "scripts" / "gen-dev-secrets.sh"
 ROLES = ("server", "teacher", "learner", "controller")
 ROBOT = "r0"
-SETTLE = 0.3  # s: how long a message that should NOT arrive is given to arrive
+# a read-only request every role may make of the server: its answer tells a sender that the
+# router has handled everything the sender sent before (``_passed``)
+BARRIER = keys.request_key(ROBOT, "position2d", "get_barrier")
 
 
 def _load_standin():
@@ -132,6 +135,63 @@ def _subscribe(sessions, inbox, who, key):
     return sessions[who].declare_subscriber(key, inbox.handler(who))
 
 
+def _flush_key(who: str) -> str:
+    """A key only ``who``'s flush subscriber listens to, on which its flusher may publish: the
+    server's sensor data for every other role, the teacher's commands for the server."""
+    if who == "server":
+        return keys.cmd_vel_key("flush", source="teacher")
+    return keys.driver_key(f"flush-{who}")
+
+
+def _flusher(who: str) -> str:
+    return "teacher" if who == "server" else "server"
+
+
+@pytest.fixture(scope="module")
+def flush(sessions):
+    """Per role, the payloads its flush subscriber got; the server answers the barrier."""
+    inbox = Inbox()
+    subs = [_subscribe(sessions, inbox, who, _flush_key(who)) for who in ROLES]
+    barrier = sessions["server"].declare_queryable(BARRIER, lambda q: q.reply(q.key_expr,
+                                                                               b"barrier"))
+    for who in ROLES:  # every flush path is up, and the barrier known to the router
+        _flush(sessions, inbox, who)
+    yield inbox
+    barrier.undeclare()
+    for sub in subs:
+        sub.undeclare()
+
+
+_FLUSHES = iter(range(1, 1 << 30))
+
+
+def _flush(sessions, flush, who: str, timeout: float = 10.0) -> None:
+    """A flush message from ``who``'s flusher reaches ``who``: behind it on that path, whatever
+    the router had queued for ``who`` before. Sent again every 0.1 s until it arrives (the
+    first ones may go out before the router knows the flush subscription)."""
+    payload = f"flush-{next(_FLUSHES)}".encode()
+    end = time.monotonic() + timeout
+    while not flush.wait_for((who, _flush_key(who), payload), timeout=0.1):
+        assert time.monotonic() < end, f"no flush reached {who}"
+        sessions[_flusher(who)].put(_flush_key(who), payload)
+
+
+def _passed(sessions, flush, senders=(), receivers=(), timeout: float = 10.0) -> None:
+    """Everything the ``senders`` sent or declared so far has been handled by the router, and
+    what it let through has reached the ``receivers``. The router handles what a session sends
+    in order, so a sender's query of the server, once answered, comes after everything that
+    sender sent before (the server itself: its flush to the teacher); then a flush from each
+    receiver's flusher, sent after that, reaches the receiver behind whatever the router had
+    queued for it. (A session that just subscribed is a sender of its declaration.)"""
+    for who in senders:
+        if who == "server":
+            _flush(sessions, flush, "teacher")
+        else:
+            assert [r.ok for r in sessions[who].get(BARRIER, timeout=timeout) if r.ok], who
+    for who in receivers:
+        _flush(sessions, flush, who)
+
+
 # ---- authentication ------------------------------------------------------------------------
 
 
@@ -198,10 +258,10 @@ def test_mutual_tls_requires_a_client_certificate(secrets):
 # ---- access control --------------------------------------------------------------------------
 
 
-def test_learner_cannot_publish_commands_teacher_and_controller_can(sessions):
+def test_learner_cannot_publish_commands_teacher_and_controller_can(sessions, flush):
     inbox = Inbox()
     sub = _subscribe(sessions, inbox, "server", keys.cmd_vel_subscription(ROBOT))
-    time.sleep(SETTLE)
+    _passed(sessions, flush, ["server"])  # the subscription is in place
     teacher_key = keys.cmd_vel_key(ROBOT, source="teacher")
     controller_key = keys.cmd_vel_key(ROBOT, source="controller")
     plain_key = keys.cmd_vel_key(ROBOT)
@@ -221,18 +281,18 @@ def test_learner_cannot_publish_commands_teacher_and_controller_can(sessions):
     try:
         assert inbox.wait_for(("server", teacher_key, b"teacher"))
         assert inbox.wait_for(("server", controller_key, b"controller"))
-        time.sleep(SETTLE)
+        _passed(sessions, flush, {who for who, _ in denied}, ["server"])
         leaked = [item for item in inbox.items if item[2].startswith(b"denied:")]
         assert leaked == []
     finally:
         sub.undeclare()
 
 
-def test_sensor_data_flows_to_authorised_readers_only_from_the_server(sessions):
+def test_sensor_data_flows_to_authorised_readers_only_from_the_server(sessions, flush):
     inbox = Inbox()
     readers = ("teacher", "learner", "controller")
     subs = [_subscribe(sessions, inbox, who, f"rhbl/{ROBOT}/*/*/data/**") for who in readers]
-    time.sleep(SETTLE)
+    _passed(sessions, flush, readers)
     for who in ("teacher", "learner", "controller"):  # forged sensor data
         sessions[who].put(keys.scan_key(ROBOT), f"forged:{who}".encode())
     sessions["server"].put(keys.scan_key(ROBOT), b"scan")
@@ -246,7 +306,7 @@ def test_sensor_data_flows_to_authorised_readers_only_from_the_server(sessions):
                 (keys.driver_key(ROBOT), b"driver"),
             ]:
                 assert inbox.wait_for((who, key, payload)), (who, key)
-        time.sleep(SETTLE)
+        _passed(sessions, flush, readers, readers)
         # a forger's own subscriber sees its own put locally; nobody else may
         leaked = [
             (who, p)
@@ -259,16 +319,16 @@ def test_sensor_data_flows_to_authorised_readers_only_from_the_server(sessions):
             sub.undeclare()
 
 
-def test_only_the_teacher_labels_demonstrations(sessions):
+def test_only_the_teacher_labels_demonstrations(sessions, flush):
     inbox = Inbox()
     sub = _subscribe(sessions, inbox, "learner", keys.teacher_action_key(ROBOT))
-    time.sleep(SETTLE)
+    _passed(sessions, flush, ["learner"])
     for who in ("controller", "server"):
         sessions[who].put(keys.teacher_action_key(ROBOT), f"forged:{who}".encode())
     sessions["teacher"].put(keys.teacher_action_key(ROBOT), b"label")
     try:
         assert inbox.wait_for(("learner", keys.teacher_action_key(ROBOT), b"label"))
-        time.sleep(SETTLE)
+        _passed(sessions, flush, ["controller", "server"], ["learner"])
         assert [p for _, _, p in inbox.items if p.startswith(b"forged:")] == []
     finally:
         sub.undeclare()
@@ -278,7 +338,7 @@ def _ask(session, key) -> list[bytes]:
     return [reply.ok.payload.to_bytes() for reply in session.get(key, timeout=1.5) if reply.ok]
 
 
-def test_requests_are_answered_by_the_server_mutating_ones_not_for_the_learner(sessions):
+def test_requests_are_answered_by_the_server_mutating_ones_not_for_the_learner(sessions, flush):
     geom, odom = (
         keys.request_key(ROBOT, "laser", "get_geom"),
         keys.request_key(ROBOT, "position2d", "set_odom"),
@@ -290,7 +350,7 @@ def test_requests_are_answered_by_the_server_mutating_ones_not_for_the_learner(s
     forged = sessions["teacher"].declare_queryable(
         keys.request_key(ROBOT, "laser", "get_config"), lambda q: q.reply(q.key_expr, b"forged")
     )
-    time.sleep(SETTLE)
+    _passed(sessions, flush, ["server", "teacher"])  # both declarations handled
     try:
         for who in ("teacher", "learner", "controller"):
             assert _ask(sessions[who], geom) == [b"ack"], who
@@ -304,13 +364,13 @@ def test_requests_are_answered_by_the_server_mutating_ones_not_for_the_learner(s
             q.undeclare()
 
 
-def test_only_teacher_may_teleport_every_role_may_read_the_true_pose(sessions):
+def test_only_teacher_may_teleport_every_role_may_read_the_true_pose(sessions, flush):
     set_pose, get_pose = keys.sim_request_key(ROBOT, "set_pose"), keys.sim_request_key(ROBOT, "get_pose")
     queryables = [
         sessions["server"].declare_queryable(key, lambda q: q.reply(q.key_expr, b"ack"))
         for key in (set_pose, get_pose)
     ]
-    time.sleep(SETTLE)
+    _passed(sessions, flush, ["server"])
     try:
         assert _ask(sessions["teacher"], set_pose) == [b"ack"]
         assert _ask(sessions["learner"], set_pose) == []
@@ -322,33 +382,33 @@ def test_only_teacher_may_teleport_every_role_may_read_the_true_pose(sessions):
             q.undeclare()
 
 
-def test_learner_snapshot_and_notices_reach_the_controller(sessions):
+def test_learner_snapshot_and_notices_reach_the_controller(sessions, flush):
     inbox = Inbox()
     sub = _subscribe(sessions, inbox, "controller", keys.learner_notice_key(ROBOT))
     snap = sessions["learner"].declare_queryable(
         keys.learner_snapshot_key(ROBOT), lambda q: q.reply(q.key_expr, b"tree")
     )
-    time.sleep(SETTLE)
+    _passed(sessions, flush, ["controller", "learner"])
     sessions["teacher"].put(keys.learner_notice_key(ROBOT), b"forged:teacher")
     sessions["learner"].put(keys.learner_notice_key(ROBOT), b"notice")
     try:
         assert inbox.wait_for(("controller", keys.learner_notice_key(ROBOT), b"notice"))
         assert _ask(sessions["controller"], keys.learner_snapshot_key(ROBOT)) == [b"tree"]
-        time.sleep(SETTLE)
+        _passed(sessions, flush, ["teacher"], ["controller"])
         assert [p for _, _, p in inbox.items if p.startswith(b"forged:")] == []
     finally:
         snap.undeclare()
         sub.undeclare()
 
 
-def test_console_reads_notices_and_decisions_with_the_teachers_credentials(sessions):
+def test_console_reads_notices_and_decisions_with_the_teachers_credentials(sessions, flush):
     """``rhbl console`` runs with the teacher's credentials: it receives the learner's notices
     and the controller's decisions, and only the controller may publish decisions."""
     inbox = Inbox()
     decision, notice = keys.controller_decision_key(ROBOT), keys.learner_notice_key(ROBOT)
     subs = [_subscribe(sessions, inbox, "teacher", decision),
             _subscribe(sessions, inbox, "teacher", notice)]
-    time.sleep(SETTLE)
+    _passed(sessions, flush, ["teacher"])
     for who in ("learner", "server"):  # (a session's own puts reach its own subscribers)
         sessions[who].put(decision, f"forged:{who}".encode())
     sessions["controller"].put(decision, b"decision")
@@ -356,7 +416,7 @@ def test_console_reads_notices_and_decisions_with_the_teachers_credentials(sessi
     try:
         assert inbox.wait_for(("teacher", decision, b"decision"))
         assert inbox.wait_for(("teacher", notice, b"notice"))
-        time.sleep(SETTLE)
+        _passed(sessions, flush, ["learner", "server"], ["teacher"])
         assert [p for _, _, p in inbox.items if p.startswith(b"forged:")] == []
     finally:
         for sub in subs:
@@ -412,24 +472,33 @@ def test_each_role_declares_liveliness_tokens_only_under_its_own_key(secrets, ro
     }
     forged.add(("controller", keys.alive_key("learner", f"{ROBOT}-1")))  # a learner of r0
     tokens = []
+
+    def declared_after(tag: str) -> set[str]:
+        """Each declarer declares a token of its own now, and the observer sees them all: the
+        router handles a session's declarations in order, so it has handled every token each
+        declarer declared or dropped before (the forged ones included)."""
+        mine = {role: keys.alive_key(role, f"acl-{role}-{tag}") for role in roles}
+        for role in roles:
+            tokens.append(declarers[role].liveliness().declare_token(mine[role]))
+        deadline = time.monotonic() + 10.0
+        seen: set[str] = set()
+        while time.monotonic() < deadline and not set(mine.values()) <= seen:
+            seen = _alive_tokens(observer)
+        assert set(mine.values()) <= seen, sorted(seen)
+        return seen
+
     try:
-        time.sleep(SETTLE)
         for who, key in sorted(forged):
             tokens.append(declarers[who].liveliness().declare_token(key))
         for role in roles:
             tokens.append(declarers[role].liveliness().declare_token(own[role]))
-        deadline = time.monotonic() + 3.0
-        seen: set[str] = set()
-        while time.monotonic() < deadline and not set(own.values()) <= seen:
-            seen = _alive_tokens(observer)
+        seen = declared_after("first")
         assert set(own.values()) <= seen, sorted(seen)
-        time.sleep(SETTLE)
-        seen = _alive_tokens(observer)
         assert [key for _, key in forged if key in seen] == []
         # ... and dropping them releases nothing: no appearance, no disappearance
         for token in tokens[: len(forged)]:
             token.undeclare()
-        time.sleep(SETTLE)
+        declared_after("then")
         with lock:
             leaked = [(kind, key) for kind, key in events if "forged" in key or key.endswith("-1")]
             subscribed = {key for _, key in events}

@@ -74,3 +74,81 @@ def test_bad_data_is_named(tmp_path, capsys):
     assert main(["compact", "--tree", str(tree), "--out", str(tmp_path / "o.rhbl"), "--data",
                  str(tmp_path / "bad.npz")]) == 2
     assert "bad.npz" in capsys.readouterr().err
+
+
+def _lineage(tmp_path, rows=200):
+    """A learner's tree (journaled), then a tree extending it (rhbl learner --resume) that
+    learned nothing more: its own journal is empty."""
+    from client.roles.learner import LearnerCore
+
+    rng = np.random.default_rng(5)
+    teacher = ReactiveFollower()
+    base = LearnerCore(tmp_path / "base.rhbl", features="wall")
+    for i in range(rows):
+        ranges = np.repeat(rng.uniform(0.2, 2.5, 24), 15).astype(np.float32)
+        base.learn(i, 0.1 * i, ranges, 0.0, teacher.act(ranges))
+    base.snapshot()
+    base.close()
+    ext = LearnerCore(tmp_path / "resumed.rhbl", resume=str(tmp_path / "base.rhbl"))
+    ext.snapshot()
+    ext.close()
+    return tmp_path / "base.rhbl", tmp_path / "resumed.rhbl"
+
+
+def test_a_resumed_tree_is_compacted_on_its_whole_lineage(tmp_path, capsys):
+    """It printed "776 -> 1 nodes ... agreement nan%" and destroyed the tree: it compacted on
+    the new lineage's empty journal. Now the parent's journal (up to the fork) is data too."""
+    base, resumed = _lineage(tmp_path)
+    small = tmp_path / "small.rhbl"
+    assert main(["compact", "--tree", str(resumed), "--out", str(small)]) == 0
+    out = capsys.readouterr().out
+    before, after = TreePolicy.load(resumed).classifier, TreePolicy.load(small).classifier
+    X, y = load_data(journal_path(base), TreePolicy.load(base).features)
+    agree = float(np.mean(before.predict(X) == y))  # the tree's own, kept by "exact"
+    assert f"200 labelled vectors from 2 file(s), agreement with their labels {agree:.1%}" in out
+    assert np.array_equal(after.predict(X), before.predict(X))
+    assert 1 < after.node_count_ <= before.node_count_
+    # the parent's journal gone: refused, saying which data it needs
+    journal_path(base).unlink()
+    assert main(["compact", "--tree", str(resumed), "--out", str(small)]) == 2
+    err = capsys.readouterr().err
+    assert f"extends {base.resolve()}" in err and "base.rhbl.journal" in err, err
+
+
+def test_empty_data_is_refused(tmp_path, capsys):
+    tree, learner = _tree_with_journal(tmp_path, rows=5)
+    empty = Journal.create(tmp_path / "empty.journal")
+    empty.close()
+    assert main(["compact", "--tree", str(tree), "--out", str(tmp_path / "o.rhbl"), "--data",
+                 str(tmp_path / "empty.journal")]) == 2
+    assert "no labelled vectors in" in capsys.readouterr().err
+
+
+def test_a_tree_trained_from_a_recording_is_compacted_on_the_recording(tmp_path, capsys):
+    """``--data run.mcap`` printed a traceback (exit 1) and a tree trained from a recording
+    could not be compacted at all; ``--rounds`` with ``--from-recording`` was silently
+    ignored. Recordings are a data source, and a flag that cannot apply is a named error."""
+    rec, tree = tmp_path / "train.mcap", tmp_path / "r.rhbl"
+    assert main(["train", "--world", "room", "--seconds", "20", "--rounds", "0", "--out",
+                 str(tmp_path / "sim.rhbl"), "--record", str(rec)]) == 0
+    assert main(["train", "--from-recording", str(rec), "--out", str(tree)]) == 0
+    capsys.readouterr()
+    for data in ([], ["--data", str(rec)]):  # its recording, found or given
+        assert main(["compact", "--tree", str(tree), "--out", str(tmp_path / "s.rhbl"),
+                     *data]) == 0
+        out = capsys.readouterr().out
+        assert "200 labelled vectors from 1 file(s)" in out, out
+    data = TreePolicy.load(tmp_path / "s.rhbl").metadata["compaction"][-1]["data"]
+    assert data["source"] == "train.mcap" and data["rows"] == 200  # 20 s at 10 Hz
+    for flags, named in ((["--rounds", "3"], "--rounds"),
+                         (["--seconds", "9", "--seed", "2"], "--seed, --seconds"),
+                         (["--world", "room"], "--world"),
+                         (["--compact-rounds"], "--compact-rounds")):
+        assert main(["train", "--from-recording", str(rec), "--out", str(tmp_path / "x.rhbl"),
+                     *flags]) == 2
+        err = capsys.readouterr().err
+        assert f"{named} do" in err and "not apply to --from-recording" in err, err
+    # --compact applies: the retrained tree compacted on the recording's vectors
+    assert main(["train", "--from-recording", str(rec), "--out", str(tmp_path / "c.rhbl"),
+                 "--compact", "exact"]) == 0
+    assert TreePolicy.load(tmp_path / "c.rhbl").metadata["compaction"][-1]["method"] == "exact"

@@ -9,8 +9,9 @@ import math
 import pytest
 
 from lab.cli import build_parser
-from lab.harness import make_learner, resolve_world, train
+from lab.harness import make_learner, resolve_world
 from lab.recipe import EVAL_SECONDS, RECIPES, Recipe, recipe_for, recipe_from_args
+from lab.train import train
 
 
 def test_the_maze_demo_snapshot_records_task_maze():

@@ -7,9 +7,10 @@ import pytest
 from client.behaviour.learning import TreePolicy
 from lab.episode import DT, Episode
 from lab.evaluate import evaluate, format_table
-from lab.harness import make_learner, resolve_world, run, train
+from lab.harness import drive, make_learner, resolve_world
 from lab.recipe import RECIPES
 from lab.report import EPISODE_HEADERS, episode_table, table
+from lab.train import train
 
 
 def test_table_is_markdown_and_rejects_ragged_rows():
@@ -21,7 +22,7 @@ def test_table_is_markdown_and_rejects_ragged_rows():
 
 def test_episode_of_a_run_and_its_metrics():
     spec = resolve_world("corridor")
-    ep = run(spec, _Straight(), spec.pose, seconds=3.0, kind="teacher")
+    ep = drive(spec, _Straight(), spec.pose, seconds=3.0, kind="teacher")
     assert isinstance(ep, Episode) and ep.kind == "teacher" and ep.dt == DT
     assert len(ep.poses) == len(ep.stalls) == len(ep.actions) == len(ep.side) == 30
     assert ep.sim_time == pytest.approx(3.0) and ep.teacher_ticks == 0

@@ -6,9 +6,11 @@ import numpy as np
 import pytest
 
 from client.behaviour.features import FEATURES
-from client.behaviour.policies import Demonstrator, make_policy
-from lab.harness import make_learner, resolve_world, train
+from client.behaviour.policies import Demonstrator
+from client.behaviour.tasks import make_policy
+from lab.harness import make_learner, resolve_world
 from lab.recipe import RECIPES, parse_scales
+from lab.train import train
 
 
 def test_world_starts_then_sampled_poses():
@@ -75,7 +77,7 @@ def test_free_starts_and_free_round_poses():
 
 
 def test_scale_augmentation_offers_scaled_scans_labelled_by_the_teacher():
-    from lab.harness import _Augmenter
+    from lab.train import _Augmenter
 
     spec = resolve_world("corridor")
     plain = make_learner(spec.task)
@@ -106,7 +108,7 @@ def test_scale_augmentation_offers_scaled_scans_labelled_by_the_teacher():
 def test_scale_augmentation_needs_a_scan_only_teacher():
     import pytest
 
-    from lab.harness import _Augmenter
+    from lab.train import _Augmenter
 
     with pytest.raises(ValueError):
         _Augmenter(object(), 1, 1.3, seed=0)

@@ -69,7 +69,11 @@ def test_prune_adds_at_most_its_error_budget(case, budget):
 def test_prune_to_a_size(case, size):
     clf, X, y = case
     small = clf.compact(X, y, method="prune", max_nodes=size)
-    assert small.node_count_ <= max(size, 1) or small.node_count_ <= clf.node_count_
+    # the exact step first, then the weakest spheres until ``size`` are left, unless none of
+    # the rest can go (the end of the whole removal sequence)
+    exact = clf.compact(X, y, method="exact").node_count_
+    floor = min((nodes for _s, nodes, _h, _e in removal_curve(clf, X, y)), default=exact)
+    assert small.node_count_ == min(exact, max(size, floor))
 
 
 @FEW

@@ -23,8 +23,8 @@ from client.behaviour.policies import (
     ReactiveFollower,
     ReactiveMazeTeacher,
     WallFollower,
-    make_policy,
 )
+from client.behaviour.tasks import make_policy
 
 
 def test_action_set_defaults_roundtrip_and_errors():

@@ -1,20 +1,18 @@
-"""Plumbing the teacher, learner and controller processes share beyond ``protocol.process``.
-
-The generic parts (exit codes ``EXIT_*``, ``ProcessError``, logging, signals, ``open_session``,
-``Context`` and its scope) live in ``protocol.process``, shared with ``rhbl server``; they are
-re-exported here. The client-only parts:
+"""What the client's processes (teacher, learner, controller, console, record, replay, foxglove)
+share beyond ``protocol.runtime`` (exit codes ``EXIT_*``, ``ProcessError``, logging, signals,
+``open_session``, ``Context`` and its scope, shared with ``rhbl server``: import those from
+there):
 
 - ``add_process_arguments(parser)``: the common flags (zenoh flags from ``protocol.session``,
   ``--robot``, ``--wait-server``, ``--log-level``).
-- ``run(role, args, body)``: ``protocol.process.run`` with the robot checked (``--robot`` must be
-  a key chunk: exit 2) and the liveliness token ``rhbl/alive/<role>/<robot>-<pid>``.
+- ``run_role(role, args, body)``: ``protocol.runtime.run_process`` with the robot checked
+  (``--robot`` must be a key chunk: exit 2) and the liveliness token ``rhbl/alive/<role>/<robot>-<pid>``.
 - ``wait_for_server(ctx)``: waits for the first scan of the robot, logging what it waits for,
   and fails with a message naming the endpoint and the key when the server is not up.
 - ``wait_for_learner(ctx, timeout)``: waits for a learner's liveliness token of the robot
   (``rhbl/alive/learner/<robot>-*``; a learner declares it once its label subscription is in
   place), logging what it waits for, and fails with EXIT_NO_LEARNER when none appears.
 - ``ScanWatch``: a background thread that logs when scans stop arriving and when they resume.
-- ``decode_scan``: a scan, or None (logged) when it is malformed.
 """
 
 from __future__ import annotations
@@ -30,36 +28,20 @@ from typing import Any
 import zenoh
 
 from protocol import keys
-from protocol.messages import Scan
-from protocol.process import (
-    EXIT_FAILURE,
+from protocol.runtime import (
     EXIT_NO_LEARNER,
     EXIT_NO_SERVER,
-    EXIT_OK,
-    EXIT_UNREACHABLE,
-    EXIT_USAGE,
     Context,
     ProcessError,
-    add_logging_arguments,
-    open_session,
+    add_report_arguments,
+    run_process,
 )
-from protocol.process import run as run_process
 from protocol.session import add_zenoh_arguments
 
 __all__ = [
-    "EXIT_FAILURE",
-    "EXIT_NO_LEARNER",
-    "EXIT_NO_SERVER",
-    "EXIT_OK",
-    "EXIT_UNREACHABLE",
-    "EXIT_USAGE",
-    "Context",
-    "ProcessError",
     "ScanWatch",
     "add_process_arguments",
-    "decode_scan",
-    "open_session",
-    "run",
+    "run_role",
     "wait_for_learner",
     "wait_for_server",
 ]
@@ -73,7 +55,7 @@ def add_process_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--wait-server", type=float, default=10.0, metavar="SECONDS",
                         help="how long to wait for the server's first scan before giving up "
                              "(0 = wait forever, logging every few seconds; default: 10)")
-    add_logging_arguments(parser)
+    add_report_arguments(parser)
 
 
 # ---- the server ---------------------------------------------------------------------------
@@ -98,9 +80,9 @@ def wait_for_server(ctx: Context, timeout: float | None = None,
     ``got``: an event the caller's own scan subscription sets (``ScanWatch.first``). Pass it
     when that subscription was declared before the process announced itself: a subscription
     declared here, later, could miss a scan sent as soon as the token was seen.
-    ``ring``: the caller's own scan subscriber with a channel handler (``RingChannel``): the
-    wait takes the first scan from it and returns that sample, for the caller to answer (a
-    lock-step sender waits for that answer before it sends another scan).
+    ``ring``: the caller's own ``client.player.ScanChannel``: the wait takes the first scan
+    from it and returns it, for the caller to answer (a lock-step sender waits for that answer
+    before it sends another scan).
     Logs what it is waiting for every few seconds, so a process never waits silently.
     """
     timeout = ctx.args.wait_server if timeout is None else timeout
@@ -116,7 +98,7 @@ def wait_for_server(ctx: Context, timeout: float | None = None,
         next_note = t0 + 2.0
         while not got.wait(0 if ring is not None else 0.05):
             if ring is not None:
-                first = ring.handler.try_recv()
+                first = ring.try_recv()
                 if first is not None:
                     break
                 time.sleep(0.01)
@@ -153,10 +135,8 @@ def learners_alive(session: zenoh.Session, robot: str, timeout: float = 1.0) -> 
     found = []
     try:
         for reply in session.liveliness().get(keys.alive_key("learner", "*"), timeout=timeout):
-            if reply.ok is not None:
-                key = str(reply.ok.key_expr)
-                if key.rsplit("/", 1)[-1].startswith(f"{robot}-"):
-                    found.append(key)
+            if reply.ok is not None and keys.parse(reply.ok.key_expr).names_robot(robot):
+                found.append(str(reply.ok.key_expr))
     except Exception as exc:  # noqa: BLE001 - treated as "none yet"
         log.debug("liveliness query failed: %s", exc)
     return found
@@ -209,6 +189,9 @@ class ScanWatch:
         self._thread = threading.Thread(target=self._loop, name=f"{role}-scanwatch", daemon=True)
 
     def start(self) -> ScanWatch:
+        """Watch from now on (a process that waited for a server or a learner first did not
+        go without scans meanwhile)."""
+        self._last = time.monotonic()
         self._thread.start()
         return self
 
@@ -236,20 +219,20 @@ class ScanWatch:
 
 
 # ---- the main wrapper ---------------------------------------------------------------------
-def run(role: str, args: argparse.Namespace, body: Callable[[Context], int | None],
-        early_token: bool = True) -> int:
-    """``protocol.process.run`` for a process of one robot (``--robot``): the token is
+def run_role(role: str, args: argparse.Namespace, body: Callable[[Context], int | None],
+             early_token: bool = True, check: Callable[[], None] | None = None,
+             wait_router: float | None = None) -> int:
+    """``protocol.runtime.run_process`` for a process of one robot (``--robot``): the token is
     ``rhbl/alive/<role>/<robot>-<pid>``, declared before ``body`` runs (or by the body with
-    ``ctx.declare_token()`` if not ``early_token``)."""
+    ``ctx.declare_token()`` if not ``early_token``); ``check`` (the process's own) runs after
+    the robot's, before any connection."""
     robot = getattr(args, "robot", "r0")
-    return run_process(role, args, body, check=lambda: keys.check_chunk(robot, "--robot"),
-                       robot=robot, ident=f"{robot}-{os.getpid()}", early_token=early_token)
 
+    def checks() -> None:
+        keys.check_chunk(robot, "--robot")
+        if check is not None:
+            check()
 
-def decode_scan(payload: bytes) -> Scan | None:
-    """Decode a scan, logging (not raising) a malformed one."""
-    try:
-        return Scan.decode(payload)
-    except Exception as exc:  # noqa: BLE001 - protocol.DecodeError and friends
-        log.warning("dropped a malformed scan: %s", exc)
-        return None
+    return run_process(role, args, body, check=checks, robot=robot,
+                       ident=f"{robot}-{os.getpid()}", early_token=early_token,
+                       wait_router=wait_router)

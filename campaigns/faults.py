@@ -1,6 +1,6 @@
 """A repeatable fault campaign against the real processes: a seed, a command, a report.
 
-    python -m lab.faults [--seed 0] [--only learner-kill,server-restart,controller-kill,
+    python -m campaigns.faults [--seed 0] [--only learner-kill,server-restart,controller-kill,
                           learner-stop,disk-full,readonly-folder,readonly-mount,
                           router-restart]
                          [--kills 20] [--restarts 5] [--router-restarts 3] [--out DIR]
@@ -65,30 +65,12 @@ from pathlib import Path
 
 import numpy as np
 
-from lab.processes import Child, free_port, rhbl_argv, without_file_override
+from lab.children import Child, free_port, rhbl_argv, without_file_override
 
 ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # `python campaigns/faults.py`: the campaigns are not installed
+    sys.path.insert(0, str(ROOT))
 log = logging.getLogger(__name__)
-
-# a learner whose journal writes fail (ENOSPC) while the file $FULL_FLAG exists: the program
-# text for `python -c` (the campaign's full disk, and the learner robustness test's)
-FULL_DISK_LEARNER = """
-import errno, os, sys
-import client.journal as j
-flag = os.environ["FULL_FLAG"]
-class _Os:
-    def __getattr__(self, name):
-        return getattr(os, name)
-    def write(self, fd, data):
-        if os.path.exists(flag):
-            raise OSError(errno.ENOSPC, "No space left on device")
-        return os.write(fd, data)
-j.os = _Os()
-from lab.cli import main
-sys.exit(main(sys.argv[1:]))
-"""
-
-
 
 class Campaign:
     """The router session and the processes of one part."""
@@ -146,14 +128,15 @@ class Campaign:
                        self.session.declare_subscriber(keys.driver_key(r), on_driver),
                        self.session.declare_subscriber(keys.state_key(r), on_state)]
 
-    def start(self, name: str, *argv: str, wrapper: str | None = None,
+    def start(self, name: str, *argv: str, prefix: list[str] | None = None,
               env: dict | None = None, preexec_fn=None) -> Child:
-        """Start ``rhbl ARGV... --connect <the router>`` (or ``python -c WRAPPER ARGV...``),
+        """Start ``rhbl ARGV... --connect <the router>`` (or ``PREFIX ARGV...``: another entry
+        point to the same commands, ``campaigns.full_disk.ARGV``),
         logging into ``<dir>/<name>.log`` (appended to: a process started again under the same
         name keeps one log); stopped with SIGINT, then SIGKILL. ``preexec_fn`` runs in the
-        child before the command (:func:`lab.processes.without_file_override`)."""
+        child before the command (:func:`lab.children.without_file_override`)."""
         argv = [*argv, "--connect", self.endpoint]
-        cmd = [sys.executable, "-c", wrapper, *argv] if wrapper else rhbl_argv(*argv)
+        cmd = [*prefix, *argv] if prefix else rhbl_argv(*argv)
         p = Child(name, cmd, self.dir, env={**os.environ, **(env or {})}, cwd=ROOT,
                   stop_signal=signal.SIGINT, stop_timeout=30.0, escalate=False,
                   preexec_fn=preexec_fn).start()
@@ -298,8 +281,9 @@ def server_restart(workdir: Path, rng: random.Random, restarts: int) -> dict:
 
 
 def _train_tree(path: Path) -> None:
-    from lab.harness import make_learner, resolve_world, train
+    from lab.harness import make_learner, resolve_world
     from lab.recipe import recipe_for
+    from lab.train import train
 
     spec = resolve_world("room")
     learner = make_learner(spec.task)
@@ -377,6 +361,8 @@ def learner_stop(workdir: Path, stop_for: float = 20.0) -> dict:
 
 
 def disk_full(workdir: Path, full_for: float = 5.0) -> dict:
+    from campaigns import full_disk
+
     c = Campaign(workdir)
     out = workdir / "tree.rhbl"
     flag = workdir / "full"
@@ -384,7 +370,7 @@ def disk_full(workdir: Path, full_for: float = 5.0) -> dict:
         c.watch()
         c.server("--speedup", "2")
         learner = c.start("learner", "learner", "--features", "wall", "--out", str(out),
-                          "--snapshot-every", "1", wrapper=FULL_DISK_LEARNER,
+                          "--snapshot-every", "1", prefix=full_disk.ARGV,
                           env={"FULL_FLAG": str(flag)})
         teacher = c.start("teacher", "teacher", "--policy", "wall-follower")
         if not c.wait(lambda: len(c.labels) > 20, 120):
@@ -430,7 +416,7 @@ def _until(pred, timeout: float, step: float = 0.05) -> float:
 
 
 def _lines_since(child: Child, mark: int) -> list[str]:
-    """The kept lines ``child`` printed after its :meth:`~lab.processes.Child.mark` ``mark``."""
+    """The kept lines ``child`` printed after its :meth:`~lab.children.Child.mark` ``mark``."""
     lines = list(child.lines)
     n = child.mark() - mark
     return lines[len(lines) - min(n, len(lines)):] if n > 0 else []
@@ -477,7 +463,7 @@ def readonly_folder(workdir: Path, ro_for: float = 5.0, how: str = "mode") -> di
     """The learner's folder made read-only for ``ro_for`` seconds, then writable (``how``:
     :class:`_ReadOnly`). With ``mode``, run as root, the learner loses the capabilities that
     let root write anyway, so it is refused as any other user would be
-    (:func:`lab.processes.without_file_override`)."""
+    (:func:`lab.children.without_file_override`)."""
     c = Campaign(workdir)
     folder = workdir / "snapshots"
     folder.mkdir(exist_ok=True)
@@ -547,7 +533,7 @@ def _alive_roles(session) -> set[str]:
     try:
         for r in session.liveliness().get(keys.alive_key("*", "**"), timeout=1.0):
             if r.ok is not None:
-                roles.add(str(r.ok.key_expr).split("/")[2])
+                roles.add(keys.parse(r.ok.key_expr).role)
     except Exception as exc:  # noqa: BLE001 - no router yet: nobody is known
         log.debug("liveliness query failed: %s", exc)
     return roles
@@ -579,11 +565,43 @@ class _Supervised:
             time.sleep(0.05)
 
 
-def _restart_router_once(sv: _Supervised, obs, journal: Path, down: float,
+class _Drivers:
+    """Who drives the robot, as the bus says (``DriverState`` on its driver key), and when."""
+
+    def __init__(self, session, robot: str = "r0") -> None:
+        from protocol import keys
+        from protocol.decoding import Decoder
+
+        self.seen: list[tuple[float, str]] = []
+        self.cond = threading.Condition()
+        self.decoder = Decoder(log)
+        self.sub = session.declare_subscriber(keys.driver_key(robot), self._on)
+
+    def _on(self, sample) -> None:
+        from protocol.messages import DriverState
+
+        d = self.decoder.decode(DriverState, sample.payload.to_bytes())
+        if d is not None:
+            with self.cond:
+                self.seen.append((time.monotonic(), d.source))
+                self.cond.notify_all()
+
+    def first_after(self, t0: float, timeout: float) -> str | None:
+        """The first source that drove after ``t0`` (waiting at most ``timeout`` s)."""
+        def first():
+            return next((s for t, s in self.seen if t >= t0 and s), None)
+
+        with self.cond:
+            self.cond.wait_for(lambda: first() is not None, timeout)
+            return first()
+
+
+def _restart_router_once(sv: _Supervised, obs, drivers: _Drivers, journal: Path, down: float,
                          roles: set[str]) -> dict:
     """SIGKILL the router, ``down`` s later start it again (the same command); the seconds from
     that start to the first command reaching the robot (the server's log: driver '' -> a
-    source), to the first label journaled, and until every service's token is back."""
+    source; who it was, from the bus), to the first label journaled, and until every
+    service's token is back."""
     sc = sv.sc
     router, server = sc.procs["router"], sc.procs["server"].child
     mark = server.mark()
@@ -606,9 +624,7 @@ def _restart_router_once(sv: _Supervised, obs, journal: Path, down: float,
     waits = [_in_thread(f) for f in (command, label, tokens)]
     sv.wait(90, tuple(t for t, _ in waits))
     cmd, lab, tok = (out[0] if out else math.nan for _, out in waits)
-    who = [ln.rsplit("-> ", 1)[1].strip("'") for ln in _lines_since(server, mark)
-           if "driver '' -> '" in ln]
-    return {"command": cmd, "by": who[0] if who else None, "label": lab, "tokens": tok}
+    return {"command": cmd, "by": drivers.first_after(t0, 10.0), "label": lab, "tokens": tok}
 
 
 def router_restart(workdir: Path, rng: random.Random, restarts: int) -> dict:
@@ -636,10 +652,12 @@ def router_restart(workdir: Path, rng: random.Random, restarts: int) -> dict:
                 f"the scenario did not start (tokens of {sorted(_alive_roles(obs))} of "
                 f"{sorted(roles)}); server log:\n{server.tail()}")
         exits = {n: len(p.exits) for n, p in sc.procs.items()}
+        drivers = _Drivers(obs)
         got = []
         for _ in range(restarts):
             sv.wait(rng.uniform(2.0, 6.0))
-            got.append(_restart_router_once(sv, obs, journal, rng.uniform(0.5, 2.0), roles))
+            got.append(_restart_router_once(sv, obs, drivers, journal, rng.uniform(0.5, 2.0),
+                                            roles))
         sc.poll(restart_delay=1.0)
         died = sorted(n for n in roles if len(sc.procs[n].exits) > exits[n] or not sc.running(n))
         cmd = np.asarray([g["command"] for g in got])

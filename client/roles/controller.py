@@ -21,23 +21,16 @@ import time
 
 import zenoh
 
-from client._process import (
-    EXIT_NO_SERVER,
-    EXIT_USAGE,
-    Context,
-    ProcessError,
-    ScanWatch,
-    add_process_arguments,
-    decode_scan,
-    run,
-    wait_for_server,
-)
 from client.behaviour.actions import ActionSet
 from client.behaviour.features import FEATURES, FeatureSpec
 from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, check_compatible
 from client.decision import Decider
+from client.player import PlayerClient
+from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
 from protocol import keys
-from protocol.messages import Scan, TreeNotice, VelCmd
+from protocol.decoding import Decoder
+from protocol.messages import Scan, TreeNotice
+from protocol.runtime import EXIT_NO_SERVER, EXIT_USAGE, Context, ProcessError
 
 __all__ = ["ControllerProcess", "add_arguments", "fetch_snapshot", "load_tree", "main"]
 
@@ -68,7 +61,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    return run("controller", args, lambda ctx: ControllerProcess(ctx).run())
+    return run_role("controller", args, lambda ctx: ControllerProcess(ctx).run())
 
 
 def _policy_from(clf_bytes_or_path, features: str | None) -> TreePolicy:
@@ -129,17 +122,19 @@ class ControllerProcess:
         self.policy: TreePolicy | None = None  # swapped between scans by the follower
         # subscribed before the first query: a tree announced meanwhile is not missed
         self.follower = _Follower(ctx, self.swap) if self.args.follow else None
-        self.cmd_pub = ctx.publisher(keys.cmd_vel_key(ctx.robot, source=SOURCE),
-                                     congestion_control=zenoh.CongestionControl.BLOCK,
-                                     express=True)
-        self.scan_key = keys.scan_key(ctx.robot)
-        self.sub = ctx.subscriber(self.scan_key, zenoh.handlers.RingChannel(1))
-        self.watch = ScanWatch("controller", self.scan_key, stale=1.0)
+        # commands on .../cmd/vel/controller, express and never dropped; the latest scan only
+        self.client = PlayerClient(session=ctx.session, robot=ctx.robot, source=SOURCE,
+                                   express=True, block=True)
+        ctx.scope.callback(self.client.close)
+        self.scans = self.client.scans(depth=1)
+        self.watch = ScanWatch("controller", self.scans.key, stale=1.0)
         ctx.scope.callback(self.watch.stop)
         self.decider = Decider(ctx.session, ctx.robot)
         ctx.scope.callback(self.decider.close)
         self.t0: float | None = None
         self.n = self.bad = 0
+        ctx.scope.callback(self.close)  # on every path, after "stopping (signal)"
+        ctx.report(self.counters)
 
     def swap(self, policy: TreePolicy) -> None:
         self.policy = policy
@@ -152,15 +147,21 @@ class ControllerProcess:
             self.follower.start()
         # the first scan is taken from the controller's own subscription and answered: a
         # lock-step server or replay sends no other scan until it has that answer
-        first = wait_for_server(self.ctx, ring=self.sub)
+        first = wait_for_server(self.ctx, ring=self.scans)
         self.watch.start()
-        try:
-            while self.step(first):
-                first = None
-        finally:
-            self.watch.stop()
-            log.info("controller stopped after %d commands", self.n)
+        while self.step(first):
+            first = None
         return 0
+
+    def close(self) -> None:
+        self.watch.stop()
+        log.info("controller stopped after %d commands", self.n)
+
+    def counters(self) -> dict:
+        return {"commands": self.n, "unanswered": self.bad,
+                "swaps": 0 if self.follower is None else self.follower.swaps,
+                "dropped": {**self.client.decoder.counts,
+                            **({} if self.follower is None else self.follower.decoder.counts)}}
 
     def first_tree(self) -> TreePolicy:
         args = self.args
@@ -201,14 +202,15 @@ class ControllerProcess:
             else:
                 time.sleep(1.0)
 
-    def step(self, sample: zenoh.Sample | None = None) -> bool:
-        """Answer ``sample`` or the next scan; False when done (``--seconds``)."""
-        if sample is None:
-            sample = self.sub.handler.recv()
-        self.watch.seen()
-        scan = decode_scan(sample.payload.to_bytes())
+    def step(self, scan: Scan | None = None) -> bool:
+        """Answer ``scan`` or the next one; False when done (``--seconds``)."""
         if scan is None:
-            return True
+            scan = self.scans.recv()  # None: a malformed one (dropped, counted)
+            self.watch.seen()
+            if scan is None:
+                return True
+        else:
+            self.watch.seen()
         if self.t0 is None:
             self.t0 = scan.ts
         if self.args.seconds is not None and scan.ts - self.t0 >= self.args.seconds:
@@ -217,8 +219,7 @@ class ControllerProcess:
         answered = self.answer(scan)
         if answered is not None:
             (vx, va), policy, x = answered
-            self.cmd_pub.put(VelCmd(vx=vx, va=va, source=SOURCE, scan_id=scan.id,
-                                    ts=scan.ts).encode())
+            self.client.answer(scan, vx, va)
             self.n += 1
             if self.n % 1000 == 0:
                 log.info("%d commands, %.0f s sim", self.n, scan.ts - self.t0)
@@ -256,6 +257,7 @@ class _Follower:
         self._want = threading.Event()
         self._stop = threading.Event()
         self.swaps = 0
+        self.decoder = Decoder(log)
         ctx.subscriber(keys.learner_notice_key(ctx.robot), self._on_notice)
         self._thread = threading.Thread(target=self._loop, name="controller-follow", daemon=True)
         ctx.scope.callback(self.stop)
@@ -275,10 +277,8 @@ class _Follower:
         return self._want.wait(timeout)
 
     def _on_notice(self, sample) -> None:
-        try:
-            note = TreeNotice.decode(sample.payload.to_bytes())
-        except Exception as exc:  # noqa: BLE001
-            log.warning("dropped a malformed tree notice: %s", exc)
+        note = self.decoder.decode(TreeNotice, sample.payload.to_bytes())
+        if note is None:
             return
         log.debug("tree notice %s", note)
         self._want.set()

@@ -3,8 +3,9 @@ protocol (``foxglove-sdk``'s server), on localhost.
 
     rhbl foxglove --connect tcp/127.0.0.1:7447           # then open ws://127.0.0.1:8765
 
-It subscribes like ``rhbl record`` (``client.recording.BusRecorder``: every robot seen, or
-``--robot``) and converts with ``client.viewer`` (the same viewer channels a recording holds):
+It taps the bus like ``rhbl record`` (``client.recording.tap.BusTap``: every robot seen, or
+``--robot``) and converts with ``client.recording.foxglove_schemas`` (the same viewer channels a
+recording holds):
 ``/world`` (walls, goal, robots), ``/tf``, ``/<robot>/laser``, ``/<robot>/pose``,
 ``/<robot>/path``, ``/<robot>/status`` (who drives, the tree's size). The world scene is sent
 again every few seconds, so a viewer that connects late draws the walls too.
@@ -14,14 +15,16 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import threading
 import time
 
-from client._process import EXIT_USAGE, Context, ProcessError, run
-from client.recording import BusRecorder, classify, decode
-from client.viewer import ViewerFeed, ViewerMessage
+from client.recording.foxglove_schemas import ViewerFeed, ViewerMessage
+from client.recording.mcap_file import KINDS, classify
+from client.recording.tap import BusTap
 from protocol import keys
-from protocol.process import add_logging_arguments
+from protocol.decoding import Decoder
+from protocol.runtime import EXIT_USAGE, Context, ProcessError, add_report_arguments, run_process
 from protocol.session import add_zenoh_arguments
 
 __all__ = ["FoxgloveSink", "add_arguments", "main"]
@@ -29,10 +32,11 @@ __all__ = ["FoxgloveSink", "add_arguments", "main"]
 log = logging.getLogger(__name__)
 
 WORLD_REPEAT = 3.0  # s between repeats of the world scene
+DRAWN = ("scan", "state", "driver", "notice", "world")  # kinds the viewer channels show
 
 
 class FoxgloveSink:
-    """A ``BusRecorder`` sink that logs the viewer messages on foxglove-sdk channels (whatever
+    """A ``BusTap`` sink that logs the viewer messages on foxglove-sdk channels (whatever
     sinks their context has: a WebSocket server, an MCAP file)."""
 
     def __init__(self, context=None):
@@ -44,6 +48,7 @@ class FoxgloveSink:
         self._world: dict[str, ViewerMessage] = {}  # robot -> its latest /world scene
         self._world_at = 0.0
         self._lock = threading.Lock()
+        self.decoder = Decoder(log, level=logging.DEBUG)  # a malformed message draws nothing
 
     def _channel(self, vm: ViewerMessage):
         import foxglove
@@ -64,12 +69,10 @@ class FoxgloveSink:
               robot: str | None = None, sim_time: float | None = None) -> None:
         if kind is None:
             kind, robot = classify(key)
-        if kind in ("other", "alive", "cmd", "label"):
+        if kind not in DRAWN:
             return
-        try:
-            msg = decode(kind, data)
-        except Exception as exc:  # noqa: BLE001 - a malformed message draws nothing
-            log.debug("dropped a malformed %s: %s", key, exc)
+        msg = self.decoder.decode(KINDS[kind], data, where=key)
+        if msg is None:
             return
         with self._lock:
             for vm in self.feed.update(kind, robot, msg, recv_ns):
@@ -108,39 +111,59 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="WebSocket port (default 8765, Foxglove's default; 0 = any free)")
     parser.add_argument("--duration", type=float, default=None, metavar="SECONDS",
                         help="stop after this many seconds (default: until stopped)")
-    add_logging_arguments(parser)
+    add_report_arguments(parser)
 
 
 def main(args: argparse.Namespace) -> int:
     for r in args.robots or []:
         keys.check_chunk(r, "--robot")  # ValueError: one line, exit 2
-    args.robot = "all" if not args.robots else args.robots[0]
-    return run("foxglove", args, _body)
+    if not 0 <= args.port <= 65535:
+        raise ValueError(f"--port must be 0..65535, got {args.port}")
+    if args.duration is not None and not args.duration > 0:
+        raise ValueError("--duration must be > 0")
+    name = "all" if not args.robots else args.robots[0]  # in its liveliness token
+    return run_process("foxglove", args, lambda ctx: BridgeProcess(ctx).run(),
+                       ident=f"{name}-{os.getpid()}")
 
 
-def _body(ctx: Context) -> int:
-    import foxglove
+class BridgeProcess:
+    """A foxglove-sdk WebSocket server fed by the bus tap through a ``FoxgloveSink``."""
 
-    args = ctx.args
-    context = foxglove.Context()
-    try:
-        server = foxglove.start_server(name="rhbl", host=args.host, port=args.port,
-                                       context=context)
-    except Exception as exc:  # noqa: BLE001 - the port is taken, ...
-        raise ProcessError(f"foxglove: cannot serve on {args.host}:{args.port}: {exc}",
-                           EXIT_USAGE) from exc
-    sink = FoxgloveSink(context)
-    tap = BusRecorder(ctx.session, sink, robots=args.robots)
-    # the line tests and people wait for
-    log.info("Foxglove WebSocket server listening on ws://%s:%d (open it in Foxglove or "
-             "Lichtblick: Open connection -> Foxglove WebSocket)", args.host, server.port)
-    t0 = time.monotonic()
-    try:
-        while args.duration is None or time.monotonic() - t0 < args.duration:
+    def __init__(self, ctx: Context):
+        import foxglove
+
+        self.args = args = ctx.args
+        context = foxglove.Context()
+        try:
+            self.server = foxglove.start_server(name="rhbl", host=args.host, port=args.port,
+                                                context=context)
+        except Exception as exc:  # noqa: BLE001 - the port is taken, ...
+            raise ProcessError(f"foxglove: cannot serve on {args.host}:{args.port}: {exc}",
+                               EXIT_USAGE) from exc
+        self.sink = FoxgloveSink(context)
+        self.tap = BusTap(ctx.session, self.sink, robots=args.robots)
+        self.closed = False
+        ctx.scope.callback(self.close)  # on every path, after "stopping (signal)"
+        ctx.report(self.counters)
+
+    def run(self) -> int:
+        # the line tests and people wait for
+        log.info("Foxglove WebSocket server listening on ws://%s:%d (open it in Foxglove or "
+                 "Lichtblick: Open connection -> Foxglove WebSocket)", self.args.host,
+                 self.server.port)
+        t0 = time.monotonic()
+        while self.args.duration is None or time.monotonic() - t0 < self.args.duration:
             time.sleep(0.1)
-    finally:
-        tap.close()
-        server.stop()
-        log.info("foxglove bridge stopped: %d bus messages shown on %d topics", sink.messages,
-                 len(sink.channels))
-    return 0
+        return 0
+
+    def close(self) -> None:
+        if not self.closed:
+            self.closed = True
+            self.tap.close()
+            self.server.stop()
+            log.info("foxglove bridge stopped: %d bus messages shown on %d topics",
+                     self.sink.messages, len(self.sink.channels))
+
+    def counters(self) -> dict:
+        return {"messages": self.sink.messages, "topics": len(self.sink.channels),
+                "dropped": dict(self.sink.decoder.counts)}

@@ -1,4 +1,4 @@
-"""lab.processes: real child processes (small Python scripts), stopped by PID."""
+"""lab.children: real child processes (small Python scripts), stopped by PID."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from lab.processes import Child, free_port, rhbl_argv
+from lab.children import Child, free_port, rhbl_argv
 
 
 def py(code: str) -> list[str]:
@@ -124,6 +124,12 @@ def test_bad_command_lines():
         child.stop()
 
 
+def _state(pid: int) -> str:
+    """The process state letter of /proc/<pid>/stat ("T": stopped)."""
+    with open(f"/proc/{pid}/stat") as f:
+        return f.read().rsplit(")", 1)[1].split()[0]
+
+
 # prints "tick N" every 20 ms until stopped
 TICKER = """
 import itertools, time
@@ -140,8 +146,14 @@ def test_pause_resume_and_lines_since_a_mark(tmp_path):
         assert child.wait_for_line("tick 3", timeout=30)
         child.pause()
         assert child.paused
-        time.sleep(0.3)  # let the pipe empty: nothing new arrives while it is stopped
-        mark = child.mark()
+        deadline = time.monotonic() + 30  # the kernel says it is stopped ...
+        while _state(child.pid) != "T":
+            assert time.monotonic() < deadline, _state(child.pid)
+            time.sleep(0.01)
+        mark = child.mark()  # ... and what it printed before has been read: quiet for 0.2 s
+        while child.wait_for_line("tick", timeout=0.2, since=mark):
+            assert time.monotonic() < deadline
+            mark = child.mark()
         assert not child.wait_for_line("tick", timeout=0.5, since=mark)  # frozen
         assert child.wait_for_line("tick 3", timeout=0)  # without since: the old lines count
         child.resume()
@@ -159,7 +171,7 @@ def test_pause_resume_and_lines_since_a_mark(tmp_path):
 def test_rss_kib_of_this_process_and_of_none():
     import os
 
-    from lab.processes import rss_kib
+    from lab.children import rss_kib
 
     if not os.path.exists("/proc/self/status"):
         pytest.skip("needs /proc")
@@ -181,7 +193,7 @@ def test_started_again_the_same_command_keeps_counting_lines(tmp_path):
 @pytest.mark.skipif(not hasattr(__import__("os"), "geteuid") or __import__("os").geteuid() != 0,
                     reason="for root (any other user is refused by permissions anyway)")
 def test_without_file_override_root_is_refused_by_permissions(tmp_path):
-    from lab.processes import without_file_override
+    from lab.children import without_file_override
 
     folder = tmp_path / "ro"
     folder.mkdir(mode=0o555)

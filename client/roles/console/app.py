@@ -39,17 +39,18 @@ import secrets
 import signal
 import ssl
 import time
-import types
 from collections import OrderedDict
 from pathlib import Path
 
 from aiohttp import WSMsgType, web
 
-from client._process import EXIT_USAGE, Context, ProcessError
 from client.behaviour.actions import DEFAULT_ACTIONS
-from client.teacher import DRAIN, TeacherPublisher, _Hold
+from client.labels import DRAIN, Hold, LabelPublisher
+from client.player import PlayerClient
 from protocol import keys
+from protocol.decoding import Decoder
 from protocol.messages import Decision, Scan, State, TreeNotice, VelCmd, WorldInfo
+from protocol.runtime import EXIT_USAGE, Context, ProcessError
 
 __all__ = ["STALE", "Console", "access_token", "body", "host_name", "parse_http"]
 
@@ -102,25 +103,6 @@ def _action_of(vx: float, va: float) -> str:
     return "stop" if vx == 0 and va == 0 else f"vx {vx:.2f} va {va:.2f}"
 
 
-def _every_robot(key_of) -> str:
-    """A robot's key with ``*`` in place of the robot: the same key of every robot."""
-    return key_of("_").replace(f"{keys.PREFIX}/_/", f"{keys.PREFIX}/*/", 1)
-
-
-def _decode(cls, sample, what: str):
-    """``cls`` decoded from a sample's payload, or None (logged): a malformed message never
-    stops the console."""
-    try:
-        return cls.decode(sample.payload.to_bytes())
-    except Exception as exc:  # noqa: BLE001 - never let a message kill the console
-        log.debug("dropped a malformed %s: %s", what, exc)
-        return None
-
-
-def _robot_of(key) -> str:
-    return str(key).split("/", 2)[1]
-
-
 class _Page:
     def __init__(self, ident: int, ws: web.WebSocketResponse, robot: str):
         self.id, self.ws, self.robot = ident, ws, robot
@@ -144,13 +126,14 @@ class _Robot:
         self.world_asked = 0.0
         self.latest: dict[str, str] = {}  # kind -> JSON (for a page that starts watching)
         self.scans: OrderedDict[int, Scan] = OrderedDict()  # id -> the scan (labels carry it)
-        self.last_scan: tuple[int, float] | None = None
+        self.last_scan: Scan | None = None
         self.holder: _Page | None = None
         self.action: str | None = None  # what the person commands now
         self.last_drive = 0.0
         self.labelled = -1  # the last scan id labelled
-        self.pubs: TeacherPublisher | None = None
-        self.hold: _Hold | None = None
+        self.client: PlayerClient | None = None  # the person's commands, as the teacher's
+        self.pubs: LabelPublisher | None = None
+        self.hold: Hold | None = None
 
 
 class Console:
@@ -162,16 +145,22 @@ class Console:
         self.pages: dict[int, _Page] = {}
         self._next_page = 1
         self._tasks: set[asyncio.Task] = set()  # kept referenced until done
-        self.scope = contextlib.ExitStack()  # what the console's publishers leave to undo
         self.default_robot = ctx.robot
         self._robot(self.default_robot)
         self.subs = []
+        # a malformed message never stops the console: dropped, counted
+        self.decoder = Decoder(log, level=logging.DEBUG)
         s = self.session
         for key_of, fn in ((keys.state_key, self._on_state), (keys.scan_key, self._on_scan),
                            (keys.learner_notice_key, self._on_notice),
                            (keys.controller_decision_key, self._on_decision),
                            (keys.cmd_vel_subscription, self._on_cmd)):
-            self.subs.append(s.declare_subscriber(_every_robot(key_of), fn))
+            self.subs.append(s.declare_subscriber(key_of(keys.EVERY), fn))
+
+    def _decode(self, cls, sample):
+        """(the message, its robot) of a sample, or (None, robot): dropped, counted."""
+        return (self.decoder.decode(cls, sample.payload.to_bytes()),
+                keys.parse(sample.key_expr).robot)
 
     # ---- zenoh side (zenoh threads): decode, make JSON, hand over to the loop ----------------
     def _hand(self, robot: str, kind: str, text: str, scan=None) -> None:
@@ -179,20 +168,19 @@ class Console:
             self.loop.call_soon_threadsafe(self._deliver, robot, kind, text, scan)
 
     def _on_state(self, sample) -> None:
-        st = _decode(State, sample, "state")
+        st, robot = self._decode(State, sample)
         if st is None:
             return
         pose = st.truth if st.truth is not None else st.pos
-        self._hand(_robot_of(sample.key_expr), "state", json.dumps({
-            "t": "state", "robot": _robot_of(sample.key_expr), "ts": st.ts, "seq": st.seq,
+        self._hand(robot, "state", json.dumps({
+            "t": "state", "robot": robot, "ts": st.ts, "seq": st.seq,
             "pose": [round(x, 4) for x in pose], "vel": [round(x, 4) for x in st.vel],
             "stall": st.stall, "driver": st.driver}))
 
     def _on_scan(self, sample) -> None:
-        sc = _decode(Scan, sample, "scan")
+        sc, robot = self._decode(Scan, sample)
         if sc is None:
             return
-        robot = _robot_of(sample.key_expr)
         pose = sc.truth if sc.truth is not None else sc.pose
         text = json.dumps({
             "t": "scan", "robot": robot, "id": sc.id, "ts": sc.ts, "min_angle": sc.min_angle,
@@ -202,19 +190,17 @@ class Console:
         self._hand(robot, "scan", text, sc)
 
     def _on_notice(self, sample) -> None:
-        n = _decode(TreeNotice, sample, "notice")
+        n, robot = self._decode(TreeNotice, sample)
         if n is None:
             return
-        robot = _robot_of(sample.key_expr)
         self._hand(robot, "notice", json.dumps({
             "t": "notice", "robot": robot, "seq": n.seq, "nodes": n.nodes, "height": n.height,
             "vectors": n.vectors, "snapshot_id": n.snapshot_id, "ts": n.ts}))
 
     def _on_decision(self, sample) -> None:
-        d = _decode(Decision, sample, "decision")
+        d, robot = self._decode(Decision, sample)
         if d is None:
             return
-        robot = _robot_of(sample.key_expr)
         path = [{"index": i, "depth": dp, "label": lab,
                  "radius": round(r, 4) if math.isfinite(r) else None}
                 for i, dp, r, lab in d.path]
@@ -223,10 +209,9 @@ class Console:
             "action": d.action, "snapshot_id": d.snapshot_id, "nodes": d.nodes, "path": path}))
 
     def _on_cmd(self, sample) -> None:
-        c = _decode(VelCmd, sample, "command")
+        c, robot = self._decode(VelCmd, sample)
         if c is None:
             return
-        robot = _robot_of(sample.key_expr)
         source = keys.source_of_cmd_key(str(sample.key_expr)) or c.source
         action = _action_of(c.vx, c.va) if c.state else "motors off"
         self._hand(robot, f"cmd-{source}", json.dumps({
@@ -279,7 +264,7 @@ class Console:
             self._ask_world(r)
         if scan is not None:
             r.scans[scan.id] = scan
-            r.last_scan = (scan.id, scan.ts)
+            r.last_scan = scan
             while len(r.scans) > SCAN_MEMORY:
                 r.scans.popitem(last=False)
         r.latest[kind] = text
@@ -322,21 +307,21 @@ class Console:
             return (f"scan {scan_id} is not among the last {SCAN_MEMORY} scans of robot "
                     f"{r.name}: the page is behind, not driving on a stale view")
         if r.pubs is None:
-            r.pubs = TeacherPublisher(self.session, r.name)
+            r.client = PlayerClient(session=self.session, robot=r.name, source="teacher",
+                                    express=True, block=True)
+            r.pubs = LabelPublisher(self.session, r.name)
             # the teacher's hold token, one per robot driven (its ident names that robot)
-            r.hold = _Hold(types.SimpleNamespace(session=self.session, scope=self.scope,
-                                                 ident=f"{r.name}-{os.getpid()}"))
+            r.hold = Hold(self.session, f"{r.name}-{os.getpid()}")
         box = r.pubs.outbox
         if box is not None and box.full:
             return (f"{len(box)} labels wait for a learner's acknowledgement (at most "
                     f"{box.cap}): not driving until one acknowledges them (they are resent "
                     f"while a learner is up)")
-        ts = scan.ts
         changed = r.holder is not page or r.action != action
         r.holder = page
         vx, va = DEFAULT_ACTIONS[action]
         r.hold.acquire()  # before the command: the server may release the teacher at once
-        r.pubs.command(vx, va, scan_id, ts)
+        r.client.answer(scan, vx, va)
         if scan_id > r.labelled:  # one label per scan (the learner learns it like any other)
             r.pubs.label(scan, action, action)
             r.labelled = scan_id
@@ -351,9 +336,9 @@ class Console:
         if r.action is None:
             return
         r.action = None
-        if r.pubs is not None and r.last_scan is not None:
+        if r.client is not None and r.last_scan is not None:
             with contextlib.suppress(Exception):
-                r.pubs.command(0.0, 0.0, *r.last_scan)
+                r.client.answer(r.last_scan, 0.0, 0.0)
         if r.hold is not None:
             r.hold.release()
         log.info("robot %s: the person's commands stopped (%s)", r.name, why)
@@ -505,17 +490,27 @@ class Console:
                 for text in batch.values():
                     await page.ws.send_str(text)
 
+    def counters(self) -> dict:
+        """What the console did (``--stats``): pages served, robots seen, labels per robot."""
+        return {"pages": self._next_page - 1, "robots": sorted(self.robots),
+                "labelled": {n: r.pubs.published for n, r in self.robots.items()
+                             if r.pubs is not None},
+                "dropped": dict(self.decoder.counts)}
+
     def close(self) -> None:
         end = time.monotonic() + DRAIN  # one wait for every robot's last acknowledgements
         for r in self.robots.values():
             self._unhold(r, "the console stops")
+            if r.hold is not None:  # held or not: no token outlives the console
+                r.hold.release()
             if r.pubs is not None:
                 r.pubs.drain(max(0.0, end - time.monotonic()))  # the person's last labels
                 r.pubs.close()
+            if r.client is not None:
+                r.client.close()
         for sub in self.subs:
             with contextlib.suppress(Exception):
                 sub.undeclare()
-        self.scope.close()
 
 
 def _ssl_context(args) -> ssl.SSLContext | None:
@@ -555,6 +550,7 @@ async def _serve(ctx: Context, host: str, port: int, token: str | None,
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     console = Console(ctx, loop, token)
+    ctx.report(console.counters)
     app = web.Application()
     app.router.add_get("/", console.index)
     app.router.add_get("/ws", console.websocket)

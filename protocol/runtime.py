@@ -1,17 +1,21 @@
 """What every rhbl process shares: exit codes, logging, signals, opening the session, a scope.
 
-``rhbl server`` and the client processes (teacher, learner, controller) run through ``run``:
+``rhbl server`` and the client processes (teacher, learner, controller) run through ``run_process``:
 
-- ``run(role, args, body, check=..., robot=..., ident=..., early_token=...)``: configures
+- ``run_process(role, args, body, check=..., robot=..., ident=..., early_token=...)``: configures
   logging (``--log-level``), turns SIGINT/SIGTERM into ``SystemExit(0)``, calls ``check()``
   (flags and files checked before any network: bad input exits 2 before an unreachable router
   exits 3), opens the zenoh session with an error naming the endpoint and the likely reason,
   optionally declares the liveliness token ``rhbl/alive/<role>/<ident>``, calls ``body(ctx)``
   and maps failures to exit codes (``EXIT_*`` below), each reported as one log line.
 - ``Context.scope``: a ``contextlib.ExitStack`` holding everything the process declares
-  (``ctx.subscriber``, ``ctx.queryable``, ``ctx.publisher``, ``ctx.keep``): released in reverse
-  order on every path, then the session is closed (an unclosed session with callback
-  subscribers hangs the interpreter at exit).
+  (``ctx.subscriber``, ``ctx.queryable``, ``ctx.publisher``, ``ctx.keep``) and its closing
+  (``ctx.scope.callback``: a process's last lines are said there, after "stopping (signal)"):
+  released in reverse order on every path, then the session is closed (an unclosed session
+  with callback subscribers hangs the interpreter at exit).
+- ``Context.report(counters)``: the process's counters as data: ``counters()`` returns a JSON
+  map, written to ``--stats FILE`` when the process exits (with its ``role`` and ``exit``
+  code), whatever the path; tests and campaigns read it rather than log lines.
 - ``on_stop_signal(callback)``: a process that stops gracefully (the learner drains, the server
   finishes its tick) replaces ``SystemExit`` by its own stop request.
 
@@ -35,6 +39,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import zenoh
@@ -51,12 +56,14 @@ __all__ = [
     "EXIT_USAGE",
     "Context",
     "ProcessError",
-    "add_logging_arguments",
+    "add_report_arguments",
+    "check_stats_path",
     "install_signal_handlers",
     "on_stop_signal",
     "open_session",
-    "run",
+    "run_process",
     "setup_logging",
+    "write_stats",
 ]
 
 log = logging.getLogger(__name__)
@@ -84,7 +91,7 @@ def _undeclare(thing: Any) -> None:
 
 @dataclass
 class Context:
-    """What ``run`` hands to a process body: the session and the scope its declarations live in."""
+    """What ``run_process`` hands to a process body: the session and the scope its declarations live in."""
 
     role: str
     ident: str
@@ -95,9 +102,15 @@ class Context:
     endpoints: list[str] = field(default_factory=list)  # the connect endpoints
     config: zenoh.Config | None = None
     token: Any = None  # the liveliness token (kept referenced while declared)
+    counters: Callable[[], dict] | None = None  # set by ``report``
+
+    def report(self, counters: Callable[[], dict]) -> None:
+        """Give the process's counters (``counters()``: a JSON map), written to ``--stats``
+        at exit."""
+        self.counters = counters
 
     def declare_token(self) -> None:
-        """Declare the liveliness token ``rhbl/alive/<role>/<ident>`` (once). ``run(...,
+        """Declare the liveliness token ``rhbl/alive/<role>/<ident>`` (once). ``run_process(...,
         early_token=False)`` leaves it to the body, to declare when the process is ready (the
         learner: after its label subscription, so the token means "ready to receive")."""
         if self.token is None:
@@ -126,10 +139,36 @@ class Context:
         return self.keep(self.session.declare_publisher(key, **kw))
 
 
-def add_logging_arguments(parser: argparse.ArgumentParser) -> None:
+def add_report_arguments(parser: argparse.ArgumentParser) -> None:
+    """What a process says and reports: ``--log-level`` and ``--stats FILE``."""
     parser.add_argument("--log-level", default=os.environ.get("RHBL_LOG_LEVEL", "INFO"),
                         choices=["DEBUG", "INFO", "WARNING", "ERROR"], type=str.upper,
                         help="logging level (default: INFO or $RHBL_LOG_LEVEL)")
+    parser.add_argument("--stats", metavar="FILE", default=None,
+                        help="at exit, write the process's counters to FILE as JSON (with its "
+                             "role and exit code); the file is replaced")
+
+
+def check_stats_path(path: str | None) -> None:
+    """``--stats FILE`` must be writable: its folder exists, it is not a folder (ValueError)."""
+    if path is None:
+        return
+    p = Path(path)
+    if p.is_dir():
+        raise ValueError(f"--stats {path}: is a folder, not a file")
+    if not p.parent.is_dir():
+        raise ValueError(f"--stats {path}: folder {p.parent} does not exist")
+    if not os.access(p.parent, os.W_OK):
+        raise ValueError(f"--stats {path}: folder {p.parent} is not writable")
+
+
+def write_stats(path: str, role: str, code: int, counters: dict) -> None:
+    """``--stats FILE``: the counters as JSON, written atomically (a reader never sees half)."""
+    p = Path(path)
+    tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps({"role": role, "exit": code, **counters}, indent=1,
+                              default=str) + "\n")
+    os.replace(tmp, p)
 
 
 def setup_logging(role: str, level: str = "INFO") -> None:
@@ -156,7 +195,7 @@ def _raise_exit(signum, _frame) -> None:
 
 
 def _redeliver(signum: int) -> None:
-    """Deliver the stop signal again every ``REDELIVER_S`` until its handler is gone (``run``
+    """Deliver the stop signal again every ``REDELIVER_S`` until its handler is gone (``run_process``
     ignores stop signals once the body has unwound). The ``SystemExit`` a signal raises lands
     wherever the main thread happens to be, and code there can swallow it: a signal that came
     during numpy's first lazy ``import numpy.random`` was lost that way, and the teacher went on
@@ -227,19 +266,22 @@ def _probe(endpoint: str, timeout: float = 1.0) -> str:
         return f"unreachable ({exc})"
 
 
-def _diagnose(connect: list[str], listen: list[str]) -> list[str]:
-    """Why ``zenoh.open`` failed, endpoint by endpoint (zenoh reports every case alike)."""
+def _diagnose(connect: list[str], listen: list[str], default: bool = False) -> list[str]:
+    """Why ``zenoh.open`` failed, endpoint by endpoint (zenoh reports every case alike);
+    ``default``: the endpoints are the default ones, no ``--connect`` was given."""
     reasons = []
     for ep in connect:
         state = _probe(ep)
+        what = f"{ep} (the default endpoint: no --connect given)" if default else ep
         if state == "open":
-            reasons.append(f"{ep}: something listens there but refused the zenoh session "
-                           f"(wrong credentials, TLS certificates or protocol version?)")
+            reasons.append(f"{what}: something listens there but refused the zenoh session "
+                           f"(another program holding that port, or wrong credentials, TLS "
+                           f"certificates or protocol version?)")
         elif state == "refused":
-            reasons.append(f"{ep}: connection refused (no router/server listening there; "
+            reasons.append(f"{what}: connection refused (no router/server listening there; "
                            f"is `rhbl server` or the router running?)")
         else:
-            reasons.append(f"{ep}: {state}")
+            reasons.append(f"{what}: {state}")
     for ep in listen:
         if _probe(ep, timeout=0.5) == "open":
             reasons.append(f"listen {ep}: already in use (another server or router listens "
@@ -254,18 +296,40 @@ def _mode(config: zenoh.Config) -> str:
         return "peer"
 
 
-def open_session(config: zenoh.Config, role: str = "process") -> tuple[zenoh.Session, list[str]]:
+ROUTER_RETRY = 0.1  # s between attempts while waiting for a router (``wait_router``)
+
+
+def open_session(config: zenoh.Config, role: str = "process", wait_router: float | None = None,
+                 default: bool = False) -> tuple[zenoh.Session, list[str]]:
     """``zenoh.open`` with an error that says which endpoint failed and the likely reason
-    (ProcessError, EXIT_UNREACHABLE). Returns the session and its connect endpoints."""
+    (ProcessError, EXIT_UNREACHABLE); ``default``: the endpoints are the default ones (no
+    ``--connect`` given), said in the error. With ``wait_router`` (seconds, 0 = forever), a
+    client whose endpoints all refuse the connection (nothing listens yet) tries again every
+    ``ROUTER_RETRY`` s, logging what it waits for. Returns the session and its connect
+    endpoints."""
     connect = _config_endpoints(config, "connect/endpoints")
     mode = _mode(config)
-    try:
-        session = zenoh.open(config)
-    except Exception as exc:  # zenoh.ZError; also config errors
-        detail = "; ".join(_diagnose(connect, _config_endpoints(config, "listen/endpoints")))
-        raise ProcessError(f"{role}: cannot open a zenoh session ({mode} mode, connect "
-                           f"{connect or 'none'}): {detail or exc}. zenoh said: {exc}",
-                           EXIT_UNREACHABLE) from exc
+    t0 = time.monotonic()
+    next_note = t0
+    while True:
+        try:
+            session = zenoh.open(config)
+            break
+        except Exception as exc:  # zenoh.ZError; also config errors
+            reasons = _diagnose(connect, _config_endpoints(config, "listen/endpoints"), default)
+            refused = bool(connect) and all("connection refused" in r for r in reasons)
+            waited = time.monotonic() - t0
+            if wait_router is None or not refused or (wait_router and waited >= wait_router):
+                raise ProcessError(
+                    f"{role}: cannot open a zenoh session ({mode} mode, connect "
+                    f"{connect or 'none'}): {'; '.join(reasons) or exc}. zenoh said: {exc}",
+                    EXIT_UNREACHABLE) from exc
+            if time.monotonic() >= next_note:
+                log.info("%s: waiting for a router: nothing listens on %s yet (%.0f s%s)", role,
+                         ", ".join(connect), waited,
+                         f" of {wait_router:g}" if wait_router else "")
+                next_note = time.monotonic() + 3.0
+            time.sleep(ROUTER_RETRY)
     if connect and mode != "client":
         _say_if_alone(session, role, connect)
     return session, connect
@@ -290,43 +354,68 @@ def _close_session(session: zenoh.Session) -> None:
 
 
 # ---- the main wrapper ---------------------------------------------------------------------
-def run(role: str, args: argparse.Namespace, body: Callable[[Context], int | None], *,
-        check: Callable[[], None] | None = None, robot: str = "", ident: str | None = None,
-        early_token: bool = True) -> int:
+def run_process(role: str, args: argparse.Namespace, body: Callable[[Context], int | None], *,
+                check: Callable[[], None] | None = None, robot: str = "",
+                ident: str | None = None, early_token: bool = True,
+                wait_router: float | None = None) -> int:
     """Run a process body with logging, signals, a session and a scope; the exit code.
 
     ``check()`` runs before the session opens (raise ProcessError(EXIT_USAGE) or ValueError for
-    bad input). The liveliness token ``rhbl/alive/<role>/<ident>`` (``ident`` default: the pid)
-    is declared before ``body`` runs if ``early_token``, else by the body with
-    ``ctx.declare_token()`` if ever (the server's node declares its own)."""
+    bad input; ``--stats`` is checked there too). The liveliness token
+    ``rhbl/alive/<role>/<ident>`` (``ident`` default: the pid) is declared before ``body`` runs
+    if ``early_token``, else by the body with ``ctx.declare_token()`` if ever (the server's
+    node declares its own). ``wait_router`` (seconds, 0 = forever; None: not at all): while
+    nothing listens on the connect endpoints, try again instead of exiting 3. The counters the
+    body gave (``ctx.report``) go to ``--stats`` at exit."""
     setup_logging(role, getattr(args, "log_level", "INFO"))
     install_signal_handlers()
+    holder: list[Context] = []
+    code = EXIT_FAILURE
     try:
-        with contextlib.ExitStack() as scope:
-            if check is not None:
-                _checked(role, check)
-            ctx = _open(role, args, scope, robot, ident or str(os.getpid()))
-            if early_token:
-                ctx.declare_token()
-            where = f"robot {robot}, " if robot else ""
-            log.info("%s up (%spid %d, zid %s)", role, where, os.getpid(), ctx.session.zid())
-            try:
-                return int(body(ctx) or EXIT_OK)
-            finally:
-                _ignore_signals()  # the scope is released whatever arrives now
+        code = _run(role, args, body, check, robot, ident, early_token, wait_router, holder)
     except ProcessError as exc:
         log.error("%s", exc)
-        return exc.code
-    except SystemExit as exc:
+        code = exc.code
+    except SystemExit as exc:  # a stop signal before the body ran (opening the session)
         code = exc.code if isinstance(exc.code, int) else EXIT_OK
         if code == EXIT_OK:
             log.info("%s stopping (signal)", role)
-        return code
     except KeyboardInterrupt:
-        return EXIT_OK
+        code = EXIT_OK
     except Exception:
         log.exception("%s failed", role)
-        return EXIT_FAILURE
+        code = EXIT_FAILURE
+    stats = getattr(args, "stats", None)
+    if stats and holder and holder[0].counters is not None:
+        try:
+            write_stats(stats, role, code, holder[0].counters())
+        except Exception as exc:  # noqa: BLE001 - the exit code stands; say why
+            log.error("%s: could not write --stats %s: %s", role, stats, exc)
+    return code
+
+
+def _run(role: str, args: argparse.Namespace, body, check, robot: str, ident: str | None,
+         early_token: bool, wait_router: float | None, holder: list) -> int:
+    """``run_process`` inside the scope: a stop signal during the body is said at once, then
+    the scope (the process's closing and last lines) is released with signals ignored."""
+    with contextlib.ExitStack() as scope:
+        _checked(role, lambda: (check_stats_path(getattr(args, "stats", None)),
+                                check() if check is not None else None))
+        ctx = _open(role, args, scope, robot, ident or str(os.getpid()), wait_router)
+        holder.append(ctx)
+        if early_token:
+            ctx.declare_token()
+        where = f"robot {robot}, " if robot else ""
+        log.info("%s up (%spid %d, zid %s)", role, where, os.getpid(), ctx.session.zid())
+        try:
+            return int(body(ctx) or EXIT_OK)
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else EXIT_OK
+            if code == EXIT_OK:
+                log.info("%s stopping (signal)", role)
+            return code
+        finally:
+            _ignore_signals()  # the scope is released whatever arrives now
 
 
 def _checked(role: str, check: Callable[[], None]) -> None:
@@ -337,11 +426,12 @@ def _checked(role: str, check: Callable[[], None]) -> None:
 
 
 def _open(role: str, args: argparse.Namespace, scope: contextlib.ExitStack, robot: str,
-          ident: str) -> Context:
+          ident: str, wait_router: float | None = None) -> Context:
     try:
         config = config_from_args(args)
     except Exception as exc:  # noqa: BLE001 - bad flags or config file
         raise ProcessError(f"{role}: bad zenoh configuration: {exc}", EXIT_USAGE) from exc
-    session, endpoints = open_session(config, role)
+    default = getattr(args, "connect", None) is None and getattr(args, "zenoh_config", None) is None
+    session, endpoints = open_session(config, role, wait_router, default=default)
     scope.callback(_close_session, session)  # the last to go: everything else was declared in it
     return Context(role, ident, args, session, scope, robot, endpoints, config)

@@ -1,6 +1,6 @@
 """Structure-aware fuzzing of every key the rhbl processes listen to, and of their files.
 
-    python -m lab.fuzz [--per-key 10000] [--seed 0] [--only server,clients,files]
+    python -m campaigns.fuzz [--per-key 10000] [--seed 0] [--only server,clients,files]
 
 Messages. From a valid message of each kind the generator derives hostile ones: a field of the
 wrong type, a field missing, extra fields, NaN and infinities, huge and negative numbers and
@@ -18,10 +18,11 @@ must still be processed.
   NACK, the payload-free requests answered, the robot did not move (valid commands say stand
   still) and its motors stayed on; the node still ticks.
 - ``clients`` (real ``rhbl learner``, ``rhbl teacher`` and ``rhbl controller --follow``
-  processes on a lock-step server): the scan key (all three), the teacher's label key
+  processes, the server at twice real time): the scan key (all three), the teacher's label key
   (learner), the learner's notice key (controller) and the learner's snapshot queryable.
   Checked: every process is alive at the end and still works (the learner journals labels, the
-  teacher labels, the controller answers scans); malformed messages counted from their logs.
+  teacher labels, the controller answers scans); malformed messages counted by the processes
+  themselves (``--stats``: what each dropped, by kind).
 - ``files``: a snapshot, a journal and a world file, each mutated the same way (bytes flipped,
   truncated, extended, random), loaded with the real loaders: each either loads or raises one
   typed error that names the file (never another exception).
@@ -48,9 +49,11 @@ from typing import Any
 
 import msgpack
 
-from lab.processes import Child, free_port, rhbl_argv
+from lab.children import Child, free_port, rhbl_argv
 
 ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # `python campaigns/fuzz.py`: the campaigns are not installed
+    sys.path.insert(0, str(ROOT))
 
 _WEIRD: list[Any] = [
     None, True, False, 0, -1, 1, 2**31, -(2**31), 2**63 - 1, -(2**63), 2**64 - 1,
@@ -172,6 +175,7 @@ def _served_node() -> Iterator[_Served]:
     import zenoh
 
     import server as server_pkg
+    from protocol import keys
     from protocol.session import make_config
     from server.node import ServerNode
     from server.world import World, load_world
@@ -185,7 +189,9 @@ def _served_node() -> Iterator[_Served]:
     start_pose = world.pose(0)
     cli = zenoh.open(make_config(mode="client", connect=[endpoint]))
     try:
-        time.sleep(0.5)
+        _until(lambda: any(r.ok is not None for r in cli.get(
+            keys.request_key("r0", "laser", "get_geom"), timeout=1.0)), 30,
+            "the node answers the client")
         yield _Served(node, world, runner, cli, start_pose)
     finally:
         node.stop()
@@ -270,6 +276,7 @@ def _fuzz_request_key(t: _Served, key: str, decode: Callable[[bytes], Any] | Non
                       valid: dict | None, rng: random.Random, per_key: int) -> KeyResult:
     """``per_key`` queries derived from ``valid``: each one the decoder rejects must get a
     NACK, each one it accepts (payload-free requests only) its answer."""
+    from protocol import keys
     from protocol.messages import COMMAND_MAX_PAYLOAD
 
     res = KeyResult(key)
@@ -288,7 +295,7 @@ def _fuzz_request_key(t: _Served, key: str, decode: Callable[[bytes], Any] | Non
             want_ok = True
         except Exception:  # noqa: BLE001
             want_ok = False
-        if want_ok and key.rsplit("/", 1)[1] in ("set_pose", "motor_power", "set_odom"):
+        if want_ok and keys.parse(key).name in ("set_pose", "motor_power", "set_odom"):
             continue  # a valid teleport or motors-off would change the robot
         n += 1
         pending.append((want_ok, t.cli.get(key, payload=data, timeout=10.0)))
@@ -317,14 +324,13 @@ def _drain_replies(res: KeyResult, pending: list[tuple[bool, Any]]) -> None:
 
 def _check_robot(t: _Served, results: list[KeyResult]) -> None:
     """The robot stood still (only stand-still commands and rejected requests), its motors on,
-    the node still ticking: else a note on every result."""
-    time.sleep(0.3)
+    the node still ticking (five ticks after the last command was counted, which also lets the
+    last ones act): else a note on every result."""
+    ticks = t.node.ticks
+    alive = _until(lambda: t.node.ticks >= ticks + 5, 10) and t.runner.is_alive()
     x0, y0, _ = t.start_pose
     x1, y1, _ = t.world.pose(0)
     moved = math.hypot(x1 - x0, y1 - y0)
-    ticks = t.node.ticks
-    time.sleep(0.5)
-    alive = t.node.ticks > ticks and t.runner.is_alive()
     for res in results:
         if moved > 1e-9:
             res.notes.append(f"the robot moved {moved:.3g} m")
@@ -352,9 +358,22 @@ def fuzz_server(per_key: int, seed: int = 0, valid_every: int = 10) -> list[KeyR
 _LISTENERS = {"scan": ("learner", "teacher", "controller"), "action": ("learner",),
               "notice": ("controller",), "snapshot": ("learner",), "labeled": ("learner",),
               "ack": ("teacher",)}
-_DROPPED = {"scan": "dropped a malformed scan", "action": "dropped a malformed teacher action",
-            "notice": "dropped a malformed tree notice",
-            "labeled": "dropped a malformed labeled scan", "ack": "dropped a malformed learner ack"}
+# what each part's messages are counted as in the listeners' --stats ("dropped": by kind)
+_DROPPED = {"scan": "scan", "action": "teacher/action", "notice": "learner/notice",
+            "labeled": "teacher/labeled", "ack": "learner/ack"}
+
+
+def _until(pred, timeout: float, what: str | None = None, step: float = 0.05) -> bool:
+    """Whether ``pred()`` held within ``timeout`` s (checked every ``step``); with ``what``
+    a RuntimeError naming it instead of False."""
+    end = time.monotonic() + timeout
+    while not pred():
+        if time.monotonic() >= end:
+            if what is not None:
+                raise RuntimeError(f"timed out waiting for {what}")
+            return False
+        time.sleep(step)
+    return True
 
 
 def _client_targets() -> list[tuple[str, Callable[[bytes], Any], dict]]:
@@ -380,23 +399,27 @@ def _client_targets() -> list[tuple[str, Callable[[bytes], Any], dict]]:
 def _start_clients(procs: dict[str, Child], work: Path, endpoint: str, tree: Path) -> None:
     """Server, learner and teacher; the controller once the learner wrote its first tree."""
 
-    def start(name: str, *argv: str) -> None:
-        procs[name] = Child(name, rhbl_argv(*argv), work, cwd=ROOT, stop_signal=signal.SIGINT,
-                            stop_timeout=30.0, escalate=False).start()
+    def start(name: str, *argv: str) -> Child:
+        # its counters at exit (--stats): what it dropped, by kind
+        procs[name] = Child(name, rhbl_argv(*argv, "--stats", str(work / f"{name}.json")), work,
+                            cwd=ROOT, stop_signal=signal.SIGINT, stop_timeout=30.0,
+                            escalate=False).start()
+        return procs[name]
 
-    start("server", "server", "--world", "room", "--speedup", "2", "--listen", endpoint)
-    time.sleep(1.0)
+    def up(p: Child, line: str) -> None:
+        if not p.wait_for_line(line, 120):
+            raise RuntimeError(f"{p.name} did not say {line!r}:\n{p.tail()}")
+
+    up(start("server", "server", "--world", "room", "--speedup", "2", "--listen", endpoint),
+       "listening on")
     start("learner", "learner", "--features", "wall", "--out", str(tree),
           "--snapshot-every", "0.5", "--connect", endpoint)
-    start("teacher", "teacher", "--policy", "wall-follower", "--connect", endpoint)
-    deadline = time.monotonic() + 120
-    while not tree.exists() and time.monotonic() < deadline:
-        time.sleep(0.2)
-    if not tree.exists():
+    up(start("teacher", "teacher", "--policy", "wall-follower", "--connect", endpoint),
+       "first label")
+    if not _until(tree.exists, 120, step=0.2):
         raise RuntimeError(f"the learner wrote no snapshot:\n{procs['learner'].output()}")
-    start("controller", "controller", "--from-learner", "--follow", "--robot", "r0",
-          "--connect", endpoint)
-    time.sleep(3.0)
+    up(start("controller", "controller", "--from-learner", "--follow", "--robot", "r0",
+             "--connect", endpoint), "server is up")
 
 
 def _fuzz_subscription(s, key: str, decode: Callable[[bytes], Any], valid: dict,
@@ -436,16 +459,20 @@ def _fuzz_snapshot_queries(s, rng: random.Random, per_key: int) -> KeyResult:
 
 def _journal_grows(tree: Path) -> bool:
     """The learner still journals labels: its journal grows within a few seconds."""
-    time.sleep(2.0)
     journal = tree.with_name(tree.name + ".journal")
     size0 = journal.stat().st_size
-    time.sleep(3.0)
-    return journal.stat().st_size > size0
+    return _until(lambda: journal.stat().st_size > size0, 20, step=0.2)
 
 
 def _client_verdicts(results: list[KeyResult], procs: dict[str, Child], learning: bool) -> None:
-    """Exit statuses, tracebacks and rejections (counted from the logs) into ``results``."""
+    """Exit statuses, tracebacks and rejections (the listeners' --stats) into ``results``."""
+    import json
+
     text = {n: p.logfile.read_text(errors="replace") for n, p in procs.items()}
+    dropped = {}
+    for n, p in procs.items():
+        stats = Path(p.logfile).with_name(f"{n}.json")
+        dropped[n] = json.loads(stats.read_text()).get("dropped", {}) if stats.exists() else {}
     for res in results:
         part = next(p for p in _LISTENERS if p in res.key)
         for n in _LISTENERS[part]:
@@ -455,8 +482,8 @@ def _client_verdicts(results: list[KeyResult], procs: dict[str, Child], learning
             if "Traceback" in text[n]:
                 res.notes.append(f"{n} logged a traceback")
         if part != "snapshot":
-            res.rejected = text[_LISTENERS[part][0]].count(_DROPPED[part])
-            others = [f"{n} {text[n].count(_DROPPED[part])}" for n in _LISTENERS[part][1:]]
+            res.rejected = dropped[_LISTENERS[part][0]].get(_DROPPED[part], 0)
+            others = [f"{n} {dropped[n].get(_DROPPED[part], 0)}" for n in _LISTENERS[part][1:]]
             if others:
                 res.key += f" (read by the rings of: {', '.join(others)})"
         if not learning:
@@ -492,21 +519,20 @@ def fuzz_clients(per_key: int, seed: int = 0, valid_every: int = 10,
 
 
 # ------------------------------------------------------------------------------------- files
-def fuzz_files(per_file: int, seed: int = 0, workdir: Path | None = None) -> list[KeyResult]:
-    """Mutate a snapshot, a journal and a world file; each must load or raise one typed error
-    naming the file."""
+def _file_cases(work: Path) -> list[tuple[str, bytes, Callable[[Path], Any], tuple]]:
+    """(what, its good bytes, its loader, the typed errors it may raise) of a snapshot, a
+    journal and a world file, made in ``work``."""
     import numpy as np
 
     import server as server_pkg
     from client.behaviour.learning import IncompatibleSnapshotError, load_snapshot
     from client.journal import Journal, JournalError
-    from lab.harness import make_learner, resolve_world, train
+    from lab.harness import make_learner, resolve_world
     from lab.recipe import recipe_for
+    from lab.train import train
     from rhbl.snapshot import SnapshotError
     from server.world import WorldError, load_world
 
-    rng = random.Random(seed)
-    work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-files-"))
     spec = resolve_world("room")
     learner = make_learner(spec.task)
     train(spec, learner, recipe_for(spec.task).replace(seconds=5.0), seed=0)
@@ -518,33 +544,45 @@ def fuzz_files(per_file: int, seed: int = 0, workdir: Path | None = None) -> lis
         j.append(i, 0.1 * i, "forward", np.ones(360, np.float32), 0.0, np.ones(8, np.float32))
     j.close()
     world = Path(server_pkg.world_path("room"))
-    cases = [
+    return [
         ("snapshot", snap.read_bytes(), lambda p: load_snapshot(p),
          (SnapshotError, IncompatibleSnapshotError)),
         ("journal", jpath.read_bytes(), lambda p: Journal.open(p, fsync_interval=0.0).close(),
          (JournalError,)),
         ("world", world.read_bytes(), lambda p: load_world(p), (WorldError,)),
     ]
+
+
+def _mutate_file(good: bytes, rng: random.Random) -> bytes:
+    """A file's bytes flipped, truncated, extended, replaced by random ones or spliced."""
+    b = bytearray(good)
+    kind = rng.randrange(5)
+    if kind == 0:
+        for _ in range(rng.randint(1, 8)):
+            b[rng.randrange(len(b))] = rng.randrange(256)
+    elif kind == 1:
+        b = b[: rng.randrange(len(b))]
+    elif kind == 2:
+        b += os.urandom(rng.randint(1, 5000))
+    elif kind == 3:
+        b = bytearray(os.urandom(rng.choice([0, 1, 8, 100, 5000])))
+    else:
+        i = rng.randrange(len(b))
+        b[i:i] = os.urandom(rng.randint(1, 64))
+    return bytes(b)
+
+
+def fuzz_files(per_file: int, seed: int = 0, workdir: Path | None = None) -> list[KeyResult]:
+    """Mutate a snapshot, a journal and a world file; each must load or raise one typed error
+    naming the file."""
+    rng = random.Random(seed)
+    work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-files-"))
     results = []
-    for what, good, load, errors in cases:
+    for what, good, load, errors in _file_cases(work):
         res = KeyResult(f"{what} file")
         target = work / f"fuzzed-{what}"
         for _ in range(per_file):
-            b = bytearray(good)
-            kind = rng.randrange(5)
-            if kind == 0:
-                for _ in range(rng.randint(1, 8)):
-                    b[rng.randrange(len(b))] = rng.randrange(256)
-            elif kind == 1:
-                b = b[: rng.randrange(len(b))]
-            elif kind == 2:
-                b += os.urandom(rng.randint(1, 5000))
-            elif kind == 3:
-                b = bytearray(os.urandom(rng.choice([0, 1, 8, 100, 5000])))
-            else:
-                i = rng.randrange(len(b))
-                b[i:i] = os.urandom(rng.randint(1, 64))
-            target.write_bytes(bytes(b))
+            target.write_bytes(_mutate_file(good, rng))
             try:
                 load(target)
                 res.valid_sent += 1

@@ -28,22 +28,12 @@ import argparse
 import contextlib
 import logging
 import os
-import threading
 import time
-from collections import OrderedDict, deque
+from collections import deque
 from pathlib import Path
 
 import numpy as np
 
-from client._process import (
-    EXIT_USAGE,
-    Context,
-    ProcessError,
-    ScanWatch,
-    add_process_arguments,
-    run,
-    wait_for_server,
-)
 from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
 from client.behaviour.features import FEATURES, FeatureError, FeatureSpec
 from client.behaviour.learning import (
@@ -52,25 +42,19 @@ from client.behaviour.learning import (
     check_compatible,
     load_snapshot,
 )
+from client.behaviour.tasks import task_of_features
 from client.journal import Journal, JournalError, LabelSet, journal_path
+from client.labels import MAX_BACKLOG, Acknowledgements, Pairing
+from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
 from protocol import keys
-from protocol.messages import LabeledScan, LearnerAck, Scan, TeacherAction, TreeNotice
-from protocol.process import on_stop_signal
+from protocol.messages import Scan, TeacherAction, TreeNotice
+from protocol.runtime import EXIT_USAGE, Context, ProcessError, on_stop_signal
 
-__all__ = ["LearnerCore", "LearnerProcess", "Pairing", "add_arguments", "main", "TASK_OF_FEATURES"]
+__all__ = ["LearnerCore", "LearnerProcess", "Pairing", "add_arguments", "main"]
 
 log = logging.getLogger(__name__)
 
-TASK_OF_FEATURES = {"wall": "wall-following", "maze": "maze"}
-# labeled scans kept in memory while the journal cannot be written (disk full): about an hour
-# of demonstration at 10 Hz (~2 KB each); beyond that the oldest are dropped, counted and logged
-MAX_BACKLOG = 36_000
 _RETRY = 1.0  # s between attempts to write the journal again
-# labeled scans waiting to be learned beyond which the learner says (error) it falls behind
-BEHIND = 600  # about a minute of demonstration at 10 Hz
-# acknowledgements are batched: published at most this often (s), or after this many labels
-ACK_EVERY = 0.15
-ACK_BATCH = 50
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -117,7 +101,7 @@ class LearnerCore:
                  resume: str | None = None, task: str | None = None,
                  tree_params: dict | None = None, stride: int = 1, min_delta: float = 0.0,
                  fsync_interval: float = 1.0, actions: ActionSet = DEFAULT_ACTIONS,
-                 fold_journal: bool = False):
+                 fold_journal: bool = False, journal_write=os.write):
         self.out = Path(out)
         self.fold_journal = bool(fold_journal)
         self.jpath = journal_path(self.out)
@@ -126,26 +110,32 @@ class LearnerCore:
         self.replayed = 0
         self.labels = LabelSet()  # the labels (origin, seq) journaled: deduplication and acks
         if self.jpath.exists():
-            self.journal = Journal.open(self.jpath, fsync_interval=fsync_interval)
+            self.journal = Journal.open(self.jpath, fsync_interval=fsync_interval,
+                                        write=journal_write)
             self.learner, self.applied = self._recover(spec, resume)
         else:
             if self.out.exists() and (resume is None or Path(resume).resolve() != self.out.resolve()):
                 raise ProcessError(
                     f"{self.out} exists but has no journal {self.jpath.name}: it was not written "
                     f"by a learner. Extend it with --resume {self.out} --out NEW_PATH", EXIT_USAGE)
+            fork = None  # where the parent's journal stood when it was extended
             if resume is not None:
                 learner = _resume(resume, spec)
                 parent = str(Path(resume).resolve())
+                j = (load_snapshot(resume)[3].get("provenance") or {}).get("journal") or {}
+                if j.get("lineage"):
+                    fork = {"lineage": j["lineage"], "records": int(j.get("records", 0))}
             else:
                 if spec is None:
                     raise ProcessError("a new tree needs --features (wall or maze)", EXIT_USAGE)
                 params = {"spawn": "winner", **(tree_params or {})}
                 learner = DemonstrationLearner(
-                    spec, actions, task=task or TASK_OF_FEATURES.get(features or ""),
+                    spec, actions, task=task or task_of_features(features),
                     stride=stride, min_delta=min_delta, **params)
                 parent = None
-            header = {"parent": parent, "meta": learner.metadata()}
-            self.journal = Journal.create(self.jpath, header, fsync_interval=fsync_interval)
+            header = {"parent": parent, "fork": fork, "meta": learner.metadata()}
+            self.journal = Journal.create(self.jpath, header, fsync_interval=fsync_interval,
+                                          write=journal_write)
             self.learner, self.applied = learner, 0
             log.info("new tree lineage %s at %s%s", self.journal.lineage, self.out,
                      f" (extending {parent})" if parent else "")
@@ -238,6 +228,15 @@ class LearnerCore:
         """True when the label (origin, seq) is journaled already (or was refused)."""
         return origin is not None and (origin, seq) in self.labels
 
+    def describe(self) -> str:
+        """What the tree is, for the learner's first line: its features, the vectors it was
+        learned from (a tree extended with ``--resume`` holds its parent's too) and how many of
+        them this lineage's journal holds, its size."""
+        learner = self.learner
+        return (f"features {self.features.to_dict()['beams']}, {learner.vectors} vectors so far "
+                f"({self.applied} journaled in lineage {self.journal.lineage}), "
+                f"{learner.nodes} nodes")
+
     @property
     def dirty(self) -> bool:
         """Labeled vectors not in the snapshot yet (and a tree to write: an empty one is not)."""
@@ -280,192 +279,16 @@ def _resume(path, spec: FeatureSpec | None) -> DemonstrationLearner:
         raise ProcessError(f"cannot load snapshot {path}: {exc}", EXIT_USAGE) from exc
 
 
-# ---- pairing labels with scans, as they arrive (no zenoh: testable on its own) -------------
-class Pairing:
-    """Pairs every label with exactly the scan it answers (by scan id, whichever arrives first),
-    at arrival: ``on_scan`` and ``on_label`` are the subscribers' callbacks (any thread); the
-    learning loop takes the labeled scans with ``get``.
-
-    Memory is bounded however fast scans arrive and however slowly the loop learns:
-
-    - scans are never queued: a scan is decoded on arrival and either completes a waiting label
-      or goes into the pairing buffer (the newest ``scan_buffer`` unlabeled scans, keyed by id).
-      Older unlabeled scans are forgotten and counted (``forgotten``): most scans are never
-      labeled, so that is not a loss. A label whose scan was already forgotten (it came more
-      than ``scan_buffer`` scans late) is counted ``unmatched`` and logged at once.
-    - labels whose scan has not arrived wait at most ``match_timeout`` (then dropped, counted
-      ``unmatched`` and logged), as before.
-    - labeled scans (``ready``) are never dropped while the loop falls behind: their number is
-      bounded by the teacher's label rate, and each one is kept (an error is logged when more
-      than ``BEHIND`` wait, every few seconds while they do). Only beyond ``max_ready`` (an hour
-      of demonstration at 10 Hz, as the journal backlog) the oldest is dropped, counted ``lost``
-      and logged as an error (and the learner exits 1). No backpressure: blocking a zenoh
-      callback stalls the whole session (scans, queries), and the router would then drop the
-      teacher's labels under congestion, silently: keeping them here is the only visible place.
-    """
-
-    def __init__(self, scan_buffer: int = 512, match_timeout: float = 2.0,
-                 max_ready: int = MAX_BACKLOG, behind: int = BEHIND, on_scan_seen=None,
-                 clock=time.monotonic):
-        self.scan_buffer = max(1, int(scan_buffer))
-        self.match_timeout = match_timeout
-        self.max_ready = max_ready
-        self.behind = behind
-        self._seen = on_scan_seen
-        self._clock = clock
-        self._cond = threading.Condition()
-        self.scans: OrderedDict[int, Scan] = OrderedDict()  # unlabeled, newest last
-        self.pending: dict[int, tuple[TeacherAction, float]] = {}  # labels awaiting their scan
-        self.ready: deque[tuple[Scan, TeacherAction]] = deque()  # labeled, to be learned
-        self.last_id = -1
-        self.forgot_upto = -1  # the newest scan id forgotten unlabeled
-        self.stats = {"scans": 0, "labels": 0, "forgotten": 0, "unmatched": 0, "bad": 0,
-                      "lost": 0, "max_ready": 0, "resent": 0}
-        self._said_behind = -1e9
-
-    # -- the callbacks (zenoh threads) --
-    def _decode(self, cls, data: bytes, what: str):
-        """The message, or None: a malformed one is counted (``bad``) and logged, dropped."""
-        try:
-            return cls.decode(data)
-        except Exception as exc:  # noqa: BLE001 - DecodeError
-            with self._cond:
-                self.stats["bad"] += 1
-            log.warning("dropped a malformed %s: %s", what, exc)
-            return None
-
-    def on_scan(self, data: bytes) -> None:
-        if self._seen is not None:
-            self._seen()
-        scan = self._decode(Scan, data, "scan")
-        if scan is None:
-            return
-        with self._cond:
-            self.stats["scans"] += 1
-            if scan.id <= self.last_id:
-                log.info("scan ids restarted (%d after %d): the server restarted; forgetting "
-                         "%d unlabeled scans", scan.id, self.last_id, len(self.scans))
-                self.scans.clear()
-                self.forgot_upto = -1
-            self.last_id = scan.id
-            hit = self.pending.pop(scan.id, None)
-            if hit is not None:
-                self._ready(scan, hit[0])
-                return
-            self.scans[scan.id] = scan
-            while len(self.scans) > self.scan_buffer:
-                old, _ = self.scans.popitem(last=False)
-                self.forgot_upto = max(self.forgot_upto, old)
-                self.stats["forgotten"] += 1
-
-    def on_label(self, data: bytes) -> None:
-        act = self._decode(TeacherAction, data, "teacher action")
-        if act is None:
-            return
-        with self._cond:
-            self.stats["labels"] += 1
-            scan = self.scans.pop(act.scan_id, None)
-            if scan is not None:
-                self._ready(scan, act)
-            elif act.scan_id <= self.forgot_upto:
-                self.stats["unmatched"] += 1
-                n = self.stats["unmatched"]
-                if n <= 3 or n % 100 == 0:
-                    log.warning("label %r for scan %d came more than %d scans after it: the "
-                                "scan was already forgotten; dropped (%d unmatched so far; "
-                                "raise --scan-buffer)", act.action, act.scan_id,
-                                self.scan_buffer, n)
-            else:
-                self.pending[act.scan_id] = (act, self._clock())
-                if len(self.pending) > 64:
-                    self._expire(self._clock())
-
-    def on_labeled(self, data: bytes) -> None:
-        """A label the teacher resent with its scan (``LabeledScan``: the learner had not
-        acknowledged it): ready at once, no pairing."""
-        lab = self._decode(LabeledScan, data, "labeled scan")
-        if lab is None:
-            return
-        act = lab.action_message()
-        scan = Scan(ts=lab.ts, id=lab.scan_id, ranges=lab.ranges, pose=(0.0, 0.0, lab.yaw))
-        with self._cond:
-            self.stats["resent"] += 1
-            waiting = self.pending.get(act.scan_id)
-            if waiting is not None and (waiting[0].origin, waiting[0].seq) == (act.origin,
-                                                                              act.seq):
-                del self.pending[act.scan_id]  # the same label, its scan never came
-            self._ready(scan, act)
-
-    def _ready(self, scan: Scan, act: TeacherAction) -> None:  # under the lock
-        self.ready.append((scan, act))
-        n = len(self.ready)
-        self.stats["max_ready"] = max(self.stats["max_ready"], n)
-        if n > self.max_ready:
-            self.ready.popleft()
-            self.stats["lost"] += 1
-            lost = self.stats["lost"]
-            if lost <= 3 or lost % 1000 == 0:
-                log.error("the learner is far behind the teacher: dropped the oldest of %d "
-                          "labeled scans waiting to be learned (%d lost so far)",
-                          self.max_ready, lost)
-        elif n > self.behind and self._clock() - self._said_behind >= 5.0:
-            self._said_behind = self._clock()
-            log.error("the learner falls behind the teacher: %d labeled scans wait to be "
-                      "learned (all kept, at most %d; then the oldest are dropped)", n,
-                      self.max_ready)
-        self._cond.notify()
-
-    # -- the learning loop --
-    def get(self, timeout: float) -> tuple[Scan, TeacherAction] | None:
-        """The oldest labeled scan, or None after ``timeout`` s without one."""
-        with self._cond:
-            if not self.ready:
-                self._cond.wait(timeout)
-            return self.ready.popleft() if self.ready else None
-
-    def expire(self) -> list[int]:
-        """Drop (count, log) the labels that waited longer than ``match_timeout``."""
-        with self._cond:
-            return self._expire(self._clock())
-
-    def _expire(self, now: float) -> list[int]:  # under the lock
-        old = [k for k, (_, t) in self.pending.items() if now - t > self.match_timeout]
-        for k in old:
-            del self.pending[k]
-        if old:
-            self.stats["unmatched"] += len(old)
-            log.warning("%d labels matched no scan within %.1f s (scan ids %s...): dropped; "
-                        "%d so far", len(old), self.match_timeout, old[:3],
-                        self.stats["unmatched"])
-        return old
-
-    def close(self) -> int:
-        """Count the labels still waiting for their scan as unmatched; how many waited."""
-        with self._cond:
-            n = len(self.pending)
-            self.stats["unmatched"] += n
-            self.pending.clear()
-            return n
-
-    def waiting(self) -> int:
-        """Labeled scans waiting to be learned."""
-        with self._cond:
-            return len(self.ready)
-
-    def discard(self) -> int:
-        """Forget the labeled scans waiting to be learned (the caller counts and logs them as
-        lost); how many there were."""
-        with self._cond:
-            n = len(self.ready)
-            self.ready.clear()
-            return n
 
 
 # ---- the process --------------------------------------------------------------------------
-def main(args: argparse.Namespace) -> int:
+def main(args: argparse.Namespace, *, journal_write=os.write) -> int:
+    """``rhbl learner``; ``journal_write`` writes the journal's records (``client.journal``'s
+    seam for injected write failures: campaigns/full_disk.py)."""
     # the token is declared once the label subscription is in place: a teacher that waits for
     # it (rhbl teacher) then loses no label
-    return run("learner", args, lambda ctx: LearnerProcess(ctx).run(), early_token=False)
+    return run_role("learner", args, lambda ctx: LearnerProcess(ctx, journal_write).run(),
+                    early_token=False)
 
 
 class LearnerProcess:
@@ -475,11 +298,11 @@ class LearnerProcess:
     SIGINT/SIGTERM set ``stopping``: the loop withdraws the token, learns what already arrived
     (up to ``--drain`` s), writes the final snapshot and returns."""
 
-    def __init__(self, ctx: Context):
+    def __init__(self, ctx: Context, journal_write=os.write):
         self.ctx, self.args = ctx, ctx.args
         self.stopping = False
         on_stop_signal(self.request_stop)
-        self.core = self._open_core(self.args)
+        self.core = self._open_core(self.args, journal_write)
         ctx.scope.callback(self.close_journal)  # also on a path that never reaches finish()
         self.latest = self.core.out.read_bytes() if self.core.out.exists() else None
         self.snap_key = keys.learner_snapshot_key(ctx.robot)
@@ -488,6 +311,7 @@ class LearnerProcess:
         self.pairing = Pairing(self.args.scan_buffer, self.args.match_timeout,
                                on_scan_seen=self.watch.seen)
         self.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0, "duplicates": 0}
+        ctx.report(self.counters)
         # labeled scans waiting to be journaled (in order): empty unless the journal cannot be
         # written (disk full); nothing is learned before it is journaled
         self.backlog: deque[tuple[Scan, TeacherAction]] = deque()
@@ -495,19 +319,19 @@ class LearnerProcess:
         self.retry_at = 0.0
         self.failures = 0  # journal writes failed in a row
         self.drain_until: float | None = None  # after a stop request: finish what arrived
-        self.notice_pub = self.ack_pub = self.subs = None
-        self.ack_due: set[str] = set()  # origins with labels journaled since the last ack
-        self.ack_count, self.last_ack = 0, 0.0
+        self.notice_pub = self.subs = None
+        self.acks: Acknowledgements | None = None  # once the ack publisher is declared
 
     @staticmethod
-    def _open_core(args: argparse.Namespace) -> LearnerCore:
+    def _open_core(args: argparse.Namespace, journal_write=os.write) -> LearnerCore:
         try:
             return LearnerCore(
                 args.out, features=args.features, resume=args.resume, task=args.task,
                 tree_params={"spawn": args.spawn,
                              **({"max_nodes": args.max_nodes} if args.max_nodes else {})},
                 stride=args.stride, min_delta=args.min_delta,
-                fsync_interval=args.fsync_interval, fold_journal=args.fold_journal)
+                fsync_interval=args.fsync_interval, fold_journal=args.fold_journal,
+                journal_write=journal_write)
         except JournalError as exc:
             raise ProcessError(f"learner: {exc}") from exc
 
@@ -518,7 +342,8 @@ class LearnerProcess:
     def declare(self) -> None:
         ctx, robot = self.ctx, self.ctx.robot
         self.notice_pub = ctx.publisher(keys.learner_notice_key(robot))
-        self.ack_pub = ctx.publisher(keys.learner_ack_key(robot))
+        self.acks = Acknowledgements(ctx.publisher(keys.learner_ack_key(robot)).put,
+                                     self.core.labels)
         self.subs = [
             ctx.subscriber(keys.scan_key(robot), self.on_scan),
             ctx.subscriber(keys.teacher_action_key(robot), self.on_label),
@@ -526,7 +351,7 @@ class LearnerProcess:
         ]
         ctx.queryable(self.snap_key, self.on_query)
         # what survived (journal + snapshot), for a teacher that resends what we do not hold
-        self.publish_acks(self.core.labels.origins())
+        self.acks.publish(self.core.labels.origins())
         ctx.declare_token()  # after the subscriptions: the token means "ready to receive labels"
 
     def on_scan(self, sample) -> None:
@@ -537,30 +362,6 @@ class LearnerProcess:
 
     def on_labeled(self, sample) -> None:
         self.pairing.on_labeled(sample.payload.to_bytes())
-
-    def publish_acks(self, origins=None) -> None:
-        """Acknowledge the labels journaled (``LearnerAck``, the whole state of each origin
-        whose labels were journaled since the last ack, or of ``origins``)."""
-        todo = self.ack_due if origins is None else set(origins)
-        for origin in todo:
-            upto, seqs = self.core.labels.ack(origin)
-            try:
-                self.ack_pub.put(LearnerAck(origin=origin, upto=upto,
-                                            seqs=seqs[:LearnerAck.MAX_SEQS],
-                                            ts=time.time()).encode())
-            except Exception as exc:  # noqa: BLE001 - the session is closing; resent anyway
-                log.debug("ack not published: %s", exc)
-        self.ack_due = set()
-        self.ack_count, self.last_ack = 0, time.monotonic()
-
-    def _handled(self, act: TeacherAction, journaled: bool) -> None:
-        """A label journaled (or refused for good): acknowledged in the next batch."""
-        if act.origin is None:
-            return
-        if not journaled:  # refused (bad input): acknowledged too, so it is not resent forever
-            self.core.labels.add(act.origin, act.seq)
-        self.ack_due.add(act.origin)
-        self.ack_count += 1
 
     def on_query(self, query) -> None:
         data = self.latest
@@ -593,7 +394,7 @@ class LearnerProcess:
             self.stats["rejected"] += 1
             log.warning("label %r for scan %d is not an action of this tree %s: dropped",
                         act.action, act.scan_id, self.core.actions.names)
-            self._handled(act, journaled=False)
+            self.acks.handled(act, journaled=False)
             return
         key = (act.origin, act.seq)
         if act.origin is not None and (self.core.holds(act.origin, act.seq)
@@ -603,7 +404,7 @@ class LearnerProcess:
             # resends what it does not see acknowledged): one copy is kept, not one per resend
             self.stats["duplicates"] += 1
             if key not in self.waiting:
-                self._handled(act, journaled=True)
+                self.acks.handled(act, journaled=True)
             return
         self.stats["paired"] += 1
         self.backlog.append((scan, act))
@@ -623,13 +424,13 @@ class LearnerProcess:
                 self._pop()
                 self.stats["rejected"] += 1
                 log.warning("label %r for scan %d dropped: %s", act.action, scan.id, exc)
-                self._handled(act, journaled=False)
+                self.acks.handled(act, journaled=False)
                 continue
             except (JournalError, OSError) as exc:
                 self._journal_failed(exc)
                 return
             self._pop()
-            self._handled(act, journaled=True)  # (again, for a duplicate: its ack was lost)
+            self.acks.handled(act, journaled=True)  # (again, for a duplicate: its ack was lost)
             if learned is None:  # resent, or live and resent: journaled once only
                 self.stats["duplicates"] += 1
             self.stats["learned"] += bool(learned)
@@ -678,8 +479,7 @@ class LearnerProcess:
                 self.latest = core.snapshot()
             except OSError as exc:  # the journal holds every vector; retried while learning
                 log.error("cannot write snapshot %s (%s); retrying later", core.out, exc)
-        log.info("learning: features %s, %d vectors so far, %d nodes; snapshot %s",
-                 core.features.to_dict()["beams"], core.applied, core.learner.nodes, core.out)
+        log.info("learning: %s; snapshot %s", core.describe(), core.out)
 
     def loop(self) -> None:
         now = time.monotonic()
@@ -698,9 +498,8 @@ class LearnerProcess:
             if item is None or now - last_expire >= 0.5:
                 last_expire = now
                 self.pairing.expire()
-            if self.ack_due and (self.ack_count >= ACK_BATCH
-                                 or now - self.last_ack >= ACK_EVERY):
-                self.publish_acks()
+            if self.acks.due(now):
+                self.acks.publish()
             if self.core.dirty and now - last_snap >= self.args.snapshot_every:
                 self.publish()
                 last_snap = now
@@ -743,8 +542,8 @@ class LearnerProcess:
         code = 0
         try:
             self.learn_leftovers()
-            if self.ack_due:
-                self.publish_acks()
+            if self.acks.pending:
+                self.acks.publish()
             lost = self.stats["lost"] + self.pairing.stats["lost"]
             if lost or (self.core.dirty and not self.publish()):
                 code = 1
@@ -783,12 +582,20 @@ class LearnerProcess:
                       "writable) and are lost", len(self.backlog))
         self.pairing.close()
 
+    def counters(self) -> dict:
+        """The learner's counters (``--stats``): this run's, the pairing's and the tree's."""
+        core = self.core
+        return {**self.stats, "vectors": core.applied, "replayed": core.replayed,
+                "nodes": core.learner.nodes, "height": core.learner.height,
+                "pairing": dict(self.pairing.stats), "backlog": len(self.backlog),
+                "dropped": dict(self.pairing.decoder.counts)}
+
     def report(self, lost: int) -> None:
         ps, st, core = self.pairing.stats, self.stats, self.core
         log.info("stopped: %d labeled vectors (%d this run, %d learned, %d unmatched "
                  "labels, %d malformed, %d rejected, %d resent by the teacher, %d duplicates "
                  "skipped, %d lost), %d nodes, height %d; snapshot %s; %d scans received, "
                  "%d unlabeled ones forgotten, at most %d labeled scans waited to be learned",
-                 core.applied, st["paired"], st["learned"], ps["unmatched"], ps["bad"],
+                 core.applied, st["paired"], st["learned"], ps["unmatched"], self.pairing.decoder.total,
                  st["rejected"], ps["resent"], st["duplicates"], lost, core.learner.nodes,
                  core.learner.height, core.out, ps["scans"], ps["forgotten"], ps["max_ready"])

@@ -1,6 +1,6 @@
 // rhbl console: draws what the console process forwards from the bus and sends the person's
 // commands back. Plain JS, no framework, no network beyond the page's own WebSocket.
-// Messages: client/console/app.py (docstring). Exposed for tests and people: #pose data-x/y/yaw
+// Messages: client/roles/console/app.py (docstring). Exposed for tests and people: #pose data-x/y/yaw
 // (the pose drawn last), #hold data-holder, #tree data-nodes/vectors, #fps data-fps/frames.
 "use strict";
 

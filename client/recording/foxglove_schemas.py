@@ -1,6 +1,6 @@
 """Bus messages -> Foxglove's well-known schemas: what a robotics viewer (Foxglove, Lichtblick)
 draws without a plugin. The one home of this conversion: the recorder writes these messages
-into a recording's viewer channels (``client.recording``), ``rhbl foxglove`` serves them live.
+into a recording's viewer channels (``client.recording.mcap_file``), ``rhbl foxglove`` serves them live.
 
     feed = ViewerFeed()
     for vm in feed.world("r0", world_info, time_ns):        # walls + goal + robot body
@@ -161,7 +161,7 @@ class ViewerFeed:
 
     # -- the stream --
     def update(self, kind: str, robot: str, msg, time_ns: int) -> list[ViewerMessage]:
-        """Viewer messages for one decoded bus message of ``kind`` (``client.recording``'s
+        """Viewer messages for one decoded bus message of ``kind`` (``client.recording.mcap_file``'s
         kinds: scan, state, driver, notice, ...); [] for kinds that draw nothing."""
         if kind == "scan":
             return self._scan(robot, msg, time_ns)

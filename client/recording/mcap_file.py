@@ -12,7 +12,7 @@ The format (written with the official ``mcap`` package, read back with ``mcap.re
 - liveliness tokens (``rhbl/alive/<role>/<id>``) appear as their key's channel with a
   ``rhbl.v1.Liveliness`` message ``{v, key, alive}`` when they appear and disappear; the sim
   world (``sim/req/get_world``'s ``WorldInfo`` reply) on ``rhbl/<robot>/sim/req/get_world``.
-- viewer channels beside them (``client.viewer``: laser, pose, path, world scene, status in
+- viewer channels beside them (``client.recording.foxglove_schemas``: laser, pose, path, world scene, status in
   Foxglove's well-known schemas), so Foxglove and Lichtblick show a recording without a plugin.
 - chunked (zstd), indexed, with a summary; a chunk is closed at least every ``chunk_seconds``
   (1 s), so a recorder killed with SIGKILL leaves every message up to its last chunk readable.
@@ -32,8 +32,6 @@ import errno
 import json
 import logging
 import os
-import queue
-import threading
 import time
 from collections import defaultdict
 from collections.abc import Iterator
@@ -42,29 +40,19 @@ from pathlib import Path
 
 import msgpack
 
-from protocol import keys
 from protocol.codec import PROTOCOL_VERSION
-from protocol.messages import (
-    DriverState,
-    Scan,
-    State,
-    TeacherAction,
-    TreeNotice,
-    VelCmd,
-    WorldInfo,
-)
+from protocol.decoding import Decoder
+from protocol.messages import CARRIES, kind_of
 
 __all__ = [
     "CHUNK_SECONDS",
     "KINDS",
-    "BusRecorder",
     "RecordedMessage",
     "RecordingError",
     "RecordingWriter",
     "classify",
     "decode",
     "read_recording",
-    "recording_summary",
 ]
 
 log = logging.getLogger(__name__)
@@ -72,58 +60,35 @@ log = logging.getLogger(__name__)
 CHUNK_SECONDS = 1.0  # a chunk is closed (written, readable) at least this often
 CHUNK_SIZE = 256 * 1024  # ... or when it holds this many uncompressed bytes
 ENCODING = "msgpack"
-BACKLOG_WARN = 2000  # received messages waiting to be written beyond which it says so
+MAGIC = b"\x89MCAP0\r\n"  # how every MCAP file begins (the MCAP specification)
 
-# kind -> (message class, schema name); "alive": liveliness (our own small map), "other":
-# a key of ours we do not know (kept, undecoded)
-KINDS: dict[str, tuple[type | None, str]] = {
-    "state": (State, "State"),
-    "scan": (Scan, "Scan"),
-    "driver": (DriverState, "Driver"),
-    "cmd": (VelCmd, "VelCmd"),
-    "label": (TeacherAction, "TeacherAction"),
-    "notice": (TreeNotice, "TreeNotice"),
-    "world": (WorldInfo, "WorldInfo"),
-    "alive": (None, "Liveliness"),
-    "other": (None, "Message"),
-}
-
-_NUM = {"type": "number"}
-_INT = {"type": "integer"}
-_STR = {"type": "string"}
-_BOOL = {"type": "boolean"}
-_VEC3 = {"type": "array", "items": _NUM, "minItems": 3, "maxItems": 3}
-_FIELDS: dict[str, dict] = {
-    "state": {"ts": _NUM, "seq": _INT, "pos": _VEC3, "vel": _VEC3, "stall": _BOOL,
-              "driver": _STR, "truth": _VEC3},
-    "scan": {"ts": _NUM, "id": _INT, "min_angle": _NUM, "max_angle": _NUM, "resolution": _NUM,
-             "max_range": _NUM, "ranges": {"description": "bin: little-endian float32 ranges, m"},
-             "pose": _VEC3, "truth": _VEC3},
-    "driver": {"source": _STR, "ts": _NUM, "priority": _INT},
-    "cmd": {"vel": _VEC3, "state": _BOOL, "source": _STR, "scan_id": _INT, "ts": _NUM},
-    "label": {"scan_id": _INT, "action": _STR, "source": _STR, "ts": _NUM, "executed": _STR},
-    "notice": {"seq": _INT, "nodes": _INT, "height": _INT, "vectors": _INT,
-               "snapshot_id": _STR, "ts": _NUM},
-    "world": {"name": _STR, "task": _STR, "walls": {"type": "array"},
-              "goal": {"type": "array"}, "starts": {"type": "array"}},
-    "alive": {"key": _STR, "alive": _BOOL},
-    "other": {},
+# kind -> message class: what each key carries (``protocol.messages.CARRIES``, whose
+# descriptions give the schemas), plus the recording's own kinds: "alive" (a liveliness token's
+# change, the small map ``{v, key, alive}``) and "other" (a key of ours we do not know: kept,
+# undecoded)
+KINDS: dict[str, type | None] = {**CARRIES, "alive": None, "other": None}
+_OWN = {
+    "alive": ("Liveliness", "a liveliness token appeared (alive) or disappeared",
+              {"key": {"type": "string"}, "alive": {"type": "boolean"}}, ["key", "alive"]),
+    "other": ("Message", "a message on a key this version does not know", {}, []),
 }
 
 
 def schema_name(kind: str) -> str:
-    return f"rhbl.v{PROTOCOL_VERSION}.{KINDS[kind][1]}"
+    cls = KINDS[kind]
+    return cls.schema_name() if cls is not None else f"rhbl.v{PROTOCOL_VERSION}.{_OWN[kind][0]}"
 
 
 def _schema_data(kind: str) -> bytes:
-    doc = {
+    cls = KINDS[kind]
+    if cls is not None:
+        return json.dumps(cls.json_schema()).encode()
+    _name, what, fields, required = _OWN[kind]
+    return json.dumps({
         "title": schema_name(kind),
-        "description": (f"rhbl wire protocol version {PROTOCOL_VERSION} (docs/protocol.md): a "
-                        f"msgpack map, as published on the bus"),
-        "type": "object",
-        "properties": {"v": {"const": PROTOCOL_VERSION}, **_FIELDS[kind]},
-    }
-    return json.dumps(doc).encode()
+        "description": f"rhbl recording (protocol version {PROTOCOL_VERSION}): {what}",
+        "type": "object", "properties": {"v": {"const": PROTOCOL_VERSION}, **fields},
+        "required": ["v", *required]}).encode()
 
 
 class RecordingError(Exception):
@@ -131,35 +96,15 @@ class RecordingError(Exception):
 
 
 def classify(key: str) -> tuple[str, str]:
-    """(kind, robot) of a bus key; robot "" for keys of no robot (a server's token)."""
-    parts = str(key).split("/")
-    if len(parts) < 3 or parts[0] != keys.PREFIX:
-        return "other", ""
-    if parts[1] == "alive":
-        ident = parts[3] if len(parts) > 3 else ""
-        return "alive", ident.split("-", 1)[0] if "-" in ident else ""
-    robot, rest = parts[1], parts[2:]
-    if rest[:1] == ["position2d"] and rest[2:4] == ["data", "state"]:
-        return "state", robot
-    if rest[:1] == ["position2d"] and rest[2:4] == ["data", "driver"]:
-        return "driver", robot
-    if rest[:1] == ["laser"] and rest[2:4] == ["data", "scan"]:
-        return "scan", robot
-    if rest[:1] == ["position2d"] and rest[2:4] == ["cmd", "vel"]:
-        return "cmd", robot
-    if rest == ["teacher", "action"]:
-        return "label", robot
-    if rest == ["learner", "notice"]:
-        return "notice", robot
-    if rest == ["sim", "req", "get_world"]:
-        return "world", robot
-    return "other", robot
+    """(kind, robot) of a bus key (``protocol.messages.kind_of``); robot "" for keys of no
+    robot."""
+    return kind_of(key)
 
 
 def decode(kind: str, data: bytes):
     """The protocol message of a payload (``protocol.messages``), or raise its DecodeError;
     for ``alive``: the map ``{v, key, alive}``."""
-    cls = KINDS[kind][0]
+    cls = KINDS[kind]
     if cls is None:
         return msgpack.unpackb(data)
     return cls.decode(data)
@@ -173,7 +118,8 @@ def alive_payload(key: str, alive: bool) -> bytes:
 class RecordingWriter:
     """An MCAP file being written: raw bus messages plus viewer channels.
 
-    Not thread-safe: one thread writes (``BusRecorder`` funnels the zenoh callbacks into one).
+    Not thread-safe: one thread writes (``client.recording.tap.BusTap`` funnels the zenoh
+    callbacks into one).
     Any error writing (a full disk) stops the writer with ``RecordingError``; the file is cut
     back to the end of its last complete chunk, which standard readers read.
     """
@@ -209,9 +155,10 @@ class RecordingWriter:
         self._good = 0  # file offset after the last complete chunk
         self._good_messages = 0
         self._last_flush = time.monotonic()
+        self.decoder = Decoder(log, level=logging.DEBUG)
         self.feed = None
         if viewer:
-            from client.viewer import ViewerFeed
+            from client.recording.foxglove_schemas import ViewerFeed
 
             self.feed = ViewerFeed()
         self._guard(self._start, recorder, metadata or {})
@@ -269,12 +216,9 @@ class RecordingWriter:
     def _write(self, key, data, recv_ns, kind, robot, sim_time):
         if kind is None:
             kind, robot = classify(key)
-        msg = None
-        if kind != "other":
-            try:
-                msg = decode(kind, data)
-            except Exception:  # noqa: BLE001 - a malformed message is still recorded, raw
-                msg = None
+        msg = None  # a malformed message is still recorded, raw (and counted)
+        if KINDS.get(kind) is not None:
+            msg = self.decoder.decode(KINDS[kind], data, where=key)
         if sim_time is None:
             ts = getattr(msg, "ts", None) if kind in ("state", "scan", "driver", "cmd",
                                                       "label") else None
@@ -379,112 +323,6 @@ class _Out:
             self.fd = -1
 
 
-# ---- recording a bus ----------------------------------------------------------------------
-class BusRecorder:
-    """Records a zenoh session's view of the robots' keys into a ``RecordingWriter``.
-
-    The subscribers' callbacks only timestamp and queue the payload; one thread writes (and
-    closes a chunk every second even when the bus is quiet). ``robots`` None: every robot.
-    """
-
-    def __init__(self, session, writer: RecordingWriter, robots: list[str] | None = None,
-                 world: bool = True):
-        self.session = session
-        self.writer = writer
-        self.robots = list(robots) if robots else None
-        self.error: RecordingError | None = None
-        self.seen_robots: set[str] = set()
-        self._world = world
-        self._q: queue.SimpleQueue = queue.SimpleQueue()
-        self._stop = threading.Event()
-        self.max_backlog = 0
-        self._warned = 0.0
-        exprs = [f"{keys.PREFIX}/{r}/**" for r in self.robots] if self.robots \
-            else [f"{keys.PREFIX}/**"]
-        self._subs = [session.declare_subscriber(e, self._on_sample) for e in exprs]
-        self._subs.append(session.liveliness().declare_subscriber(
-            f"{keys.PREFIX}/alive/**", self._on_alive, history=True))
-        self._thread = threading.Thread(target=self._loop, name="recorder-writer", daemon=True)
-        self._thread.start()
-
-    def _on_sample(self, sample) -> None:
-        key = str(sample.key_expr)
-        if key.startswith(f"{keys.PREFIX}/alive/"):
-            return
-        self._q.put((key, sample.payload.to_bytes(), time.time_ns(), None))
-
-    def _on_alive(self, sample) -> None:
-        import zenoh
-
-        self._q.put((str(sample.key_expr), None, time.time_ns(),
-                     sample.kind == zenoh.SampleKind.PUT))
-
-    def _fetch_world(self, robot: str) -> None:
-        try:
-            for reply in self.session.get(keys.sim_request_key(robot, "get_world"), timeout=2.0):
-                if reply.ok is not None:
-                    self._q.put((keys.sim_request_key(robot, "get_world"),
-                                 reply.ok.payload.to_bytes(), time.time_ns(), None))
-                    return
-        except Exception as exc:  # noqa: BLE001 - not a simulator, or the session closing
-            log.debug("no world for robot %s: %s", robot, exc)
-
-    def _loop(self) -> None:
-        w = self.writer
-        while True:
-            try:
-                item = self._q.get(timeout=0.2)
-            except queue.Empty:
-                if self._stop.is_set():
-                    return
-                item = None
-            try:
-                if item is None:
-                    w.maybe_flush()
-                    continue
-                key, data, t, alive = item
-                if data is None:
-                    w.write_alive(key, alive, t)
-                else:
-                    kind, robot = classify(key)
-                    if (self._world and robot and kind != "world"
-                            and robot not in self.seen_robots):
-                        self.seen_robots.add(robot)
-                        threading.Thread(target=self._fetch_world, args=(robot,),
-                                         daemon=True).start()
-                    w.write(key, data, t, kind, robot)
-                n = self._q.qsize()
-                if n > self.max_backlog:
-                    self.max_backlog = n
-                if n > BACKLOG_WARN and time.monotonic() - self._warned >= 10.0:
-                    self._warned = time.monotonic()
-                    log.warning("the recorder falls behind: %d messages wait to be written "
-                                "(all kept, in memory)", n)
-            except RecordingError as exc:
-                self.error = exc
-                log.error("%s", exc)
-                self._stop.set()
-                return
-
-    @property
-    def failed(self) -> bool:
-        return self.error is not None
-
-    def close(self) -> RecordingError | None:
-        """Stop subscribing, write what arrived, finish the file; the error, if any."""
-        for s in self._subs:
-            with contextlib.suppress(Exception):
-                s.undeclare()
-        self._stop.set()
-        self._thread.join()
-        if self.error is None:
-            try:
-                self.writer.close()
-            except RecordingError as exc:
-                self.error = exc
-        return self.error
-
-
 # ---- reading ------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class RecordedMessage:
@@ -521,6 +359,10 @@ def read_recording(path: str | os.PathLike, viewer: bool = False,
     with f:
         if os.fstat(f.fileno()).st_size == 0:
             raise RecordingError(f"{path} is empty: not an MCAP recording")
+        if f.read(len(MAGIC)) != MAGIC:
+            raise RecordingError(f"{path} is not an MCAP recording (it does not begin with "
+                                 f"MCAP's magic bytes)")
+        f.seek(0)
         try:
             reader = NonSeekingReader(f, validate_crcs=True)
             for schema, channel, m in reader.iter_messages(log_time_order=False):
@@ -547,61 +389,3 @@ def read_recording(path: str | os.PathLike, viewer: bool = False,
                 return
             raise RecordingError(f"{path} is damaged after {n} messages (at byte {f.tell()}): "
                                  f"{name}: {exc}") from exc
-
-
-def recording_summary(path: str | os.PathLike) -> dict:
-    """What a recording holds (``rhbl inspect``): robots, keys and counts, the sim-time span,
-    teacher labels per action, gaps in the scan stream, the metadata."""
-    from mcap.reader import NonSeekingReader
-
-    notes: list[str] = []
-    keys_: dict[str, dict] = {}
-    robots: dict[str, dict] = {}
-    viewer: dict[str, int] = defaultdict(int)
-    labels: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
-    last_scan: dict[str, tuple[int, float]] = {}
-    gaps: list[dict] = []
-    t_first = t_last = None
-    for m in read_recording(path, viewer=True, notes=notes):
-        if m.kind == "viewer":
-            viewer[m.key] += 1
-            continue
-        k = keys_.setdefault(m.key, {"kind": m.kind, "schema": m.schema, "messages": 0})
-        k["messages"] += 1
-        t_first = m.log_time if t_first is None else min(t_first, m.log_time)
-        t_last = m.log_time if t_last is None else max(t_last, m.log_time)
-        if not m.robot or m.kind == "alive":
-            continue
-        r = robots.setdefault(m.robot, {"sim_start": None, "sim_end": None, "scans": 0})
-        if m.kind in ("scan", "state"):
-            s = m.sim_time
-            r["sim_start"] = s if r["sim_start"] is None else min(r["sim_start"], s)
-            r["sim_end"] = s if r["sim_end"] is None else max(r["sim_end"], s)
-        if m.kind == "scan":
-            r["scans"] += 1
-            try:
-                scan = m.message()
-            except Exception:  # noqa: BLE001
-                continue
-            prev = last_scan.get(m.robot)
-            if prev is not None and scan.id > prev[0] + 1:
-                gaps.append({"robot": m.robot, "after_scan": prev[0], "missing": scan.id - prev[0] - 1,
-                             "sim_time": round(prev[1], 3)})
-            last_scan[m.robot] = (scan.id, scan.ts)
-        elif m.kind == "label":
-            try:
-                labels[m.robot][m.message().action] += 1
-            except Exception:  # noqa: BLE001
-                labels[m.robot]["<malformed>"] += 1
-    meta = {}
-    try:
-        with open(path, "rb") as f:
-            for rec in NonSeekingReader(f).iter_metadata():
-                if rec.name == "rhbl":
-                    meta = dict(rec.metadata)
-    except Exception:  # noqa: BLE001 - an unclosed file: metadata still read above if present
-        pass
-    return {"path": str(path), "metadata": meta, "robots": robots, "keys": keys_,
-            "viewer": dict(viewer), "labels": {r: dict(v) for r, v in labels.items()},
-            "gaps": gaps, "notes": notes,
-            "wall_seconds": (t_last - t_first) / 1e9 if t_first is not None else 0.0}

@@ -3,19 +3,20 @@
 A zenoh client like the other processes (the same ``--connect/--listen/--mode/--zenoh-config``
 and ``--robot`` flags; behind the secured router it uses the teacher's credentials) that serves
 one page and its WebSocket on ``--http HOST:PORT`` (default ``127.0.0.1:8080``) and prints one
-line ``console: <URL>`` with the URL to open. The page (``client/console/static/``: plain HTML,
+line ``console: <URL>`` with the URL to open. The page (``client/roles/console/static/``: plain HTML,
 JS and a canvas, no network access beyond this process) shows the world, the robot, its trail and
 laser, who drives and with which action, the learner's tree and the controller's decision; the
 person drives with the arrow keys/WASD, on-screen buttons or a gamepad. Commands go on the bus
-exactly as ``rhbl teacher`` sends them (``client.teacher.TeacherPublisher``): the velocity on
-``.../cmd/vel/teacher`` and the label for the scan the page displayed on ``.../teacher/action``,
+exactly as ``rhbl teacher`` sends them (``client.player.PlayerClient``,
+``client.labels.LabelPublisher``): the velocity on ``.../cmd/vel/teacher`` and the label for
+the scan the page displayed on ``.../teacher/action``,
 kept and resent until a learner acknowledges it (once a learner of the robot was seen).
 
     rhbl console                                   # http://127.0.0.1:8080/
     rhbl console --http 0.0.0.0:8443 --tls-cert c.pem --tls-key k.pem   # token in the URL
     rhbl console --view-only                       # watch: publishes nothing at all
 
-docs/console.md describes the page; ``client.console.app`` the server side.
+docs/console.md describes the page; ``client.roles.console.app`` the server side.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from client._process import add_process_arguments, run
+from client.roles.common import add_process_arguments, run_role
 
 __all__ = ["add_arguments", "main"]
 
@@ -46,7 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from client.console.app import body, parse_http
+    from client.roles.console.app import body, parse_http
 
     # bad flags are said before any session is opened (exit status 2, like argparse)
     try:
@@ -56,4 +57,4 @@ def main(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"rhbl console: error: {exc}", file=sys.stderr)
         return 2
-    return run("console", args, body, early_token=False)
+    return run_role("console", args, body, early_token=False)

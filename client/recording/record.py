@@ -1,0 +1,171 @@
+"""``rhbl record``: keep every message of the robots' keys in an MCAP file (Player's
+``writelog``, a ROS bag). docs/recording.md describes the file.
+
+    rhbl record --out run.mcap                      # every robot it sees, until Ctrl-C
+    rhbl record --out run.mcap --robot r0 --duration 120
+
+It needs no server: started before one, it waits for a router to connect to (``--wait-router``,
+forever by default, logging what it waits for) and records from then on. ``--out`` and the
+other options are checked before any connection. SIGINT/SIGTERM finish the file (summary and
+indexes); a SIGKILL leaves every message up to the last chunk (closed every second) readable.
+A full disk stops it with one clear error (exit 1); what was written stays readable.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import time
+from pathlib import Path
+
+from client.recording.mcap_file import CHUNK_SECONDS, RecordingError, RecordingWriter
+from client.recording.tap import BusTap
+from protocol import keys
+from protocol.runtime import (
+    EXIT_FAILURE,
+    EXIT_USAGE,
+    Context,
+    ProcessError,
+    add_report_arguments,
+    run_process,
+)
+from protocol.session import add_zenoh_arguments
+
+__all__ = ["RecordProcess", "add_arguments", "check_out", "demo_recording", "main",
+           "say_demo_recording"]
+
+log = logging.getLogger(__name__)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_zenoh_arguments(parser)
+    parser.add_argument("--out", required=True, metavar="FILE",
+                        help="the MCAP file to write (refused if it exists, unless --overwrite)")
+    parser.add_argument("--robot", action="append", dest="robots", metavar="NAME",
+                        help="record this robot's keys (repeatable; default: every robot seen)")
+    parser.add_argument("--duration", type=float, default=None, metavar="SECONDS",
+                        help="stop after this many seconds of recording (wall time; default: "
+                             "until stopped)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    parser.add_argument("--no-viewer", action="store_true",
+                        help="only the bus messages, no Foxglove viewer channels")
+    parser.add_argument("--chunk-seconds", type=float, default=CHUNK_SECONDS, metavar="S",
+                        help=f"close a chunk at least this often (default {CHUNK_SECONDS:g}): "
+                             f"what a killed recorder can lose at most")
+    parser.add_argument("--wait-router", type=float, default=0.0, metavar="SECONDS",
+                        help="while nothing listens on the --connect endpoints (no server or "
+                             "router up yet), try again for this long (0 = forever, the "
+                             "default)")
+    add_report_arguments(parser)
+
+
+def check_out(path: str | os.PathLike, overwrite: bool) -> None:
+    """ValueError unless ``path`` can be the new recording: not a folder, not an existing file
+    (unless ``overwrite``), in a folder that exists or can be made."""
+    p = Path(path)
+    if p.is_dir():
+        raise ValueError(f"--out {p}: is a folder, not a file")
+    if p.exists() and not overwrite:
+        raise ValueError(f"--out {p} exists: choose another file or pass --overwrite (a "
+                         f"recording is never replaced silently)")
+    folder = next((q for q in p.absolute().parents if q.exists()), None)
+    if folder is None or not folder.is_dir() or not os.access(folder, os.W_OK):
+        raise ValueError(f"--out {p}: cannot create it in {folder} (not a writable folder)")
+
+
+def main(args: argparse.Namespace) -> int:
+    def check() -> None:
+        for r in args.robots or []:
+            keys.check_chunk(r, "--robot")
+        if args.duration is not None and not args.duration > 0:
+            raise ValueError("--duration must be > 0")
+        if not args.chunk_seconds > 0:
+            raise ValueError("--chunk-seconds must be > 0")
+        if not args.wait_router >= 0:
+            raise ValueError("--wait-router must be >= 0")
+        check_out(args.out, args.overwrite)
+
+    check()  # a ValueError is one line, exit 2, before anything is opened (lab.cli)
+    name = "all" if not args.robots else args.robots[0]  # in its liveliness token
+    return run_process("recorder", args, lambda ctx: RecordProcess(ctx).run(),
+                       ident=f"{name}-{os.getpid()}", wait_router=args.wait_router)
+
+
+class RecordProcess:
+    """The bus tap feeding one ``RecordingWriter`` until ``--duration``, a stop signal or a
+    failure to write; its counters go to ``--stats``."""
+
+    def __init__(self, ctx: Context):
+        args = self.args = ctx.args
+        try:
+            self.writer = RecordingWriter(
+                args.out, overwrite=args.overwrite, viewer=not args.no_viewer,
+                recorder="rhbl record", chunk_seconds=args.chunk_seconds,
+                metadata={"robots": ",".join(args.robots or ["*"])})
+        except RecordingError as exc:
+            raise ProcessError(f"recorder: {exc}", EXIT_USAGE) from exc
+        self.tap = BusTap(ctx.session, self.writer, robots=args.robots)
+        self.error: RecordingError | None = None
+        self.closed = False
+        ctx.scope.callback(self.close)  # on every path, after "stopping (signal)"
+        ctx.report(self.counters)
+        log.info("recording %s to %s", ", ".join(args.robots) if args.robots else "every robot",
+                 args.out)
+
+    def run(self) -> int:
+        t0 = last_note = time.monotonic()
+        while not self.tap.failed:
+            if self.args.duration is not None and time.monotonic() - t0 >= self.args.duration:
+                log.info("recorded %.0f s: done", self.args.duration)
+                break
+            time.sleep(0.1)
+            if time.monotonic() - last_note >= 10.0:
+                last_note = time.monotonic()
+                log.info("%d messages recorded (robots %s)", self.writer.messages,
+                         ", ".join(sorted(self.tap.seen_robots)) or "none yet")
+        return EXIT_FAILURE if self.close() is not None else 0
+
+    def close(self) -> RecordingError | None:
+        """Stop the tap and finish the file (once); the error that stopped the recording."""
+        if not self.closed:
+            self.closed = True
+            self.tap.close()
+            self.error = self.tap.error(self.writer)
+            w, out = self.writer, self.args.out
+            log.info("recorder stopped: %d messages on %d keys in %s (%.1f MB); at most %d "
+                     "received messages waited to be written%s", w.messages, len(w.counts),
+                     out, os.path.getsize(out) / 1e6 if os.path.exists(out) else 0.0,
+                     self.tap.max_backlog, "" if self.error is None else "; FAILED")
+        return self.error
+
+    def counters(self) -> dict:
+        w = self.writer
+        return {"messages": w.messages, "keys": len(w.counts),
+                "robots": sorted(self.tap.seen_robots), "max_backlog": self.tap.max_backlog,
+                "failed": None if self.error is None else str(self.error)}
+
+
+# ---- rhbl demo --record --------------------------------------------------------------------
+def demo_recording(record: str | None, out_dir, say=print) -> RecordingWriter | None:
+    """``rhbl demo --record [FILE]``: the writer of the demo's recording (default
+    ``OUT/run.mcap``), a sink for the demo's bus tap; None when not asked. ValueError when the
+    file cannot be created."""
+    if record is None:
+        return None
+    path = record or os.path.join(out_dir, "run.mcap")
+    try:
+        writer = RecordingWriter(path, overwrite=True, recorder="rhbl demo")
+    except RecordingError as exc:
+        raise ValueError(str(exc)) from None
+    say(f"recording every bus message into {path}")
+    return writer
+
+
+def say_demo_recording(tap: BusTap, writer: RecordingWriter | None, say=print) -> None:
+    """The demo's last word on its recording (after ``tap.close()``)."""
+    if writer is None:
+        return
+    err = tap.error(writer)
+    say(f"recording: {writer.messages} messages on {len(writer.counts)} keys in {writer.path}"
+        + (f"; FAILED: {err}" if err else ""))

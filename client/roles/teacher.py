@@ -1,0 +1,357 @@
+"""``rhbl teacher``: demonstrate a behaviour over zenoh (a scripted expert or keyboard teleop).
+
+For every scan of the robot it publishes the executed velocity command on the per-source key
+``.../cmd/vel/teacher`` (``source="teacher"``, ``scan_id`` set) and the demonstrated label on
+``rhbl/<robot>/teacher/action`` (``TeacherAction``: the expert's choice for exactly that scan, and
+the action executed, which differs while a perturbation runs).
+
+    rhbl teacher --policy wall-follower --seconds 300     # scripted, perturbed demonstrations
+    rhbl teacher --policy maze
+    rhbl teacher --policy wall-follower --correct         # watch and correct (the controller drives)
+    rhbl teacher --correct --demonstrate 60 --seconds 300 # demonstrate 60 s, then correct
+    rhbl teacher --policy keyboard                        # a person at a terminal (arrows/WASD)
+    rhbl teacher --policy keyboard --no-wait-learner      # pure teleop, nobody records
+
+Nothing demonstrated is lost: before its first label the teacher waits (``--wait-learner-timeout``,
+30 s; 0 = forever) for a learner's liveliness token ``rhbl/alive/learner/<robot>-<pid>``, which
+a learner declares only once it subscribes to the labels; with no learner it exits with status 5.
+When the last learner's token disappears while demonstrating (it stopped or crashed), the teacher
+pauses (no commands, no labels: the server's watchdog stops the robot) and waits for a learner the
+same way, or without a time limit while it holds labels no learner has acknowledged.
+
+Nor is a label lost in flight when a learner is killed: each label carries the session's identity
+(``origin``, a random id per process, and ``seq``, 0, 1, ...) and stays in the teacher's outbox
+(``client.labels``: ``Outbox``, owned by ``LabelPublisher``) with the scan it answers until the learner
+acknowledges it (``LearnerAck`` on ``rhbl/<robot>/learner/ack``: the labels in its
+journal). Every unacknowledged label when a learner's token appears again, and a label missed
+(unacknowledged after ``--resend-after``, 2 s, with backoff: ``Outbox``), is resent with its scan
+on ``rhbl/<robot>/teacher/labeled`` (``LabeledScan``); the learner journals each label once. With ``--outbox`` (2000) labels
+unacknowledged the teacher pauses as above rather than drop one. On exit it waits up to 10 s for
+the last acknowledgements. The outbox lives in this process: a killed teacher loses the labels
+not yet acknowledged. ``--no-wait-learner`` keeps no outbox.
+
+Correcting mode (``--correct``, the corrective (DAgger) rounds of the training recipe, Player
+style "the teacher watches and corrects"): the controller drives; for every scan the teacher
+publishes its label (the expert's choice, ``executed`` unset) but commands the robot only while
+``client.behaviour.policies.takes_over`` says so (any beam closer than ``--takeover`` m: the
+harness's rule), then with the label (``executed`` = the label). While it commands it also holds
+the liveliness token ``rhbl/alive/teacher/<robot>-<pid>-hold`` and withdraws it when it stops
+commanding: the server ends a teacher's hold when a teacher token disappears, so the controller
+drives again on the very next tick instead of after the watchdog timeout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+
+import numpy as np
+
+from client.behaviour.actions import DEFAULT_ACTIONS
+from client.behaviour.policies import STYLES, TAKEOVER, Demonstrator, takes_over
+from client.behaviour.tasks import TASKS, make_policy, task_of_teacher
+from client.labels import DRAIN, OUTBOX, RESEND_AFTER, Hold, LabelPublisher
+from client.player import PlayerClient
+from client.roles.common import (
+    ScanWatch,
+    add_process_arguments,
+    run_role,
+    wait_for_learner,
+    wait_for_server,
+)
+from protocol.messages import Scan
+from protocol.runtime import EXIT_USAGE, Context, ProcessError
+
+__all__ = ["TeacherProcess", "add_arguments", "main"]
+
+log = logging.getLogger(__name__)
+
+SOURCE = "teacher"
+# scans kept for labelling in --correct mode (the oldest are dropped, counted and logged): a
+# lock-step server runs at the controller's pace, ~10x real time, so 64 scans let the teacher be
+# descheduled for ~0.6 s on a loaded machine without a state the controller visited going unlabelled
+CORRECT_QUEUE = 64
+# --policy: a task's scripted expert, or a person at the keyboard
+POLICIES = (*(t.teacher for t in TASKS.values()), "keyboard")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_process_arguments(parser)
+    parser.add_argument("--policy", choices=POLICIES, default="wall-follower",
+                        help="scripted expert of a task, or keyboard teleop")
+    parser.add_argument("--seconds", type=float, default=None, metavar="S",
+                        help="stop after demonstrating S seconds of sim time (default: until "
+                             "stopped)")
+    parser.add_argument("--perturb", type=float, default=0.05, metavar="P",
+                        help="fraction of time a scripted demonstration executes a random action "
+                             "(labels stay the expert's; 0 = off; default 0.05, the training "
+                             "recipe measured in docs/experiments.md)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the perturbations")
+    parser.add_argument("--style", choices=STYLES, default="reactive",
+                        help="scripted expert: 'reactive' (labels a function of the features; "
+                             "the training recipe, default) or 'smooth' (the earlier teacher with "
+                             "hysteresis and memory)")
+    parser.add_argument("--correct", action="store_true",
+                        help="watch and correct: label every scan but command the robot only "
+                             "while a beam is closer than --takeover (the controller drives "
+                             "otherwise); the corrective rounds of the training recipe")
+    parser.add_argument("--demonstrate", type=float, default=0.0, metavar="S",
+                        help="with --correct: demonstrate (drive) for the first S seconds of sim "
+                             "time, then correct (default 0)")
+    parser.add_argument("--takeover", type=float, default=TAKEOVER, metavar="M",
+                        help=f"with --correct: take over while any beam is closer than M metres "
+                             f"(0 = never; default {TAKEOVER:g}, the training recipe)")
+    parser.add_argument("--no-wait-learner", dest="wait_learner", action="store_false",
+                        help="demonstrate without waiting for a learner (e.g. pure teleop); "
+                             "labels published while no learner listens are lost (no outbox, "
+                             "no resends)")
+    parser.add_argument("--outbox", type=int, default=OUTBOX, metavar="N",
+                        help=f"labels kept until a learner acknowledges them (resent with their "
+                             f"scan when unacknowledged); with N waiting the teacher pauses "
+                             f"(default {OUTBOX})")
+    parser.add_argument("--resend-after", type=float, default=RESEND_AFTER, metavar="SECONDS",
+                        help=f"resend a label (with its scan) not acknowledged after this long "
+                             f"(default {RESEND_AFTER:g}); at once to a learner that (re)starts")
+    parser.add_argument("--wait-learner-timeout", type=float, default=30.0, metavar="SECONDS",
+                        help="how long to wait for a learner's liveliness token before "
+                             "demonstrating; then exit with status 5 (0 = wait forever, "
+                             "logging every few seconds; default: 30; a paused teacher "
+                             "holding unacknowledged labels waits forever)")
+
+
+def main(args: argparse.Namespace) -> int:
+    return run_role("teacher", args, _body)
+
+
+def _body(ctx: Context) -> int:
+    demo = _demonstrator(ctx.args)
+    close = getattr(demo, "close", None)
+    if close:
+        ctx.scope.callback(close)  # the keyboard restores the terminal
+    return TeacherProcess(ctx, demo).run()
+
+
+def _demonstrator(args: argparse.Namespace):
+    if args.correct and args.policy == "keyboard":
+        raise ProcessError("teacher: --correct needs a scripted expert (--policy wall-follower "
+                           "or maze), not the keyboard", EXIT_USAGE)
+    if not (args.demonstrate >= 0 and args.takeover >= 0):
+        raise ProcessError("teacher: --demonstrate and --takeover must be >= 0", EXIT_USAGE)
+    if args.policy == "keyboard":
+        from client.roles.keyboard import KeyboardPolicy
+
+        return KeyboardPolicy(DEFAULT_ACTIONS)
+    try:
+        policy = make_policy(task_of_teacher(args.policy), DEFAULT_ACTIONS, style=args.style)
+    except ValueError as exc:
+        raise ProcessError(f"teacher: {exc}", EXIT_USAGE) from exc
+    return Demonstrator(policy, perturb=args.perturb, rng=np.random.default_rng(args.seed))
+
+
+class TeacherProcess:
+    """For every scan: the demonstrator's label on ``rhbl/<robot>/teacher/action`` and, when it
+    drives, the executed action's command on ``.../cmd/vel/teacher``."""
+
+    def __init__(self, ctx: Context, demo):
+        self.ctx, self.args, self.demo = ctx, ctx.args, demo
+        robot = ctx.robot
+        if self.args.wait_learner and not (self.args.outbox >= 1 and self.args.resend_after > 0):
+            raise ProcessError("teacher: --outbox must be >= 1 and --resend-after > 0",
+                               EXIT_USAGE)
+        # the outbox (labels kept until acknowledged, resent) only when a learner records
+        self.labels = LabelPublisher(
+            ctx.session, robot, outbox=self.args.outbox if self.args.wait_learner else 0,
+            resend_after=self.args.resend_after)
+        ctx.scope.callback(self.labels.close)
+        # commands on .../cmd/vel/teacher, express and never dropped
+        self.client = PlayerClient(session=ctx.session, robot=robot, source=SOURCE,
+                                   express=True, block=True)
+        ctx.scope.callback(self.client.close)
+        # the latest scan wins (a teacher never acts on a backlog); correcting, a short queue:
+        # the server does not wait for a teacher that does not drive, and every state the
+        # controller visits should get its label (a lock-step run only falls a scan or two behind)
+        self.scans = self.client.scans(depth=CORRECT_QUEUE if self.args.correct else 1)
+        self.learners = self.labels.learners  # None with --no-wait-learner
+        self.hold = Hold(ctx.session, ctx.ident) if self.args.correct else None
+        if self.hold is not None:
+            ctx.scope.callback(self.hold.release)
+        self.watch = ScanWatch("teacher", self.scans.key, stale=1.0)
+        ctx.scope.callback(self.watch.stop)
+        self.t0: float | None = None
+        self.n = self.perturbed = self.took = self.bad = 0
+        self.first_scan: int | None = None  # the scan the first label answered
+        self.correcting = False
+        self.last_id, self.missed = -1, 0  # correcting: scans dropped from the queue unlabelled
+        ctx.scope.callback(self.close)  # on every path, after "stopping (signal)"
+        ctx.report(self.counters)
+
+    def run(self) -> int:
+        wait_for_server(self.ctx)
+        if self.learners is not None:
+            self.wait_learner()
+        else:
+            log.info("not waiting for a learner (--no-wait-learner): labels go to whoever "
+                     "listens")
+        self.watch.start()
+        while self.step():
+            pass
+        return 0
+
+    def wait_learner(self, timeout: float | None = None) -> None:
+        found = wait_for_learner(self.ctx, timeout)
+        end = time.monotonic() + 2.0  # the subscriber sees the token too (normally at once)
+        while not self.learners and time.monotonic() < end:
+            time.sleep(0.01)
+        if not self.learners:
+            self.learners.add(found)
+        # a scan kept from before the learner subscribed never reached it: its label could not
+        # be paired. Skip it and start with the next scan.
+        self.skip_stale()
+
+    def skip_stale(self) -> None:
+        """Scans that waited while the teacher could not label (before a learner subscribed,
+        or paused) are skipped: their labels could not be paired. A demonstrating teacher
+        answers the latest with a stop, so a lock-step server steps on at once rather than
+        after its timeout (the scans stopped meanwhile; the watch would say so)."""
+        stale = self.scans.latest()
+        if stale is not None and not self.args.correct:
+            self.client.answer(stale, 0.0, 0.0)
+    def step(self) -> bool:
+        """Answer the next scan; False when done (``--seconds``)."""
+        scan = self.scans.recv()  # None: a malformed one (dropped, counted)
+        self.watch.seen()
+        if scan is None:
+            return True
+        if self.learners is not None and not self.learners:
+            self.pause(scan)
+            return True
+        if self.labels.outbox is not None and self.labels.outbox.full:
+            self.pause_full(scan)
+            return True
+        if not self.track(scan):
+            return False
+        choice = self.choose(scan)
+        if choice is not None:
+            self.publish(scan, *choice)
+        return True
+
+    def pause(self, scan: Scan) -> None:
+        """The learner stopped or crashed: a label now would be lost. Stand still (now, not
+        after the watchdog) and wait until a learner is up again."""
+        log.warning("teacher: no learner of robot %s is up any more: pausing (no commands, no "
+                    "labels)", self.ctx.robot)
+        self.client.answer(scan, 0.0, 0.0)
+        box = self.labels.outbox
+        if box is not None and len(box):  # giving up would drop them: wait for a learner
+            log.warning("teacher: %d labels unacknowledged: waiting for a learner without a "
+                        "time limit (--wait-learner-timeout applies when none are)", len(box))
+            self.wait_learner(timeout=0)
+        else:
+            self.wait_learner()
+        self.last_id = -1  # the scans of the pause were skipped on purpose, not missed
+
+    def pause_full(self, scan: Scan) -> None:
+        """The outbox is full (the learner acknowledges nothing: stuck, or its journal cannot
+        be written): a label now could not be kept. Stand still until acknowledgements come
+        (the outbox resends meanwhile), or a learner is gone (then ``pause``)."""
+        box = self.labels.outbox
+        log.warning("teacher: %d labels wait for the learner's acknowledgement (--outbox %d): "
+                    "pausing (no commands, no labels) until it acknowledges", len(box), box.cap)
+        self.client.answer(scan, 0.0, 0.0)
+        t0 = next_note = time.monotonic()
+        while box.full and self.learners:
+            time.sleep(0.05)
+            if time.monotonic() >= next_note + 5.0:
+                next_note = time.monotonic()
+                log.warning("teacher: still paused: %d labels unacknowledged (%.0f s)",
+                            len(box), next_note - t0)
+        log.info("teacher: %d labels unacknowledged after %.1f s: demonstrating again",
+                 len(box), time.monotonic() - t0)
+        self.skip_stale()  # the scans of the pause
+        self.last_id = -1
+
+    def track(self, scan: Scan) -> bool:
+        """Sim time, scans missed while correcting, the switch to correcting; False when done."""
+        args = self.args
+        if self.t0 is None:
+            self.t0 = scan.ts
+        elif self.correcting and self.last_id >= 0 and scan.id > self.last_id + 1:
+            before = self.missed  # the queue overflowed
+            self.missed += scan.id - self.last_id - 1
+            if before == 0 or self.missed // 100 > before // 100:
+                log.warning("teacher fell behind the controller: %d scans not labelled so far",
+                            self.missed)
+        self.last_id = scan.id
+        if args.seconds is not None and scan.ts - self.t0 >= args.seconds:
+            log.info("demonstrated %.1f s of sim time: done", scan.ts - self.t0)
+            return False
+        if args.correct and not self.correcting and scan.ts - self.t0 >= args.demonstrate:
+            self.correcting = True
+            log.info("correcting from %.1f s of sim time: the controller drives, the teacher "
+                     "labels every scan and takes over while a beam is closer than %g m",
+                     scan.ts - self.t0, args.takeover)
+        return True
+
+    def choose(self, scan: Scan) -> tuple[str, str | None, tuple[float, float]] | None:
+        """(label, executed action or None, its velocity), or None when there is nothing to
+        demonstrate."""
+        try:
+            if self.correcting:
+                # the expert's choice on the state the controller put the robot in; the wheels
+                # only when the harness's takeover rule says so
+                label = self.demo.policy.act(scan.ranges, scan.pose)
+                executed = label if takes_over(scan.ranges, self.args.takeover) else None
+            else:
+                label, executed = self.demo.step(scan.ranges, scan.pose)
+            vel = DEFAULT_ACTIONS[executed] if label is not None and executed else (0.0, 0.0)
+        except Exception as exc:  # noqa: BLE001 - a scan the policy cannot use
+            self.bad += 1
+            if self.bad <= 10 or self.bad % 100 == 0:
+                log.warning("scan %d not demonstrated (%d so far): %s: %s", scan.id, self.bad,
+                            type(exc).__name__, exc)
+            return None
+        return None if label is None else (label, executed, vel)  # keyboard: nothing pressed
+
+    def publish(self, scan: Scan, label: str, executed: str | None,
+                vel: tuple[float, float]) -> None:
+        if self.n == 0:
+            self.first_scan = scan.id
+            log.info("first label: scan %d, %s", scan.id, label)
+        if executed is not None:
+            vx, va = vel
+            if self.hold is not None:
+                self.hold.acquire()  # before the command: the server may release at once
+            self.client.answer(scan, vx, va)
+        elif self.hold is not None:
+            self.hold.release()  # the controller drives from the next tick on
+        self.labels.label(scan, label, executed)
+        self.n += 1
+        if self.correcting:
+            self.took += executed is not None
+        else:
+            self.perturbed += executed != label
+        if self.n % 500 == 0:
+            log.info("%d labels, %.0f s sim, %.0f%% perturbed, %d taken over", self.n,
+                     scan.ts - self.t0, 100.0 * self.perturbed / self.n, self.took)
+
+    def close(self) -> None:
+        self.watch.stop()
+        if self.hold is not None:
+            self.hold.release()
+        self.labels.drain(DRAIN)
+        box = self.labels.outbox
+        log.info("teacher stopped after %d labels (%d perturbed, %d taken over)%s%s", self.n,
+                 self.perturbed, self.took,
+                 f"; {self.missed} scans not labelled (fell behind)" if self.missed else "",
+                 "" if box is None else
+                 f"; {box.stats['resent']} resends, {len(box)} unacknowledged at exit")
+
+    def counters(self) -> dict:
+        box = self.labels.outbox
+        return {"labels": self.n, "first_label_scan": self.first_scan,
+                "perturbed": self.perturbed, "taken_over": self.took,
+                "missed": self.missed, "not_demonstrated": self.bad,
+                "handbacks": 0 if self.hold is None else self.hold.handbacks,
+                "outbox": None if box is None else {**box.stats, "unacknowledged": len(box)},
+                "dropped": {**self.client.decoder.counts, **self.labels.decoder.counts}}

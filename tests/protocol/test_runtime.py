@@ -1,0 +1,104 @@
+"""Stop signals of every rhbl process (``protocol.runtime``), with a real process and real
+signals: a SIGTERM that lands where code swallows the ``SystemExit`` it raises (a signal during
+numpy's first lazy import of ``numpy.random`` was lost that way) is delivered again until the
+process stops."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+from pathlib import Path
+
+from lab.children import Child
+
+ROOT = Path(__file__).resolve().parents[2]
+
+# the first SystemExit is swallowed, as library code can; only a second one ends the program
+PROGRAM = """
+import sys, time
+from protocol.runtime import install_signal_handlers
+install_signal_handlers()
+try:
+    print("ready", flush=True)  # inside: a signal right after it must land in this block
+    while True:
+        time.sleep(0.01)
+except SystemExit:
+    print("swallowed", flush=True)
+try:
+    while True:
+        time.sleep(0.01)
+except SystemExit:
+    print("stopped", flush=True)
+    sys.exit(0)
+"""
+
+
+def test_a_swallowed_stop_signal_is_delivered_again(tmp_path):
+    p = Child("swallower", [sys.executable, "-c", PROGRAM], tmp_path, cwd=ROOT,
+              env={**os.environ, "PYTHONPATH": str(ROOT)}, escalate=False).start()
+    try:
+        assert p.wait_for_line("ready", 30), p.output()
+        p.send_signal(signal.SIGTERM)  # once
+        assert p.wait_for_line("swallowed", 10), p.output()
+        assert p.wait_for_line("stopped", 10), p.output()
+        assert p.wait(10) == 0, p.output()
+    finally:
+        p.stop(signal.SIGKILL)
+
+
+import pytest  # noqa: E402
+
+
+@pytest.fixture(autouse=True)
+def _own_signal_handlers():
+    """run_process installs its stop-signal handlers, then ignores the signals: the test
+    process gets its own back."""
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    yield
+    for s, h in saved.items():
+        signal.signal(s, h)
+
+
+def _args(tmp_path, port: int, **kw):
+    import argparse
+
+    return argparse.Namespace(mode="peer", listen=[f"tcp/127.0.0.1:{port}"], connect=None,
+                              zenoh_config=None, multicast_scouting=False, namespace=None,
+                              log_level="WARNING", **kw)
+
+
+def test_counters_are_written_at_exit_whatever_the_path(tmp_path, free_port):
+    """``--stats FILE``: the counters the body reported, its role and exit code, as JSON; also
+    when the body fails (the exit code says so)."""
+    import json
+
+    from protocol.runtime import EXIT_NO_SERVER, ProcessError, run_process
+
+    def body(ctx):
+        ctx.report(lambda: {"labels": 7, "dropped": {"scan": 1}})
+        return 0
+
+    stats = tmp_path / "ok.json"
+    assert run_process("tester", _args(tmp_path, free_port(), stats=str(stats)), body) == 0
+    assert json.loads(stats.read_text()) == {"role": "tester", "exit": 0, "labels": 7,
+                                             "dropped": {"scan": 1}}
+
+    def failing(ctx):
+        ctx.report(lambda: {"labels": 2})
+        raise ProcessError("no server", EXIT_NO_SERVER)
+
+    stats = tmp_path / "failed.json"
+    assert run_process("tester", _args(tmp_path, free_port(), stats=str(stats)),
+                       failing) == EXIT_NO_SERVER
+    assert json.loads(stats.read_text()) == {"role": "tester", "exit": EXIT_NO_SERVER,
+                                             "labels": 2}
+
+
+def test_a_stats_file_that_cannot_be_written_is_bad_input_before_any_session(tmp_path):
+    from protocol.runtime import EXIT_USAGE, run_process
+
+    opened = []
+    args = _args(tmp_path, 1, stats=str(tmp_path / "missing" / "s.json"))  # port 1: no session
+    assert run_process("tester", args, lambda ctx: opened.append(ctx)) == EXIT_USAGE
+    assert opened == []
