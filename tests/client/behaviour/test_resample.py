@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from client.behaviour.features import FEATURES, FeatureError, FeatureSpec
-from client.behaviour.policies import make_policy
 from client.behaviour.resample import TAUGHT_BEAMS, CoverageError, LaserResampler
+from client.behaviour.tasks import make_policy
 from protocol.messages import Scan
 from server import world_path
 from server.world import LASER, free_pose, load_world
