@@ -21,8 +21,9 @@ from client.behaviour.guard import RotationGuard
 from client.behaviour.learning import TreePolicy
 from lab.evaluate import evaluate
 from lab.experiment import default_eval_worlds
-from lab.harness import make_learner, resolve_world, train
+from lab.harness import make_learner, resolve_world
 from lab.recipe import recipe_for
+from lab.train import train
 
 
 def trial(task: str, seed: int, worlds) -> dict:

@@ -17,7 +17,8 @@ A method is a learner and the scan its labels are tied to: ``today`` and ``liter
 paper's rule, ``spawn="all"``) learn each label as it arrives, tied to the scan displayed when
 the key went out (today's console); ``person`` ties each label to the scan the person answered
 (``client.behaviour.teaching.answered_scan``, ``lag`` scans earlier) and builds the tree by the
-neighbours' majority (``PersonLearner``). Options after a colon: ``person:lag=2,k=25,copies=3``.
+neighbours' majority (``PersonLearner``). Options after a colon, joined by ``+``:
+``person:lag=2+k=25+copies=3``.
 
 Per person model and seed: ``--demo`` s of demonstrating from the world's pose, then
 ``--correct`` s of correcting, then the tree evaluated with ``lab.evaluate`` in the room it was
@@ -102,12 +103,12 @@ METHODS = {"today": 0, "literal": 0, "person": LAG}  # name -> the default lag
 
 
 def make_method(text: str) -> Method:
-    """``person``, ``person:lag=2,k=25,vote=mean``: a method with those settings."""
+    """``person``, ``person:lag=2+k=25+vote=mean``: a method with those settings."""
     name, _, opts = text.partition(":")
     if name not in METHODS:
         raise ValueError(f"unknown method {name!r}; known: {', '.join(METHODS)}")
     options: dict = {}
-    for part in filter(None, opts.split(",")):
+    for part in filter(None, opts.split("+")):
         key, _, value = part.partition("=")
         options[key] = (value if value.replace("-", "").isalpha()
                         else float(value) if "." in value else int(value))
@@ -354,7 +355,7 @@ def main(argv=None) -> int:
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--methods", default="today,literal,person",
                     help=f"learning methods ({', '.join(METHODS)}; options after a colon: "
-                         "person:lag=2,k=25)")
+                         "person:lag=2+k=25)")
     ap.add_argument("--worlds", default=",".join((TAUGHT, *UNSEEN_DEV)),
                     help="worlds to evaluate in (the first is the one taught in)")
     ap.add_argument("--demo", type=float, default=240.0, help="s of demonstrating")

@@ -13,6 +13,9 @@ out (a loop is a state the teacher has not shown yet).
     action = policy.act(ranges, pose)        # one call per scan
     policy.looping, policy.overruled         # for the console: "stuck here: show it the way"
 
+    guard = RotationGuard()                  # no policy: the controller asks its tree itself
+    action = guard.choose(tree_action)       # the action to execute, one call per scan
+
 Pure (no zenoh): the controller process and the in-process harness use this same code.
 """
 
@@ -31,9 +34,10 @@ class RotationGuard:
     the current one for this many scans after the robot stopped rotating (a reversal right after
     a short arc is a loop too). ``looping`` is True for ``memory`` scans after a reversal was
     overruled. ``classifier``, ``features``, ``actions``, ``metadata`` are the wrapped
-    policy's."""
+    policy's. Without a policy, ``choose(action)`` filters the actions of any source (the
+    controller, whose tree may be swapped while the guard's memory goes on)."""
 
-    def __init__(self, policy, hold: int = 30, memory: int = 5):
+    def __init__(self, policy=None, hold: int = 30, memory: int = 5):
         if hold < 0 or memory < 0:
             raise ValueError(f"hold and memory must be >= 0 scans, got {hold}, {memory}")
         self.policy = policy
@@ -47,7 +51,8 @@ class RotationGuard:
         return getattr(self.policy, name)
 
     def reset(self) -> None:
-        self.policy.reset()
+        if self.policy is not None:
+            self.policy.reset()
         self._turn: str | None = None   # the current rotation
         self._since = self.memory + 1   # scans since the robot last rotated that way
         self._held = 0                  # overruled reversals in a row
@@ -58,7 +63,10 @@ class RotationGuard:
         return self._last_overruled <= self.memory
 
     def act(self, ranges, pose) -> str:
-        want = self.policy.act(ranges, pose)
+        return self.choose(self.policy.act(ranges, pose))
+
+    def choose(self, want: str) -> str:
+        """The action to execute when the policy wants ``want`` (one call per scan)."""
         self._last_overruled += 1
         if (self._turn is not None and want == _OPPOSITE.get(self._turn)
                 and self._since <= self.memory and self._held < self.hold):

@@ -37,6 +37,7 @@ from .learning import DemonstrationLearner
 
 __all__ = [
     "JUMP",
+    "PERSON_RULE",
     "LAG",
     "PERSON_DEFAULTS",
     "PersonLearner",
@@ -109,6 +110,8 @@ def mean_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
     return ((mean[:, None, :] - v[None, :, :]) ** 2).sum(axis=2).argmin(axis=1)
 
 
+PERSON_RULE = "person"  # the snapshot metadata's learning rule of a PersonLearner
+
 # the defaults docs/teaching.md chose on the teaching study
 PERSON_DEFAULTS = {"k": 15, "copies": 0, "sigma": 0.06, "vote": "majority", "passes": 1,
                    "build": "batch"}
@@ -130,8 +133,8 @@ class PersonLearner(DemonstrationLearner):
                  k: int = PERSON_DEFAULTS["k"], copies: int = PERSON_DEFAULTS["copies"],
                  sigma: float = PERSON_DEFAULTS["sigma"], vote: str = PERSON_DEFAULTS["vote"],
                  passes: int = PERSON_DEFAULTS["passes"], build: str = PERSON_DEFAULTS["build"],
-                 seed: int = 0, task: str | None = None, parent: str | None = None,
-                 provenance: Mapping | None = None, **tree_params):
+                 seed: int = 0, lag: int = LAG, task: str | None = None,
+                 parent: str | None = None, provenance: Mapping | None = None, **tree_params):
         if not (isinstance(k, int) and k >= 1):
             raise ValueError(f"k must be an integer >= 1, got {k!r}")
         if not (isinstance(copies, int) and copies >= 0):
@@ -147,6 +150,7 @@ class PersonLearner(DemonstrationLearner):
         if build == "repair" and copies:
             raise ValueError("build 'repair' learns the labelled vectors only (copies=0)")
         self.build = build
+        self.lag = int(lag)  # recorded only: the scans the labels were shifted by when paired
         self.k, self.copies, self.sigma, self.vote = k, copies, float(sigma), vote
         self.passes, self.seed = passes, seed
         self._xs: list[np.ndarray] = []
@@ -251,11 +255,24 @@ class PersonLearner(DemonstrationLearner):
 
     def metadata(self) -> dict:
         meta = super().metadata()
-        meta["learning"] = {"rule": "person", "k": self.k, "copies": self.copies,
+        meta["learning"] = {"rule": PERSON_RULE, "lag": self.lag, "k": self.k, "copies": self.copies,
                             "sigma": self.sigma, "vote": self.vote, "passes": self.passes,
                             "build": self.build,
                             "seed": self.seed}
         return meta
+
+    @classmethod
+    def from_metadata(cls, meta: Mapping, features: FeatureSpec, actions: ActionSet,
+                      parent: str | None = None) -> PersonLearner:
+        """An empty learner with the settings ``metadata()`` recorded in ``meta`` (a snapshot's
+        or a journal header's): its labels are learned again from the journal."""
+        learning = dict(meta.get("learning") or {})
+        if learning.get("rule") != PERSON_RULE:
+            raise ValueError(f"not a person's tree: learning rule {learning.get('rule')!r}")
+        opts = {k: learning[k] for k in ("k", "copies", "sigma", "vote", "passes", "build",
+                                         "seed", "lag") if k in learning}
+        return cls(features, actions, task=meta.get("task"), parent=parent,
+                   **opts, **(meta.get("tree_params") or {}))
 
     def compact(self, *args, **kw):
         raise ValueError("a PersonLearner's tree is rebuilt from its labels: compact the "

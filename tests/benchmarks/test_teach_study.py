@@ -71,7 +71,7 @@ def test_labels_are_tied_to_the_scan_the_person_answered(study):
 
 
 def test_make_method_reads_options_and_names_mistakes(study):
-    m = study.make_method("person:lag=2,k=25,vote=mean,sigma=0.05")
+    m = study.make_method("person:lag=2+k=25+vote=mean+sigma=0.05")
     assert (m.name, m.lag, m.options) == ("person", 2, {"k": 25, "vote": "mean", "sigma": 0.05})
     assert study.make_method("today").lag == 0
     with pytest.raises(ValueError, match="unknown method 'magic'"):

@@ -60,3 +60,12 @@ def test_looping_fades_and_reset_forgets():
 def test_bad_settings():
     with pytest.raises(ValueError, match="hold and memory"):
         RotationGuard(Script([]), hold=-1)
+
+
+def test_without_a_policy_the_guard_filters_actions():
+    g = RotationGuard(hold=2, memory=5)
+    assert [g.choose(a) for a in ["rot-right", "rot-left", "rot-left", "rot-left", "fwd"]] == \
+        ["rot-right", "rot-right", "rot-right", "rot-left", "fwd"]
+    assert g.overruled == 2
+    g.reset()  # no policy to reset
+    assert not g.looping

@@ -134,7 +134,8 @@ def test_person_learner_copies_are_seeded_and_the_tree_saves(tmp_path):
     assert a.classifier.tree_.equal(b.classifier.tree_)
     path = a.save(tmp_path / "person.rhbl")
     meta = load(path).metadata
-    assert meta["learning"] == {"rule": "person", "k": PERSON_DEFAULTS["k"], "copies": 2,
+    assert meta["learning"] == {"rule": "person", "lag": LAG, "k": PERSON_DEFAULTS["k"],
+                                "copies": 2,
                                 "sigma": PERSON_DEFAULTS["sigma"], "vote": "majority",
                                 "passes": PERSON_DEFAULTS["passes"],
                                 "build": PERSON_DEFAULTS["build"], "seed": 4}
