@@ -86,8 +86,9 @@ def nearest_votes(Q: np.ndarray, X: np.ndarray, y: np.ndarray, k: int,
         d = np.einsum("ij,ij->i", q, q)[:, None] + xx[None, :] - 2.0 * q @ X.T
         nn = (np.argpartition(d, k - 1, axis=1)[:, :k] if k < n
               else np.broadcast_to(np.arange(n), (len(q), n)))
-        rows = np.repeat(np.arange(len(q)), nn.shape[1])
-        np.add.at(out[s:s + step], (rows, y[nn].ravel()), 1.0)
+        flat = np.repeat(np.arange(len(q)) * n_labels, nn.shape[1]) + y[nn].ravel()
+        out[s:s + step] = np.bincount(flat, minlength=len(q) * n_labels).reshape(len(q),
+                                                                                 n_labels)
     return out
 
 
