@@ -114,7 +114,7 @@ def mean_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
 PERSON_RULE = "person"  # the snapshot metadata's learning rule of a PersonLearner
 
 # the defaults docs/teaching.md chose on the teaching study
-PERSON_DEFAULTS = {"k": 15, "copies": 0, "sigma": 0.06, "vote": "majority", "passes": 1,
+PERSON_DEFAULTS = {"k": 25, "copies": 0, "sigma": 0.06, "vote": "majority", "passes": 1,
                    "build": "batch"}
 
 
