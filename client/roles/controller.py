@@ -10,6 +10,10 @@ commanding (and logs it), and the server's watchdog stops the robot.
 
 With ``--follow`` the starting order does not matter: started before the learner (or before its
 first snapshot) it waits for the first tree (``--wait-tree``, forever by default), then drives.
+
+With ``--ros2`` it drives a ROS 2 robot instead (``client.ros2.Ros2Robot``, docs/ros2.md): its
+``LaserScan`` (any beam count and span, resampled to the tree's features, or refused with exit 2
+when they cannot be had from that laser) and ``Odometry`` in, a ``Twist`` on ``cmd_vel`` out.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, che
 from client.decision import Decider
 from client.player import PlayerClient
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
+from client.ros2 import Ros2Options, Ros2Robot, add_ros2_arguments
 from protocol import keys
 from protocol.decoding import Decoder
 from protocol.messages import Scan, TreeNotice
@@ -58,10 +63,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(queried again at each tree notice and every second, logging "
                              "every few seconds; 0 = forever). Default: forever with --follow, "
                              "otherwise one query (no learner or no tree yet: exit 4)")
+    parser.add_argument("--ros2", action="store_true",
+                        help="drive a ROS 2 robot (rmw_zenoh's keys): its LaserScan and Odometry "
+                             "in, a Twist on cmd_vel out; --robot names its topics "
+                             "(docs/ros2.md)")
+    add_ros2_arguments(parser, bridge=False, when="with --ros2")
+
+
+def _check_ros2(args: argparse.Namespace) -> None:
+    """The ROS 2 options, before any connection (ValueError: one line, exit 2)."""
+    if args.ros2:
+        Ros2Options.from_args(args).topics(args.robot)
+    elif Ros2Options.given(args):
+        raise ValueError(f"{', '.join(Ros2Options.given(args))}: only with --ros2")
 
 
 def main(args: argparse.Namespace) -> int:
-    return run_role("controller", args, lambda ctx: ControllerProcess(ctx).run())
+    return run_role("controller", args, lambda ctx: ControllerProcess(ctx).run(),
+                    check=lambda: _check_ros2(args))
 
 
 def _policy_from(clf_bytes_or_path, features: str | None) -> TreePolicy:
@@ -122,9 +141,7 @@ class ControllerProcess:
         self.policy: TreePolicy | None = None  # swapped between scans by the follower
         # subscribed before the first query: a tree announced meanwhile is not missed
         self.follower = _Follower(ctx, self.swap) if self.args.follow else None
-        # commands on .../cmd/vel/controller, express and never dropped; the latest scan only
-        self.client = PlayerClient(session=ctx.session, robot=ctx.robot, source=SOURCE,
-                                   express=True, block=True)
+        self.client = self.robot()
         ctx.scope.callback(self.client.close)
         self.scans = self.client.scans(depth=1)
         self.watch = ScanWatch("controller", self.scans.key, stale=1.0)
@@ -135,6 +152,16 @@ class ControllerProcess:
         self.n = self.bad = 0
         ctx.scope.callback(self.close)  # on every path, after "stopping (signal)"
         ctx.report(self.counters)
+
+    def robot(self) -> PlayerClient | Ros2Robot:
+        """What it drives: the rhbl robot (commands on .../cmd/vel/controller, express and never
+        dropped) or, with --ros2, a ROS 2 robot whose scans come resampled to the tree's."""
+        ctx = self.ctx
+        if self.args.ros2:
+            return Ros2Robot(ctx.session, ctx.robot, Ros2Options.from_args(self.args),
+                             spec=lambda: self.policy.features)
+        return PlayerClient(session=ctx.session, robot=ctx.robot, source=SOURCE, express=True,
+                            block=True)
 
     def swap(self, policy: TreePolicy) -> None:
         self.policy = policy
