@@ -132,14 +132,16 @@ _FLAGS = {"--" + dest.replace("_", "-"): dest for dest in _DESTS.values()}
 
 
 def add_ros2_arguments(parser: argparse.ArgumentParser, bridge: bool = True,
-                       when: str = "") -> None:
+                       when: str = "", domain: bool = True) -> None:
     """The ROS 2 options (defaults: ``Ros2Options``); ``bridge``: also ``/tf`` and ``/clock``
-    (what ``rhbl ros2`` publishes); ``when`` is said after each help text (``with --ros2``)."""
+    (what ``rhbl ros2`` publishes); ``domain``: ``--domain`` (not for a file); ``when`` is said
+    after each help text (``with --ros2``)."""
     d = Ros2Options()
     w = f" ({when})" if when else ""
     g = parser.add_argument_group("ROS 2 (docs/ros2.md)")
-    g.add_argument("--domain", type=int, default=None, metavar="ID",
-                   help=f"ROS 2 domain id, as ROS_DOMAIN_ID (default {d.domain}){w}")
+    if domain:
+        g.add_argument("--domain", type=int, default=None, metavar="ID",
+                       help=f"ROS 2 domain id, as ROS_DOMAIN_ID (default {d.domain}){w}")
     g.add_argument("--ros-namespace", default=None, metavar="NS",
                    help=f"ROS 2 namespace of the robots' topics: <NS>/<robot>/scan (default "
                         f"{d.namespace}; not the zenoh --namespace){w}")

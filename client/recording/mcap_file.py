@@ -53,6 +53,7 @@ __all__ = [
     "classify",
     "decode",
     "read_recording",
+    "why_not_written",
 ]
 
 log = logging.getLogger(__name__)
@@ -115,6 +116,13 @@ def alive_payload(key: str, alive: bool) -> bytes:
 
 
 # ---- writing ------------------------------------------------------------------------------
+def why_not_written(exc: OSError) -> str:
+    """Why a recording could not be written, in words (a full disk, a quota, a size limit)."""
+    return {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is used up",
+            errno.EFBIG: "the file reached its size limit"}.get(exc.errno,
+                                                                exc.strerror or str(exc))
+
+
 class RecordingWriter:
     """An MCAP file being written: raw bus messages plus viewer channels.
 
@@ -183,9 +191,7 @@ class RecordingWriter:
             self._fail(exc)
 
     def _fail(self, exc: OSError):
-        why = {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is used up",
-               errno.EFBIG: "the file reached its size limit"}.get(exc.errno,
-                                                                   exc.strerror or str(exc))
+        why = why_not_written(exc)
         with contextlib.suppress(OSError):
             os.ftruncate(self._file.fd, self._good)
         self._file.close()
