@@ -29,6 +29,7 @@ import threading
 import time
 
 import numpy as np
+import zenoh
 from rosbags.typesys import Stores, get_typestore
 
 from client.behaviour.tasks import TASKS
@@ -51,10 +52,13 @@ def ros2_key(domain: int, topic: str, typename: str) -> str:
 
 
 class _Publisher:
-    """A zenoh publisher that attaches what rmw_zenoh attaches to every sample."""
+    """A zenoh publisher that attaches what rmw_zenoh attaches to every sample. It blocks
+    rather than drop a sample under congestion (a loaded machine): a lock-step robot that lost
+    a scan would wait for an answer that never comes."""
 
     def __init__(self, session, key: str):
-        self.pub = session.declare_publisher(key, express=True)
+        self.pub = session.declare_publisher(key, express=True,
+                                             congestion_control=zenoh.CongestionControl.BLOCK)
         self.gid = os.urandom(16)
         self.seq = 0
 
@@ -161,10 +165,24 @@ class Ros2StyleRobot:
                 return None
             return self._twists.pop(0)
 
+    def _answer(self, timeout: float):
+        """The Twist answering the scan just published; the scan is published again every 2 s
+        until one comes (the driver's Twist may be dropped under congestion: rmw_zenoh's
+        reliable keep-last publishers drop rather than block, and a real robot keeps
+        publishing); None after ``timeout`` s."""
+        deadline = time.monotonic() + timeout
+        twist = self.next_twist(min(2.0, timeout))
+        while twist is None and time.monotonic() < deadline:
+            self.resent += 1
+            self.publish()
+            twist = self.next_twist(min(2.0, max(0.0, deadline - time.monotonic())))
+        return twist
+
     def run(self, steps: int, first_timeout: float = 60.0, timeout: float = 30.0) -> Episode:
         """``steps`` lock-step steps of 0.1 s; the episode recorded. The first scan is sent
         again every second until a Twist answers (the driver may not be subscribed yet);
-        after that a step waits ``timeout`` s for its Twist (AssertionError if none)."""
+        after that a step waits ``timeout`` s for its Twist, sending its scan again every 2 s
+        (``resent`` counts them; AssertionError if none comes)."""
         ep = Episode(start=self.start, dt=DT, kind="ros2")
         side = TASKS[self.spec.task].side
         deadline = time.monotonic() + first_timeout
@@ -180,7 +198,7 @@ class Ros2StyleRobot:
         for k in range(steps):
             if k:
                 self.publish()
-                twist = self.next_twist(timeout)
+                twist = self._answer(timeout)
                 assert twist is not None, f"no Twist answered scan {k} within {timeout:g} s"
             vx, va = twist.linear.x, twist.angular.z
             native = self.world.scan(0)  # the simulator's laser: the metric's wall distance
