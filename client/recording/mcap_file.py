@@ -52,6 +52,7 @@ __all__ = [
     "RecordingWriter",
     "classify",
     "decode",
+    "not_created",
     "read_recording",
     "why_not_written",
 ]
@@ -123,6 +124,14 @@ def why_not_written(exc: OSError) -> str:
                                                                 exc.strerror or str(exc))
 
 
+def not_created(path: Path, exc: OSError) -> RecordingError:
+    """Why the recording ``path`` could not be created, for the user (one line)."""
+    if isinstance(exc, FileExistsError):
+        return RecordingError(f"{path} exists: choose another file or pass --overwrite "
+                              f"(a recording is never replaced silently)")
+    return RecordingError(f"cannot create the recording {path}: {exc.strerror or exc}")
+
+
 class RecordingWriter:
     """An MCAP file being written: raw bus messages plus viewer channels.
 
@@ -144,12 +153,8 @@ class RecordingWriter:
             if self.path.parent and not self.path.parent.exists():
                 self.path.parent.mkdir(parents=True, exist_ok=True)
             fd = os.open(self.path, flags, 0o644)
-        except FileExistsError:
-            raise RecordingError(f"{self.path} exists: choose another file or pass --overwrite "
-                                 f"(a recording is never replaced silently)") from None
         except OSError as exc:
-            raise RecordingError(f"cannot create the recording {self.path}: "
-                                 f"{exc.strerror or exc}") from exc
+            raise not_created(self.path, exc) from exc
         self._file = _Out(fd)
         self._writer = Writer(self._file, chunk_size=chunk_size,
                               compression=CompressionType.ZSTD)

@@ -19,7 +19,12 @@ from collections import defaultdict
 from collections.abc import Callable
 from pathlib import Path
 
-from client.recording.mcap_file import CHUNK_SECONDS, RecordingError, why_not_written
+from client.recording.mcap_file import (
+    CHUNK_SECONDS,
+    RecordingError,
+    not_created,
+    why_not_written,
+)
 from client.ros2 import Ros2Options
 from protocol.decoding import Decoder
 from protocol.messages import Scan, State
@@ -45,12 +50,8 @@ class Ros2Recording:
         self.chunk_seconds = float(chunk_seconds)
         try:
             self.writer = Ros2McapWriter(self.path, overwrite=overwrite)
-        except FileExistsError:
-            raise RecordingError(f"{self.path} exists: choose another file or pass --overwrite "
-                                 f"(a recording is never replaced silently)") from None
         except OSError as exc:
-            raise RecordingError(f"cannot create the recording {self.path}: "
-                                 f"{exc.strerror or exc}") from exc
+            raise not_created(self.path, exc) from exc
         self.feeds: dict[str, RobotFeed | None] = {}  # None: a robot without a ROS 2 name
         self.messages = 0
         self.counts: dict[str, int] = defaultdict(int)  # per ROS 2 topic
