@@ -79,7 +79,7 @@ def main() -> int:
                 try:
                     ep = robot.run(steps)
                 except AssertionError as exc:  # no Twist answered: say what the controller said
-                    raise SystemExit(f"bench_ros2_drive: start {k}: {exc}\n{ctl.output()}")
+                    raise SystemExit(f"bench_ros2_drive: start {k}: {exc}\n{ctl.output()}") from exc
                 finally:
                     robot.close()
                 m = ep.metrics(spec.goal)
