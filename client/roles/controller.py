@@ -17,6 +17,10 @@ way within 5 scans of a rotation is overruled (the robot keeps turning as it was
 ``--guard-hold`` scans in a row), so the robot does not bounce between a rot-left and a rot-right
 sphere for ever; every overruled reversal is counted (``--stats``: ``overruled``) and logged at a
 bounded rate (docs/teaching.md has the study behind it).
+
+With ``--ros2`` it drives a ROS 2 robot instead (``client.ros2.Ros2Robot``, docs/ros2.md): its
+``LaserScan`` (any beam count and span, resampled to the tree's features, or refused with exit 2
+when they cannot be had from that laser) and ``Odometry`` in, a ``Twist`` on ``cmd_vel`` out.
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, che
 from client.decision import Decider
 from client.player import PlayerClient
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
+from client.ros2 import Ros2Options, Ros2Robot, add_ros2_arguments
 from protocol import keys
 from protocol.decoding import Decoder
 from protocol.messages import Scan, TreeNotice
@@ -73,12 +78,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--guard-hold", type=int, default=30, metavar="SCANS",
                         help="with --guard: at most this many overruled reversals in a row, "
                              "then the tree's answer is taken (default 30: 3 s at 10 Hz)")
+    parser.add_argument("--ros2", action="store_true",
+                        help="drive a ROS 2 robot (rmw_zenoh's keys): its LaserScan and Odometry "
+                             "in, a Twist on cmd_vel out; --robot names its topics "
+                             "(docs/ros2.md)")
+    add_ros2_arguments(parser, bridge=False, when="with --ros2")
+
+
+def _check_ros2(args: argparse.Namespace) -> None:
+    """The ROS 2 options, before any connection (ValueError: one line, exit 2)."""
+    if args.ros2:
+        Ros2Options.from_args(args).topics(args.robot)
+    elif Ros2Options.given(args):
+        raise ValueError(f"{', '.join(Ros2Options.given(args))}: only with --ros2")
 
 
 def main(args: argparse.Namespace) -> int:
     def check() -> None:  # before the session opens (ValueError: one line, exit 2)
         if args.guard_hold < 0:
             raise ValueError(f"--guard-hold must be >= 0 scans, got {args.guard_hold}")
+        _check_ros2(args)
 
     return run_role("controller", args, lambda ctx: ControllerProcess(ctx).run(), check=check)
 
@@ -144,9 +163,7 @@ class ControllerProcess:
         self.policy: TreePolicy | None = None  # swapped between scans by the follower
         # subscribed before the first query: a tree announced meanwhile is not missed
         self.follower = _Follower(ctx, self.swap) if self.args.follow else None
-        # commands on .../cmd/vel/controller, express and never dropped; the latest scan only
-        self.client = PlayerClient(session=ctx.session, robot=ctx.robot, source=SOURCE,
-                                   express=True, block=True)
+        self.client = self.robot()
         ctx.scope.callback(self.client.close)
         self.scans = self.client.scans(depth=1)
         self.watch = ScanWatch("controller", self.scans.key, stale=1.0)
@@ -157,6 +174,16 @@ class ControllerProcess:
         self.n = self.bad = 0
         ctx.scope.callback(self.close)  # on every path, after "stopping (signal)"
         ctx.report(self.counters)
+
+    def robot(self) -> PlayerClient | Ros2Robot:
+        """What it drives: the rhbl robot (commands on .../cmd/vel/controller, express and never
+        dropped) or, with --ros2, a ROS 2 robot whose scans come resampled to the tree's."""
+        ctx = self.ctx
+        if self.args.ros2:
+            return Ros2Robot(ctx.session, ctx.robot, Ros2Options.from_args(self.args),
+                             spec=lambda: self.policy.features)
+        return PlayerClient(session=ctx.session, robot=ctx.robot, source=SOURCE, express=True,
+                            block=True)
 
     def swap(self, policy: TreePolicy) -> None:
         self.policy = policy
