@@ -203,8 +203,7 @@ def test_the_bridges_samples_decode_to_the_servers_scans_and_poses(bridged):
         compared += 1
     assert compared >= 5, "too few scans of the server matched"
     compared = 0
-    for (odom_data, _), (tf_data, _), (clock_data, _) in zip(
-            samples["/r0/odom"], samples["/tf"], samples["/clock"], strict=False):
+    for (odom_data, _), (tf_data, _) in zip(samples["/r0/odom"], samples["/tf"], strict=False):
         for odom in _decode_independently(ODOMETRY, odom_data):
             t = round(odom.header.stamp.sec + odom.header.stamp.nanosec * 1e-9, 6)
             state = states.get(t)
@@ -223,10 +222,18 @@ def test_the_bridges_samples_decode_to_the_servers_scans_and_poses(bridged):
                 assert (x.header.frame_id, x.child_frame_id) == ("r0/odom", "r0/base_link")
                 assert (x.transform.translation.x, x.transform.translation.y) == \
                     pytest.approx(state.pos[:2], abs=1e-12)
-            for clock in _decode_independently(CLOCK, clock_data):
-                assert clock.clock.sec + clock.clock.nanosec * 1e-9 == pytest.approx(state.ts,
-                                                                                     abs=1e-9)
             compared += 1
+    # /clock is best effort with depth 1 (rclcpp's clock QoS): a busy subscriber may miss some,
+    # so each one is held to a state of the server, not to the odometry beside it
+    clocks = 0
+    for clock_data, _ in samples["/clock"]:
+        for clock in _decode_independently(CLOCK, clock_data):
+            t = round(clock.clock.sec + clock.clock.nanosec * 1e-9, 6)
+            if t in states:
+                clocks += 1
+            else:
+                assert not min(states) < t < max(states), f"a /clock time {t} no state had"
+    assert clocks >= 5, "too few /clock samples matched the server's states"
     assert compared >= 5, "too few states of the server matched"
 
 
@@ -298,10 +305,11 @@ def test_a_twist_from_rosbags_moves_the_robot_and_the_watchdog_stops_it(bridged)
             bus.wait(lambda n=n: len(bus.states) > n)
             pub.put(_twist_cdr(2.0, 0.0), attachment=_attachment(seq))
             sent.append(bus.states[-1].ts)
-        def stopped_a_while():  # three states after the first without a driver
-            seen = _driver_and_speed(bus, mark)
-            last = sent[-1] if sent else math.inf
-            idle = [k for k, (ts, d, _) in enumerate(seen) if d == "" and ts > last]
+        def stopped_a_while():  # three states after the first without a driver, once the
+            seen = _driver_and_speed(bus, mark)  # last Twist sent has driven (a busy bridge
+            driven = [ts for ts, d, _ in seen if d == "ros2"]  # may deliver it late)
+            idle = [k for k, (ts, d, _) in enumerate(seen)
+                    if d == "" and driven and ts > max(driven[-1], sent[-1])]
             return bool(idle) and len(seen) - idle[0] > 3
 
         bus.wait(stopped_a_while, why="the watchdog did not stop the robot")
@@ -313,8 +321,10 @@ def test_a_twist_from_rosbags_moves_the_robot_and_the_watchdog_stops_it(bridged)
     assert max(v for _, v in driving) == pytest.approx(MAX_VX, abs=0.02)  # clamped to 0.5 m/s
     with bus.cond:
         assert bus.states[-1].pos[0] > x0 + 0.3  # it moved forward
-    stopped = next(ts for ts, d, _ in seen if d == "" and ts > sent[-1])
-    assert stopped - sent[-1] <= 0.5 + 0.25  # the server's watchdog (0.5 s sim) and a tick
+    last = max(driving[-1][0], sent[-1])
+    stopped = next(ts for ts, d, _ in seen if d == "" and ts > last)
+    # the server's watchdog (0.5 s sim after the last Twist it got) and a tick
+    assert stopped - driving[-1][0] <= 0.5 + 0.25
     after = [v for ts, d, v in seen if ts > stopped]
     assert after and all(abs(v) < 1e-9 for v in after)  # it stands still
 
