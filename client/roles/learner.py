@@ -140,6 +140,9 @@ class LearnerCore:
                 raise ProcessError(
                     f"{self.out} exists but has no journal {self.jpath.name}: it was not written "
                     f"by a learner. Extend it with --resume {self.out} --out NEW_PATH", EXIT_USAGE)
+            if teacher == "person" and fold_journal:
+                raise ProcessError("--teacher person rebuilds its tree from every label of its "
+                                   "journal: --fold-journal cannot be used with it", EXIT_USAGE)
             fork = None  # where the parent's journal stood when it was extended
             if resume is not None:
                 if teacher == "person":

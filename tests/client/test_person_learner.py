@@ -116,6 +116,9 @@ def test_a_persons_lineage_is_rebuilt_from_its_whole_journal(tmp_path):
         LearnerCore(out, fold_journal=True)
     with pytest.raises(ProcessError, match="cannot --resume"):
         LearnerCore(tmp_path / "r.rhbl", resume=str(out), teacher="person")
+    with pytest.raises(ProcessError, match="fold-journal"):
+        LearnerCore(tmp_path / "f.rhbl", features="wall", teacher="person", fold_journal=True)
+    assert not (tmp_path / "f.rhbl.journal").exists()  # refused before anything was written
     with pytest.raises(ProcessError, match="--lag"):
         LearnerCore(tmp_path / "n.rhbl", features="wall", teacher="person", lag=-1)
 
