@@ -278,10 +278,17 @@ class TreePolicy:
 
     def __init__(self, classifier, features: FeatureSpec, actions: ActionSet,
                  metadata: Mapping | None = None):
-        self.classifier = classifier
+        self._classifier = classifier
+        self._learner: DemonstrationLearner | None = None
         self.features = features
         self.actions = actions
         self.metadata = dict(metadata or {})
+
+    @property
+    def classifier(self):
+        """The tree; that of a learner (:meth:`from_learner`) as it is now, every vector it was
+        offered learned (the learner may have replaced its tree, by a compaction)."""
+        return self._classifier if self._learner is None else self._learner.classifier
 
     @classmethod
     def load(cls, path: str | Path, features: FeatureSpec | None = None,
@@ -292,7 +299,10 @@ class TreePolicy:
 
     @classmethod
     def from_learner(cls, learner: DemonstrationLearner) -> TreePolicy:
-        return cls(learner.classifier, learner.features, learner.actions, learner.metadata())
+        """The learner's tree as it grows (what drives a corrective round)."""
+        policy = cls(None, learner.features, learner.actions, learner.metadata())
+        policy._learner = learner
+        return policy
 
     def reset(self) -> None:
         pass

@@ -206,8 +206,9 @@ def test_features_in_one_call_equal_the_windows_one_by_one():
 
 
 def test_learner_learns_queued_vectors_whenever_the_tree_is_read():
-    """observe queues vectors; every read of the tree sees all of them, in the order offered:
-    the same tree as one partial_fit per vector."""
+    """observe queues vectors; every read of the tree (the learner's, or a TreePolicy's made
+    from it) sees all of them, in the order offered: the same tree as one partial_fit per
+    vector."""
     from rhbl import HypersphereClassifier
 
     spec = FEATURES["wall"]
@@ -215,12 +216,16 @@ def test_learner_learns_queued_vectors_whenever_the_tree_is_read():
     scans = (rng.random((700, 360)) * 2.5).astype(np.float32)
     labels = rng.choice(DEFAULT_ACTIONS.names, len(scans))
     learner = DemonstrationLearner(spec, DEFAULT_ACTIONS)
+    drives = TreePolicy.from_learner(learner)  # a corrective round's: the tree as it grows
     one = HypersphereClassifier(default_label=DEFAULT_ACTIONS.names[0])
     for i, (r, label) in enumerate(zip(scans, labels, strict=True)):
         assert learner.observe(r, 0.0, label)
         one.partial_fit(spec.extract(r)[None, :], [label])
         if i in (0, 1, 17, 300, 650):
+            want = one.predict_one(spec.extract(scans[i // 2]))
+            assert drives.act(scans[i // 2], (0.0, 0.0, 0.0)) == want
+            assert drives.classifier.node_count_ == one.node_count_
             assert learner.nodes == one.node_count_
-            assert learner.predict(scans[i // 2]) == one.predict_one(spec.extract(scans[i // 2]))
+            assert learner.predict(scans[i // 2]) == want
     assert learner.classifier.tree_equal(one) and learner.vectors == len(scans)
     assert learner.classifier.n_seen_ == one.n_seen_ == len(scans)
