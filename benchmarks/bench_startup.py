@@ -16,8 +16,8 @@ Rows: ``before`` (that revision), ``after`` (this checkout as installed: kernels
 of time where setup.py could), ``after, numba`` (this checkout with ``RHBL_KERNELS=jit``).
 
 ``--train`` also times ``rhbl train --world room --seconds 1200 --rounds 0 --starts world``
-(wall clock of the whole process, start-up included) and checks that both revisions wrote the
-same tree.
+(wall clock of the whole process, start-up included, and the time its learner spends in the
+tree per vector) and checks that both revisions wrote the same tree.
 """
 
 from __future__ import annotations
@@ -53,6 +53,23 @@ if "tree" in sys.argv[2:]:
 """
 TRAIN = ("train", "--world", "room", "--seconds", "1200", "--rounds", "0", "--starts", "world",
          "--seed", "0")
+# rhbl train, timing the learner's calls into the tree (e5b649a: a partial_fit per vector in
+# _learn; now: the queue's partial_fit in _flush); prints the seconds spent there
+TRAIN_CODE = """
+import sys, time
+from client.behaviour import learning
+cls = learning.DemonstrationLearner
+name = "_flush" if hasattr(cls, "_flush") else "_learn"
+inner, spent = getattr(cls, name), [0.0]
+def timed(self, *a):
+    t = time.perf_counter()
+    inner(self, *a)
+    spent[0] += time.perf_counter() - t
+setattr(cls, name, timed)
+from lab.cli import main
+main(sys.argv[1:])
+print("learning", spent[0])
+"""
 
 
 def _env(source: Path | None, jit: bool = False) -> dict:
@@ -64,10 +81,15 @@ def _env(source: Path | None, jit: bool = False) -> dict:
 
 
 def _seconds(argv: list[str], env: dict, cwd: Path) -> float:
+    return _run(argv, env, cwd)[0]
+
+
+def _run(argv: list[str], env: dict, cwd: Path) -> tuple[float, str]:
+    """(wall-clock seconds, standard output) of a fresh process."""
     t = time.perf_counter()
-    subprocess.run(argv, env=env, cwd=cwd, check=True, stdout=subprocess.DEVNULL,
-                   stderr=subprocess.DEVNULL)
-    return time.perf_counter() - t
+    done = subprocess.run(argv, env=env, cwd=cwd, check=True, stdout=subprocess.PIPE,
+                          stderr=subprocess.DEVNULL, text=True)
+    return time.perf_counter() - t, done.stdout
 
 
 def _archive(rev: str, into: Path) -> Path:
@@ -118,13 +140,20 @@ def _train(rows: dict, tmp: Path, repeat: int) -> None:
     import rhbl
 
     times: dict[str, list[float]] = {name: [] for name in rows}
+    learning: dict[str, list[float]] = {name: [] for name in rows}
     for _ in range(max(1, repeat // 2)):
         for name, (env, cwd) in rows.items():
             out = tmp / f"{name.replace(', ', '-')}.rhbl"
-            code = "import sys; from lab.cli import main; sys.exit(main(sys.argv[1:]))"
-            times[name].append(_seconds([sys.executable, "-c", code, *TRAIN, "--out", str(out)],
-                                        env, cwd))
+            seconds, text = _run([sys.executable, "-c", TRAIN_CODE, *TRAIN, "--out", str(out)],
+                                 env, cwd)
+            times[name].append(seconds)
+            last = [ln for ln in text.splitlines() if ln.startswith("learning ")][-1]
+            learning[name].append(float(last.split()[1]))
     trees = {name: rhbl.load(tmp / f"{name.replace(', ', '-')}.rhbl") for name in rows}
+    vectors = trees["before"].n_seen_
+    print(f"\nlearning on the product's path (rhbl train's DemonstrationLearner into the tree, "
+          f"{vectors} vectors), us per vector: "
+          + "; ".join(f"{name} {min(v) / vectors * 1e6:.1f}" for name, v in learning.items()))
     first = trees["before"]
     same = all(t.tree_equal(first) and all(
         np.array_equal(a, b) for a, b in zip(t.tree_.to_arrays().values(),
