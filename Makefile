@@ -11,12 +11,15 @@ VENV ?= .venv
 DEMO_ARGS ?=
 COMPOSE_TEST_ARGS ?=
 BIN := $(VENV)/bin
-# installed once per change of pyproject.toml; removing $(VENV) starts afresh
+# installed once per change of pyproject.toml, setup.py or the compiled kernels' source (the
+# install compiles them ahead of time where a C compiler is found); removing $(VENV) starts
+# afresh
 STAMP := $(VENV)/.rhbl-installed
+KERNEL_SOURCES := setup.py rhbl/_layout.py rhbl/_kernels.py server/_laser_kernels.py
 # the environment's commands (hadolint, shellcheck, rhbl) first on PATH for the tests
 RUN := PATH="$(abspath $(BIN)):$$PATH"
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml $(KERNEL_SOURCES)
 	@bash scripts/make-venv.sh "$(PYTHON)" "$(VENV)"
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev]'
 	@touch $(STAMP)

@@ -8,15 +8,17 @@ Every figure is measured in the same run, on the same machine, the peers' calls 
 
 * the wall tree that ``rhbl train --world room --seconds 1200 --rounds 0 --starts world``
   writes (trained first, or ``--wall-tree SNAPSHOT``), 5000 queries near its centres: one query
-  and a batch of 5000 for rhbl (compiled), rhbl's numpy reference (``compiled=False``, the code
-  before the kernels), scikit-learn's ``KNeighborsClassifier(1)`` (kd-tree and brute force)
-  and ``BallTree`` on the same centres with the spheres' labels; spheres visited per query.
+  and a batch of 5000 for rhbl (compiled), rhbl's compiled descent on the node table (``rhbl
+  node tab``: the search before the search table, which a tree that has just changed uses),
+  rhbl's numpy reference (``compiled=False``, the code before the kernels), scikit-learn's
+  ``KNeighborsClassifier(1)`` (kd-tree and brute force) and ``BallTree`` on the same centres
+  with the spheres' labels, every one on one core; spheres visited per query.
   Targets: one query at most 3 us, a batch of 5000 at least 5x faster than the kd-tree 1-NN;
 * scaling: trees of 1k, 10k and 100k spheres grown from noisy labels (6 features, 10% of the
   labels flipped): one query, batches of 1, 100 and 10,000, learning per vector (a batch, and
   one vector at a time), spheres visited per query; the issue's noisy case (12,000 vectors);
 * start-up: a fresh process importing rhbl, loading a snapshot, predicting once, with numba's
-  cache empty and warm;
+  cache empty and warm, and with the kernels compiled ahead of time;
 * accuracy and speed on data sets (a synthetic 5-feature, 5-action set, scikit-learn's iris,
   wine and breast-cancer, min-max scaled to [0, 1]) beside 1-NN and a decision tree (median
   one-row latency, batch throughput of 20,000 queries, held-out accuracy).
@@ -40,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+import rhbl.tree
 from rhbl import HypersphereClassifier
 
 ACTIONS = np.array(["fwd", "fwd-left", "rot-left", "fwd-right", "rot-right"])
@@ -192,11 +195,25 @@ class Peers:
         self.kd = KNeighborsClassifier(n_neighbors=1, algorithm="kd_tree").fit(C, y)
         self.kd_brute = KNeighborsClassifier(n_neighbors=1, algorithm="brute").fit(C, y)
         self.ball = BallTree(C)
-        self.names = ["rhbl", "rhbl numpy", "1-NN kd-tree", "1-NN brute", "BallTree"]
+        self.names = ["rhbl", "rhbl node tab", "rhbl numpy", "1-NN kd-tree", "1-NN brute",
+                      "BallTree"]
+
+    def _walk_one(self, x: np.ndarray):
+        """The compiled descent on the node table (the search before the search table: what
+        a tree that has just changed uses), one query, as ``predict_one`` calls it."""
+        tree = self.clf.tree_
+        i = rhbl.tree._kernels().winner(tree._table, tree.node_count, x, tree.eps,
+                                        tree.distance == "euclidean")
+        return self.clf.classes_[tree.label[i]]
+
+    def _walk(self, Q: np.ndarray) -> np.ndarray:
+        return self.clf.classes_[self.clf.tree_.label[self.clf.tree_._searched(
+            Q, "descent", True, walk=True)[0]]]
 
     def one(self) -> dict[str, Callable]:
         """One query: ``predict_one`` for rhbl, ``predict``/``query`` of one row for the others."""
-        return {"rhbl": self.clf.predict_one, "rhbl numpy": self.ref.predict_one,
+        return {"rhbl": self.clf.predict_one, "rhbl node tab": self._walk_one,
+                "rhbl numpy": self.ref.predict_one,
                 "1-NN kd-tree": lambda r: self.kd.predict(r[None, :]),
                 "1-NN brute": lambda r: self.kd_brute.predict(r[None, :]),
                 "BallTree": lambda r: self.labels[self.ball.query(r[None, :], 1,
@@ -204,7 +221,8 @@ class Peers:
 
     def batch(self) -> dict[str, Callable]:
         """A batch of rows: ``predict`` (rhbl, 1-NN), ``query`` then the label (BallTree)."""
-        return {"rhbl": self.clf.predict, "rhbl numpy": self.ref.predict,
+        return {"rhbl": self.clf.predict, "rhbl node tab": self._walk,
+                "rhbl numpy": self.ref.predict,
                 "1-NN kd-tree": self.kd.predict, "1-NN brute": self.kd_brute.predict,
                 "BallTree": lambda Q: self.labels[self.ball.query(Q, 1, return_distance=False)]}
 
@@ -231,6 +249,8 @@ def time_batches(peers: Peers, Q: np.ndarray, sizes: tuple[int, ...], repeat: in
 def check_same(peers: Peers, Q: np.ndarray) -> None:
     """The compiled and numpy searches give the same labels (else the figures mean nothing)."""
     got = peers.clf.predict(Q)
+    if not np.array_equal(got, peers._walk(Q)):
+        raise SystemExit("the searches on the search table and on the node table differ")
     for algorithm in ("brute", "descent"):
         ref = peers.ref.set_params(algorithm=algorithm).predict(Q)
         if not np.array_equal(got, ref):
@@ -374,9 +394,10 @@ print((t1 - t0) * 1e3, (t2 - t1) * 1e3, (t3 - t2) * 1e3, 'numba' in sys.modules)
 
 
 def startup_run(args) -> None:
-    """A fresh process: import rhbl, load a snapshot (the first tree built: numba imported and
-    the kernels compiled or loaded from its cache), the first predict_one; numba's cache empty
-    (cold), then filled (warm)."""
+    """A fresh process: import rhbl, load a snapshot (the first tree built: the kernels loaded:
+    numba imported and its kernels compiled or loaded from its cache, or the kernels compiled
+    ahead of time), the first predict_one; numba's cache empty (cold), then filled (warm), then
+    the kernels compiled ahead of time."""
     clf = HypersphereClassifier("a").fit(*noisy(300, 5, 0.0, seed=5))
     print("\n== start-up of a fresh process (ms): import numpy + rhbl, load a snapshot "
           "(the first tree: numba and the kernels), the first predict_one")
@@ -385,8 +406,14 @@ def startup_run(args) -> None:
         snap = Path(tmp) / "t.rhbl"
         clf.save(snap)
         cache = Path(tmp) / "numba-cache"
-        env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
-        for title, runs in (("numba cache empty (compiles)", 1), ("numba cache warm, best of 3", 3)):
+        jit = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "RHBL_KERNELS": "jit"}
+        aot = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "RHBL_KERNELS": ""}
+        for title, runs, env in (("numba cache empty (compiles)", 1, jit),
+                                 ("numba cache warm, best of 3", 3, jit),
+                                 ("ahead of time (setup.py), best of 3", 3, aot)):
+            if env is aot and rhbl.tree._ahead_of_time() is None:
+                print(f"{title:<34} not built (no C compiler when rhbl was installed)")
+                continue
             best = None
             for _ in range(runs):
                 out = subprocess.run([sys.executable, "-c", STARTUP, str(snap)], env=env,

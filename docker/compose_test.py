@@ -715,7 +715,9 @@ class Scenario:
         code = ("import time; t = time.perf_counter(); import server; "
                 "from server.world import World, load_world; "
                 "World(load_world(server.world_path('room'))).scans(); "
-                "print(f'first cast {time.perf_counter() - t:.2f} s')")
+                "print(f'first cast {time.perf_counter() - t:.2f} s'); "
+                "import rhbl.tree; t = time.perf_counter(); rhbl.tree.load_kernels(); "
+                "print(f'tree kernels {time.perf_counter() - t:.2f} s')")
         timings = {}
         for how, extra in (("loaded", []), ("compiled", ["--read-only"])):
             run = self.engine.run("run", "--rm", *extra, "-e", "NUMBA_DEBUG_CACHE=1",
@@ -723,16 +725,19 @@ class Scenario:
                                   check=False, timeout=300)
             out = run.stdout + run.stderr
             cast = re.search(r"first cast ([\d.]+) s", out)
+            tree = re.search(r"tree kernels ([\d.]+) s", out)
             timings[how] = (cast.group(1) if cast else "?", out.count("data loaded from"),
-                            out.count("data saved to"))
+                            out.count("data saved to"), tree.group(1) if tree else "?",
+                            len(re.findall(r"data loaded from .*/_kernels\.", out)))
         loaded, compiled = timings["loaded"], timings["compiled"]
         self.report.check(
             "numba kernels from the image",
-            not written and loaded[1] > 0 and loaded[2] == 0,
+            not written and loaded[1] > 0 and loaded[2] == 0 and loaded[4] > 0,
             f"the server container wrote {len(written)} files under {NUMBA_CACHE}; a one-off "
-            f"container: first laser cast {loaded[0]} s loading {loaded[1]} compiled "
-            f"file(s) from the image ({loaded[2]} compiled), {compiled[0]} s with a read-only root filesystem "
-            f"({compiled[1]} loaded: numba compiles then)")
+            f"container: first laser cast {loaded[0]} s and the tree's kernels {loaded[3]} s, "
+            f"loading {loaded[1]} compiled file(s) from the image ({loaded[4]} of the tree's; "
+            f"{loaded[2]} compiled), {compiled[0]} s and {compiled[3]} s with a read-only root "
+            f"filesystem ({compiled[1]} loaded: numba compiles then)")
 
     def _save_tree(self) -> None:
         learner = self.containers()["learner"]

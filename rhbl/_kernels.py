@@ -1,17 +1,10 @@
 """The sphere tree's compiled kernels (numba): the winner searches and the training scan.
 
-The kernels work on the node table of :class:`rhbl.tree.SphereTree`: one row per sphere, in
-creation order (the capacity's rows allocated), of 8-byte cells (int64; the float columns are
-read through a float64 view of the same memory):
-
-* columns ``0 .. features - 1``: the centre (float), column ``features``: the radius (float);
-* then the integer columns below, from ``features + 1`` on: parent (-1 for the root), depth,
-  label index and the children as a linked list in creation order (first child, next sibling,
-  last child; -1 for none).
-
-One table keeps a call cheap (numba unboxes each array argument, a few hundred nanoseconds
-each) and each sphere's data together in memory. A per-sphere value added later is one more
-column (``INT_COLUMNS`` grows); a kernel reads only the columns it names.
+The kernels work on the tables of :mod:`rhbl._layout`: the node table of
+:class:`rhbl.tree.SphereTree` (creation order: training and the searches of a tree that has
+just changed) and the search table built from it (:func:`layout`: depth-first pre-order, with
+each sphere's rank in the winner order and the end of its subtree, which the searches of a tree
+that stays the same use: :func:`search_kernels`).
 
 The arithmetic is that of the numpy code in :mod:`rhbl._reference` (the tests compare them
 array by array): the distance is ``sum((c - x)**2)`` accumulated in feature order (its square
@@ -19,8 +12,10 @@ root for ``euclidean``), a sphere encloses ``x`` iff ``d <= r + eps``, the winne
 reachable sphere of smallest radius, then deepest, then earliest created. The root encloses
 every vector of the unit cube, so the searches start from its children.
 
-Each kernel is compiled on its first call, or loaded from numba's cache (next to this file, else
-in the user's cache folder or ``NUMBA_CACHE_DIR``); :func:`load` does that once per process.
+Each kernel is compiled ahead of time when rhbl is installed (``setup.py``: an extension module,
+``rhbl._kernels_aot``, that needs no numba, from the functions :func:`aot_exports` names), or
+else on its first call, or loaded from numba's cache (next to this file, else in the user's
+cache folder or ``NUMBA_CACHE_DIR``); :func:`load` does that once per process.
 """
 
 from __future__ import annotations
@@ -31,18 +26,29 @@ import math
 import numpy as np
 from numba import njit
 
+from ._layout import (
+    DEPTH,
+    FIRST,
+    INT_COLUMNS,
+    LABEL,
+    LAST,
+    NEXT,
+    PARENT,
+    RANK,
+    SEARCH_INT_COLUMNS,
+    SKIP,
+    SPECIALISED,
+)
+
 log = logging.getLogger(__name__)
 
-__all__ = ["INT_COLUMNS", "learn", "load", "winner", "winners"]
-
-# the integer columns, counted from ``features + 1``
-PARENT, DEPTH, LABEL, FIRST, NEXT, LAST = range(6)
-INT_COLUMNS = 6
+__all__ = ["aot_exports", "layout", "learn", "load", "search_kernels", "winner", "winners"]
 
 
 def _jit(func):
     """Compile ``func`` on its first call, cached on disk; without a writable cache folder
-    (numba: "no locator available") it is compiled in each process."""
+    (numba: "no locator available") it is compiled in each process. The ahead-of-time build
+    compiles with the same options (no GIL, numpy's error model)."""
     try:
         return njit(cache=True, nogil=True, error_model="numpy")(func)
     except RuntimeError:
@@ -254,11 +260,198 @@ def learn(table, X, labels, start, n, height, eps, euclidean, winner_only, min_r
     return row - start, n, height, spawned, relabelled, skipped
 
 
-_KERNELS = (_distance, _better, _descend, _brute, winner, winners, _candidates, learn)
+@_jit
+def layout(table, n, rank, search, nodes):
+    """Fill the search table ``search`` (flat, ``n`` rows of the centre, the radius, ``SKIP``
+    and ``RANK``) and ``nodes`` (each position's creation index) from the first ``n`` spheres
+    of the node table, in depth-first pre-order (children in creation order); ``rank``: each
+    sphere's place in the winner order (by creation index)."""
+    tf = table.view(np.float64)
+    sf = search.view(np.float64)
+    f = table.shape[1] - 1 - INT_COLUMNS
+    w = f + 1 + SEARCH_INT_COLUMNS
+    c_parent, c_first, c_next = f + 1 + PARENT, f + 1 + FIRST, f + 1 + NEXT
+    size = np.ones(n, dtype=np.int64)  # of each subtree
+    for i in range(n - 1, 0, -1):  # parents precede their children
+        size[table[i, c_parent]] += size[i]
+    stack = np.empty(n, dtype=np.int64)
+    stack[0] = 0
+    top = 1
+    pos = 0
+    while top > 0:
+        top -= 1
+        i = stack[top]
+        b = pos * w
+        for k in range(f + 1):  # the centre and the radius
+            sf[b + k] = tf[i, k]
+        search[b + f + 1 + SKIP] = pos + size[i]
+        search[b + f + 1 + RANK] = rank[i]
+        nodes[pos] = i
+        pos += 1
+        bottom = top
+        c = table[i, c_first]
+        while c >= 0:
+            stack[top] = c
+            top += 1
+            c = table[c, c_next]
+        j = top - 1  # the first child on top: visited first
+        while bottom < j:
+            stack[bottom], stack[j] = stack[j], stack[bottom]
+            bottom += 1
+            j -= 1
+
+
+@_jit
+def _query_order(X):
+    """The rows of ``X`` in Z order (Morton: the bits of the coordinates interleaved, 8 per
+    coordinate at most), so that consecutive queries take similar paths down the tree (the
+    branches and the cache see the same spheres again). Only the order changes, never an
+    answer."""
+    m, f = X.shape
+    bits = min(8, 63 // f)
+    if bits == 0:
+        return np.arange(m)
+    top = (1 << bits) - 1
+    cells = np.empty(f, dtype=np.int64)
+    keys = np.empty(m, dtype=np.int64)
+    for q in range(m):
+        for k in range(f):
+            cells[k] = min(int(X[q, k] * (top + 1)), top)
+        key = 0
+        for b in range(bits - 1, -1, -1):
+            for k in range(f):
+                key = (key << 1) | ((cells[k] >> b) & 1)
+        keys[q] = key
+    return np.argsort(keys)
+
+
+# batches of at least this many rows are searched in Z order
+ORDERED_BATCH = 64
+
+
+@_jit
+def _descend_flat(search, x, f, eps, euclidean):
+    """(the winner's position, the number of spheres whose distance was computed) for ``x``
+    of ``f`` features: in pre-order, a sphere that encloses ``x`` is followed by its first
+    child, any other by the position after its subtree (which is thereby skipped). Indices are
+    unsigned (no check for negative indices in the loop)."""
+    sf = search.view(np.float64)
+    w = np.uint64(f + 1 + SEARCH_INT_COLUMNS)
+    n = np.uint64(search.shape[0]) // w
+    c_r = np.uint64(f)
+    c_skip = np.uint64(f + 1 + SKIP)
+    c_rank = np.uint64(f + 1 + RANK)
+    one = np.uint64(1)
+    best = np.uint64(0)
+    best_rank = search[c_rank]
+    visited = 0
+    i = one
+    while i < n:
+        b = i * w
+        d = 0.0
+        for k in range(f):
+            t = sf[b + np.uint64(k)] - x[k]
+            d += t * t
+        if euclidean:
+            d = math.sqrt(d)
+        visited += 1
+        if d <= sf[b + c_r] + eps:
+            r = search[b + c_rank]
+            if r < best_rank:
+                best_rank = r
+                best = i
+            i += one
+        else:
+            i = np.uint64(search[b + c_skip])
+    return best, visited
+
+
+@_jit
+def _search_one(search, nodes, x, f, eps, euclidean):
+    """The winning sphere (creation index) of one query; -1 if a coordinate of ``x`` is
+    outside [0, 1] or NaN (the caller checks its input only then)."""
+    for k in range(x.shape[0]):
+        if not (x[k] >= 0.0 and x[k] <= 1.0):
+            return -1
+    return nodes[_descend_flat(search, x, f, eps, euclidean)[0]]
+
+
+@_jit
+def _search_many(search, nodes, X, f, eps, euclidean, out, visited):
+    """The winning sphere of each row of ``X`` into ``out``, the spheres whose distance each
+    search computed into ``visited``; a batch of ``ORDERED_BATCH`` rows or more is searched in
+    Z order."""
+    m = X.shape[0]
+    order = _query_order(X) if m >= ORDERED_BATCH else np.arange(m)
+    for j in range(m):
+        q = order[j]
+        best, visited[q] = _descend_flat(search, X[q], f, eps, euclidean)
+        out[q] = nodes[best]
+
+
+@_jit
+def search_one(search, nodes, x, eps, euclidean):
+    """:func:`_search_one` for any number of features (read from ``x``)."""
+    return _search_one(search, nodes, x, x.shape[0], eps, euclidean)
+
+
+@_jit
+def search_many(search, nodes, X, eps, euclidean, out, visited):
+    """:func:`_search_many` for any number of features (read from ``X``)."""
+    _search_many(search, nodes, X, X.shape[1], eps, euclidean, out, visited)
+
+
+def _specialised(features):
+    """``(search_one, search_many)`` for vectors of exactly ``features`` features: the loop
+    over the features has a fixed length, which the compiler unrolls (about a quarter faster).
+    Compiled ahead of time only (numba's cache does not keep closures: the kernels numba
+    compiles at run time are the general ones)."""
+
+    def one(search, nodes, x, eps, euclidean):
+        return _search_one(search, nodes, x, features, eps, euclidean)
+
+    def many(search, nodes, X, eps, euclidean, out, visited):
+        _search_many(search, nodes, X, features, eps, euclidean, out, visited)
+
+    return njit(nogil=True, error_model="numpy")(one), njit(nogil=True, error_model="numpy")(many)
+
+
+def search_kernels(features: int):
+    """``(search_one, search_many)`` for vectors of ``features`` features: numba's, the
+    general ones (the kernels compiled ahead of time have one of their own for each count in
+    ``SPECIALISED``)."""
+    return search_one, search_many
+
+
+# the signatures the kernels are compiled with ahead of time (and called with)
+_TABLE, _FLAT, _VECTOR, _ROWS = "int64[:, ::1]", "int64[::1]", "float64[::1]", "float64[:, ::1]"
+
+
+def aot_exports() -> dict:
+    """name -> (function, signature) of every kernel ``setup.py`` compiles ahead of time; the
+    searches of each feature count in ``SPECIALISED`` are ``search_one_<count>`` and
+    ``search_many_<count>``, the general ones ``search_one`` and ``search_many``."""
+    exports = {
+        "winner": (winner, f"int64({_TABLE}, int64, {_VECTOR}, float64, boolean)"),
+        "winners": (winners, f"void({_TABLE}, int64, {_ROWS}, float64, boolean, boolean, "
+                             f"{_FLAT}, {_FLAT})"),
+        "learn": (learn, f"UniTuple(int64, 6)({_TABLE}, {_ROWS}, {_FLAT}, int64, int64, int64, "
+                         "float64, boolean, boolean, float64, int64, int64)"),
+        "layout": (layout, f"void({_TABLE}, int64, {_FLAT}, {_FLAT}, {_FLAT})"),
+    }
+    for features in (0, *SPECIALISED):
+        one, many = _specialised(features) if features else (search_one, search_many)
+        suffix = f"_{features}" if features else ""
+        exports["search_one" + suffix] = (one, f"int64({_FLAT}, {_FLAT}, {_VECTOR}, float64, "
+                                               "boolean)")
+        exports["search_many" + suffix] = (many, f"void({_FLAT}, {_FLAT}, {_ROWS}, float64, "
+                                                 f"boolean, {_FLAT}, {_FLAT})")
+    return exports
 
 
 def _warm_up() -> None:
-    """Every entry kernel once, with the argument types :class:`rhbl.tree.SphereTree` passes."""
+    """Every entry kernel once, with the argument types :class:`rhbl.tree.SphereTree` passes
+    (the searches: the general ones, which numba compiles at run time)."""
     table = np.array([[0, 0, -1, 0, 0, -1, -1, -1]], dtype=np.int64)
     table.view(np.float64)[0, :2] = (0.5, 0.25)
     x = np.full(1, 0.5)
@@ -266,6 +459,12 @@ def _warm_up() -> None:
     out = np.empty(1, dtype=np.int64)
     winners(table, 1, x[None, :], 1e-9, False, False, out, out.copy())
     learn(table, x[None, :], np.zeros(1, dtype=np.int64), 0, 1, 0, 1e-9, False, False, 0.0, 1, 1)
+    search = np.empty(1 + 1 + SEARCH_INT_COLUMNS, dtype=np.int64)
+    nodes = np.empty(1, dtype=np.int64)
+    layout(table, 1, np.zeros(1, dtype=np.int64), search, nodes)
+    one, many = search_kernels(1)
+    one(search, nodes, x, 1e-9, False)
+    many(search, nodes, x[None, :], 1e-9, False, out, out.copy())
 
 
 def load() -> None:
@@ -274,6 +473,8 @@ def load() -> None:
         _warm_up()
     except OSError as e:  # the cache folder took the index, not the code (disk full, ...)
         log.warning("cannot cache the tree's compiled code (%s): compiled in this process", e)
-        for kernel in _KERNELS:
+        for kernel in (_distance, _better, _descend, _brute, winner, winners, _candidates,
+                       learn, layout, _query_order, _descend_flat, _search_one, _search_many,
+                       search_one, search_many):
             kernel._cache.disable()
         _warm_up()

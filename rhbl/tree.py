@@ -8,9 +8,10 @@ parameters, input checks and label values belong to :class:`rhbl.HypersphereClas
 keeps its tree in ``tree_`` (as scikit-learn keeps ``Tree`` apart from
 ``DecisionTreeClassifier``).
 
-Searches and training run compiled kernels (:mod:`rhbl._kernels`, numba) by default; with
-``compiled=False`` they run the numpy code of :mod:`rhbl._reference` instead, the code before
-the kernels, which gives exactly the same trees and answers (the tests compare them).
+Searches and training run compiled kernels (:mod:`rhbl._kernels`: compiled ahead of time when
+rhbl was installed, else by numba when first used) by default; with ``compiled=False`` they run
+the numpy code of :mod:`rhbl._reference` instead, the code before the kernels, which gives
+exactly the same trees and answers (the tests compare them).
 
 Inputs are checked vectors in ``[0, 1]^n``: this module does no input validation of its own
 except in :meth:`SphereTree.from_arrays`, which rebuilds a tree from untrusted arrays.
@@ -20,37 +21,102 @@ from __future__ import annotations
 
 import functools
 import importlib
+import logging
 import math
-from types import ModuleType
+import os
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from . import _reference
+from . import _layout, _reference
 
 __all__ = ["ALGORITHMS", "DISTANCES", "Growth", "SphereTree", "Totals", "load_kernels"]
+
+log = logging.getLogger(__name__)
 
 DISTANCES = ("squared", "euclidean")
 ALGORITHMS = ("auto", "brute", "descent")
 # no limit, for the kernels (which take integers)
 _UNLIMITED = 1 << 62
+# "auto" builds the search table (and then uses it) for a batch of at least this many rows,
+# or after this many single queries of a tree that has not changed since; until then it walks
+# the node table (a tree that changes between queries, as in a corrective round, never pays
+# for a table it would use once)
+_TABLE_AFTER = 32
+_F64 = np.dtype(np.float64)
+# set to "jit" to use numba's kernels even where kernels compiled ahead of time are installed
+# (the tests and benchmarks compare the two)
+KERNELS_ENV = "RHBL_KERNELS"
+
+
+class _Kernels:
+    """The kernels of this process: ``origin`` is ``"ahead-of-time"`` (the extension module
+    ``rhbl._kernels_aot`` that setup.py compiles, no numba at run time) or ``"numba"`` (the
+    functions of :mod:`rhbl._kernels`, compiled on first use or loaded from numba's cache)."""
+
+    def __init__(self, module: Any, origin: str) -> None:
+        self.origin = origin
+        self._module = module
+        self.winner, self.winners, self.learn = module.winner, module.winners, module.learn
+        self.layout = module.layout
+
+    @functools.cache  # noqa: B019 (one instance per process)
+    def search(self, features: int) -> tuple[Any, Any]:
+        """``(search_one, search_many)`` for vectors of ``features`` features."""
+        if self.origin == "numba":
+            return self._module.search_kernels(features)
+        suffix = f"_{features}" if features in _layout.SPECIALISED else ""
+        return getattr(self._module, "search_one" + suffix), getattr(
+            self._module, "search_many" + suffix)
+
+
+def _ahead_of_time() -> Any:
+    """The kernels compiled ahead of time, or None: not built (no compiler when rhbl was
+    installed), built from other source than this checkout's (a change since ``make install``:
+    logged) or not wanted (``RHBL_KERNELS=jit``)."""
+    if os.environ.get(KERNELS_ENV, "") == "jit":
+        return None
+    try:
+        aot = importlib.import_module("._kernels_aot", __package__)
+    except ImportError:
+        return None
+    if aot.source_hash() != _layout.source_hash():
+        log.info("the tree's kernels compiled ahead of time are older than rhbl/_kernels.py: "
+                 "using numba's (make install compiles them again)")
+        return None
+    return aot
 
 
 @functools.cache
-def _kernels() -> ModuleType:
-    """The compiled kernels, imported, compiled or loaded from numba's cache on the first call
-    in a process (the first classifier or tree made): importing rhbl does not import numba,
-    which a process that only reads snapshot files or prints help does not need."""
+def _kernels() -> _Kernels:
+    """The compiled kernels, on the first call in a process (the first classifier or tree
+    made): the extension module compiled ahead of time (about a millisecond), else numba's
+    (numba imported, the kernels compiled or loaded from its cache: about a second). Importing
+    rhbl loads neither."""
+    aot = _ahead_of_time()
+    if aot is not None:
+        return _Kernels(aot, "ahead-of-time")
     kernels = importlib.import_module("._kernels", __package__)
     kernels.load()
-    return kernels
+    return _Kernels(kernels, "numba")
 
 
-def load_kernels() -> None:
-    """Import numba and compile the kernels or load them from its cache, now: once per process
-    (about a second, most of it numba's own set-up); later calls return at once. Building a
-    tree does it anyway; a process calls it to pay it before it serves."""
-    _kernels()
+def load_kernels() -> str:
+    """Load the compiled kernels now: once per process (the ahead-of-time extension in about a
+    millisecond; numba's in about a second, most of it numba's own set-up); later calls return
+    at once. Building a tree does it anyway; a process calls it to pay it before it serves.
+    Returns where they come from: ``"ahead-of-time"`` or ``"numba"``."""
+    return _kernels().origin
+
+
+class _Search(NamedTuple):
+    """The search table of a tree that has not changed since it was built (see
+    :mod:`rhbl._layout`), with the kernels for its number of features."""
+
+    table: np.ndarray  # flat int64, a row per sphere in pre-order
+    nodes: np.ndarray  # each row's creation index
+    one: Any  # search_one kernel
+    many: Any  # search_many kernel
 
 
 class Growth(NamedTuple):
@@ -114,7 +180,7 @@ class SphereTree:
     def _allocate(self, capacity: int) -> None:
         """An empty table for ``capacity`` spheres."""
         n_feat = self.n_features
-        self._table = np.empty((capacity, n_feat + 1 + _kernels().INT_COLUMNS), dtype=np.int64)
+        self._table = np.empty((capacity, n_feat + 1 + _layout.INT_COLUMNS), dtype=np.int64)
         # (features, capacity) copy of the centres for the numpy training scan, filled lazily
         self._centers_t = np.empty((n_feat, capacity), dtype=np.float64)
         self._transposed = 0  # columns of _centers_t that are up to date
@@ -122,7 +188,7 @@ class SphereTree:
 
     def _bind(self) -> None:
         """The views of the table's columns (rebuilt with the table, and after unpickling)."""
-        k, n_feat = _kernels(), self.n_features
+        k, n_feat = _layout, self.n_features
         base = n_feat + 1  # the first integer column
         floats = self._table.view(np.float64)
         self._centers = floats[:, :n_feat]
@@ -138,7 +204,8 @@ class SphereTree:
     def __getstate__(self) -> dict[str, Any]:
         """Pickle (and ``copy.deepcopy``) the table, not its views or derived caches."""
         state = {k: v for k, v in self.__dict__.items() if k not in self._VIEWS}
-        state.update(_creation=None, _preorder=None, _children=None)
+        state.update(_creation=None, _preorder=None, _children=None, _search=None,
+                     _unchanged=0)
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -317,10 +384,13 @@ class SphereTree:
         return i
 
     def _changed(self) -> None:
-        """Forget what was derived from the spheres (the reference's layouts, children)."""
+        """Forget what was derived from the spheres (the search table, the reference's layouts,
+        children)."""
         self._creation = None
         self._preorder = None
         self._children = None
+        self._search: _Search | None = None
+        self._unchanged = 0  # single queries since the last change
 
     def learn(
         self,
@@ -398,18 +468,40 @@ class SphereTree:
     def apply_one(self, x: np.ndarray, *, compiled: bool = True) -> int:
         """The winning sphere (creation index) for one checked query vector.
 
-        Compiled: the descent (only the children of enclosing spheres are tested); -1 for a
-        vector outside the unit cube or with a NaN, so that a caller may check its input only
-        when the search rejects it. Numpy: every sphere is tested at once (one vectorised
-        ``sum((x - c)**2)`` over the features, in feature order), then the enclosing ones are
-        walked in creation order in Python.
+        Compiled: the descent (only the children of enclosing spheres are tested), on the
+        search table once the tree has stayed the same for a few queries, else on the node
+        table; -1 for a vector outside the unit cube or with a NaN, so that a caller may check
+        its input only when the search rejects it. Numpy: every sphere is tested at once (one
+        vectorised ``sum((x - c)**2)`` over the features, in feature order), then the enclosing
+        ones are walked in creation order in Python.
         """
         if not compiled:
             return _reference.apply_one(self, x)
         flags = x.flags
-        if not (flags.c_contiguous and flags.writeable):
-            x = x.copy()
-        return _kernels().winner(self._table, self.node_count, x, self._eps, self._euclidean)
+        if not (x.dtype is _F64 and flags.c_contiguous and flags.writeable):
+            x = np.array(x, dtype=np.float64)  # what the kernels take (a fresh, writable copy)
+        search = self._search
+        if search is None:
+            self._unchanged += 1
+            if self._unchanged < _TABLE_AFTER:
+                return _kernels().winner(self._table, self.node_count, x, self._eps,
+                                         self._euclidean)
+            search = self._search_table()
+        return search.one(search.table, search.nodes, x, self._eps, self._euclidean)
+
+    def _search_table(self) -> _Search:
+        """The search table of the tree as it is (built now if the tree changed since)."""
+        if self._search is None:
+            n, f = self.node_count, self.n_features
+            rank = np.empty(n, dtype=np.int64)
+            # the winner order: smallest radius, then deepest, then earliest created
+            rank[np.lexsort((np.arange(n), -self._depth[:n], self._radii[:n]))] = np.arange(n)
+            table = np.empty(n * (f + 1 + _layout.SEARCH_INT_COLUMNS), dtype=np.int64)
+            nodes = np.empty(n, dtype=np.int64)
+            kernels = _kernels()
+            kernels.layout(self._table, n, rank, table, nodes)
+            self._search = _Search(table, nodes, *kernels.search(f))
+        return self._search
 
     def predict_one(self, x: np.ndarray, *, compiled: bool = True) -> int:
         """The label index of the winning sphere for one checked query vector (compiled: -1
@@ -434,17 +526,21 @@ class SphereTree:
         tests only the children of enclosing spheres. ``"auto"``: compiled, the descent; numpy,
         brute force for trees of at most 64 spheres, else the descent (the numpy brute force
         tests every (query, sphere) pair at once; its descent carries the queries each sphere
-        encloses). All give exactly the same answers.
+        encloses). All give exactly the same answers. The compiled descent runs on the search
+        table (built for it if the tree changed since the last), but for a batch of fewer than
+        32 rows of a tree that has just changed: it walks the node table then.
         """
-        return self._search(X, algorithm, compiled)[0]
+        return self._searched(X, algorithm, compiled)[0]
 
     def visits(self, X: np.ndarray, algorithm: str = "auto") -> np.ndarray:
         """How many spheres the compiled search computed the distance of, per row of ``X``
         (the root is never tested: it encloses the whole cube)."""
-        return self._search(X, algorithm, True)[1]
+        return self._searched(X, algorithm, True)[1]
 
-    def _search(self, X: np.ndarray, algorithm: str, compiled: bool
-                ) -> tuple[np.ndarray, np.ndarray | None]:
+    def _searched(self, X: np.ndarray, algorithm: str, compiled: bool, *, walk: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray | None]:
+        """(winners, spheres tested per row); ``walk``: the descent on the node table, not on
+        the search table (the tests check both)."""
         if algorithm not in ALGORITHMS:
             raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
         if not compiled:
@@ -452,8 +548,14 @@ class SphereTree:
         X = _queries(X)
         out = np.empty(X.shape[0], dtype=np.int64)
         visited = np.empty(X.shape[0], dtype=np.int64)
-        _kernels().winners(self._table, self.node_count, X, self._eps, self._euclidean,
-                        algorithm == "brute", out, visited)
+        brute = algorithm == "brute"
+        if brute or walk or (self._search is None and algorithm == "auto"
+                             and X.shape[0] < _TABLE_AFTER):
+            _kernels().winners(self._table, self.node_count, X, self._eps, self._euclidean,
+                               brute, out, visited)
+        else:
+            search = self._search_table()
+            search.many(search.table, search.nodes, X, self._eps, self._euclidean, out, visited)
         return out, visited
 
     def predict(self, X: np.ndarray, algorithm: str = "auto", *, compiled: bool = True
@@ -464,7 +566,8 @@ class SphereTree:
 
 def _queries(X: np.ndarray) -> np.ndarray:
     """``X`` as the kernels take it: float64, C order, writable (a copy only if needed: other
-    array types would make numba compile another version of a kernel)."""
-    if X.dtype == np.float64 and X.flags.c_contiguous and X.flags.writeable:
+    array types would make numba compile another version of a kernel, and the kernels compiled
+    ahead of time take only these)."""
+    if X.dtype is _F64 and X.flags.c_contiguous and X.flags.writeable:
         return X
     return np.array(X, dtype=np.float64, order="C")

@@ -1,5 +1,5 @@
 """The simulated laser: every laser of a tick cast against the walls and the other robots in
-one compiled call (numba).
+one compiled call (numba, compiled ahead of time where the package was built with a compiler).
 
 :meth:`server.world.World.scans` (and ``scan``) calls :meth:`Laser.cast` once per tick for all
 its lasers. A tick's cost is the arithmetic of what each laser can see,
@@ -22,154 +22,55 @@ The culling only skips work whose result cannot be a hit, so the ranges equal th
 dense cast (:func:`robots_dense` is the plain cast of one laser against every other robot, kept
 as the reference the tests and ``benchmarks/bench_sim.py --compare`` use). The laser's field of
 view must not exceed 180 degrees (a robot's angular interval is then never cut by the wrap at
-+-pi inside it). The kernels are compiled once per machine (numba's cache, next to this file or
-in numba's cache folder) and loaded from there by every later process.
++-pi inside it). The kernels (:mod:`server._laser_kernels`) are compiled ahead of time when the
+package is installed (``setup.py``), else once per machine by numba (its cache, next to that file
+or in numba's cache folder) and loaded from there by every later process.
 """
 
 from __future__ import annotations
 
+import functools
+import importlib
 import logging
 import math
+import os
+from typing import Any
 
 import numpy as np
-from numba import njit
+
+from . import _laser_layout
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Laser", "robots_dense"]
+__all__ = ["Laser", "kernels_origin", "robots_dense"]
+
+# set to "jit" to use numba's kernels even where kernels compiled ahead of time are installed
+KERNELS_ENV = "RHBL_KERNELS"
 
 
-def _jit(func):
-    """numba-compile ``func`` when first called; cached on disk (next to this file, else in
-    the user's cache folder, or in ``NUMBA_CACHE_DIR``) so later processes load it. Without a
-    writable cache folder it is compiled in each process. error_model="numpy": a division by
-    zero gives inf (a beam parallel to a segment), as in numpy."""
-    try:
-        return njit(cache=True, nogil=True, error_model="numpy")(func)
-    except RuntimeError:  # numba: "cannot cache function ...: no locator available"
-        return njit(nogil=True, error_model="numpy")(func)
+@functools.cache
+def _kernels() -> tuple[Any, str]:
+    """The cast kernel of this process and where it comes from: ``"ahead-of-time"`` (the
+    extension module ``server._laser_aot`` that setup.py compiles: no numba at run time) or
+    ``"numba"`` (:mod:`server._laser_kernels`, compiled on first use or loaded from numba's
+    cache), when the first ``Laser`` is made."""
+    if os.environ.get(KERNELS_ENV, "") != "jit":
+        try:
+            aot = importlib.import_module("._laser_aot", __package__)
+        except ImportError:
+            aot = None
+        if aot is not None and aot.source_hash() == _laser_layout.source_hash():
+            return aot.cast, "ahead-of-time"
+        if aot is not None:
+            log.info("the laser's kernels compiled ahead of time are older than "
+                     "server/_laser_kernels.py: using numba's (make install compiles them again)")
+    return importlib.import_module("._laser_kernels", __package__).cast, "numba"
 
 
-_F32 = np.float32
-_TWO_PI = 2.0 * math.pi
-
-
-@_jit
-def _beam_index(angle, start, resolution, up):
-    """The beam just below (``up`` False: floor, minus a margin of one) or just above (ceil,
-    plus one) ``angle``, a bearing in the laser's frame."""
-    x = (angle - start) / resolution
-    return math.ceil(x) + 1 if up else math.floor(x) - 1
-
-
-@_jit
-def _cast_segment(out, lo, hi, ax, ay, ex, ey, dc, ds):
-    """Lower ``out[lo..hi]`` where those beams hit the segment (float32 arithmetic)."""
-    lo = max(lo, 0)
-    hi = min(hi, out.shape[0] - 1)
-    ax32, ay32, ex32, ey32 = _F32(ax), _F32(ay), _F32(ex), _F32(ey)
-    num = ax32 * ey32 - ay32 * ex32
-    one = _F32(1.0)
-    for b in range(lo, hi + 1):
-        inv = one / (ey32 * dc[b] - ex32 * ds[b])
-        tr = num * inv
-        u = (ax32 * ds[b] - ay32 * dc[b]) * inv
-        if u >= 0.0 and u <= 1.0 and tr > 0.0 and tr < out[b]:
-            out[b] = tr
-
-
-@_jit
-def _walls(out, ox, oy, yaw, segs, dc, ds, start, resolution, max_range):
-    """Fill ``out`` (float32, beams) with the ranges from (ox, oy) facing ``yaw`` to the walls
-    ``segs`` (S, 4: x0, y0, x1, y1); ``dc``/``ds``: float32 cosines and sines of the beams'
-    world angles."""
-    out[:] = _F32(max_range)
-    fx, fy = math.cos(yaw), math.sin(yaw)
-    for j in range(segs.shape[0]):
-        ax, ay = segs[j, 0] - ox, segs[j, 1] - oy
-        bx, by = segs[j, 2] - ox, segs[j, 3] - oy
-        if ax * fx + ay * fy < 0.0 and bx * fx + by * fy < 0.0:
-            continue  # wholly behind the laser
-        ex, ey = segs[j, 2] - segs[j, 0], segs[j, 3] - segs[j, 1]
-        ee = ex * ex + ey * ey
-        t = (ax * ex + ay * ey) / -(ee if ee > 0.0 else 1.0)
-        t = min(max(t, 0.0), 1.0)
-        nx, ny = ex * t + ax, ey * t + ay  # the segment's point nearest the laser
-        if not nx * nx + ny * ny < max_range * max_range:
-            continue
-        a0 = (math.atan2(ay, ax) - yaw + math.pi) % _TWO_PI - math.pi
-        a1 = (math.atan2(by, bx) - yaw + math.pi) % _TWO_PI - math.pi
-        amin, amax = min(a0, a1), max(a0, a1)
-        if amax - amin > math.pi:  # the short way round passes behind the laser: two parts
-            _cast_segment(out, _beam_index(amax, start, resolution, False),
-                          _beam_index(math.pi, start, resolution, True), ax, ay, ex, ey, dc, ds)
-            _cast_segment(out, _beam_index(-math.pi, start, resolution, False),
-                          _beam_index(amin, start, resolution, True), ax, ay, ex, ey, dc, ds)
-        else:
-            _cast_segment(out, _beam_index(amin, start, resolution, False),
-                          _beam_index(amax, start, resolution, True), ax, ay, ex, ey, dc, ds)
-
-
-@_jit
-def _robots(out, ox, oy, yaw, own, centres, dc, ds, radius, start, resolution, max_range):
-    """Lower ``out`` where the beams from (ox, oy) facing ``yaw`` hit a robot (``centres``
-    (N, 2); robot ``own`` is the laser's own, never seen)."""
-    count = out.shape[0]
-    fx, fy = math.cos(yaw), math.sin(yaw)
-    reach = max_range + radius
-    for j in range(centres.shape[0]):
-        if j == own:
-            continue
-        qx, qy = centres[j, 0] - ox, centres[j, 1] - oy
-        qq = qx * qx + qy * qy
-        c = qq - radius * radius
-        if not (c > 0.0 and qq < reach * reach and qx * fx + qy * fy > -radius):
-            continue
-        bearing = (math.atan2(qy, qx) - yaw + math.pi) % _TWO_PI - math.pi
-        half = math.asin(min(radius / math.sqrt(qq), 1.0))
-        lo = max(_beam_index(bearing - half, start, resolution, False), 0)
-        hi = min(_beam_index(bearing + half, start, resolution, True), count - 1)
-        for b in range(lo, hi + 1):
-            bb = np.float64(dc[b]) * qx + np.float64(ds[b]) * qy
-            disc = bb * bb - c
-            if disc >= 0.0:
-                t = bb - math.sqrt(disc)
-                if t > 0.0 and t < out[b]:
-                    out[b] = _F32(t)
-
-
-@_jit
-def _directions(dc, ds, bearings, yaw):
-    """The float32 cosines and sines of the beams' world angles at heading ``yaw``."""
-    for b in range(bearings.shape[0]):
-        a = bearings[b] + yaw
-        dc[b] = _F32(math.cos(a))
-        ds[b] = _F32(math.sin(a))
-
-
-@_jit
-def _cast(out, origins, yaws, rows, centres, segs, bearings, kept, dc, ds, radius, start,
-          resolution, max_range):
-    n = out.shape[0]
-    if origins.shape[0] != n or yaws.shape[0] != n or rows.shape[0] != n:
-        raise ValueError("cast: origins, yaws, rows and out need one row per laser")
-    if origins.shape[1] != 2 or out.shape[1] != bearings.shape[0]:
-        raise ValueError("cast: origins are (x, y) and out has one column per beam")
-    for i in range(n):
-        if rows[i] < 0 or rows[i] >= kept.shape[0]:
-            raise ValueError("cast: a laser's robot row is outside 0 .. robots - 1")
-    for i in range(n):
-        ox, oy, yaw, row = origins[i, 0], origins[i, 1], yaws[i], rows[i]
-        if kept[row] != yaw:  # NaN (none kept) is never equal
-            _directions(dc[row], ds[row], bearings, yaw)
-            kept[row] = yaw
-        _walls(out[i], ox, oy, yaw, segs, dc[row], ds[row], start, resolution, max_range)
-        if centres.shape[0] > 1:
-            _robots(out[i], ox, oy, yaw, row, centres, dc[row], ds[row], radius, start,
-                    resolution, max_range)
-
-
-_KERNELS = (_beam_index, _cast_segment, _walls, _robots, _directions, _cast)
+def kernels_origin() -> str:
+    """Where this process's laser kernels come from (``"ahead-of-time"`` or ``"numba"``),
+    loading them if no laser was made yet."""
+    return _kernels()[1]
 
 
 class Laser:
@@ -202,15 +103,15 @@ class Laser:
         self.kept = np.full(robots, np.nan)  # the heading of each robot's directions
         self.dc = np.zeros((robots, count), dtype=np.float32)
         self.ds = np.zeros((robots, count), dtype=np.float32)
-        # compile (first process on a machine, about 2 s) or load the kernels now, not in the
-        # first tick
+        # load the kernels now, not in the first tick (numba's: compiled by the first process
+        # on a machine, about 2 s, or loaded from its cache)
+        self._cast = _kernels()[0]
         try:
             self._warm_up()
         except OSError as e:  # the cache folder took the index, not the code (disk full, ...)
             log.warning("cannot cache the laser's compiled code (%s): compiled in this process",
                         e)
-            for kernel in _KERNELS:
-                kernel._cache.disable()
+            importlib.import_module("._laser_kernels", __package__).disable_cache()
             self._warm_up()
 
     def _warm_up(self) -> None:
@@ -223,8 +124,13 @@ class Laser:
         never sees its own robot); ``centres`` (N, 2) are every robot's positions (fewer than
         two: walls only)."""
         out = np.empty((len(rows), len(self.bearings)), dtype=np.float32)
-        _cast(out, origins, yaws, rows, centres, self.segs, self.bearings, self.kept, self.dc,
-              self.ds, self.radius, self.start, self.resolution, self.max_range)
+        # the arrays as the kernel takes them (the ahead-of-time kernel checks no dtype)
+        self._cast(out, np.ascontiguousarray(origins, dtype=np.float64),
+                   np.ascontiguousarray(yaws, dtype=np.float64),
+                   np.ascontiguousarray(rows, dtype=np.intp),
+                   np.ascontiguousarray(centres, dtype=np.float64), self.segs, self.bearings,
+                   self.kept, self.dc, self.ds, self.radius, self.start, self.resolution,
+                   self.max_range)
         return out
 
     def directions(self, row: int) -> tuple[np.ndarray, np.ndarray]:

@@ -83,16 +83,33 @@ class FeatureSpec:
         per = (count - 1) / self.fov
         return [int(math.floor(b * per + 0.5)) for b in self.beams]
 
+    def _reduce_at(self, count: int) -> np.ndarray | None:
+        """The indices ``np.minimum.reduceat`` takes to give each beam's window minimum at its
+        even positions (``lo, hi`` of each window in turn; the last window's ``hi`` is dropped
+        when it is the scan's end, the reduction then runs to it); None when another window
+        ends at the scan's end (:meth:`extract` then takes the windows one by one)."""
+        key = ("reduceat", count)
+        if key not in self._cache:
+            pairs = [i for window in self._slices(count) for i in window]
+            if pairs[-1] == count:
+                pairs.pop()
+            self._cache[key] = (np.array(pairs, dtype=np.intp) if max(pairs) < count
+                                else None)
+        return self._cache[key]
+
     def extract(self, ranges, yaw: float = 0.0) -> np.ndarray:
         r = np.asarray(ranges)
         if r.ndim != 1 or r.size < 2:
             raise FeatureError(f"ranges must be a 1-D scan, got shape {r.shape}")
         out = np.empty(self.dim, dtype=np.float64)
-        for k, (lo, hi) in enumerate(self._slices(r.size)):
-            v = float(r[lo]) if hi - lo == 1 else float(r[lo:hi].min())
-            if not v >= 0.0:  # NaN or negative: treat as no reading (far)
-                v = self.clamp
-            out[k] = min(v, self.clamp) / self.scale
+        n = len(self.beams)
+        at = self._reduce_at(r.size)
+        if at is not None:  # every window's minimum in one call (as the loop below gives)
+            v = np.minimum.reduceat(r, at)[::2].astype(np.float64)
+        else:
+            v = np.array([r[lo:hi].min() for lo, hi in self._slices(r.size)], dtype=np.float64)
+        v[~(v >= 0.0)] = self.clamp  # NaN or negative: treat as no reading (far)
+        np.divide(np.minimum(v, self.clamp), self.scale, out=out[:n])
         if self.heading == "lr":
             out[-1] = HEADING_RIGHT if math.cos(yaw) >= 0.0 else HEADING_LEFT
         return out

@@ -37,6 +37,9 @@ __all__ = [
     "load_snapshot",
 ]
 
+# vectors :meth:`DemonstrationLearner.observe` queues at most before learning them in one call
+LEARN_BATCH = 256
+
 log = logging.getLogger(__name__)
 
 
@@ -112,7 +115,10 @@ class DemonstrationLearner:
         if classifier is None:
             tree_params.setdefault("default_label", actions.names[0])
             classifier = HypersphereClassifier(**tree_params)
-        self.classifier = classifier
+        # vectors offered but not yet learned (see ``classifier``)
+        self._pending_x: list[np.ndarray] = []
+        self._pending_y: list[str] = []
+        self._classifier = classifier
         prov = dict(provenance or {})
         self.vectors = int(prov.get("vectors", 0))        # observations offered to the tree
         self.seen = int(prov.get("seen", 0))              # observations received
@@ -146,12 +152,37 @@ class DemonstrationLearner:
         self._learn(x, label)
         return True
 
+    @property
+    def classifier(self):
+        """The tree (``rhbl.HypersphereClassifier``), with every vector offered so far learned:
+        :meth:`observe` queues its vectors (up to ``LEARN_BATCH``) and they are learned in one
+        ``partial_fit`` when the tree is read (a prediction, its size, a save, ...) or the
+        queue is full, in the order offered: the same tree as one ``partial_fit`` per vector,
+        without the cost of a call per vector."""
+        self._flush()
+        return self._classifier
+
+    @classifier.setter
+    def classifier(self, clf) -> None:
+        self._flush()  # the queued vectors belong to the tree they were offered to
+        self._classifier = clf
+
+    def _flush(self) -> None:
+        if self._pending_x:
+            X = np.array(self._pending_x, dtype=np.float64).reshape(len(self._pending_x), -1)
+            y = self._pending_y
+            self._pending_x, self._pending_y = [], []
+            self._classifier.partial_fit(X, y)
+
     def _learn(self, x: np.ndarray, label: str) -> None:
-        self.classifier.partial_fit(x.reshape(1, -1), [label])
+        self._pending_x.append(x)
+        self._pending_y.append(label)
         self.vectors += 1
         if self._rec_x is not None:
             self._rec_x.append(x)
             self._rec_y.append(label)
+        if len(self._pending_x) >= LEARN_BATCH:
+            self._flush()
 
     @property
     def recording(self) -> bool:
@@ -167,8 +198,10 @@ class DemonstrationLearner:
         return X, np.array(self._rec_y, dtype=str)
 
     def observe_vector(self, x: np.ndarray, label: str) -> bool:
-        """Offer an already extracted feature vector (no sample selection)."""
+        """Offer an already extracted feature vector (no sample selection), learned at once (a
+        bad vector raises here, not when the tree is next read)."""
         self._learn(np.asarray(x, dtype=np.float64).reshape(-1), label)
+        self._flush()
         self.seen += 1
         return True
 
@@ -271,10 +304,17 @@ class TreePolicy:
 
     def __init__(self, classifier, features: FeatureSpec, actions: ActionSet,
                  metadata: Mapping | None = None):
-        self.classifier = classifier
+        self._classifier = classifier
+        self._learner: DemonstrationLearner | None = None
         self.features = features
         self.actions = actions
         self.metadata = dict(metadata or {})
+
+    @property
+    def classifier(self):
+        """The tree; that of a learner (:meth:`from_learner`) as it is now, every vector it was
+        offered learned (the learner may have replaced its tree, by a compaction)."""
+        return self._classifier if self._learner is None else self._learner.classifier
 
     @classmethod
     def load(cls, path: str | Path, features: FeatureSpec | None = None,
@@ -285,7 +325,10 @@ class TreePolicy:
 
     @classmethod
     def from_learner(cls, learner: DemonstrationLearner) -> TreePolicy:
-        return cls(learner.classifier, learner.features, learner.actions, learner.metadata())
+        """The learner's tree as it grows (what drives a corrective round)."""
+        policy = cls(None, learner.features, learner.actions, learner.metadata())
+        policy._learner = learner
+        return policy
 
     def reset(self) -> None:
         pass

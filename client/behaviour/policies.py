@@ -298,6 +298,7 @@ class Demonstrator:
         # (rotations are always kept: a committed rotation in a tight spot is how the expert
         # gets out, and dropping it leaves the learner pinned)
         self.consistent = (reactive is None or label.startswith("rot")
+                           or getattr(self.policy, "acts_reactively", False)
                            or reactive(ranges) == label)
         if self._left > 0 and float(np.min(ranges)) < self.safety:
             self._left = 0
@@ -393,6 +394,12 @@ class ReactiveFollower(Policy):
 
     def act(self, ranges, pose=None) -> str:
         return self.label(ranges)
+
+    @property
+    def acts_reactively(self) -> bool:
+        """True when ``act`` is ``label``: every label is then the reactive one (the
+        :class:`Demonstrator` need not compute it twice)."""
+        return type(self).act is ReactiveFollower.act
 
 
 class ReactiveMazeTeacher(ReactiveFollower):

@@ -3,12 +3,16 @@
 Every tree here is grown twice, once by the kernels and once by the reference, from the same
 vectors; the two must agree exactly: every array of the tree (centres, radii, parents, depths,
 labels), the counters, the height, the children, and the winner of every query under every
-search (compiled descent and brute force, the reference's single-query scan, brute force and
-descent).
+search (compiled: the descent on the node table and on the search table, single queries and
+batches, brute force; the reference's single-query scan, brute force and descent). Every test
+runs twice: with the kernels compiled ahead of time (``setup.py``; skipped where they are not
+built) and with numba's.
 """
 
 from __future__ import annotations
 
+import importlib
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -19,10 +23,31 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import rhbl
+import rhbl.tree
 from rhbl import HypersphereClassifier, SphereTree
 
 DATA = Path(__file__).parent / "data"
 SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+
+@pytest.fixture(autouse=True, scope="module", params=["ahead-of-time", "numba"])
+def kernels(request):
+    """The kernels every tree of the module is grown and searched with."""
+    if request.param == "ahead-of-time":
+        aot = rhbl.tree._ahead_of_time()
+        if aot is None:
+            pytest.skip("no kernels compiled ahead of time (setup.py: no C compiler, or the "
+                        "source changed since make install)")
+        chosen = rhbl.tree._Kernels(aot, "ahead-of-time")
+    else:
+        jit = importlib.import_module("rhbl._kernels")
+        jit.load()
+        chosen = rhbl.tree._Kernels(jit, "numba")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(rhbl.tree, "_kernels", lambda: chosen)
+        yield request.param
+
 
 # a coarse grid makes coincident centres (relabels in place), duplicates, corners (radius 0)
 # and vectors on sphere boundaries likely
@@ -69,6 +94,10 @@ def assert_same_tree(a: HypersphereClassifier, b: HypersphereClassifier) -> None
 def assert_same_winners(tree: SphereTree, Q: np.ndarray) -> np.ndarray:
     """Every search finds the same winner for every row of ``Q``; returns the winners."""
     want = np.array([tree.apply_one(q, compiled=False) for q in Q], dtype=np.int64)
+    tree._changed()  # single queries: on the node table first, then on the search table
+    assert [tree.apply_one(q) for q in Q] == want.tolist()
+    walked = tree._searched(Q, "descent", True, walk=True)[0]
+    np.testing.assert_array_equal(walked, want, err_msg="descent on the node table")
     for compiled in (True, False):
         for algorithm in ("auto", "brute", "descent"):
             got = tree.apply(Q, algorithm, compiled=compiled)
@@ -216,17 +245,23 @@ def test_compiled_parameter():
         HypersphereClassifier("a", compiled="yes").fit([[0.2]], ["b"])
 
 
-def test_importing_rhbl_does_not_import_numba():
-    """numba is imported (and the kernels loaded) by the first classifier made (or tree built),
-    not by ``import rhbl``."""
-    code = ("import sys, rhbl; assert 'numba' not in sys.modules, 'numba imported'; "
-            "rhbl.load({path!r}); assert 'numba' in sys.modules")
-    subprocess.run([sys.executable, "-c", code.format(path=str(DATA / "main-v1-int.rhbl"))],
-                   check=True)
-    code = ("import sys, rhbl; rhbl.HypersphereClassifier('a', compiled=False); "
-            "assert 'numba' not in sys.modules; rhbl.HypersphereClassifier('a'); "
-            "assert 'rhbl._kernels' in sys.modules")
-    subprocess.run([sys.executable, "-c", code], check=True)
+def test_importing_rhbl_does_not_import_numba(kernels):
+    """The kernels are loaded by the first classifier made (or tree built), not by ``import
+    rhbl``; numba is imported only for its kernels (none compiled ahead of time, or
+    ``RHBL_KERNELS=jit``)."""
+    code = ("import sys, rhbl, rhbl.tree; assert 'numba' not in sys.modules, 'numba imported'; "
+            "rhbl.load({path!r}); assert rhbl.tree._kernels.cache_info().currsize == 1; "
+            "origin = rhbl.tree.load_kernels(); "
+            "assert ('numba' in sys.modules) == (origin == 'numba'), origin; print(origin)")
+    env = {**os.environ, "RHBL_KERNELS": "jit" if kernels == "numba" else ""}
+    done = subprocess.run([sys.executable, "-c", code.format(path=str(DATA / "main-v1-int.rhbl"))],
+                          check=True, env=env, capture_output=True, text=True)
+    assert done.stdout.strip() == kernels
+    code = ("import sys, rhbl, rhbl.tree; rhbl.HypersphereClassifier('a', compiled=False); "
+            "assert 'numba' not in sys.modules; "
+            "assert rhbl.tree._kernels.cache_info().currsize == 0; rhbl.HypersphereClassifier('a'); "
+            "assert rhbl.tree._kernels.cache_info().currsize == 1")
+    subprocess.run([sys.executable, "-c", code], check=True, env=env)
 
 
 def test_pickled_and_copied_trees_grow_on_alike():

@@ -149,9 +149,10 @@ def test_modules_import_one_way():
     """_reference <- tree <- snapshot, compact <- classifier: no import circle, and no import
     hidden in a function; the kernels (numba) are the one module loaded on first use."""
     root = Path(rhbl.__file__).parent
-    assert _imports(root / "_kernels.py") == (set(), [])
+    assert _imports(root / "_layout.py") == (set(), [])
+    assert _imports(root / "_kernels.py") == ({"_layout"}, [])
     assert _imports(root / "_reference.py") == (set(), [])
-    assert _imports(root / "tree.py") == ({"_reference"}, [])
+    assert _imports(root / "tree.py") == ({"_layout", "_reference"}, [])
     assert 'importlib.import_module("._kernels", __package__)' in (root / "tree.py").read_text()
     assert _imports(root / "snapshot.py") == ({"_errors"}, [])
     assert _imports(root / "compact.py") == ({"tree"}, [])

@@ -1,8 +1,11 @@
 """The vectorised laser against a plain per-beam ray cast, on random free poses of every shipped
-world (the corridor property test in test_world.py checks a box analytically)."""
+world (the corridor property test in test_world.py checks a box analytically). Every test runs
+twice: with the cast compiled ahead of time (setup.py; skipped where it is not built) and with
+numba's."""
 
 from __future__ import annotations
 
+import importlib
 import math
 
 import numpy as np
@@ -11,6 +14,20 @@ import pytest
 import server
 from server import laser
 from server.world import LASER, World, load_world
+
+
+@pytest.fixture(autouse=True, scope="module", params=["ahead-of-time", "numba"])
+def kernels(request):
+    """The cast every laser of the module uses."""
+    cast, origin = laser._kernels()
+    if request.param == "numba":
+        cast, origin = importlib.import_module("server._laser_kernels").cast, "numba"
+    elif origin != "ahead-of-time":
+        pytest.skip("no laser kernel compiled ahead of time (setup.py: no C compiler, or the "
+                    "source changed since make install)")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(laser, "_kernels", lambda: (cast, origin))
+        yield request.param
 
 
 def dense_walls(segments, x, y, dc, ds) -> np.ndarray:

@@ -172,3 +172,60 @@ def test_learner_sample_selection():
     dedup = DemonstrationLearner(FEATURES["wall"], DEFAULT_ACTIONS, min_delta=0.01)
     assert [dedup.observe(scan, 0.0, "fwd") for _ in range(3)] == [True, False, False]
     assert dedup.observe(scan, 0.0, "fwd-left")  # a new label is always offered
+
+
+def _windows_one_by_one(spec: FeatureSpec, ranges, yaw: float) -> np.ndarray:
+    """The features as extract computed them window by window (before np.minimum.reduceat)."""
+    r = np.asarray(ranges)
+    out = np.empty(spec.dim, dtype=np.float64)
+    for k, (lo, hi) in enumerate(spec._slices(r.size)):
+        v = float(r[lo]) if hi - lo == 1 else float(r[lo:hi].min())
+        out[k] = min(v if v >= 0.0 else spec.clamp, spec.clamp) / spec.scale
+    if spec.heading == "lr":
+        out[-1] = HEADING_RIGHT if np.cos(yaw) >= 0.0 else HEADING_LEFT
+    return out
+
+
+def test_features_in_one_call_equal_the_windows_one_by_one():
+    """Every shipped spec and odd ones (a window reaching past either end of the scan, beams
+    out of order) on scans of float32 and float64 with NaN, negative, zero and inf readings."""
+    rng = np.random.default_rng(0)
+    specs = [*FEATURES.values(), FeatureSpec(beams=(180.0, 0.0, 90.0), window=20.0),
+             FeatureSpec(beams=(170.0, 180.0), window=15.0, heading="lr"),
+             FeatureSpec(beams=(0.0,), window=200.0)]
+    for spec in specs:
+        for count in (2, 3, 90, 360, 361):
+            for dtype in (np.float32, np.float64):
+                for _ in range(40):
+                    r = (rng.random(count) * 3).astype(dtype)
+                    k = int(rng.integers(0, 4))
+                    r[rng.integers(0, count, k)] = rng.choice([np.nan, -1.0, 0.0, np.inf], k)
+                    yaw = float(rng.uniform(-4, 4))
+                    assert (spec.extract(r, yaw).tobytes()
+                            == _windows_one_by_one(spec, r, yaw).tobytes()), (spec, r)
+
+
+def test_learner_learns_queued_vectors_whenever_the_tree_is_read():
+    """observe queues vectors; every read of the tree (the learner's, or a TreePolicy's made
+    from it) sees all of them, in the order offered: the same tree as one partial_fit per
+    vector."""
+    from rhbl import HypersphereClassifier
+
+    spec = FEATURES["wall"]
+    rng = np.random.default_rng(1)
+    scans = (rng.random((700, 360)) * 2.5).astype(np.float32)
+    labels = rng.choice(DEFAULT_ACTIONS.names, len(scans))
+    learner = DemonstrationLearner(spec, DEFAULT_ACTIONS)
+    drives = TreePolicy.from_learner(learner)  # a corrective round's: the tree as it grows
+    one = HypersphereClassifier(default_label=DEFAULT_ACTIONS.names[0])
+    for i, (r, label) in enumerate(zip(scans, labels, strict=True)):
+        assert learner.observe(r, 0.0, label)
+        one.partial_fit(spec.extract(r)[None, :], [label])
+        if i in (0, 1, 17, 300, 650):
+            want = one.predict_one(spec.extract(scans[i // 2]))
+            assert drives.act(scans[i // 2], (0.0, 0.0, 0.0)) == want
+            assert drives.classifier.node_count_ == one.node_count_
+            assert learner.nodes == one.node_count_
+            assert learner.predict(scans[i // 2]) == want
+    assert learner.classifier.tree_equal(one) and learner.vectors == len(scans)
+    assert learner.classifier.n_seen_ == one.n_seen_ == len(scans)
