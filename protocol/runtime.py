@@ -186,26 +186,49 @@ REDELIVER_S = 1.0
 _stopping = threading.Event()
 
 
-def _raise_exit(signum, _frame) -> None:
-    if not _stopping.is_set():
-        _stopping.set()
+# a stop signal that lands in one of these is delivered again shortly instead of raised there:
+# Python swallows (and prints as "Exception ignored in ...") an exception raised in the import
+# machinery's lock callbacks (frozen code) and in ``__del__``
+DEFER_S = 0.05
+_SWALLOWING = ("<frozen importlib",)
+
+
+def _swallowed_here(frame) -> bool:
+    """Whether an exception raised in ``frame`` would be swallowed by the interpreter."""
+    code = frame.f_code if frame is not None else None
+    return code is not None and (code.co_name == "__del__"
+                                 or code.co_filename.startswith(_SWALLOWING))
+
+
+def _raise_exit(signum, frame) -> None:
+    first = not _stopping.is_set()
+    _stopping.set()
+    if _swallowed_here(frame):  # raised here it would be lost, with a traceback printed
+        threading.Thread(target=_redeliver, args=(signum, DEFER_S, False), name="stop-signal",
+                         daemon=True).start()
+        return
+    if first:
         threading.Thread(target=_redeliver, args=(signum,), name="stop-signal",
                          daemon=True).start()
     raise SystemExit(EXIT_OK)
 
 
-def _redeliver(signum: int) -> None:
-    """Deliver the stop signal again every ``REDELIVER_S`` until its handler is gone (``run_process``
-    ignores stop signals once the body has unwound). The ``SystemExit`` a signal raises lands
-    wherever the main thread happens to be, and code there can swallow it: a signal that came
-    during numpy's first lazy ``import numpy.random`` was lost that way, and the teacher went on
-    waiting for a learner until it was killed."""
+def _redeliver(signum: int, every: float = REDELIVER_S, loop: bool = True) -> None:
+    """Deliver the stop signal again every ``every`` s until its handler is gone
+    (``run_process`` ignores stop signals once the body has unwound), or once (``loop`` false:
+    a signal deferred by ``_raise_exit``). The ``SystemExit`` a signal raises lands wherever the
+    main thread happens to be, and code there can swallow it: a signal that came during numpy's
+    first lazy ``import numpy.random`` was lost that way, and the teacher went on waiting for a
+    learner until it was killed."""
     while True:
-        time.sleep(REDELIVER_S)
+        time.sleep(every)
         if signal.getsignal(signum) is not _raise_exit:
             return
-        log.info("stop signal %d not acted on after %g s: delivered again", signum, REDELIVER_S)
+        if loop:
+            log.info("stop signal %d not acted on after %g s: delivered again", signum, every)
         signal.pthread_kill(threading.main_thread().ident, signum)
+        if not loop:
+            return
 
 
 def install_signal_handlers() -> None:
