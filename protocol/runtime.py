@@ -39,12 +39,11 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import zenoh
 
-from protocol import keys
+from protocol import arguments, files, keys
 from protocol.session import config_from_args
 
 __all__ = [
@@ -144,31 +143,24 @@ def add_report_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--log-level", default=os.environ.get("RHBL_LOG_LEVEL", "INFO"),
                         choices=["DEBUG", "INFO", "WARNING", "ERROR"], type=str.upper,
                         help="logging level (default: INFO or $RHBL_LOG_LEVEL)")
-    parser.add_argument("--stats", metavar="FILE", default=None,
+    parser.add_argument("--stats", metavar="FILE", default=None, type=arguments.output_file,
                         help="at exit, write the process's counters to FILE as JSON (with its "
-                             "role and exit code); the file is replaced")
+                             "role and exit code); the file is replaced (a regular file or a "
+                             "new one only)")
 
 
 def check_stats_path(path: str | None) -> None:
-    """``--stats FILE`` must be writable: its folder exists, it is not a folder (ValueError)."""
-    if path is None:
-        return
-    p = Path(path)
-    if p.is_dir():
-        raise ValueError(f"--stats {path}: is a folder, not a file")
-    if not p.parent.is_dir():
-        raise ValueError(f"--stats {path}: folder {p.parent} does not exist")
-    if not os.access(p.parent, os.W_OK):
-        raise ValueError(f"--stats {path}: folder {p.parent} is not writable")
+    """``--stats FILE`` must be writable under ``protocol.files``' rule (FileRuleError, a
+    ValueError)."""
+    if path is not None:
+        files.check_output(path, "--stats")
 
 
 def write_stats(path: str, role: str, code: int, counters: dict) -> None:
-    """``--stats FILE``: the counters as JSON, written atomically (a reader never sees half)."""
-    p = Path(path)
-    tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps({"role": role, "exit": code, **counters}, indent=1,
-                              default=str) + "\n")
-    os.replace(tmp, p)
+    """``--stats FILE``: the counters as JSON, written atomically (a reader never sees half),
+    to a regular file only (``protocol.files``)."""
+    files.write_text(path, json.dumps({"role": role, "exit": code, **counters}, indent=1,
+                                      default=str) + "\n", "--stats")
 
 
 def setup_logging(role: str, level: str = "INFO") -> None:

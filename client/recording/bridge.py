@@ -22,7 +22,7 @@ import time
 from client.recording.foxglove_schemas import ViewerFeed, ViewerMessage
 from client.recording.mcap_file import KINDS, classify
 from client.recording.tap import BusTap
-from protocol import keys
+from protocol import arguments
 from protocol.decoding import Decoder
 from protocol.runtime import EXIT_USAGE, Context, ProcessError, add_report_arguments, run_process
 from protocol.session import add_zenoh_arguments
@@ -103,24 +103,19 @@ class FoxgloveSink:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_zenoh_arguments(parser)
     parser.add_argument("--robot", action="append", dest="robots", metavar="NAME",
+                        type=arguments.key_chunk,
                         help="show this robot (repeatable; default: every robot seen)")
-    parser.add_argument("--host", default="127.0.0.1",
+    parser.add_argument("--host", default="127.0.0.1", type=arguments.host,
                         help="address the WebSocket server binds (default 127.0.0.1: this "
                              "machine only)")
-    parser.add_argument("--port", type=int, default=8765,
+    parser.add_argument("--port", type=arguments.port, default=8765,
                         help="WebSocket port (default 8765, Foxglove's default; 0 = any free)")
-    parser.add_argument("--duration", type=float, default=None, metavar="SECONDS",
+    parser.add_argument("--duration", type=arguments.seconds, default=None, metavar="SECONDS",
                         help="stop after this many seconds (default: until stopped)")
     add_report_arguments(parser)
 
 
 def main(args: argparse.Namespace) -> int:
-    for r in args.robots or []:
-        keys.check_chunk(r, "--robot")  # ValueError: one line, exit 2
-    if not 0 <= args.port <= 65535:
-        raise ValueError(f"--port must be 0..65535, got {args.port}")
-    if args.duration is not None and not args.duration > 0:
-        raise ValueError("--duration must be > 0")
     name = "all" if not args.robots else args.robots[0]  # in its liveliness token
     return run_process("foxglove", args, lambda ctx: BridgeProcess(ctx).run(),
                        ident=f"{name}-{os.getpid()}")

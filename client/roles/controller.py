@@ -27,7 +27,7 @@ from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, che
 from client.decision import Decider
 from client.player import PlayerClient
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
-from protocol import keys
+from protocol import arguments, keys
 from protocol.decoding import Decoder
 from protocol.messages import Scan, TreeNotice
 from protocol.runtime import EXIT_NO_SERVER, EXIT_USAGE, Context, ProcessError
@@ -42,26 +42,37 @@ SOURCE = "controller"
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_process_arguments(parser)
     src = parser.add_mutually_exclusive_group(required=True)
-    src.add_argument("--tree", metavar="PATH", help="a snapshot written by the learner")
+    src.add_argument("--tree", metavar="PATH", type=arguments.input_file,
+                     help="a snapshot written by the learner")
     src.add_argument("--from-learner", action="store_true",
                      help="fetch the learner's latest snapshot with a zenoh query")
     parser.add_argument("--follow", action="store_true",
                         help="with --from-learner: swap in each newer tree the learner announces")
     parser.add_argument("--features", choices=sorted(FEATURES),
                         help="expected feature specification (a tree trained otherwise is an error)")
-    parser.add_argument("--seconds", type=float, default=None, metavar="S",
+    parser.add_argument("--seconds", type=arguments.seconds, default=None, metavar="S",
                         help="stop after driving S seconds of sim time (default: until stopped)")
-    parser.add_argument("--query-timeout", type=float, default=5.0, metavar="SECONDS",
+    parser.add_argument("--query-timeout", type=arguments.seconds, default=5.0, metavar="SECONDS",
                         help="how long one query waits for the learner's snapshot (default 5)")
-    parser.add_argument("--wait-tree", type=float, default=None, metavar="SECONDS",
+    parser.add_argument("--wait-tree", type=arguments.seconds_or_zero, default=None,
+                        metavar="SECONDS",
                         help="with --from-learner: wait this long for the learner's first tree "
                              "(queried again at each tree notice and every second, logging "
                              "every few seconds; 0 = forever). Default: forever with --follow, "
                              "otherwise one query (no learner or no tree yet: exit 4)")
 
 
+def check(args: argparse.Namespace) -> None:
+    """What the options say together, before any connection (ValueError: exit 2)."""
+    if args.follow and not args.from_learner:
+        raise ValueError("--follow needs --from-learner")
+    if args.wait_tree is not None and not args.from_learner:
+        raise ValueError("--wait-tree goes with --from-learner")
+
+
 def main(args: argparse.Namespace) -> int:
-    return run_role("controller", args, lambda ctx: ControllerProcess(ctx).run())
+    return run_role("controller", args, lambda ctx: ControllerProcess(ctx).run(),
+                    check=lambda: check(args))
 
 
 def _policy_from(clf_bytes_or_path, features: str | None) -> TreePolicy:
@@ -117,8 +128,6 @@ class ControllerProcess:
 
     def __init__(self, ctx: Context):
         self.ctx, self.args = ctx, ctx.args
-        if self.args.follow and not self.args.from_learner:
-            raise ProcessError("controller: --follow needs --from-learner", EXIT_USAGE)
         self.policy: TreePolicy | None = None  # swapped between scans by the follower
         # subscribed before the first query: a tree announced meanwhile is not missed
         self.follower = _Follower(ctx, self.swap) if self.args.follow else None

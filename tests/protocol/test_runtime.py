@@ -99,9 +99,14 @@ def test_a_stats_file_that_cannot_be_written_is_bad_input_before_any_session(tmp
     from protocol.runtime import EXIT_USAGE, run_process
 
     opened = []
-    args = _args(tmp_path, 1, stats=str(tmp_path / "missing" / "s.json"))  # port 1: no session
+    (tmp_path / "file").write_text("")  # its folder cannot be made: a file is in its place
+    args = _args(tmp_path, 1, stats=str(tmp_path / "file" / "s.json"))  # port 1: no session
     assert run_process("tester", args, lambda ctx: opened.append(ctx)) == EXIT_USAGE
     assert opened == []
+    os.mkfifo(tmp_path / "fifo")  # nor a FIFO (it would block or be replaced)
+    args = _args(tmp_path, 1, stats=str(tmp_path / "fifo"))
+    assert run_process("tester", args, lambda ctx: opened.append(ctx)) == EXIT_USAGE
+    assert opened == [] and (tmp_path / "fifo").is_fifo()
 
 
 # a stop signal that arrives while ``__del__`` runs (as one can while the import machinery's lock
