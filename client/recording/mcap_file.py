@@ -357,6 +357,9 @@ class RecordedMessage:
         return decode(self.kind, self.data)
 
 
+_MESSAGE = struct.Struct("<HIQQ")  # a message record's fixed fields
+
+
 class _Damaged(Exception):
     """A complete record that does not parse (the file is damaged there)."""
 
@@ -383,7 +386,8 @@ class RecordingReader:
         self.metadata: dict[str, dict[str, str]] = {}
         self.messages_read = 0
         self._schemas: dict[int, str] = {}
-        self._channels: dict[int, tuple[str, str, str]] = {}  # id -> (topic, encoding, schema)
+        # id -> (topic, encoding, schema, kind, robot): classified once per channel
+        self._channels: dict[int, tuple[str, str, str, str, str]] = {}
         self._complete = False  # the data section's end was read: every message is
 
     def messages(self, viewer: bool = False) -> Iterator[RecordedMessage]:
@@ -462,7 +466,7 @@ class RecordingReader:
                 ) -> Iterator[RecordedMessage]:
         """One record outside or inside a chunk; the message it is, if any."""
         from mcap.data_stream import ReadDataStream
-        from mcap.records import Channel, Message, Metadata, Schema
+        from mcap.records import Channel, Metadata, Schema
 
         stream = ReadDataStream(io.BytesIO(body))
         try:
@@ -474,32 +478,39 @@ class RecordingReader:
                 if ch.schema_id and ch.schema_id not in self._schemas:
                     raise _Damaged(f"channel {ch.id} names schema {ch.schema_id}, never "
                                    f"declared")
+                kind, robot = (classify(ch.topic) if ch.message_encoding == ENCODING
+                               else ("viewer", ""))
                 self._channels[ch.id] = (ch.topic, ch.message_encoding,
-                                         self._schemas.get(ch.schema_id, ""))
+                                         self._schemas.get(ch.schema_id, ""), kind, robot)
             elif opcode == Opcode.METADATA:
                 md = Metadata.read(stream)
                 self.metadata[md.name] = dict(md.metadata)
             elif opcode == Opcode.MESSAGE:
-                if len(body) < 22:
-                    raise _Damaged(f"a message record of {len(body)} bytes (at least 22)")
-                m = Message.read(stream, len(body))
-                ch = self._channels.get(m.channel_id)
-                if ch is None:
-                    raise _Damaged(f"a message on channel {m.channel_id}, never declared")
-                topic, encoding, schema = ch
-                if encoding != ENCODING:
-                    if not viewer:
-                        return
-                    kind, robot = "viewer", ""
-                else:
-                    kind, robot = classify(topic)
-                self.messages_read += 1
-                yield RecordedMessage(topic, kind, robot, m.data, m.log_time,
-                                      m.publish_time, encoding, schema)
+                m = self._message(body, 0, len(body), viewer)
+                if m is not None:
+                    yield m
         except _Damaged:
             raise
         except Exception as exc:  # noqa: BLE001 - struct.error, EndOfFile, UnicodeDecodeError
             raise _Damaged(f"{type(exc).__name__}: {exc}") from None
+
+    def _message(self, buf: bytes, start: int, end: int, viewer: bool
+                 ) -> RecordedMessage | None:
+        """The message record in ``buf[start:end]`` (channel u16, sequence u32, log and publish
+        times u64, then the payload); None for a viewer message when not ``viewer``."""
+        if end - start < _MESSAGE.size:
+            raise _Damaged(f"a message record of {end - start} bytes (at least "
+                           f"{_MESSAGE.size})")
+        channel, _seq, log_time, publish_time = _MESSAGE.unpack_from(buf, start)
+        ch = self._channels.get(channel)
+        if ch is None:
+            raise _Damaged(f"a message on channel {channel}, never declared")
+        topic, encoding, schema, kind, robot = ch
+        if kind == "viewer" and not viewer:
+            return None
+        self.messages_read += 1
+        return RecordedMessage(topic, kind, robot, buf[start + _MESSAGE.size:end], log_time,
+                               publish_time, encoding, schema)
 
     def _chunk(self, body: bytes, at: int, viewer: bool) -> Iterator[RecordedMessage]:
         """The records of a chunk, decompressed at most to its declared size (``MAX_CHUNK``)."""
@@ -534,7 +545,12 @@ class RecordingReader:
             if pos + 9 + length > len(data):
                 raise _Damaged(f"a record of {length} bytes at byte {pos} of its chunk runs "
                                f"past the chunk's end")
-            yield from self._record(opcode, data[pos + 9:pos + 9 + length], at, viewer)
+            if opcode == Opcode.MESSAGE:  # the common case, without copying the record
+                m = self._message(data, pos + 9, pos + 9 + length, viewer)
+                if m is not None:
+                    yield m
+            else:
+                yield from self._record(opcode, data[pos + 9:pos + 9 + length], at, viewer)
             pos += 9 + length
 
 

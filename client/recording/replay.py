@@ -97,11 +97,14 @@ def sensor_messages(path, robots: list[str] | None = None, worlds: bool = False
     in memory), each topic checked (``_checked_robot``). ValueError naming the file for a
     recording that is damaged or holds a topic that is not a plain key."""
     want = (*SENSOR_KINDS, "world") if worlds else SENSOR_KINDS
+    checked: dict[str, str] = {}  # topic -> its robot, once checked
     try:
         for n, m in enumerate(read_recording(path)):
             if m.kind not in want:
                 continue
-            robot = _checked_robot(m, n, path)
+            robot = checked.get(m.key)
+            if robot is None:
+                robot = checked[m.key] = _checked_robot(m, n, path)
             if not robots or robot in robots:
                 yield m
     except RecordingError as exc:
