@@ -13,6 +13,7 @@ end to end, with a bounded timeout (no hang).
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -83,3 +84,71 @@ def test_a_hostile_value_exits_2_in_one_line_end_to_end(command, places):
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1 and option_name(action) in lines[0], r.stderr
     assert "Traceback" not in r.stderr
+
+
+ISSUE_CASES = [  # issue 21's list: each was a traceback, silence or the wrong code
+    ("demo --console nonsense", "--console"),
+    ("experiment wall-following --trials 0", "--trials"),
+    ("evaluate --world room --tree {tree} --spheres 99999,0 --plot {tmp}/x.png", "--spheres"),
+    ("learner --out /proc/nope/t.rhbl --features wall", "--out"),
+    ("learner --out {tmp}/l.rhbl --stride 0", "--stride"),
+    ("teacher --perturb 2", "--perturb"),
+    ("controller --tree {tree} --query-timeout -1", "--query-timeout"),
+    ("server --duration -1", "--duration"),
+    ("foxglove --duration -1", "--duration"),
+    ("teacher --seconds -1", "--seconds"),
+    ("controller --tree {tree} --seconds -1", "--seconds"),
+    ("record --out {tmp}/r.mcap --chunk-seconds 0", "--chunk-seconds"),
+    ("record --out {tmp}/r.mcap --chunk-seconds nan", "--chunk-seconds"),
+    ("learner --out {tmp}/l.rhbl --max-nodes -1", "--max-nodes"),
+    ("learner --out {tmp}/l.rhbl --scan-buffer 0", "--scan-buffer"),
+    ("learner --out {tmp}/l.rhbl --snapshot-every 0", "--snapshot-every"),
+    ("learner --out {tmp}/l.rhbl --match-timeout nan", "--match-timeout"),
+    ("evaluate --world room --tree {tree} --episodes -1", "--episodes"),
+    ("demo --starts -1", "--starts"),
+    ("train --from-recording {rec} --out {tmp}/t.rhbl --world room", "--world"),
+    ("train --from-recording {rec} --out {tmp}/t.rhbl --resume {tree}", "--resume"),
+    ("server --listen tcp/127.0.0.1:99999", "--listen"),
+    ("demo --speedup -1", "--speedup"),
+    ("server --zenoh-config {tmp}/bad.json5", "bad.json5"),
+    ("learner --out {tmp}/l.rhbl --resume /nonexistent", "--resume"),
+    ("train --world room --out /dev/null", "--out"),
+    ("inspect {tmp}/fifo", "fifo"),
+    ("replay {tmp}/fifo", "fifo"),
+    ("train --from-recording {tmp}/fifo --out {tmp}/t.rhbl", "fifo"),
+    ("compact --tree {tree} --out {tmp}/c.rhbl --data {tmp}/fifo", "fifo"),
+]
+
+
+@pytest.fixture(scope="module")
+def issue_files(tmp_path_factory):
+    import numpy as np
+
+    from client.recording.mcap_file import RecordingWriter
+    from protocol import keys
+    from protocol import messages as m
+    from rhbl import HypersphereClassifier
+
+    d = tmp_path_factory.mktemp("issue")
+    tree = d / "tree.rhbl"
+    HypersphereClassifier().fit(np.array([[0.0, 0.0], [1.0, 1.0]]), ["a", "b"]).save(tree)
+    rec = d / "run.mcap"
+    with RecordingWriter(rec, viewer=False) as w:
+        w.write(keys.scan_key("r0"), m.Scan(ts=0.0, id=0, ranges=np.ones(36, np.float32))
+                .encode(), 10**9)
+    (d / "bad.json5").write_text('{ mode: "peer", ')
+    os.mkfifo(d / "fifo")
+    return {"tmp": str(d), "tree": str(tree), "rec": str(rec)}
+
+
+@pytest.mark.parametrize("line, named", ISSUE_CASES)
+def test_the_issues_cases_are_one_line_and_exit_2(line, named, issue_files):
+    argv = line.format(**issue_files).split()
+    r = subprocess.run([sys.executable, "-m", "lab.cli", *argv, "--connect", "tcp/127.0.0.1:9"]
+                       if argv[0] not in ("train", "evaluate", "experiment", "demo", "inspect",
+                                          "compact")
+                       else [sys.executable, "-m", "lab.cli", *argv],
+                       cwd=ROOT, capture_output=True, text=True, timeout=120)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    assert len(lines) == 1 and named in lines[0] and "Traceback" not in r.stderr, r.stderr
