@@ -25,11 +25,12 @@ a connection.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import re
 import stat
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -59,6 +60,7 @@ __all__ = [
     "seconds",
     "seconds_or_zero",
     "seed",
+    "syntax_only",
     "text",
     "token",
 ]
@@ -148,6 +150,26 @@ seconds = Number(float, 0, MAX_SECONDS, low_open=True, name="seconds")
 seconds_or_zero = Number(float, 0, MAX_SECONDS, name="seconds")
 
 
+_files_checked = True  # False inside ``syntax_only()``
+
+
+@contextlib.contextmanager
+def syntax_only() -> Iterator[None]:
+    """Parse a command line meant for another machine (a compose file's, whose paths exist in
+    its containers): inside this block the path types check the text only, not the files."""
+    global _files_checked
+    before, _files_checked = _files_checked, False
+    try:
+        yield
+    finally:
+        _files_checked = before
+
+
+def files_checked() -> bool:
+    """Whether path arguments are checked against the file system (see ``syntax_only``)."""
+    return _files_checked
+
+
 class PathArg(Checked):
     """A path under ``protocol.files``' rule: ``kind`` ``input`` (an existing regular file),
     ``output`` (a regular file or a new one; its folder is made) or ``folder`` (a folder, or a
@@ -159,6 +181,10 @@ class PathArg(Checked):
 
     def parse(self, text: str) -> str:
         if text == "" and self.empty_ok:
+            return text
+        if not _files_checked:
+            if not text:
+                raise ValueError("an empty path")
             return text
         if self.kind == "input":
             files.check_input(text)

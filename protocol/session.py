@@ -111,7 +111,10 @@ def load_config_file(path: str | Path) -> zenoh.Config:
 
 
 def _check_config_file(text: str) -> str:
-    load_config_file(text)
+    if arguments.files_checked():
+        load_config_file(text)
+    elif not text:
+        raise ValueError("an empty path")
     return text
 
 

@@ -38,6 +38,10 @@ def world_path(name: str | Path) -> Path:
 
 
 def _world(text: str) -> str:
+    from protocol.arguments import files_checked
+
+    if not files_checked() and "/" in text:  # a path on another machine (syntax_only)
+        return text
     try:
         world_path(text)
     except FileNotFoundError as exc:
