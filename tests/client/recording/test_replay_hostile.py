@@ -8,7 +8,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -53,29 +52,40 @@ def test_a_topic_that_is_not_a_plain_key_is_refused_before_any_connection(tmp_pa
 
 
 def test_huge_log_times_and_pauses_play_capped(tmp_path, free_port):
-    """Three scans: at 1 s, 10^9 s later, then at 2^64-1 ns. Played with --max-gap 0.2: every
-    scan arrives and the replay ends (it slept silently for ever, or raised OverflowError)."""
+    """Three scans: at 1 s, 10^9 s later, then at 2^64-1 ns. Played with --max-gap 0.2 and
+    --lockstep (the test answers each scan it gets, so every scan is known to have arrived):
+    every scan arrives and the replay ends (it slept silently for ever, or raised
+    OverflowError)."""
+    import queue
+
     scan = keys.scan_key("r0")
     rec = recording(tmp_path / "gaps.mcap", [(scan, 10**9), (scan, 10**9 + 10**18),
                                              (scan, 2**64 - 1)])
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    got, three = [], threading.Event()
-
-    def on(sample):
-        got.append(m.Scan.decode(sample.payload.to_bytes()).id)
-        if len(got) == 3:
-            three.set()
-
+    got: queue.Queue[int] = queue.Queue()
     with zenoh.open(make_config(mode="router", listen=[endpoint])) as session:
-        sub = session.declare_subscriber(scan, on)
-        r = rhbl("replay", str(rec), "--connect", endpoint, "--max-gap", "0.2",
-                 "--wait-subscriber", "60", "--log-level", "INFO")
-        assert r.returncode == 0, r.stderr
-        assert three.wait(30), (got, r.stderr)
+        sub = session.declare_subscriber(
+            scan, lambda s: got.put(m.Scan.decode(s.payload.to_bytes()).id))
+        replay = subprocess.Popen(
+            [sys.executable, "-m", "lab.cli", "replay", str(rec), "--connect", endpoint,
+             "--max-gap", "0.2", "--wait-subscriber", "60", "--lockstep",
+             "--lockstep-timeout", "60", "--log-level", "INFO"],
+            cwd=ROOT, stderr=subprocess.PIPE, text=True)
+        ids = []
+        try:
+            for _ in range(3):
+                ids.append(got.get(timeout=60))
+                session.put(keys.cmd_vel_key("r0", source="test"),
+                            m.VelCmd(scan_id=ids[-1], source="test").encode())
+            _, err = replay.communicate(timeout=60)
+        finally:
+            if replay.poll() is None:
+                replay.kill()
         sub.undeclare()
-    assert got == [0, 1, 2]
-    assert "2 pauses longer than 0.2 s played as 0.2 s" in r.stderr, r.stderr
-    assert "Traceback" not in r.stderr
+    assert ids == [0, 1, 2]
+    assert replay.returncode == 0, err
+    assert "2 pauses longer than 0.2 s played as 0.2 s" in err, err
+    assert "lock-step: 0 scans without an answer" in err and "Traceback" not in err, err
 
 
 def test_only_the_named_robots_keys_are_published(tmp_path):
