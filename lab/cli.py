@@ -94,7 +94,27 @@ def parse(argv: list[str]) -> tuple[str, argparse.Namespace]:
     """``(command, its parsed arguments)`` of ``rhbl ARGV...``; SystemExit(2) after one line
     on stderr for a usage error (what ``main`` does first)."""
     top = _top_parser().parse_args(argv[:1] if argv and not argv[0].startswith("-") else argv)
-    return top.command, build_parser(top.command).parse_args(argv[1:])
+    parser = build_parser(top.command)
+    args = parser.parse_args(argv[1:])
+    args._outputs = [(a.option_strings[-1] if a.option_strings else a.dest, v)
+                     for a in parser._actions if getattr(a.type, "kind", "") == "output"
+                     for v in _values(getattr(args, a.dest, None))]
+    return top.command, args
+
+
+def _values(value) -> list[str]:
+    if value is None or value == "":
+        return []
+    return [v for v in value if v] if isinstance(value, list) else [value]
+
+
+def prepare_outputs(args: argparse.Namespace) -> None:
+    """Make the folders of the output files given (``protocol.files``; FileRuleError, a
+    ValueError, when one cannot be made: /proc/nope passes the parse-time check as root)."""
+    from protocol import files
+
+    for option, path in getattr(args, "_outputs", []):
+        files.check_output(path, option, make=True)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -102,6 +122,7 @@ def main(argv: list[str] | None = None) -> int:
     command, args = parse(argv)
     top = argparse.Namespace(command=command)
     try:
+        prepare_outputs(args)  # the output files' folders made: a failure is exit 2, no work
         rc = int(args._main(args) or 0)
         sys.stdout.flush()  # a pipe is block-buffered: a closed reader shows here, not at exit
         return rc

@@ -91,6 +91,7 @@ ISSUE_CASES = [  # issue 21's list: each was a traceback, silence or the wrong c
     ("experiment wall-following --trials 0", "--trials"),
     ("evaluate --world room --tree {tree} --spheres 99999,0 --plot {tmp}/x.png", "--spheres"),
     ("learner --out /proc/nope/t.rhbl --features wall", "--out"),
+    ("train --world room --out /proc/nope/t.rhbl", "--out"),  # its folder cannot be made
     ("learner --out {tmp}/l.rhbl --stride 0", "--stride"),
     ("teacher --perturb 2", "--perturb"),
     ("controller --tree {tree} --query-timeout -1", "--query-timeout"),
