@@ -1,6 +1,6 @@
 """Structure-aware fuzzing of every key the rhbl processes listen to, and of their files.
 
-    python -m campaigns.fuzz [--per-key 10000] [--seed 0] [--only server,clients,files]
+    python -m campaigns.fuzz [--per-key 10000] [--seed 0] [--only server,clients,files,...]
 
 Messages. From a valid message of each kind the generator derives hostile ones: a field of the
 wrong type, a field missing, extra fields, NaN and infinities, huge and negative numbers and
@@ -26,6 +26,22 @@ must still be processed.
 - ``files``: a snapshot, a journal and a world file, each mutated the same way (bytes flipped,
   truncated, extended, random), loaded with the real loaders: each either loads or raises one
   typed error that names the file (never another exception).
+- ``written``: every writer of a file a person names (snapshots, ``--json``, ``--stats``,
+  ``--record`` and ``rhbl record --out`` with and without ``--overwrite``, ``--plot``) against
+  every kind of non-regular target (a character device, a FIFO, a folder, a socket, symlinks
+  to a device, a FIFO and a folder): each refused naming the path, the target unchanged (same
+  kind, same inode); a new regular file is written (the positive control).
+- ``recordings`` (``--per-key / 10`` mutations): decompression bombs (zstd 1 GiB, lz4) and
+  oversized records refused at once; a small recording cut at every byte (a prefix of its
+  messages and a note, or "not an MCAP recording" inside the magic); mutated recordings (read
+  or one error naming the file); crafted topics (wildcards, empty chunks, ``#``, ``?``, ...)
+  refused by ``rhbl replay``'s check and log times near 2^64 or 10^9 s apart played capped.
+- ``bridge`` (``--per-key / 100`` of each kind): a real ``rhbl foxglove`` sent foreign
+  Origins and Hosts, no Host, repeated headers, oversized headers, requests that are no
+  upgrade, random bytes and a header never finished: each refused (never 101), a valid
+  upgrade after each burst gets 101, the bridge alive and its log bounded.
+- ``cli``: every option of every ``rhbl`` command with the hostile values of its type
+  (``cli_hostile``): each refused by the parser, one line naming the option, exit 2.
 
 The suite runs a CI-sized campaign (tests/fuzz/); the full one is this command.
 """
@@ -601,12 +617,547 @@ def fuzz_files(per_file: int, seed: int = 0, workdir: Path | None = None) -> lis
     return results
 
 
+# ----------------------------------------------------------------------- the command line
+# The walk of every option of every ``rhbl`` command (tests/test_cli_walk.py runs it too): the
+# hostile values of an option come from its argparse type (``protocol.arguments``: its kind
+# and, for numbers, its range) or its choices.
+def cli_places(work: Path) -> dict[str, str]:
+    """Files of every kind to give as paths, made in ``work``."""
+    work.mkdir(parents=True, exist_ok=True)
+    (work / "file.json5").write_text("{}\n")  # a regular file (a valid zenoh config too)
+    for name, make in (("fifo", lambda p: os.mkfifo(p)), ("folder", lambda p: p.mkdir()),
+                       ("to-dev-null", lambda p: os.symlink("/dev/null", p))):
+        if not os.path.lexists(work / name):
+            make(work / name)
+    return {"file": str(work / "file.json5"), "fifo": str(work / "fifo"),
+            "folder": str(work / "folder"), "device": "/dev/null",
+            "link": str(work / "to-dev-null"), "missing": str(work / "missing" / "x"),
+            "under_file": str(work / "file.json5" / "x"), "new": str(work / "new" / "out.x"),
+            "new_folder": str(work / "new-folder")}
+
+
+def value_actions(parser: argparse.ArgumentParser) -> list[argparse.Action]:
+    """The options and positionals of ``parser`` that take a value."""
+    return [a for a in parser._actions
+            if a.nargs != 0 and not isinstance(a, argparse._HelpAction) and a.dest != "_main"]
+
+
+def option_name(action: argparse.Action) -> str:
+    return action.option_strings[-1] if action.option_strings else action.dest
+
+
+def cli_example(action: argparse.Action, places: dict[str, str]) -> str:
+    """A valid value of ``action`` (for the options that must be given while another is
+    walked)."""
+    if action.choices:
+        return str(next(iter(action.choices)))
+    kind = getattr(action.type, "kind", "text")
+    return {"input": places["file"], "output": places["new"],
+            "folder": places["new_folder"]}.get(kind, getattr(action.type, "example", "x"))
+
+
+def _number_values(t) -> list[str]:
+    out = ["nan", "inf", "-inf", "1e999", "", "x", "1x"]
+    for v in (-1, 0, 1e12):
+        low_bad = t.low is not None and (v < t.low or (t.low_open and v == t.low))
+        if low_bad or (t.high is not None and v > t.high):
+            out.append(f"{v:g}" if t.cast is not int else str(int(v)))
+    if t.cast is int:
+        out.append("1.5")
+    return out
+
+
+def cli_hostile(action: argparse.Action, places: dict[str, str]) -> list[str]:
+    """The values ``action`` must refuse ("" is a value of a type whose ``empty_ok``)."""
+    values = _cli_hostile(action, places)
+    return [v for v in values if v or not getattr(action.type, "empty_ok", False)]
+
+
+def _cli_hostile(action: argparse.Action, places: dict[str, str]) -> list[str]:
+    from protocol.arguments import Checked, Number
+
+    t = action.type
+    if action.choices and not isinstance(t, Checked):
+        return ["not-a-choice", ""]
+    if isinstance(t, Number):
+        return _number_values(t)
+    kind = t.kind
+    if kind == "input":
+        return ["", places["fifo"], places["device"], places["folder"], places["missing"],
+                places["link"]]
+    if kind == "output":
+        return ["", places["fifo"], places["device"], places["folder"], places["link"],
+                places["under_file"]]
+    if kind == "folder":
+        return ["", places["file"], places["fifo"], places["device"], places["under_file"]]
+    if kind == "world":
+        return ["", "no-such-world", places["fifo"], places["device"], places["folder"]]
+    if kind == "chunk":
+        return ["", "*", "**", "a/*", "r$*0", "r#0", "r?0", "a b", "a//b", "/a", "a/"]
+    if kind == "host":
+        return ["", "-x", "a b", "a/b"]
+    if kind == "address":
+        return ["", "nonsense", "127.0.0.1:99999", ":80", "127.0.0.1:-1", "a b:80"]
+    if kind == "endpoint":
+        return ["", "nonsense", "tcp/", "tcp/127.0.0.1:99999", "tcp/127.0.0.1", "/x"]
+    if kind == "list":
+        return ["x", "nan", "inf,1,0", "nan,nan,nan", "1e999"]
+    if kind == "origin":
+        return ["", "evil.example", "ftp://x", "https://x/path", "https://u@x"]
+    return ["", "\x00", "a\nb", "x" * 1001]  # text, token
+
+
+def cli_base_argv(parser: argparse.ArgumentParser, skip: argparse.Action | None,
+                  places: dict[str, str]) -> list[str]:
+    """The required options and positionals of ``parser`` with valid values (but ``skip``)."""
+    argv, positionals = [], []
+    for a in value_actions(parser):
+        if a is skip:
+            continue
+        if not a.option_strings:
+            positionals.append(cli_example(a, places))
+        elif a.required:
+            argv += [a.option_strings[-1], cli_example(a, places)]
+    for g in parser._mutually_exclusive_groups:
+        if g.required and skip not in g._group_actions:
+            first = g._group_actions[0]
+            argv += [first.option_strings[-1]] + ([] if first.nargs == 0 else
+                                                  [cli_example(first, places)])
+    return argv + positionals
+
+
+def cli_parse(parser: argparse.ArgumentParser, argv: list[str]) -> tuple[int | None, str]:
+    """(the exit code, None when parsed; what it printed on stderr)."""
+    import io
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            parser.parse_args(argv)
+        except SystemExit as exc:
+            return exc.code, err.getvalue()
+    return None, err.getvalue()
+
+
+def cli_refusal(command: str, action: argparse.Action, value: str, parser,
+                places: dict[str, str]) -> str | None:
+    """None when ``rhbl COMMAND`` refuses ``value`` for ``action`` as it must (exit 2, one
+    line naming the option, no traceback), else what went wrong."""
+    argv = cli_base_argv(parser, action, places)
+    argv += ([f"{action.option_strings[-1]}={value}"] if action.option_strings
+             else ["--", value])
+    code, err = cli_parse(parser, argv)
+    what = f"rhbl {command} {option_name(action)} {value[:40]!r}"
+    lines = err.strip().splitlines()
+    if code != 2:
+        return f"{what}: accepted (exit {code})"
+    if len(lines) != 1 or not lines[0].startswith(f"rhbl {command}: error:") or \
+            "Traceback" in err:
+        return f"{what}: {err[:200]!r}"
+    named = action.option_strings or [action.dest, action.metavar or action.dest]
+    if not any(n in lines[0] for n in named):
+        return f"{what}: the option is not named: {lines[0][:200]}"
+    return None
+
+
+def fuzz_cli(workdir: Path | None = None) -> list[KeyResult]:
+    """Every option of every ``rhbl`` command with its hostile values: each refused by the
+    parser, before the command runs (one line naming the option, exit 2); the command's valid
+    example arguments accepted (the positive control)."""
+    from lab.cli import COMMANDS, build_parser
+
+    places = cli_places(Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-cli-")))
+    results = []
+    for command in COMMANDS:
+        parser = build_parser(command)
+        res = KeyResult(f"rhbl {command} (every option)", valid_sent=1)
+        code, err = cli_parse(parser, cli_base_argv(parser, None, places))
+        res.valid_processed = int(code is None)
+        for action in value_actions(parser):
+            for value in cli_hostile(action, places):
+                res.sent += 1
+                wrong = cli_refusal(command, action, value, parser, places)
+                if wrong is None:
+                    res.rejected += 1
+                elif len(res.notes) < 3:
+                    res.notes.append(wrong)
+        results.append(res)
+    return results
+
+
+# ---------------------------------------------------------------------------- files written
+def _odd_targets(work: Path) -> dict[str, Path]:
+    """Every kind of path that is not a regular file, made in ``work`` (a socket bound)."""
+    import socket
+
+    work.mkdir(parents=True, exist_ok=True)
+    os.mkfifo(work / "fifo")
+    (work / "folder").mkdir()
+    sock = socket.socket(socket.AF_UNIX)
+    sock.bind(str(work / "socket"))
+    sock.close()  # the socket file stays
+    os.symlink("/dev/null", work / "link-to-device")
+    os.symlink(work / "fifo", work / "link-to-fifo")
+    os.symlink(work / "folder", work / "link-to-folder")
+    return {"character device": Path("/dev/null"), "FIFO": work / "fifo",
+            "folder": work / "folder", "socket": work / "socket",
+            "symlink to a device": work / "link-to-device",
+            "symlink to a FIFO": work / "link-to-fifo",
+            "symlink to a folder": work / "link-to-folder"}
+
+
+def _writers(work: Path) -> list[tuple[str, Callable[[Path], Any]]]:
+    """Every way rhbl writes a file a person names (the real functions)."""
+    import numpy as np
+
+    from client.recording.mcap_file import RecordingWriter
+    from protocol import files
+    from protocol.runtime import write_stats
+    from rhbl import HypersphereClassifier
+
+    clf = HypersphereClassifier().fit(np.array([[0.0, 0.0], [1.0, 1.0]]), ["a", "b"])
+
+    def record(p: Path, overwrite: bool) -> None:
+        with RecordingWriter(p, overwrite=overwrite, viewer=False):
+            pass
+
+    def plot(p: Path) -> None:
+        from lab.harness import resolve_world
+        from lab.plot import plot_paths
+
+        plot_paths(resolve_world("room"), {}, p)
+
+    return [
+        ("snapshot (train, learner, compact, example)", lambda p: clf.save(p)),
+        ("--json / summary (files.write_text)", lambda p: files.write_text(p, "{}")),
+        ("--stats", lambda p: write_stats(str(p), "fuzz", 0, {})),
+        ("--record / record --out", lambda p: record(p, False)),
+        ("record --out --overwrite", lambda p: record(p, True)),
+        ("--plot", plot),
+    ]
+
+
+def fuzz_written(workdir: Path | None = None) -> list[KeyResult]:
+    """Every writer against every kind of non-regular target: each refused with an error
+    naming the path, the target left as it was (its kind, and a device's node, unchanged)."""
+    import stat
+
+    work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-written-"))
+    targets = _odd_targets(work / "targets")
+    results = []
+    for what, write in _writers(work):
+        res = KeyResult(f"writer: {what}")
+        for kind, path in targets.items():
+            res.sent += 1
+            before = os.lstat(path), os.stat(path)
+            try:
+                write(path)
+                res.notes.append(f"{kind}: written")
+                continue
+            except Exception as exc:  # noqa: BLE001 - the refusal, or the finding
+                said = str(exc)
+            after = os.lstat(path), os.stat(path)
+            same = all(stat.S_IFMT(a.st_mode) == stat.S_IFMT(b.st_mode) and a.st_ino == b.st_ino
+                       for a, b in zip(before, after, strict=True))
+            if same and (path.name in said or str(path) in said):
+                res.rejected += 1
+            elif len(res.notes) < 3:
+                res.notes.append(f"{kind}: {'changed; ' if not same else ''}{said[:120]}")
+        # the positive control: a new regular file is written
+        res.valid_sent += 1
+        good = work / f"good-{len(results)}.png"  # (a picture for --plot)
+        with contextlib.suppress(Exception):
+            write(good)
+        res.valid_processed += int(good.is_file() and good.stat().st_size > 0)
+        results.append(res)
+    return results
+
+
+# ------------------------------------------------------------------------ recordings read
+def _small_recording(path: Path, n: int = 12) -> list[bytes]:
+    import numpy as np
+
+    from client.recording.mcap_file import RecordingWriter
+    from protocol import keys
+    from protocol import messages as m
+
+    out = []
+    with RecordingWriter(path, viewer=False, chunk_seconds=1e9) as w:
+        for k in range(n):
+            data = m.Scan(ts=float(k), id=k, ranges=np.full(36, 2.0, np.float32)).encode()
+            out.append(data)
+            w.write(keys.scan_key("r0"), data, 1_000_000_000 + k)
+            if (k + 1) % 4 == 0:
+                w.flush()
+    return out
+
+
+def _bombs(work: Path) -> list[tuple[str, Path]]:
+    """Crafted recordings: a zstd and an lz4 chunk of 1 GiB of zeros (a few KiB on disk), a
+    chunk that declares less than it holds, a record claiming 2^63 bytes."""
+    import struct
+
+    import lz4.frame
+    import zstandard
+
+    magic = b"\x89MCAP0\r\n"
+    header = struct.pack("<BQ", 0x01, 8) + struct.pack("<II", 0, 0)
+
+    def chunk(compression: str, data: bytes, size: int) -> bytes:
+        body = (struct.pack("<QQQI", 0, 0, size, 0) + struct.pack("<I", len(compression))
+                + compression.encode() + struct.pack("<Q", len(data)) + data)
+        return struct.pack("<BQ", 0x06, len(body)) + body
+
+    cz = zstandard.ZstdCompressor(level=19).compressobj()
+    zeros = b"\0" * 2**20
+    gib = b"".join(cz.compress(zeros) for _ in range(1024)) + cz.flush()
+    small = lz4.frame.compress(b"\0" * 2**26)
+    cases = {"zstd bomb (1 GiB)": chunk("zstd", gib, 2**30),
+             "lz4 bomb (64 MiB, declared 64 MiB + 1)": chunk("lz4", small, 2**26 + 1),
+             "chunk holding more than it declares": chunk("zstd", gib, 1000),
+             "record claiming 2^63 bytes": struct.pack("<BQ", 0x05, 2**63) + b"\0" * 32}
+    out = []
+    for i, (what, body) in enumerate(cases.items()):
+        p = work / f"bomb-{i}.mcap"
+        p.write_bytes(magic + header + body)
+        out.append((what, p))
+    return out
+
+
+def fuzz_recordings(per_file: int, seed: int = 0, workdir: Path | None = None
+                    ) -> list[KeyResult]:
+    """Recordings read by every reader (``RecordingReader``: inspect, replay, retraining):
+    bombs refused at once; the file cut at every byte (a prefix of the messages and a note,
+    never another exception); ``per_file`` mutations (a message list or one RecordingError
+    naming the file); crafted topics and log times given to ``rhbl replay``'s check (a plain
+    key of a robot only, one ValueError naming the file)."""
+    import logging
+
+    from client.recording.mcap_file import RecordingError, RecordingReader
+    from client.recording.replay import plan_replay
+    from protocol import keys
+
+    logging.getLogger("client.recording.mcap_file").setLevel(logging.ERROR)  # a line a cut
+    rng = random.Random(seed)
+    work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-mcap-"))
+    work.mkdir(parents=True, exist_ok=True)
+    good = work / "good.mcap"
+    payloads = _small_recording(good)
+    whole = good.read_bytes()
+    results = []
+
+    bombs = KeyResult("recording: decompression bombs, oversized records")
+    for what, path in _bombs(work):
+        bombs.sent += 1
+        t0 = time.monotonic()
+        try:
+            list(RecordingReader(path).messages())
+            bombs.notes.append(f"{what}: read")
+        except RecordingError as exc:
+            if path.name in str(exc) and time.monotonic() - t0 < 30:
+                bombs.rejected += 1
+            else:
+                bombs.notes.append(f"{what}: {str(exc)[:100]}")
+        except Exception as exc:  # noqa: BLE001 - the finding
+            bombs.notes.append(f"{what}: {type(exc).__name__}: {str(exc)[:100]}")
+    results.append(bombs)
+
+    cuts = KeyResult(f"recording cut at every byte ({len(whole)})")
+    cut = work / "cut.mcap"
+    for at in range(len(whole)):
+        cut.write_bytes(whole[:at])
+        reader = RecordingReader(cut)
+        try:
+            got = [m.data for m in reader.messages()]
+        except RecordingError as exc:
+            if at < 17 and cut.name in str(exc):  # inside the magic or the header: no MCAP
+                cuts.sent += 1
+                cuts.rejected += 1
+            elif len(cuts.notes) < 3:
+                cuts.notes.append(f"cut at {at}: {str(exc)[:100]}")
+            continue
+        except Exception as exc:  # noqa: BLE001 - the finding (struct.error was one)
+            if len(cuts.notes) < 3:
+                cuts.notes.append(f"cut at {at}: {type(exc).__name__}: {str(exc)[:100]}")
+            continue
+        cuts.valid_sent += 1  # a prefix of the messages, and a note
+        cuts.valid_processed += int(got == payloads[:len(got)] and len(reader.notes) == 1)
+    results.append(cuts)
+
+    mutated = KeyResult("recording mutated")
+    target = work / "fuzzed.mcap"
+    for _ in range(per_file):
+        target.write_bytes(_mutate_file(whole, rng))
+        mutated.sent += 1
+        try:
+            list(RecordingReader(target).messages(viewer=True))
+            mutated.rejected += 1  # read (what is intact): no crash, no hang
+        except RecordingError as exc:
+            if target.name in str(exc):
+                mutated.rejected += 1
+            elif len(mutated.notes) < 3:
+                mutated.notes.append(f"error does not name the file: {exc}")
+        except Exception as exc:  # noqa: BLE001 - the finding
+            if len(mutated.notes) < 3:
+                mutated.notes.append(f"{type(exc).__name__}: {str(exc)[:120]}")
+    results.append(mutated)
+
+    crafted = KeyResult("replay: crafted topics and log times")
+    scan = keys.scan_key("r0")
+    topics = ["rhbl/**/laser/0/data/scan", "rhbl/*/laser/0/data/scan", "rhbl/r$*0/laser/0/data/scan",
+              "rhbl//laser/0/data/scan", "rhbl/r#0/laser/0/data/scan", "rhbl/r?0/laser/0/data/scan",
+              "rhbl/r0/laser/00/data/scan", "rhbl/r 0/laser/0/data/scan",
+              "rhbl/r0/sim/req/../get_world", "rhbl/**/sim/req/get_world"]
+    for i, topic in enumerate(topics):
+        p = work / f"crafted-{i}.mcap"
+        _write_topics(p, [(scan, 10**9), (topic, 10**9 + 1)])
+        crafted.sent += 1
+        try:
+            plan = plan_replay(p, None, 5.0)
+            if all(k == scan for k in plan.keys) and set(plan.worlds) <= {"r0"}:
+                crafted.rejected += 1  # not a sensor key of ours: never published
+            else:
+                crafted.notes.append(f"{topic!r}: would publish on {sorted(plan.keys)}")
+        except ValueError as exc:
+            if p.name in str(exc) and repr(topic) in str(exc):
+                crafted.rejected += 1
+            elif len(crafted.notes) < 3:
+                crafted.notes.append(f"{topic!r}: {str(exc)[:100]}")
+    for i, times in enumerate([[10**9, 2**64 - 1], [2**64 - 1, 0], [10**9, 10**9 + 10**18]]):
+        p = work / f"times-{i}.mcap"
+        _write_topics(p, [(scan, t) for t in times])
+        crafted.valid_sent += 1
+        plan = plan_replay(p, None, 5.0)
+        crafted.valid_processed += int(plan.messages == 2 and plan.span <= 5.0)
+    results.append(crafted)
+    return results
+
+
+def _write_topics(path: Path, topics_times: list[tuple[str, int]]) -> None:
+    import numpy as np
+
+    from client.recording.mcap_file import RecordingWriter
+    from protocol import messages as m
+
+    with RecordingWriter(path, viewer=False) as w:
+        for k, (topic, ns) in enumerate(topics_times):
+            w.write(topic, m.Scan(ts=float(k), id=k, ranges=np.full(36, 2.0, np.float32))
+                    .encode(), ns)
+
+
+# ---------------------------------------------------------------------- the Foxglove bridge
+def _http(port: int, raw: bytes, timeout: float = 30.0) -> bytes:
+    """What the server answers ``raw`` with (its first line), b"" when it closes."""
+    import socket
+
+    with socket.create_connection(("127.0.0.1", port), timeout=timeout) as s:
+        s.sendall(raw)
+        got = b""
+        with contextlib.suppress(OSError):
+            while b"\r\n" not in got:
+                part = s.recv(4096)
+                if not part:
+                    break
+                got += part
+    return got.split(b"\r\n", 1)[0]
+
+
+def _upgrade(host: str | None = None, path: str = "/", origin: str | None = None,
+             extra: str = "") -> bytes:
+    import base64
+
+    key = base64.b64encode(os.urandom(16)).decode()
+    lines = [f"GET {path} HTTP/1.1", *([f"Host: {host}"] if host is not None else []),
+             "Upgrade: websocket", "Connection: Upgrade", f"Sec-WebSocket-Key: {key}",
+             "Sec-WebSocket-Version: 13", "Sec-WebSocket-Protocol: foxglove.sdk.v1",
+             *([f"Origin: {origin}"] if origin is not None else [])]
+    return ("\r\n".join(lines) + "\r\n" + extra + "\r\n").encode()
+
+
+def fuzz_bridge(per_kind: int, seed: int = 0, workdir: Path | None = None) -> list[KeyResult]:
+    """A real ``rhbl foxglove`` (a zenoh peer, no server needed): hostile HTTP and WebSocket
+    upgrades (foreign Origin, foreign or missing Host, a wrong token, repeated headers, an
+    oversized header, a header never finished, not an upgrade, random bytes), ``per_kind`` of
+    each kind: each refused (an HTTP error, never 101); a valid upgrade after each burst gets
+    101 (the positive control); the bridge is alive at the end and logged a bounded number of
+    lines (one a second at most)."""
+    rng = random.Random(seed)
+    work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-bridge-"))
+    port = free_port()
+    fx = Child("foxglove", rhbl_argv("foxglove", "--mode", "peer", "--listen",
+                                     f"tcp/127.0.0.1:{free_port()}", "--port", str(port),
+                                     "--allow-origin", "https://app.foxglove.dev"),
+               work, cwd=ROOT).start()
+    results = []
+    try:
+        if not fx.wait_for_line("Foxglove WebSocket server listening on", 120):
+            raise RuntimeError(f"the bridge did not start:\n{fx.tail()}")
+        here = f"127.0.0.1:{port}"
+        t_start = time.monotonic()
+        kinds: dict[str, Callable[[], bytes]] = {
+            "foreign Origin": lambda: _upgrade(here, origin=rng.choice(
+                ["http://evil.example", "null", "https://app.foxglove.dev.evil.example",
+                 f"http://{here}x", "file://"])),
+            "foreign Host": lambda: _upgrade(rng.choice(["attacker.example", "127.0.0.1.nip.io",
+                                                         "", "[::2]:1", "localhost.evil"])),
+            "no Host": lambda: _upgrade(None),
+            "repeated Origin": lambda: _upgrade(here, extra="Origin: a\r\nOrigin: b\r\n"),
+            "oversized header": lambda: _upgrade(here, extra="X: " + "y" * rng.randint(
+                9000, 70_000) + "\r\n"),
+            "not an upgrade": lambda: rng.choice([b"GET / HTTP/1.1\r\nHost: " + here.encode()
+                                                  + b"\r\n\r\n",
+                                                  b"POST / HTTP/1.1\r\n\r\n",
+                                                  b"GET /" + b"a" * 5000 + b" HTTP/1.1\r\n\r\n"]),
+            "random bytes": lambda: os.urandom(rng.randint(1, 2000)) + b"\r\n\r\n",
+        }
+        for what, make in kinds.items():
+            res = KeyResult(f"foxglove bridge: {what}")
+            for _ in range(per_kind):
+                res.sent += 1
+                line = _http(port, make())
+                if b" 101 " not in line:
+                    res.rejected += 1
+                elif len(res.notes) < 3:
+                    res.notes.append(f"got {line[:60]!r}")
+            res.valid_sent += 1
+            res.valid_processed += int(b" 101 " in _http(port, _upgrade(here)))
+            results.append(res)
+        # a header never finished: closed within the gate's timeout, then still serving
+        import socket
+
+        res = KeyResult("foxglove bridge: header never finished")
+        from client.recording.gate import HEADER_TIMEOUT
+
+        with socket.create_connection(("127.0.0.1", port), timeout=HEADER_TIMEOUT + 20) as s:
+            s.sendall(b"GET / HTTP/1.1\r\nHost: " + here.encode() + b"\r\n")
+            res.sent += 1
+            t0 = time.monotonic()
+            with contextlib.suppress(OSError):
+                answer = s.recv(4096)
+                res.rejected += int(b" 408 " in answer and
+                                    time.monotonic() - t0 < HEADER_TIMEOUT + 15)
+        res.valid_sent += 1
+        res.valid_processed += int(b" 101 " in _http(port, _upgrade(here)))
+        results.append(res)
+        alive = KeyResult("foxglove bridge: alive, log bounded", valid_sent=1)
+        refused_lines = fx.output().count("refused a request from")
+        alive.valid_processed = int(fx.proc is not None and fx.proc.poll() is None)
+        elapsed = time.monotonic() - t_start
+        if refused_lines > elapsed + 2:  # one line a second at most
+            alive.notes.append(f"{refused_lines} refusal lines logged in {elapsed:.0f} s")
+        results.append(alive)
+    finally:
+        fx.stop()
+    return results
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--per-key", type=int, default=10_000, help="hostile messages per key")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--only", default="server,clients,files",
-                    help="comma list of parts: server, clients, files")
+    ap.add_argument("--only", default="server,clients,files,written,recordings,bridge,cli",
+                    help="comma list of parts: server, clients, files, written, recordings, "
+                         "bridge, cli")
     args = ap.parse_args(argv)
     parts = set(args.only.split(","))
     results: list[KeyResult] = []
@@ -617,6 +1168,14 @@ def main(argv: list[str] | None = None) -> int:
         results += fuzz_clients(args.per_key, args.seed)
     if "files" in parts:
         results += fuzz_files(max(1, args.per_key // 10), args.seed)
+    if "written" in parts:
+        results += fuzz_written()
+    if "recordings" in parts:
+        results += fuzz_recordings(max(1, args.per_key // 10), args.seed)
+    if "bridge" in parts:
+        results += fuzz_bridge(max(1, args.per_key // 100), args.seed)
+    if "cli" in parts:
+        results += fuzz_cli()
     print(f"fuzz: seed {args.seed}, {args.per_key} hostile messages per key, "
           f"{time.monotonic() - t0:.0f} s")
     print("| key | hostile sent | rejected | valid sent | valid processed | result |")

@@ -167,6 +167,11 @@ class Outbox:
             self.stats["resent"] += len(self._entries)
             return [e[0] for e in sorted(self._entries.values(), key=lambda e: e[0].seq)]
 
+    def seqs(self) -> list[int]:
+        """The seqs of the unacknowledged labels, in order."""
+        with self._lock:
+            return sorted(self._entries)
+
     @property
     def full(self) -> bool:
         return len(self) >= self.cap
@@ -272,9 +277,14 @@ class LabelPublisher:
         while len(self.outbox) and self.learners and time.monotonic() < end:
             time.sleep(0.05)
         left = len(self.outbox)
-        if left:
-            log.error("%d labels of session %s not acknowledged by a learner: lost when this "
-                      "process exits", left, self.outbox.origin)
+        if left:  # the learner may hold them (an acknowledgement it had no time to send, a
+            # learner that stopped first): only its journal knows, so they are not called lost
+            seqs = self.outbox.seqs()
+            log.warning("%d labels of session %s (seq %d..%d) unacknowledged at exit%s: a "
+                        "learner that journaled them holds them (its journal says); they are "
+                        "not resent after this process exits", left, self.outbox.origin,
+                        seqs[0], seqs[-1],
+                        "" if self.learners else " (no learner up: it stopped first)")
         elif self.outbox.stats["published"]:
             log.info("all %d labels acknowledged by the learner (%d resends)",
                      self.outbox.stats["published"], self.outbox.stats["resent"])

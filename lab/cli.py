@@ -3,6 +3,11 @@
 Each subcommand lives in its own module, which defines ``add_arguments(parser)`` and
 ``main(args) -> int``. Modules are imported only when their command runs, so ``rhbl --help``
 stays fast and a heavy import (zenoh, pymunk, matplotlib) is paid only by the command using it.
+
+Options take their ``type=`` from ``protocol.arguments`` (checked numbers, paths, names,
+endpoints): a bad value is refused while parsing, before ``main`` runs, as one line naming the
+option (no usage block) and exit 2; so is a bad value found by ``main`` before it starts
+(a ``ValueError`` or ``OSError``).
 """
 
 from __future__ import annotations
@@ -10,9 +15,10 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import re
 import sys
 
-__all__ = ["COMMANDS", "main"]
+__all__ = ["COMMANDS", "Parser", "build_parser", "main", "parse"]
 
 # name -> (module, one-line help). Order is the order shown by ``rhbl --help``.
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -35,10 +41,23 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse's parser, whose usage errors are one line: ``rhbl CMD: error: argument --x:
+    <why> (rhbl CMD --help lists the options)`` and exit 2, without the usage block (which
+    runs to many lines for a command with many options)."""
+
+    def error(self, message: str):
+        message = " ".join(message.split())
+        said = re.match(r"^argument ([^:]+): (must .*)$", message)  # --x must be ...
+        if said:
+            message = f"{said[1]} {said[2]}"
+        self.exit(2, f"{self.prog}: error: {message} ({self.prog} --help lists the options)\n")
+
+
 def _top_parser() -> argparse.ArgumentParser:
     width = max(len(n) for n in COMMANDS)
     lines = "\n".join(f"  {n:<{width}}  {h}" for n, (_, h) in COMMANDS.items())
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="rhbl",
         description="Recursive, Hyperspherical Behavioral Learning for a Player-style robot over zenoh.",
         epilog=f"commands:\n{lines}\n\nRun 'rhbl COMMAND --help' for a command's options.",
@@ -53,7 +72,7 @@ def build_parser(command: str) -> argparse.ArgumentParser:
     """The argparse parser of one subcommand (used by ``main`` and by tests)."""
     module_name, help_text = COMMANDS[command]
     module = importlib.import_module(module_name)
-    parser = argparse.ArgumentParser(prog=f"rhbl {command}", description=help_text)
+    parser = Parser(prog=f"rhbl {command}", description=help_text)
     module.add_arguments(parser)
     parser.set_defaults(_main=module.main)
     return parser
@@ -72,12 +91,39 @@ def _stdout_closed() -> bool:
         return False
 
 
-def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
+def parse(argv: list[str]) -> tuple[str, argparse.Namespace]:
+    """``(command, its parsed arguments)`` of ``rhbl ARGV...``; SystemExit(2) after one line
+    on stderr for a usage error (what ``main`` does first)."""
     top = _top_parser().parse_args(argv[:1] if argv and not argv[0].startswith("-") else argv)
     parser = build_parser(top.command)
     args = parser.parse_args(argv[1:])
+    args._outputs = [(a.option_strings[-1] if a.option_strings else a.dest, v)
+                     for a in parser._actions if getattr(a.type, "kind", "") == "output"
+                     for v in _values(getattr(args, a.dest, None))]
+    return top.command, args
+
+
+def _values(value) -> list[str]:
+    if value is None or value == "":
+        return []
+    return [v for v in value if v] if isinstance(value, list) else [value]
+
+
+def prepare_outputs(args: argparse.Namespace) -> None:
+    """Make the folders of the output files given (``protocol.files``; FileRuleError, a
+    ValueError, when one cannot be made: /proc/nope passes the parse-time check as root)."""
+    from protocol import files
+
+    for option, path in getattr(args, "_outputs", []):
+        files.check_output(path, option, make=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    command, args = parse(argv)
+    top = argparse.Namespace(command=command)
     try:
+        prepare_outputs(args)  # the output files' folders made: a failure is exit 2, no work
         rc = int(args._main(args) or 0)
         sys.stdout.flush()  # a pipe is block-buffered: a closed reader shows here, not at exit
         return rc
@@ -97,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
         # line naming what was wrong, exit code 2 like argparse; RHBL_DEBUG=1 shows the traceback
         if os.environ.get("RHBL_DEBUG"):
             raise
-        print(f"rhbl {top.command}: error: {exc}", file=sys.stderr)
+        print(f"rhbl {top.command}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
 
 

@@ -27,6 +27,7 @@ import numpy as np
 from client.behaviour.features import FeatureSpec
 from client.behaviour.learning import load_snapshot
 from client.journal import Journal, JournalError, journal_path
+from protocol import arguments
 from rhbl.compact import METHODS
 
 __all__ = ["add_arguments", "lineage_data", "load_data", "main"]
@@ -130,9 +131,12 @@ def lineage_data(tree: str | Path) -> list[tuple[Path, int | None]]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--tree", required=True, help="snapshot to compact")
-    parser.add_argument("--out", required=True, help="snapshot to write")
+    parser.add_argument("--tree", required=True, type=arguments.input_file,
+                        help="snapshot to compact")
+    parser.add_argument("--out", required=True, type=arguments.output_file,
+                        help="snapshot to write")
     parser.add_argument("--data", action="append", default=None, metavar="FILE",
+                        type=arguments.input_file,
                         help="labelled vectors: a learner journal, a recording (.mcap) or an "
                              ".npz with X and y (repeatable; default: every vector the tree "
                              "was learned from: its lineage's journals, or the recordings it "
@@ -140,12 +144,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--method", choices=METHODS, default="exact",
                         help="exact: keep every prediction on the data (default); prune: delete "
                              "the weakest spheres against the data's labels")
-    parser.add_argument("--max-error", type=float, default=0.0,
+    parser.add_argument("--max-error", type=arguments.fraction, default=0.0,
                         help="prune: fraction of the rows whose errors the pruning may add (0)")
     parser.add_argument("--class-weight", choices=["balanced"], default=None,
                         help="prune: weigh each label's rows the same in total (rare labels, such "
                              "as a turn in place before a wall, are not pruned away as cheap)")
-    parser.add_argument("--max-nodes", type=int, default=None,
+    parser.add_argument("--max-nodes", type=arguments.positive_int, default=None,
                         help="prune: delete the weakest spheres until at most this many are left")
 
 

@@ -42,6 +42,8 @@ from lab.children import free_port
 from lab.children import rhbl_argv as _rhbl
 from lab.episode import Episode, EpisodeCollector
 from lab.recipe import EVAL_SECONDS, RECIPES, Recipe, per_task
+from protocol import arguments, files
+from server import world_arg
 
 __all__ = ["SCENARIOS", "Scenario", "add_arguments", "main", "free_port"]
 
@@ -115,43 +117,46 @@ def _defaults(value) -> str:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", choices=list(SCENARIOS), default="wall-following")
-    parser.add_argument("--out", metavar="DIR", default=None,
+    parser.add_argument("--out", metavar="DIR", default=None, type=arguments.output_folder,
                         help="output folder (default: rhbl-out/<timestamp>-<scenario>)")
-    parser.add_argument("--world", default=None,
+    parser.add_argument("--world", default=None, type=world_arg,
                         help=f"world file or name (default: the scenario's, "
                              f"{_defaults(lambda sc: sc.world)})")
-    parser.add_argument("--teach-seconds", type=float, default=None, metavar="S",
+    parser.add_argument("--teach-seconds", type=arguments.seconds, default=None, metavar="S",
                         help="sim seconds the teacher demonstrates from each start pose (or until "
                              f"the goal; default: {_defaults(lambda sc: sc.recipe.segment)})")
-    parser.add_argument("--rounds", type=int, default=None, metavar="N",
+    parser.add_argument("--rounds", type=arguments.non_negative_int, default=None, metavar="N",
                         help="corrective rounds: the controller drives the latest tree from each "
                              "start pose while the teacher labels and takes over near walls "
                              f"(default: {_defaults(lambda sc: sc.recipe.rounds)}; the training "
                              f"recipe's: {per_task({t: r.rounds for t, r in RECIPES.items()})}; "
                              "0 = demonstrations only)")
-    parser.add_argument("--round-seconds", type=float, default=None, metavar="S",
+    parser.add_argument("--round-seconds", type=arguments.seconds, default=None, metavar="S",
                         help="sim seconds per start pose in each corrective round (or until the "
                              f"goal; default: {_defaults(lambda sc: sc.recipe.round_seconds)})")
-    parser.add_argument("--drive-seconds", type=float, default=None, metavar="S",
+    parser.add_argument("--drive-seconds", type=arguments.seconds, default=None, metavar="S",
                         help="sim seconds the final tree drives from each start pose "
                              f"(default: {_defaults(lambda sc: sc.drive)})")
-    parser.add_argument("--starts", type=int, default=None, metavar="N",
+    parser.add_argument("--starts", type=arguments.positive_int, default=None, metavar="N",
                         help="use the first N start poses only (default: all)")
     parser.add_argument("--style", choices=["reactive", "smooth"], default="reactive",
                         help="the teacher's style (default: reactive, the training recipe)")
-    parser.add_argument("--speedup", type=float, default=None, metavar="N",
+    parser.add_argument("--speedup", type=arguments.non_negative_float, default=None,
+                        metavar="N",
                         help="run the server N times real time instead of lock-step (0: as fast "
                              "as possible)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the teacher's perturbations")
-    parser.add_argument("--timeout", type=float, default=600.0, metavar="SECONDS",
+    parser.add_argument("--seed", type=arguments.seed, default=0,
+                        help="seed of the teacher's perturbations")
+    parser.add_argument("--timeout", type=arguments.seconds, default=600.0, metavar="SECONDS",
                         help="give up (and fail) after this much wall time")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     parser.add_argument("--console", nargs="?", const="127.0.0.1:8080", default=None,
-                        metavar="HOST:PORT",
+                        metavar="HOST:PORT", type=arguments.address,
                         help="also serve the teacher's console (view-only) to watch the loop "
                              "live in a browser (default address 127.0.0.1:8080; the URL is "
                              "printed)")
     parser.add_argument("--record", nargs="?", const="", default=None, metavar="FILE",
+                        type=arguments.output_file_or_default,
                         help="record the whole run (every bus message) as MCAP into FILE "
                              "(default: OUT/run.mcap; docs/recording.md)")
 
@@ -176,13 +181,6 @@ class Demo:
         from lab.harness import resolve_world
 
         self.args = args
-        for flag, v in (("--teach-seconds", args.teach_seconds),
-                        ("--round-seconds", args.round_seconds),
-                        ("--drive-seconds", args.drive_seconds)):
-            if v is not None and not v > 0:
-                raise ValueError(f"{flag} must be > 0, got {v:g}")
-        if args.rounds is not None and args.rounds < 0:
-            raise ValueError(f"--rounds must be >= 0, got {args.rounds}")
         self.scenario = SCENARIOS[args.scenario].replace(
             teach=args.teach_seconds, rounds=args.rounds, round_seconds=args.round_seconds,
             drive=args.drive_seconds)
@@ -530,12 +528,12 @@ class Demo:
             "drive_seconds": self.drive, "style": self.args.style,
             "processes": self.process_counters(),
         }
-        (self.out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
+        files.write_text(self.out / "summary.json", json.dumps(summary, indent=2, default=str))
         eps = [*demos, *rounds, *learned]
-        np.savez_compressed(
-            self.out / "trajectories.npz",
-            **{f"{ep.kind}{k}_{f}": np.asarray(getattr(ep, f))
-               for k, ep in enumerate(eps) for f in ("ts", "poses", "side", "ids", "stalls")})
+        with files.replace_file(self.out / "trajectories.npz") as tmp, open(tmp, "wb") as out:
+            np.savez_compressed(
+                out, **{f"{ep.kind}{k}_{f}": np.asarray(getattr(ep, f))
+                      for k, ep in enumerate(eps) for f in ("ts", "poses", "side", "ids", "stalls")})
         return picture
 
     def process_counters(self) -> dict:

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 from client.behaviour.learning import TreePolicy
 from client.behaviour.tasks import make_policy
@@ -24,6 +23,8 @@ from lab.harness import DT, OnStep, drive, resolve_world
 from lab.recipe import EVAL_SECONDS, per_task
 from lab.report import episode_table
 from lab.sim_tap import record_run
+from protocol import arguments, files
+from server import world_arg
 from server.world import WorldSpec
 
 __all__ = ["add_arguments", "evaluate", "format_table", "main", "success"]
@@ -134,28 +135,52 @@ def format_table(report: dict) -> str:
     return episode_table(entries, title=title, notes=notes)
 
 
+def _feature_pair(text: str) -> tuple[int, int]:
+    try:
+        i, j = (int(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"must be two feature indices I,J (e.g. 0,1), got {text!r}") from None
+    if not (0 <= i < 10_000 and 0 <= j < 10_000) or i == j:
+        raise ValueError(f"must be two different feature indices >= 0, got {text!r}")
+    return i, j
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--world", required=True, help="world file (or a shipped world's name)")
-    parser.add_argument("--tree", required=True, help="snapshot written by 'rhbl train'")
-    parser.add_argument("--episodes", type=int, default=None,
+    parser.add_argument("--world", required=True, type=world_arg,
+                        help="world file (or a shipped world's name)")
+    parser.add_argument("--tree", required=True, type=arguments.input_file,
+                        help="snapshot written by 'rhbl train'")
+    parser.add_argument("--episodes", type=arguments.positive_int, default=None,
                         help="episodes, cycling over the world's start poses (default: one per pose)")
-    parser.add_argument("--seconds", type=float, default=None,
+    parser.add_argument("--seconds", type=arguments.seconds, default=None,
                         help=f"sim seconds per episode (default: {per_task(EVAL_SECONDS)})")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--range-noise", type=float, default=0.0, help="laser noise (server option)")
-    parser.add_argument("--odom-noise", type=float, default=0.0, help="odometry noise (server option)")
-    parser.add_argument("--json", default=None, help="write the full report here")
-    parser.add_argument("--plot", default=None, help="draw world and paths to this PNG")
+    parser.add_argument("--seed", type=arguments.seed, default=0)
+    parser.add_argument("--range-noise", type=arguments.non_negative_float, default=0.0,
+                        help="laser noise (server option)")
+    parser.add_argument("--odom-noise", type=arguments.non_negative_float, default=0.0,
+                        help="odometry noise (server option)")
+    parser.add_argument("--json", default=None, type=arguments.output_file,
+                        help="write the full report here")
+    parser.add_argument("--plot", default=None, type=arguments.output_file,
+                        help="draw world and paths to this PNG")
     parser.add_argument("--spheres", default=None, metavar="I,J",
+                        type=arguments.checked_list("feature pair", _feature_pair, "0,1"),
                         help="with --plot: also draw the tree's spheres projected on features I,J")
-    parser.add_argument("--record", metavar="FILE", default=None,
+    parser.add_argument("--record", metavar="FILE", default=None, type=arguments.output_file,
                         help="also write the episodes (tree and teacher runs) as an MCAP "
                              "recording (docs/recording.md)")
 
 
 def main(args) -> int:
+    if args.spheres and not args.plot:
+        raise ValueError("--spheres goes with --plot (it draws the spheres in the picture)")
     spec = resolve_world(args.world)
     policy = TreePolicy.load(args.tree)
+    dims = args.spheres or (0, 1)
+    if args.spheres and max(dims) >= policy.classifier.n_features_in_:
+        raise ValueError(f"--spheres {dims[0]},{dims[1]}: the tree {args.tree} has "
+                         f"{policy.classifier.n_features_in_} features (0 .. "
+                         f"{policy.classifier.n_features_in_ - 1})")
     with record_run(args.record, "rhbl evaluate") as tap:  # None without --record
         report = evaluate(spec, policy, episodes=args.episodes, seconds=args.seconds,
                           seed=args.seed, range_noise=args.range_noise,
@@ -164,13 +189,11 @@ def main(args) -> int:
     paths = report.pop("_paths", None)
     print(format_table(report))
     if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(report, indent=1))
+        files.write_text(args.json, json.dumps(report, indent=1), "--json")
         print(f"wrote {args.json}")
     if args.plot:
         from lab.plot import plot_paths
 
-        dims = tuple(int(v) for v in args.spheres.split(",")) if args.spheres else (0, 1)
         plot_paths(spec, paths, args.plot,
                    title=f"{spec.name}: teacher (blue) and learned robot (red), "
                          f"success {report['success_rate']:.0%}",

@@ -15,18 +15,20 @@ from pathlib import Path
 
 import numpy as np
 
+from protocol import arguments
 from rhbl import HypersphereClassifier, load
 
 ACTIONS = ["fwd", "fwd-left", "rot-left", "fwd-right", "rot-right"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--vectors", type=int, default=1500, help="training vectors (default 1500)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed")
+    parser.add_argument("--vectors", type=arguments.Number(int, 2, 10**7, name="vectors"),
+                        default=1500, help="training vectors (default 1500; 2 .. 10^7)")
+    parser.add_argument("--seed", type=arguments.seed, default=0, help="random seed")
     parser.add_argument("--spawn", choices=["all", "winner"], default="all",
                         help="spawn rule: the paper's literal 'all' or the compact 'winner'")
     parser.add_argument("--distance", choices=["squared", "euclidean"], default="squared")
-    parser.add_argument("--out", type=Path, default=None,
+    parser.add_argument("--out", type=arguments.output_file, default=None,
                         help="snapshot path (default: a temporary file, removed afterwards)")
 
 
@@ -53,7 +55,7 @@ def main(args: argparse.Namespace) -> int:
     print("spheres per label:", clf.label_counts())
 
     with tempfile.TemporaryDirectory() as tmp:
-        path = args.out or Path(tmp) / "example.rhbl"
+        path = Path(args.out) if args.out else Path(tmp) / "example.rhbl"
         clf.save(path, metadata={"task": "example", "vectors": half, "seed": args.seed})
         print(f"saved snapshot {path} ({path.stat().st_size} bytes)")
         again = load(path)

@@ -27,6 +27,8 @@ from lab.harness import make_learner, resolve_world
 from lab.recipe import Recipe, add_recipe_arguments, recipe_for, recipe_from_args
 from lab.report import table
 from lab.train import train
+from protocol import arguments, files
+from server import world_arg
 
 __all__ = ["PAPER", "TEACHERS", "add_arguments", "main", "run_experiment", "run_trial", "table_i"]
 
@@ -141,24 +143,34 @@ def format_worlds(res: dict) -> str:
     return table(["world", "success mean", "min", "max", "teacher", "collisions", "loops"], rows)
 
 
+def _check_eval_world(text: str) -> str:
+    return text if text == "none" else world_arg.parse(text)
+
+
+_eval_world = arguments.Checked("world", _check_eval_world)
+_eval_world.kind, _eval_world.example = "world", "room"
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("task", choices=[*TASKS, "both"])
-    parser.add_argument("--trials", type=int, default=5)
-    parser.add_argument("--seed", type=int, default=0, help="first trial's seed")
-    parser.add_argument("--world", default=None,
+    parser.add_argument("--trials", type=arguments.positive_int, default=5)
+    parser.add_argument("--seed", type=arguments.seed, default=0, help="first trial's seed")
+    parser.add_argument("--world", default=None, type=world_arg,
                         help="training world (default: the recipe's, room / maze)")
-    parser.add_argument("--seconds", type=float, default=None, help="evaluation seconds per episode")
-    parser.add_argument("--episodes", type=int, default=None)
-    parser.add_argument("--eval-world", action="append", default=None,
+    parser.add_argument("--seconds", type=arguments.seconds, default=None,
+                        help="evaluation seconds per episode")
+    parser.add_argument("--episodes", type=arguments.positive_int, default=None)
+    parser.add_argument("--eval-world", action="append", default=None, type=_eval_world,
                         help="extra evaluation world (repeatable); default: server/worlds/eval-room*"
                              " or eval-maze*; 'none' for none")
     parser.add_argument("--teacher", choices=sorted(TEACHERS), default="reactive")
     add_recipe_arguments(parser, seconds="--train-seconds")
-    parser.add_argument("--range-noise", type=float, default=0.0)
-    parser.add_argument("--odom-noise", type=float, default=0.0)
+    parser.add_argument("--range-noise", type=arguments.non_negative_float, default=0.0)
+    parser.add_argument("--odom-noise", type=arguments.non_negative_float, default=0.0)
     parser.add_argument("--train-noise", action="store_true",
                         help="also demonstrate with the noise on (default: noise only in evaluation)")
-    parser.add_argument("--json", default=None)
+    parser.add_argument("--json", default=None, type=arguments.output_file,
+                        help="write every trial's results here (JSON)")
 
 
 def main(args) -> int:
@@ -182,6 +194,5 @@ def main(args) -> int:
     print(table_i(results))
     print(f"({time.perf_counter() - t0:.0f} s)")
     if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(results, indent=1))
+        files.write_text(args.json, json.dumps(results, indent=1), "--json")
     return 0

@@ -16,6 +16,7 @@ step before the world moves; it is passed explicitly, down to every step that sh
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -26,6 +27,7 @@ from client.behaviour.tasks import TASKS
 from lab import metrics
 from lab.episode import DT, Episode
 from lab.recipe import Recipe, parse_floats, recipe_for
+from protocol.arguments import checked_list
 from server.world import World, WorldSpec, load_world
 
 __all__ = [
@@ -56,11 +58,15 @@ def resolve_world(path_or_name: str) -> WorldSpec:
     return load_world(p)
 
 
-def parse_pose(text: str) -> tuple[float, float, float]:
+def _parse_pose(text: str) -> tuple[float, float, float]:
     vals = parse_floats(text, "pose must be x,y,yaw numbers")
-    if len(vals) != 3:
-        raise argparse.ArgumentTypeError(f"pose must be x,y,yaw (3 numbers), got {text!r}")
+    if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
+        raise argparse.ArgumentTypeError(f"pose must be x,y,yaw (3 finite numbers), got {text!r}")
     return vals  # type: ignore[return-value]
+
+
+# ``--start x,y,yaw`` (an argparse type: ``protocol.arguments.checked_list``)
+parse_pose = checked_list("pose", _parse_pose, "1,1,0")
 
 
 def make_learner(recipe: Recipe | str, actions: ActionSet = DEFAULT_ACTIONS, *,

@@ -22,6 +22,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Circle  # noqa: E402
 
+from protocol import files  # noqa: E402
+
 __all__ = ["COLORS", "draw_path", "draw_spheres", "draw_world", "plot_paths"]
 
 COLORS = {"teacher": "tab:blue", "learner": "tab:red", "controller": "tab:red"}
@@ -117,7 +119,9 @@ def plot_paths(world, paths: dict, out, title: str | None = None, spheres=None, 
     if spheres is not None:
         draw_spheres(axes[0][-1], spheres, dims=dims, feature_names=feature_names)
     fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
+    try:  # a regular file or a new one only, written atomically (protocol.files)
+        with files.replace_file(out) as tmp:
+            fig.savefig(tmp, dpi=110, format=out.suffix[1:].lower() or "png")
+    finally:
+        plt.close(fig)
     return out

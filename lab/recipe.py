@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 from client.behaviour.features import FEATURES, FeatureSpec
 from client.behaviour.tasks import TASKS
+from protocol import arguments
+from protocol.arguments import checked_list
 
 __all__ = [
     "DEMO",
@@ -255,8 +257,7 @@ def parse_floats(text: str, what: str) -> tuple[float, ...]:
         raise argparse.ArgumentTypeError(f"{what}, got {text!r}") from exc
 
 
-def parse_scales(text: str) -> tuple[float, ...]:
-    """``--round-scales``: comma-separated positive factors, or 'none'."""
+def _parse_scales(text: str) -> tuple[float, ...]:
     if text.strip().lower() in ("", "none"):
         return ()
     vals = parse_floats(text, "scales must be numbers like 0.85,1.2 or 'none'")
@@ -265,40 +266,46 @@ def parse_scales(text: str) -> tuple[float, ...]:
     return vals
 
 
+# ``--round-scales``: comma-separated positive factors, or 'none'
+parse_scales = checked_list("scales", _parse_scales, "1.2")
+
+
 # flag -> (recipe field, argparse keywords, help); the help gets the recipe's defaults appended
 _FLAGS: list[tuple[str, str, dict, str]] = [
-    ("--perturb", "perturb", {"type": float},
+    ("--perturb", "perturb", {"type": arguments.fraction},
      "fraction of time a random action is executed"),
     ("--features", "features", {"choices": sorted(FEATURES)}, "feature spec"),
     ("--spawn", "spawn", {"choices": list(SPAWN)},
      "spawn rule ('all' is the paper's literal rule)"),
     ("--distance", "distance", {"choices": list(DISTANCE)}, "the tree's distance"),
-    ("--min-radius", "min_radius", {"type": float}, "the smallest sphere radius"),
-    ("--max-nodes", "max_nodes", {"type": int}, "cap on the tree size"),
-    ("--stride", "stride", {"type": int}, "learn every n-th step"),
+    ("--min-radius", "min_radius", {"type": arguments.non_negative_float},
+     "the smallest sphere radius"),
+    ("--max-nodes", "max_nodes", {"type": arguments.positive_int}, "cap on the tree size"),
+    ("--stride", "stride", {"type": arguments.positive_int}, "learn every n-th step"),
     ("--starts", "starts", {"choices": list(STARTS)},
      "demonstrate from the world's default pose only, or from each of its start poses in turn "
      "('free': then from poses anywhere in the free space, random heading)"),
-    ("--segment", "segment", {"type": float},
+    ("--segment", "segment", {"type": arguments.seconds},
      "sim seconds per demonstration before the teacher restarts"),
-    ("--random-segment", "random_segment", {"type": float},
+    ("--random-segment", "random_segment", {"type": arguments.non_negative_float},
      "after the start poses: demonstrations from sampled poses, each this fraction of "
      "--segment (0: cycle the start poses)"),
     ("--consistent", "consistent", {"action": "store_true"},
      "learn only labels that do not depend on the teacher's memory"),
-    ("--rounds", "rounds", {"type": int},
+    ("--rounds", "rounds", {"type": arguments.non_negative_int},
      "corrective (DAgger) rounds after the demonstration: the tree drives from every start "
      "pose, the teacher labels"),
-    ("--round-seconds", "round_seconds", {"type": float},
+    ("--round-seconds", "round_seconds", {"type": arguments.seconds},
      "sim seconds per start pose in each corrective round"),
-    ("--round-free", "round_free", {"type": int},
+    ("--round-free", "round_free", {"type": arguments.non_negative_int},
      "corrective rounds also drive from this many random free-space poses"),
-    ("--takeover", "takeover", {"type": float},
+    ("--takeover", "takeover", {"type": arguments.non_negative_float},
      "in corrective rounds the teacher drives while a beam is closer than this (m; 0 = never)"),
-    ("--augment", "augment", {"type": int},
+    ("--augment", "augment", {"type": arguments.non_negative_int},
      "scale augmentation: offer every labelled state N more times with the scan scaled (a "
      "wider/narrower copy of the world)"),
-    ("--augment-scale", "augment_scale", {"type": float},
+    ("--augment-scale", "augment_scale",
+     {"type": arguments.Number(float, 1, 10, name="scale factor")},
      "largest scale factor of --augment (and 1/it the smallest)"),
     ("--round-scales", "round_scales", {"type": parse_scales, "metavar": "F,F"},
      "repeat the corrective rounds in the training world scaled by these factors first "
@@ -307,20 +314,20 @@ _FLAGS: list[tuple[str, str, dict, str]] = [
      "last step: compact the tree on every vector it learned (rhbl.compact; exact: no "
      "prediction on them changes; prune: also delete the weakest spheres; prune-balanced: "
      "errors weighted per label)"),
-    ("--compact-max-nodes", "compact_max_nodes", {"type": int},
+    ("--compact-max-nodes", "compact_max_nodes", {"type": arguments.positive_int},
      "prune: delete the weakest spheres until at most N are left"),
-    ("--compact-max-error", "compact_max_error", {"type": float},
+    ("--compact-max-error", "compact_max_error", {"type": arguments.fraction},
      "prune: fraction of the learned vectors whose errors it may add"),
     ("--compact-rounds", "compact_rounds", {"action": argparse.BooleanOptionalAction},
      "with --compact: compact also after the demonstrations and after every corrective round, "
      "so the next round corrects the states the compacted tree reaches"),
-    ("--compact-visits", "compact_visits", {"type": int},
+    ("--compact-visits", "compact_visits", {"type": arguments.non_negative_int},
      "with --compact: then redo the last compaction K times against the learned vectors plus "
      "the teacher's labels of the states the compacted tree reaches in one round without "
      "learning in scaled copies (--visit-scales) and the world"),
     ("--visit-scales", "visit_scales", {"type": parse_scales, "metavar": "F,F"},
      "--compact-visits: the scaled copies ('none': only the world itself)"),
-    ("--visit-free", "visit_free", {"type": int},
+    ("--visit-free", "visit_free", {"type": arguments.non_negative_int},
      "--compact-visits: the round also drives from this many random free-space poses"),
 ]
 
@@ -328,7 +335,8 @@ _FLAGS: list[tuple[str, str, dict, str]] = [
 def add_recipe_arguments(parser: argparse.ArgumentParser, seconds: str = "--seconds") -> None:
     """The recipe's flags (default None: the task's recipe), ``seconds`` naming the flag of
     the demonstration time; every help text shows the recipe's values."""
-    parser.add_argument(seconds, dest="recipe_seconds", type=float, default=None, metavar="S",
+    parser.add_argument(seconds, dest="recipe_seconds", type=arguments.seconds, default=None,
+                        metavar="S",
                         help=f"sim seconds of demonstration ({recipe_default('seconds')})")
     for flag, name, kw, text in _FLAGS:
         parser.add_argument(flag, dest=name, default=None, **kw,

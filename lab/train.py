@@ -36,6 +36,8 @@ from lab.harness import (
 )
 from lab.recipe import Recipe, add_recipe_arguments, recipe_for, recipe_from_args
 from lab.sim_tap import record_run
+from protocol import arguments
+from server import world_arg
 from server.world import World, WorldSpec, free_pose, sample_pose
 
 __all__ = ["add_arguments", "main", "train", "visited_states"]
@@ -377,21 +379,24 @@ def visited_states(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recip
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--world", help="world file (or a shipped world's name); required "
-                                        "unless --from-recording")
-    parser.add_argument("--out", required=True, help="snapshot to write")
-    parser.add_argument("--resume", default=None,
+    parser.add_argument("--world", type=world_arg,
+                        help="world file (or a shipped world's name); required unless "
+                             "--from-recording")
+    parser.add_argument("--out", required=True, type=arguments.output_file,
+                        help="snapshot to write")
+    parser.add_argument("--resume", default=None, type=arguments.input_file,
                         help="continue training this snapshot (a corrective demonstration)")
     parser.add_argument("--start", type=parse_pose, default=None,
                         help="start pose x,y,yaw (default: the world's pose); use the pose of an "
                              "oscillation loop reported by 'rhbl evaluate --json'")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=arguments.seed, default=0)
     add_recipe_arguments(parser)
-    parser.add_argument("--range-noise", type=float, default=0.0)
-    parser.add_argument("--odom-noise", type=float, default=0.0)
-    parser.add_argument("--record", metavar="FILE", default=None,
+    parser.add_argument("--range-noise", type=arguments.non_negative_float, default=0.0)
+    parser.add_argument("--odom-noise", type=arguments.non_negative_float, default=0.0)
+    parser.add_argument("--record", metavar="FILE", default=None, type=arguments.output_file,
                         help="also write the run as an MCAP recording (docs/recording.md)")
     parser.add_argument("--from-recording", nargs="+", metavar="FILE", default=None,
+                        type=arguments.input_file,
                         help="no simulation: learn the teacher labels of these recordings "
                              "(with --features and the tree options; docs/recording.md)")
     parser.add_argument("--teacher", choices=["script", "person"], default="script",

@@ -39,12 +39,11 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import zenoh
 
-from protocol import keys
+from protocol import arguments, files, keys
 from protocol.session import config_from_args
 
 __all__ = [
@@ -144,31 +143,24 @@ def add_report_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--log-level", default=os.environ.get("RHBL_LOG_LEVEL", "INFO"),
                         choices=["DEBUG", "INFO", "WARNING", "ERROR"], type=str.upper,
                         help="logging level (default: INFO or $RHBL_LOG_LEVEL)")
-    parser.add_argument("--stats", metavar="FILE", default=None,
+    parser.add_argument("--stats", metavar="FILE", default=None, type=arguments.output_file,
                         help="at exit, write the process's counters to FILE as JSON (with its "
-                             "role and exit code); the file is replaced")
+                             "role and exit code); the file is replaced (a regular file or a "
+                             "new one only)")
 
 
 def check_stats_path(path: str | None) -> None:
-    """``--stats FILE`` must be writable: its folder exists, it is not a folder (ValueError)."""
-    if path is None:
-        return
-    p = Path(path)
-    if p.is_dir():
-        raise ValueError(f"--stats {path}: is a folder, not a file")
-    if not p.parent.is_dir():
-        raise ValueError(f"--stats {path}: folder {p.parent} does not exist")
-    if not os.access(p.parent, os.W_OK):
-        raise ValueError(f"--stats {path}: folder {p.parent} is not writable")
+    """``--stats FILE`` must be writable under ``protocol.files``' rule (FileRuleError, a
+    ValueError)."""
+    if path is not None:
+        files.check_output(path, "--stats")
 
 
 def write_stats(path: str, role: str, code: int, counters: dict) -> None:
-    """``--stats FILE``: the counters as JSON, written atomically (a reader never sees half)."""
-    p = Path(path)
-    tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps({"role": role, "exit": code, **counters}, indent=1,
-                              default=str) + "\n")
-    os.replace(tmp, p)
+    """``--stats FILE``: the counters as JSON, written atomically (a reader never sees half),
+    to a regular file only (``protocol.files``)."""
+    files.write_text(path, json.dumps({"role": role, "exit": code, **counters}, indent=1,
+                                      default=str) + "\n", "--stats")
 
 
 def setup_logging(role: str, level: str = "INFO") -> None:
@@ -186,26 +178,49 @@ REDELIVER_S = 1.0
 _stopping = threading.Event()
 
 
-def _raise_exit(signum, _frame) -> None:
-    if not _stopping.is_set():
-        _stopping.set()
+# a stop signal that lands in one of these is delivered again shortly instead of raised there:
+# Python swallows (and prints as "Exception ignored in ...") an exception raised in the import
+# machinery's lock callbacks (frozen code) and in ``__del__``
+DEFER_S = 0.05
+_SWALLOWING = ("<frozen importlib",)
+
+
+def _swallowed_here(frame) -> bool:
+    """Whether an exception raised in ``frame`` would be swallowed by the interpreter."""
+    code = frame.f_code if frame is not None else None
+    return code is not None and (code.co_name == "__del__"
+                                 or code.co_filename.startswith(_SWALLOWING))
+
+
+def _raise_exit(signum, frame) -> None:
+    first = not _stopping.is_set()
+    _stopping.set()
+    if _swallowed_here(frame):  # raised here it would be lost, with a traceback printed
+        threading.Thread(target=_redeliver, args=(signum, DEFER_S, False), name="stop-signal",
+                         daemon=True).start()
+        return
+    if first:
         threading.Thread(target=_redeliver, args=(signum,), name="stop-signal",
                          daemon=True).start()
     raise SystemExit(EXIT_OK)
 
 
-def _redeliver(signum: int) -> None:
-    """Deliver the stop signal again every ``REDELIVER_S`` until its handler is gone (``run_process``
-    ignores stop signals once the body has unwound). The ``SystemExit`` a signal raises lands
-    wherever the main thread happens to be, and code there can swallow it: a signal that came
-    during numpy's first lazy ``import numpy.random`` was lost that way, and the teacher went on
-    waiting for a learner until it was killed."""
+def _redeliver(signum: int, every: float = REDELIVER_S, loop: bool = True) -> None:
+    """Deliver the stop signal again every ``every`` s until its handler is gone
+    (``run_process`` ignores stop signals once the body has unwound), or once (``loop`` false:
+    a signal deferred by ``_raise_exit``). The ``SystemExit`` a signal raises lands wherever the
+    main thread happens to be, and code there can swallow it: a signal that came during numpy's
+    first lazy ``import numpy.random`` was lost that way, and the teacher went on waiting for a
+    learner until it was killed."""
     while True:
-        time.sleep(REDELIVER_S)
+        time.sleep(every)
         if signal.getsignal(signum) is not _raise_exit:
             return
-        log.info("stop signal %d not acted on after %g s: delivered again", signum, REDELIVER_S)
+        if loop:
+            log.info("stop signal %d not acted on after %g s: delivered again", signum, every)
         signal.pthread_kill(threading.main_thread().ident, signum)
+        if not loop:
+            return
 
 
 def install_signal_handlers() -> None:

@@ -16,10 +16,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from collections.abc import Sequence
 from pathlib import Path
 
 import zenoh
+
+from protocol import arguments, files
 
 __all__ = [
     "DEFAULT_ENDPOINT",
@@ -27,7 +30,9 @@ __all__ = [
     "MODES",
     "add_zenoh_arguments",
     "config_from_args",
+    "load_config_file",
     "make_config",
+    "zenoh_config_file",
 ]
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
@@ -53,13 +58,7 @@ def make_config(
     """
     if mode not in MODES:
         raise ValueError(f"zenoh mode must be one of {list(MODES)}, got {mode!r}")
-    if config_file is not None:
-        path = Path(config_file)
-        if not path.is_file():
-            raise ValueError(f"zenoh config file not found: {path}")
-        conf = zenoh.Config.from_file(str(path))
-    else:
-        conf = zenoh.Config()
+    conf = load_config_file(config_file) if config_file is not None else zenoh.Config()
     conf.insert_json5("mode", json.dumps(mode))
     if listen:
         conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
@@ -74,6 +73,53 @@ def make_config(
     if lease_ms is not None:
         conf.insert_json5("transport/link/tx/lease", json.dumps(int(lease_ms)))
     return conf
+
+
+def _said(exc: Exception) -> str:
+    """zenoh's message about a config file in one line: its reason and where (line:column),
+    without the excerpt it draws and the Rust source location it ends with."""
+    text = str(exc)
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    where = next((ln[3:].strip() for ln in lines if ln.startswith("-->")), None)
+    reason = next((ln[1:].strip() for ln in lines if ln.startswith("=")), lines[0] if lines else
+                  type(exc).__name__)
+    reason = re.sub(r" at /\S+\.rs:\d+\.?$", "", reason)
+    return f"{reason} (at line:column {where})" if where else reason
+
+
+def load_config_file(path: str | Path) -> zenoh.Config:
+    """A zenoh json5 config file, checked: a regular file zenoh can parse, whose endpoints are
+    well-formed (ValueError, one line naming the file)."""
+    p = files.check_input(path, "zenoh config")
+    try:
+        conf = zenoh.Config.from_file(str(p))
+    except Exception as exc:  # noqa: BLE001 - zenoh.ZError: a syntax or schema error
+        raise ValueError(f"zenoh config {p}: {_said(exc)}") from None
+    for key in ("listen/endpoints", "connect/endpoints"):
+        try:
+            value = json.loads(conf.get_json(key))
+        except Exception:  # noqa: BLE001 - not set
+            continue
+        values = [v for vs in value.values() for v in (vs if isinstance(vs, list) else [vs])] \
+            if isinstance(value, dict) else value if isinstance(value, list) else [value]
+        for ep in values:
+            try:
+                arguments.endpoint(str(ep))
+            except argparse.ArgumentTypeError as exc:
+                raise ValueError(f"zenoh config {p}: {key}: {exc}") from None
+    return conf
+
+
+def _check_config_file(text: str) -> str:
+    if arguments.files_checked():
+        load_config_file(text)
+    elif not text:
+        raise ValueError("an empty path")
+    return text
+
+
+zenoh_config_file = arguments.Checked("zenoh config file", _check_config_file)
+zenoh_config_file.kind = "input"
 
 
 def add_zenoh_arguments(
@@ -98,6 +144,7 @@ def add_zenoh_arguments(
         "-e",
         action="append",
         default=None,
+        type=arguments.endpoint,
         metavar="ENDPOINT",
         help=f"endpoint to connect to (repeatable, or a comma list; default: {connect_default}; "
         "a --zenoh-config file's endpoints replace the default)",
@@ -107,6 +154,7 @@ def add_zenoh_arguments(
         "-l",
         action="append",
         default=None,
+        type=arguments.endpoint,
         metavar="ENDPOINT",
         help="endpoint to listen on (repeatable; default: "
         f"{', '.join(default_listen) if default_listen else 'none'})",
@@ -114,6 +162,7 @@ def add_zenoh_arguments(
     g.add_argument(
         "--zenoh-config",
         default=None,
+        type=zenoh_config_file,
         metavar="FILE",
         help="a zenoh json5 config file, loaded first (flags override it)",
     )
@@ -122,7 +171,8 @@ def add_zenoh_arguments(
         action="store_true",
         help="enable multicast scouting (off by default)",
     )
-    g.add_argument("--namespace", default=None, help="zenoh namespace prefixed to every key")
+    g.add_argument("--namespace", default=None, type=arguments.key_path,
+                   help="zenoh namespace prefixed to every key (chunks separated by '/')")
     parser.set_defaults(
         _zenoh_default_listen=list(default_listen or []),
         _zenoh_default_connect=list(default_connect or []),

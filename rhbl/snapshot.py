@@ -18,7 +18,9 @@ loading and training further gives exactly the tree that training in one process
 This module knows the format only: :func:`encode` and :func:`decode` turn a :class:`Snapshot`
 (parameters, labels, the tree's arrays, counters, metadata) into bytes and back, checking the
 structure of every field; :func:`write` writes bytes atomically (temporary file in the same
-folder, fsync, ``os.replace``). :class:`rhbl.HypersphereClassifier` (``save``, ``to_bytes``)
+folder, fsync, ``os.replace``) to a regular file only: :func:`check_target` refuses a device, a
+FIFO, a socket or a folder at the path (a symlink is followed to the file it names, which is
+replaced and the link kept). :class:`rhbl.HypersphereClassifier` (``save``, ``to_bytes``)
 and :func:`rhbl.load`/:func:`rhbl.loads` build on it; the consistency of the tree and of the
 parameters is checked there, by :meth:`rhbl.SphereTree.from_arrays` and
 :meth:`rhbl.HypersphereClassifier.from_tree`. Every problem while reading raises
@@ -29,6 +31,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,7 +42,8 @@ import numpy as np
 
 from ._errors import SnapshotError
 
-__all__ = ["FORMAT", "PARAMS", "VERSION", "Snapshot", "decode", "encode", "read", "write"]
+__all__ = ["FORMAT", "PARAMS", "VERSION", "Snapshot", "check_target", "decode", "encode", "read",
+           "write"]
 
 FORMAT = "rhbl-tree"
 VERSION = 1
@@ -114,9 +118,40 @@ def encode(snap: Snapshot, *, source: str = "<bytes>") -> bytes:
         raise SnapshotError(source, f"cannot serialise the snapshot: {exc}") from exc
 
 
+def check_target(path: Any) -> Path:
+    """The file a snapshot written to ``path`` replaces: ``path`` itself, or the file a symlink
+    at ``path`` names (followed deliberately: the link is kept and its file replaced, as an
+    editor saving through a link does). :class:`SnapshotError` when that is anything but a
+    regular file or nothing yet (a device, a FIFO, a socket, a folder: ``os.replace`` would put
+    a regular file in its place), or when its folder does not exist. Cheap: callers check their
+    output path with it before any work."""
+    given = Path(path)
+    target = given.resolve() if given.is_symlink() else given
+    try:
+        st = os.stat(target)
+    except FileNotFoundError:
+        st = None
+    except OSError as exc:
+        raise SnapshotError(str(given), f"cannot write there: {exc.strerror or exc}") from exc
+    if st is not None and not stat.S_ISREG(st.st_mode):
+        kind = _KINDS.get(stat.S_IFMT(st.st_mode), "not a regular file")
+        via = f" (the symlink's target {target})" if target != given else ""
+        raise SnapshotError(str(given), f"is {kind}{via}: a snapshot is written only to a "
+                                        f"regular file (or a new one); choose another path")
+    folder = target.parent if str(target.parent) else Path(".")
+    if not folder.is_dir():
+        raise SnapshotError(str(given), f"cannot write there: the folder {folder} does not exist")
+    return target
+
+
+_KINDS = {stat.S_IFCHR: "a character device", stat.S_IFBLK: "a block device",
+          stat.S_IFIFO: "a FIFO", stat.S_IFSOCK: "a socket", stat.S_IFDIR: "a folder"}
+
+
 def write(path: Any, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically."""
-    path = Path(path)
+    """Write ``data`` atomically to the regular file at ``path`` (see :func:`check_target`:
+    anything else there is refused with :class:`SnapshotError`, and left as it is)."""
+    path = check_target(path)
     folder = path.parent if str(path.parent) else Path(".")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
     try:

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["world_names", "world_path", "worlds_dir"]
+from protocol.arguments import Checked
+
+__all__ = ["world_arg", "world_names", "world_path", "worlds_dir"]
 
 
 def worlds_dir() -> Path:
@@ -33,3 +35,20 @@ def world_path(name: str | Path) -> Path:
     raise FileNotFoundError(
         f"world {str(name)!r} is neither a file nor a shipped world (one of {world_names()})"
     )
+
+
+def _world(text: str) -> str:
+    from protocol.arguments import files_checked
+
+    if not files_checked() and "/" in text:  # a path on another machine (syntax_only)
+        return text
+    try:
+        world_path(text)
+    except FileNotFoundError as exc:
+        raise ValueError(str(exc)) from None
+    return text
+
+
+# ``--world FILE|NAME`` (argparse type: a regular file or a shipped world's name)
+world_arg = Checked("world", _world)
+world_arg.kind, world_arg.example = "world", "room"

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import logging
 
-from protocol import keys
+from protocol import arguments, keys
 from protocol.runtime import (
     EXIT_OK,
     EXIT_USAGE,
@@ -28,9 +28,12 @@ log = logging.getLogger("server")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from server import world_arg
+
     parser.add_argument(
         "--world",
         default="room",
+        type=world_arg,
         help="world file or shipped world name (default: room, the wall-following world)",
     )
     parser.add_argument(
@@ -38,14 +41,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=None,
         metavar="NAME",
+        type=arguments.key_chunk,
         help="robot name, repeat for several robots (default: r0, r1, ...)",
     )
-    parser.add_argument("--robots", type=int, default=None, help="number of robots (default: 1)")
-    parser.add_argument("--rate", type=float, default=10.0, help="publishing rate in sim Hz (10)")
+    parser.add_argument("--robots", type=arguments.Number(int, 1, 1000, name="robots"),
+                        default=None, help="number of robots (default: 1; at most 1000)")
+    parser.add_argument("--rate", type=arguments.Number(float, 0, 1000, low_open=True,
+                                                        name="rate"),
+                        default=10.0, help="publishing rate in sim Hz (10; at most 1000)")
     pace = parser.add_mutually_exclusive_group()
     pace.add_argument(
         "--speedup",
-        type=float,
+        type=arguments.non_negative_float,
         default=1.0,
         help="N times real time (default 1; 0: as fast as possible)",
     )
@@ -56,25 +63,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--lockstep-timeout",
-        type=float,
+        type=arguments.seconds,
         default=1.0,
         help="lock-step: real seconds to wait for an answer before stepping anyway (1.0)",
     )
     parser.add_argument(
         "--watchdog",
-        type=float,
+        type=arguments.seconds,
         default=0.5,
         help="sim seconds without commands before a source loses the robot and it stops (0.5)",
     )
-    parser.add_argument("--seed", type=int, default=0, help="random seed (noise)")
-    parser.add_argument("--range-noise", type=float, default=0.0, help="laser noise sigma, m")
-    parser.add_argument("--odom-noise", type=float, default=0.0, help="odometry noise factor")
+    parser.add_argument("--seed", type=arguments.seed, default=0, help="random seed (noise)")
+    parser.add_argument("--range-noise", type=arguments.non_negative_float, default=0.0,
+                        help="laser noise sigma, m")
+    parser.add_argument("--odom-noise", type=arguments.non_negative_float, default=0.0,
+                        help="odometry noise factor")
     parser.add_argument(
-        "--duration", type=float, default=None, help="stop after this many sim seconds"
+        "--duration", type=arguments.seconds, default=None,
+        help="stop after this many sim seconds"
     )
     parser.add_argument(
         "--ident",
         default=None,
+        type=arguments.key_chunk,
         help="server id in its liveliness tokens rhbl/alive/server/<id>/<robot>, one per robot "
         "(default: <host>-<pid>, unique on the network)",
     )

@@ -12,7 +12,8 @@ import json
 import os
 from collections import defaultdict
 
-from client.recording.mcap_file import RecordingError, read_recording
+from client.recording.mcap_file import RecordingError, RecordingReader
+from protocol import arguments
 
 __all__ = ["add_arguments", "format_summary", "main", "recording_summary"]
 
@@ -20,9 +21,7 @@ __all__ = ["add_arguments", "format_summary", "main", "recording_summary"]
 def recording_summary(path: str | os.PathLike) -> dict:
     """What a recording holds (``rhbl inspect``): robots, keys and counts, the sim-time span,
     teacher labels per action, gaps in the scan stream, the metadata."""
-    from mcap.reader import NonSeekingReader
-
-    notes: list[str] = []
+    reader = RecordingReader(path)
     keys_: dict[str, dict] = {}
     robots: dict[str, dict] = {}
     viewer: dict[str, int] = defaultdict(int)
@@ -30,7 +29,7 @@ def recording_summary(path: str | os.PathLike) -> dict:
     last_scan: dict[str, tuple[int, float]] = {}
     gaps: list[dict] = []
     t_first = t_last = None
-    for m in read_recording(path, viewer=True, notes=notes):
+    for m in reader.messages(viewer=True):
         if m.kind == "viewer":
             viewer[m.key] += 1
             continue
@@ -61,23 +60,17 @@ def recording_summary(path: str | os.PathLike) -> dict:
                 labels[m.robot][m.message().action] += 1
             except Exception:  # noqa: BLE001
                 labels[m.robot]["<malformed>"] += 1
-    meta = {}
-    try:
-        with open(path, "rb") as f:
-            for rec in NonSeekingReader(f).iter_metadata():
-                if rec.name == "rhbl":
-                    meta = dict(rec.metadata)
-    except Exception:  # noqa: BLE001 - an unclosed file: metadata still read above if present
-        pass
-    return {"path": str(path), "metadata": meta, "robots": robots, "keys": keys_,
-            "viewer": dict(viewer), "labels": {r: dict(v) for r, v in labels.items()},
-            "gaps": gaps, "notes": notes,
+    return {"path": str(path), "metadata": reader.metadata.get("rhbl", {}), "robots": robots,
+            "keys": keys_, "viewer": dict(viewer),
+            "labels": {r: dict(v) for r, v in labels.items()}, "gaps": gaps,
+            "notes": reader.notes,
             "wall_seconds": (t_last - t_first) / 1e9 if t_first is not None else 0.0}
 
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("recording", nargs="+", help="MCAP file(s) written by rhbl")
+    parser.add_argument("recording", nargs="+", type=arguments.input_file,
+                        help="MCAP file(s) written by rhbl")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 

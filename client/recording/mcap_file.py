@@ -1,6 +1,8 @@
 """Recordings: every message of a run kept as an MCAP file (docs/recording.md).
 
-The format (written with the official ``mcap`` package, read back with ``mcap.reader``):
+The format (written with the official ``mcap`` package's writer, read back record by record by
+``RecordingReader``: streamed, with limits on record and chunk sizes, CRCs checked, a file cut
+anywhere read up to its last complete chunk):
 
 - one channel per bus key (topic = the zenoh key, e.g. ``rhbl/r0/laser/0/data/scan``),
   ``message_encoding`` ``msgpack``; each message is the original payload, bit for bit. A schema
@@ -29,9 +31,11 @@ from __future__ import annotations
 import contextlib
 import datetime as _dt
 import errno
+import io
 import json
 import logging
 import os
+import struct
 import time
 from collections import defaultdict
 from collections.abc import Iterator
@@ -39,7 +43,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import msgpack
+from mcap.opcode import Opcode
 
+from protocol import files
 from protocol.codec import PROTOCOL_VERSION
 from protocol.decoding import Decoder
 from protocol.messages import CARRIES, kind_of
@@ -47,8 +53,11 @@ from protocol.messages import CARRIES, kind_of
 __all__ = [
     "CHUNK_SECONDS",
     "KINDS",
+    "MAX_CHUNK",
+    "MAX_RECORD",
     "RecordedMessage",
     "RecordingError",
+    "RecordingReader",
     "RecordingWriter",
     "classify",
     "decode",
@@ -148,12 +157,11 @@ class RecordingWriter:
 
         self.path = Path(path)
         self.chunk_seconds = float(chunk_seconds)
-        flags = os.O_WRONLY | os.O_CREAT | (os.O_TRUNC if overwrite else os.O_EXCL)
-        try:
-            if self.path.parent and not self.path.parent.exists():
-                self.path.parent.mkdir(parents=True, exist_ok=True)
-            fd = os.open(self.path, flags, 0o644)
-        except OSError as exc:
+        try:  # a regular file or a new one only (protocol.files), its folder made
+            fd = files.open_output(self.path, overwrite=overwrite)
+        except files.FileRuleError as exc:
+            raise RecordingError(str(exc)) from None
+        except OSError as exc:  # FileExistsError included
             raise not_created(self.path, exc) from exc
         self._file = _Out(fd)
         self._writer = Writer(self._file, chunk_size=chunk_size,
@@ -335,6 +343,12 @@ class _Out:
 
 
 # ---- reading ------------------------------------------------------------------------------
+# a reader never allocates more than these for one record: a hostile file claiming a chunk of
+# a GiB (a few KiB of zstd) is refused instead of inflated. Our writer's chunks hold 256 KiB.
+MAX_RECORD = 64 * 2**20  # bytes of one record as stored (a chunk's compressed data included)
+MAX_CHUNK = 64 * 2**20  # bytes of one chunk once decompressed
+
+
 @dataclass(frozen=True)
 class RecordedMessage:
     key: str  # the topic: the bus key (or a viewer topic)
@@ -354,49 +368,239 @@ class RecordedMessage:
         return decode(self.kind, self.data)
 
 
+_MESSAGE = struct.Struct("<HIQQ")  # a message record's fixed fields
+
+
+class _Damaged(Exception):
+    """A complete record that does not parse (the file is damaged there)."""
+
+
+class _Cut(Exception):
+    """The file ends inside a record (it was cut there)."""
+
+
+class RecordingReader:
+    """An MCAP recording read record by record (memory: one chunk at most, ``MAX_CHUNK``),
+    checked as it goes: the data section's and each chunk's CRCs, a limit on every record's
+    and chunk's size, every length against what the file holds.
+
+    ``messages(viewer=False)`` yields the messages in file order (= the order received). A file
+    cut anywhere (a recorder killed, a full disk, a partial copy) yields every message before
+    the cut that sits in a complete record (chunk), then ends with a line in ``notes``; anything
+    else wrong is ``RecordingError`` naming the file, the byte and what is wrong. ``metadata``:
+    the metadata records read so far (name -> map). The file must be a regular file
+    (``protocol.files``: a FIFO or a device is refused, never read)."""
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        self.notes: list[str] = []
+        self.metadata: dict[str, dict[str, str]] = {}
+        self.messages_read = 0
+        self._schemas: dict[int, str] = {}
+        # id -> (topic, encoding, schema, kind, robot): classified once per channel
+        self._channels: dict[int, tuple[str, str, str, str, str]] = {}
+        self._complete = False  # the data section's end was read: every message is
+
+    def messages(self, viewer: bool = False) -> Iterator[RecordedMessage]:
+        try:
+            f = files.open_input(self.path, "recording")
+        except files.FileRuleError as exc:
+            raise RecordingError(str(exc)) from None
+        with f:
+            size = os.fstat(f.fileno()).st_size
+            if size == 0:
+                raise RecordingError(f"{self.path} is empty: not an MCAP recording")
+            if f.read(len(MAGIC)) != MAGIC:
+                raise RecordingError(f"{self.path} is not an MCAP recording (it does not begin "
+                                     f"with MCAP's magic bytes)")
+            try:
+                yield from self._records(f, size, viewer)
+            except _Cut as cut:
+                if self._complete:
+                    line = (f"{self.path} is cut {cut}, after its data: all its "
+                            f"{self.messages_read} messages were read (a partial copy?)")
+                else:
+                    line = (f"{self.path} ends after {self.messages_read} messages, cut {cut}: "
+                            f"it was not closed (a recorder killed, a full disk, a partial "
+                            f"copy?); read up to its last complete chunk")
+                log.warning("%s", line)
+                self.notes.append(line)
+
+    # -- records --
+    def _records(self, f, size: int, viewer: bool) -> Iterator[RecordedMessage]:
+        import zlib
+
+        crc = zlib.crc32(MAGIC)
+        data_end = False
+        while True:
+            at = f.tell()
+            header = f.read(9)
+            if len(header) < 9:
+                where = "at its end" if not header else f"in a record header at byte {at}"
+                raise _Cut(f"{where} (no footer)" if not header else where)
+            opcode, length = struct.unpack("<BQ", header)
+            if length > MAX_RECORD:
+                raise RecordingError(f"{self.path}: the record at byte {at} claims {length} "
+                                     f"bytes, more than the {MAX_RECORD} a recording's record "
+                                     f"may hold: refused (damaged or crafted)")
+            if at + 9 + length > size:
+                raise _Cut(f"inside the record that begins at byte {at} ({length} bytes, "
+                           f"{size - at - 9} left)")
+            body = f.read(length)
+            if opcode == Opcode.DATA_END:
+                data_end = self._complete = True
+                self._check_data_crc(body, crc, at)
+            elif not data_end:
+                crc = zlib.crc32(body, zlib.crc32(header, crc))
+            try:
+                if opcode == Opcode.FOOTER:
+                    if f.read(len(MAGIC)) != MAGIC:
+                        raise _Cut("in its closing magic bytes (after the footer)")
+                    return
+                if opcode == Opcode.CHUNK and not data_end:
+                    yield from self._chunk(body, at, viewer)
+                elif not data_end or opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
+                    yield from self._record(opcode, body, at, viewer)
+            except _Damaged as exc:
+                raise RecordingError(f"{self.path} is damaged after {self.messages_read} "
+                                     f"messages (in the record at byte {at}): {exc}") from None
+
+    def _check_data_crc(self, body: bytes, crc: int, at: int) -> None:
+        if len(body) >= 4:
+            (expected,) = struct.unpack_from("<I", body)
+            if expected not in (0, crc):
+                raise RecordingError(f"{self.path} is damaged: the data section's CRC "
+                                     f"({crc:#010x}) is not the one its end record holds "
+                                     f"({expected:#010x}, byte {at})")
+
+    def _record(self, opcode: int, body: bytes, at: int, viewer: bool
+                ) -> Iterator[RecordedMessage]:
+        """One record outside or inside a chunk; the message it is, if any."""
+        from mcap.data_stream import ReadDataStream
+        from mcap.records import Channel, Metadata, Schema
+
+        stream = ReadDataStream(io.BytesIO(body))
+        try:
+            if opcode == Opcode.SCHEMA:
+                sc = Schema.read(stream)
+                self._schemas[sc.id] = sc.name
+            elif opcode == Opcode.CHANNEL:
+                ch = Channel.read(stream)
+                if ch.schema_id and ch.schema_id not in self._schemas:
+                    raise _Damaged(f"channel {ch.id} names schema {ch.schema_id}, never "
+                                   f"declared")
+                kind, robot = (classify(ch.topic) if ch.message_encoding == ENCODING
+                               else ("viewer", ""))
+                self._channels[ch.id] = (ch.topic, ch.message_encoding,
+                                         self._schemas.get(ch.schema_id, ""), kind, robot)
+            elif opcode == Opcode.METADATA:
+                md = Metadata.read(stream)
+                self.metadata[md.name] = dict(md.metadata)
+            elif opcode == Opcode.MESSAGE:
+                m = self._message(body, 0, len(body), viewer)
+                if m is not None:
+                    yield m
+        except _Damaged:
+            raise
+        except Exception as exc:  # noqa: BLE001 - struct.error, EndOfFile, UnicodeDecodeError
+            raise _Damaged(f"{type(exc).__name__}: {exc}") from None
+
+    def _message(self, buf: bytes, start: int, end: int, viewer: bool
+                 ) -> RecordedMessage | None:
+        """The message record in ``buf[start:end]`` (channel u16, sequence u32, log and publish
+        times u64, then the payload); None for a viewer message when not ``viewer``."""
+        if end - start < _MESSAGE.size:
+            raise _Damaged(f"a message record of {end - start} bytes (at least "
+                           f"{_MESSAGE.size})")
+        channel, _seq, log_time, publish_time = _MESSAGE.unpack_from(buf, start)
+        ch = self._channels.get(channel)
+        if ch is None:
+            raise _Damaged(f"a message on channel {channel}, never declared")
+        topic, encoding, schema, kind, robot = ch
+        if kind == "viewer" and not viewer:
+            return None
+        self.messages_read += 1
+        return RecordedMessage(topic, kind, robot, buf[start + _MESSAGE.size:end], log_time,
+                               publish_time, encoding, schema)
+
+    def _chunk(self, body: bytes, at: int, viewer: bool) -> Iterator[RecordedMessage]:
+        """The records of a chunk, decompressed at most to its declared size (``MAX_CHUNK``)."""
+        import zlib
+
+        from mcap.data_stream import ReadDataStream
+        from mcap.records import Chunk
+
+        try:
+            chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
+        except Exception as exc:  # noqa: BLE001 - struct.error, EndOfFile, UnicodeDecodeError
+            raise _Damaged(f"{type(exc).__name__}: {exc}") from None
+        if chunk.uncompressed_size > MAX_CHUNK:
+            raise RecordingError(f"{self.path}: the chunk at byte {at} claims "
+                                 f"{chunk.uncompressed_size} bytes uncompressed, more than the "
+                                 f"{MAX_CHUNK} a recording's chunk may hold: refused (a "
+                                 f"decompression bomb, or damaged)")
+        data = _inflate(chunk)
+        if len(data) > chunk.uncompressed_size:
+            raise _Damaged(f"its chunk decompresses to more than the "
+                           f"{chunk.uncompressed_size} bytes it declares")
+        if len(data) < chunk.uncompressed_size:
+            raise _Damaged(f"its chunk decompresses to {len(data)} bytes, not the "
+                           f"{chunk.uncompressed_size} it declares")
+        if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+            raise _Damaged("its chunk's CRC does not match its contents")
+        pos = 0
+        while pos < len(data):
+            if pos + 9 > len(data):
+                raise _Damaged(f"a record header cut at byte {pos} of its chunk")
+            opcode, length = struct.unpack_from("<BQ", data, pos)
+            if pos + 9 + length > len(data):
+                raise _Damaged(f"a record of {length} bytes at byte {pos} of its chunk runs "
+                               f"past the chunk's end")
+            if opcode == Opcode.MESSAGE:  # the common case, without copying the record
+                m = self._message(data, pos + 9, pos + 9 + length, viewer)
+                if m is not None:
+                    yield m
+            else:
+                yield from self._record(opcode, data[pos + 9:pos + 9 + length], at, viewer)
+            pos += 9 + length
+
+
+def _inflate(chunk) -> bytes:
+    """A chunk's data decompressed: at most one byte more than it declares (so a chunk that
+    holds more than it says is caught, never inflated whole)."""
+    cap = chunk.uncompressed_size + 1
+    try:
+        if chunk.compression == "":
+            return chunk.data
+        if chunk.compression == "zstd":
+            import zstandard
+
+            reader = zstandard.ZstdDecompressor().stream_reader(io.BytesIO(chunk.data))
+            out = bytearray()
+            while len(out) < cap:
+                part = reader.read(min(cap - len(out), 1 << 20))
+                if not part:
+                    break
+                out += part
+            return bytes(out)
+        if chunk.compression == "lz4":
+            import lz4.frame
+
+            return lz4.frame.LZ4FrameDecompressor().decompress(chunk.data, max_length=cap)
+    except Exception as exc:  # noqa: BLE001 - zstd/lz4 errors: corrupt compressed data
+        raise _Damaged(f"its chunk does not decompress ({type(exc).__name__}: {exc})") from None
+    raise _Damaged(f"its chunk is compressed with {chunk.compression!r} (zstd, lz4 or none)")
+
+
 def read_recording(path: str | os.PathLike, viewer: bool = False,
                    notes: list | None = None) -> Iterator[RecordedMessage]:
-    """The messages of a recording in file order (= the order they were received). A file
-    that was not closed (a recorder killed) is read up to its last complete chunk; ``notes``
-    gets a line saying so. Raises ``RecordingError`` naming the file for anything else."""
-    from mcap.reader import NonSeekingReader
-
-    path = Path(path)
+    """The messages of a recording in file order (= the order they were received), streamed
+    (``RecordingReader``). A file that was not closed (a recorder killed) or was cut anywhere
+    is read up to its last complete chunk; ``notes`` gets a line saying so. Raises
+    ``RecordingError`` naming the file for anything else."""
+    reader = RecordingReader(path)
     try:
-        f = open(path, "rb")  # noqa: SIM115 - closed below
-    except OSError as exc:
-        raise RecordingError(f"cannot open the recording {path}: {exc.strerror or exc}") from exc
-    n = 0
-    with f:
-        if os.fstat(f.fileno()).st_size == 0:
-            raise RecordingError(f"{path} is empty: not an MCAP recording")
-        if f.read(len(MAGIC)) != MAGIC:
-            raise RecordingError(f"{path} is not an MCAP recording (it does not begin with "
-                                 f"MCAP's magic bytes)")
-        f.seek(0)
-        try:
-            reader = NonSeekingReader(f, validate_crcs=True)
-            for schema, channel, m in reader.iter_messages(log_time_order=False):
-                if channel.message_encoding != ENCODING:
-                    if not viewer:
-                        continue
-                    kind, robot = "viewer", ""
-                else:
-                    kind, robot = classify(channel.topic)
-                n += 1
-                yield RecordedMessage(channel.topic, kind, robot, m.data, m.log_time,
-                                      m.publish_time, channel.message_encoding,
-                                      schema.name if schema else "")
-        except Exception as exc:  # noqa: BLE001 - McapError, zstd/lz4 errors, EOF, ...
-            name = type(exc).__name__
-            if "InvalidMagic" in name:
-                raise RecordingError(f"{path} is not an MCAP recording ({name}: {exc})") from exc
-            if "EndOfFile" in name or isinstance(exc, EOFError):
-                line = (f"{path} ends after {n} messages without its summary: it was not closed "
-                        f"(a recorder killed, a full disk?); read up to its last complete chunk")
-                log.warning("%s", line)
-                if notes is not None:
-                    notes.append(line)
-                return
-            raise RecordingError(f"{path} is damaged after {n} messages (at byte {f.tell()}): "
-                                 f"{name}: {exc}") from exc
+        yield from reader.messages(viewer)
+    finally:
+        if notes is not None:
+            notes.extend(reader.notes)

@@ -18,13 +18,12 @@ import argparse
 import logging
 import os
 import time
-from pathlib import Path
 
 from client.recording.mcap_file import CHUNK_SECONDS, RecordingError, RecordingWriter
 from client.recording.ros2 import Ros2Recording
 from client.recording.tap import BusTap
 from client.ros2 import Ros2Options, add_ros2_arguments
-from protocol import keys
+from protocol import arguments, files, keys
 from protocol.messages import LaserConfig
 from protocol.runtime import (
     EXIT_FAILURE,
@@ -44,17 +43,20 @@ log = logging.getLogger(__name__)
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_zenoh_arguments(parser)
-    parser.add_argument("--out", required=True, metavar="FILE",
-                        help="the MCAP file to write (refused if it exists, unless --overwrite)")
+    parser.add_argument("--out", required=True, metavar="FILE", type=arguments.output_file,
+                        help="the MCAP file to write (refused if it exists, unless --overwrite; "
+                             "a regular file or a new one only)")
     parser.add_argument("--robot", action="append", dest="robots", metavar="NAME",
+                        type=arguments.key_chunk,
                         help="record this robot's keys (repeatable; default: every robot seen)")
-    parser.add_argument("--duration", type=float, default=None, metavar="SECONDS",
+    parser.add_argument("--duration", type=arguments.seconds, default=None, metavar="SECONDS",
                         help="stop after this many seconds of recording (wall time; default: "
                              "until stopped)")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     parser.add_argument("--no-viewer", action="store_true",
                         help="only the bus messages, no Foxglove viewer channels")
-    parser.add_argument("--chunk-seconds", type=float, default=CHUNK_SECONDS, metavar="S",
+    parser.add_argument("--chunk-seconds", type=arguments.seconds, default=CHUNK_SECONDS,
+                        metavar="S",
                         help=f"close a chunk at least this often (default {CHUNK_SECONDS:g}): "
                              f"what a killed recorder can lose at most")
     parser.add_argument("--ros2", action="store_true",
@@ -62,7 +64,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "profile: ros2 bag, Foxglove's ROS 2 view): the topics rhbl ros2 "
                              "publishes (docs/ros2.md)")
     add_ros2_arguments(parser, bridge=True, when="with --ros2", domain=False)
-    parser.add_argument("--wait-router", type=float, default=0.0, metavar="SECONDS",
+    parser.add_argument("--wait-router", type=arguments.seconds_or_zero, default=0.0,
+                        metavar="SECONDS",
                         help="while nothing listens on the --connect endpoints (no server or "
                              "router up yet), try again for this long (0 = forever, the "
                              "default)")
@@ -70,29 +73,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def check_out(path: str | os.PathLike, overwrite: bool) -> None:
-    """ValueError unless ``path`` can be the new recording: not a folder, not an existing file
-    (unless ``overwrite``), in a folder that exists or can be made."""
-    p = Path(path)
-    if p.is_dir():
-        raise ValueError(f"--out {p}: is a folder, not a file")
-    if p.exists() and not overwrite:
-        raise ValueError(f"--out {p} exists: choose another file or pass --overwrite (a "
+    """ValueError unless ``path`` can be the new recording: a regular file or a new one
+    (``protocol.files``: never a device, a FIFO, a socket or a folder), not an existing file
+    unless ``overwrite``; its folder is made."""
+    target = files.check_output(path, "--out")
+    if target.exists() and not overwrite:
+        raise ValueError(f"--out {path} exists: choose another file or pass --overwrite (a "
                          f"recording is never replaced silently)")
-    folder = next((q for q in p.absolute().parents if q.exists()), None)
-    if folder is None or not folder.is_dir() or not os.access(folder, os.W_OK):
-        raise ValueError(f"--out {p}: cannot create it in {folder} (not a writable folder)")
 
 
 def main(args: argparse.Namespace) -> int:
     def check() -> None:
-        for r in args.robots or []:
-            keys.check_chunk(r, "--robot")
-        if args.duration is not None and not args.duration > 0:
-            raise ValueError("--duration must be > 0")
-        if not args.chunk_seconds > 0:
-            raise ValueError("--chunk-seconds must be > 0")
-        if not args.wait_router >= 0:
-            raise ValueError("--wait-router must be >= 0")
         if args.ros2:
             options = Ros2Options.from_args(args)
             for r in args.robots or []:

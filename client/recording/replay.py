@@ -6,8 +6,9 @@ against it without a simulator; commands are not replayed (the new controller ma
     rhbl replay run.mcap --listen tcp/127.0.0.1:7447 --mode router   # be the rendezvous
     rhbl controller --tree tree.rhbl --connect tcp/127.0.0.1:7447      # drives the replay
 
-The recording is read before any connection (a file that is not a recording: one line, exit
-2). It answers ``sim/req/get_world`` with the recorded world (viewers draw the walls) and holds
+The recording is read once before any connection (a file that is not a recording, or holds a
+topic that is not a robot's plain key: one line, exit 2), then again as it plays (streamed:
+memory does not grow with the file). A pause longer than ``--max-gap`` is played as that long. It answers ``sim/req/get_world`` with the recorded world (viewers draw the walls) and holds
 the liveliness token ``rhbl/alive/server/replay-<pid>`` while it plays.
 """
 
@@ -18,92 +19,171 @@ import logging
 import os
 import threading
 import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
 
 import zenoh
 
 from client.recording.mcap_file import RecordedMessage, RecordingError, read_recording
-from protocol import keys
+from protocol import arguments, keys
 from protocol.decoding import Decoder
 from protocol.messages import Scan, VelCmd
 from protocol.runtime import Context, add_report_arguments, run_process
 from protocol.session import add_zenoh_arguments
 
-__all__ = ["SENSOR_KINDS", "ReplayProcess", "add_arguments", "load_stream", "main"]
+__all__ = ["MAX_GAP", "SENSOR_KINDS", "ReplayPlan", "ReplayProcess", "add_arguments", "main",
+           "plan_replay", "sensor_messages"]
 
 log = logging.getLogger(__name__)
 
 SENSOR_KINDS = ("state", "scan", "driver")  # what the server publishes
+_PLAIN_KEY = {"state": keys.state_key, "scan": keys.scan_key, "driver": keys.driver_key}
+MAX_GAP = 5.0  # default --max-gap: a longer pause in a recording is played as this long
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_zenoh_arguments(parser)
-    parser.add_argument("recording", help="an MCAP file written by rhbl record (or --record)")
-    parser.add_argument("--speed", type=float, default=1.0, metavar="X",
+    parser.add_argument("recording", type=arguments.input_file,
+                        help="an MCAP file written by rhbl record (or --record)")
+    parser.add_argument("--speed", type=arguments.non_negative_float, default=1.0, metavar="X",
                         help="play X times as fast as recorded (0 = as fast as possible; "
                              "default 1)")
     parser.add_argument("--robot", action="append", dest="robots", metavar="NAME",
+                        type=arguments.key_chunk,
                         help="replay only this robot (repeatable; default: every robot)")
-    parser.add_argument("--wait-subscriber", type=float, default=10.0, metavar="SECONDS",
+    parser.add_argument("--max-gap", type=arguments.seconds, default=MAX_GAP,
+                        metavar="SECONDS",
+                        help=f"a pause longer than this between two recorded messages is played "
+                             f"as this long (recorded time; default {MAX_GAP:g}); a message "
+                             f"recorded before the one ahead of it is played at once")
+    parser.add_argument("--wait-subscriber", type=arguments.seconds_or_zero, default=10.0,
+                        metavar="SECONDS",
                         help="start once something subscribes to the scans, waiting at most "
                              "this long (0 = start at once; default 10)")
     parser.add_argument("--lockstep", action="store_true",
                         help="after each scan wait until a command answers it (its scan_id), "
                              "as a lock-step server does, at most --lockstep-timeout: every "
                              "scan gets its command however slow the machine")
-    parser.add_argument("--lockstep-timeout", type=float, default=1.0, metavar="SECONDS",
+    parser.add_argument("--lockstep-timeout", type=arguments.seconds, default=1.0,
+                        metavar="SECONDS",
                         help="with --lockstep: go on after this long without an answer "
                              "(default 1)")
     add_report_arguments(parser)
 
 
-def load_stream(path: str, robots: list[str] | None = None
-                ) -> tuple[list[RecordedMessage], dict[str, bytes]]:
-    """The sensor messages of a recording (``SENSOR_KINDS``, of ``robots`` or every robot) in
-    the order received, and each robot's recorded world (``WorldInfo`` payload). ValueError
-    naming the file when it is no recording or holds no sensor message."""
+def _checked_robot(m: RecordedMessage, n: int, path) -> str:
+    """The robot of a recorded sensor or world message whose topic is the plain key of a
+    robot (``protocol.keys``: no wildcard, no empty chunk, nothing but the key the server
+    publishes); ValueError naming the topic otherwise (a replay publishes on it)."""
+    info = keys.parse(m.key)
     try:
-        msgs = [m for m in read_recording(path)
-                if m.kind in (*SENSOR_KINDS, "world") and (not robots or m.robot in robots)]
+        keys.check_chunk(info.robot, "its robot")
+        plain = (keys.sim_request_key(info.robot, "get_world") if m.kind == "world"
+                 else _PLAIN_KEY[m.kind](info.robot, info.index or 0))
+    except ValueError as exc:
+        raise ValueError(f"{path}: message {n} is on the topic {m.key!r}, not a robot's plain "
+                         f"key: {exc}; refused (a replay publishes on the keys it reads)"
+                         ) from None
+    if plain != m.key:
+        raise ValueError(f"{path}: message {n} is on the topic {m.key!r}, not a robot's plain "
+                         f"key ({plain}); refused (a replay publishes on the keys it reads)")
+    return info.robot
+
+
+def sensor_messages(path, robots: list[str] | None = None, worlds: bool = False
+                    ) -> Iterator[RecordedMessage]:
+    """The sensor messages (``SENSOR_KINDS``, and the recorded worlds with ``worlds``) of
+    ``robots`` (default every robot) in the order received, streamed from the file (one chunk
+    in memory), each topic checked (``_checked_robot``). ValueError naming the file for a
+    recording that is damaged or holds a topic that is not a plain key."""
+    want = (*SENSOR_KINDS, "world") if worlds else SENSOR_KINDS
+    checked: dict[str, str] = {}  # topic -> its robot, once checked
+    try:
+        for n, m in enumerate(read_recording(path)):
+            if m.kind not in want:
+                continue
+            robot = checked.get(m.key)
+            if robot is None:
+                robot = checked[m.key] = _checked_robot(m, n, path)
+            if not robots or robot in robots:
+                yield m
     except RecordingError as exc:
         raise ValueError(str(exc)) from None
-    stream = [m for m in msgs if m.kind in SENSOR_KINDS]
-    if not stream:
+
+
+@dataclass
+class ReplayPlan:
+    """What a replay will play, found by reading the file once before any connection."""
+
+    path: str
+    robots: list[str]
+    keys: set[str]
+    messages: int
+    worlds: dict[str, bytes] = field(default_factory=dict)  # robot -> WorldInfo payload
+    span: float = 0.0  # recorded seconds played (gaps capped)
+    capped: int = 0  # gaps longer than max_gap
+
+
+def _gap(prev_ns: int | None, ns: int, max_gap: float) -> float:
+    """Recorded seconds between two messages as played: >= 0 (a clock that stepped back
+    plays at once), at most ``max_gap``."""
+    if prev_ns is None:
+        return 0.0
+    return min(max(0.0, (ns - prev_ns) / 1e9), max_gap)
+
+
+def plan_replay(path, robots: list[str] | None, max_gap: float) -> ReplayPlan:
+    """Read the recording once (streamed): every topic checked, the robots, keys and worlds
+    it holds. ValueError naming the file when it is no recording, is damaged, holds a topic
+    that is not a plain key, or holds no sensor message."""
+    plan = ReplayPlan(str(path), [], set(), 0)
+    prev = None
+    for m in sensor_messages(path, robots, worlds=True):
+        robot = keys.parse(m.key).robot
+        if m.kind == "world":
+            plan.worlds[robot] = m.data
+            continue
+        plan.keys.add(m.key)
+        plan.messages += 1
+        if prev is not None and (m.log_time - prev) / 1e9 > max_gap:
+            plan.capped += 1
+        plan.span += _gap(prev, m.log_time, max_gap)
+        prev = m.log_time
+        if robot not in plan.robots:
+            plan.robots.append(robot)
+    if not plan.messages:
         raise ValueError(f"{path} holds no sensor messages"
                          f"{' of robot ' + ', '.join(robots) if robots else ''}")
-    return stream, {m.robot: m.data for m in msgs if m.kind == "world"}
+    plan.robots.sort()
+    return plan
 
 
 def main(args: argparse.Namespace) -> int:
-    if not args.speed >= 0:
-        raise ValueError(f"--speed must be >= 0, got {args.speed}")
-    for r in args.robots or []:
-        keys.check_chunk(r, "--robot")
-    if not os.path.exists(args.recording):
-        raise ValueError(f"recording {args.recording} does not exist")
-    stream, worlds = load_stream(args.recording, args.robots)  # before any connection
+    plan = plan_replay(args.recording, args.robots, args.max_gap)  # before any connection
     # it holds a server's token (rhbl/alive/server/replay-<pid>), not one of its own
-    return run_process("replay", args, lambda ctx: ReplayProcess(ctx, stream, worlds).run(),
+    return run_process("replay", args, lambda ctx: ReplayProcess(ctx, plan).run(),
                        early_token=False)
 
 
 class ReplayProcess:
-    """Publishers for the recorded keys, the recorded worlds served, the stream played."""
+    """Publishers for the recorded keys, the recorded worlds served, the stream played (read
+    from the file again as it plays: memory does not grow with the recording)."""
 
-    def __init__(self, ctx: Context, stream: list[RecordedMessage], worlds: dict[str, bytes]):
-        self.args, self.session, self.stream = ctx.args, ctx.session, stream
-        for robot, data in worlds.items():
+    def __init__(self, ctx: Context, plan: ReplayPlan):
+        self.args, self.session, self.plan = ctx.args, ctx.session, plan
+        for robot, data in plan.worlds.items():
             key = keys.sim_request_key(robot, "get_world")
             ctx.queryable(key, lambda q, key=key, data=data: self._answer(q, key, data))
-        self.pubs: dict[str, zenoh.Publisher] = {}
-        for m in stream:
-            if m.key not in self.pubs:
-                self.pubs[m.key] = ctx.publisher(
-                    m.key, congestion_control=zenoh.CongestionControl.BLOCK)
+        self.pubs: dict[str, zenoh.Publisher] = {
+            key: ctx.publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+            for key in sorted(plan.keys)}
         ctx.keep(self.session.liveliness().declare_token(
             keys.alive_key("server", f"replay-{os.getpid()}")))
-        self.robots = sorted({m.robot for m in stream})
+        self.robots = plan.robots
         self.answers = _Answers(self.session, self.robots) if self.args.lockstep else None
         self.sent = self.unanswered = 0
+        self.played = 0.0  # recorded seconds played so far (gaps capped)
+        self._prev_ns: int | None = None
         self.t0 = time.monotonic()
         ctx.scope.callback(self.close)  # on every path, after "stopping (signal)"
         ctx.report(self.counters)
@@ -117,12 +197,15 @@ class ReplayProcess:
 
     def run(self) -> int:
         self.wait_for_subscriber()
-        log.info("replaying %d messages of %s (robots %s) at %s", len(self.stream),
+        log.info("replaying %d messages of %s (robots %s) at %s%s", self.plan.messages,
                  self.args.recording, ", ".join(self.robots),
-                 f"{self.args.speed:g}x" if self.args.speed else "full speed")
+                 f"{self.args.speed:g}x" if self.args.speed else "full speed",
+                 f"; {self.plan.capped} pauses longer than {self.args.max_gap:g} s played as "
+                 f"{self.args.max_gap:g} s" if self.plan.capped else "")
         self.t0 = time.monotonic()
-        for m in self.stream:
-            self.play(m)
+        for m in sensor_messages(self.args.recording, self.args.robots):
+            if m.key in self.pubs:  # the file changed since it was checked: nothing new
+                self.play(m)
         return 0
 
     def wait_for_subscriber(self) -> None:
@@ -139,12 +222,14 @@ class ReplayProcess:
             time.sleep(0.02)
 
     def play(self, m: RecordedMessage) -> None:
-        """Publish ``m`` at its recorded time (scaled by ``--speed``); with ``--lockstep`` a
-        scan then waits for its answer, and the recorded spacing goes on after it."""
+        """Publish ``m`` at its recorded time (pauses capped at ``--max-gap``, scaled by
+        ``--speed``); with ``--lockstep`` a scan then waits for its answer, and the recorded
+        spacing goes on after it."""
         speed = self.args.speed
+        self.played += _gap(self._prev_ns, m.log_time, self.args.max_gap)
+        self._prev_ns = m.log_time
         if speed > 0:
-            due = self.t0 + (m.log_time - self.stream[0].log_time) / 1e9 / speed
-            delay = due - time.monotonic()
+            delay = self.t0 + self.played / speed - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
         self.pubs[m.key].put(m.data)
@@ -161,13 +246,12 @@ class ReplayProcess:
             log.info("lock-step: %d scans without an answer within %.1f s", self.unanswered,
                      self.args.lockstep_timeout)
             self.answers = None
-        span = (self.stream[-1].log_time - self.stream[0].log_time) / 1e9
         log.info("replay stopped: %d of %d messages sent (%.1f s recorded, %.1f s played)",
-                 self.sent, len(self.stream), span, time.monotonic() - self.t0)
+                 self.sent, self.plan.messages, self.plan.span, time.monotonic() - self.t0)
 
     def counters(self) -> dict:
-        return {"sent": self.sent, "messages": len(self.stream), "unanswered": self.unanswered,
-                "robots": self.robots}
+        return {"sent": self.sent, "messages": self.plan.messages,
+                "unanswered": self.unanswered, "robots": self.robots}
 
 
 class _Answers:

@@ -26,6 +26,7 @@ from client.recording.mcap_file import (
     why_not_written,
 )
 from client.ros2 import Ros2Options
+from protocol import files
 from protocol.decoding import Decoder
 from protocol.messages import Scan, State
 from protocol.ros2.convert import Frames, RobotFeed
@@ -50,6 +51,8 @@ class Ros2Recording:
         self.chunk_seconds = float(chunk_seconds)
         try:
             self.writer = Ros2McapWriter(self.path, overwrite=overwrite)
+        except files.FileRuleError as exc:
+            raise RecordingError(str(exc)) from None
         except OSError as exc:
             raise not_created(self.path, exc) from exc
         self.feeds: dict[str, RobotFeed | None] = {}  # None: a robot without a ROS 2 name

@@ -27,7 +27,7 @@ from typing import Any
 
 import zenoh
 
-from protocol import keys
+from protocol import arguments, keys
 from protocol.runtime import (
     EXIT_NO_LEARNER,
     EXIT_NO_SERVER,
@@ -51,8 +51,10 @@ log = logging.getLogger(__name__)
 
 def add_process_arguments(parser: argparse.ArgumentParser) -> None:
     add_zenoh_arguments(parser)
-    parser.add_argument("--robot", default="r0", help="robot name (default: r0)")
-    parser.add_argument("--wait-server", type=float, default=10.0, metavar="SECONDS",
+    parser.add_argument("--robot", default="r0", type=arguments.key_chunk,
+                        help="robot name (default: r0)")
+    parser.add_argument("--wait-server", type=arguments.seconds_or_zero, default=10.0,
+                        metavar="SECONDS",
                         help="how long to wait for the server's first scan before giving up "
                              "(0 = wait forever, logging every few seconds; default: 10)")
     add_report_arguments(parser)

@@ -40,7 +40,7 @@ from client.decision import Decider
 from client.player import PlayerClient
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
 from client.ros2 import Ros2Options, Ros2Robot, add_ros2_arguments
-from protocol import keys
+from protocol import arguments, keys
 from protocol.decoding import Decoder
 from protocol.messages import Scan, TreeNotice
 from protocol.runtime import EXIT_NO_SERVER, EXIT_USAGE, Context, ProcessError
@@ -55,18 +55,20 @@ SOURCE = "controller"
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_process_arguments(parser)
     src = parser.add_mutually_exclusive_group(required=True)
-    src.add_argument("--tree", metavar="PATH", help="a snapshot written by the learner")
+    src.add_argument("--tree", metavar="PATH", type=arguments.input_file,
+                     help="a snapshot written by the learner")
     src.add_argument("--from-learner", action="store_true",
                      help="fetch the learner's latest snapshot with a zenoh query")
     parser.add_argument("--follow", action="store_true",
                         help="with --from-learner: swap in each newer tree the learner announces")
     parser.add_argument("--features", choices=sorted(FEATURES),
                         help="expected feature specification (a tree trained otherwise is an error)")
-    parser.add_argument("--seconds", type=float, default=None, metavar="S",
+    parser.add_argument("--seconds", type=arguments.seconds, default=None, metavar="S",
                         help="stop after driving S seconds of sim time (default: until stopped)")
-    parser.add_argument("--query-timeout", type=float, default=5.0, metavar="SECONDS",
+    parser.add_argument("--query-timeout", type=arguments.seconds, default=5.0, metavar="SECONDS",
                         help="how long one query waits for the learner's snapshot (default 5)")
-    parser.add_argument("--wait-tree", type=float, default=None, metavar="SECONDS",
+    parser.add_argument("--wait-tree", type=arguments.seconds_or_zero, default=None,
+                        metavar="SECONDS",
                         help="with --from-learner: wait this long for the learner's first tree "
                              "(queried again at each tree notice and every second, logging "
                              "every few seconds; 0 = forever). Default: forever with --follow, "
@@ -75,7 +77,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the loop guard: never reverse a rotation at once (an order to "
                              "rotate the other way within 5 scans of a rotation is overruled, "
                              "for at most --guard-hold scans in a row; default on)")
-    parser.add_argument("--guard-hold", type=int, default=30, metavar="SCANS",
+    parser.add_argument("--guard-hold", type=arguments.non_negative_int, default=30, metavar="SCANS",
                         help="with --guard: at most this many overruled reversals in a row, "
                              "then the tree's answer is taken (default 30: 3 s at 10 Hz)")
     parser.add_argument("--ros2", action="store_true",
@@ -93,13 +95,18 @@ def _check_ros2(args: argparse.Namespace) -> None:
         raise ValueError(f"{', '.join(Ros2Options.given(args))}: only with --ros2")
 
 
-def main(args: argparse.Namespace) -> int:
-    def check() -> None:  # before the session opens (ValueError: one line, exit 2)
-        if args.guard_hold < 0:
-            raise ValueError(f"--guard-hold must be >= 0 scans, got {args.guard_hold}")
-        _check_ros2(args)
+def check(args: argparse.Namespace) -> None:
+    """What the options say together, before any connection (ValueError: exit 2)."""
+    if args.follow and not args.from_learner:
+        raise ValueError("--follow needs --from-learner")
+    if args.wait_tree is not None and not args.from_learner:
+        raise ValueError("--wait-tree goes with --from-learner")
+    _check_ros2(args)
 
-    return run_role("controller", args, lambda ctx: ControllerProcess(ctx).run(), check=check)
+
+def main(args: argparse.Namespace) -> int:
+    return run_role("controller", args, lambda ctx: ControllerProcess(ctx).run(),
+                    check=lambda: check(args))
 
 
 def _policy_from(clf_bytes_or_path, features: str | None) -> TreePolicy:
@@ -155,8 +162,6 @@ class ControllerProcess:
 
     def __init__(self, ctx: Context):
         self.ctx, self.args = ctx, ctx.args
-        if self.args.follow and not self.args.from_learner:
-            raise ProcessError("controller: --follow needs --from-learner", EXIT_USAGE)
         # kept across tree swaps: a new tree does not reset what the robot is doing
         self.guard = (RotationGuard(hold=self.args.guard_hold)
                       if self.args.guard else None)

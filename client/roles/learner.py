@@ -56,7 +56,7 @@ from client.behaviour.teaching import LAG, PERSON_RULE, PersonLearner
 from client.journal import Journal, JournalError, LabelSet, journal_path
 from client.labels import MAX_BACKLOG, Acknowledgements, Pairing
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
-from protocol import keys
+from protocol import arguments, files, keys
 from protocol.messages import Scan, TeacherAction, TreeNotice
 from protocol.runtime import EXIT_USAGE, Context, ProcessError, on_stop_signal
 
@@ -72,34 +72,40 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--features", choices=sorted(FEATURES),
                         help="feature specification (required for a new tree; checked against "
                              "the tree when continuing or resuming)")
-    parser.add_argument("--out", required=True, metavar="PATH",
+    parser.add_argument("--out", required=True, metavar="PATH", type=arguments.output_file,
                         help="snapshot path; the journal is PATH.journal. If they exist the "
                              "learner continues them (after a crash: snapshot + journal)")
-    parser.add_argument("--resume", metavar="SNAPSHOT",
+    parser.add_argument("--resume", metavar="SNAPSHOT", type=arguments.input_file,
                         help="extend an existing tree: start a new lineage at --out from it "
                              "(its path is recorded as the parent in the provenance)")
-    parser.add_argument("--task", default=None,
+    parser.add_argument("--task", default=None, type=arguments.key_chunk,
                         help="task stored in the metadata (default: from --features)")
     parser.add_argument("--spawn", choices=["winner", "all"], default="winner",
                         help="tree growth rule: 'all' = the paper's literal rule, 'winner' = "
                              "spawn under the winning sphere only (smaller trees; default)")
-    parser.add_argument("--stride", type=int, default=1, help="learn every n-th labeled vector")
-    parser.add_argument("--min-delta", type=float, default=0.0,
+    parser.add_argument("--stride", type=arguments.positive_int, default=1,
+                        help="learn every n-th labeled vector")
+    parser.add_argument("--min-delta", type=arguments.non_negative_float, default=0.0,
                         help="skip a vector that moved less than this with an unchanged label")
-    parser.add_argument("--max-nodes", type=int, default=None, help="cap on the tree size")
-    parser.add_argument("--snapshot-every", type=float, default=2.0, metavar="SECONDS",
+    parser.add_argument("--max-nodes", type=arguments.positive_int, default=None,
+                        help="cap on the tree size")
+    parser.add_argument("--snapshot-every", type=arguments.seconds, default=2.0,
+                        metavar="SECONDS",
                         help="write a snapshot this often (wall time) when the tree changed")
     parser.add_argument("--fold-journal", action="store_true",
                         help="after each snapshot drop the journal records it holds (bounded "
                              "disk; the raw scans before it can no longer be relearned)")
-    parser.add_argument("--fsync-interval", type=float, default=1.0, metavar="SECONDS",
+    parser.add_argument("--fsync-interval", type=arguments.seconds_or_zero, default=1.0,
+                        metavar="SECONDS",
                         help="fsync the journal at most this long after an append (default 1)")
-    parser.add_argument("--match-timeout", type=float, default=2.0, metavar="SECONDS",
+    parser.add_argument("--match-timeout", type=arguments.seconds, default=2.0,
+                        metavar="SECONDS",
                         help="a label whose scan has not arrived after this is dropped and counted")
-    parser.add_argument("--drain", type=float, default=5.0, metavar="SECONDS",
+    parser.add_argument("--drain", type=arguments.seconds_or_zero, default=5.0,
+                        metavar="SECONDS",
                         help="on SIGINT/SIGTERM, keep learning what already arrived for at most "
                              "this long before the final snapshot (default 5)")
-    parser.add_argument("--scan-buffer", type=int, default=512,
+    parser.add_argument("--scan-buffer", type=arguments.positive_int, default=512,
                         help="how many recent unlabeled scans are kept for pairing")
     parser.add_argument("--teacher", choices=["script", "person"], default="script",
                         help="who labels a new tree: 'script' (rhbl teacher: each label learned "
@@ -107,7 +113,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "with the scan --lag scans earlier, the tree rebuilt from every "
                              "label by the majority of its nearest labels); a lineage keeps "
                              "the rule it was made with")
-    parser.add_argument("--lag", type=int, default=LAG, metavar="SCANS",
+    parser.add_argument("--lag", type=arguments.non_negative_int, default=LAG, metavar="SCANS",
                         help=f"with --teacher person: a label answers the scan this many scans "
                              f"before the one it names (default {LAG}: 0.3 s at 10 Hz)")
 
@@ -338,16 +344,17 @@ def _resume(path, spec: FeatureSpec | None) -> DemonstrationLearner:
 def main(args: argparse.Namespace, *, journal_write=os.write) -> int:
     """``rhbl learner``; ``journal_write`` writes the journal's records (``client.journal``'s
     seam for injected write failures: campaigns/full_disk.py)."""
+    core: list[LearnerCore] = []
+
+    def check() -> None:  # the snapshot and journal, opened before any connection: bad ones
+        files.check_output(args.out, "--out", make=True)  # exit 2 at once (its folder made)
+        files.check_output(journal_path(args.out), "--out's journal")
+        core.append(LearnerProcess.open_core(args, journal_write))
+
     # the token is declared once the label subscription is in place: a teacher that waits for
     # it (rhbl teacher) then loses no label
-    return run_role("learner", args, lambda ctx: LearnerProcess(ctx, journal_write).run(),
-                    early_token=False, check=lambda: _check(args))
-
-
-def _check(args: argparse.Namespace) -> None:
-    """The options checked before the session opens (ValueError: one line, exit 2)."""
-    if args.lag < 0:
-        raise ValueError(f"--lag must be >= 0 scans, got {args.lag}")
+    return run_role("learner", args, lambda ctx: LearnerProcess(ctx, core[0]).run(),
+                    early_token=False, check=check)
 
 
 class LearnerProcess:
@@ -357,11 +364,11 @@ class LearnerProcess:
     SIGINT/SIGTERM set ``stopping``: the loop withdraws the token, learns what already arrived
     (up to ``--drain`` s), writes the final snapshot and returns."""
 
-    def __init__(self, ctx: Context, journal_write=os.write):
+    def __init__(self, ctx: Context, core: LearnerCore):
         self.ctx, self.args = ctx, ctx.args
         self.stopping = False
         on_stop_signal(self.request_stop)
-        self.core = self._open_core(self.args, journal_write)
+        self.core = core
         ctx.scope.callback(self.close_journal)  # also on a path that never reaches finish()
         self.latest = self.core.out.read_bytes() if self.core.out.exists() else None
         self.snap_key = keys.learner_snapshot_key(ctx.robot)
@@ -382,7 +389,9 @@ class LearnerProcess:
         self.acks: Acknowledgements | None = None  # once the ack publisher is declared
 
     @staticmethod
-    def _open_core(args: argparse.Namespace, journal_write=os.write) -> LearnerCore:
+    def open_core(args: argparse.Namespace, journal_write=os.write) -> LearnerCore:
+        """The learner's snapshot and journal of ``args`` (``--out``, ``--resume``, ...);
+        ProcessError when they cannot be used."""
         try:
             return LearnerCore(
                 args.out, features=args.features, resume=args.resume, task=args.task,

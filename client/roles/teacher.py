@@ -60,6 +60,7 @@ from client.roles.common import (
     wait_for_learner,
     wait_for_server,
 )
+from protocol import arguments
 from protocol.messages import Scan
 from protocol.runtime import EXIT_USAGE, Context, ProcessError
 
@@ -80,14 +81,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_process_arguments(parser)
     parser.add_argument("--policy", choices=POLICIES, default="wall-follower",
                         help="scripted expert of a task, or keyboard teleop")
-    parser.add_argument("--seconds", type=float, default=None, metavar="S",
+    parser.add_argument("--seconds", type=arguments.seconds, default=None, metavar="S",
                         help="stop after demonstrating S seconds of sim time (default: until "
                              "stopped)")
-    parser.add_argument("--perturb", type=float, default=0.05, metavar="P",
+    parser.add_argument("--perturb", type=arguments.fraction, default=0.05, metavar="P",
                         help="fraction of time a scripted demonstration executes a random action "
                              "(labels stay the expert's; 0 = off; default 0.05, the training "
                              "recipe measured in docs/experiments.md)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the perturbations")
+    parser.add_argument("--seed", type=arguments.seed, default=0,
+                        help="seed of the perturbations")
     parser.add_argument("--style", choices=STYLES, default="reactive",
                         help="scripted expert: 'reactive' (labels a function of the features; "
                              "the training recipe, default) or 'smooth' (the earlier teacher with "
@@ -96,32 +98,44 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="watch and correct: label every scan but command the robot only "
                              "while a beam is closer than --takeover (the controller drives "
                              "otherwise); the corrective rounds of the training recipe")
-    parser.add_argument("--demonstrate", type=float, default=0.0, metavar="S",
+    parser.add_argument("--demonstrate", type=arguments.seconds_or_zero, default=0.0, metavar="S",
                         help="with --correct: demonstrate (drive) for the first S seconds of sim "
                              "time, then correct (default 0)")
-    parser.add_argument("--takeover", type=float, default=TAKEOVER, metavar="M",
+    parser.add_argument("--takeover", type=arguments.non_negative_float, default=TAKEOVER,
+                        metavar="M",
                         help=f"with --correct: take over while any beam is closer than M metres "
                              f"(0 = never; default {TAKEOVER:g}, the training recipe)")
     parser.add_argument("--no-wait-learner", dest="wait_learner", action="store_false",
                         help="demonstrate without waiting for a learner (e.g. pure teleop); "
                              "labels published while no learner listens are lost (no outbox, "
                              "no resends)")
-    parser.add_argument("--outbox", type=int, default=OUTBOX, metavar="N",
+    parser.add_argument("--outbox", type=arguments.positive_int, default=OUTBOX, metavar="N",
                         help=f"labels kept until a learner acknowledges them (resent with their "
                              f"scan when unacknowledged); with N waiting the teacher pauses "
                              f"(default {OUTBOX})")
-    parser.add_argument("--resend-after", type=float, default=RESEND_AFTER, metavar="SECONDS",
+    parser.add_argument("--resend-after", type=arguments.seconds, default=RESEND_AFTER,
+                        metavar="SECONDS",
                         help=f"resend a label (with its scan) not acknowledged after this long "
                              f"(default {RESEND_AFTER:g}); at once to a learner that (re)starts")
-    parser.add_argument("--wait-learner-timeout", type=float, default=30.0, metavar="SECONDS",
+    parser.add_argument("--wait-learner-timeout", type=arguments.seconds_or_zero, default=30.0,
+                        metavar="SECONDS",
                         help="how long to wait for a learner's liveliness token before "
                              "demonstrating; then exit with status 5 (0 = wait forever, "
                              "logging every few seconds; default: 30; a paused teacher "
                              "holding unacknowledged labels waits forever)")
 
 
+def check(args: argparse.Namespace) -> None:
+    """What the options say together, before any connection (ValueError: exit 2)."""
+    if args.correct and args.policy == "keyboard":
+        raise ValueError("--correct needs a scripted expert (--policy wall-follower or maze), "
+                         "not the keyboard")
+    if args.demonstrate and not args.correct:
+        raise ValueError("--demonstrate goes with --correct (demonstrate, then correct)")
+
+
 def main(args: argparse.Namespace) -> int:
-    return run_role("teacher", args, _body)
+    return run_role("teacher", args, _body, check=lambda: check(args))
 
 
 def _body(ctx: Context) -> int:
@@ -133,11 +147,6 @@ def _body(ctx: Context) -> int:
 
 
 def _demonstrator(args: argparse.Namespace):
-    if args.correct and args.policy == "keyboard":
-        raise ProcessError("teacher: --correct needs a scripted expert (--policy wall-follower "
-                           "or maze), not the keyboard", EXIT_USAGE)
-    if not (args.demonstrate >= 0 and args.takeover >= 0):
-        raise ProcessError("teacher: --demonstrate and --takeover must be >= 0", EXIT_USAGE)
     if args.policy == "keyboard":
         from client.roles.keyboard import KeyboardPolicy
 
@@ -156,9 +165,6 @@ class TeacherProcess:
     def __init__(self, ctx: Context, demo):
         self.ctx, self.args, self.demo = ctx, ctx.args, demo
         robot = ctx.robot
-        if self.args.wait_learner and not (self.args.outbox >= 1 and self.args.resend_after > 0):
-            raise ProcessError("teacher: --outbox must be >= 1 and --resend-after > 0",
-                               EXIT_USAGE)
         # the outbox (labels kept until acknowledged, resent) only when a learner records
         self.labels = LabelPublisher(
             ctx.session, robot, outbox=self.args.outbox if self.args.wait_learner else 0,

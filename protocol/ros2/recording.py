@@ -25,6 +25,7 @@ from mcap import __version__ as _mcap_version
 from mcap.writer import Writer
 from rosbags.rosbag2.metadata import dump_qos_v8
 
+from protocol import files
 from protocol.ros2 import cdr
 from protocol.ros2.graph import Topic
 from protocol.ros2.qos import adapt
@@ -44,7 +45,8 @@ class Ros2McapWriter:
 
     def __init__(self, output: str | os.PathLike | IO[bytes], *, overwrite: bool = False):
         if isinstance(output, str | os.PathLike):
-            self._file = open(output, "wb" if overwrite else "xb")  # noqa: SIM115 - closed in close()
+            # a regular file or a new one only (protocol.files): never a device or FIFO
+            self._file = os.fdopen(files.open_output(output, overwrite=overwrite), "wb")
             stream = self._file
         else:
             self._file, stream = None, output

@@ -206,3 +206,35 @@ def test_an_ack_naming_a_seq_twice_is_taken_once():
     for i in range(3):
         box.label(_scan(i), "fwd", None)
     assert box.ack(0, (1, 1)) == 1 and len(box) == 2 and box.stats["acked"] == 1
+
+
+def test_labels_unacknowledged_at_exit_are_not_called_lost(free_port, caplog):
+    """All services stopped at once: the learner held every label but its last
+    acknowledgement never came; the teacher said ERROR "... not acknowledged ... lost"."""
+    import logging
+    import threading
+
+    import zenoh
+
+    from client.labels import LabelPublisher
+    from protocol import keys
+    from protocol.session import make_config
+
+    with zenoh.open(make_config(mode="peer", listen=[f"tcp/127.0.0.1:{free_port()}"])) as s:
+        pub = LabelPublisher(s, "r0", outbox=8, resend_after=60.0)
+        seen = threading.Event()
+        token = s.liveliness().declare_token(keys.alive_key("learner", "r0-1"))
+        for _ in range(3000):  # the liveliness callback (at most 30 s)
+            if pub.learners.arrivals:
+                break
+            seen.wait(0.01)
+        assert pub.learners.arrivals == 1
+        for i in range(3):
+            pub.label(_scan(i), "fwd", None)
+        token.undeclare()  # the learner stopped first, its acknowledgements never sent
+        with caplog.at_level(logging.INFO, logger="client.labels"):
+            assert pub.drain(0.2) is False
+        pub.close()
+    said = [r for r in caplog.records if "unacknowledged at exit" in r.getMessage()]
+    assert said and said[0].levelno == logging.WARNING, caplog.text
+    assert "seq 0..2" in said[0].getMessage() and "lost" not in caplog.text

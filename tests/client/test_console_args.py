@@ -54,12 +54,14 @@ def test_cli_flags():
     (["--http", "nonsense"], "--http must be HOST:PORT"),
     (["--tls-cert", "c.pem"], "--tls-cert and --tls-key go together"),
 ])
-def test_bad_flags_exit_2_before_opening_a_session(argv, said):
+def test_bad_flags_exit_2_before_opening_a_session(argv, said, tmp_path):
     import os
     import subprocess
     import sys
 
+    (tmp_path / "c.pem").write_text("")
     r = subprocess.run([sys.executable, "-m", "lab.cli", "console", *argv,
                         "--connect", "tcp/127.0.0.1:9"], capture_output=True, text=True,
+                       cwd=tmp_path,
                        timeout=60, env={**os.environ, "RHBL_LOG_LEVEL": "INFO"})
     assert r.returncode == 2 and said in r.stderr, r.stderr

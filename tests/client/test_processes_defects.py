@@ -36,13 +36,13 @@ def test_arguments_are_checked_before_any_connection(tmp_path, free_port):
     (tmp_path / "tree.rhbl").write_bytes(b"\x82\xa1v\x01")
     for args, needle in [
         (("record", "--out", str(tmp_path / "run.mcap")), "exists: choose another file"),
-        (("record", "--out", str(tmp_path)), "is a folder, not a file"),
+        (("record", "--out", str(tmp_path)), "is a folder"),
         (("record", "--out", str(tmp_path / "x.mcap"), "--duration", "0"), "--duration"),
         (("replay", str(tmp_path / "tree.rhbl")), "tree.rhbl is not an MCAP recording"),
         (("replay", str(tmp_path / "none.mcap")), "none.mcap does not exist"),
-        (("foxglove", "--port", "70000"), "--port must be 0..65535"),
-        (("controller", "--tree", "t.rhbl", "--stats", str(tmp_path / "no" / "s.json")),
-         "folder"),
+        (("foxglove", "--port", "70000"), "--port must be an integer >= 0 and <= 65535"),
+        (("controller", "--tree", str(tmp_path / "tree.rhbl"), "--stats",
+          str(tmp_path / "run.mcap" / "s.json")), "--stats"),
     ]:
         r = _run(*args, "--connect", ep)
         assert r.returncode == 2, (args, r.stderr)

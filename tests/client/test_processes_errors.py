@@ -57,7 +57,7 @@ def test_server_not_up(free_port):
     ep = f"tcp/127.0.0.1:{free_port()}"
     with zenoh.open(make_config(mode="router", listen=[ep])):
         r = _run("controller", "--connect", ep, "--tree", "x.rhbl", "--wait-server", "1")
-        assert r.returncode == EXIT_USAGE and "No such file" in r.stderr
+        assert r.returncode == EXIT_USAGE and "argument --tree: x.rhbl does not exist" in r.stderr
         r = _run("teacher", "--connect", ep, "--wait-server", "1.5")
     assert r.returncode == EXIT_NO_SERVER, r.stderr
     assert "the server is not up" in r.stderr and "rhbl/r0/laser/0/data/scan" in r.stderr

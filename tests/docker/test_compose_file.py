@@ -19,6 +19,15 @@ import yaml
 from lab.cli import COMMANDS, build_parser
 
 ROOT = Path(__file__).resolve().parents[2]
+
+
+def _parse(command: str, argv: list[str]):
+    """A service's command line, parsed as ``rhbl`` does (SystemExit(2) when it is bad); its
+    paths exist in the containers, not here: checked as text (``syntax_only``)."""
+    from protocol.arguments import syntax_only
+
+    with syntax_only():
+        return build_parser(command).parse_args(argv)
 DOCKER = ROOT / "docker"
 COMPOSE = DOCKER / "compose.yaml"
 SCHEMA = DOCKER / "schema" / "compose-spec.json"
@@ -88,7 +97,7 @@ def test_every_rhbl_service_command_is_a_valid_rhbl_invocation(compose):
         command, rest = argv[0], argv[1:]
         assert command in COMMANDS, name
         assert command == name  # one service per role
-        args = build_parser(command).parse_args(rest)  # SystemExit(2) on a bad invocation
+        args = _parse(command, rest)  # SystemExit(2) on a bad invocation
         assert args.mode == "client", f"{name}: every process is a client of the router"
         assert args.connect == ["tls/router:7447"], f"{name}: explicit TLS endpoint"
         assert not args.multicast_scouting
@@ -97,14 +106,14 @@ def test_every_rhbl_service_command_is_a_valid_rhbl_invocation(compose):
 
 def test_scenario_flags(compose):
     services = _rhbl_services(compose)
-    teacher = build_parser("teacher").parse_args(services["teacher"][1:])
+    teacher = _parse("teacher", services["teacher"][1:])
     assert teacher.seconds and teacher.seconds > 0  # stops by itself: the controller takes over
     # the training recipe: demonstrate, then correct while the controller drives
     assert teacher.correct and 0 < teacher.demonstrate < teacher.seconds
     assert teacher.style == "reactive" and teacher.policy == "wall-follower"
-    learner = build_parser("learner").parse_args(services["learner"][1:])
+    learner = _parse("learner", services["learner"][1:])
     assert learner.out.startswith("/data/")
-    controller = build_parser("controller").parse_args(services["controller"][1:])
+    controller = _parse("controller", services["controller"][1:])
     assert controller.from_learner and controller.follow
     assert learner.features == controller.features
     # the controller exits until the learner has a tree: compose restarts it
@@ -138,7 +147,7 @@ def test_console_is_published_on_the_hosts_loopback_only(compose):
     ports = console["ports"]
     assert ports and all(p.startswith("127.0.0.1:") for p in ports), ports
     assert all(p.endswith(":8080") for p in ports)
-    args = build_parser("console").parse_args(_rhbl_services(compose)["console"][1:])
+    args = _parse("console", _rhbl_services(compose)["console"][1:])
     assert args.http == "0.0.0.0:8080" and not args.view_only
     # inside the container it listens on every address, so it requires a token (random
     # unless RHBL_CONSOLE_TOKEN is set)

@@ -47,3 +47,21 @@ def test_the_generator_makes_only_messages_the_oracle_rejects():
     for _ in range(500):
         with pytest.raises(Exception):  # noqa: B017 - any rejection is the point
             VelCmd.decode(next(gen))
+
+
+def test_no_writer_replaces_or_writes_into_a_non_regular_target(tmp_path):
+    results = fuzz.fuzz_written(workdir=tmp_path)
+    _check(results)
+    assert all(r.sent == 7 and r.valid_processed == 1 for r in results)
+
+
+def test_hostile_recordings_are_refused_or_read_up_to_the_cut(tmp_path):
+    results = fuzz.fuzz_recordings(per_file=150, seed=4, workdir=tmp_path)
+    _check(results)
+    cut = results[1]
+    assert cut.valid_sent + cut.sent > 3000  # every byte of the small recording
+
+
+def test_the_foxglove_bridge_refuses_every_hostile_request_and_keeps_serving(tmp_path):
+    results = fuzz.fuzz_bridge(per_kind=20, seed=5, workdir=tmp_path)
+    _check(results)

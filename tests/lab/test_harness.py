@@ -177,6 +177,7 @@ def test_compact_rounds_bad_combinations_are_named_errors(tmp_path, capsys):
     out = str(tmp_path / "x.rhbl")
     assert cli(["train", "--world", CORRIDOR, "--out", out, "--compact-rounds"]) == 2
     assert "compact_rounds needs a compaction step" in capsys.readouterr().err
+    (tmp_path / "none.mcap").write_bytes(b"")  # the combination is refused before it is read
     assert cli(["train", "--from-recording", str(tmp_path / "none.mcap"), "--out", out,
                 "--compact-rounds"]) == 2
     assert "--compact-rounds does not apply to --from-recording" in capsys.readouterr().err

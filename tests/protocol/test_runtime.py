@@ -99,6 +99,48 @@ def test_a_stats_file_that_cannot_be_written_is_bad_input_before_any_session(tmp
     from protocol.runtime import EXIT_USAGE, run_process
 
     opened = []
-    args = _args(tmp_path, 1, stats=str(tmp_path / "missing" / "s.json"))  # port 1: no session
+    (tmp_path / "file").write_text("")  # its folder cannot be made: a file is in its place
+    args = _args(tmp_path, 1, stats=str(tmp_path / "file" / "s.json"))  # port 1: no session
     assert run_process("tester", args, lambda ctx: opened.append(ctx)) == EXIT_USAGE
     assert opened == []
+    os.mkfifo(tmp_path / "fifo")  # nor a FIFO (it would block or be replaced)
+    args = _args(tmp_path, 1, stats=str(tmp_path / "fifo"))
+    assert run_process("tester", args, lambda ctx: opened.append(ctx)) == EXIT_USAGE
+    assert opened == [] and (tmp_path / "fifo").is_fifo()
+
+
+# a stop signal that arrives while ``__del__`` runs (as one can while the import machinery's lock
+# callbacks run): raised there, Python would print "Exception ignored in ..." with a traceback
+# and swallow it
+IN_DEL = """
+import signal, time
+from protocol.runtime import install_signal_handlers
+install_signal_handlers()
+
+class Finaliser:
+    def __del__(self):
+        signal.raise_signal(signal.SIGTERM)
+        for _ in range(3):  # the handler runs between these bytecodes, inside __del__
+            pass
+
+print("ready", flush=True)
+try:
+    obj = Finaliser()
+    del obj
+    while True:
+        time.sleep(0.01)
+except SystemExit:
+    print("stopped", flush=True)
+    raise
+"""
+
+
+def test_a_stop_signal_in_a_finaliser_stops_without_a_traceback(tmp_path):
+    p = Child("finaliser", [sys.executable, "-c", IN_DEL], tmp_path, cwd=ROOT,
+              env={**os.environ, "PYTHONPATH": str(ROOT)}, escalate=False).start()
+    try:
+        assert p.wait_for_line("stopped", 30), p.output()
+        assert p.wait(10) == 0, p.output()
+        assert "Exception ignored" not in p.output() and "Traceback" not in p.output()
+    finally:
+        p.stop(signal.SIGKILL)

@@ -33,7 +33,7 @@ def test_make_config_is_hermetic():
     assert _get(r, "namespace") == "t1"
     with pytest.raises(ValueError, match="mode"):
         make_config(mode="satellite")
-    with pytest.raises(ValueError, match="not found"):
+    with pytest.raises(ValueError, match="does not exist"):
         make_config(config_file="/nonexistent.json5")
 
 

@@ -97,6 +97,59 @@ def test_atomic_write_keeps_old_file_on_crash(tmp_path, fitted, monkeypatch):
     assert os.listdir(tmp_path) == ["t.rhbl"]
 
 
+def _special_files(tmp_path):
+    """A FIFO, a socket and (as root) a character device like /dev/null, all made here: name
+    -> (path, what the error calls it)."""
+    import socket
+    import stat
+
+    made = {"fifo": (tmp_path / "fifo", "a FIFO"), "socket": (tmp_path / "sock", "a socket"),
+            "folder": (tmp_path / "dir", "a folder")}
+    os.mkfifo(made["fifo"][0])
+    s = socket.socket(socket.AF_UNIX)
+    s.bind(str(made["socket"][0]))
+    s.close()
+    made["folder"][0].mkdir()
+    if os.geteuid() == 0:  # mknod needs root (CI runs as root)
+        dev = tmp_path / "null"
+        os.mknod(dev, 0o666 | stat.S_IFCHR, os.stat("/dev/null").st_rdev)
+        made["device"] = (dev, "a character device")
+    return made
+
+
+def test_a_snapshot_never_replaces_what_is_not_a_regular_file(tmp_path, fitted):
+    made = _special_files(tmp_path)
+    assert "device" in made or os.geteuid() != 0
+    for name, (path, kind) in made.items():
+        mode = os.lstat(path).st_mode
+        with pytest.raises(SnapshotError, match=f"{path}: is {kind}"):
+            fitted.save(path)
+        assert os.lstat(path).st_mode == mode, name  # still what it was
+        link = tmp_path / f"link-to-{name}"
+        link.symlink_to(path)
+        with pytest.raises(SnapshotError, match=f"is {kind} \\(the symlink's target {path}\\)"):
+            fitted.save(link)
+        assert link.is_symlink() and os.lstat(path).st_mode == mode
+    assert not [p for p in os.listdir(tmp_path) if p.endswith(".tmp")]
+
+
+def test_a_snapshot_is_written_through_a_symlink_to_its_file(tmp_path, fitted):
+    real = tmp_path / "trees" / "t3.rhbl"
+    real.parent.mkdir()
+    link = tmp_path / "current.rhbl"
+    link.symlink_to(real)  # dangling: the file is made where the link points
+    fitted.save(link)
+    assert link.is_symlink() and real.is_file()
+    small = HypersphereClassifier("x").fit([[0.5] * 5], ["y"])
+    small.save(link)  # replaces the file, keeps the link
+    assert link.is_symlink() and load(real).node_count_ == small.node_count_
+
+
+def test_a_snapshot_in_a_missing_folder_names_it(tmp_path, fitted):
+    with pytest.raises(SnapshotError, match="the folder .*nope does not exist"):
+        fitted.save(tmp_path / "nope" / "t.rhbl")
+
+
 def _bad(tmp_path, content: bytes):
     p = tmp_path / "bad.rhbl"
     p.write_bytes(content)

@@ -25,6 +25,7 @@ import argparse
 import sys
 
 from client.roles.common import add_process_arguments, run_role
+from protocol import arguments
 
 __all__ = ["add_arguments", "main"]
 
@@ -35,13 +36,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         if action.dest == "wait_server":
             action.help = argparse.SUPPRESS
     parser.add_argument("--http", default="127.0.0.1:8080", metavar="HOST:PORT",
+                        type=arguments.address,
                         help="where the page is served (default 127.0.0.1:8080; port 0 = any "
                              "free port). Any address but loopback requires an access token")
-    parser.add_argument("--token", default=None,
+    parser.add_argument("--token", default=None, type=arguments.token,
                         help="access token the URL must carry (default: none on loopback, a "
                              "random one on any other address; printed in the URL)")
-    parser.add_argument("--tls-cert", metavar="PEM", help="serve HTTPS/WSS with this certificate")
-    parser.add_argument("--tls-key", metavar="PEM", help="the certificate's private key")
+    parser.add_argument("--tls-cert", metavar="PEM", type=arguments.input_file,
+                        help="serve HTTPS/WSS with this certificate")
+    parser.add_argument("--tls-key", metavar="PEM", type=arguments.input_file,
+                        help="the certificate's private key")
     parser.add_argument("--view-only", action="store_true",
                         help="watch only: no commands, no labels, no liveliness token")
 
