@@ -1,0 +1,418 @@
+"""Models of people teaching wall following at the console (``rhbl console``): benchmark code,
+not product code (``benchmarks/bench_teach_study.py`` and the tests import it).
+
+A model is a person who follows the RIGHT-hand wall by looking at the page's map (the robot, the
+walls, the laser hits) with a key held down. It knows nothing of the scripted teacher (it imports
+nothing from ``client``): its notion of "keep the wall on my right" is its own, read off the map
+geometry (the nearest wall point on the robot's right and that wall's direction, the free run
+ahead), and it teaches as people do: late (a reaction time of 200-450 ms on a view that is itself
+a frame old), with wrong keys, over-steering, hesitations (keys released: the console stops the
+robot and sends no label), in a cautious or a hurried style.
+
+One small interface, fed with what the page shows at each frame:
+
+    person = PEOPLE["steady"](seed=0)
+    person.reset()
+    key = person.observe(view)     # "fwd" | "fwd-left" | "rot-left" | "fwd-right" | "rot-right" | None
+
+``view`` is a :class:`View`: the page's clock, the robot as drawn, the map's walls, the page's
+mode ("demonstrate" or "correct"), who drives and the action executed (the side panel). ``None``
+means no key is held. The model holds a key until it decides otherwise (the page then repeats it
+with every scan it displays); the same object can drive the real page in a browser (read the
+displayed state, call ``observe``, press or release keys) or the in-process study.
+
+In correct mode (the learned tree drives) the person keeps the hands off and takes over only
+when they judge it necessary, as in HG-DAgger: the robot too close to a wall, drifting off the
+wall, spinning in place (rotating without getting anywhere, or the action flickering between
+rot-left and rot-right) or going round in circles; they drive until the robot is back on the wall, then let go.
+
+Models: ``DEV`` are the ones methods may be chosen on; ``HELD_OUT`` are evaluated once, at the
+end (docs/teaching.md).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+__all__ = ["DEV", "HELD_OUT", "KEYS", "PEOPLE", "Person", "Style", "View", "percept"]
+
+KEYS = ("fwd", "fwd-left", "rot-left", "fwd-right", "rot-right")
+_MIRROR = {"fwd": "fwd", "fwd-left": "fwd-right", "fwd-right": "fwd-left",
+           "rot-left": "rot-right", "rot-right": "rot-left"}
+# a finger on the neighbouring key: forward <-> its arc, an arc <-> the rotation on its side
+_NEIGHBOUR = {"fwd": ("fwd-left", "fwd-right"), "fwd-left": ("fwd", "rot-left"),
+              "fwd-right": ("fwd", "rot-right"), "rot-left": ("fwd-left",),
+              "rot-right": ("fwd-right",)}
+_TURNS = ("fwd-left", "rot-left", "fwd-right", "rot-right")
+
+
+@dataclass(frozen=True)
+class View:
+    """What the page shows at one frame.
+
+    ``t``: the page's clock (s); ``pose``: the robot as drawn (x, y, yaw); ``walls``: the map's
+    wall segments (S, 4) as x0, y0, x1, y1; ``mode``: the page's mode; ``driver``: who drives
+    (``"teacher"``, ``"controller"`` or ``""``); ``action``: the action executed now (the side
+    panel's "action"); ``scan_id``: the scan displayed (for the record only)."""
+
+    t: float
+    pose: tuple[float, float, float]
+    walls: np.ndarray
+    mode: str = "demonstrate"
+    driver: str = ""
+    action: str | None = None
+    scan_id: int | None = None
+
+
+@dataclass(frozen=True)
+class Percept:
+    """What a person reads off the map (metres, radians)."""
+
+    front: float        # free run straight ahead within the robot's width
+    front_right: float  # free run along a line 40 deg to the right of the heading
+    right: float        # nearest wall point on the robot's right (bearing -150..-30 deg)
+    angle: float        # heading against that wall's direction (> 0: heading away from it)
+    behind: float       # nearest wall point behind-right (bearing -180..-100 deg)
+
+
+def _wrap(a: float) -> float:
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+def _ray(walls: np.ndarray, ox: float, oy: float, ang: float, far: float = 8.0) -> float:
+    """Distance from (ox, oy) along direction ``ang`` to the first wall (``far`` if none)."""
+    ux, uy = math.cos(ang), math.sin(ang)
+    x0, y0 = walls[:, 0] - ox, walls[:, 1] - oy
+    dx, dy = walls[:, 2] - walls[:, 0], walls[:, 3] - walls[:, 1]
+    den = ux * dy - uy * dx
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (x0 * dy - y0 * dx) / den      # along the ray
+        u = (x0 * uy - y0 * ux) / den      # along the segment
+    hit = (np.abs(den) > 1e-12) & (s >= 0) & (u >= 0) & (u <= 1)
+    return float(min(far, s[hit].min())) if hit.any() else far
+
+
+def percept(view: View) -> Percept:
+    """The person's reading of the map at ``view`` (their own geometry, not the laser's)."""
+    x, y, yaw = view.pose
+    w = view.walls
+    p0 = w[:, :2]
+    d = w[:, 2:] - p0
+    rel = np.array([x, y]) - p0
+    t = np.clip((rel * d).sum(1) / np.maximum((d * d).sum(1), 1e-12), 0.0, 1.0)
+    q = p0 + t[:, None] * d
+    v = q - np.array([x, y])
+    dist = np.hypot(v[:, 0], v[:, 1])
+    bearing = np.arctan2(v[:, 1], v[:, 0]) - yaw
+    bearing = np.arctan2(np.sin(bearing), np.cos(bearing))
+    right_side = (bearing > math.radians(-150)) & (bearing < math.radians(-30))
+    right = angle = math.inf
+    if right_side.any():
+        k = int(np.argmin(np.where(right_side, dist, np.inf)))
+        right = float(dist[k])
+        # the wall's direction as the person sees it: across the line to its nearest point,
+        # with the wall on the right (along a straight wall: the wall itself; round a corner
+        # or a fin's tip: the circle about it)
+        angle = _wrap(yaw - math.atan2(v[k, 0], -v[k, 1]))
+    behind_side = (bearing > math.radians(-180)) & (bearing < math.radians(-100))
+    behind = float(dist[behind_side].min()) if behind_side.any() else math.inf
+    c, s = math.cos(yaw), math.sin(yaw)
+    front = min(_ray(w, x - s * o, y + c * o, yaw) for o in (-0.2, 0.0, 0.2))
+    front_right = _ray(w, x, y, yaw - math.radians(40))
+    return Percept(front=front, front_right=front_right, right=right,
+                   angle=0.0 if math.isinf(angle) else angle, behind=behind)
+
+
+@dataclass(frozen=True)
+class Style:
+    """How one person drives and teaches (times in s, distances in m)."""
+
+    name: str
+    # timing
+    reaction: float = 0.25          # mean reaction time on what the page showed
+    reaction_sd: float = 0.04       # its spread (it drifts slowly over a session)
+    period: float = 0.1             # how often the person re-decides
+    min_hold: float = 0.15          # a key is held at least this long
+    # errors
+    wrong: float = 0.10             # probability that a key press is the wrong key
+    mirror: float = 0.5             # of the wrong keys: left/right confused (else a neighbour)
+    notice: float = 0.15            # extra time to notice a wrong key, on top of the reaction
+    oversteer: float = 0.2          # a turn key is released up to this much too late
+    hesitate: float = 0.02          # rate (per s) of letting go of every key
+    pause: tuple[float, float] = (0.3, 0.8)   # how long a hesitation lasts
+    taps: float = 0.0               # a turn is pressed in taps: held this long, then let go ...
+    tap_gap: tuple[float, float] = (0.1, 0.25)  # ... for this long
+    noise: float = 0.08             # relative error of judging a distance on the map
+    # the person's own wall following
+    target: float = 0.65            # where they like the wall on their right
+    stop: float = 0.55              # wall ahead closer than this: rotate left in place
+    slow: float = 1.0               # wall ahead closer than this: arc left
+    diag: float = 0.6               # a wall ahead-right closer than this: arc left
+    lost: float = 1.3               # nothing on the right within this: turn right to find it
+    k_d: float = 2.0                # steering on the distance error ...
+    k_a: float = 1.5                # ... and on the heading against the wall
+    band: float = 0.25              # dead band of the steering
+    sharp: bool = False             # round a wall's end rotating in place (else arcing)
+    corner_rot: bool = False        # a wall ahead: always rotate in place, never arc
+    # correct mode (HG-DAgger: take over only when needed)
+    close: float = 0.35             # the robot nearer than this to a wall: take over
+    far: float = 1.6                # ... farther than this from the right wall ...
+    patience: float = 2.0           # ... for this long: take over
+    spin_window: float = 4.0        # spinning: moved less than ``spin_move`` in this window
+    spin_move: float = 0.3
+    circle_window: float = 8.0      # circling: turned a full circle in this window without
+    circle_move: float = 1.5        # getting farther than this from where it began
+    settle: float = 1.5             # drive at least this long once taken over, then let go when fine
+
+
+@dataclass
+class _Memory:
+    views: deque = field(default_factory=lambda: deque(maxlen=200))
+    seen_t: float = -math.inf       # the page time of the view perceived last
+    rt: float = 0.25
+    next_decision: float = -math.inf
+    intent: str | None = None       # what the person means to press
+    key: str | None = None          # what is pressed
+    pressed_at: float = -math.inf
+    wrong_key: str | None = None
+    wrong_until: float = -math.inf
+    late_key: str | None = None     # a turn held too long (over-steering)
+    late_until: float = -math.inf
+    pause_until: float = -math.inf
+    tap_on_until: float = -math.inf
+    tap_off_until: float = -math.inf
+    # correct mode
+    in_control: bool = False
+    took_at: float = -math.inf
+    far_since: float | None = None
+    fine_since: float | None = None
+    trail: deque = field(default_factory=lambda: deque(maxlen=120))
+    actions: deque = field(default_factory=lambda: deque(maxlen=60))
+
+
+class Person:
+    """A person at the console (see the module's docstring): ``observe(view) -> key or None``.
+
+    ``wrong_now`` is True while the key pressed is a wrong key (for the study's record);
+    ``intent`` is the key the person meant."""
+
+    def __init__(self, style: Style, seed: int = 0):
+        self.style = style
+        self.seed = seed
+        self.reset()
+
+    def reset(self) -> None:
+        self.rng = np.random.default_rng(self.seed)
+        self.m = _Memory(rt=self.style.reaction)
+
+    @property
+    def intent(self) -> str | None:
+        return self.m.intent
+
+    @property
+    def wrong_now(self) -> bool:
+        return self.m.wrong_key is not None and self.m.key == self.m.wrong_key
+
+    # -- perception: the view of one reaction time ago ------------------------------------
+    def _perceived(self, now: float) -> View | None:
+        m, s = self.m, self.style
+        # the reaction time drifts slowly around the person's mean (never below 0.15 s)
+        m.rt += 0.2 * (s.reaction - m.rt) + float(self.rng.normal(0.0, s.reaction_sd * 0.45))
+        m.rt = max(0.15, m.rt)
+        seen = None
+        for v in m.views:
+            if v.t <= now - m.rt + 1e-9 and v.t >= m.seen_t:
+                seen = v
+        if seen is None:
+            return None
+        m.seen_t = seen.t
+        return seen
+
+    def _judge(self, view: View) -> Percept:
+        p = percept(view)
+        n = self.style.noise
+
+        def j(v: float) -> float:
+            return v if math.isinf(v) else v * (1.0 + float(self.rng.normal(0.0, n)))
+
+        return replace(p, front=j(p.front), front_right=j(p.front_right), right=j(p.right),
+                       behind=j(p.behind), angle=p.angle + float(self.rng.normal(0.0, n)))
+
+    # -- the person's own wall following ---------------------------------------------------
+    def wanted(self, p: Percept) -> str:
+        """The key this person means for what they see."""
+        s = self.style
+        if p.front < s.stop:
+            return "rot-left"
+        if p.front < s.slow or p.front_right < s.diag:
+            return "rot-left" if s.corner_rot else "fwd-left"
+        if p.right > s.lost:
+            if p.behind < s.lost + 0.3:  # the wall just ended (a corner, a fin's tip): round it
+                return "rot-right" if s.sharp else "fwd-right"
+            return "fwd"  # out in the open: straight on until a wall is ahead, then put it right
+        u = s.k_d * (p.right - s.target) + s.k_a * p.angle
+        if u > s.band:
+            return "fwd-right"
+        if u < -s.band:
+            return "fwd-left"
+        return "fwd"
+
+    # -- correct mode: hands off unless needed ---------------------------------------------
+    def _trouble(self, p: Percept, seen: View) -> bool:
+        s, m = self.style, self.m
+        if p.front < s.stop * 0.9 or min(p.right, p.front_right) < s.close:
+            return True
+        if p.right > s.far:
+            if m.far_since is None:
+                m.far_since = seen.t
+            if seen.t - m.far_since >= s.patience:
+                return True
+        else:
+            m.far_since = None
+        window = [(t, xy) for t, xy, _ in m.trail if t >= seen.t - s.spin_window]
+        if len(window) >= 2 and seen.t - window[0][0] >= s.spin_window * 0.9:
+            moved = max(math.dist(window[0][1], xy) for _, xy in window)
+            if moved < s.spin_move:
+                return True
+        circle = [(xy, yaw) for t, xy, yaw in m.trail if t >= seen.t - s.circle_window]
+        if len(circle) >= 2:
+            turned = sum(abs(_wrap(b[1] - a[1])) for a, b in zip(circle, circle[1:], strict=False))
+            moved = max(math.dist(circle[0][0], xy) for xy, _ in circle)
+            if turned > 2 * math.pi and moved < s.circle_move:
+                return True
+        acts = [a for t, a in m.actions if t >= seen.t - 3.0]
+        flips = sum(1 for a, b in zip(acts, acts[1:], strict=False)
+                    if {a, b} == {"rot-left", "rot-right"})
+        return flips >= 3
+
+    def _fine(self, p: Percept) -> bool:
+        s = self.style
+        return (p.front > s.slow and p.front_right > s.diag and s.close < p.right < s.lost
+                and abs(p.right - s.target) < 0.3 and abs(p.angle) < 0.4)
+
+    def _correcting(self, p: Percept, seen: View) -> str | None:
+        """The key meant in correct mode (None: hands off)."""
+        m, s = self.m, self.style
+        m.trail.append((seen.t, (seen.pose[0], seen.pose[1]), seen.pose[2]))
+        if seen.action:
+            m.actions.append((seen.t, seen.action))
+        if not m.in_control:
+            if not self._trouble(p, seen):
+                return None
+            m.in_control, m.took_at, m.fine_since = True, seen.t, None
+            m.trail.clear()
+            m.actions.clear()
+            m.far_since = None
+        if self._fine(p):
+            if m.fine_since is None:
+                m.fine_since = seen.t
+        else:
+            m.fine_since = None
+        if (seen.t - m.took_at >= s.settle and m.fine_since is not None
+                and seen.t - m.fine_since >= 0.5):
+            m.in_control = False
+            m.trail.clear()
+            m.actions.clear()
+            return None
+        return self.wanted(p)
+
+    # -- the hands: intent -> the key held -------------------------------------------------
+    def _confuse(self, key: str) -> str:
+        if self.rng.random() < self.style.mirror and _MIRROR[key] != key:
+            return _MIRROR[key]
+        options = _NEIGHBOUR[key]
+        return options[int(self.rng.integers(len(options)))]
+
+    def _press(self, now: float, intent: str | None) -> str | None:
+        m, s = self.m, self.style
+        if now < m.pause_until:
+            return None
+        if now < m.wrong_until:
+            return m.wrong_key
+        m.wrong_key = None
+        if now < m.late_until and intent != m.late_key:
+            return m.late_key
+        if intent is None:
+            return None
+        if intent in _TURNS and s.taps > 0:  # tapping a turn: on, off, on ...
+            if now < m.tap_off_until:
+                return None
+            if now >= m.tap_on_until:
+                m.tap_on_until = now + s.taps * float(self.rng.uniform(0.7, 1.3))
+                m.tap_off_until = m.tap_on_until + float(self.rng.uniform(*s.tap_gap))
+        return intent
+
+    def observe(self, view: View) -> str | None:
+        """The key held after this frame (None: no key)."""
+        m, s = self.m, self.style
+        m.views.append(view)
+        now = view.t
+        if now >= m.next_decision:
+            m.next_decision = now + s.period
+            seen = self._perceived(now)
+            if seen is not None:
+                p = self._judge(seen)
+                intent = (self._correcting(p, seen) if seen.mode == "correct"
+                          else self.wanted(p))
+                if seen.mode != "correct":
+                    m.in_control = False
+                if intent is not None and self.rng.random() < s.hesitate * s.period:
+                    m.pause_until = now + float(self.rng.uniform(*s.pause))  # lets go a moment
+                old = m.intent
+                if intent != old:
+                    if old in _TURNS and s.oversteer > 0:
+                        m.late_key = old  # the turn key is let go of late
+                        m.late_until = now + float(self.rng.uniform(0.0, s.oversteer))
+                    if intent is not None and self.rng.random() < s.wrong:
+                        m.wrong_key = self._confuse(intent)
+                        m.wrong_until = now + m.rt + s.notice * float(self.rng.uniform(0.5, 1.5))
+                    m.intent = intent
+        key = self._press(now, m.intent)
+        if key != m.key:
+            if now - m.pressed_at < s.min_hold and m.key is not None and key is not None:
+                return m.key  # fingers are not faster than this
+            m.key, m.pressed_at = key, now
+        return m.key
+
+
+def _model(style: Style):
+    def make(seed: int = 0) -> Person:
+        return Person(style, seed=seed)
+
+    make.style = style  # type: ignore[attr-defined]
+    return make
+
+
+# the models methods may be chosen on
+DEV = {
+    "steady": _model(Style("steady", reaction=0.25, wrong=0.08, oversteer=0.2, hesitate=0.02)),
+    "hurried": _model(Style(
+        "hurried", reaction=0.21, reaction_sd=0.03, wrong=0.15, notice=0.1, oversteer=0.3,
+        hesitate=0.005, target=0.5, stop=0.45, slow=0.75, diag=0.5, band=0.35, k_a=1.0,
+        close=0.3, far=1.8, patience=3.0, settle=1.0)),
+    "cautious": _model(Style(
+        "cautious", reaction=0.40, reaction_sd=0.05, period=0.15, wrong=0.05, oversteer=0.1,
+        hesitate=0.06, pause=(0.5, 1.5), target=0.8, stop=0.8, slow=1.3, diag=0.75, lost=1.5,
+        band=0.2, corner_rot=True, sharp=True, close=0.45, far=1.5, patience=1.5, settle=2.0)),
+    "oversteerer": _model(Style(
+        "oversteerer", reaction=0.30, reaction_sd=0.05, wrong=0.12, oversteer=0.5,
+        hesitate=0.02, target=0.65, k_d=3.0, k_a=2.5, band=0.15)),
+}
+
+# evaluated once, at the end, never looked at while choosing methods
+HELD_OUT = {
+    "novice": _model(Style(
+        "novice", reaction=0.45, reaction_sd=0.08, period=0.12, wrong=0.13, mirror=0.7,
+        notice=0.3, oversteer=0.35, hesitate=0.08, pause=(0.4, 1.2), target=0.7, slow=1.1,
+        band=0.3, noise=0.12, far=1.7, patience=2.5, settle=2.0)),
+    "tapper": _model(Style(
+        "tapper", reaction=0.24, reaction_sd=0.04, wrong=0.10, oversteer=0.15, hesitate=0.03,
+        taps=0.3, tap_gap=(0.1, 0.3), target=0.55, stop=0.5, slow=0.9, band=0.2,
+        sharp=True, close=0.3)),
+}
+
+PEOPLE = {**DEV, **HELD_OUT}

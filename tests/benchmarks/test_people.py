@@ -1,0 +1,85 @@
+"""The models of people (``benchmarks/people.py``): what they see, when they press, when they
+take over."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+# a corridor along +x: the wall on the robot's right at y = 0, another at y = 3, an end at x = 10
+WALLS = np.array([[0.0, 0.0, 10.0, 0.0], [0.0, 3.0, 10.0, 3.0], [10.0, 0.0, 10.0, 3.0]])
+
+
+@pytest.fixture
+def view(people):
+    def make(t, pose, mode="demonstrate", **kw):
+        return people.View(t=t, pose=pose, walls=WALLS, mode=mode, **kw)
+
+    return make
+
+
+def test_percept_reads_the_map(people, view):
+    p = people.percept(view(0.0, (2.0, 0.7, 0.0)))
+    assert p.right == pytest.approx(0.7)
+    assert p.angle == pytest.approx(0.0)
+    assert p.front == pytest.approx(8.0)  # to the end wall
+    away = people.percept(view(0.0, (2.0, 0.7, 0.3)))
+    assert away.angle == pytest.approx(0.3)  # heading away from the wall: positive
+    ahead = people.percept(view(0.0, (9.5, 1.5, 0.0)))
+    assert ahead.front == pytest.approx(0.5)
+
+
+def test_every_model_answers_keys_only_and_is_deterministic(people, view):
+    def drive(person):
+        return [person.observe(view(0.1 * k, (2.0 + 0.03 * k, 0.7 + 0.02 * k, 0.1)))
+                for k in range(40)]
+
+    for name, make in people.PEOPLE.items():
+        person = make(seed=3)
+        keys = drive(person)
+        assert set(keys) <= {*people.KEYS, None}, name
+        assert keys[-1] is not None, name
+        assert drive(make(seed=3)) == keys, name
+        person.reset()
+        assert drive(person) == keys, name
+
+
+def test_a_person_presses_only_after_their_reaction_time(people, view):
+    style = people.Style("test", reaction=0.3, reaction_sd=0.0, wrong=0.0, hesitate=0.0,
+                         oversteer=0.0, noise=0.0)
+    person = people.Person(style)
+    presses = [(0.05 * k, person.observe(view(0.05 * k, (9.6, 1.5, 0.0)))) for k in range(20)]
+    first = next(t for t, key in presses if key is not None)
+    assert 0.3 - 1e-9 <= first <= 0.4  # a wall 0.4 m ahead: seen 0.3 s after it was shown
+    assert presses[-1][1] == "rot-left"
+
+
+def test_a_wrong_key_is_pressed_then_corrected(people, view):
+    style = people.Style("test", reaction=0.2, reaction_sd=0.0, wrong=1.0, mirror=1.0,
+                         hesitate=0.0, oversteer=0.0, noise=0.0)
+    person = people.Person(style)
+    keys = [person.observe(view(0.1 * k, (9.6, 1.5, 0.0))) for k in range(30)]
+    assert "rot-right" in keys  # the mirror image of what was meant
+    assert person.intent == "rot-left"
+
+
+def test_correct_mode_hands_off_unless_needed(people, view):
+    person = people.PEOPLE["steady"](seed=0)
+    fine = [person.observe(view(0.1 * k, (1.0 + 0.04 * k, 0.65, 0.0), mode="correct",
+                                 driver="controller", action="fwd")) for k in range(40)]
+    assert fine == [None] * 40  # on the wall: the person watches
+    close = [person.observe(view(4.0 + 0.1 * k, (3.0, 0.3, -0.3), mode="correct",
+                                  driver="controller", action="fwd")) for k in range(10)]
+    assert close[-1] is not None  # too close to the wall: takes over
+
+
+def test_a_person_takes_over_a_robot_spinning_in_place(people, view):
+    person = people.PEOPLE["steady"](seed=0)
+    keys = []
+    for k in range(80):
+        yaw = math.remainder(0.8 * 0.1 * k, 2 * math.pi)  # rotating on the spot
+        keys.append(person.observe(view(0.1 * k, (5.0, 1.2, yaw), mode="correct",
+                                         driver="controller", action="rot-left")))
+    assert any(k is not None for k in keys[40:])
