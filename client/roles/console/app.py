@@ -195,6 +195,7 @@ class _Robot:
         self.tree_busy = False
         self.teach_said = 0.0
         self.teach_dirty = True
+        self.teach_seq = 0  # teach messages composed (a page sees the one after an event)
 
     @property
     def start_index(self) -> int:
@@ -426,8 +427,9 @@ class Console:
             "given": box.stats["published"], "held": box.stats["acked"],
             "waiting": len(box), "cap": box.cap, "withdrawn": box.stats["withdrawn"],
             "withdrawals_waiting": box.unacknowledged_withdrawals}
+        r.teach_seq += 1
         return json.dumps({
-            "t": "teach", "robot": r.name,
+            "t": "teach", "robot": r.name, "seq": r.teach_seq,
             "learner": None if learners is None else {"up": bool(learners)},
             "labels": labels, "tree": r.policy_id or None,
             **r.teaching.summary(now), **r.trouble.summary()})
