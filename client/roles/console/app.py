@@ -812,6 +812,9 @@ class Console:
                     page.push("error", _error("binary messages are not understood"))
                 else:
                     break
+                # messages already read return without a pause: yield, so that a page that
+                # floods messages cannot starve the senders, the watchdog and the other pages
+                await asyncio.sleep(0)
         finally:
             # the page closed, reloaded or lost its connection: its commands end now
             self.pages.pop(page.id, None)

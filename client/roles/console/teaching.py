@@ -7,8 +7,9 @@ console's server side, ``client.roles.console.app``, feeds it and says it to the
   closes it; ``discard`` gives the label range to withdraw (the episode recording, else the
   last one kept); ``rerecord`` the same plus the pose it started from, to put the robot back.
 - **Undo** (``undo(seconds)``): the range of labels given in the last ``seconds`` of teaching
-  (sim time, back from the latest label), not withdrawn yet. The caller withdraws it
-  (``client.labels.LabelPublisher.withdraw``) and says so with ``withdrawn(first, upto)``.
+  (sim time, back from the latest label still standing: undo again goes further back), not
+  withdrawn yet. The caller withdraws it (``client.labels.LabelPublisher.withdraw``) and says
+  so with ``withdrawn_range(first, upto)``.
 - **Agreement**: each key the person gives is scored against what the tree the console holds
   would have done on that very scan (``scored``); ``agreement()`` is the share that agreed over
   the last ``window`` seconds of sim time: how often the robot would have done what the
@@ -141,16 +142,18 @@ class Teaching:
             e.end_ts = self.last_ts
 
     def undo(self, seconds: float) -> tuple[int, int] | None:
-        """The labels of the last ``seconds`` of teaching still standing: ``(first, upto)``,
-        or None when there are none. ValueError outside 0 < seconds <= UNDO_MAX."""
+        """The labels of the last ``seconds`` of teaching still standing (back from the latest
+        label standing: undo again goes further back): ``(first, upto)``, or None when there
+        are none. ValueError outside 0 < seconds <= UNDO_MAX."""
         if not (isinstance(seconds, int | float) and not isinstance(seconds, bool)
                 and 0 < seconds <= UNDO_MAX):
             raise ValueError(f"undo: seconds must be a number in (0, {UNDO_MAX:g}], got "
                              f"{seconds!r}")
-        if self.last_ts is None:
+        latest = next((h[1] for h in reversed(self._history) if not h[3]), None)
+        if latest is None:
             return None
-        cutoff = self.last_ts - float(seconds)
-        seqs = [h[0] for h in reversed(self._history) if h[1] >= cutoff - 1e-9 and not h[3]]
+        cutoff = latest - float(seconds)
+        seqs = [h[0] for h in reversed(self._history) if h[1] > cutoff + 1e-9 and not h[3]]
         if not seqs:
             return None
         return min(seqs), max(seqs) + 1
