@@ -340,6 +340,46 @@ def test_correct_mode_marks_a_loop_and_asks_the_person_to_show_the_way(env, brow
     assert _errors(browser) == []
 
 
+def test_a_remote_teacher_over_tls_with_a_token_teaches_the_same(env, tmp_path):
+    """https and wss with a token: the page, its files and its WebSocket answer, the learner's
+    status shows, the keys put the robot at a start pose, drive, record and undo."""
+    import shutil
+    import subprocess
+
+    if shutil.which("openssl") is None:
+        pytest.skip("openssl is needed to make a test certificate")
+    found = find_chromium()
+    if isinstance(found, str):
+        pytest.skip(found)
+    cert, key = tmp_path / "cert.pem", tmp_path / "key.pem"
+    subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "1",
+                    "-subj", "/CN=localhost", "-addext", "subjectAltName=IP:127.0.0.1",
+                    "-keyout", str(key), "-out", str(cert)], check=True, capture_output=True)
+    console = ConsoleProcess(env["srv"].endpoint, "--tls-cert", str(cert), "--tls-key", str(key),
+                             "--token", "rem0te")
+    b = chromium("--ignore-certificate-errors")
+    w, starts = env["watch"], env["starts"]
+    try:
+        url = console.wait_url()
+        assert url.startswith("https://") and url.endswith("?token=rem0te")
+        _open(b, url)
+        _until(b, lambda d: _attr(d, "learner", "up") in ("0", "1"), 20, "the learner status")
+        _press(b, "2")
+        w.wait(lambda w: _near(w.state.truth, starts[1]), 10, "the robot at start pose 2")
+        given = _int(b, "labels", "given")
+        _hold_until(b, "ARROW_UP", lambda d: _int(d, "labels", "given") - given >= 5,
+                    "five labels over TLS")
+        w.wait(Watch.stopped, 5, "the robot stops")
+        _fresh(b)
+        withdrawn = _int(b, "labels", "withdrawn")
+        _press(b, "z")
+        _until(b, lambda d: _int(d, "labels", "withdrawn") > withdrawn, 10, "undo over TLS")
+        assert _errors(b) == []
+    finally:
+        close_chromium(b)
+        assert console.stop() == 0, console.output()
+
+
 def test_side_panel_never_overflows_at_1200x800(env, browser):
     session = env["session"]
     browser.set_window_size(1200, 800)
