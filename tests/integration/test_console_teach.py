@@ -18,7 +18,6 @@ Chromium is installed, except in CI (``CI=true``).
 from __future__ import annotations
 
 import math
-import threading
 import time
 from pathlib import Path
 
@@ -27,8 +26,9 @@ import pytest
 zenoh = pytest.importorskip("zenoh")
 pytest.importorskip("aiohttp")
 
-from browser import ConsoleProcess, chromium, close_chromium, find_chromium, in_ci  # noqa: E402
+from browser import ConsoleProcess, chromium, close_chromium, find_chromium  # noqa: E402
 from test_console import Watch, _errors, _keys, _open, _rhbl, _wait_learner  # noqa: E402
+from test_withdraw import _Notices  # noqa: E402
 
 from client.journal import Journal, journal_path  # noqa: E402
 from client.player import PlayerClient  # noqa: E402
@@ -37,18 +37,6 @@ from protocol.messages import Decision, Scan, TreeNotice  # noqa: E402
 from protocol.session import make_config  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
-
-
-@pytest.fixture(scope="module")
-def browser():
-    found = find_chromium()
-    if isinstance(found, str):
-        if in_ci():
-            pytest.fail(f"CI=true and {found}")
-        pytest.skip(found)
-    drv = chromium()
-    yield drv
-    close_chromium(drv)
 
 
 @pytest.fixture(scope="module")
@@ -122,24 +110,6 @@ def _learner(env, tmp: Path, name: str):
               "--snapshot-every", "0.3", "--connect", env["srv"].endpoint)
     p.out = out
     return p
-
-
-class _Notices:
-    def __init__(self, session):
-        self.last: TreeNotice | None = None
-        self.cond = threading.Condition()
-        self.sub = session.declare_subscriber(keys.learner_notice_key("r0"), self._on)
-
-    def _on(self, sample):
-        with self.cond:
-            self.last = TreeNotice.decode(sample.payload.to_bytes())
-            self.cond.notify_all()
-
-    def wait(self, pred, timeout: float, what: str) -> TreeNotice:
-        with self.cond:
-            assert self.cond.wait_for(lambda: self.last is not None and pred(self.last),
-                                      timeout), f"{what}: last notice {self.last}"
-            return self.last
 
 
 def test_labels_before_any_learner_are_kept_shown_and_delivered(env, browser, tmp_path):
