@@ -199,6 +199,10 @@ def test_discarding_an_episode_and_undo_withdraw_labels_from_the_learner(env, br
         w.wait(Watch.stopped, 5, "the robot stops")
         _fresh(browser)
         right = _int(browser, "labels", "given") - given
+        # the tree the console holds learned fwd only: it disagrees with every rot-right key
+        _until(browser, lambda d: _int(d, "agreement", "n") >= right, 10, "the keys scored")
+        assert float(_attr(browser, "agreement", "value")) < 1.0
+        assert "the tree agrees with" in _text(browser, "agreement")
         notices.wait(lambda n: n.vectors == fwd + right, 30,
                      f"the rot-right labels learned ({fwd} fwd, {right} rot-right)")
         box = browser.find_element("id", "undo-seconds")
