@@ -63,7 +63,7 @@ function receive(m) {
       setRobots(m.robots.length ? m.robots : [m.robot]);
       if (want && want !== m.robot) { S.robot = want; $("robot").value = want; send({ t: "view", robot: want }); }
       if (m.view_only) {
-        for (const el of document.querySelectorAll("#pad button, #modes input, #take")) el.disabled = true;
+        for (const el of document.querySelectorAll("#pad button, #modes input, #take, #episodes button, #episodes input, #place button, #place select")) el.disabled = true;
         $("hold").textContent = "view-only console: watching";
       }
       break;
