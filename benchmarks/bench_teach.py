@@ -30,12 +30,14 @@ demonstrating plus 120 s correcting (real time).
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import contextlib
 import json
 import math
 import shlex
 import signal
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -152,19 +154,16 @@ def _labels(page: Page) -> dict:
                                                           "withdrawn")}
 
 
-def run_one(person_name: str, seed: int, demo: float, correct: float, *, learner: str = "default",
-            literal_args: str = LITERAL, world: str = "room", unseen=UNSEEN,
-            eval_episodes: int | None = None, eval_seconds: float | None = None,
-            workdir: Path | None = None, log=print) -> dict:
-    """One run (see the module); its figures."""
+def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
+              learner: str = "default", literal_args: str = LITERAL, world: str = "room",
+              workdir: Path | None = None, log=print) -> dict:
+    """A person teaches at the page: demonstrating, then correcting (see the module); what they
+    did and the learner's tree (``tree_path``), not evaluated yet."""
     import people
     import zenoh  # noqa: F401 - fail early without it
     from browser import ConsoleProcess, chromium, close_chromium
 
-    from client.behaviour.learning import TreePolicy
     from lab.children import Child, rhbl_argv
-    from lab.evaluate import evaluate
-    from lab.harness import resolve_world
     from tests.conftest import _server_factory
 
     work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-bench-teach-"))
@@ -228,13 +227,32 @@ def run_one(person_name: str, seed: int, demo: float, correct: float, *, learner
     result["teaching_wall_s"] = round(time.monotonic() - t_start, 1)
     stats = json.loads((work / "learner.json").read_text())
     result["labels_standing"] = stats.get("standing")
-    policy = TreePolicy.load(out)
-    result["tree"] = {"nodes": int(policy.classifier.node_count_),
-                      "height": int(policy.classifier.height_)}
+    result["tree_path"] = str(out)
+    return result
+
+
+def evaluate_run(result: dict, world: str = "room", unseen=UNSEEN,
+                 eval_episodes: int | None = None, eval_seconds: float | None = None) -> dict:
+    """Evaluate a run's tree (``rhbl evaluate``, i.e. ``lab.evaluate``, in its own process) in
+    the room it was taught in and in the unseen rooms; the figures added to ``result``."""
+    from lab.children import rhbl_argv
+
+    work = Path(result["workdir"])
     result["eval"] = {}
     for name in (world, *unseen):
-        rep = evaluate(resolve_world(name), policy, episodes=eval_episodes, seconds=eval_seconds,
-                       seed=seed)
+        out = work / f"eval-{name}.json"
+        argv = rhbl_argv("evaluate", "--world", name, "--tree", result["tree_path"],
+                         "--seed", str(result["seed"]), "--json", str(out))
+        if eval_episodes is not None:
+            argv += ["--episodes", str(eval_episodes)]
+        if eval_seconds is not None:
+            argv += ["--seconds", str(eval_seconds)]
+        done = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=3600)
+        if done.returncode != 0:
+            raise RuntimeError(f"rhbl evaluate --world {name} exited {done.returncode}: "
+                               f"{done.stdout[-500:]}{done.stderr[-1000:]}")
+        rep = json.loads(out.read_text())
+        result["tree"] = rep["tree"]
         result["eval"][name] = {
             "success_rate": rep["success_rate"], "episodes": rep["episodes"],
             "loops": len(rep["loops"]),
@@ -250,6 +268,14 @@ def run_one(person_name: str, seed: int, demo: float, correct: float, *, learner
     result["loops_taught"] = taught["loops"]
     result["collisions"] = sum(e["collisions"] for e in result["eval"].values())
     return result
+
+
+def run_one(person_name: str, seed: int, demo: float, correct: float, *, world: str = "room",
+            unseen=UNSEEN, eval_episodes: int | None = None, eval_seconds: float | None = None,
+            **kw) -> dict:
+    """One run, taught then evaluated (see the module); its figures."""
+    r = teach_one(person_name, seed, demo, correct, world=world, **kw)
+    return evaluate_run(r, world, unseen, eval_episodes, eval_seconds)
 
 
 def _pct(v) -> str:
@@ -358,28 +384,44 @@ def main(argv=None) -> int:
     except Exception as exc:  # noqa: BLE001 - one line, exit 2
         print(f"bench_teach: error: {exc}", file=sys.stderr)
         return 2
-    results = []
     top = Path(args.workdir) if args.workdir else Path(tempfile.mkdtemp(prefix="rhbl-bench-teach-"))
     print(f"bench_teach: {len(names)} people x {len(seeds)} seeds x {len(learners)} learners, "
           f"{args.demo:g} s demonstrating + {args.correct:g} s correcting each; logs in {top}",
           flush=True)
-    for name in names:
-        for seed in seeds:
-            for lrn in learners:
-                try:
-                    r = run_one(name, seed, args.demo, args.correct, learner=lrn,
-                                literal_args=args.literal_args, world=args.world, unseen=unseen,
-                                eval_episodes=args.eval_episodes, eval_seconds=args.eval_seconds,
-                                workdir=top / f"{name}-{seed}-{lrn}",
-                                log=lambda s: print(s, flush=True))
-                except Exception as exc:  # noqa: BLE001 - the next run still runs; said
-                    r = {"person": name, "seed": seed, "learner": lrn,
-                         "error": f"{type(exc).__name__}: {exc}"}
-                results.append(r)
-                print(f"  -> {json.dumps({k: v for k, v in r.items() if k != 'eval'})}",
-                      flush=True)
-                if args.json:
-                    Path(args.json).write_text(json.dumps(results, indent=1))
+    results: list[dict] = []
+
+    def save() -> None:
+        if args.json:
+            Path(args.json).write_text(json.dumps(results, indent=1))
+
+    def evaluated(r: dict) -> dict:
+        try:
+            evaluate_run(r, args.world, unseen, args.eval_episodes, args.eval_seconds)
+        except Exception as exc:  # noqa: BLE001 - said in the table
+            r["error"] = f"evaluation: {type(exc).__name__}: {exc}"
+        print(f"  -> {json.dumps({k: v for k, v in r.items() if k != 'eval'})}", flush=True)
+        save()
+        return r
+
+    # each run's tree is evaluated while the next person teaches (real time, mostly waiting)
+    with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool:
+        pending = []
+        for name in names:
+            for seed in seeds:
+                for lrn in learners:
+                    try:
+                        r = teach_one(name, seed, args.demo, args.correct, learner=lrn,
+                                      literal_args=args.literal_args, world=args.world,
+                                      workdir=top / f"{name}-{seed}-{lrn}",
+                                      log=lambda s: print(s, flush=True))
+                    except Exception as exc:  # noqa: BLE001 - the next run still runs; said
+                        r = {"person": name, "seed": seed, "learner": lrn,
+                             "error": f"{type(exc).__name__}: {exc}"}
+                    results.append(r)
+                    if "error" not in r:
+                        pending.append(pool.submit(evaluated, r))
+                    save()
+        concurrent.futures.wait(pending)
     print(table(results))
     return 0 if all("error" not in r for r in results) else 1
 

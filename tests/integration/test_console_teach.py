@@ -244,6 +244,23 @@ def test_keys_put_the_robot_at_a_start_dragging_moves_it_and_home_resets(env, br
     assert abs(w.state.truth[2] - starts[2][2]) < 0.05
     _until(browser, lambda d: _near([float(_attr(d, "pose", k)) for k in ("x", "y")],
                                     starts[2]), 10, "the page draws it there")
+    # re-record: an episode from here, a few labels, then E: they go, the robot comes back
+    if _attr(browser, "episode", "state") == "recording":
+        _press(browser, "r")
+        _until(browser, lambda d: _attr(d, "episode", "state") == "stopped", 10, "stopped")
+    _press(browser, "r")
+    _until(browser, lambda d: _attr(d, "episode", "state") == "recording", 10, "recording")
+    n = _attr(browser, "episode", "n")
+    _hold_until(browser, "ARROW_UP", lambda d: _int(d, "episode", "labels") >= 5, "5 labels")
+    w.wait(Watch.stopped, 5, "the robot stops")
+    w.wait(lambda w: not _near(w.state.truth, starts[2], 0.2), 5, "it moved")
+    _fresh(browser)
+    withdrawn, labels = _int(browser, "labels", "withdrawn"), _int(browser, "episode", "labels")
+    _press(browser, "e")
+    w.wait(lambda w: _near(w.state.truth, starts[2]), 10, "back where the episode started")
+    _until(browser, lambda d: _int(d, "labels", "withdrawn") - withdrawn == labels
+           and _attr(d, "episode", "state") == "recording" and _attr(d, "episode", "n") != n,
+           10, "its labels withdrawn, a new episode recording")
     # drag it by its body into the middle of the room
     canvas = browser.find_element("id", "view")
     x0, y0 = starts[2][0], starts[2][1]
