@@ -281,6 +281,18 @@ def test_keys_put_the_robot_at_a_start_dragging_moves_it_and_home_resets(env, br
     assert _errors(browser) == []
 
 
+def _purple_near(browser, x: float, y: float) -> bool:
+    """A pixel of the loop colour (#9b3fd5) within 3 px of the world point (x, y) on the map."""
+    ox, oy = _screen(browser, x, y)
+    return browser.execute_script("""
+        const c = document.getElementById("view"), dpr = window.devicePixelRatio || 1;
+        const px = (c.clientWidth / 2 + arguments[0]) * dpr, py = (c.clientHeight / 2 + arguments[1]) * dpr;
+        const d = c.getContext("2d").getImageData(px - 3 * dpr, py - 3 * dpr, 7 * dpr, 7 * dpr).data;
+        for (let i = 0; i < d.length; i += 4)
+          if (Math.abs(d[i] - 155) < 30 && Math.abs(d[i + 1] - 63) < 30 && Math.abs(d[i + 2] - 213) < 30) return true;
+        return false;""", ox, oy)
+
+
 class _Looper:
     """A stand-in for a learned robot that loops: a controller-source client answering every
     scan of r0, two scans rot-left then two rot-right (a rot-left/rot-right alternation)."""
@@ -316,6 +328,11 @@ def test_correct_mode_marks_a_loop_and_asks_the_person_to_show_the_way(env, brow
         assert "show it the way" in _text(browser, "stuck")
         assert _int(browser, "trouble", "loops") > markers0
         assert browser.find_element("id", "stuck").is_displayed()
+        # the loop's mark is drawn on the map: a purple ring of 0.18 m about it
+        loop = next(m for m in browser.execute_script("return window.rhbl.view().markers")
+                    if m["kind"] == "loop")
+        _until(browser, lambda d: _purple_near(d, loop["x"] + 0.18, loop["y"]), 5,
+               "the loop's ring on the canvas")
         # the person shows the way: the prompt goes while they drive
         _keys(browser, ("down", "ARROW_UP"))
         try:

@@ -428,7 +428,6 @@ function draw() {
   }
   if (S.world) startsDrawn(px);
   trail(px);
-  marks(px);
   const sc = S.scan;
   if (sc) {
     const [x, y, yaw] = sc.pose, n = sc.ranges.length;
@@ -464,6 +463,7 @@ function draw() {
     el.dataset.scan = sc ? sc.id : "";
     el.textContent = `${x.toFixed(2)}, ${y.toFixed(2)}, ${(yaw * 180 / Math.PI).toFixed(0)}\u00b0`;
   }
+  marks(px); // above the robot: a robot looping in place sits on its own mark
   g.setTransform(dpr, 0, 0, dpr, 0, 0);
   scaleBar(h, v.scale);
   panel();
@@ -615,6 +615,7 @@ Object.defineProperty(window, "rhbl", { value: Object.freeze({
       mode: S.mode, driver: drv, action: drv && c ? c.action : null,
       scan_id: sh.scan ? sh.scan.id : null, holder: $("hold").dataset.holder || "",
       stuck: S.teach && S.teach.stuck ? S.teach.stuck.why : null, link: $("link").dataset.state || "",
+      markers: S.teach ? S.teach.markers.map((k) => ({ ...k })) : [],
     };
   },
 }) });
