@@ -509,15 +509,19 @@ function startsDrawn(px) {
 // the trail, each piece in the colour of who drove it (null: a jump)
 function trail(px) {
   const t = S.trail;
-  g.lineWidth = 2 * px; g.lineCap = "round";
+  g.lineWidth = 2 * px; g.lineCap = "round"; g.globalAlpha = 0.75;
+  let colour = null; // one path per run of the same driver
   for (let i = 1; i < t.length; i++) {
     const a = t[i - 1], b = t[i];
     if (!a || !b) continue;
-    g.strokeStyle = COLOURS[b[2]]; g.globalAlpha = 0.75;
-    g.beginPath(); g.moveTo(a[0], a[1]); g.lineTo(b[0], b[1]); g.stroke();
+    if (COLOURS[b[2]] !== colour) {
+      if (colour) g.stroke();
+      colour = COLOURS[b[2]]; g.strokeStyle = colour; g.beginPath();
+    }
+    g.moveTo(a[0], a[1]); g.lineTo(b[0], b[1]);
   }
+  if (colour) g.stroke();
   g.globalAlpha = 1;
-  if (t.length > 4000) S.trail = t.slice(t.length - 3000);
 }
 
 // where the learned robot looped (purple ring), stalled (teal square), collided (crimson X);
