@@ -155,8 +155,8 @@ def _labels(page: Page) -> dict:
 
 
 def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
-              learner: str = "default", literal_args: str = LITERAL, world: str = "room",
-              workdir: Path | None = None, log=print) -> dict:
+              learner: str = "default", literal_args: str = LITERAL, learner_args: str = "",
+              world: str = "room", workdir: Path | None = None, log=print) -> dict:
     """A person teaches at the page: demonstrating, then correcting (see the module); what they
     did and the learner's tree (``tree_path``), not evaluated yet."""
     import people
@@ -169,9 +169,10 @@ def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
     work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-bench-teach-"))
     work.mkdir(parents=True, exist_ok=True)
     out = work / "tree.rhbl"
-    extra = shlex.split(literal_args) if learner == "literal" else []
+    extra = shlex.split(literal_args if learner == "literal" else learner_args)
     started, children, browser = [], [], None
-    result = {"person": person_name, "seed": seed, "learner": learner, "world": world,
+    result = {"person": person_name, "seed": seed, "learner": learner,
+              "learner_args": " ".join(extra), "world": world,
               "demo_budget": demo, "correct_budget": correct, "workdir": str(work)}
     t_start = time.monotonic()
     try:
@@ -353,6 +354,9 @@ def main(argv=None) -> int:
                          "as a baseline)")
     ap.add_argument("--literal-args", default=LITERAL,
                     help=f"the learner's options for the literal algorithm (default {LITERAL!r})")
+    ap.add_argument("--learner-args", default="",
+                    help="the learner's options for the default runs (default: none, the "
+                         "learner's own defaults), e.g. '--teacher person'")
     ap.add_argument("--world", default="room", help="the room taught in (default room)")
     ap.add_argument("--unseen", default=",".join(UNSEEN),
                     help=f"unseen rooms, comma-separated (default {','.join(UNSEEN)})")
@@ -411,7 +415,8 @@ def main(argv=None) -> int:
                 for lrn in learners:
                     try:
                         r = teach_one(name, seed, args.demo, args.correct, learner=lrn,
-                                      literal_args=args.literal_args, world=args.world,
+                                      literal_args=args.literal_args,
+                                      learner_args=args.learner_args, world=args.world,
                                       workdir=top / f"{name}-{seed}-{lrn}",
                                       log=lambda s: print(s, flush=True))
                     except Exception as exc:  # noqa: BLE001 - the next run still runs; said
