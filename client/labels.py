@@ -466,11 +466,21 @@ class Pairing:
       and logged as an error (and the learner exits 1). No backpressure: blocking a zenoh
       callback stalls the whole session (scans, queries), and the router would then drop the
       teacher's labels under congestion, silently: keeping them here is the only visible place.
+
+    A person's label answers what they saw ``lag`` scans before the scan the page displayed
+    (their reaction time): with ``lag`` > 0 each label is paired with that earlier scan instead
+    (``client.behaviour.teaching.answered_scan``: the label's own scan when the earlier one is
+    no longer held or the robot was put elsewhere in between, counted ``unshifted``); the
+    newest ``scan_buffer`` scans, labeled or not, are kept for it.
     """
 
     def __init__(self, scan_buffer: int = 512, match_timeout: float = 2.0,
                  max_ready: int = MAX_BACKLOG, behind: int = BEHIND, on_scan_seen=None,
-                 clock=time.monotonic):
+                 clock=time.monotonic, lag: int = 0):
+        if not (isinstance(lag, int) and lag >= 0):
+            raise ValueError(f"lag must be an integer >= 0 scans, got {lag!r}")
+        self.lag = lag
+        self.recent: OrderedDict[int, Scan] = OrderedDict()  # every scan (lag > 0 only)
         self.scan_buffer = max(1, int(scan_buffer))
         self.match_timeout = match_timeout
         self.max_ready = max_ready
@@ -484,7 +494,7 @@ class Pairing:
         self.last_id = -1
         self.forgot_upto = -1  # the newest scan id forgotten unlabeled
         self.stats = {"scans": 0, "labels": 0, "forgotten": 0, "unmatched": 0,
-                      "lost": 0, "max_ready": 0, "resent": 0}
+                      "lost": 0, "max_ready": 0, "resent": 0, "shifted": 0, "unshifted": 0}
         self.decoder = Decoder(log)  # malformed scans and labels: dropped, counted by kind
         self._said_behind = -1e9
 
@@ -501,8 +511,13 @@ class Pairing:
                 log.info("scan ids restarted (%d after %d): the server restarted; forgetting "
                          "%d unlabeled scans", scan.id, self.last_id, len(self.scans))
                 self.scans.clear()
+                self.recent.clear()
                 self.forgot_upto = -1
             self.last_id = scan.id
+            if self.lag:
+                self.recent[scan.id] = scan
+                while len(self.recent) > self.scan_buffer:
+                    self.recent.popitem(last=False)
             hit = self.pending.pop(scan.id, None)
             if hit is not None:
                 self._ready(scan, hit[0])
@@ -551,7 +566,21 @@ class Pairing:
                 del self.pending[act.scan_id]  # the same label, its scan never came
             self._ready(scan, act)
 
+    def _answered(self, scan: Scan) -> Scan:  # under the lock
+        """The scan a label given while ``scan`` was displayed answers (``lag``)."""
+        from client.behaviour.teaching import answered_scan
+
+        held = self.recent if scan.id in self.recent else {**self.recent, scan.id: scan}
+        sid = answered_scan(scan.id, held, self.lag)
+        if sid == scan.id:
+            self.stats["unshifted"] += 1
+            return scan
+        self.stats["shifted"] += 1
+        return held[sid]
+
     def _ready(self, scan: Scan, act: TeacherAction) -> None:  # under the lock
+        if self.lag:
+            scan = self._answered(scan)
         self.ready.append((scan, act))
         n = len(self.ready)
         self.stats["max_ready"] = max(self.stats["max_ready"], n)

@@ -30,6 +30,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "replay": ("client.recording.replay", "republish a recording's sensor stream on zenoh with its timing"),
     "inspect": ("client.recording.inspect", "print what an MCAP recording holds"),
     "foxglove": ("client.recording.bridge", "serve the live bus to Foxglove/Lichtblick (WebSocket)"),
+    "ros2": ("client.roles.ros2", "an rhbl robot on ROS 2 (rmw_zenoh): scan, odom, tf, clock out; cmd_vel in"),
     "example": ("lab.example", "a small end-to-end example of the learner on synthetic data"),
 }
 

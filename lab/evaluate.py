@@ -26,10 +26,12 @@ from lab.report import episode_table
 from lab.sim_tap import record_run
 from server.world import WorldSpec
 
-__all__ = ["add_arguments", "evaluate", "format_table", "main"]
+__all__ = ["add_arguments", "evaluate", "format_table", "main", "success"]
 
 
-def _success(task: str, m: dict, teacher_m: dict | None) -> bool:
+def success(task: str, m: dict, teacher_m: dict | None) -> bool:
+    """The success rule of an episode's metrics ``m`` (``teacher_m``: the teacher's from the
+    same start, for wall following's distance; None: not compared), see the module's doc."""
     if task == "maze":
         return metrics.maze_success(m)
     return metrics.wall_success(m, teacher_m["distance"] if teacher_m else None)
@@ -77,12 +79,12 @@ def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
         tt = _teacher_episode(spec, policy.actions, start, seconds, ep_seed, range_noise,
                               odom_noise, dt, on_step)
         tm = tt.metrics(spec.goal)
-        tm["success"] = _success(task, tm, None)
+        tm["success"] = success(task, tm, None)
         lt = drive(spec, policy, start, seconds, seed=ep_seed,
                    teacher=make_policy(task, actions=policy.actions), range_noise=range_noise,
                    odom_noise=odom_noise, dt=dt, kind="learner", on_step=on_step)
         lm = lt.metrics(spec.goal)
-        lm["success"] = _success(task, lm, tm)
+        lm["success"] = success(task, lm, tm)
         learner_eps.append(lm)
         teacher_eps.append(tm)
         if keep_paths:

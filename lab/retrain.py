@@ -9,7 +9,10 @@ given is a named error, not ignored.
 Retraining replays the live learner's pairing: the recorded scans and teacher labels go, in the
 order the recorder received them, through ``client.labels.Pairing`` (a label is paired with
 exactly the scan it answers) into ``DemonstrationLearner.observe``, the learner's code path; so
-with the live learner's features and settings the tree is the one it built.
+with the live learner's features and settings the tree is the one it built. ``teacher="person"``
+(``rhbl train --from-recording ... --teacher person``) retrains labels given by hand as
+``rhbl learner --teacher person`` learns them: each paired with the scan ``lag`` scans earlier,
+the tree built by the neighbours' vote (``client.behaviour.teaching.PersonLearner``).
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from client.behaviour.actions import DEFAULT_ACTIONS
 from client.behaviour.features import FEATURES, FeatureError
 from client.behaviour.learning import DemonstrationLearner
 from client.behaviour.tasks import task_of_features
+from client.behaviour.teaching import LAG, PersonLearner
 from client.recording.mcap_file import RecordingError, read_recording
 from protocol.messages import Scan, TeacherAction
 
@@ -43,9 +47,11 @@ class _Clock:
 
 def labeled_scans(path: str | Path, robots: list[str] | None = None,
                   match_timeout: float = 2.0, scan_buffer: int = 512,
-                  stats: dict | None = None) -> Iterator[tuple[str, Scan, TeacherAction]]:
+                  stats: dict | None = None, lag: int = 0
+                  ) -> Iterator[tuple[str, Scan, TeacherAction]]:
     """(robot, scan, label) in the order the live learner paired them: the recording's scans
-    and labels through ``client.labels.Pairing`` (one per robot), clocked by receive time."""
+    and labels through ``client.labels.Pairing`` (one per robot, ``lag`` as its own), clocked by
+    receive time."""
     from client.labels import Pairing
 
     pairings: dict[str, tuple[Pairing, _Clock]] = {}
@@ -55,7 +61,8 @@ def labeled_scans(path: str | Path, robots: list[str] | None = None,
         p = pairings.get(m.robot)
         if p is None:
             clock = _Clock()
-            p = pairings[m.robot] = (Pairing(scan_buffer, match_timeout, clock=clock), clock)
+            p = pairings[m.robot] = (Pairing(scan_buffer, match_timeout, clock=clock, lag=lag),
+                                     clock)
         pairing, clock = p
         clock.now = m.log_time / 1e9
         if m.kind == "scan":
@@ -74,23 +81,31 @@ def labeled_scans(path: str | Path, robots: list[str] | None = None,
 
 def retrain(paths, features: str = "wall", robots: list[str] | None = None,
             task: str | None = None, stride: int = 1, min_delta: float = 0.0,
-            tree_params: dict | None = None, record: bool = False
-            ) -> tuple[DemonstrationLearner, dict]:
+            tree_params: dict | None = None, record: bool = False, teacher: str = "script",
+            lag: int = LAG) -> tuple[DemonstrationLearner, dict]:
     """A tree learned from the recordings' teacher labels (in order, files in the order
     given), as ``rhbl learner`` learns: labels that are no action of the tree and scans the
     features cannot use are skipped and counted. ``record``: the learner keeps its vectors
-    (to compact on them). Returns (learner, stats)."""
+    (to compact on them). ``teacher="person"``: as ``rhbl learner --teacher person --lag``.
+    Returns (learner, stats)."""
     spec = FEATURES[features]
     params = {"spawn": "winner", **(tree_params or {})}
-    learner = DemonstrationLearner(spec, DEFAULT_ACTIONS,
-                                   task=task or task_of_features(features),
-                                   stride=stride, min_delta=min_delta, record=record, **params)
+    task = task or task_of_features(features)
+    if teacher == "person":
+        if record or stride != 1 or min_delta:
+            raise ValueError("--teacher person learns every label (no --stride) and its tree is "
+                             "rebuilt from them (no --compact: compact the snapshot it writes)")
+        learner = PersonLearner(spec, DEFAULT_ACTIONS, task=task, lag=lag, **params)
+    else:
+        learner = DemonstrationLearner(spec, DEFAULT_ACTIONS, task=task, stride=stride,
+                                       min_delta=min_delta, record=record, **params)
+        lag = 0
     stats = {"paired": 0, "learned": 0, "rejected": 0, "recordings": []}
     t0 = time.perf_counter()
     for path in paths:
         pstats: dict = {}
         n0 = stats["paired"]
-        for _robot, scan, act in labeled_scans(path, robots, stats=pstats):
+        for _robot, scan, act in labeled_scans(path, robots, stats=pstats, lag=lag):
             if act.action not in learner.actions:
                 stats["rejected"] += 1
                 continue
@@ -140,7 +155,7 @@ def save_retrained(learner: DemonstrationLearner, stats: dict, out: str | Path) 
 # the flags of ``rhbl train`` a retraining uses (the features, the tree, a compaction on the
 # recordings' vectors); every other one drives a simulation and is refused with its name
 USES = ("out", "from_recording", "features", "spawn", "distance", "min_radius", "max_nodes",
-        "stride", "compact", "compact_max_nodes", "compact_max_error")
+        "stride", "compact", "compact_max_nodes", "compact_max_error", "teacher", "lag")
 
 
 def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
@@ -152,7 +167,8 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
         raise ValueError(f"{', '.join(given)} {'does' if len(given) == 1 else 'do'} not apply to "
                          f"--from-recording (no simulation runs: it learns the recordings' "
                          f"labels; it takes --features, --spawn, --distance, --min-radius, "
-                         f"--max-nodes, --stride and --compact with its --compact-max-*)")
+                         f"--max-nodes, --stride, --compact with its --compact-max-*, --teacher "
+                         f"and --lag)")
 
 
 def train_main(args) -> int:
@@ -167,7 +183,7 @@ def train_main(args) -> int:
     try:
         learner, stats = retrain(args.from_recording, features=args.features or "wall",
                                  stride=args.stride or 1, tree_params=tree,
-                                 record=compact is not None)
+                                 record=compact is not None, teacher=args.teacher, lag=args.lag)
     except RecordingError as exc:
         raise ValueError(str(exc)) from None
     if stats["paired"] == 0:

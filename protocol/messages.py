@@ -7,6 +7,7 @@ Field names on the wire are exactly the ones in docs/protocol.md; extra fields a
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -41,6 +42,8 @@ __all__ = [
     "LabeledScan",
     "LaserConfig",
     "LearnerAck",
+    "MAX_VA",
+    "MAX_VX",
     "MotorPower",
     "Nack",
     "ProtocolError",
@@ -58,6 +61,10 @@ __all__ = [
 ]
 
 COMMAND_MAX_PAYLOAD = 64 * 1024  # bytes: commands and requests are small
+# the robot's speed limits (docs/protocol.md section 2): |vx| <= MAX_VX m/s, |va| <= MAX_VA
+# rad/s (100 deg/s); a server clamps every command to them, a bridge can clamp the same way
+MAX_VX = 0.5
+MAX_VA = math.radians(100.0)
 _MAX_BEAMS = 100_000
 MAX_ORIGIN = 64  # characters of a teacher session's identity (``origin``)
 MAX_WITHDRAWN = 100_000  # labels one withdrawal may name (hours of demonstration at 10 Hz)

@@ -19,7 +19,7 @@
 # These are development secrets: for a real robot, make the CA offline and keep its key there.
 set -euo pipefail
 
-ROLES=(server teacher learner controller operator)
+ROLES=(server teacher learner controller operator ros2)
 here="$(cd "$(dirname "$0")/.." && pwd)"
 out="${1:-$here/docker/secrets}"
 shift $(( $# > 0 ? 1 : 0 ))

@@ -34,6 +34,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import pymunk
 
+from protocol.messages import MAX_VA, MAX_VX
 from server import laser
 
 __all__ = [
@@ -82,8 +83,8 @@ class RobotSpec:
     length: float = 0.511
     width: float = 0.4
     radius: float = 0.25
-    max_vx: float = 0.5  # m/s
-    max_va: float = math.radians(100.0)  # rad/s
+    max_vx: float = MAX_VX  # m/s (the protocol's limits: docs/protocol.md section 2)
+    max_va: float = MAX_VA  # rad/s (100 deg/s)
     mass: float = 9.0  # kg (only matters robot against robot)
 
 

@@ -127,10 +127,13 @@ class DemonstrationLearner:
         self._rec_y: list[str] = []
 
     # -- learning --
-    def observe(self, ranges, yaw: float, label: str) -> bool:
-        """Offer one labelled observation; True when it reached the tree."""
+    def _check_label(self, label: str) -> None:
         if label not in self.actions:
             raise ValueError(f"label {label!r} is not an action of this learner: {self.actions.names}")
+
+    def observe(self, ranges, yaw: float, label: str) -> bool:
+        """Offer one labelled observation; True when it reached the tree."""
+        self._check_label(label)
         self.seen += 1
         self._count += 1
         if (self._count - 1) % self.stride:
@@ -168,6 +171,29 @@ class DemonstrationLearner:
         self._learn(np.asarray(x, dtype=np.float64).reshape(-1), label)
         self.seen += 1
         return True
+
+    def _checked(self, X, labels) -> tuple[np.ndarray, list[str]]:
+        """``X`` as rows of this learner's features and ``labels`` as checked action names."""
+        X = np.asarray(X, dtype=np.float64).reshape(-1, self.features.dim)
+        labels = [str(v) for v in labels]
+        if len(labels) != len(X):
+            raise ValueError(f"{len(X)} vectors but {len(labels)} labels")
+        for label in set(labels):
+            self._check_label(label)
+        return X, labels
+
+    def observe_vectors(self, X: np.ndarray, labels) -> int:
+        """Offer already extracted feature vectors in order (no sample selection), in one call
+        to the tree; returns how many."""
+        X, labels = self._checked(X, labels)
+        if len(X):
+            self.classifier.partial_fit(X, labels)
+        self.vectors += len(X)
+        self.seen += len(X)
+        if self._rec_x is not None:
+            self._rec_x.extend(X)
+            self._rec_y.extend(labels)
+        return len(X)
 
     def compact(self, method: str = "exact", *, data: str | None = None, **options) -> dict:
         """Replace the tree by its compaction (``rhbl.compact``) on the recorded vectors (the

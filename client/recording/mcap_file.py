@@ -52,7 +52,9 @@ __all__ = [
     "RecordingWriter",
     "classify",
     "decode",
+    "not_created",
     "read_recording",
+    "why_not_written",
 ]
 
 log = logging.getLogger(__name__)
@@ -115,6 +117,21 @@ def alive_payload(key: str, alive: bool) -> bytes:
 
 
 # ---- writing ------------------------------------------------------------------------------
+def why_not_written(exc: OSError) -> str:
+    """Why a recording could not be written, in words (a full disk, a quota, a size limit)."""
+    return {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is used up",
+            errno.EFBIG: "the file reached its size limit"}.get(exc.errno,
+                                                                exc.strerror or str(exc))
+
+
+def not_created(path: Path, exc: OSError) -> RecordingError:
+    """Why the recording ``path`` could not be created, for the user (one line)."""
+    if isinstance(exc, FileExistsError):
+        return RecordingError(f"{path} exists: choose another file or pass --overwrite "
+                              f"(a recording is never replaced silently)")
+    return RecordingError(f"cannot create the recording {path}: {exc.strerror or exc}")
+
+
 class RecordingWriter:
     """An MCAP file being written: raw bus messages plus viewer channels.
 
@@ -136,12 +153,8 @@ class RecordingWriter:
             if self.path.parent and not self.path.parent.exists():
                 self.path.parent.mkdir(parents=True, exist_ok=True)
             fd = os.open(self.path, flags, 0o644)
-        except FileExistsError:
-            raise RecordingError(f"{self.path} exists: choose another file or pass --overwrite "
-                                 f"(a recording is never replaced silently)") from None
         except OSError as exc:
-            raise RecordingError(f"cannot create the recording {self.path}: "
-                                 f"{exc.strerror or exc}") from exc
+            raise not_created(self.path, exc) from exc
         self._file = _Out(fd)
         self._writer = Writer(self._file, chunk_size=chunk_size,
                               compression=CompressionType.ZSTD)
@@ -183,9 +196,7 @@ class RecordingWriter:
             self._fail(exc)
 
     def _fail(self, exc: OSError):
-        why = {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is used up",
-               errno.EFBIG: "the file reached its size limit"}.get(exc.errno,
-                                                                   exc.strerror or str(exc))
+        why = why_not_written(exc)
         with contextlib.suppress(OSError):
             os.ftruncate(self._file.fd, self._good)
         self._file.close()

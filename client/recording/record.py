@@ -3,6 +3,7 @@
 
     rhbl record --out run.mcap                      # every robot it sees, until Ctrl-C
     rhbl record --out run.mcap --robot r0 --duration 120
+    rhbl record --ros2 --out bag.mcap               # ROS 2 messages (client.recording.ros2)
 
 It needs no server: started before one, it waits for a router to connect to (``--wait-router``,
 forever by default, logging what it waits for) and records from then on. ``--out`` and the
@@ -20,8 +21,11 @@ import time
 from pathlib import Path
 
 from client.recording.mcap_file import CHUNK_SECONDS, RecordingError, RecordingWriter
+from client.recording.ros2 import Ros2Recording
 from client.recording.tap import BusTap
+from client.ros2 import Ros2Options, add_ros2_arguments
 from protocol import keys
+from protocol.messages import LaserConfig
 from protocol.runtime import (
     EXIT_FAILURE,
     EXIT_USAGE,
@@ -53,6 +57,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--chunk-seconds", type=float, default=CHUNK_SECONDS, metavar="S",
                         help=f"close a chunk at least this often (default {CHUNK_SECONDS:g}): "
                              f"what a killed recorder can lose at most")
+    parser.add_argument("--ros2", action="store_true",
+                        help="write the robots' scans and states as ROS 2 messages (MCAP, ROS 2 "
+                             "profile: ros2 bag, Foxglove's ROS 2 view): the topics rhbl ros2 "
+                             "publishes (docs/ros2.md)")
+    add_ros2_arguments(parser, bridge=True, when="with --ros2", domain=False)
     parser.add_argument("--wait-router", type=float, default=0.0, metavar="SECONDS",
                         help="while nothing listens on the --connect endpoints (no server or "
                              "router up yet), try again for this long (0 = forever, the "
@@ -84,6 +93,15 @@ def main(args: argparse.Namespace) -> int:
             raise ValueError("--chunk-seconds must be > 0")
         if not args.wait_router >= 0:
             raise ValueError("--wait-router must be >= 0")
+        if args.ros2:
+            options = Ros2Options.from_args(args)
+            for r in args.robots or []:
+                options.topics(r)
+            if args.no_viewer:
+                raise ValueError("--no-viewer: only without --ros2 (a ROS 2 recording has no "
+                                 "viewer channels)")
+        elif Ros2Options.given(args):
+            raise ValueError(f"{', '.join(Ros2Options.given(args))}: only with --ros2")
         check_out(args.out, args.overwrite)
 
     check()  # a ValueError is one line, exit 2, before anything is opened (lab.cli)
@@ -98,11 +116,9 @@ class RecordProcess:
 
     def __init__(self, ctx: Context):
         args = self.args = ctx.args
+        self.session = ctx.session
         try:
-            self.writer = RecordingWriter(
-                args.out, overwrite=args.overwrite, viewer=not args.no_viewer,
-                recorder="rhbl record", chunk_seconds=args.chunk_seconds,
-                metadata={"robots": ",".join(args.robots or ["*"])})
+            self.writer = self.open_writer()
         except RecordingError as exc:
             raise ProcessError(f"recorder: {exc}", EXIT_USAGE) from exc
         self.tap = BusTap(ctx.session, self.writer, robots=args.robots)
@@ -112,6 +128,28 @@ class RecordProcess:
         ctx.report(self.counters)
         log.info("recording %s to %s", ", ".join(args.robots) if args.robots else "every robot",
                  args.out)
+
+    def open_writer(self) -> RecordingWriter | Ros2Recording:
+        """The sink the tap feeds: the bus as it is, or with --ros2 its ROS 2 messages."""
+        args = self.args
+        if args.ros2:
+            return Ros2Recording(args.out, Ros2Options.from_args(args), self.scan_time,
+                                 overwrite=args.overwrite, chunk_seconds=args.chunk_seconds)
+        return RecordingWriter(args.out, overwrite=args.overwrite, viewer=not args.no_viewer,
+                               recorder="rhbl record", chunk_seconds=args.chunk_seconds,
+                               metadata={"robots": ",".join(args.robots or ["*"])})
+
+    def scan_time(self, robot: str) -> float:
+        """--ros2: seconds between the robot's scans (its laser's get_config; 0 if unknown)."""
+        try:
+            for reply in self.session.get(keys.request_key(robot, "laser", "get_config"),
+                                          timeout=1.0):
+                if reply.ok is not None:
+                    rate = LaserConfig.decode(reply.ok.payload.to_bytes()).rate
+                    return 1.0 / rate if rate > 0 else 0.0
+        except Exception as exc:  # noqa: BLE001 - a replay has no laser to ask
+            log.debug("no laser configuration of robot %s: %s", robot, exc)
+        return 0.0
 
     def run(self) -> int:
         t0 = last_note = time.monotonic()
@@ -141,7 +179,8 @@ class RecordProcess:
 
     def counters(self) -> dict:
         w = self.writer
-        return {"messages": w.messages, "keys": len(w.counts),
+        extra = {"skipped_robots": w.skipped} if isinstance(w, Ros2Recording) else {}
+        return {**extra, "messages": w.messages, "keys": len(w.counts),
                 "robots": sorted(self.tap.seen_robots), "max_backlog": self.tap.max_backlog,
                 "failed": None if self.error is None else str(self.error)}
 

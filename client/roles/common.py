@@ -82,11 +82,13 @@ def wait_for_server(ctx: Context, timeout: float | None = None,
     declared here, later, could miss a scan sent as soon as the token was seen.
     ``ring``: the caller's own ``client.player.ScanChannel``: the wait takes the first scan
     from it and returns it, for the caller to answer (a lock-step sender waits for that answer
-    before it sends another scan).
+    before it sends another scan). A channel of another robot than an rhbl server's (a
+    ``client.ros2.Ros2ScanChannel``) names its ``key`` and what it ``needs``, said instead.
     Logs what it is waiting for every few seconds, so a process never waits silently.
     """
     timeout = ctx.args.wait_server if timeout is None else timeout
-    key = keys.scan_key(ctx.robot)
+    key = getattr(ring, "key", None) or keys.scan_key(ctx.robot)
+    needs = getattr(ring, "needs", None)
     sub = first = None
     if ring is not None:
         got = threading.Event()
@@ -106,8 +108,11 @@ def wait_for_server(ctx: Context, timeout: float | None = None,
                 return
             now = time.monotonic()
             if timeout and now - t0 >= timeout:
-                alive = server_alive(ctx.session)
                 where = ", ".join(ctx.endpoints) or "the local zenoh network"
+                if needs:
+                    raise ProcessError(f"{ctx.role}: no scans on {key} within {timeout:g} s via "
+                                       f"{where}: is {needs} up?", EXIT_NO_SERVER)
+                alive = server_alive(ctx.session)
                 if alive:
                     raise ProcessError(
                         f"{ctx.role}: a server is up ({', '.join(alive)}) but no scans of robot "
@@ -117,7 +122,10 @@ def wait_for_server(ctx: Context, timeout: float | None = None,
                     f"{ctx.role}: the server is not up: no scans on {key} and no liveliness "
                     f"token {keys.alive_key('server', '**')} within {timeout:g} s via {where}. "
                     f"Start `rhbl server` (or check --connect/--robot).", EXIT_NO_SERVER)
-            if now >= next_note:
+            if now >= next_note and needs:
+                log.info("waiting for %s: no scans on %s yet (%.0f s)", needs, key, now - t0)
+                next_note = now + 3.0
+            elif now >= next_note:
                 alive = server_alive(ctx.session, timeout=0.5)
                 log.info("waiting for the server: no scans on %s yet (%s; %.0f s)", key,
                          f"server tokens: {', '.join(alive)}" if alive else "no server token",
@@ -126,7 +134,7 @@ def wait_for_server(ctx: Context, timeout: float | None = None,
     finally:
         if sub is not None:
             sub.undeclare()
-    log.info("server is up: scans arrive on %s", key)
+    log.info("%s: scans arrive on %s", "robot is up" if needs else "server is up", key)
     return first
 
 

@@ -10,6 +10,17 @@ commanding (and logs it), and the server's watchdog stops the robot.
 
 With ``--follow`` the starting order does not matter: started before the learner (or before its
 first snapshot) it waits for the first tree (``--wait-tree``, forever by default), then drives.
+
+The tree's actions go through a loop guard (``client.behaviour.guard.RotationGuard``, on by
+default, ``--no-guard`` to drive the tree's answers as they are): an order to rotate the other
+way within 5 scans of a rotation is overruled (the robot keeps turning as it was, for at most
+``--guard-hold`` scans in a row), so the robot does not bounce between a rot-left and a rot-right
+sphere for ever; every overruled reversal is counted (``--stats``: ``overruled``) and logged at a
+bounded rate (docs/teaching.md has the study behind it).
+
+With ``--ros2`` it drives a ROS 2 robot instead (``client.ros2.Ros2Robot``, docs/ros2.md): its
+``LaserScan`` (any beam count and span, resampled to the tree's features, or refused with exit 2
+when they cannot be had from that laser) and ``Odometry`` in, a ``Twist`` on ``cmd_vel`` out.
 """
 
 from __future__ import annotations
@@ -23,10 +34,12 @@ import zenoh
 
 from client.behaviour.actions import ActionSet
 from client.behaviour.features import FEATURES, FeatureSpec
+from client.behaviour.guard import RotationGuard
 from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, check_compatible
 from client.decision import Decider
 from client.player import PlayerClient
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
+from client.ros2 import Ros2Options, Ros2Robot, add_ros2_arguments
 from protocol import keys
 from protocol.decoding import Decoder
 from protocol.messages import Scan, TreeNotice
@@ -58,10 +71,35 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(queried again at each tree notice and every second, logging "
                              "every few seconds; 0 = forever). Default: forever with --follow, "
                              "otherwise one query (no learner or no tree yet: exit 4)")
+    parser.add_argument("--guard", action=argparse.BooleanOptionalAction, default=True,
+                        help="the loop guard: never reverse a rotation at once (an order to "
+                             "rotate the other way within 5 scans of a rotation is overruled, "
+                             "for at most --guard-hold scans in a row; default on)")
+    parser.add_argument("--guard-hold", type=int, default=30, metavar="SCANS",
+                        help="with --guard: at most this many overruled reversals in a row, "
+                             "then the tree's answer is taken (default 30: 3 s at 10 Hz)")
+    parser.add_argument("--ros2", action="store_true",
+                        help="drive a ROS 2 robot (rmw_zenoh's keys): its LaserScan and Odometry "
+                             "in, a Twist on cmd_vel out; --robot names its topics "
+                             "(docs/ros2.md)")
+    add_ros2_arguments(parser, bridge=False, when="with --ros2")
+
+
+def _check_ros2(args: argparse.Namespace) -> None:
+    """The ROS 2 options, before any connection (ValueError: one line, exit 2)."""
+    if args.ros2:
+        Ros2Options.from_args(args).topics(args.robot)
+    elif Ros2Options.given(args):
+        raise ValueError(f"{', '.join(Ros2Options.given(args))}: only with --ros2")
 
 
 def main(args: argparse.Namespace) -> int:
-    return run_role("controller", args, lambda ctx: ControllerProcess(ctx).run())
+    def check() -> None:  # before the session opens (ValueError: one line, exit 2)
+        if args.guard_hold < 0:
+            raise ValueError(f"--guard-hold must be >= 0 scans, got {args.guard_hold}")
+        _check_ros2(args)
+
+    return run_role("controller", args, lambda ctx: ControllerProcess(ctx).run(), check=check)
 
 
 def _policy_from(clf_bytes_or_path, features: str | None) -> TreePolicy:
@@ -119,12 +157,13 @@ class ControllerProcess:
         self.ctx, self.args = ctx, ctx.args
         if self.args.follow and not self.args.from_learner:
             raise ProcessError("controller: --follow needs --from-learner", EXIT_USAGE)
+        # kept across tree swaps: a new tree does not reset what the robot is doing
+        self.guard = (RotationGuard(hold=self.args.guard_hold)
+                      if self.args.guard else None)
         self.policy: TreePolicy | None = None  # swapped between scans by the follower
         # subscribed before the first query: a tree announced meanwhile is not missed
         self.follower = _Follower(ctx, self.swap) if self.args.follow else None
-        # commands on .../cmd/vel/controller, express and never dropped; the latest scan only
-        self.client = PlayerClient(session=ctx.session, robot=ctx.robot, source=SOURCE,
-                                   express=True, block=True)
+        self.client = self.robot()
         ctx.scope.callback(self.client.close)
         self.scans = self.client.scans(depth=1)
         self.watch = ScanWatch("controller", self.scans.key, stale=1.0)
@@ -135,6 +174,16 @@ class ControllerProcess:
         self.n = self.bad = 0
         ctx.scope.callback(self.close)  # on every path, after "stopping (signal)"
         ctx.report(self.counters)
+
+    def robot(self) -> PlayerClient | Ros2Robot:
+        """What it drives: the rhbl robot (commands on .../cmd/vel/controller, express and never
+        dropped) or, with --ros2, a ROS 2 robot whose scans come resampled to the tree's."""
+        ctx = self.ctx
+        if self.args.ros2:
+            return Ros2Robot(ctx.session, ctx.robot, Ros2Options.from_args(self.args),
+                             spec=lambda: self.policy.features)
+        return PlayerClient(session=ctx.session, robot=ctx.robot, source=SOURCE, express=True,
+                            block=True)
 
     def swap(self, policy: TreePolicy) -> None:
         self.policy = policy
@@ -159,6 +208,7 @@ class ControllerProcess:
 
     def counters(self) -> dict:
         return {"commands": self.n, "unanswered": self.bad,
+                "overruled": 0 if self.guard is None else self.guard.overruled,
                 "swaps": 0 if self.follower is None else self.follower.swaps,
                 "dropped": {**self.client.decoder.counts,
                             **({} if self.follower is None else self.follower.decoder.counts)}}
@@ -232,13 +282,27 @@ class ControllerProcess:
         p = self.policy
         try:
             x = p.features.extract(scan.ranges, scan.pose[2])
-            return p.actions[str(p.classifier.predict_one(x))], p, x
+            name = str(p.classifier.predict_one(x))
+            if self.guard is not None:
+                name = self.guard_choose(name, scan)
+            return p.actions[name], p, x
         except Exception as exc:  # noqa: BLE001 - a scan the tree cannot use: no command
             self.bad += 1
             if self.bad <= 10 or self.bad % 100 == 0:
                 log.warning("scan %d not answered (%d so far; the watchdog stops the robot): "
                             "%s: %s", scan.id, self.bad, type(exc).__name__, exc)
             return None
+
+    def guard_choose(self, name: str, scan: Scan) -> str:
+        """The loop guard's action for the tree's ``name`` (an overruled reversal logged at a
+        bounded rate)."""
+        before = self.guard.overruled
+        chosen = self.guard.choose(name)
+        n = self.guard.overruled
+        if n > before and (n <= 3 or n % 100 == 0):
+            log.info("loop guard: the tree reversed its rotation at scan %d (%s): kept %s "
+                     "(%d overruled so far)", scan.id, name, chosen, n)
+        return chosen
 
     def publish_decision(self, policy, x, scan: Scan) -> None:
         """The decision of the scan just answered, for viewers; a failure here is logged and

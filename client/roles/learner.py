@@ -28,6 +28,15 @@ withdrawal of labels folded into a snapshot is journaled but cannot take them ou
 
     rhbl learner --features wall --out tree.rhbl                 # new tree (or continue tree.rhbl)
     rhbl learner --resume tree.rhbl --out tree2.rhbl             # extend a tree: a new lineage
+    rhbl learner --features wall --teacher person --out tree.rhbl  # taught by hand (rhbl console)
+
+``--teacher person`` (labels given by hand at ``rhbl console``): each label is paired with the
+scan ``--lag`` scans before the one it names (a person's key answers what they saw a reaction
+time earlier: ``client.labels.Pairing``), and the tree is rebuilt from every label journaled,
+each taking the label most of its nearest labels carry
+(``client.behaviour.teaching.PersonLearner``: one wrong key does not carve a sphere for ever).
+Such a lineage is rebuilt from its whole journal on a restart (no ``--fold-journal``, no
+``--resume``); docs/teaching.md has the study behind it.
 """
 
 from __future__ import annotations
@@ -51,6 +60,7 @@ from client.behaviour.learning import (
     load_snapshot,
 )
 from client.behaviour.tasks import task_of_features
+from client.behaviour.teaching import LAG, PERSON_RULE, PersonLearner
 from client.journal import (
     Journal,
     JournalError,
@@ -107,6 +117,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "this long before the final snapshot (default 5)")
     parser.add_argument("--scan-buffer", type=int, default=512,
                         help="how many recent unlabeled scans are kept for pairing")
+    parser.add_argument("--teacher", choices=["script", "person"], default="script",
+                        help="who labels a new tree: 'script' (rhbl teacher: each label learned "
+                             "as it arrives, default) or 'person' (rhbl console: labels paired "
+                             "with the scan --lag scans earlier, the tree rebuilt from every "
+                             "label by the majority of its nearest labels); a lineage keeps "
+                             "the rule it was made with")
+    parser.add_argument("--lag", type=int, default=LAG, metavar="SCANS",
+                        help=f"with --teacher person: a label answers the scan this many scans "
+                             f"before the one it names (default {LAG}: 0.3 s at 10 Hz)")
 
 
 # ---- the learning core (no zenoh: testable on its own) --------------------------------------
@@ -117,7 +136,10 @@ class LearnerCore:
                  resume: str | None = None, task: str | None = None,
                  tree_params: dict | None = None, stride: int = 1, min_delta: float = 0.0,
                  fsync_interval: float = 1.0, actions: ActionSet = DEFAULT_ACTIONS,
-                 fold_journal: bool = False, journal_write=os.write):
+                 fold_journal: bool = False, journal_write=os.write, teacher: str = "script",
+                 lag: int = LAG):
+        if not (isinstance(lag, int) and lag >= 0):
+            raise ProcessError(f"learner: --lag must be >= 0 scans, got {lag!r}", EXIT_USAGE)
         self.out = Path(out)
         self.fold_journal = bool(fold_journal)
         self.jpath = journal_path(self.out)
@@ -140,6 +162,9 @@ class LearnerCore:
                     f"by a learner. Extend it with --resume {self.out} --out NEW_PATH", EXIT_USAGE)
             fork = None  # where the parent's journal stood when it was extended
             if resume is not None:
+                if teacher == "person":
+                    raise ProcessError("--teacher person builds its tree from its own labels: "
+                                       "it cannot --resume another tree", EXIT_USAGE)
                 learner = _resume(resume, spec)
                 parent = str(Path(resume).resolve())
                 j = (load_snapshot(resume)[3].get("provenance") or {}).get("journal") or {}
@@ -149,9 +174,13 @@ class LearnerCore:
                 if spec is None:
                     raise ProcessError("a new tree needs --features (wall or maze)", EXIT_USAGE)
                 params = {"spawn": "winner", **(tree_params or {})}
-                learner = DemonstrationLearner(
-                    spec, actions, task=task or task_of_features(features),
-                    stride=stride, min_delta=min_delta, **params)
+                if teacher == "person":
+                    learner = PersonLearner(spec, actions, task=task or task_of_features(features),
+                                            lag=lag, **params)
+                else:
+                    learner = DemonstrationLearner(
+                        spec, actions, task=task or task_of_features(features),
+                        stride=stride, min_delta=min_delta, **params)
                 parent = None
             header = {"parent": parent, "fork": fork, "meta": learner.metadata()}
             self.journal = Journal.create(self.jpath, header, fsync_interval=fsync_interval,
@@ -160,12 +189,25 @@ class LearnerCore:
             log.info("new tree lineage %s at %s%s", self.journal.lineage, self.out,
                      f" (extending {parent})" if parent else "")
         self.learner.parent = self.journal.header.get("parent")
+        if self.person and self.fold_journal:
+            raise ProcessError(f"{self.out} is a person's tree, rebuilt from every label of its "
+                               "journal: --fold-journal cannot be used with it", EXIT_USAGE)
         self.saved_applied = self.applied if self.out.exists() else -1
         self.seq = 0
 
     @property
     def features(self) -> FeatureSpec:
         return self.learner.features
+
+    @property
+    def person(self) -> bool:
+        """A person's lineage (``--teacher person``): labels shifted by ``lag``, tree rebuilt."""
+        return isinstance(self.learner, PersonLearner)
+
+    @property
+    def lag(self) -> int:
+        """Scans a label is shifted back by when paired (0: the scan it names)."""
+        return self.learner.lag if self.person else 0
 
     @property
     def actions(self) -> ActionSet:
@@ -205,6 +247,11 @@ class LearnerCore:
                     f"{j.get('lineage')!r} != {lineage!r}); move one of them aside", EXIT_USAGE)
         if learner is None:  # killed before its first snapshot: start where the lineage started
             learner = self._lineage_start()
+        if self._person_rule():
+            # a person's tree is rebuilt from every label: the whole journal again (the
+            # withdrawals in it are held again below and stay out)
+            learner = self._lineage_start()
+            start, self.labels, self.standing = 0, LabelSet(), 0
         if start > len(self.journal):
             raise ProcessError(
                 f"snapshot {self.out} includes {start} journal records but {self.jpath} holds "
@@ -233,9 +280,18 @@ class LearnerCore:
                  len(self.withdrawals))
         return learner, len(self.journal)
 
+    def _person_rule(self) -> bool:
+        meta = self.journal.header.get("meta") or {}
+        return (meta.get("learning") or {}).get("rule") == PERSON_RULE
+
     def _lineage_start(self) -> DemonstrationLearner:
-        """The tree this lineage started from: its parent's (``--resume``) or a new one."""
+        """The tree this lineage started from: a person's learner (rebuilt from the whole
+        journal), its parent's (``--resume``) or a new one."""
         header = self.journal.header
+        if self._person_rule():
+            meta = header["meta"]
+            return PersonLearner.from_metadata(meta, FeatureSpec.from_dict(meta["features"]),
+                                               ActionSet.from_dict(meta["actions"]))
         if header.get("parent") is not None:
             return _resume(header["parent"], None)
         meta = header["meta"]
@@ -328,9 +384,11 @@ class LearnerCore:
         learned from (a tree extended with ``--resume`` holds its parent's too) and how many of
         them this lineage's journal holds, its size."""
         learner = self.learner
+        rule = (f"; a person's labels (shifted {learner.lag} scans back, the majority of "
+                f"{learner.k} nearest)" if self.person else "")
         return (f"features {self.features.to_dict()['beams']}, {learner.vectors} vectors so far "
                 f"({self.applied} journaled in lineage {self.journal.lineage}), "
-                f"{learner.nodes} nodes")
+                f"{learner.nodes} nodes{rule}")
 
     @property
     def dirty(self) -> bool:
@@ -385,7 +443,13 @@ def main(args: argparse.Namespace, *, journal_write=os.write) -> int:
     # the token is declared once the label subscription is in place: a teacher that waits for
     # it (rhbl teacher) then loses no label
     return run_role("learner", args, lambda ctx: LearnerProcess(ctx, journal_write).run(),
-                    early_token=False)
+                    early_token=False, check=lambda: _check(args))
+
+
+def _check(args: argparse.Namespace) -> None:
+    """The options checked before the session opens (ValueError: one line, exit 2)."""
+    if args.lag < 0:
+        raise ValueError(f"--lag must be >= 0 scans, got {args.lag}")
 
 
 class LearnerProcess:
@@ -406,7 +470,7 @@ class LearnerProcess:
         self.watch = ScanWatch("learner", keys.scan_key(ctx.robot), stale=3.0)
         # labels are paired with their scans as they arrive: nothing but labeled scans is queued
         self.pairing = Pairing(self.args.scan_buffer, self.args.match_timeout,
-                               on_scan_seen=self.watch.seen)
+                               on_scan_seen=self.watch.seen, lag=self.core.lag)
         self.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0, "duplicates": 0,
                       "withdrawals": 0, "withdrawn_skipped": 0}
         # teachers' withdrawals as they arrive (decoded in zenoh's thread), applied by the loop
@@ -432,7 +496,7 @@ class LearnerProcess:
                              **({"max_nodes": args.max_nodes} if args.max_nodes else {})},
                 stride=args.stride, min_delta=args.min_delta,
                 fsync_interval=args.fsync_interval, fold_journal=args.fold_journal,
-                journal_write=journal_write)
+                journal_write=journal_write, teacher=args.teacher, lag=args.lag)
         except JournalError as exc:
             raise ProcessError(f"learner: {exc}") from exc
 

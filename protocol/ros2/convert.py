@@ -7,6 +7,8 @@ From an rhbl robot to ROS 2::
     tf_from_state(state, frames)                            -> tf2_msgs/msg/TFMessage (odom -> base)
     velcmd_from_twist(twist, max_vx=..., max_va=...)        -> VelCmd (clamped, like the server)
     clock_from_time(ts)                                     -> rosgraph_msgs/msg/Clock
+    RobotFeed(topics, frames, scan_time).of_scan(scan) / .of_state(state)
+                                                            -> [(Topic, message)]: a robot's tick
 
 From a ROS 2 robot to rhbl::
 
@@ -35,9 +37,11 @@ import numpy as np
 from protocol.codec import DecodeError
 from protocol.messages import Scan, State, VelCmd
 from protocol.ros2.cdr import CLOCK, LASER_SCAN, ODOMETRY, TF_MESSAGE, TWIST, TWIST_STAMPED, types
+from protocol.ros2.graph import RobotTopics, Topic
 
 __all__ = [
     "Frames",
+    "RobotFeed",
     "clock_from_time",
     "laserscan_from_scan",
     "odometry_from_state",
@@ -261,3 +265,33 @@ def twist_from_velcmd(cmd: VelCmd) -> Any:
     if not cmd.state:
         return types()[TWIST](linear=_vector3(), angular=_vector3())
     return types()[TWIST](linear=_vector3(cmd.vx, cmd.vy), angular=_vector3(z=cmd.va))
+
+
+@dataclass(frozen=True)
+class RobotFeed:
+    """What one rhbl robot's data become on ROS 2 (docs/ros2.md, "Mapping"): each scan a
+    ``LaserScan`` on ``topics.scan`` (``scan_time`` s between scans: 1 / the laser's rate, 0 if
+    unknown), each state an ``Odometry`` on ``topics.odom``, a ``TFMessage`` (odom -> base) on
+    ``topics.tf`` and, with ``clock``, the sim time on ``topics.clock``. The one mapping that
+    ``rhbl ros2`` publishes and ``rhbl record --ros2`` writes."""
+
+    topics: RobotTopics
+    frames: Frames
+    scan_time: float = 0.0
+    clock: bool = True
+
+    def of_scan(self, scan: Scan) -> list[tuple[Topic, Any]]:
+        return [(self.topics.scan, laserscan_from_scan(scan, self.frames.laser, self.scan_time))]
+
+    def of_state(self, state: State) -> list[tuple[Topic, Any]]:
+        out = [(self.topics.odom, odometry_from_state(state, self.frames)),
+               (self.topics.tf, tf_from_state(state, self.frames))]
+        if self.clock:
+            out.append((self.topics.clock, clock_from_time(state.ts)))
+        return out
+
+    @property
+    def published(self) -> tuple[Topic, ...]:
+        """The topics this feed writes to."""
+        t = self.topics
+        return t.published if self.clock else (t.scan, t.odom, t.tf)

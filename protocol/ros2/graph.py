@@ -150,17 +150,32 @@ class RobotTopics:
     clock: Topic
 
     @classmethod
-    def of(cls, robot: str, namespace: str = "/") -> RobotTopics:
+    def of(cls, robot: str, namespace: str = "/", *, scan: str = "scan", odom: str = "odom",
+           cmd_vel: str = "cmd_vel", tf: str = "/tf", clock: str = "/clock") -> RobotTopics:
         """``<namespace>/<robot>/scan``, ``.../odom``, ``.../cmd_vel``; ``/tf`` and ``/clock``
-        are shared by every robot. ``robot`` must be a ROS 2 name token (no ``-`` or ``.``)."""
+        are shared by every robot. ``robot`` must be a ROS 2 name token (no ``-`` or ``.``).
+        Other names: a relative one is put under ``<namespace>/<robot>``, an absolute one
+        (``/scan``) is kept as it is (a ValueError names a bad one)."""
         ns = fully_qualified(robot, namespace)
         return cls(
-            scan=Topic(f"{ns}/scan", cdr.LASER_SCAN, SENSOR_DATA_QOS),
-            odom=Topic(f"{ns}/odom", cdr.ODOMETRY, DEFAULT_QOS),
-            cmd_vel=Topic(f"{ns}/cmd_vel", cdr.TWIST, DEFAULT_QOS),
-            tf=Topic("/tf", cdr.TF_MESSAGE, DEFAULT_QOS._replace(depth=100)),
-            clock=Topic("/clock", cdr.CLOCK, SENSOR_DATA_QOS._replace(depth=1)),
+            scan=Topic(fully_qualified(scan, ns), cdr.LASER_SCAN, SENSOR_DATA_QOS),
+            odom=Topic(fully_qualified(odom, ns), cdr.ODOMETRY, DEFAULT_QOS),
+            cmd_vel=Topic(fully_qualified(cmd_vel, ns), cdr.TWIST, DEFAULT_QOS),
+            tf=Topic(fully_qualified(tf, ns), cdr.TF_MESSAGE, DEFAULT_QOS._replace(depth=100)),
+            clock=Topic(fully_qualified(clock, ns), cdr.CLOCK,
+                        SENSOR_DATA_QOS._replace(depth=1)),
         )
+
+    @property
+    def cmd_vel_stamped(self) -> Topic:
+        """The ``cmd_vel`` topic carrying ``geometry_msgs/msg/TwistStamped`` (what Nav2 sends
+        with ``enable_stamped_cmd_vel``): another key, read beside the plain ``Twist``."""
+        return Topic(self.cmd_vel.name, cdr.TWIST_STAMPED, self.cmd_vel.qos)
+
+    @property
+    def published(self) -> tuple[Topic, Topic, Topic, Topic]:
+        """What an rhbl robot publishes to ROS 2: scan, odom, tf, clock."""
+        return (self.scan, self.odom, self.tf, self.clock)
 
 
 @dataclass(frozen=True)

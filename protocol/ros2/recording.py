@@ -4,6 +4,7 @@
         out.add_topic(Topic("/r0/scan", LASER_SCAN, SENSOR_DATA_QOS))
         out.write_message("/r0/scan", laserscan_from_scan(scan, "r0/base_link"), log_time_ns)
         out.write("/r0/scan", cdr_bytes, log_time_ns, publish_time_ns)   # bytes already CDR
+        out.flush()                      # close the chunk in progress (a killed writer keeps it)
 
 The layout rosbag2's MCAP storage writes and reads: header profile ``ros2``; one schema per
 message type, named ``package/msg/Name``, encoding ``ros2msg`` (the type's .msg text with its
@@ -96,6 +97,14 @@ class Ros2McapWriter:
         if known is not None and typename != known[1]:
             raise ValueError(f"topic {topic} records {known[1]}, got a {typename}")
         self.write(topic, cdr.serialize(msg), log_time_ns, publish_time_ns)
+
+    def flush(self) -> None:
+        """Close the chunk in progress and write it out (readable from then on, even if the
+        process is killed before :meth:`close`)."""
+        self._check_open()
+        self._writer.flush()
+        if self._file is not None:
+            self._file.flush()
 
     def _check_open(self) -> None:
         if self._closed:

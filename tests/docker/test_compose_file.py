@@ -111,6 +111,28 @@ def test_scenario_flags(compose):
     assert compose["services"]["controller"]["restart"] == "on-failure"
 
 
+def test_the_documented_ros2_service_is_valid(raw, tmp_path):
+    """docs/deployment.md's ``ros2`` service (the bridge), added to the compose file as a user
+    would: the file still validates, and the service is a valid ``rhbl ros2`` invocation with
+    the bridge's own credentials, which the secrets script makes."""
+    doc = (ROOT / "docs" / "deployment.md").read_text()
+    snippet = re.search(r"```yaml\n(  ros2:\n.*?)```", doc, re.S)
+    assert snippet, "docs/deployment.md: the ros2 service snippet"
+    text = COMPOSE.read_text().replace("\nservices:\n", "\nservices:\n" + snippet[1], 1)
+    path = tmp_path / "compose.yaml"
+    path.write_text(text)
+    schema = json.loads(SCHEMA.read_text())
+    jsonschema.Draft202012Validator(schema).validate(yaml.safe_load(text))
+    service = compose_local.load_compose(path, env={})["services"]["ros2"]
+    argv = compose_local.rhbl_argv(service)
+    assert argv and argv[0] == "ros2"
+    args = build_parser("ros2").parse_args(argv[1:])
+    assert args.mode == "client" and args.connect == ["tls/router:7447"]
+    assert not args.multicast_scouting
+    assert args.zenoh_config == "/run/secrets/ros2.json5"
+    assert "ros2" in re.search(r"^ROLES=\((.*)\)$", GEN_SECRETS.read_text(), re.M)[1].split()
+
+
 def test_console_is_published_on_the_hosts_loopback_only(compose):
     console = compose["services"]["console"]
     ports = console["ports"]
@@ -306,7 +328,7 @@ def test_gen_dev_secrets(tmp_path):
     out = tmp_path / "s"
     run = _gen(out, "DNS:robot.example.org", EXTRA_SANS="IP:192.0.2.7")
     assert run.returncode == 0, run.stderr
-    roles = ("server", "teacher", "learner", "controller", "operator")
+    roles = ("server", "teacher", "learner", "controller", "operator", "ros2")
     for name in ("ca", "router", *roles):
         assert (out / f"{name}.pem").is_file() and (out / f"{name}.key").is_file()
     users = dict(ln.split(":", 1) for ln in (out / "users.txt").read_text().splitlines())

@@ -424,3 +424,48 @@ def test_starting_order_does_not_matter_for_a_following_controller(env):
     finally:
         sub.undeclare()
         sim.set_pose2d(*start)
+
+
+def test_a_persons_learner_pairs_each_label_with_the_scan_lag_scans_earlier(env):
+    """``rhbl learner --teacher person --lag 3``: every label learned with the scan three
+    before the one it names (the teacher labels every scan, so the journal's scan ids are the
+    labels' minus 3), the tree rebuilt by the neighbours' vote; the snapshot says so, a
+    controller drives it through its loop guard and counts what the guard overruled."""
+    session = env["session"]
+    sim = PlayerClient(session=session, source="test").simulation
+    start = sim.get_pose2d()
+    out = env["tmp"] / "person.rhbl"
+    try:
+        learner = env["start"]("learner", "learner", "--features", "wall", "--teacher",
+                               "person", "--lag", "3", "--out", str(out),
+                               "--snapshot-every", "0.3")
+        _wait_token(session, "learner", learner)
+        labels = []
+        sub = session.declare_subscriber(keys.teacher_action_key("r0"),
+                                         lambda s: labels.append(
+                                             TeacherAction.decode(s.payload.to_bytes()).scan_id))
+        try:
+            n = _teach(env, 6, seed=5)
+        finally:
+            sub.undeclare()
+        _wait_journal(out, n)
+        assert learner.stop() == 0, learner.output()
+        pairing = _stats(learner)["pairing"]
+        assert pairing["shifted"] + pairing["unshifted"] == n and pairing["shifted"] >= n - 3
+        with Journal.open(journal_path(out), readonly=True) as j:
+            learned = [r.scan_id for r in j.records()]
+        # the labels this test saw (its subscription may miss the first few): each one's
+        # scan three before is in the journal, and the newest scan learned is three before the
+        # newest scan named
+        named = set(labels)
+        assert len(learned) == n and len(named) >= n // 2, (n, len(named))
+        assert sum((s - 3) in set(learned) for s in named) >= len(named) - 3
+        assert max(learned) <= max(named) - 3
+        meta = load_snapshot(out)[3]
+        assert meta["learning"]["rule"] == "person" and meta["learning"]["lag"] == 3
+        c = env["start"]("controller", "controller", "--tree", str(out), "--seconds", "5")
+        assert c.wait(60) == 0, c.output()
+        st = _stats(c)
+        assert st["commands"] > 0 and st["overruled"] >= 0 and st["unanswered"] == 0
+    finally:
+        sim.set_pose2d(*start)

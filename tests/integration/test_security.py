@@ -29,7 +29,7 @@ pytestmark = pytest.mark.integration
 ROOT = Path(__file__).resolve().parents[2]
 ROUTER_CONFIG = ROOT / "docker" / "zenoh" / "router.json5"
 GEN_SECRETS = ROOT / "scripts" / "gen-dev-secrets.sh"
-ROLES = ("server", "teacher", "learner", "controller")
+ROLES = ("server", "teacher", "learner", "controller", "ros2")
 ROBOT = "r0"
 # a read-only request every role may make of the server: its answer tells a sender that the
 # router has handled everything the sender sent before (``_passed``)
@@ -290,10 +290,10 @@ def test_learner_cannot_publish_commands_teacher_and_controller_can(sessions, fl
 
 def test_sensor_data_flows_to_authorised_readers_only_from_the_server(sessions, flush):
     inbox = Inbox()
-    readers = ("teacher", "learner", "controller")
+    readers = ("teacher", "learner", "controller", "ros2")
     subs = [_subscribe(sessions, inbox, who, f"rhbl/{ROBOT}/*/*/data/**") for who in readers]
     _passed(sessions, flush, readers)
-    for who in ("teacher", "learner", "controller"):  # forged sensor data
+    for who in readers:  # forged sensor data
         sessions[who].put(keys.scan_key(ROBOT), f"forged:{who}".encode())
     sessions["server"].put(keys.scan_key(ROBOT), b"scan")
     sessions["server"].put(keys.state_key(ROBOT), b"state")
@@ -356,10 +356,11 @@ def test_requests_are_answered_by_the_server_mutating_ones_not_for_the_learner(s
     )
     _passed(sessions, flush, ["server", "teacher"])  # both declarations handled
     try:
-        for who in ("teacher", "learner", "controller"):
+        for who in ("teacher", "learner", "controller", "ros2"):  # read-only: get_*
             assert _ask(sessions[who], geom) == [b"ack"], who
         assert _ask(sessions["teacher"], odom) == [b"ack"]
         assert _ask(sessions["learner"], odom) == []
+        assert _ask(sessions["ros2"], odom) == []
         # only the server answers device requests
         assert _ask(sessions["controller"], keys.request_key(ROBOT, "laser", "get_config")) == []
     finally:
@@ -514,6 +515,120 @@ def test_each_role_declares_liveliness_tokens_only_under_its_own_key(secrets, ro
         watch.undeclare()
         observer.close()
         declarers["operator"].close()
+
+
+# ---- ROS 2 over rmw_zenoh: the bridge's credentials (rhbl ros2) -----------------------------
+
+
+def test_the_bridge_commands_on_its_own_key_only(sessions, flush):
+    """The ``ros2`` credentials publish commands on ``.../cmd/vel/ros2`` (priority 0 in the
+    server's arbitration) and nowhere else; nobody else may pose as the bridge."""
+    inbox = Inbox()
+    sub = _subscribe(sessions, inbox, "server", keys.cmd_vel_subscription(ROBOT))
+    _passed(sessions, flush, ["server"])
+    ros2_key = keys.cmd_vel_key(ROBOT, source="ros2")
+    denied = [
+        ("ros2", keys.cmd_vel_key(ROBOT, source="teacher")),
+        ("ros2", keys.cmd_vel_key(ROBOT, source="controller")),
+        ("ros2", keys.cmd_vel_key(ROBOT)),
+        ("teacher", ros2_key),
+        ("controller", ros2_key),
+        ("learner", ros2_key),
+    ]
+    for who, key in denied:
+        sessions[who].put(key, f"denied:{who}".encode())
+    sessions["ros2"].put(ros2_key, b"ros2")
+    try:
+        assert inbox.wait_for(("server", ros2_key, b"ros2"))
+        _passed(sessions, flush, {who for who, _ in denied}, ["server"])
+        assert [item for item in inbox.items if item[2].startswith(b"denied:")] == []
+    finally:
+        sub.undeclare()
+
+
+def _ros2_topics():
+    from protocol.ros2.graph import RobotTopics
+
+    return RobotTopics.of(ROBOT)
+
+
+def test_ros2_samples_flow_between_the_bridge_and_the_controller_only(sessions, flush):
+    """Domain 0's keys (``0/<topic>/<type>/<hash>``): the bridge's LaserScan reaches the
+    controller (``rhbl controller --ros2``), the controller's Twist reaches the bridge; the
+    learner and the teacher can neither publish there nor read."""
+    topics = _ros2_topics()
+    scan, cmd_vel = topics.scan.key(0), topics.cmd_vel.key(0)
+    inbox = Inbox()
+    readers = {"controller": scan, "ros2": cmd_vel, "learner": "0/**", "teacher": "0/**"}
+    subs = [_subscribe(sessions, inbox, who, key) for who, key in readers.items()]
+    _passed(sessions, flush, list(readers))
+    for who in ("learner", "teacher"):
+        sessions[who].put(scan, f"forged:{who}".encode())
+        sessions[who].put(cmd_vel, f"forged:{who}".encode())
+    sessions["ros2"].put(scan, b"laserscan")
+    sessions["controller"].put(cmd_vel, b"twist")
+    try:
+        assert inbox.wait_for(("controller", scan, b"laserscan"))
+        assert inbox.wait_for(("ros2", cmd_vel, b"twist"))
+        _passed(sessions, flush, ["learner", "teacher", "ros2", "controller"], list(readers))
+        leaked = [
+            (who, p)
+            for who, _, p in inbox.items
+            if (who in ("learner", "teacher") and p in (b"laserscan", b"twist"))
+            or (p.startswith(b"forged:") and p != f"forged:{who}".encode())
+        ]
+        assert leaked == []
+    finally:
+        for sub in subs:
+            sub.undeclare()
+
+
+def test_ros2_graph_tokens_are_declared_by_the_bridge_and_the_controller_only(sessions):
+    """rmw_zenoh's liveliness tokens (``@ros2_lv/0/...``): the bridge's node and publisher are
+    seen by the controller and the controller's by the bridge; a learner's are dropped."""
+    from client.ros2 import Ros2Graph
+
+    topics = _ros2_topics()
+    graphs = {who: Ros2Graph(sessions[who], 0) for who in ("ros2", "controller", "learner")}
+    marker = None
+
+    def announce(who, name, topic):
+        node = graphs[who].node(name, f"/{ROBOT}")
+        return {node.token.key(), node.publisher(topic).token.key()}
+
+    try:
+        learner_keys = announce("learner", "forged", topics.scan)
+        # the learner's own token after its forged ones: once seen, those were handled
+        learner_alive = keys.alive_key("learner", "ros2-graph")
+        marker = sessions["learner"].liveliness().declare_token(learner_alive)
+        bridge_keys = announce("ros2", "rhbl_bridge", topics.scan)
+        driver_keys = announce("controller", "rhbl_controller", topics.cmd_vel)
+        deadline = time.monotonic() + 10.0
+        seen: dict[str, set[str]] = {}
+        while time.monotonic() < deadline:
+            seen = {
+                who: {
+                    str(r.ok.key_expr)
+                    for r in sessions[who].liveliness().get("@ros2_lv/0/**", timeout=1.0)
+                    if r.ok is not None
+                }
+                for who in ("ros2", "controller")
+            }
+            if (
+                driver_keys <= seen["ros2"]
+                and bridge_keys <= seen["controller"]
+                and learner_alive in _alive_tokens(sessions["controller"])
+            ):
+                break
+        assert driver_keys <= seen["ros2"], sorted(seen["ros2"])
+        assert bridge_keys <= seen["controller"], sorted(seen["controller"])
+        assert learner_alive in _alive_tokens(sessions["controller"])
+        assert not learner_keys & (seen["ros2"] | seen["controller"])
+    finally:
+        for graph in graphs.values():
+            graph.close()
+        if marker is not None:
+            marker.undeclare()
 
 
 # ---- the remote teacher's messages -----------------------------------------------------------

@@ -152,3 +152,33 @@ def test_a_tree_trained_from_a_recording_is_compacted_on_the_recording(tmp_path,
     assert main(["train", "--from-recording", str(rec), "--out", str(tmp_path / "c.rhbl"),
                  "--compact", "exact"]) == 0
     assert TreePolicy.load(tmp_path / "c.rhbl").metadata["compaction"][-1]["method"] == "exact"
+
+
+def test_a_recording_retrained_as_a_persons_labels(tmp_path, capsys):
+    """``rhbl train --from-recording --teacher person --lag 3``: the labels paired with the
+    scan three earlier and the tree built by the neighbours' vote, as the live learner does;
+    the two flags refused where they cannot apply."""
+    from client.behaviour.teaching import PersonLearner
+    from lab.retrain import labeled_scans
+
+    rec, tree = tmp_path / "train.mcap", tmp_path / "p.rhbl"
+    assert main(["train", "--world", "room", "--seconds", "20", "--rounds", "0", "--out",
+                 str(tmp_path / "sim.rhbl"), "--record", str(rec)]) == 0
+    assert main(["train", "--from-recording", str(rec), "--out", str(tree), "--teacher",
+                 "person", "--lag", "3"]) == 0
+    assert "200 labeled scans" in capsys.readouterr().out
+    meta = TreePolicy.load(tree).metadata
+    assert meta["learning"]["rule"] == "person" and meta["learning"]["lag"] == 3
+    stats: dict = {}
+    pairs = [(s.id, a.scan_id) for _r, s, a in labeled_scans(rec, stats=stats, lag=3)]
+    assert sum(s == named - 3 for s, named in pairs) >= len(pairs) - 3
+    ref = PersonLearner(TreePolicy.load(tree).features, lag=3, task="wall-following")
+    for _r, s, a in labeled_scans(rec, lag=3):
+        ref.observe(s.ranges, float(s.pose[2]), a.action)
+    assert ref.classifier.tree_equal(TreePolicy.load(tree).classifier)
+    for flags in (["--world", "room", "--teacher", "person"], ["--world", "room", "--lag", "2"]):
+        assert main(["train", "--out", str(tmp_path / "x.rhbl"), *flags]) == 2
+        assert "go with --from-recording" in capsys.readouterr().err
+    assert main(["train", "--from-recording", str(rec), "--out", str(tmp_path / "x.rhbl"),
+                 "--teacher", "person", "--compact", "exact"]) == 2
+    assert "no --compact" in capsys.readouterr().err

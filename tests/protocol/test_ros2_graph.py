@@ -92,6 +92,19 @@ def test_a_robots_topics():
     assert RobotTopics.of("r1", "/fleet").scan.name == "/fleet/r1/scan"
     with pytest.raises(ValueError, match="ROS 2 topic name"):
         RobotTopics.of("robot-1")  # a valid rhbl robot name, not a ROS 2 one
+    assert t.published == (t.scan, t.odom, t.tf, t.clock)
+    assert (t.cmd_vel_stamped.name, t.cmd_vel_stamped.typename) == ("/r0/cmd_vel",
+                                                                    cdr.TWIST_STAMPED)
+
+
+def test_a_robots_topic_names_are_options():
+    t = RobotTopics.of("r0", "/fleet", scan="base_scan", odom="/odom", cmd_vel="nav/cmd_vel",
+                       tf="tf", clock="/sim/clock")
+    assert [x.name for x in (t.scan, t.odom, t.cmd_vel, t.tf, t.clock)] == [
+        "/fleet/r0/base_scan", "/odom", "/fleet/r0/nav/cmd_vel", "/fleet/r0/tf", "/sim/clock"]
+    for bad in ("scan-1", "", "/a//b", "~/scan", "{robot}/scan"):
+        with pytest.raises(ValueError, match="ROS 2 topic name"):
+            RobotTopics.of("r0", scan=bad)
 
 
 @pytest.mark.parametrize("key", DESIGN_TOKENS)

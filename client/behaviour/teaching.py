@@ -1,0 +1,280 @@
+"""Learning from a person: what to do with labels given by hand at the console.
+
+People react 200-450 ms after what they see, press wrong keys, over-steer and correct
+themselves; the scripted teachers do none of that. Learning every label as it arrives (the
+paper's rule, ``DemonstrationLearner``) carves a sphere for every late or wrong key, and the
+tree copies the noise. Two pieces cope with it (docs/teaching.md has the study behind them):
+
+* **the reaction lag** (``answered_scan``, on the console's side): a key held while scan ``n``
+  is displayed answers what the person saw ``lag`` scans earlier, so the label is tied to scan
+  ``n - lag`` (the scan displayed when the key went out, as today, if that one is unknown or the
+  robot was moved since).
+* **the majority** (``PersonLearner``, on the learner's side): every label is kept as given;
+  the tree is built from all of them at once, each labelled vector taking the label most of its
+  ``k`` nearest labelled vectors carry (a wrong key or a late release is outvoted by the labels
+  around it), optionally with jittered copies labelled by the same vote (``copies``).
+
+    shown = 812                                         # the scan the page displayed
+    answered = answered_scan(shown, scans, lag=LAG)     # scans: id -> scan (with .pose)
+    learner = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, task="wall-following")
+    learner.observe(ranges, yaw, "fwd-left")            # the label, tied to the answered scan
+    learner.classifier                                  # the tree of every label so far (rebuilt
+                                                        # when labels came since it was last asked)
+
+Pure (no zenoh, no I/O): the processes and the in-process study run this same code.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+
+import numpy as np
+
+from .actions import DEFAULT_ACTIONS, ActionSet
+from .features import FeatureSpec
+from .learning import DemonstrationLearner
+
+__all__ = [
+    "JUMP",
+    "PERSON_RULE",
+    "LAG",
+    "PERSON_DEFAULTS",
+    "PersonLearner",
+    "answered_scan",
+    "majority_labels",
+    "mean_actions",
+    "nearest_votes",
+]
+
+LAG = 3  # scans (0.3 s at 10 Hz) between what a person saw and the scan shown when the key went out
+JUMP = 0.5  # m: the robot moved farther than this between two scans: it was put there (set_pose)
+_CHUNK = 1 << 22  # distances computed per block (query rows x references)
+
+
+def answered_scan(shown: int, scans: Mapping[int, object], lag: int = LAG,
+                  pose: Callable[[object], tuple] = lambda s: s.pose,
+                  jump: float = JUMP) -> int:
+    """The id of the scan a key answers: ``lag`` scans before ``shown`` (the scan displayed when
+    the key was sent), or ``shown`` itself when that earlier scan is not in ``scans`` (id ->
+    scan, ``pose(scan)`` its (x, y, ...)) or the robot jumped more than ``jump`` metres from one
+    scan to the next in between (it was put elsewhere: the person saw another place)."""
+    if lag <= 0:
+        return shown
+    ids = [shown - i for i in range(lag + 1)]
+    if any(i not in scans for i in ids):
+        return shown
+    for a, b in zip(ids, ids[1:], strict=False):
+        pa, pb = pose(scans[a]), pose(scans[b])
+        if math.hypot(pa[0] - pb[0], pa[1] - pb[1]) > jump:
+            return shown
+    return shown - lag
+
+
+def nearest_votes(Q: np.ndarray, X: np.ndarray, y: np.ndarray, k: int,
+                  n_labels: int) -> np.ndarray:
+    """(len(Q), n_labels): for each row of ``Q`` the count of each label index of ``y`` among
+    its ``k`` nearest rows of ``X`` (squared Euclidean distance; ties broken by numpy's
+    partition)."""
+    n = len(X)
+    k = max(1, min(int(k), n))
+    out = np.zeros((len(Q), n_labels))
+    xx = np.einsum("ij,ij->i", X, X)
+    step = max(1, _CHUNK // max(1, n))
+    for s in range(0, len(Q), step):
+        q = Q[s:s + step]
+        d = np.einsum("ij,ij->i", q, q)[:, None] + xx[None, :] - 2.0 * q @ X.T
+        nn = (np.argpartition(d, k - 1, axis=1)[:, :k] if k < n
+              else np.broadcast_to(np.arange(n), (len(q), n)))
+        flat = np.repeat(np.arange(len(q)) * n_labels, nn.shape[1]) + y[nn].ravel()
+        out[s:s + step] = np.bincount(flat, minlength=len(q) * n_labels).reshape(len(q),
+                                                                                 n_labels)
+    return out
+
+
+def majority_labels(X: np.ndarray, y: np.ndarray, k: int, n_labels: int) -> np.ndarray:
+    """The label index most of each row's ``k`` nearest rows of ``X`` carry (the row itself
+    among them); a tie keeps the row's own label."""
+    votes = nearest_votes(X, X, y, k, n_labels)
+    rows = np.arange(len(y))
+    best = votes.argmax(axis=1)
+    return np.where(votes[rows, y] >= votes[rows, best], y, best)
+
+
+def mean_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
+    """Per row of ``votes`` (counts per action index) the index of the action nearest to the
+    votes' mean command ((vx, va) averaged, each scaled by the largest of the set): a person
+    steering left, right, left along a wall means forward."""
+    v = np.array([actions[n] for n in actions.names], dtype=np.float64)
+    v = v / np.maximum(np.abs(v).max(axis=0), 1e-12)
+    mean = votes @ v / np.maximum(votes.sum(axis=1, keepdims=True), 1e-12)
+    return ((mean[:, None, :] - v[None, :, :]) ** 2).sum(axis=2).argmin(axis=1)
+
+
+PERSON_RULE = "person"  # the snapshot metadata's learning rule of a PersonLearner
+
+# the defaults docs/teaching.md chose on the teaching study
+PERSON_DEFAULTS = {"k": 25, "copies": 0, "sigma": 0.06, "vote": "majority", "passes": 1,
+                   "build": "batch"}
+
+
+class PersonLearner(DemonstrationLearner):
+    """A ``DemonstrationLearner`` for labels given by a person (see the module's docstring).
+
+    Every label offered (``observe``, ``observe_vector``) is kept; ``classifier`` is the tree
+    built from all of them (spawn rule and other ``**tree_params`` as for
+    ``DemonstrationLearner``, default ``spawn="winner"``), rebuilt when labels came since it
+    was last asked for, in up to ``passes`` shuffled passes (``_build``). ``k``: neighbours of the vote. ``vote``: ``"majority"`` (the label most
+    of them carry) or ``"mean"`` (the action nearest to their mean command). ``copies``,
+    ``sigma``: jittered copies of each vector (normal noise of ``sigma`` in feature units,
+    seeded with ``seed``) the tree also learns the vote's answer at (0: none). Sample
+    selection (``stride``, ``min_delta``) does not apply: the vote needs every label."""
+
+    def __init__(self, features: FeatureSpec, actions: ActionSet = DEFAULT_ACTIONS, *,
+                 k: int = PERSON_DEFAULTS["k"], copies: int = PERSON_DEFAULTS["copies"],
+                 sigma: float = PERSON_DEFAULTS["sigma"], vote: str = PERSON_DEFAULTS["vote"],
+                 passes: int = PERSON_DEFAULTS["passes"], build: str = PERSON_DEFAULTS["build"],
+                 seed: int = 0, lag: int = LAG, task: str | None = None,
+                 parent: str | None = None, provenance: Mapping | None = None, **tree_params):
+        if not (isinstance(k, int) and k >= 1):
+            raise ValueError(f"k must be an integer >= 1, got {k!r}")
+        if not (isinstance(copies, int) and copies >= 0):
+            raise ValueError(f"copies must be an integer >= 0, got {copies!r}")
+        if not (sigma >= 0 and math.isfinite(sigma)):
+            raise ValueError(f"sigma must be a finite number >= 0, got {sigma!r}")
+        if vote not in ("majority", "mean"):
+            raise ValueError(f"vote must be 'majority' or 'mean', got {vote!r}")
+        if not (isinstance(passes, int) and passes >= 1):
+            raise ValueError(f"passes must be an integer >= 1, got {passes!r}")
+        if build not in ("batch", "repair"):
+            raise ValueError(f"build must be 'batch' or 'repair', got {build!r}")
+        if build == "repair" and copies:
+            raise ValueError("build 'repair' learns the labelled vectors only (copies=0)")
+        self.build = build
+        self.lag = int(lag)  # recorded only: the scans the labels were shifted by when paired
+        self.k, self.copies, self.sigma, self.vote = k, copies, float(sigma), vote
+        self.passes, self.seed = passes, seed
+        self._xs: list[np.ndarray] = []
+        self._ys: list[int] = []
+        self._clf = None
+        self._built = -1
+        tree_params.setdefault("spawn", "winner")
+        super().__init__(features, actions, task=task, parent=parent, provenance=provenance,
+                         **tree_params)
+
+    # the tree: built from every label when asked for
+    @property
+    def classifier(self):
+        if self._built != len(self._ys):
+            self._clf = self._build()
+            self._built = len(self._ys)
+        return self._clf
+
+    @classifier.setter
+    def classifier(self, clf) -> None:  # DemonstrationLearner's __init__: the empty tree
+        self._clf = clf
+        self._built = len(self._ys)
+
+    def _learn(self, x: np.ndarray, label: str) -> None:
+        self._xs.append(np.asarray(x, dtype=np.float64).reshape(-1))
+        self._ys.append(self.actions.names.index(label))
+        self.vectors += 1
+        if self._rec_x is not None:
+            self._rec_x.append(self._xs[-1])
+            self._rec_y.append(label)
+
+    def observe(self, ranges, yaw: float, label: str) -> bool:
+        """Keep one labelled observation (every one is kept: True)."""
+        return self.observe_vector(self.features.extract(ranges, yaw), label)
+
+    def observe_vector(self, x: np.ndarray, label: str) -> bool:
+        self._check_label(label)
+        self.seen += 1
+        self._learn(x, label)
+        return True
+
+    def observe_vectors(self, X: np.ndarray, labels) -> int:
+        X, labels = self._checked(X, labels)
+        for x, label in zip(X, labels, strict=True):
+            self.seen += 1
+            self._learn(x, label)
+        return len(X)
+
+    def training_set(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(X, y)`` the tree is built from: the labelled vectors with the vote's labels (and
+        the jittered copies), label indices into ``actions.names``, in the order the tree
+        learns them (shuffled with ``seed``)."""
+        X = np.array(self._xs, dtype=np.float64).reshape(-1, self.features.dim)
+        y = np.array(self._ys, dtype=np.int64)
+        if len(y) == 0:
+            return X, y
+        n = len(self.actions)
+        if self.vote == "mean":
+            ym = mean_actions(nearest_votes(X, X, y, self.k, n), self.actions)
+        else:
+            ym = majority_labels(X, y, self.k, n)
+        rng = np.random.default_rng(self.seed)
+        if self.copies == 0:
+            order = rng.permutation(len(ym))
+            return X[order], ym[order]
+        Q = np.clip(np.repeat(X, self.copies, axis=0)
+                    + rng.normal(0.0, self.sigma, (len(X) * self.copies, X.shape[1])), 0.0, 1.0)
+        votes = nearest_votes(Q, X, y, self.k, n)
+        yq = mean_actions(votes, self.actions) if self.vote == "mean" else votes.argmax(axis=1)
+        XA, yA = np.concatenate([X, Q]), np.concatenate([ym, yq])
+        order = rng.permutation(len(yA))
+        return XA[order], yA[order]
+
+    def _build(self):
+        """The tree of ``training_set``, learned in passes over it until it answers every
+        vector with its label (at most ``passes``): presented in the order taught, a run along
+        one wall carves one big sphere that hides what came before; shuffled and repeated, the
+        spheres follow the labels."""
+        from rhbl import HypersphereClassifier
+
+        if self.build == "repair" and getattr(self._clf, "tree_", None) is not None:
+            clf = self._clf  # the tree so far, repaired where it disagrees with the vote
+            X = np.array(self._xs, dtype=np.float64)
+            y = np.array(self._ys, dtype=np.int64)
+            y = majority_labels(X, y, self.k, len(self.actions))
+        else:
+            params = {"default_label": self.actions.names[0], **self.tree_params}
+            clf = HypersphereClassifier(**params)
+            X, y = self.training_set()
+        if len(y):
+            labels = np.array(self.actions.names)[y]
+            todo = np.arange(len(y)) if clf is not self._clf else None
+            for _ in range(self.passes):
+                if todo is None:  # repair: only where the tree disagrees with the vote
+                    todo = np.flatnonzero(clf.predict(X) != labels)
+                if len(todo):
+                    clf.partial_fit(X[todo], labels[todo])
+                todo = np.flatnonzero(clf.predict(X) != labels)
+                if not len(todo):
+                    break
+        return clf
+
+    def metadata(self) -> dict:
+        meta = super().metadata()
+        meta["learning"] = {"rule": PERSON_RULE, "lag": self.lag, "k": self.k, "copies": self.copies,
+                            "sigma": self.sigma, "vote": self.vote, "passes": self.passes,
+                            "build": self.build,
+                            "seed": self.seed}
+        return meta
+
+    @classmethod
+    def from_metadata(cls, meta: Mapping, features: FeatureSpec, actions: ActionSet,
+                      parent: str | None = None) -> PersonLearner:
+        """An empty learner with the settings ``metadata()`` recorded in ``meta`` (a snapshot's
+        or a journal header's): its labels are learned again from the journal."""
+        learning = dict(meta.get("learning") or {})
+        if learning.get("rule") != PERSON_RULE:
+            raise ValueError(f"not a person's tree: learning rule {learning.get('rule')!r}")
+        opts = {k: learning[k] for k in ("k", "copies", "sigma", "vote", "passes", "build",
+                                         "seed", "lag") if k in learning}
+        return cls(features, actions, task=meta.get("task"), parent=parent,
+                   **opts, **(meta.get("tree_params") or {}))
+
+    def compact(self, *args, **kw):
+        raise ValueError("a PersonLearner's tree is rebuilt from its labels: compact the "
+                         "saved snapshot instead (rhbl compact)")

@@ -1,0 +1,71 @@
+"""The controller's guard against rot-left/rot-right loops."""
+
+import pytest
+
+from client.behaviour.guard import RotationGuard
+
+
+class Script:
+    """A policy answering from a list, one answer per scan."""
+
+    classifier = "the tree"
+
+    def __init__(self, answers):
+        self.answers = list(answers)
+        self.resets = 0
+
+    def reset(self):
+        self.resets += 1
+
+    def act(self, ranges, pose):
+        return self.answers.pop(0)
+
+
+def _drive(guard, n):
+    return [guard.act(None, (0.0, 0.0, 0.0)) for _ in range(n)]
+
+
+def test_a_reversal_is_overruled_and_counted():
+    g = RotationGuard(Script(["rot-left", "rot-right", "rot-right", "fwd", "rot-right"]),
+                      hold=30, memory=5)
+    assert _drive(g, 3) == ["rot-left", "rot-left", "rot-left"]
+    assert g.overruled == 2 and g.looping
+    # anything but the reversal is taken as it is; then the reversal right after the rotation
+    # is a loop too
+    assert _drive(g, 2) == ["fwd", "rot-left"]
+    assert g.overruled == 3
+
+
+def test_the_policy_wins_after_hold_scans_and_after_memory_scans():
+    g = RotationGuard(Script(["rot-right"] + ["rot-left"] * 4), hold=2)
+    assert _drive(g, 5) == ["rot-right", "rot-right", "rot-right", "rot-left", "rot-left"]
+    g = RotationGuard(Script(["rot-left", "fwd", "fwd", "fwd", "rot-right"]), memory=2)
+    assert _drive(g, 5) == ["rot-left", "fwd", "fwd", "fwd", "rot-right"]  # long ago: taken
+    assert g.overruled == 0 and not g.looping
+
+
+def test_looping_fades_and_reset_forgets():
+    s = Script(["rot-left", "rot-right", "fwd", "fwd", "fwd", "rot-left", "rot-right"])
+    g = RotationGuard(s, memory=2)
+    _drive(g, 2)
+    assert g.looping
+    _drive(g, 3)
+    assert not g.looping  # nothing overruled for more than ``memory`` scans
+    g.reset()
+    assert s.resets == 2  # made and reset: the wrapped policy is reset too
+    assert _drive(g, 2) == ["rot-left", "rot-left"]
+    assert g.classifier == "the tree"  # the wrapped policy's attributes
+
+
+def test_bad_settings():
+    with pytest.raises(ValueError, match="hold and memory"):
+        RotationGuard(Script([]), hold=-1)
+
+
+def test_without_a_policy_the_guard_filters_actions():
+    g = RotationGuard(hold=2, memory=5)
+    assert [g.choose(a) for a in ["rot-right", "rot-left", "rot-left", "rot-left", "fwd"]] == \
+        ["rot-right", "rot-right", "rot-right", "rot-left", "fwd"]
+    assert g.overruled == 2
+    g.reset()  # no policy to reset
+    assert not g.looping

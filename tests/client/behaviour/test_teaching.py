@@ -1,0 +1,173 @@
+"""Learning from a person: the reaction lag, the neighbours' vote, the PersonLearner."""
+
+import types
+
+import numpy as np
+import pytest
+
+from client.behaviour.actions import DEFAULT_ACTIONS
+from client.behaviour.features import FEATURES
+from client.behaviour.learning import DemonstrationLearner, TreePolicy
+from client.behaviour.teaching import (
+    LAG,
+    PERSON_DEFAULTS,
+    PersonLearner,
+    answered_scan,
+    majority_labels,
+    mean_actions,
+    nearest_votes,
+)
+from rhbl import load
+
+NAMES = DEFAULT_ACTIONS.names
+
+
+def _scans(ids, jump_at=None):
+    """id -> a scan-like object with a pose; the robot moves 5 cm per scan, or 3 m at
+    ``jump_at`` (it was put elsewhere)."""
+    out, x = {}, 0.0
+    for i in ids:
+        x += 3.0 if i == jump_at else 0.05
+        out[i] = types.SimpleNamespace(pose=(x, 0.0, 0.0))
+    return out
+
+
+def test_answered_scan_is_lag_scans_before_the_one_shown():
+    scans = _scans(range(100, 120))
+    assert answered_scan(115, scans, lag=3) == 112
+    assert answered_scan(115, scans, lag=0) == 115
+    assert answered_scan(115, scans) == 115 - LAG
+
+
+def test_answered_scan_falls_back_to_the_scan_shown():
+    scans = _scans(range(100, 120))
+    assert answered_scan(101, scans, lag=3) == 101  # the console never saw scan 98
+    jumped = _scans(range(100, 120), jump_at=114)
+    assert answered_scan(115, jumped, lag=3) == 115  # put elsewhere in between: not that view
+    assert answered_scan(118, jumped, lag=3) == 115  # three scans after the jump: paired again
+    poses = {i: (0.05 * i, 0.0) for i in range(10)}
+    assert answered_scan(9, poses, lag=2, pose=lambda p: p) == 7
+
+
+def test_nearest_votes_counts_the_labels_of_the_k_nearest():
+    X = np.array([[0.0], [0.1], [0.2], [0.9], [1.0]])
+    y = np.array([0, 0, 1, 2, 2])
+    votes = nearest_votes(np.array([[0.05], [0.95]]), X, y, 3, 3)
+    assert votes.tolist() == [[2.0, 1.0, 0.0], [0.0, 1.0, 2.0]]
+    assert nearest_votes(np.array([[0.5]]), X, y, 99, 3).tolist() == [[2.0, 1.0, 2.0]]
+
+
+def test_majority_outvotes_a_lone_label_and_a_tie_keeps_the_own():
+    X = np.linspace(0.0, 1.0, 11).reshape(-1, 1)
+    y = np.zeros(11, dtype=np.int64)
+    y[5] = 3  # one wrong key in the middle of a run
+    assert majority_labels(X, y, 5, 5).tolist() == [0] * 11
+    two = np.array([[0.0], [1.0]])
+    assert majority_labels(two, np.array([1, 2]), 2, 5).tolist() == [1, 2]
+
+
+def test_mean_action_of_left_and_right_steering_is_forward():
+    votes = np.zeros((3, 5))
+    i = {n: k for k, n in enumerate(NAMES)}
+    votes[0, [i["fwd-left"], i["fwd-right"]]] = 5
+    votes[1, i["rot-left"]] = 4
+    votes[1, i["fwd-left"]] = 1
+    votes[2, i["fwd-right"]] = 1
+    assert [NAMES[a] for a in mean_actions(votes, DEFAULT_ACTIONS)] == [
+        "fwd", "rot-left", "fwd-right"]
+
+
+def _walk(n=200, seed=0):
+    """A run along a wall: the right-hand distance grows slowly; the person steers right
+    once it is beyond 1 m; one key in twenty is wrong."""
+    rng = np.random.default_rng(seed)
+    ranges, labels, truth = [], [], []
+    for k in range(n):
+        r = np.full(360, 3.0, dtype=np.float32)
+        r[:60] = 0.5 + 1.0 * k / n
+        right = "fwd-right" if r[0] > 1.0 else "fwd"
+        truth.append(right)
+        labels.append("rot-left" if rng.random() < 0.05 else right)
+        ranges.append(r)
+    return ranges, labels, truth
+
+
+def test_person_learner_outvotes_wrong_keys():
+    ranges, labels, truth = _walk()
+    person = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, task="wall-following")
+    stream = DemonstrationLearner(FEATURES["wall"], DEFAULT_ACTIONS, spawn="winner")
+    for r, lab in zip(ranges, labels, strict=True):
+        assert person.observe(r, 0.0, lab)
+        stream.observe(r, 0.0, lab)
+    wrong = [k for k, (lab, t) in enumerate(zip(labels, truth, strict=True)) if lab != t]
+    assert wrong  # the walk has wrong keys
+    assert all(person.predict(ranges[k]) == truth[k] for k in wrong)  # outvoted
+    right = sum(person.predict(r) == t for r, t in zip(ranges, truth, strict=True))
+    assert right >= 195
+    # the label-by-label tree carves a sphere for each wrong key and loses the rest around it
+    assert sum(stream.predict(r) == t for r, t in zip(ranges, truth, strict=True)) < right - 50
+    assert person.vectors == person.seen == len(labels)
+
+
+def test_person_learner_rebuilds_only_when_labels_came():
+    ranges, labels, _ = _walk(60)
+    person = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS)
+    assert person.nodes == 1 and person.predict(ranges[0]) == "fwd"  # nothing learned yet
+    person.observe_vectors([FEATURES["wall"].extract(r) for r in ranges[:30]], labels[:30])
+    first = person.classifier
+    assert person.classifier is first  # no new label: the same tree
+    policy = TreePolicy.from_learner(person)
+    person.observe(ranges[30], 0.0, labels[30])
+    assert person.classifier is not first and policy.classifier is first  # a published tree stays
+    assert person.vectors == 31
+
+
+def test_person_learner_copies_are_seeded_and_the_tree_saves(tmp_path):
+    ranges, labels, _ = _walk(80)
+    a = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, copies=2, seed=4)
+    b = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, copies=2, seed=4)
+    for r, lab in zip(ranges, labels, strict=True):
+        a.observe(r, 0.0, lab)
+        b.observe(r, 0.0, lab)
+    X, y = a.training_set()
+    assert len(y) == 3 * 80 and X.shape == (240, 5)
+    assert a.classifier.tree_.equal(b.classifier.tree_)
+    path = a.save(tmp_path / "person.rhbl")
+    meta = load(path).metadata
+    assert meta["learning"] == {"rule": "person", "lag": LAG, "k": PERSON_DEFAULTS["k"],
+                                "copies": 2,
+                                "sigma": PERSON_DEFAULTS["sigma"], "vote": "majority",
+                                "passes": PERSON_DEFAULTS["passes"],
+                                "build": PERSON_DEFAULTS["build"], "seed": 4}
+    assert meta["tree_params"]["spawn"] == "winner"
+    assert meta["provenance"]["vectors"] == 80
+
+
+def test_person_learner_rejects_bad_settings_and_labels():
+    with pytest.raises(ValueError, match="k must be an integer >= 1"):
+        PersonLearner(FEATURES["wall"], k=0)
+    with pytest.raises(ValueError, match="copies must be"):
+        PersonLearner(FEATURES["wall"], copies=-1)
+    with pytest.raises(ValueError, match="vote must be 'majority' or 'mean'"):
+        PersonLearner(FEATURES["wall"], vote="median")
+    person = PersonLearner(FEATURES["wall"])
+    with pytest.raises(ValueError, match="'jump' is not an action"):
+        person.observe(np.full(360, 1.0), 0.0, "jump")
+    with pytest.raises(ValueError, match="rebuilt from its labels"):
+        person.compact()
+
+
+def test_observe_vectors_learns_as_one_by_one():
+    ranges, labels, _ = _walk(50)
+    X = [FEATURES["wall"].extract(r) for r in ranges]
+    batch = DemonstrationLearner(FEATURES["wall"], DEFAULT_ACTIONS, spawn="winner")
+    single = DemonstrationLearner(FEATURES["wall"], DEFAULT_ACTIONS, spawn="winner")
+    assert batch.observe_vectors(X, labels) == 50
+    for x, lab in zip(X, labels, strict=True):
+        single.observe_vector(x, lab)
+    assert batch.classifier.tree_.equal(single.classifier.tree_)
+    assert batch.vectors == batch.seen == 50
+    with pytest.raises(ValueError, match="2 vectors but 1 labels"):
+        batch.observe_vectors(X[:2], labels[:1])
+    with pytest.raises(ValueError, match="'jump' is not an action"):
+        batch.observe_vectors(X[:1], ["jump"])

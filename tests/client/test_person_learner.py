@@ -1,0 +1,152 @@
+"""A person's labels in the learner: paired with the scan ``lag`` scans before the one they
+name (``Pairing(lag=...)``), learned by the majority of their neighbours (``LearnerCore``
+with ``teacher="person"``), and rebuilt from the whole journal after a crash."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from client.behaviour.learning import load_snapshot
+from client.behaviour.teaching import PersonLearner
+from client.labels import Pairing
+from client.roles.learner import LearnerCore
+from protocol.messages import LabeledScan, Scan, TeacherAction
+from protocol.runtime import ProcessError
+
+LABELS = ["fwd", "fwd-left", "rot-left", "fwd-right", "rot-right"]
+
+
+def _scan(sid: int, x: float = 0.0) -> bytes:
+    ranges = np.full(8, 1.0 + 0.01 * sid, np.float32)
+    return Scan(ts=0.1 * sid, id=sid, ranges=ranges, pose=(x + 0.01 * sid, 0.0, 0.0)).encode()
+
+
+def _label(sid: int, action: str = "fwd") -> bytes:
+    return TeacherAction(scan_id=sid, action=action).encode()
+
+
+def _paired(p: Pairing) -> list[tuple[int, int]]:
+    """(scan id learned, scan id the label named) of every labeled scan ready."""
+    out = []
+    while (item := p.get(0.0)) is not None:
+        out.append((item[0].id, item[1].scan_id))
+    return out
+
+
+def test_a_label_is_paired_with_the_scan_lag_scans_earlier():
+    p = Pairing(scan_buffer=16, lag=3)
+    for sid in range(10):
+        p.on_scan(_scan(sid))
+    p.on_label(_label(7))         # its scan arrived already
+    p.on_label(_label(11))        # its scan arrives later
+    p.on_scan(_scan(10))
+    p.on_scan(_scan(11))
+    p.on_label(_label(1))         # no scan 3 earlier than it: its own scan
+    assert _paired(p) == [(4, 7), (8, 11), (1, 1)]
+    assert p.stats["shifted"] == 2 and p.stats["unshifted"] == 1
+    # the ranges learned are the earlier scan's
+    p.on_label(_label(9))
+    scan, act = p.get(0.0)
+    assert scan.id == 6 and float(scan.ranges[0]) == pytest.approx(1.06)
+
+
+def test_a_robot_put_elsewhere_in_between_keeps_the_labels_own_scan():
+    p = Pairing(scan_buffer=16, lag=3)
+    for sid in range(5):
+        p.on_scan(_scan(sid))
+    for sid in range(5, 8):
+        p.on_scan(_scan(sid, x=5.0))  # set_pose between scans 4 and 5
+    p.on_label(_label(6))             # scans 3..6 cross the jump
+    p.on_label(_label(4))             # scans 1..4 do not
+    assert _paired(p) == [(6, 6), (1, 4)]
+
+
+def test_a_resent_label_is_shifted_when_its_scans_are_held_and_no_lag_pairs_as_named():
+    p = Pairing(scan_buffer=4, lag=2)
+    for sid in range(10):
+        p.on_scan(_scan(sid))
+    resend = LabeledScan(scan_id=9, action="rot-left", origin="o" * 16, seq=0,
+                         ranges=np.ones(8, np.float32), yaw=0.0, ts=0.9)
+    old = LabeledScan(scan_id=2, action="rot-left", origin="o" * 16, seq=1,
+                      ranges=np.ones(8, np.float32), yaw=0.0, ts=0.2)
+    p.on_labeled(resend.encode())
+    p.on_labeled(old.encode())        # scans 0..2 no longer held: its own scan
+    assert _paired(p) == [(7, 9), (2, 2)]
+    plain = Pairing(scan_buffer=4)
+    for sid in range(5):
+        plain.on_scan(_scan(sid))
+    plain.on_label(_label(4))
+    assert _paired(plain) == [(4, 4)] and not plain.recent
+    with pytest.raises(ValueError, match="lag"):
+        Pairing(lag=-1)
+
+
+def _feed(core: LearnerCore, n: int, seed: int, start_id: int = 0) -> None:
+    rng = np.random.default_rng(seed)
+    for k in range(n):
+        ranges = rng.uniform(0.2, 3.0, 360).astype(np.float32)
+        core.learn(start_id + k, 0.1 * k, ranges, float(rng.uniform(-3, 3)),
+                   LABELS[int(rng.integers(5))], origin="p" * 16, seq=start_id + k)
+
+
+def test_a_persons_lineage_is_rebuilt_from_its_whole_journal(tmp_path):
+    out = tmp_path / "t.rhbl"
+    core = LearnerCore(out, features="wall", teacher="person", lag=2)
+    assert core.person and core.lag == 2 and isinstance(core.learner, PersonLearner)
+    _feed(core, 60, seed=0)
+    core.snapshot()
+    _feed(core, 30, seed=1, start_id=60)
+    core.journal.sync()
+    _clf, _f, _a, meta = load_snapshot(out)
+    assert meta["learning"]["rule"] == "person" and meta["learning"]["lag"] == 2
+    # "crash": the lineage keeps its rule (the default teacher is the script) and its lag
+    again = LearnerCore(out, features="wall")
+    assert again.person and again.lag == 2
+    assert again.replayed == 90 and again.applied == 90 and len(again.labels) == 90
+    ref = LearnerCore(tmp_path / "ref.rhbl", features="wall", teacher="person", lag=2)
+    _feed(ref, 60, seed=0)
+    _feed(ref, 30, seed=1, start_id=60)
+    assert again.learner.classifier.tree_equal(ref.learner.classifier)
+    assert again.learner.nodes == ref.learner.nodes > 1
+    assert "a person's labels" in again.describe()
+    for c in (core, again, ref):
+        c.close()
+    with pytest.raises(ProcessError, match="fold-journal"):
+        LearnerCore(out, fold_journal=True)
+    with pytest.raises(ProcessError, match="cannot --resume"):
+        LearnerCore(tmp_path / "r.rhbl", resume=str(out), teacher="person")
+    with pytest.raises(ProcessError, match="--lag"):
+        LearnerCore(tmp_path / "n.rhbl", features="wall", teacher="person", lag=-1)
+
+
+def test_the_majority_outvotes_a_wrong_key(tmp_path):
+    cores = {"person": LearnerCore(tmp_path / "t.rhbl", features="wall", teacher="person")}
+    rng = np.random.default_rng(3)
+    base = rng.uniform(1.0, 2.0, 360).astype(np.float32)
+    for k in range(40):
+        label = "rot-left" if k == 20 else "fwd"  # one wrong key among its neighbours
+        ranges = (base + rng.normal(0, 0.05, 360)).astype(np.float32)
+        for core in cores.values():
+            core.learn(k, 0.1 * k, ranges, 0.0, label)
+    X = np.array(cores["person"].learner._xs)
+    assert set(map(str, cores["person"].learner.classifier.predict(X))) == {"fwd"}
+    assert len(cores["person"].journal) == 40  # the wrong key is kept as given, outvoted
+    for core in cores.values():
+        core.close()
+
+
+@pytest.mark.parametrize(("argv", "needle"), [
+    (["learner", "--features", "wall", "--teacher", "person", "--lag", "-1", "--out", "t.rhbl"],
+     "--lag must be >= 0"),
+    (["controller", "--tree", "t.rhbl", "--guard-hold", "-2"], "--guard-hold must be >= 0"),
+])
+def test_bad_lag_or_guard_hold_is_refused_before_connecting(tmp_path, argv, needle):
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "lab.cli", *argv, "--connect", "tcp/127.0.0.1:1"],
+                          capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    assert needle in proc.stderr and "Traceback" not in proc.stderr
+    assert not (tmp_path / "t.rhbl.journal").exists()
