@@ -55,11 +55,11 @@ class _Notices:
             return self.last
 
 
-def _learner(srv, out: Path, tmp: Path, n: int) -> Child:
+def _learner(srv, out: Path, tmp: Path, n: int, *extra: str) -> Child:
     stats = tmp / f"learner-{n}.json"
     p = Child(f"learner-{n}", rhbl_argv("learner", "--features", "wall", "--out", str(out),
                                         "--snapshot-every", "0.3", "--connect", srv.endpoint,
-                                        "--stats", str(stats)), tmp, cwd=ROOT,
+                                        "--stats", str(stats), *extra), tmp, cwd=ROOT,
               stop_signal=signal.SIGINT, stop_timeout=30.0, escalate=False).start()
     p.stats_file = stats
     return p
@@ -109,3 +109,41 @@ def test_labels_before_any_learner_are_kept_and_a_withdrawal_survives_a_restart(
     assert [type(r) for r in recs].count(JournalWithdrawal) == 1
     assert standing == [*range(40), *range(55, 61)]
     assert all(r.origin == pubs.outbox.origin for r in recs)
+
+
+def test_a_persons_learner_keeps_withdrawn_labels_out_after_a_restart(start_server, tmp_path):
+    """``--teacher person`` rebuilds its tree from the whole journal: the tombstones in it keep
+    the withdrawn labels out, live and after a SIGKILL and a restart."""
+    srv = start_server("room")
+    out = tmp_path / "tree.rhbl"
+    with zenoh.open(make_config(mode="client", connect=[srv.endpoint])) as session:
+        notices = _Notices(session)
+        client = PlayerClient(session=session, source="teacher")
+        scans = client.scans(depth=64)
+        pubs = LabelPublisher(session, "r0", resend_after=0.5)
+        learner = _learner(srv, out, tmp_path, 1, "--teacher", "person")
+        try:
+            _until(lambda: bool(pubs.learners), 30, "the learner is up")
+            for k in range(40):
+                pubs.label(scans.recv(), "fwd" if k < 30 else "rot-left", "fwd")
+            _until(lambda: len(pubs.outbox) == 0, 30, "all 40 acknowledged")
+            notices.wait(lambda n: n.vectors == 40, 20, "a notice of 40 vectors")
+            pubs.withdraw(30, 40, "undo 1 s")
+            _until(lambda: pubs.outbox.unacknowledged_withdrawals == 0, 20, "acknowledged")
+            notices.wait(lambda n: n.vectors == 30, 20, "the rebuilt tree: 30 vectors")
+            learner.send_signal(signal.SIGKILL)
+            assert learner.wait(10) is not None
+            notices.last = None
+            again = _learner(srv, out, tmp_path, 2, "--teacher", "person")
+            pubs.label(scans.recv(), "fwd", "fwd")
+            _until(lambda: len(pubs.outbox) == 0, 30, "the restarted learner acknowledges")
+            notices.wait(lambda n: n.vectors == 31, 20, "30 + 1 vectors after the restart")
+            assert again.stop() == 0, again.output()
+        finally:
+            learner.kill()
+            pubs.close()
+            client.close()
+            notices.sub.undeclare()
+    with Journal.open(journal_path(out), readonly=True) as j:
+        standing = [r.label for r in j.standing()]
+    assert standing == ["fwd"] * 31
