@@ -3,11 +3,13 @@ real console page in a real headless Chromium for a short budget (demonstrating,
 correcting a ``--follow`` controller), against a real server, learner, console and controller;
 then the learner's saved tree is evaluated in the room it was taught in.
 
-The harness must work every time (the labels given at the page all reach the learner's journal,
-the controller drove in correct mode, a tree came out); the learned robot must not loop nor
-leave the wall. Until the learning remedies for people (lag pairing, noise, a loop guard) are
-in, a short budget may teach a tree that loops or wanders: that part is an expected failure,
-said with the figures.
+The learner learns as it does for a person (``--teacher person``: lag pairing, majority labels)
+and the controller keeps its loop guard (on by default). The harness must work every time (the
+labels given at the page all reach the learner's journal, the controller drove in correct mode,
+a tree came out); the learned robot must not loop nor leave the wall. A 45-second budget is far
+below the issue's 4 + 2 minutes and does not always teach the whole room: when the learned
+robot loops or leaves the wall, that part is an expected failure, said with the figures
+(``benchmarks/bench_teach.py`` measures the full budget).
 """
 
 from __future__ import annotations
@@ -41,7 +43,8 @@ def test_a_short_person_teaches_a_robot_that_follows_the_wall(bench, tmp_path):
             pytest.fail(f"CI=true and {found}")
         pytest.skip(found)
     r = bench.run_one("steady", 0, demo=45.0, correct=20.0, unseen=(), eval_episodes=2,
-                      eval_seconds=60.0, workdir=tmp_path, log=lambda s: None)
+                      eval_seconds=60.0, learner_args="--teacher person", workdir=tmp_path,
+                      log=lambda s: None)
     # the harness: a person at the real page, every label delivered and kept
     assert r["demonstrate"]["seconds"] >= 45.0 and r["correct"]["seconds"] >= 20.0
     assert r["demonstrate"]["presses"] > 5 and r["demonstrate"]["frames_with_a_key"] > 0
@@ -54,7 +57,7 @@ def test_a_short_person_teaches_a_robot_that_follows_the_wall(bench, tmp_path):
     assert ev["episodes"] == 2
     # the learned robot: no loop, on the wall
     if r["loops"] or ev["wall_band"] < 0.8 or ev["collisions"]:
-        pytest.xfail(f"the learning remedies for people are not in yet: {r['loops']} loops, "
+        pytest.xfail(f"45 s of teaching did not teach the room: {r['loops']} loops, "
                      f"wall band {ev['wall_band']:.2f}, {ev['collisions']} collisions, success "
                      f"{ev['success_rate']:.0%} ({r['tree']['nodes']} nodes, "
                      f"{r['labels']['given']} labels)")
