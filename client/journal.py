@@ -13,9 +13,13 @@ File format (little-endian)::
                (ranges and x as float32 bytes), plus "origin" and "seq" when the label carries
                its identity (the teacher session and its number, for acknowledgements and
                deduplication: ``LabelSet``); journals without them read the same
+            or a tombstone {"i", "ts", "withdraw": {"origin", "id", "first", "upto", "reason"}}:
+               the teacher withdrew its labels ``first <= seq < upto`` of session ``origin``
+               (``JournalWithdrawal``; its withdrawal number ``id``). The labelled vectors that
+               *stand* are the records no tombstone of the journal names (``Journal.standing``)
 
-A snapshot records which labels it holds (``LabelSet.to_dict`` in its provenance), so folding the
-journal keeps what deduplication needs.
+A snapshot records which labels it holds and which were withdrawn (``LabelSet.to_dict`` and
+``Withdrawals.to_dict`` in its provenance), so folding the journal keeps what deduplication needs.
 
 Folding (``Journal.fold(upto)``, ``rhbl learner --fold-journal``): once a durable snapshot holds
 records ``0 .. upto - 1`` they are dropped: the file is rewritten as a header with ``base`` =
@@ -33,6 +37,7 @@ silently.
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import errno
 import logging
@@ -54,7 +59,9 @@ __all__ = [
     "JournalCorruptError",
     "JournalError",
     "JournalRecord",
+    "JournalWithdrawal",
     "LabelSet",
+    "Withdrawals",
     "journal_path",
 ]
 
@@ -119,6 +126,40 @@ class JournalRecord:
         )
 
 
+@dataclass(frozen=True)
+class JournalWithdrawal:
+    """A tombstone: the teacher session ``origin`` withdrew its labels ``first <= seq < upto``
+    (its withdrawal number ``id``, ``reason`` what the person did); kept like any record."""
+
+    index: int
+    origin: str
+    id: int
+    first: int
+    upto: int
+    ts: float = 0.0
+    reason: str = ""
+
+    def names(self, origin: str | None, seq: int | None) -> bool:
+        return origin == self.origin and seq is not None and self.first <= seq < self.upto
+
+    def to_payload(self) -> dict:
+        return {"i": int(self.index), "ts": float(self.ts),
+                "withdraw": {"origin": str(self.origin), "id": int(self.id),
+                             "first": int(self.first), "upto": int(self.upto),
+                             "reason": str(self.reason)}}
+
+    @classmethod
+    def from_payload(cls, p: Mapping) -> JournalWithdrawal:
+        w = p["withdraw"]
+        return cls(index=int(p["i"]), origin=str(w["origin"]), id=int(w["id"]),
+                   first=int(w["first"]), upto=int(w["upto"]), ts=float(p.get("ts", 0.0)),
+                   reason=str(w.get("reason", "")))
+
+
+def _record(p: Mapping) -> JournalRecord | JournalWithdrawal:
+    return JournalWithdrawal.from_payload(p) if "withdraw" in p else JournalRecord.from_payload(p)
+
+
 class LabelSet:
     """Which labels (``origin``, ``seq``) a learner holds: per origin a watermark ``upto`` (every
     seq below it is held) and the few held above it. Bounded: at most ``max_above`` seqs above a
@@ -144,30 +185,41 @@ class LabelSet:
         if (origin, seq) in self:
             self._touch(origin)
             return False
+        self._put(origin, seq, seq + 1)
+        return True
+
+    def add_range(self, origin: str, first: int, upto: int) -> None:
+        """Record the labels ``first <= seq < upto`` as held (withdrawn ones: never to be
+        learned, so never resent)."""
+        if upto > first:
+            self._put(origin, int(first), int(upto))
+
+    def _put(self, origin: str, first: int, stop: int) -> None:
         upto, above = self._o.pop(origin, (0, set()))
-        if seq == upto:
+        if first <= upto:
+            if stop > upto + 1 and above:  # a range past seqs held above: now below
+                above = {q for q in above if q >= stop}
+            upto = max(upto, stop)
+        else:
+            above.update(range(first, stop))
+        while upto in above:
+            above.discard(upto)
             upto += 1
+        if len(above) > self.max_above:
+            low = min(above)
+            log.warning("labels of teacher session %s: %d held above seq %d, never "
+                        "received; giving up on seqs %d..%d", origin, len(above), upto,
+                        upto, low - 1)
+            upto = low
             while upto in above:
                 above.discard(upto)
                 upto += 1
-        else:
-            above.add(seq)
-            if len(above) > self.max_above:
-                low = min(above)
-                log.warning("labels of teacher session %s: %d held above seq %d, never "
-                            "received; giving up on seqs %d..%d", origin, len(above), upto,
-                            upto, low - 1)
-                upto = low
-                while upto in above:
-                    above.discard(upto)
-                    upto += 1
         self._o[origin] = (upto, above)
         while len(self._o) > self.max_origins:
             old = next(iter(self._o))
             log.warning("forgetting the labels of teacher session %s (more than %d sessions)",
                         old, self.max_origins)
             del self._o[old]
-        return True
 
     def _touch(self, origin: str) -> None:
         self._o[origin] = self._o.pop(origin)
@@ -204,6 +256,112 @@ class LabelSet:
                 raise ValueError(f"label set: entry {o!r}: expected [upto, [seqs]], got {v!r:.80}")
             ls._o[o] = (int(v[0]), {int(x) for x in v[1] if x >= v[0]})
         return ls
+
+
+class Withdrawals:
+    """The withdrawals a learner holds: per teacher session (``origin``) the ranges of labels it
+    withdrew (``[first, upto)``, merged) and which withdrawals (their ``id``) are held, as a
+    watermark (every id below it) plus the few above it, for ``LearnerAck.withdrawn``. Kept in
+    the journal (tombstones) and in a snapshot's provenance (``to_dict``)."""
+
+    def __init__(self, max_above: int = 4096):
+        self.max_above = int(max_above)
+        self._ranges: dict[str, list[tuple[int, int]]] = {}  # sorted, disjoint, merged
+        self._ids: dict[str, tuple[int, set[int]]] = {}
+
+    def holds(self, origin: str, wid: int) -> bool:
+        """True when the withdrawal ``wid`` of ``origin`` is held."""
+        st = self._ids.get(origin)
+        return st is not None and (wid < st[0] or wid in st[1])
+
+    def add(self, origin: str, wid: int, first: int, upto: int) -> bool:
+        """Record a withdrawal; False when it was held already (its range is merged anyway)."""
+        self._merge(origin, int(first), int(upto))
+        if self.holds(origin, wid):
+            return False
+        low, above = self._ids.get(origin, (0, set()))
+        above.add(int(wid))
+        while low in above:
+            above.discard(low)
+            low += 1
+        if len(above) > self.max_above:  # ids that never came (a teacher that died): given up
+            low = min(above)
+            while low in above:
+                above.discard(low)
+                low += 1
+        self._ids[origin] = (low, above)
+        return True
+
+    def _merge(self, origin: str, first: int, upto: int) -> None:
+        spans = self._ranges.setdefault(origin, [])
+        spans.append((first, upto))
+        spans.sort()
+        merged = [spans[0]]
+        for a, b in spans[1:]:
+            if a <= merged[-1][1]:
+                merged[-1] = (merged[-1][0], max(merged[-1][1], b))
+            else:
+                merged.append((a, b))
+        self._ranges[origin] = merged
+
+    def __contains__(self, label: tuple[str | None, int | None]) -> bool:
+        origin, seq = label
+        spans = self._ranges.get(origin) if origin is not None else None
+        if not spans or seq is None:
+            return False
+        k = bisect.bisect_right(spans, (seq, float("inf"))) - 1
+        return k >= 0 and spans[k][0] <= seq < spans[k][1]
+
+    def acked(self, origin: str) -> int | None:
+        """Every withdrawal of ``origin`` with ``id`` below this is held (None: none came)."""
+        st = self._ids.get(origin)
+        return None if st is None else st[0]
+
+    def ranges(self, origin: str) -> list[tuple[int, int]]:
+        return list(self._ranges.get(origin, ()))
+
+    def origins(self) -> list[str]:
+        return list(self._ids)
+
+    def labels(self) -> int:
+        """How many label numbers the ranges cover (every origin)."""
+        return sum(b - a for spans in self._ranges.values() for a, b in spans)
+
+    def __len__(self) -> int:
+        """Withdrawals held (every origin)."""
+        return sum(low + len(above) for low, above in self._ids.values())
+
+    def to_dict(self) -> dict:
+        return {o: {"ranges": [list(r) for r in self._ranges.get(o, ())],
+                    "ids": [low, sorted(above)]} for o, (low, above) in self._ids.items()}
+
+    @classmethod
+    def from_dict(cls, d, **kw) -> Withdrawals:
+        """From ``to_dict`` (a snapshot's provenance); a wrong shape raises ValueError."""
+        ws = cls(**kw)
+        if d is None:
+            return ws
+        if not isinstance(d, Mapping):
+            raise ValueError(f"withdrawals: expected a map, got {type(d).__name__}")
+
+        def ints(x) -> bool:
+            return all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in x)
+
+        for o, v in d.items():
+            ranges = v.get("ranges") if isinstance(v, Mapping) else None
+            ids = v.get("ids") if isinstance(v, Mapping) else None
+            ok = (isinstance(o, str) and isinstance(ranges, list | tuple)
+                  and all(isinstance(r, list | tuple) and len(r) == 2 and ints(r) and r[0] < r[1]
+                          for r in ranges)
+                  and isinstance(ids, list | tuple) and len(ids) == 2 and ints([ids[0]])
+                  and isinstance(ids[1], list | tuple) and ints(ids[1]))
+            if not ok:
+                raise ValueError(f"withdrawals: entry {o!r}: expected {{ranges: [[first, upto]"
+                                 f"...], ids: [upto, [ids]]}}, got {v!r:.80}")
+            for a, b in ranges:
+                ws._merge(o, int(a), int(b))
+            ws._ids[o] = (int(ids[0]), {int(x) for x in ids[1] if x >= ids[0]})
+        return ws
 
 
 def journal_path(snapshot: str | os.PathLike) -> Path:
@@ -314,8 +472,10 @@ class Journal:
         return self.base + len(self._offsets)
 
     def records(self, start: int = 0) -> Iterator[JournalRecord]:
-        """Records ``start``, ``start + 1``, ... (re-read from the file, CRC-checked). Records
-        before ``base`` were folded into a snapshot (:meth:`fold`) and cannot be read."""
+        """Records ``start``, ``start + 1``, ... (re-read from the file, CRC-checked): each a
+        ``JournalRecord`` (a labelled vector) or a ``JournalWithdrawal`` (a tombstone; the
+        vectors that stand: :meth:`standing`). Records before ``base`` were folded into a
+        snapshot (:meth:`fold`) and cannot be read."""
         if start < self.base or start > len(self):
             held = (f"records {self.base}..{len(self) - 1}" if self.base else
                     f"{len(self)} records")
@@ -328,8 +488,27 @@ class Journal:
             f.seek(self._offsets[start - self.base])
             for i in range(start - self.base, len(self._offsets)):
                 payload = _read_frame(f, self.path, i + 1, self._offsets[i])
-                yield JournalRecord.from_payload(_unpack(payload, self.path, i + 1,
-                                                         self._offsets[i]))
+                yield _record(_unpack(payload, self.path, i + 1, self._offsets[i]))
+
+    def standing(self, start: int | None = None, stop: int | None = None,
+                 withdrawn: Withdrawals | None = None) -> Iterator[JournalRecord]:
+        """The labelled vectors that stand among records ``start .. stop - 1`` (default: all
+        the journal holds): every label record that no tombstone among records before
+        ``stop`` names, nor ``withdrawn`` (those of a snapshot's provenance)."""
+        start = self.base if start is None else start
+        stop = len(self) if stop is None else min(stop, len(self))
+        gone = [r for r in self.records(self.base) if isinstance(r, JournalWithdrawal)
+                and r.index < stop]
+        for rec in self.records(start):
+            if rec.index >= stop:
+                return
+            if isinstance(rec, JournalWithdrawal):
+                continue
+            if rec.origin is not None and (any(w.names(rec.origin, rec.seq) for w in gone)
+                                           or (withdrawn is not None
+                                               and (rec.origin, rec.seq) in withdrawn)):
+                continue
+            yield rec
 
     # ---- writing ------------------------------------------------------------------------
     def append(self, scan_id: int, ts: float, label: str, ranges, yaw: float,
@@ -337,10 +516,19 @@ class Journal:
         """Append one labeled vector (with the label's ``origin`` and ``seq`` when it has them);
         returns its index. Durable against a killed process on return; fsync'd within
         ``fsync_interval`` seconds."""
+        return self._append(JournalRecord(len(self), scan_id, ts, label, ranges, yaw,
+                                          features, origin, seq))
+
+    def append_withdrawal(self, origin: str, wid: int, first: int, upto: int,
+                          ts: float = 0.0, reason: str = "") -> int:
+        """Append a tombstone: the labels ``first <= seq < upto`` of ``origin`` are withdrawn
+        (withdrawal number ``wid``); returns its index. Durable as ``append``."""
+        return self._append(JournalWithdrawal(len(self), origin, wid, first, upto, ts, reason))
+
+    def _append(self, rec: JournalRecord | JournalWithdrawal) -> int:
         if self._fd < 0:
             raise JournalError(f"journal {self.path} is closed")
-        index = len(self)
-        rec = JournalRecord(index, scan_id, ts, label, ranges, yaw, features, origin, seq)
+        index = rec.index
         data = _frame(msgpack.packb(rec.to_payload(), use_bin_type=True))
         if self._torn:  # a failed append left bytes that a retry could not remove yet
             self._rollback(None)

@@ -5,8 +5,10 @@ The teacher's end (``rhbl teacher``, ``rhbl console``):
 - ``Outbox``: the labels a teacher session published and no learner acknowledged yet, each with
   the scan it answers, to be resent until one does (no zenoh: testable alone).
 - ``LabelPublisher``: publishes a robot's labels (``rhbl/<robot>/teacher/action``), keeps
-  them in the outbox once a learner was seen, takes the acknowledgements
-  (``rhbl/<robot>/learner/ack``) and resends what was missed (``rhbl/<robot>/teacher/labeled``).
+  them in the outbox (from the first, also before any learner is up), takes the
+  acknowledgements (``rhbl/<robot>/learner/ack``) and resends what was missed
+  (``rhbl/<robot>/teacher/labeled``); withdraws labels the person takes back
+  (``rhbl/<robot>/teacher/withdraw``: an undo, a discarded episode), kept and resent alike.
 - ``Learners``: which learners of the robot are up (their liveliness tokens).
 - ``Hold``: the teacher's hold token, held while a teacher commands the robot.
 
@@ -28,10 +30,10 @@ import time
 import uuid
 from collections import OrderedDict, deque
 
-from client.journal import LabelSet
+from client.journal import LabelSet, Withdrawals
 from protocol import keys
 from protocol.decoding import Decoder
-from protocol.messages import LabeledScan, LearnerAck, Scan, TeacherAction
+from protocol.messages import LabeledScan, LearnerAck, Scan, TeacherAction, Withdrawal
 
 __all__ = [
     "ACK_BATCH",
@@ -91,7 +93,12 @@ class Outbox:
     never reached the learner, say) or acknowledged nothing for ``resend_after`` s (stuck): a
     learner that is merely behind, acknowledging in order, gets no resends that would slow it
     down further. At most ``cap`` entries: ``full`` says the publisher must stop labelling
-    (nothing is ever dropped). Thread-safe."""
+    (nothing is ever dropped). Thread-safe.
+
+    ``withdraw(first, upto)`` takes the session's labels ``first <= seq < upto`` back (a
+    ``Withdrawal``, numbered from 0): those not acknowledged yet are never sent again, and the
+    withdrawal is kept until an acknowledgement's ``withdrawn`` covers it, resent like a label
+    (``due_withdrawals``; ``withdrawals`` all of them, for a learner that (re)started)."""
 
     def __init__(self, cap: int = OUTBOX, resend_after: float = RESEND_AFTER,
                  origin: str | None = None, clock=time.monotonic):
@@ -103,7 +110,10 @@ class Outbox:
         self._next_due = float("inf")  # no entry is due before this
         self._acked_max = -1  # the highest seq acknowledged
         self._progress = clock()  # when an acknowledgement last removed a label
-        self.stats = {"published": 0, "acked": 0, "resent": 0, "max": 0}
+        self._withdrawals: dict[int, list] = {}  # id -> [the Withdrawal, due at, resends]
+        self._next_wid = 0
+        self.stats = {"published": 0, "acked": 0, "resent": 0, "max": 0, "withdrawals": 0,
+                      "withdrawn": 0, "withdrawals_acked": 0}
 
     def label(self, scan: Scan, action: str, executed: str | None,
               source: str = "teacher") -> LabeledScan:
@@ -120,9 +130,32 @@ class Outbox:
             self.stats["max"] = max(self.stats["max"], len(self._entries))
         return item
 
-    def ack(self, upto: int, seqs=()) -> int:
-        """Forget the labels with ``seq < upto`` and those in ``seqs``; how many were held."""
+    def withdraw(self, first: int, upto: int, reason: str = "") -> Withdrawal:
+        """Take back this session's labels ``first <= seq < upto`` (clipped to those published;
+        ValueError when none is left): a ``Withdrawal`` kept until acknowledged."""
         with self._lock:
+            first, upto = max(0, int(first)), min(int(upto), self._next)
+            if first >= upto:
+                raise ValueError(f"no label of session {self.origin} to withdraw in "
+                                 f"[{first}, {upto}) ({self._next} published)")
+            w = Withdrawal(origin=self.origin, id=self._next_wid, first=first, upto=upto,
+                           ts=time.time(), reason=reason)
+            self._next_wid += 1
+            for q in [q for q in self._entries if first <= q < upto]:
+                del self._entries[q]  # never sent again: the learner holds them as withdrawn
+            self._withdrawals[w.id] = [w, self._clock() + self.resend_after, 0]
+            self.stats["withdrawals"] += 1
+            self.stats["withdrawn"] += upto - first
+        return w
+
+    def ack(self, upto: int, seqs=(), withdrawn: int | None = None) -> int:
+        """Forget the labels with ``seq < upto`` and those in ``seqs`` (and the withdrawals with
+        ``id < withdrawn``); how many labels were held."""
+        with self._lock:
+            if withdrawn is not None:
+                for wid in [k for k in self._withdrawals if k < withdrawn]:
+                    del self._withdrawals[wid]
+                    self.stats["withdrawals_acked"] += 1
             gone = [q for q in self._entries if q < upto]
             gone += [q for q in set(seqs) if q >= upto and q in self._entries]
             for q in gone:
@@ -155,6 +188,37 @@ class Outbox:
             self.stats["resent"] += len(out)
         return out
 
+    def due_withdrawals(self) -> list[Withdrawal]:
+        """The withdrawals unacknowledged for their resend time (doubling), marked resent."""
+        now = self._clock()
+        with self._lock:
+            out = []
+            for e in self._withdrawals.values():
+                if e[1] <= now:
+                    e[2] += 1
+                    e[1] = now + self.resend_after * 2 ** min(e[2], 4)
+                    out.append(e[0])
+            return out
+
+    def withdrawals(self) -> list[Withdrawal]:
+        """Every unacknowledged withdrawal, in order, marked sent now."""
+        with self._lock:
+            now = self._clock()
+            for e in self._withdrawals.values():
+                e[1], e[2] = now + self.resend_after, 0
+            return [self._withdrawals[k][0] for k in sorted(self._withdrawals)]
+
+    @property
+    def unacknowledged_withdrawals(self) -> int:
+        with self._lock:
+            return len(self._withdrawals)
+
+    @property
+    def next_seq(self) -> int:
+        """The seq the next label gets (every label below it was published)."""
+        with self._lock:
+            return self._next
+
     def everything(self) -> list[LabeledScan]:
         """Every unacknowledged label, marked sent now (for a learner that (re)started)."""
         with self._lock:
@@ -186,14 +250,15 @@ class LabelPublisher:
     ``rhbl teacher`` and ``rhbl console``, so both label alike (their commands go through
     ``client.player.PlayerClient``).
 
-    With an ``outbox`` (its size; 0 = none, pure teleop) labels are delivered at least once:
-    from the moment a learner of the robot is first seen (``learners``, its liveliness token),
-    each label carries the session's ``origin`` and a ``seq`` and stays in the ``Outbox`` with
-    its scan until a learner acknowledges it on ``rhbl/<robot>/learner/ack``; a background
+    With an ``outbox`` (its size; 0 = none, pure teleop: labels without identity, unkept) labels
+    are delivered at least once: each label carries the session's ``origin`` and a ``seq`` and
+    stays in the ``Outbox`` with its scan until a learner acknowledges it on
+    ``rhbl/<robot>/learner/ack``, also a label given before any learner was up; a background
     thread resends (``rhbl/<robot>/teacher/labeled``, the label with its scan) all of them at
-    once when a learner's token appears (a restarted learner) and the missed ones
-    (``Outbox.due``), while a learner is up. The caller stops labelling while ``outbox.full``.
-    Before any learner was seen labels go out without identity, unkept (nobody records)."""
+    once when a learner's token appears (the first learner, a restarted one) and the missed
+    ones (``Outbox.due``), while a learner is up. The caller stops labelling while
+    ``outbox.full``. ``withdraw`` takes labels back (``rhbl/<robot>/teacher/withdraw``), kept
+    and resent the same way until acknowledged."""
 
     def __init__(self, session, robot: str, outbox: int = OUTBOX,
                  resend_after: float = RESEND_AFTER):
@@ -213,8 +278,11 @@ class LabelPublisher:
             self.outbox = Outbox(outbox, resend_after)
             self.resend_pub = session.declare_publisher(
                 keys.teacher_labeled_key(robot), congestion_control=zenoh.CongestionControl.BLOCK)
+            self.withdraw_pub = session.declare_publisher(
+                keys.teacher_withdraw_key(robot),
+                congestion_control=zenoh.CongestionControl.BLOCK)
             self.learners = Learners(session, robot)
-            self._decls += [self.resend_pub, self.learners.sub,
+            self._decls += [self.resend_pub, self.withdraw_pub, self.learners.sub,
                             session.declare_subscriber(keys.learner_ack_key(robot), self._on_ack)]
             self._arrivals = 0
             self._thread = threading.Thread(target=self._resender, daemon=True,
@@ -224,21 +292,35 @@ class LabelPublisher:
                      "them (at most %d), resent after %g s", robot, self.outbox.origin,
                      outbox, resend_after)
 
-    def label(self, scan: Scan, action: str, executed: str | None) -> None:
-        """Publish the label of ``scan`` (kept in the outbox once a learner was seen)."""
+    def label(self, scan: Scan, action: str, executed: str | None) -> int | None:
+        """Publish the label of ``scan`` (kept in the outbox until acknowledged); its seq
+        (None without an outbox)."""
         self.published += 1
-        if self.outbox is None or not self.learners.arrivals:
+        if self.outbox is None:
             act = TeacherAction(scan_id=scan.id, action=action, source=SOURCE, ts=scan.ts,
                                 executed=executed)
         else:  # kept before it is published: an acknowledgement cannot come first
             act = self.outbox.label(scan, action, executed, SOURCE).action_message()
         self.act_pub.put(act.encode())
+        return act.seq
+
+    def withdraw(self, first: int, upto: int, reason: str = "") -> Withdrawal:
+        """Take back the labels ``first <= seq < upto`` of this session (an undo, a discarded
+        episode): published now, kept and resent until a learner acknowledges it. ValueError
+        without an outbox (labels without identity cannot be named) or when none is left."""
+        if self.outbox is None:
+            raise ValueError("labels without identity (no outbox) cannot be withdrawn")
+        w = self.outbox.withdraw(first, upto, reason)
+        self.withdraw_pub.put(w.encode())
+        log.info("withdrew labels %d..%d of session %s (%s)", w.first, w.upto - 1, w.origin,
+                 reason or "no reason given")
+        return w
 
     # -- acknowledgements and resends --
     def _on_ack(self, sample) -> None:
         ack = self.decoder.decode(LearnerAck, sample.payload.to_bytes())
         if ack is not None and ack.origin == self.outbox.origin:
-            self.outbox.ack(ack.upto, ack.seqs)
+            self.outbox.ack(ack.upto, ack.seqs, ack.withdrawn)
 
     def _resender(self) -> None:
         said = 0.0
@@ -248,20 +330,25 @@ class LabelPublisher:
                     continue  # nobody to resend to: at once when a learner (re)appears
                 arrivals = self.learners.arrivals
                 if arrivals != self._arrivals:
-                    first = self._arrivals == 0 and arrivals == 1  # nothing sent to another
+                    # a learner appeared (the first, or one that restarted): everything it
+                    # has not acknowledged, also what was labelled before any learner was up
                     self._arrivals = arrivals
-                    items = [] if first else self.outbox.everything()
+                    taken = self.outbox.withdrawals()
+                    items = self.outbox.everything()
                     if items:
-                        log.info("a learner (re)started: resending the %d labels it has not "
-                                 "acknowledged (seq %d..%d)", len(items), items[0].seq,
-                                 items[-1].seq)
+                        log.info("a learner is up: sending the %d labels it has not "
+                                 "acknowledged (seq %d..%d) with their scans", len(items),
+                                 items[0].seq, items[-1].seq)
                 else:
+                    taken = self.outbox.due_withdrawals()
                     items = self.outbox.due()
                     if items and time.monotonic() - said >= 5.0:
                         said = time.monotonic()
                         log.info("resending %d labels not acknowledged within %g s (%d "
                                  "resends so far)", len(items), self.outbox.resend_after,
                                  self.outbox.stats["resent"])
+                for w in taken:  # first: the learner then never learns what was taken back
+                    self.withdraw_pub.put(w.encode())
                 for item in items:
                     self.resend_pub.put(item.encode())
             except Exception as exc:  # noqa: BLE001 - the session is closing
@@ -274,8 +361,14 @@ class LabelPublisher:
         if self.outbox is None:
             return True
         end = time.monotonic() + timeout
-        while len(self.outbox) and self.learners and time.monotonic() < end:
+        box = self.outbox
+        while ((len(box) or box.unacknowledged_withdrawals) and self.learners
+               and time.monotonic() < end):
             time.sleep(0.05)
+        if box.unacknowledged_withdrawals:
+            log.error("%d withdrawals of session %s not acknowledged by a learner: a learner "
+                      "that restarts may still hold those labels", box.unacknowledged_withdrawals,
+                      box.origin)
         left = len(self.outbox)
         if left:  # the learner may hold them (an acknowledgement it had no time to send, a
             # learner that stopped first): only its journal knows, so they are not called lost
@@ -568,11 +661,13 @@ class Acknowledgements:
     holding the whole state of that session in ``labels`` (the learner's ``LabelSet``), so a
     later ack makes up for a lost one. A batch is due ``every`` s after the last one or after
     ``batch`` labels (``due``); ``publish`` sends it (or the state of ``origins``: everything a
-    restarted learner holds, before its liveliness token). ``put`` publishes the encoded ack."""
+    restarted learner holds, before its liveliness token). ``put`` publishes the encoded ack.
+    With ``withdrawals`` (the learner's ``Withdrawals``) each ack also says which withdrawals
+    of the session are held (``withdrawn``)."""
 
     def __init__(self, put, labels: LabelSet, every: float = ACK_EVERY, batch: int = ACK_BATCH,
-                 clock=time.monotonic):
-        self._put, self.labels = put, labels
+                 clock=time.monotonic, withdrawals: Withdrawals | None = None):
+        self._put, self.labels, self.withdrawals = put, labels, withdrawals
         self.every, self.batch, self._clock = float(every), int(batch), clock
         self.pending: set[str] = set()  # origins with labels handled since the last ack
         self.count, self.last = 0, 0.0
@@ -587,6 +682,11 @@ class Acknowledgements:
         self.pending.add(act.origin)
         self.count += 1
 
+    def withdrawn(self, origin: str) -> None:
+        """A withdrawal of ``origin`` journaled (or held already): acknowledged next batch."""
+        self.pending.add(origin)
+        self.count += 1
+
     def due(self, now: float | None = None) -> bool:
         now = self._clock() if now is None else now
         return bool(self.pending) and (self.count >= self.batch or now - self.last >= self.every)
@@ -597,9 +697,10 @@ class Acknowledgements:
         todo = self.pending if origins is None else set(origins)
         for origin in todo:
             upto, seqs = self.labels.ack(origin)
+            wd = None if self.withdrawals is None else self.withdrawals.acked(origin)
             try:
                 self._put(LearnerAck(origin=origin, upto=upto, seqs=seqs[:LearnerAck.MAX_SEQS],
-                                     ts=time.time()).encode())
+                                     ts=time.time(), withdrawn=wd).encode())
             except Exception as exc:  # noqa: BLE001 - the session is closing; resent anyway
                 log.debug("ack not published: %s", exc)
         self.pending = set()

@@ -35,18 +35,16 @@ __all__ = ["add_arguments", "lineage_data", "load_data", "main"]
 
 def _journal_rows(path: Path, features: FeatureSpec, stop: int | None = None
                   ) -> tuple[list, list]:
-    """Features and labels of a journal's records ``0 .. stop - 1`` (all by default); a journal
-    folded into its snapshot (``--fold-journal``) no longer holds its first records: refused."""
+    """Features and labels of a journal's records ``0 .. stop - 1`` (all by default) that stand
+    (not withdrawn by their teacher); a journal folded into its snapshot (``--fold-journal``) no
+    longer holds its first records: refused."""
     with Journal.open(path, readonly=True) as j:
         if j.base:
             raise ValueError(f"{path}: its first {j.base} records were folded into its snapshot "
                              f"(--fold-journal) and cannot be read back: give the data with "
                              f"--data")
-        stop = len(j) if stop is None else min(stop, len(j))
         rows, labels = [], []
-        for rec in j.records():
-            if rec.index >= stop:
-                break
+        for rec in j.standing(stop=stop):  # labels the teacher withdrew are no data
             rows.append(features.extract(rec.ranges, rec.yaw))
             labels.append(rec.label)
     return rows, labels

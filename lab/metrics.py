@@ -34,6 +34,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from client.behaviour.loops import LoopDetector
+
 __all__ = [
     "BAND",
     "collisions",
@@ -126,28 +128,20 @@ def oscillations(actions: Sequence[str], a: str = "rot-left", b: str = "rot-righ
 def oscillation_loops(actions: Sequence[str], poses, dt: float, min_alternations: int = 4,
                       window_s: float = 6.0, a: str = "rot-left", b: str = "rot-right") -> list[dict]:
     """Where rotate-left/rotate-right loops happened: groups of at least ``min_alternations``
-    a<->b switches each within ``window_s`` of the previous. Each loop gives the step, time and
-    pose where it began (pass that pose to ``rhbl train --resume ... --start``)."""
-    runs = _runs(actions)
-    switches = [runs[k + 1][1] for k in range(len(runs) - 1) if {runs[k][0], runs[k + 1][0]} == {a, b}]
+    a<->b switches each within ``window_s`` of the previous (``client.behaviour.loops``, the
+    one definition, which the console and a controller apply live). Each loop gives the step,
+    time and pose where it began (pass that pose to ``rhbl train --resume ... --start``)."""
+    detector = LoopDetector(min_alternations, window_s, a, b)
+    for i, action in enumerate(actions):
+        detector.observe(i * dt, action)
+    detector.flush()
     p = np.asarray(poses, dtype=np.float64).reshape(-1, 3) if len(poses) else np.zeros((0, 3))
     loops: list[dict] = []
-    group: list[int] = []
-    gap = max(1, int(round(window_s / dt)))
-
-    def flush():
-        if len(group) >= min_alternations:
-            step = max(0, group[0] - 1)
-            pose = [round(float(v), 3) for v in p[step]] if len(p) > step else None
-            loops.append({"step": step, "time": round(step * dt, 3), "pose": pose,
-                          "alternations": len(group)})
-
-    for s in switches:
-        if group and s - group[-1] > gap:
-            flush()
-            group = []
-        group.append(s)
-    flush()
+    for loop in detector.loops:
+        step = max(0, int(round(loop.start / dt)))
+        pose = [round(float(v), 3) for v in p[step]] if len(p) > step else None
+        loops.append({"step": step, "time": round(step * dt, 3), "pose": pose,
+                      "alternations": loop.alternations})
     return loops
 
 

@@ -43,6 +43,7 @@ __all__ = [
     "state_key",
     "teacher_action_key",
     "teacher_labeled_key",
+    "teacher_withdraw_key",
 ]
 
 PREFIX = "rhbl"
@@ -146,6 +147,13 @@ def teacher_labeled_key(robot: str = "r0") -> str:
     return f"{PREFIX}/{robot}/teacher/labeled"
 
 
+def teacher_withdraw_key(robot: str = "r0") -> str:
+    """A teacher's withdrawal of labels it gave (``Withdrawal``: undo, a discarded episode),
+    teacher -> learner; delivered like a label (kept until acknowledged, resent)."""
+    check_chunk(robot, "robot")
+    return f"{PREFIX}/{robot}/teacher/withdraw"
+
+
 def learner_ack_key(robot: str = "r0") -> str:
     """Which labels the learner holds in its journal (``LearnerAck``), learner -> teacher."""
     check_chunk(robot, "robot")
@@ -192,11 +200,12 @@ def every_token() -> str:
 
 # ---- parsing ----------------------------------------------------------------------------------
 # what a key of ours is: the message it carries (docs/protocol.md section 3)
-KINDS = ("state", "scan", "driver", "cmd", "request", "sim", "label", "labeled", "ack",
-         "notice", "snapshot", "decision", "alive", "other")
+KINDS = ("state", "scan", "driver", "cmd", "request", "sim", "label", "labeled", "withdraw",
+         "ack", "notice", "snapshot", "decision", "alive", "other")
 _DATA = {("position2d", "state"): "state", ("laser", "scan"): "scan",
          ("position2d", "driver"): "driver"}
 _ROLE_KEYS = {("teacher", "action"): "label", ("teacher", "labeled"): "labeled",
+              ("teacher", "withdraw"): "withdraw",
               ("learner", "ack"): "ack", ("learner", "notice"): "notice",
               ("learner", "snapshot"): "snapshot", ("controller", "decision"): "decision"}
 

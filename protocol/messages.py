@@ -55,6 +55,7 @@ __all__ = [
     "TeacherAction",
     "TreeNotice",
     "VelCmd",
+    "Withdrawal",
     "WorldInfo",
     "kind_of",
 ]
@@ -66,6 +67,7 @@ MAX_VX = 0.5
 MAX_VA = math.radians(100.0)
 _MAX_BEAMS = 100_000
 MAX_ORIGIN = 64  # characters of a teacher session's identity (``origin``)
+MAX_WITHDRAWN = 100_000  # labels one withdrawal may name (hours of demonstration at 10 Hz)
 
 # JSON-schema fragments of the field kinds the decoders check (``_Message.FIELDS``)
 NUM = {"type": "number"}
@@ -338,6 +340,14 @@ def _get_origin(m: dict, what: str, required: bool) -> tuple[str | None, int | N
     return origin, seq
 
 
+def _get_session(m: dict, what: str) -> str:
+    """A required ``origin``: a teacher session, 1..64 characters."""
+    origin = get_str(m, "origin", what, max_len=MAX_ORIGIN)
+    if not origin:
+        raise DecodeError(f"{what}: field 'origin': expected a non-empty string, got ''")
+    return origin
+
+
 def _label_fields(m: dict, what: str, required: bool) -> dict[str, Any]:
     """The fields a label and a resent label share (``TeacherAction``, ``LabeledScan``)."""
     origin, seq = _get_origin(m, what, required=required)
@@ -445,7 +455,8 @@ class LearnerAck(_Message):
 
     WHAT: ClassVar[str] = "learner/ack"
     FIELDS = {"origin": ORIGIN, "upto": UINT,
-              "seqs": {"type": "array", "items": UINT, "maxItems": 4096}, "ts": NUM}
+              "seqs": {"type": "array", "items": UINT, "maxItems": 4096}, "ts": NUM,
+              "withdrawn": UINT}
     REQUIRED = ("origin", "upto")
     MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
     MAX_SEQS: ClassVar[int] = 4096
@@ -453,17 +464,19 @@ class LearnerAck(_Message):
     upto: int
     seqs: tuple[int, ...] = ()
     ts: float = 0.0
+    withdrawn: int | None = None  # the withdrawals of origin with ``id < withdrawn`` are held
 
     def to_map(self):
-        return {"origin": self.origin, "upto": int(self.upto),
-                "seqs": [int(x) for x in self.seqs], "ts": float(self.ts)}
+        m = {"origin": self.origin, "upto": int(self.upto),
+             "seqs": [int(x) for x in self.seqs], "ts": float(self.ts)}
+        if self.withdrawn is not None:
+            m["withdrawn"] = int(self.withdrawn)
+        return m
 
     @classmethod
     def from_map(cls, m):
         w = cls.WHAT
-        origin, upto = get_str(m, "origin", w, max_len=MAX_ORIGIN), get_int(m, "upto", w, minimum=0)
-        if not origin:
-            raise DecodeError(f"{w}: field 'origin': expected a non-empty string, got ''")
+        origin, upto = _get_session(m, w), get_int(m, "upto", w, minimum=0)
         raw = m.get("seqs", [])
         if not isinstance(raw, list | tuple) or len(raw) > cls.MAX_SEQS:
             raise DecodeError(f"{w}: field 'seqs': expected a list of at most {cls.MAX_SEQS} "
@@ -471,7 +484,46 @@ class LearnerAck(_Message):
                               f"{' of ' + str(len(raw)) if isinstance(raw, list | tuple) else ''}")
         seqs = tuple(get_int({"seqs": x}, "seqs", w, minimum=upto) for x in raw)
         return cls(origin=origin, upto=upto, seqs=seqs,
-                   ts=get_opt(m, "ts", get_float, w, default=0.0))
+                   ts=get_opt(m, "ts", get_float, w, default=0.0),
+                   withdrawn=get_opt(m, "withdrawn", get_int, w, minimum=0))
+
+
+@dataclass
+class Withdrawal(_Message):
+    """A teacher's withdrawal of labels it gave (``rhbl/<robot>/teacher/withdraw``): the labels
+    of session ``origin`` with ``first <= seq < upto`` are taken back (an undo, a discarded
+    episode); a learner journals the withdrawal, never learns those labels and rebuilds its tree
+    without them. ``id`` numbers the session's withdrawals from 0 (acknowledged in
+    ``LearnerAck.withdrawn``, resent until then); ``ts`` wall time; ``reason`` what the person
+    did. At most ``MAX_WITHDRAWN`` labels per withdrawal."""
+
+    WHAT: ClassVar[str] = "teacher/withdraw"
+    FIELDS = {"origin": ORIGIN, "id": UINT, "first": UINT, "upto": UINT, "ts": NUM,
+              "reason": STR}
+    REQUIRED = ("origin", "id", "first", "upto")
+    MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
+    origin: str
+    id: int
+    first: int
+    upto: int
+    ts: float = 0.0
+    reason: str = ""
+
+    def to_map(self):
+        return {"origin": self.origin, "id": int(self.id), "first": int(self.first),
+                "upto": int(self.upto), "ts": float(self.ts), "reason": self.reason}
+
+    @classmethod
+    def from_map(cls, m):
+        w = cls.WHAT
+        origin = _get_session(m, w)
+        first, upto = get_int(m, "first", w, minimum=0), get_int(m, "upto", w, minimum=0)
+        if not first < upto <= first + MAX_WITHDRAWN:
+            raise DecodeError(f"{w}: fields 'first', 'upto': expected first < upto <= first + "
+                              f"{MAX_WITHDRAWN}, got {first} and {upto}")
+        return cls(origin=origin, id=get_int(m, "id", w, minimum=0), first=first, upto=upto,
+                   ts=get_opt(m, "ts", get_float, w, default=0.0),
+                   reason=get_opt(m, "reason", get_str, w, default=""))
 
 
 @dataclass
@@ -821,7 +873,7 @@ class Nack(_Message):
 # requests are not published, except the world, which recorders keep on its request's key)
 CARRIES: dict[str, type[_Message]] = {
     "state": State, "scan": Scan, "driver": DriverState, "cmd": VelCmd, "label": TeacherAction,
-    "labeled": LabeledScan, "ack": LearnerAck, "notice": TreeNotice, "decision": Decision,
+    "labeled": LabeledScan, "withdraw": Withdrawal, "ack": LearnerAck, "notice": TreeNotice, "decision": Decision,
     "world": WorldInfo}
 
 

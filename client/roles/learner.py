@@ -18,6 +18,14 @@ resends what is not acknowledged with its scan on ``rhbl/<robot>/teacher/labeled
 rebuilt on restart from the snapshot's provenance and the journal) is acknowledged again, not
 journaled or learned twice.
 
+A teacher takes labels back with a ``Withdrawal`` on ``rhbl/<robot>/teacher/withdraw`` (an undo,
+a discarded episode): the learner journals it (a tombstone), acknowledges it
+(``LearnerAck.withdrawn``), never learns those labels and rebuilds its tree from the journal
+without them (the lineage's start plus every labelled vector that stands); a restart keeps them
+out. A journal folded with ``--fold-journal`` no longer holds the records a rebuild needs: a
+withdrawal of labels folded into a snapshot is journaled but cannot take them out of the tree
+(logged as an error).
+
     rhbl learner --features wall --out tree.rhbl                 # new tree (or continue tree.rhbl)
     rhbl learner --resume tree.rhbl --out tree2.rhbl             # extend a tree: a new lineage
     rhbl learner --features wall --teacher person --out tree.rhbl  # taught by hand (rhbl console)
@@ -53,11 +61,19 @@ from client.behaviour.learning import (
 )
 from client.behaviour.tasks import task_of_features
 from client.behaviour.teaching import LAG, PERSON_RULE, PersonLearner
-from client.journal import Journal, JournalError, LabelSet, journal_path
+from client.journal import (
+    Journal,
+    JournalError,
+    JournalWithdrawal,
+    LabelSet,
+    Withdrawals,
+    journal_path,
+)
 from client.labels import MAX_BACKLOG, Acknowledgements, Pairing
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
 from protocol import arguments, files, keys
-from protocol.messages import Scan, TeacherAction, TreeNotice
+from protocol.decoding import Decoder
+from protocol.messages import Scan, TeacherAction, TreeNotice, Withdrawal
 from protocol.runtime import EXIT_USAGE, Context, ProcessError, on_stop_signal
 
 __all__ = ["LearnerCore", "LearnerProcess", "Pairing", "add_arguments", "main"]
@@ -137,6 +153,10 @@ class LearnerCore:
         spec = FEATURES[features] if features else None
         self.replayed = 0
         self.labels = LabelSet()  # the labels (origin, seq) journaled: deduplication and acks
+        self.withdrawals = Withdrawals()  # what teachers took back (tombstones, provenance)
+        self.spans: dict[str, tuple[int, int]] = {}  # origin -> lowest, highest seq journaled
+        self.standing = 0  # labelled vectors journaled and not withdrawn
+        self.rebuilds = 0
         if self.jpath.exists():
             self.journal = Journal.open(self.jpath, fsync_interval=fsync_interval,
                                         write=journal_write)
@@ -219,49 +239,132 @@ class LearnerCore:
         learner = None
         if self.out.exists():
             _clf, _f, _a, meta = load_snapshot(self.out)
-            j = (meta.get("provenance") or {}).get("journal") or {}
+            prov = meta.get("provenance") or {}
+            j = prov.get("journal") or {}
             if j.get("lineage") == lineage:
                 learner = _resume(self.out, None)
                 start = int(j.get("records", 0))
                 try:  # the labels the snapshot holds (folded out of the journal, maybe)
                     self.labels = LabelSet.from_dict(j.get("labels"))
+                    self.withdrawals = Withdrawals.from_dict(j.get("withdrawn"))
                 except ValueError as exc:
                     raise ProcessError(f"snapshot {self.out}: {exc}", EXIT_USAGE) from exc
+                self.standing = int(prov.get("standing", start))
             elif parent is None or Path(parent).resolve() != self.out.resolve():
                 raise ProcessError(
                     f"snapshot {self.out} does not belong to journal {self.jpath} (lineage "
                     f"{j.get('lineage')!r} != {lineage!r}); move one of them aside", EXIT_USAGE)
         if learner is None:  # killed before its first snapshot: start where the lineage started
-            if parent is not None:
-                learner = _resume(parent, None)
-            else:
-                meta = header["meta"]
-                learning = meta.get("learning") or {}
-                learner = DemonstrationLearner(
-                    FeatureSpec.from_dict(meta["features"]), ActionSet.from_dict(meta["actions"]),
-                    task=meta.get("task"), stride=int(learning.get("stride", 1)),
-                    min_delta=float(learning.get("min_delta", 0.0)),
-                    **(meta.get("tree_params") or {}))
-        meta = header.get("meta") or {}
-        if (meta.get("learning") or {}).get("rule") == PERSON_RULE:
-            # a person's tree is rebuilt from every label: the whole journal again
-            learner = PersonLearner.from_metadata(meta, FeatureSpec.from_dict(meta["features"]),
-                                                  ActionSet.from_dict(meta["actions"]))
-            start, self.labels = 0, LabelSet()
+            learner = self._lineage_start()
+        if self._person_rule():
+            # a person's tree is rebuilt from every label: the whole journal again (the
+            # withdrawals in it are held again below and stay out)
+            learner = self._lineage_start()
+            start, self.labels, self.standing = 0, LabelSet(), 0
         if start > len(self.journal):
             raise ProcessError(
                 f"snapshot {self.out} includes {start} journal records but {self.jpath} holds "
                 f"only {len(self.journal)}: the journal lost records", EXIT_USAGE)
         t0 = time.monotonic()
-        for rec in self.journal.records(start):
-            learner.observe(rec.ranges, rec.yaw, rec.label)
-            if rec.origin is not None:
-                self.labels.add(rec.origin, rec.seq)
-            self.replayed += 1
+        withdrawn_later = False  # a tombstone after the snapshot: its tree may hold them
+        for rec in self.journal.records(self.journal.base):  # what deduplication needs
+            if not isinstance(rec, JournalWithdrawal):
+                self._journaled(rec.origin, rec.seq)
+            elif rec.index >= start:
+                self._hold_withdrawal(rec.origin, rec.id, rec.first, rec.upto)
+                withdrawn_later = True
+        if withdrawn_later and not self.journal.base:
+            learner = self._rebuilt()
+        else:
+            if withdrawn_later:
+                log.error("labels were withdrawn after the last snapshot, but the journal was "
+                          "folded (--fold-journal): those in the snapshot stay in the tree")
+            for rec in self.journal.standing(start, withdrawn=self.withdrawals):
+                learner.observe(rec.ranges, rec.yaw, rec.label)
+                self.standing += 1
+        self.replayed = len(self.journal) - start
         log.info("recovered lineage %s: snapshot held %d journal records, replayed %d more in "
-                 "%.2f s (%d nodes); %d identified labels held", lineage, start, self.replayed,
-                 time.monotonic() - t0, learner.nodes, len(self.labels))
+                 "%.2f s (%d nodes); %d identified labels held, %d withdrawals", lineage, start,
+                 self.replayed, time.monotonic() - t0, learner.nodes, len(self.labels),
+                 len(self.withdrawals))
         return learner, len(self.journal)
+
+    def _person_rule(self) -> bool:
+        meta = self.journal.header.get("meta") or {}
+        return (meta.get("learning") or {}).get("rule") == PERSON_RULE
+
+    def _lineage_start(self) -> DemonstrationLearner:
+        """The tree this lineage started from: a person's learner (rebuilt from the whole
+        journal), its parent's (``--resume``) or a new one."""
+        header = self.journal.header
+        if self._person_rule():
+            meta = header["meta"]
+            return PersonLearner.from_metadata(meta, FeatureSpec.from_dict(meta["features"]),
+                                               ActionSet.from_dict(meta["actions"]))
+        if header.get("parent") is not None:
+            return _resume(header["parent"], None)
+        meta = header["meta"]
+        learning = meta.get("learning") or {}
+        return DemonstrationLearner(
+            FeatureSpec.from_dict(meta["features"]), ActionSet.from_dict(meta["actions"]),
+            task=meta.get("task"), stride=int(learning.get("stride", 1)),
+            min_delta=float(learning.get("min_delta", 0.0)), **(meta.get("tree_params") or {}))
+
+    def _journaled(self, origin: str | None, seq: int | None) -> None:
+        """A label record of ``origin`` is in the journal: held, and within its span."""
+        if origin is None:
+            return
+        self.labels.add(origin, seq)
+        lo, hi = self.spans.get(origin, (seq, seq))
+        self.spans[origin] = (min(lo, seq), max(hi, seq))
+
+    def _hold_withdrawal(self, origin: str, wid: int, first: int, upto: int) -> bool:
+        """Record a withdrawal; True when it was not held before."""
+        self.labels.add_range(origin, first, upto)  # never journaled, never resent
+        return self.withdrawals.add(origin, wid, first, upto)
+
+    def _rebuilt(self) -> DemonstrationLearner:
+        """The lineage's start plus every labelled vector of the journal that stands."""
+        learner = self._lineage_start()
+        self.standing = 0
+        for rec in self.journal.standing(withdrawn=self.withdrawals):
+            learner.observe(rec.ranges, rec.yaw, rec.label)
+            self.standing += 1
+        learner.parent = self.journal.header.get("parent")
+        self.rebuilds += 1
+        return learner
+
+    def withdraw(self, w: Withdrawal) -> bool | None:
+        """Journal a teacher's withdrawal (a tombstone, flushed) and hold it: its labels are
+        never learned from now on. True when the tree holds some of them (``rebuild``), False
+        when none, None when the withdrawal was held already. Raises JournalError (nothing
+        written: call again later)."""
+        if self.withdrawals.holds(w.origin, w.id):
+            self._hold_withdrawal(w.origin, w.id, w.first, w.upto)
+            return None
+        self.journal.append_withdrawal(w.origin, w.id, w.first, w.upto, w.ts, w.reason)
+        self.applied += 1
+        self._hold_withdrawal(w.origin, w.id, w.first, w.upto)
+        lo, hi = self.spans.get(w.origin, (0, -1))
+        return w.first <= hi and w.upto > lo
+
+    def rebuild(self) -> bool:
+        """Rebuild the tree without the withdrawn labels; False (logged) when the journal was
+        folded (``--fold-journal``): the records the tree was learned from are gone."""
+        if self.journal.base:
+            log.error("labels were withdrawn, but the journal's first %d records were folded "
+                      "into the snapshot (--fold-journal): the tree cannot be rebuilt without "
+                      "them; they stay in the tree (the later ones are never learned)",
+                      self.journal.base)
+            return False
+        before = self.learner.nodes
+        t0 = time.monotonic()
+        self.learner = self._rebuilt()
+        log.info("rebuilt the tree without the withdrawn labels (%d withdrawals, %d labels): "
+                 "%d labelled vectors stand, %d -> %d nodes, in %.2f s", len(self.withdrawals),
+                 self.withdrawals.labels(), self.standing, before, self.learner.nodes,
+                 time.monotonic() - t0)
+        return True
 
     def learn(self, scan_id: int, ts: float, ranges, yaw: float, label: str,
               origin: str | None = None, seq: int | None = None) -> bool | None:
@@ -275,10 +378,10 @@ class LearnerCore:
             return None
         x = self.learner.features.extract(ranges, yaw)
         self.journal.append(scan_id, ts, label, ranges, yaw, x.astype(np.float32), origin, seq)
-        if origin is not None:
-            self.labels.add(origin, seq)
+        self._journaled(origin, seq)
         learned = self.learner.observe(ranges, yaw, label)
         self.applied += 1
+        self.standing += 1
         return learned
 
     def holds(self, origin: str | None, seq: int | None) -> bool:
@@ -305,8 +408,10 @@ class LearnerCore:
         meta = self.learner.metadata()
         prov = meta["provenance"]
         prov["journal"] = {"path": self.jpath.name, "lineage": self.journal.lineage,
-                           "records": self.applied, "labels": self.labels.to_dict()}
+                           "records": self.applied, "labels": self.labels.to_dict(),
+                           "withdrawn": self.withdrawals.to_dict()}
         prov["labeled"] = self.applied
+        prov["standing"] = self.standing
         prov["time"] = time.time()
         return meta
 
@@ -376,7 +481,11 @@ class LearnerProcess:
         # labels are paired with their scans as they arrive: nothing but labeled scans is queued
         self.pairing = Pairing(self.args.scan_buffer, self.args.match_timeout,
                                on_scan_seen=self.watch.seen, lag=self.core.lag)
-        self.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0, "duplicates": 0}
+        self.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0, "duplicates": 0,
+                      "withdrawals": 0, "withdrawn_skipped": 0}
+        # teachers' withdrawals as they arrive (decoded in zenoh's thread), applied by the loop
+        self.taken_back: deque[Withdrawal] = deque()
+        self.withdraw_decoder = Decoder(log)
         ctx.report(self.counters)
         # labeled scans waiting to be journaled (in order): empty unless the journal cannot be
         # written (disk full); nothing is learned before it is journaled
@@ -411,15 +520,16 @@ class LearnerProcess:
         ctx, robot = self.ctx, self.ctx.robot
         self.notice_pub = ctx.publisher(keys.learner_notice_key(robot))
         self.acks = Acknowledgements(ctx.publisher(keys.learner_ack_key(robot)).put,
-                                     self.core.labels)
+                                     self.core.labels, withdrawals=self.core.withdrawals)
         self.subs = [
             ctx.subscriber(keys.scan_key(robot), self.on_scan),
             ctx.subscriber(keys.teacher_action_key(robot), self.on_label),
             ctx.subscriber(keys.teacher_labeled_key(robot), self.on_labeled),
+            ctx.subscriber(keys.teacher_withdraw_key(robot), self.on_withdraw),
         ]
         ctx.queryable(self.snap_key, self.on_query)
         # what survived (journal + snapshot), for a teacher that resends what we do not hold
-        self.acks.publish(self.core.labels.origins())
+        self.acks.publish(set(self.core.labels.origins()) | set(self.core.withdrawals.origins()))
         ctx.declare_token()  # after the subscriptions: the token means "ready to receive labels"
 
     def on_scan(self, sample) -> None:
@@ -430,6 +540,11 @@ class LearnerProcess:
 
     def on_labeled(self, sample) -> None:
         self.pairing.on_labeled(sample.payload.to_bytes())
+
+    def on_withdraw(self, sample) -> None:
+        w = self.withdraw_decoder.decode(Withdrawal, sample.payload.to_bytes())
+        if w is not None:
+            self.taken_back.append(w)
 
     def on_query(self, query) -> None:
         data = self.latest
@@ -451,8 +566,8 @@ class LearnerProcess:
                       "every labeled vector)", core.out, exc, self.args.snapshot_every)
             return False
         note = TreeNotice(seq=core.seq, nodes=core.learner.nodes, height=core.learner.height,
-                          vectors=core.applied, snapshot_id=f"{core.journal.lineage}:{core.applied}",
-                          ts=time.time())
+                          vectors=core.standing,
+                          snapshot_id=f"{core.journal.lineage}:{core.applied}", ts=time.time())
         self.notice_pub.put(note.encode())
         return True
 
@@ -465,6 +580,10 @@ class LearnerProcess:
             self.acks.handled(act, journaled=False)
             return
         key = (act.origin, act.seq)
+        if key in self.core.withdrawals:  # taken back by its teacher before it came
+            self.stats["withdrawn_skipped"] += 1
+            self.acks.handled(act, journaled=True)
+            return
         if act.origin is not None and (self.core.holds(act.origin, act.seq)
                                        or key in self.waiting):
             # a resend of a label journaled already (acknowledged again: the ack was lost), or
@@ -505,6 +624,28 @@ class LearnerProcess:
         if self.failures:
             log.warning("the journal is writable again after %d failed attempts", self.failures)
             self.failures = 0
+
+    def apply_withdrawals(self) -> None:
+        """Journal and hold the withdrawals that arrived; then rebuild the tree once if it
+        holds some of their labels, and announce the new tree at once. A journal that cannot
+        be written keeps them waiting (retried with the backlog)."""
+        rebuild = False
+        while self.taken_back:
+            w = self.taken_back[0]
+            try:
+                held = self.core.withdraw(w)
+            except (JournalError, OSError) as exc:
+                self._journal_failed(exc)
+                break
+            self.taken_back.popleft()
+            self.acks.withdrawn(w.origin)
+            if held is not None:
+                self.stats["withdrawals"] += 1
+                log.info("teacher session %s withdrew its labels %d..%d (%s)", w.origin,
+                         w.first, w.upto - 1, w.reason or "no reason given")
+                rebuild = rebuild or held
+        if rebuild and self.core.rebuild():
+            self.publish()
 
     def _pop(self) -> None:
         """Take the oldest labeled scan off the backlog."""
@@ -560,6 +701,8 @@ class LearnerProcess:
                 return  # quiet (everything that arrived is learned), or out of time
             if item is not None:
                 self.learn(*item)
+            if self.taken_back and time.monotonic() >= self.retry_at:
+                self.apply_withdrawals()
             now = time.monotonic()
             if self.backlog and now >= self.retry_at:
                 self.flush_backlog()
@@ -610,6 +753,12 @@ class LearnerProcess:
         code = 0
         try:
             self.learn_leftovers()
+            if self.taken_back:
+                self.apply_withdrawals()
+            if self.taken_back:
+                log.error("%d withdrawals could not be journaled (the journal is not writable);"
+                          " their teacher resends them to the next learner",
+                          len(self.taken_back))
             if self.acks.pending:
                 self.acks.publish()
             lost = self.stats["lost"] + self.pairing.stats["lost"]
@@ -654,9 +803,11 @@ class LearnerProcess:
         """The learner's counters (``--stats``): this run's, the pairing's and the tree's."""
         core = self.core
         return {**self.stats, "vectors": core.applied, "replayed": core.replayed,
+                "standing": core.standing, "rebuilds": core.rebuilds,
+                "withdrawn_labels": core.withdrawals.labels(),
                 "nodes": core.learner.nodes, "height": core.learner.height,
                 "pairing": dict(self.pairing.stats), "backlog": len(self.backlog),
-                "dropped": dict(self.pairing.decoder.counts)}
+                "dropped": {**self.pairing.decoder.counts, **self.withdraw_decoder.counts}}
 
     def report(self, lost: int) -> None:
         ps, st, core = self.pairing.stats, self.stats, self.core

@@ -38,8 +38,9 @@ def in_ci() -> bool:
     return os.environ.get("CI", "").lower() in ("1", "true", "yes")
 
 
-def chromium():
-    """A selenium Chrome driver for a new headless Chromium with an empty profile."""
+def chromium(*extra_flags: str):
+    """A selenium Chrome driver for a new headless Chromium with an empty profile (and
+    ``extra_flags``, e.g. ``--ignore-certificate-errors`` for a test certificate)."""
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
@@ -50,7 +51,7 @@ def chromium():
     opts = webdriver.ChromeOptions()
     opts.binary_location = browser
     profile = tempfile.mkdtemp(prefix="rhbl-chromium-")
-    for flag in (*CHROMIUM_FLAGS, f"--user-data-dir={profile}"):
+    for flag in (*CHROMIUM_FLAGS, *extra_flags, f"--user-data-dir={profile}"):
         opts.add_argument(flag)
     opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     drv = webdriver.Chrome(options=opts, service=Service(driver))

@@ -28,7 +28,7 @@ import pytest
 zenoh = pytest.importorskip("zenoh")
 aiohttp = pytest.importorskip("aiohttp")
 
-from browser import ConsoleProcess, chromium, close_chromium, find_chromium, in_ci  # noqa: E402
+from browser import ConsoleProcess  # noqa: E402
 
 from client.journal import Journal, journal_path  # noqa: E402
 from client.player import PlayerClient  # noqa: E402
@@ -41,18 +41,6 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 
 ROOT = Path(__file__).resolve().parents[2]
 STOP_WITHIN = 0.5 + 1.0  # the server's watchdog (0.5 s) and a margin for a loaded machine
-
-
-@pytest.fixture(scope="module")
-def browser():
-    found = find_chromium()
-    if isinstance(found, str):
-        if in_ci():
-            pytest.fail(f"CI=true and {found}")
-        pytest.skip(found)
-    drv = chromium()
-    yield drv
-    close_chromium(drv)
 
 
 class Watch:

@@ -319,15 +319,19 @@ def test_sensor_data_flows_to_authorised_readers_only_from_the_server(sessions, 
             sub.undeclare()
 
 
-def test_only_the_teacher_labels_demonstrations(sessions, flush):
+@pytest.mark.parametrize("key_of", [keys.teacher_action_key, keys.teacher_withdraw_key],
+                         ids=["label", "withdrawal"])
+def test_only_the_teacher_labels_demonstrations(sessions, flush, key_of):
+    """A label, and a withdrawal of labels (the console's undo): the teacher's alone."""
+    key = key_of(ROBOT)
     inbox = Inbox()
-    sub = _subscribe(sessions, inbox, "learner", keys.teacher_action_key(ROBOT))
+    sub = _subscribe(sessions, inbox, "learner", key)
     _passed(sessions, flush, ["learner"])
     for who in ("controller", "server"):
-        sessions[who].put(keys.teacher_action_key(ROBOT), f"forged:{who}".encode())
-    sessions["teacher"].put(keys.teacher_action_key(ROBOT), b"label")
+        sessions[who].put(key, f"forged:{who}".encode())
+    sessions["teacher"].put(key, b"label")
     try:
-        assert inbox.wait_for(("learner", keys.teacher_action_key(ROBOT), b"label"))
+        assert inbox.wait_for(("learner", key, b"label"))
         _passed(sessions, flush, ["controller", "server"], ["learner"])
         assert [p for _, _, p in inbox.items if p.startswith(b"forged:")] == []
     finally:

@@ -111,3 +111,37 @@ def test_teacher_agreement_and_stuck():
 def test_distance_of_known_path():
     assert metrics.distance([(0, 0, 0), (3, 4, 0), (3, 4, 1)]) == pytest.approx(5.0)
     assert metrics.distance([(0, 0, 0)]) == 0.0
+
+
+def _loops_by_steps(actions, dt, min_alternations=4, window_s=6.0):
+    """The definition written out over step indices (switch steps grouped by their gaps), to
+    hold the one live detector (client.behaviour.loops) to it."""
+    runs = [(a, i) for i, a in enumerate(actions) if i == 0 or actions[i - 1] != a]
+    switches = [runs[k + 1][1] for k in range(len(runs) - 1)
+                if {runs[k][0], runs[k + 1][0]} == {"rot-left", "rot-right"}]
+    gap, groups = max(1, round(window_s / dt)), []
+    for s in switches:
+        if groups and s - groups[-1][-1] <= gap:
+            groups[-1].append(s)
+        else:
+            groups.append([s])
+    return [(max(0, g[0] - 1), len(g)) for g in groups if len(g) >= min_alternations]
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_the_live_loop_detector_finds_the_loops_of_the_definition(seed):
+    rng = np.random.default_rng(seed)
+    acts: list[str] = []
+    while len(acts) < 800:  # alternations of random runs, other actions, calm stretches
+        kind = rng.integers(3)
+        if kind == 0:
+            for k in range(int(rng.integers(1, 12))):
+                acts += [("rot-left", "rot-right")[k % 2]] * int(rng.integers(1, 6))
+        elif kind == 1:
+            acts += [str(rng.choice(["fwd", "fwd-left", "rot-left", "rot-right"]))]
+        else:
+            acts += ["fwd"] * int(rng.integers(1, 90))
+    poses = [(0.1 * i, 0.0, 0.0) for i in range(len(acts))]
+    got = [(lp["step"], lp["alternations"]) for lp in metrics.oscillation_loops(acts, poses, 0.1)]
+    assert got == _loops_by_steps(acts, 0.1)
+    assert got  # every seed makes some loops

@@ -232,3 +232,26 @@ def test_label_identity_resend_and_ack_messages():
                        ({"seqs": [True]}, "'seqs'"), ({"origin": ""}, "'origin'")]:
         with pytest.raises(DecodeError, match=field):
             LearnerAck.decode(msgpack.packb({**ok, **bad}))
+
+
+def test_withdrawal_message_and_the_ack_of_withdrawals():
+    from protocol.messages import MAX_WITHDRAWN, LearnerAck, Withdrawal
+
+    assert keys.teacher_withdraw_key("r0") == "rhbl/r0/teacher/withdraw"
+    assert keys.parse("rhbl/r0/teacher/withdraw").kind == "withdraw"
+    w = Withdrawal(origin="ab12", id=3, first=100, upto=150, ts=2.0, reason="undo 5 s")
+    assert _roundtrip(w) == w
+    ack = LearnerAck(origin="ab12", upto=150, withdrawn=4)
+    assert _roundtrip(ack) == ack
+    assert LearnerAck.decode(LearnerAck(origin="a", upto=1).encode()).withdrawn is None
+    ok = msgpack.unpackb(w.encode())
+    for bad, field in [({"first": 150}, "'first', 'upto'"),  # an empty range
+                       ({"upto": 99}, "'first', 'upto'"),
+                       ({"upto": 100 + MAX_WITHDRAWN + 1}, "'first', 'upto'"),
+                       ({"first": -1}, "'first'"), ({"id": -2}, "'id'"),
+                       ({"origin": ""}, "'origin'"), ({"origin": "x" * 65}, "'origin'"),
+                       ({"reason": 5}, "'reason'"), ({"id": None}, "'id'")]:
+        with pytest.raises(DecodeError, match=field):
+            Withdrawal.decode(msgpack.packb({**ok, **bad}))
+    with pytest.raises(DecodeError, match="'withdrawn'"):
+        LearnerAck.decode(msgpack.packb({"v": 1, "origin": "a", "upto": 1, "withdrawn": -1}))

@@ -24,7 +24,8 @@ FULL = [
     m.TeacherAction(scan_id=3, action="fwd", ts=1.0, executed="rot-left", origin="o1", seq=4),
     m.LabeledScan(scan_id=3, action="fwd", origin="o1", seq=4, ranges=R, yaw=0.1, ts=1.0,
                   executed="fwd"),
-    m.LearnerAck(origin="o1", upto=4, seqs=(6, 7), ts=1.0),
+    m.LearnerAck(origin="o1", upto=4, seqs=(6, 7), ts=1.0, withdrawn=2),
+    m.Withdrawal(origin="o1", id=0, first=10, upto=60, ts=1.0, reason="undo 5 s"),
     m.TreeNotice(seq=1, nodes=7, height=3, vectors=12, snapshot_id="l:12", ts=1.0),
     m.Decision(scan_id=3, action="fwd", path=((0, 0, 1.5, "fwd"),), ts=1.0, snapshot_id="l:1",
                nodes=7),
@@ -107,7 +108,8 @@ def test_a_schema_names_the_version_and_the_type():
 @pytest.mark.parametrize("key,kind", [
     ("rhbl/r0/laser/0/data/scan", "scan"), ("rhbl/r0/position2d/0/cmd/vel/teacher", "cmd"),
     ("rhbl/r0/learner/ack", "ack"), ("rhbl/r0/controller/decision", "decision"),
-    ("rhbl/r0/teacher/labeled", "labeled"), ("rhbl/r0/sim/req/get_world", "world"),
+    ("rhbl/r0/teacher/labeled", "labeled"), ("rhbl/r0/teacher/withdraw", "withdraw"),
+    ("rhbl/r0/sim/req/get_world", "world"),
     ("rhbl/r0/sim/req/get_pose", "other"), ("rhbl/r0/learner/snapshot", "other"),
     ("rhbl/alive/learner/r0-12", "alive")])
 def test_each_key_kind_carries_its_message(key, kind):

@@ -48,6 +48,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the certificate's private key")
     parser.add_argument("--view-only", action="store_true",
                         help="watch only: no commands, no labels, no liveliness token")
+    parser.add_argument("--header-timeout", type=float, default=10.0, metavar="SECONDS",
+                        help="close a connection whose request headers have not all arrived "
+                             "within this (or that is idle this long between requests; "
+                             "default 10)")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -58,6 +62,9 @@ def main(args: argparse.Namespace) -> int:
         parse_http(args.http)
         if bool(args.tls_cert) != bool(args.tls_key):
             raise ValueError("--tls-cert and --tls-key go together")
+        if not 0 < args.header_timeout <= 3600:  # NaN fails too
+            raise ValueError(f"--header-timeout must be in (0, 3600] seconds, got "
+                             f"{args.header_timeout:g}")
     except ValueError as exc:
         print(f"rhbl console: error: {exc}", file=sys.stderr)
         return 2

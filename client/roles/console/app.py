@@ -4,25 +4,35 @@ person's commands -> the teacher's keys.
 Threads: zenoh delivers samples in its own threads; each callback decodes and validates the
 message (``protocol.messages``), turns it into one JSON text and hands it to the asyncio loop
 (``call_soon_threadsafe``), which keeps only the latest text of each kind per robot and page:
-a slow page skips frames, it never builds a backlog and never slows the bus down.
+a slow page skips frames, it never builds a backlog and never slows the bus down. A page that
+does not read at all (a send waits ``SEND_TIMEOUT`` s) is closed; at most ``MAX_ERRORS`` of its
+error replies wait to be sent, the rest are counted in one.
 
-The page's messages (JSON objects, at most 4 KiB; anything else is answered with an ``error``
-and the connection stays up):
+The page's messages (JSON objects, at most 4 KiB, nested at most a few levels; anything else
+is answered with an ``error`` and the connection stays up):
 
     {"t": "view", "robot": "r1"}                 watch another robot of the server
     {"t": "mode", "mode": "demonstrate"|"watch"|"correct"}
     {"t": "drive", "action": "fwd", "scan_id": 812}   the key held now, for the scan displayed
     {"t": "release"}                              keys up / page hidden: stop commanding now
     {"t": "take"}                                 take the robot over from another page
+    {"t": "episode", "do": "start"|"stop"|"discard"|"rerecord"}
+    {"t": "undo", "seconds": 5}                   withdraw the labels of the last 5 s of teaching
+    {"t": "place", "pose": [x, y, yaw]}           put the robot there (the simulator's set_pose)
+    {"t": "place", "start": 2}                    ... at the world's start pose 2 (0 = the first)
+    {"t": "reset"}                                the robot back at its start pose, markers gone
 
 One page at a time drives a robot: the first page that drives holds it until it leaves, switches
 to watch or another page takes over explicitly. The robot never moves on a stale key: a release,
 the page's WebSocket closing or no ``drive`` for ``STALE`` seconds end the person's commands at
 once (a last zero command, then the teacher's hold token is withdrawn, so the server hands the
-robot to the controller, or stops it, on the next tick).
+robot to the controller, or stops it, on the next tick). Episodes, undo and placing the robot
+are refused while another page holds it.
 
 Messages to the page: ``hello``, ``world``, ``state``, ``scan``, ``cmd`` (the action being
-executed), ``notice``, ``decision``, ``control`` (who holds each robot), ``robots``, ``error``.
+executed), ``notice``, ``decision``, ``control`` (who holds each robot), ``robots``, ``teach``
+(the learner, the labels, episodes, agreement, markers, stuck: ``client.roles.console.teaching``),
+``placed``, ``info``, ``error``.
 """
 
 from __future__ import annotations
@@ -35,6 +45,7 @@ import json
 import logging
 import math
 import os
+import re
 import secrets
 import signal
 import ssl
@@ -44,15 +55,26 @@ from pathlib import Path
 
 from aiohttp import WSMsgType, web
 
-from client.behaviour.actions import DEFAULT_ACTIONS
-from client.labels import DRAIN, Hold, LabelPublisher
-from client.player import PlayerClient
+from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
+from client.behaviour.features import FeatureSpec
+from client.behaviour.learning import TreePolicy, check_compatible
+from client.labels import DRAIN, Hold, LabelPublisher, Learners
+from client.player import PlayerClient, RequestError
+from client.roles.console.teaching import Teaching, Trouble
+from client.roles.console.web import (
+    HEADER_TIMEOUT,
+    Assets,
+    Refusals,
+    ServerLog,
+    guard,
+    read_message,
+)
 from protocol import keys
 from protocol.decoding import Decoder
 from protocol.messages import Decision, Scan, State, TreeNotice, VelCmd, WorldInfo
 from protocol.runtime import EXIT_USAGE, Context, ProcessError
 
-__all__ = ["STALE", "Console", "access_token", "body", "host_name", "parse_http"]
+__all__ = ["SEND_TIMEOUT", "STALE", "Console", "access_token", "body", "host_name", "parse_http"]
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +83,12 @@ STALE = 0.5  # s of wall time without a ``drive`` from the page: its key is stal
 MAX_MESSAGE = 4096  # bytes of a page's message
 MODES = ("demonstrate", "watch", "correct")
 SCAN_MEMORY = 128  # scan ids remembered per robot (a page's label must name one of these)
+SEND_TIMEOUT = 5.0  # s a send to a page may wait: a page that does not read is closed
+MAX_ERRORS = 8  # error replies waiting for a page at most (the rest counted in one)
+MAX_KINDS = 64  # kinds of message waiting for a page at most
+TEACH_EVERY = 0.5  # s between two ``teach`` messages of a robot
+TREE_EVERY = 2.0  # s at least between two fetches of the learner's tree (for the agreement)
+_ROBOT_NUMBER = re.compile(r"^r(\d+)$")
 
 
 def parse_http(value: str) -> tuple[str, int]:
@@ -103,30 +131,53 @@ def _action_of(vx: float, va: float) -> str:
     return "stop" if vx == 0 and va == 0 else f"vx {vx:.2f} va {va:.2f}"
 
 
+def _error(text: str) -> str:
+    return json.dumps({"t": "error", "error": text})
+
+
 class _Page:
-    def __init__(self, ident: int, ws: web.WebSocketResponse, robot: str):
-        self.id, self.ws, self.robot = ident, ws, robot
+    def __init__(self, ident: int, ws: web.WebSocketResponse, robot: str,
+                 request: web.Request | None = None):
+        self.id, self.ws, self.robot, self.request = ident, ws, robot, request
         self.mode = "demonstrate"
         self.pending: dict[str, str] = {}  # kind -> latest JSON text
-        self.errors = 0
+        self.errors = 0  # error replies waiting
+        self.errors_dropped = 0  # beyond MAX_ERRORS, counted
         self.wake = asyncio.Event()
 
     def push(self, kind: str, text: str) -> None:
-        if kind == "error":  # every error is said, the other kinds keep only their latest
+        """Queue ``text``: the latest of each kind; every error is said, at most
+        ``MAX_ERRORS`` of them waiting (then they are counted and said as one)."""
+        if kind == "error":
+            if self.errors >= MAX_ERRORS:
+                self.errors_dropped += 1
+                self.pending["error-more"] = _error(
+                    f"{self.errors_dropped} more errors (messages refused; not each said)")
+                self.wake.set()
+                return
             self.errors += 1
             kind = f"error-{self.errors}"
+        elif kind not in self.pending and len(self.pending) >= MAX_KINDS:
+            return  # a flood of kinds (sources on the bus): the known ones still come
         self.pending[kind] = text
         self.wake.set()
+
+    def take(self) -> list[str]:
+        batch, self.pending = self.pending, {}
+        self.errors = self.errors_dropped = 0
+        return list(batch.values())
 
 
 class _Robot:
     def __init__(self, name: str):
         self.name = name
         self.world: str | None = None  # JSON of the WorldInfo
+        self.starts: tuple = ()  # the world's start poses
         self.world_asked = 0.0
         self.latest: dict[str, str] = {}  # kind -> JSON (for a page that starts watching)
         self.scans: OrderedDict[int, Scan] = OrderedDict()  # id -> the scan (labels carry it)
         self.last_scan: Scan | None = None
+        self.state: State | None = None
         self.holder: _Page | None = None
         self.action: str | None = None  # what the person commands now
         self.last_drive = 0.0
@@ -134,6 +185,23 @@ class _Robot:
         self.client: PlayerClient | None = None  # the person's commands, as the teacher's
         self.pubs: LabelPublisher | None = None
         self.hold: Hold | None = None
+        self.learners: Learners | None = None  # view-only: which learners are up
+        self.teaching = Teaching()
+        self.trouble = Trouble()
+        self.policy: TreePolicy | None = None  # the learner's tree, for the agreement
+        self.policy_id = ""
+        self.tree_wanted: str | None = None  # a notice's snapshot id not fetched yet
+        self.tree_asked = 0.0
+        self.tree_busy = False
+        self.teach_said = 0.0
+        self.teach_dirty = True
+        self.teach_seq = 0  # teach messages composed (a page sees the one after an event)
+
+    @property
+    def start_index(self) -> int:
+        """Robot ``r<i>`` starts at start pose ``i`` (cycling), as the server places it."""
+        m = _ROBOT_NUMBER.match(self.name)
+        return int(m.group(1)) % len(self.starts) if m and self.starts else 0
 
 
 class Console:
@@ -145,6 +213,9 @@ class Console:
         self.pages: dict[int, _Page] = {}
         self._next_page = 1
         self._tasks: set[asyncio.Task] = set()  # kept referenced until done
+        self.refusals = Refusals(log)
+        self.assets = Assets(STATIC)
+        self.stats = {"withdrawals": 0, "withdrawn": 0, "placed": 0, "closed_unread": 0}
         self.default_robot = ctx.robot
         self._robot(self.default_robot)
         self.subs = []
@@ -163,9 +234,9 @@ class Console:
                 keys.parse(sample.key_expr).robot)
 
     # ---- zenoh side (zenoh threads): decode, make JSON, hand over to the loop ----------------
-    def _hand(self, robot: str, kind: str, text: str, scan=None) -> None:
+    def _hand(self, robot: str, kind: str, text: str, msg=None) -> None:
         with contextlib.suppress(RuntimeError):  # the loop is closing
-            self.loop.call_soon_threadsafe(self._deliver, robot, kind, text, scan)
+            self.loop.call_soon_threadsafe(self._deliver, robot, kind, text, msg)
 
     def _on_state(self, sample) -> None:
         st, robot = self._decode(State, sample)
@@ -175,7 +246,7 @@ class Console:
         self._hand(robot, "state", json.dumps({
             "t": "state", "robot": robot, "ts": st.ts, "seq": st.seq,
             "pose": [round(x, 4) for x in pose], "vel": [round(x, 4) for x in st.vel],
-            "stall": st.stall, "driver": st.driver}))
+            "stall": st.stall, "driver": st.driver}), st)
 
     def _on_scan(self, sample) -> None:
         sc, robot = self._decode(Scan, sample)
@@ -195,7 +266,7 @@ class Console:
             return
         self._hand(robot, "notice", json.dumps({
             "t": "notice", "robot": robot, "seq": n.seq, "nodes": n.nodes, "height": n.height,
-            "vectors": n.vectors, "snapshot_id": n.snapshot_id, "ts": n.ts}))
+            "vectors": n.vectors, "snapshot_id": n.snapshot_id, "ts": n.ts}), n)
 
     def _on_decision(self, sample) -> None:
         d, robot = self._decode(Decision, sample)
@@ -216,7 +287,7 @@ class Console:
         action = _action_of(c.vx, c.va) if c.state else "motors off"
         self._hand(robot, f"cmd-{source}", json.dumps({
             "t": "cmd", "robot": robot, "source": source, "action": action,
-            "scan_id": c.scan_id}))
+            "scan_id": c.scan_id}), (source, action, c))
 
     # ---- loop side ------------------------------------------------------------------------
     def _robot(self, name: str) -> _Robot:
@@ -227,49 +298,72 @@ class Console:
             self._broadcast(json.dumps({"t": "robots", "robots": sorted(self.robots)}))
         return r
 
+    def _spawn(self, coro) -> None:
+        task = self.loop.create_task(coro)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
     def _ask_world(self, r: _Robot) -> None:
         now = time.monotonic()
         if r.world is not None or now - r.world_asked < 5.0:
             return
         r.world_asked = now
 
-        def fetch() -> str | None:
+        def fetch() -> WorldInfo | None:
             try:
                 for reply in self.session.get(keys.sim_request_key(r.name, "get_world"),
                                               timeout=2.0):
                     if reply.ok is not None:
-                        w = WorldInfo.decode(reply.ok.payload.to_bytes())
-                        return json.dumps({
-                            "t": "world", "robot": r.name, "name": w.name, "task": w.task,
-                            "walls": w.walls, "goal": w.goal, "starts": w.starts})
+                        return WorldInfo.decode(reply.ok.payload.to_bytes())
             except Exception as exc:  # noqa: BLE001 - a real robot has no world to give
                 log.info("no world for robot %s: %s", r.name, exc)
             return None
 
         async def get() -> None:
-            text = await self.loop.run_in_executor(None, fetch)
-            if text is not None:
-                r.world = text
-                for p in self.pages.values():
-                    if p.robot == r.name:
-                        p.push("world", text)
+            w = await self.loop.run_in_executor(None, fetch)
+            if w is not None:
+                r.starts = w.starts
+                r.world = json.dumps({
+                    "t": "world", "robot": r.name, "name": w.name, "task": w.task,
+                    "walls": w.walls, "goal": w.goal, "starts": w.starts,
+                    "start": r.start_index})
+                self._to_pages(r, "world", r.world)
 
-        task = self.loop.create_task(get())
-        self._tasks.add(task)
-        task.add_done_callback(self._tasks.discard)
+        self._spawn(get())
 
-    def _deliver(self, robot: str, kind: str, text: str, scan) -> None:
+    def _deliver(self, robot: str, kind: str, text: str, msg) -> None:
         r = self._robot(robot)
         if r.world is None:  # the server came up after the console (asked at most every 5 s)
             self._ask_world(r)
-        if scan is not None:
-            r.scans[scan.id] = scan
-            r.last_scan = scan
+        if kind == "scan":
+            r.scans[msg.id] = msg
+            r.last_scan = msg
             while len(r.scans) > SCAN_MEMORY:
                 r.scans.popitem(last=False)
+        elif kind == "state":
+            self._on_robot_state(r, msg)
+        elif kind == "notice":
+            r.tree_wanted = msg.snapshot_id or f"notice-{msg.seq}"
+            self._fetch_tree(r)
+        elif kind.startswith("cmd-") and msg[0].split("-", 1)[0] == "controller":
+            st = r.state
+            if st is not None and st.driver.startswith("controller"):
+                scan = r.scans.get(msg[2].scan_id) if msg[2].scan_id is not None else None
+                r.trouble.command(scan.ts if scan is not None else st.ts, msg[1])
         r.latest[kind] = text
+        self._to_pages(r, kind, text)
+        if r.trouble.changed:
+            r.trouble.changed = False
+            r.teach_dirty = True
+
+    def _on_robot_state(self, r: _Robot, st: State) -> None:
+        r.state = st
+        pose = st.truth if st.truth is not None else st.pos
+        r.trouble.state(st.ts, pose, st.stall, st.driver.startswith("controller"))
+
+    def _to_pages(self, r: _Robot, kind: str, text: str) -> None:
         for p in self.pages.values():
-            if p.robot == robot:
+            if p.robot == r.name:
                 p.push(kind, text)
 
     def _broadcast(self, text: str, kind: str = "robots") -> None:
@@ -282,54 +376,147 @@ class Console:
                            "holder_mode": h.mode if h else None, "action": r.action})
 
     def _announce(self, r: _Robot) -> None:
-        text = self._control_text(r)
-        for p in self.pages.values():
-            if p.robot == r.name:
-                p.push("control", text)
+        self._to_pages(r, "control", self._control_text(r))
+
+    # -- the learner's tree, for the agreement --
+    def _fetch_tree(self, r: _Robot) -> None:
+        """Fetch the learner's latest tree (at most every ``TREE_EVERY`` s, one at a time)."""
+        now = time.monotonic()
+        if r.tree_busy or r.tree_wanted in (None, r.policy_id) or now - r.tree_asked < TREE_EVERY:
+            return
+        r.tree_busy, r.tree_asked, wanted = True, now, r.tree_wanted
+
+        def fetch() -> TreePolicy | None:
+            from rhbl import loads
+
+            try:
+                for reply in self.session.get(keys.learner_snapshot_key(r.name), timeout=5.0):
+                    if reply.ok is None:
+                        continue
+                    clf = loads(reply.ok.payload.to_bytes(), source="learner snapshot")
+                    meta = dict(clf.metadata or {})
+                    check_compatible(meta)
+                    policy = TreePolicy(clf, FeatureSpec.from_dict(meta["features"]),
+                                        ActionSet.from_dict(meta["actions"]), meta)
+                    if r.last_scan is not None:  # compiled here, not in the page's loop
+                        policy.act(r.last_scan.ranges, r.last_scan.pose)
+                    return policy
+            except Exception as exc:  # noqa: BLE001 - no agreement until a tree loads
+                log.info("the learner's tree of robot %s did not load: %s", r.name, exc)
+            return None
+
+        async def get() -> None:
+            try:
+                policy = await self.loop.run_in_executor(None, fetch)
+            finally:
+                r.tree_busy = False
+            if policy is not None:
+                r.policy, r.policy_id = policy, wanted
+                r.teach_dirty = True
+            if r.tree_wanted != r.policy_id:  # a newer notice came meanwhile
+                self.loop.call_later(TREE_EVERY, self._fetch_tree, r)
+
+        self._spawn(get())
+
+    # -- what the page says about teaching --
+    def _teach_text(self, r: _Robot) -> str:
+        box = r.pubs.outbox if r.pubs is not None else None
+        learners = r.pubs.learners if r.pubs is not None else r.learners
+        now = r.state.ts if r.state is not None else None
+        labels = None if box is None else {
+            "given": box.stats["published"], "held": box.stats["acked"],
+            "waiting": len(box), "cap": box.cap, "withdrawn": box.stats["withdrawn"],
+            "withdrawals_waiting": box.unacknowledged_withdrawals}
+        r.teach_seq += 1
+        return json.dumps({
+            "t": "teach", "robot": r.name, "seq": r.teach_seq,
+            "learner": None if learners is None else {"up": bool(learners)},
+            "labels": labels, "tree": r.policy_id or None,
+            **r.teaching.summary(now), **r.trouble.summary()})
+
+    def _say_teaching(self, force: bool = False) -> None:
+        now = time.monotonic()
+        for r in self.robots.values():
+            if not any(p.robot == r.name for p in self.pages.values()):
+                continue
+            if force or r.teach_dirty or now - r.teach_said >= TEACH_EVERY:
+                r.teach_said, r.teach_dirty = now, False
+                text = self._teach_text(r)
+                r.latest["teach"] = text
+                self._to_pages(r, "teach", text)
 
     # -- the person's commands --
-    def _drive(self, page: _Page, action, scan_id) -> str | None:
-        """Publish the page's command and label; an error text when refused."""
-        if self.view_only:
-            return "this console is view-only (--view-only): it publishes nothing"
-        if page.mode == "watch":
-            return "watch mode: switch to demonstrate or correct to drive"
-        if action not in DEFAULT_ACTIONS.names:
-            return f"unknown action {action!r}; one of {', '.join(DEFAULT_ACTIONS.names)}"
-        if isinstance(scan_id, bool) or not isinstance(scan_id, int):
-            return f"'scan_id' must be the integer id of the scan displayed, got {scan_id!r}"
-        r = self.robots[page.robot]
-        if r.holder is not None and r.holder is not page:
-            return (f"page #{r.holder.id} holds robot {r.name}: watch, or take over "
-                    f"explicitly")
-        scan = r.scans.get(scan_id)
-        if scan is None:
-            return (f"scan {scan_id} is not among the last {SCAN_MEMORY} scans of robot "
-                    f"{r.name}: the page is behind, not driving on a stale view")
+    def _publishers(self, r: _Robot) -> None:
+        """The robot's teacher keys: commands, labels (kept until a learner acknowledges
+        them, also before any learner is up), the hold token."""
         if r.pubs is None:
             r.client = PlayerClient(session=self.session, robot=r.name, source="teacher",
                                     express=True, block=True)
             r.pubs = LabelPublisher(self.session, r.name)
             # the teacher's hold token, one per robot driven (its ident names that robot)
             r.hold = Hold(self.session, f"{r.name}-{os.getpid()}")
+
+    def _may_act(self, page: _Page, r: _Robot | None, what: str) -> str | None:
+        """Why ``page`` may not ``what`` (drive, place, undo...) the robot now, or None."""
+        if self.view_only:
+            return "this console is view-only (--view-only): it publishes nothing"
+        if page.mode == "watch":
+            return f"watch mode: switch to demonstrate or correct to {what}"
+        if r is None:
+            return "no robot"
+        if r.holder is not None and r.holder is not page:
+            return (f"page #{r.holder.id} holds robot {r.name}: watch, or take over "
+                    f"explicitly")
+        return None
+
+    def _drive(self, page: _Page, action, scan_id) -> str | None:
+        """Publish the page's command and label; an error text when refused."""
+        r = self.robots.get(page.robot)
+        why = self._may_act(page, r, "drive")
+        if why:
+            return why
+        if action not in DEFAULT_ACTIONS.names:
+            return f"unknown action {action!r}; one of {', '.join(DEFAULT_ACTIONS.names)}"
+        if isinstance(scan_id, bool) or not isinstance(scan_id, int):
+            return f"'scan_id' must be the integer id of the scan displayed, got {scan_id!r}"
+        scan = r.scans.get(scan_id)
+        if scan is None:
+            return (f"scan {scan_id} is not among the last {SCAN_MEMORY} scans of robot "
+                    f"{r.name}: the page is behind, not driving on a stale view")
+        self._publishers(r)
         box = r.pubs.outbox
-        if box is not None and box.full:
+        if box.full:
+            who = ("no learner is up" if not r.pubs.learners
+                   else "the learner acknowledges nothing")
             return (f"{len(box)} labels wait for a learner's acknowledgement (at most "
-                    f"{box.cap}): not driving until one acknowledges them (they are resent "
-                    f"while a learner is up)")
+                    f"{box.cap}; {who}): not driving until one acknowledges them (they are kept "
+                    f"and sent once a learner is up)")
         changed = r.holder is not page or r.action != action
         r.holder = page
         vx, va = DEFAULT_ACTIONS[action]
         r.hold.acquire()  # before the command: the server may release the teacher at once
         r.client.answer(scan, vx, va)
         if scan_id > r.labelled:  # one label per scan (the learner learns it like any other)
-            r.pubs.label(scan, action, action)
-            r.labelled = scan_id
+            self._label(r, scan, action)
         r.action, r.last_drive = action, time.monotonic()
         if changed:
             log.info("page #%d drives robot %s: %s (%s)", page.id, r.name, action, page.mode)
             self._announce(r)
         return None
+
+    def _label(self, r: _Robot, scan: Scan, action: str) -> None:
+        pose = scan.truth if scan.truth is not None else scan.pose
+        if r.policy is not None:  # what the tree would have done on this very scan
+            try:
+                r.teaching.scored(scan.ts, r.policy.act(scan.ranges, scan.pose) == action)
+            except Exception as exc:  # noqa: BLE001 - a tree of other features: no score
+                log.debug("agreement not scored: %s", exc)
+        seq = r.pubs.label(scan, action, action)
+        was = r.teaching.current
+        r.teaching.labelled(seq, scan.ts, pose)
+        r.labelled = scan.id
+        if r.teaching.current is not was:
+            r.teach_dirty = True
 
     def _stop(self, r: _Robot, why: str) -> None:
         """End the person's commands on ``r`` now: a zero command, then the hold is withdrawn."""
@@ -350,6 +537,135 @@ class Console:
             r.holder = None
             self._announce(r)
 
+    # -- episodes, undo, placing the robot --
+    def _withdraw(self, r: _Robot, first: int, upto: int, reason: str) -> int:
+        """Withdraw the labels ``first <= seq < upto``; how many stood."""
+        r.pubs.withdraw(first, upto, reason)
+        n = r.teaching.withdrawn_range(first, upto)
+        self.stats["withdrawals"] += 1
+        self.stats["withdrawn"] += n
+        r.teach_dirty = True
+        return n
+
+    def _episode(self, page: _Page, do) -> str | None:
+        r = self.robots.get(page.robot)
+        why = self._may_act(page, r, "record episodes")
+        if why:
+            return why
+        t = r.teaching
+        ts = r.state.ts if r.state is not None else None
+        pose = self._pose(r)
+        if do == "start":
+            self._stop(r, "a new episode")
+            e = t.start(pose, ts)
+            self._info(page, f"episode {e.n} records: drive to teach")
+        elif do == "stop":
+            self._stop(r, "the episode stopped")
+            e = t.stop(ts)
+            if e is None:
+                return "no episode records now"
+            self._info(page, f"episode {e.n} stopped: {e.labels} labels kept")
+        elif do in ("discard", "rerecord"):
+            self._stop(r, f"the episode is {'discarded' if do == 'discard' else 're-recorded'}")
+            found = t.discard()
+            if found is None:
+                return "no episode with labels to discard"
+            e, first, upto = found
+            n = self._withdraw(r, first, upto, f"discard episode {e.n}") if r.pubs else 0
+            t.discarded(e)
+            if do == "rerecord":
+                if e.start_pose is not None:
+                    self._place(page, r, e.start_pose, f"the start of episode {e.n}")
+                t.start(e.start_pose, ts)
+            self._info(page, f"episode {e.n} discarded: {n} labels withdrawn"
+                       + ("; recording it again" if do == "rerecord" else ""))
+        else:
+            return f"unknown episode action {do!r}; one of start, stop, discard, rerecord"
+        r.teach_dirty = True
+        return None
+
+    def _undo(self, page: _Page, seconds) -> str | None:
+        r = self.robots.get(page.robot)
+        why = self._may_act(page, r, "undo")
+        if why:
+            return why
+        try:
+            found = r.teaching.undo(seconds)
+        except ValueError as exc:
+            return str(exc)
+        if found is None or r.pubs is None:
+            return "nothing to undo: no label given yet (or all withdrawn)"
+        self._stop(r, "undo")
+        n = self._withdraw(r, *found, f"undo {seconds:g} s")
+        self._info(page, f"undone: the last {seconds:g} s of teaching, {n} labels withdrawn")
+        return None
+
+    def _pose(self, r: _Robot):
+        st = r.state
+        if st is None:
+            return None
+        return st.truth if st.truth is not None else st.pos
+
+    def _place_msg(self, page: _Page, msg: dict) -> str | None:
+        r = self.robots.get(page.robot)
+        why = self._may_act(page, r, "move the robot")
+        if why:
+            return why
+        if "start" in msg:
+            i = msg["start"]
+            if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < len(r.starts):
+                return (f"'start' must be the number of a start pose of the world, 0.."
+                        f"{len(r.starts) - 1}, got {i!r}" if r.starts
+                        else "the world gives no start poses (no simulator?)")
+            self._place(page, r, r.starts[i], f"start pose {i + 1}")
+            return None
+        pose = msg.get("pose")
+        if (not isinstance(pose, list) or len(pose) != 3
+                or not all(isinstance(v, int | float) and not isinstance(v, bool)
+                           and math.isfinite(v) for v in pose)):
+            return f"'pose' must be [x, y, yaw], three finite numbers, got {pose!r:.80}"
+        self._place(page, r, tuple(float(v) for v in pose), "where it was dropped")
+        return None
+
+    def _reset(self, page: _Page) -> str | None:
+        r = self.robots.get(page.robot)
+        why = self._may_act(page, r, "reset the scene")
+        if why:
+            return why
+        if not r.starts:
+            return "the world gives no start poses (no simulator?)"
+        self._stop(r, "the scene is reset")
+        r.teaching.stop()
+        r.trouble.clear()
+        r.teach_dirty = True
+        self._place(page, r, r.starts[r.start_index], "its start pose (reset)", reset=True)
+        return None
+
+    def _place(self, page: _Page, r: _Robot, pose, where: str, reset: bool = False) -> None:
+        """Teleport the robot (``set_pose``, in a thread); the result said to the page."""
+        self._publishers(r)
+        x, y, yaw = (float(v) for v in pose)
+
+        async def go() -> None:
+            try:
+                ack = await self.loop.run_in_executor(
+                    None, lambda: r.client.simulation.set_pose2d(x, y, yaw))
+            except RequestError as exc:
+                page.push("error", _error(f"cannot put the robot {where}: {exc}"))
+                return
+            self.stats["placed"] += 1
+            got = ack.extra.get("pose", [x, y, yaw])
+            log.info("page #%d put robot %s at (%.2f, %.2f, %.2f): %s", page.id, r.name,
+                     *got, where)
+            self._to_pages(r, "placed", json.dumps({"t": "placed", "robot": r.name,
+                                                     "pose": got, "reset": reset,
+                                                     "where": where}))
+
+        self._spawn(go())
+
+    def _info(self, page: _Page, text: str) -> None:
+        page.push("info", json.dumps({"t": "info", "info": text}))
+
     async def watchdog(self) -> None:
         while True:
             await asyncio.sleep(0.05)
@@ -357,16 +673,15 @@ class Console:
             for r in self.robots.values():
                 if r.action is not None and now - r.last_drive > STALE:
                     self._stop(r, f"no key from the page for {STALE:g} s")
+            self._say_teaching()
 
     def handle(self, page: _Page, raw) -> None:
         """One message of a page (a bad one is answered with an error, never raised)."""
         err = None
         try:
-            msg = json.loads(raw)
-            if not isinstance(msg, dict):
-                raise ValueError("expected a JSON object")
-        except ValueError as exc:
-            page.push("error", json.dumps({"t": "error", "error": f"bad message: {exc}"}))
+            msg = read_message(raw)
+        except (ValueError, RecursionError) as exc:
+            page.push("error", _error(f"bad message: {exc}"))
             return
         t = msg.get("t")
         r = self.robots.get(page.robot)
@@ -406,49 +721,75 @@ class Console:
                     self._unhold(r, "the page watches another robot")
                 page.robot = name
                 self._send_robot(page)
+        elif t == "episode":
+            err = self._episode(page, msg.get("do"))
+        elif t == "undo":
+            err = self._undo(page, msg.get("seconds"))
+        elif t == "place":
+            err = self._place_msg(page, msg)
+        elif t == "reset":
+            err = self._reset(page)
         else:
             err = f"unknown message type {t!r}"
         if err:
-            page.push("error", json.dumps({"t": "error", "error": err}))
+            page.push("error", _error(err))
 
     def _send_robot(self, page: _Page) -> None:
         r = self._robot(page.robot)
         self._ask_world(r)
+        if not self.view_only:
+            self._publishers(r)  # the learner's status and the labels, before the first key
+        elif r.learners is None:
+            r.learners = Learners(self.session, r.name)  # only watches: publishes nothing
         if r.world is not None:
             page.push("world", r.world)
         for kind, text in r.latest.items():
             page.push(kind, text)
         page.push("control", self._control_text(r))
+        r.teach_dirty = True
 
     # ---- HTTP ------------------------------------------------------------------------------
-    def _authorised(self, request: web.Request) -> bool:
+    def _authorised(self, request: web.Request) -> None:
+        """Raise the refusal when ``request`` may not have the page, its files or its
+        WebSocket: a request without a Host header (400), without a token a Host that is no
+        loopback name (403: DNS rebinding), with a token a missing or wrong one (401)."""
+        host = request.headers.get("Host")
+        if not host:
+            raise web.HTTPBadRequest(text="rhbl console: a Host header is required\n")
         if self.token is None:
             # no token (loopback only): the page must be asked for by a loopback name, so a
             # site whose name an attacker points at 127.0.0.1 (DNS rebinding) gets nothing
-            if not is_loopback(host_name(request.host or "")):
-                raise web.HTTPForbidden(text=f"rhbl console: Host {request.host!r} refused: "
+            if not is_loopback(host_name(host)):
+                raise web.HTTPForbidden(text=f"rhbl console: Host {host[:80]!r} refused: "
                                              f"open it as http://127.0.0.1:<port>/\n")
-            return True
+            return
         given = request.query.get("token", "")
-        return hmac.compare_digest(given.encode(), self.token.encode())
-
-    async def index(self, request: web.Request) -> web.StreamResponse:
-        if not self._authorised(request):
+        if not hmac.compare_digest(given.encode(), self.token.encode()):
             raise web.HTTPUnauthorized(text="rhbl console: a valid ?token= is required "
                                             "(printed in the console's URL)\n")
-        return web.FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
+
+    async def index(self, request: web.Request) -> web.StreamResponse:
+        self._authorised(request)
+        return web.Response(text=self.assets.page(self.token), content_type="text/html",
+                            headers={"Cache-Control": "no-store"})
+
+    async def static(self, request: web.Request) -> web.StreamResponse:
+        self._authorised(request)
+        found = self.assets.get(request.match_info["name"])
+        if found is None:
+            raise web.HTTPNotFound(text="rhbl console: no such file\n")
+        data, kind = found
+        return web.Response(body=data, content_type=kind, headers={"Cache-Control": "no-store"})
 
     async def websocket(self, request: web.Request) -> web.StreamResponse:
-        if not self._authorised(request):
-            raise web.HTTPUnauthorized(text="rhbl console: a valid ?token= is required\n")
+        self._authorised(request)
         origin = request.headers.get("Origin")
-        own = f"{request.scheme}://{request.host}"
+        own = f"{request.scheme}://{request.headers['Host']}"
         if origin is not None and origin != own:
-            log.warning("refused a WebSocket from origin %s (expected %s)", origin, own)
-            raise web.HTTPForbidden(text=f"rhbl console: foreign origin {origin} refused\n")
+            raise web.HTTPForbidden(text=f"rhbl console: foreign origin {origin[:80]} refused\n")
         ws = web.WebSocketResponse(heartbeat=5.0, max_msg_size=MAX_MESSAGE)
         await ws.prepare(request)
-        page = _Page(self._next_page, ws, self.default_robot)
+        page = _Page(self._next_page, ws, self.default_robot, request)
         self._next_page += 1
         self.pages[page.id] = page
         log.info("page #%d connected from %s", page.id, request.remote)
@@ -464,13 +805,16 @@ class Console:
                     try:
                         self.handle(page, msg.data)
                     except Exception as exc:  # noqa: BLE001 - a page never kills the console
-                        log.exception("page #%d: message not handled", page.id)
-                        page.push("error", json.dumps({"t": "error", "error": str(exc)}))
+                        log.warning("page #%d: message not handled: %s: %s", page.id,
+                                    type(exc).__name__, exc)
+                        page.push("error", _error(f"message not handled: {exc}"))
                 elif msg.type == WSMsgType.BINARY:
-                    page.push("error", json.dumps({"t": "error",
-                                                   "error": "binary messages are not understood"}))
+                    page.push("error", _error("binary messages are not understood"))
                 else:
                     break
+                # messages already read return without a pause: yield, so that a page that
+                # floods messages cannot starve the senders, the watchdog and the other pages
+                await asyncio.sleep(0)
         finally:
             # the page closed, reloaded or lost its connection: its commands end now
             self.pages.pop(page.id, None)
@@ -486,15 +830,29 @@ class Console:
             while not page.ws.closed:
                 await page.wake.wait()
                 page.wake.clear()
-                batch, page.pending = page.pending, {}
-                for text in batch.values():
-                    await page.ws.send_str(text)
+                for text in page.take():
+                    try:
+                        await asyncio.wait_for(page.ws.send_str(text), SEND_TIMEOUT)
+                    except TimeoutError:
+                        self._close_unread(page)
+                        return
+
+    def _close_unread(self, page: _Page) -> None:
+        """A page that reads nothing (its send waited ``SEND_TIMEOUT`` s): closed, its
+        commands end; a page reading again reconnects."""
+        self.stats["closed_unread"] += 1
+        log.warning("page #%d reads nothing (a send waited %g s): closing its connection",
+                    page.id, SEND_TIMEOUT)
+        transport = page.request.transport if page.request is not None else None
+        if transport is not None:
+            transport.abort()  # its unread bytes go; the receive loop ends, the robot stops
 
     def counters(self) -> dict:
         """What the console did (``--stats``): pages served, robots seen, labels per robot."""
         return {"pages": self._next_page - 1, "robots": sorted(self.robots),
                 "labelled": {n: r.pubs.published for n, r in self.robots.items()
                              if r.pubs is not None},
+                **self.stats, "refused": self.refusals.total,
                 "dropped": dict(self.decoder.counts)}
 
     def close(self) -> None:
@@ -508,6 +866,9 @@ class Console:
                 r.pubs.close()
             if r.client is not None:
                 r.client.close()
+            if r.learners is not None:
+                with contextlib.suppress(Exception):
+                    r.learners.sub.undeclare()
         for sub in self.subs:
             with contextlib.suppress(Exception):
                 sub.undeclare()
@@ -551,11 +912,14 @@ async def _serve(ctx: Context, host: str, port: int, token: str | None,
         loop.add_signal_handler(sig, stop.set)
     console = Console(ctx, loop, token)
     ctx.report(console.counters)
-    app = web.Application()
+    app = web.Application(middlewares=[guard(console.refusals, log)])
     app.router.add_get("/", console.index)
     app.router.add_get("/ws", console.websocket)
-    app.router.add_static("/static/", STATIC, show_index=False)
-    runner = web.AppRunner(app, access_log=None, handle_signals=False)
+    app.router.add_get("/static/{name}", console.static)
+    header_timeout = getattr(ctx.args, "header_timeout", HEADER_TIMEOUT)
+    runner = web.AppRunner(app, access_log=None, handle_signals=False,
+                           keepalive_timeout=header_timeout,
+                           logger=ServerLog(log, console.refusals))
     await runner.setup()
     try:
         site = web.TCPSite(runner, host, port, ssl_context=tls)

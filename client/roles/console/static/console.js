@@ -1,7 +1,11 @@
 // rhbl console: draws what the console process forwards from the bus and sends the person's
 // commands back. Plain JS, no framework, no network beyond the page's own WebSocket.
 // Messages: client/roles/console/app.py (docstring). Exposed for tests and people: #pose data-x/y/yaw
-// (the pose drawn last), #hold data-holder, #tree data-nodes/vectors, #fps data-fps/frames.
+// (the pose drawn last), #hold data-holder, #tree data-nodes/vectors, #fps data-fps/frames,
+// #learner data-up/seq, #labels data-given/held/waiting/withdrawn, #agreement data-value/n,
+// #trouble data-markers/loops/stalls/collisions, #stuck data-why, #episode data-n/state,
+// #clock data-t; and window.rhbl.view(): what the page shows now, read-only (the robot as
+// drawn, the walls, the mode, who drives, the action executed, the scan displayed, the clock).
 "use strict";
 
 const $ = (id) => document.getElementById(id);
@@ -11,7 +15,7 @@ const g = canvas.getContext("2d");
 const S = {
   ws: null, page: null, robot: null, viewOnly: false, mode: "demonstrate",
   world: null, state: null, scan: null, notice: null, decision: null, control: null,
-  cmds: {}, trail: [],
+  cmds: {}, trail: [], teach: null, dragging: null,
   view: { cx: 0, cy: 0, scale: 50, fitted: false }, follow: false,
   keys: new Set(), pad: null, gamepad: null, sent: null, sentScan: -1,
   frames: 0, fpsT0: performance.now(), fpsN: 0,
@@ -59,20 +63,21 @@ function receive(m) {
       setRobots(m.robots.length ? m.robots : [m.robot]);
       if (want && want !== m.robot) { S.robot = want; $("robot").value = want; send({ t: "view", robot: want }); }
       if (m.view_only) {
-        for (const el of document.querySelectorAll("#pad button, #modes input, #take")) el.disabled = true;
+        for (const el of document.querySelectorAll("#pad button, #modes input, #take, #episodes button, #episodes input, #place button, #place select")) el.disabled = true;
         $("hold").textContent = "view-only console: watching";
       }
       break;
     }
     case "robots": setRobots(m.robots); break;
-    case "world": S.world = m; S.view.fitted = false; canvas.dataset.walls = m.walls.length; break;
+    case "world": S.world = m; S.view.fitted = false; canvas.dataset.walls = m.walls.length; setStarts(); break;
     case "state":
       S.state = m;
-      { // a jump (a teleport) starts a new trail
+      { // a jump (a teleport) starts a new piece of trail
         const last = S.trail[S.trail.length - 1];
-        if (last && Math.hypot(m.pose[0] - last[0], m.pose[1] - last[1]) > 1.0) S.trail = [];
+        const who = whoDrives(m.driver);
+        if (last && Math.hypot(m.pose[0] - last[0], m.pose[1] - last[1]) > 1.0) S.trail.push(null);
+        S.trail.push([m.pose[0], m.pose[1], who]);
       }
-      S.trail.push([m.pose[0], m.pose[1]]);
       if (S.trail.length > 2000) S.trail.splice(0, S.trail.length - 2000);
       break;
     case "scan":
@@ -83,7 +88,93 @@ function receive(m) {
     case "decision": S.decision = m; break;
     case "cmd": S.cmds[m.source] = m; break;
     case "control": S.control = m; showHold(); break;
+    case "teach": S.teach = m; showTeach(); showHold(); break;
+    case "placed":
+      if (m.reset) S.trail = [];
+      else S.trail.push(null);
+      showInfo(`the robot is at ${m.where}`);
+      break;
+    case "info": showInfo(m.info); break;
     case "error": showError(m.error); break;
+  }
+}
+
+function showInfo(text) {
+  $("info").textContent = text;
+  clearTimeout(showInfo.timer);
+  showInfo.timer = setTimeout(() => { $("info").textContent = ""; }, 6000);
+}
+
+// who drives, as the colours say: "me" (a teacher: the person), "controller", "" (nobody)
+function whoDrives(driver) {
+  return !driver ? "" : driver.startsWith("teacher") ? "teacher"
+    : driver.startsWith("controller") ? "controller" : "other";
+}
+const COLOURS = { teacher: "#e8a33d", controller: "#4a90d9", other: "#8a6d3b", "": "#999" };
+const MARKS = { loop: "#9b3fd5", stall: "#16a39a", collision: "#c2185b" };
+
+function setStarts() {
+  const sel = $("starts"), starts = S.world ? S.world.starts || [] : [];
+  sel.innerHTML = "";
+  starts.forEach((p, i) => sel.add(new Option(
+    `start ${i + 1}: ${p[0].toFixed(1)}, ${p[1].toFixed(1)}, ${(p[2] * 180 / Math.PI).toFixed(0)}\u00b0`,
+    String(i), false, i === (S.world.start || 0))));
+  $("go").disabled = !starts.length || S.viewOnly;
+}
+
+function plural(n, one, many) { return `${n} ${n === 1 ? one : many || one + "s"}`; }
+
+// the learner, the labels, the episode, the agreement and where the robot got into trouble
+function showTeach() {
+  const m = S.teach;
+  if (!m) return;
+  const L = $("learner"), lab = $("labels");
+  const up = m.learner ? m.learner.up : null;
+  L.dataset.seq = m.seq;
+  L.dataset.up = up === null ? "" : up ? "1" : "0";
+  const b = m.labels;
+  L.textContent = up === null ? "learner: unknown" : up ? "a learner is listening"
+    : "no learner is up: your labels are kept and sent once one is";
+  L.className = up ? "ok" : up === null ? "" : "warn";
+  if (b) {
+    lab.dataset.given = b.given; lab.dataset.held = b.held; lab.dataset.waiting = b.waiting;
+    lab.dataset.withdrawn = b.withdrawn;
+    lab.textContent = `labels: ${b.given} given, ${b.held} held by the learner, ${b.waiting} waiting`
+      + (b.withdrawn ? `, ${b.withdrawn} withdrawn` : "")
+      + (b.withdrawals_waiting ? ` (${plural(b.withdrawals_waiting, "withdrawal")} not yet acknowledged)` : "");
+    lab.className = b.waiting >= b.cap ? "bad" : b.waiting > 50 && !up ? "warn" : "";
+  } else {
+    lab.textContent = "labels: none given yet";
+  }
+  const A = $("agreement");
+  A.dataset.value = m.agreement === null ? "" : m.agreement; A.dataset.n = m.scored;
+  A.textContent = m.agreement === null
+    ? (m.tree ? "agreement: no key scored yet (drive to see)" : "agreement: no tree yet")
+    : `the tree agrees with ${(100 * m.agreement).toFixed(0)}% of your last ${plural(m.scored, "key")} (${m.window.toFixed(0)} s)`;
+  A.className = m.agreement === null ? "" : m.agreement >= 0.8 ? "ok" : m.agreement >= 0.5 ? "warn" : "bad";
+  const count = { loop: 0, stall: 0, collision: 0 };
+  for (const k of m.markers) count[k.kind] = (count[k.kind] || 0) + k.count;
+  const T = $("trouble");
+  T.dataset.markers = m.markers.length; T.dataset.loops = count.loop;
+  T.dataset.stalls = count.stall; T.dataset.collisions = count.collision;
+  T.textContent = m.markers.length
+    ? `on the map: ${plural(count.loop, "loop")}, ${plural(count.stall, "stall")}, ${plural(count.collision, "collision")}`
+    : "the learned robot has not looped, stalled or collided";
+  const E = $("episode"), eps = m.episodes || [], cur = eps.length ? eps[eps.length - 1] : null;
+  E.dataset.n = cur ? cur.n : ""; E.dataset.state = cur ? cur.state : "";
+  E.dataset.labels = cur ? cur.labels : "";
+  E.textContent = !cur ? "none yet: your first key starts one"
+    : `episode ${cur.n} ${cur.state}: ${plural(cur.labels, "label")}`
+      + (eps.length > 1 ? ` (${plural(eps.filter((e) => e.state !== "discarded").length, "episode")} kept)` : "");
+  $("record").firstChild.textContent = m.episode !== null ? "stop " : "record ";
+  const stuck = $("stuck");
+  const show = m.stuck && S.mode !== "demonstrate";
+  stuck.hidden = !show;
+  stuck.dataset.why = show ? m.stuck.why : "";
+  if (show) {
+    stuck.textContent = S.mode === "correct"
+      ? `the robot is stuck here (${m.stuck.why === "loop" ? "it turns left and right in a loop" : "it hardly moves"}): show it the way`
+      : `the robot is stuck here (${m.stuck.why}): switch to correct (C) to show it the way`;
   }
 }
 
@@ -103,8 +194,35 @@ $("robot").onchange = (e) => {
 };
 
 for (const r of document.querySelectorAll("#modes input")) {
-  r.onchange = () => { S.mode = r.value; release(); send({ t: "mode", mode: S.mode }); };
+  r.onchange = () => { S.mode = r.value; release(); send({ t: "mode", mode: S.mode }); showTeach(); showHold(); };
 }
+
+function setMode(mode) {
+  if (S.viewOnly || mode === S.mode) return;
+  const input = document.querySelector(`#modes input[value="${mode}"]`);
+  input.checked = true;
+  input.onchange();
+}
+
+// ---- episodes, undo, where the robot is ----------------------------------------------------
+function episode(what) { release(); send({ t: "episode", do: what }); }
+function undo() {
+  const s = Number($("undo-seconds").value);
+  release(); send({ t: "undo", seconds: s });
+}
+function placeAt(i) {
+  if (!S.world || !(S.world.starts || []).length) { showError("the world gives no start poses"); return; }
+  if (i >= S.world.starts.length) { showError(`the world has ${S.world.starts.length} start poses`); return; }
+  $("starts").value = String(i);
+  release(); send({ t: "place", start: i });
+}
+function reset() { release(); send({ t: "reset" }); }
+$("record").onclick = () => SHORTCUTS.r();
+$("discard").onclick = () => episode("discard");
+$("rerecord").onclick = () => episode("rerecord");
+$("undo").onclick = undo;
+$("go").onclick = () => placeAt(Number($("starts").value));
+$("reset").onclick = reset;
 $("take").onclick = () => send({ t: "take" });
 $("follow").onchange = (e) => { S.follow = e.target.checked; };
 
@@ -114,7 +232,9 @@ function showHold() {
   let who = "none";
   if (c && c.holder !== null) who = c.holder === S.page ? "me" : "other";
   el.dataset.holder = who;
+  const t = S.teach, nobody = t && t.learner && !t.learner.up;
   el.textContent = who === "me" ? `you hold the robot (${c.holder_mode})`
+    + (nobody ? `: no learner is up, your ${t.labels ? t.labels.waiting : 0} labels wait for one` : "")
     : who === "other" ? `page #${c.holder} holds the robot: you watch`
     : S.mode === "watch" ? "watching" : "nobody holds the robot: press a key to drive";
   $("take").hidden = who !== "other" || S.mode === "watch";
@@ -149,11 +269,28 @@ function update() {
 
 function release() { S.keys.clear(); S.pad = null; S.gamepad = null; update(); }
 
+// the shortcuts (the page's "keys" table and docs/console.md say the same)
+const SHORTCUTS = {
+  t: () => setMode("demonstrate"), v: () => setMode("watch"), c: () => setMode("correct"),
+  r: () => episode(S.teach && S.teach.episode !== null ? "stop" : "start"),
+  x: () => episode("discard"), e: () => episode("rerecord"),
+  z: undo, Backspace: undo, Home: reset,
+  f: () => { S.follow = !S.follow; $("follow").checked = S.follow; },
+};
+
 addEventListener("keydown", (e) => {
-  if (e.target.tagName === "SELECT") return;
+  const tag = e.target.tagName;
+  if (tag === "SELECT" || tag === "INPUT" || tag === "TEXTAREA") return;
   if (e.key === " " || e.key === "Escape") { e.preventDefault(); release(); return; }
   const k = KEYS[e.key];
-  if (!k) return;
+  if (!k) {
+    if (e.ctrlKey || e.metaKey || e.altKey) return;
+    const name = e.key.length === 1 ? e.key.toLowerCase() : e.key;
+    const fn = SHORTCUTS[name];
+    if (fn) { e.preventDefault(); if (!e.repeat) fn(); return; }
+    if (/^[1-9]$/.test(e.key)) { e.preventDefault(); if (!e.repeat) placeAt(Number(e.key) - 1); }
+    return;
+  }
   e.preventDefault();
   if (!e.repeat) { S.keys.add(k); update(); }
 });
@@ -202,16 +339,49 @@ canvas.addEventListener("wheel", (e) => {
   const after = toWorld(e.offsetX, e.offsetY);
   S.view.cx += before[0] - after[0]; S.view.cy += before[1] - after[1];
 }, { passive: false });
+// drag the map to pan; drag the robot's body to move it, its nose to turn it (sent on release)
 let drag = null;
-canvas.addEventListener("pointerdown", (e) => { canvas.focus(); drag = [e.offsetX, e.offsetY]; });
+function robotPose() { return S.state ? S.state.pose : S.scan ? S.scan.pose : null; }
+canvas.addEventListener("pointerdown", (e) => {
+  canvas.focus();
+  const p = robotPose(), [wx, wy] = toWorld(e.offsetX, e.offsetY);
+  const mayMove = p && !S.viewOnly && S.mode !== "watch";
+  if (mayMove) {
+    const nose = [p[0] + 0.3 * Math.cos(p[2]), p[1] + 0.3 * Math.sin(p[2])];
+    const grab = Math.max(0.12, 8 / S.view.scale);
+    const how = Math.hypot(wx - nose[0], wy - nose[1]) < grab ? "turn"
+      : Math.hypot(wx - p[0], wy - p[1]) < 0.25 + grab / 2 ? "move" : null;
+    if (how) {
+      release();
+      S.dragging = { how, pose: [p[0], p[1], p[2]], dx: wx - p[0], dy: wy - p[1] };
+      canvas.setPointerCapture(e.pointerId);
+      return;
+    }
+  }
+  drag = [e.offsetX, e.offsetY];
+});
 canvas.addEventListener("pointermove", (e) => {
+  const d = S.dragging;
+  if (d) {
+    const [wx, wy] = toWorld(e.offsetX, e.offsetY);
+    if (d.how === "move") { d.pose[0] = wx - d.dx; d.pose[1] = wy - d.dy; }
+    else d.pose[2] = Math.atan2(wy - d.pose[1], wx - d.pose[0]);
+    return;
+  }
   if (!drag) return;
   const dx = e.offsetX - drag[0], dy = e.offsetY - drag[1];
   if (Math.abs(dx) + Math.abs(dy) < 3) return;
   S.view.cx -= dx / S.view.scale; S.view.cy += dy / S.view.scale; drag = [e.offsetX, e.offsetY];
   if (S.follow) { S.follow = false; $("follow").checked = false; }
 });
-addEventListener("pointerup", () => { drag = null; });
+addEventListener("pointerup", () => {
+  drag = null;
+  const d = S.dragging;
+  if (d) {
+    S.dragging = null;
+    send({ t: "place", pose: d.pose.map((v) => Math.round(v * 1000) / 1000) });
+  }
+});
 
 function toWorld(px, py) {
   const w = canvas.clientWidth, h = canvas.clientHeight, v = S.view;
@@ -246,6 +416,7 @@ function draw() {
   g.clearRect(0, 0, w, h);
   g.setTransform(dpr * v.scale, 0, 0, -dpr * v.scale, dpr * (w / 2 - v.cx * v.scale), dpr * (h / 2 + v.cy * v.scale));
   const px = 1 / v.scale; // one screen pixel in metres
+  grid(w, h, px);
   if (S.world) {
     if (S.world.goal) {
       const [gx, gy, gr] = S.world.goal;
@@ -255,12 +426,8 @@ function draw() {
     for (const [a, b, c, d] of S.world.walls) { g.moveTo(a, b); g.lineTo(c, d); }
     g.stroke();
   }
-  if (S.trail.length > 1) {
-    g.strokeStyle = "rgba(74,144,217,0.7)"; g.lineWidth = 2 * px; g.beginPath();
-    g.moveTo(S.trail[0][0], S.trail[0][1]);
-    for (const [x, y] of S.trail) g.lineTo(x, y);
-    g.stroke();
-  }
+  if (S.world) startsDrawn(px);
+  trail(px);
   const sc = S.scan;
   if (sc) {
     const [x, y, yaw] = sc.pose, n = sc.ranges.length;
@@ -277,18 +444,109 @@ function draw() {
     const d = 3 * px;
     for (let i = 0; i < hits.length; i += 2) g.fillRect(hits[i] - d / 2, hits[i + 1] - d / 2, d, d);
   }
+  if (S.dragging) { // where it will be put
+    const [x, y, yaw] = S.dragging.pose;
+    g.setLineDash([4 * px, 3 * px]); g.strokeStyle = "#222"; g.lineWidth = 1.5 * px;
+    g.beginPath(); g.arc(x, y, 0.25, 0, 2 * Math.PI); g.stroke();
+    g.beginPath(); g.moveTo(x, y); g.lineTo(x + 0.3 * Math.cos(yaw), y + 0.3 * Math.sin(yaw)); g.stroke();
+    g.setLineDash([]);
+  }
   if (pose) {
     const [x, y, yaw] = pose, drv = S.state ? S.state.driver : "";
-    g.fillStyle = drv.startsWith("teacher") ? "#e8a33d" : drv.startsWith("controller") ? "#4a90d9" : "#999";
+    g.fillStyle = COLOURS[whoDrives(drv)];
     g.strokeStyle = "#222"; g.lineWidth = 1.5 * px;
     g.beginPath(); g.arc(x, y, 0.25, 0, 2 * Math.PI); g.fill(); g.stroke();
     g.beginPath(); g.moveTo(x, y); g.lineTo(x + 0.3 * Math.cos(yaw), y + 0.3 * Math.sin(yaw)); g.stroke();
+    g.fillStyle = "#222"; g.beginPath(); g.arc(x + 0.3 * Math.cos(yaw), y + 0.3 * Math.sin(yaw), 3 * px, 0, 2 * Math.PI); g.fill();
     const el = $("pose");
     el.dataset.x = x.toFixed(3); el.dataset.y = y.toFixed(3); el.dataset.yaw = yaw.toFixed(3);
     el.dataset.scan = sc ? sc.id : "";
     el.textContent = `${x.toFixed(2)}, ${y.toFixed(2)}, ${(yaw * 180 / Math.PI).toFixed(0)}\u00b0`;
   }
+  marks(px); // above the robot: a robot looping in place sits on its own mark
+  g.setTransform(dpr, 0, 0, dpr, 0, 0);
+  scaleBar(h, v.scale);
   panel();
+  S.shown = { pose, scan: sc };
+}
+
+// a light grid every metre (every 5 m when zoomed out), in world coordinates
+function grid(w, h, px) {
+  const step = S.view.scale < 12 ? 5 : 1;
+  const [x0, y1] = toWorld(0, 0), [x1, y0] = toWorld(w, h);
+  g.strokeStyle = "rgba(0,0,0,0.06)"; g.lineWidth = px; g.beginPath();
+  for (let x = Math.ceil(x0 / step) * step; x <= x1; x += step) { g.moveTo(x, y0); g.lineTo(x, y1); }
+  for (let y = Math.ceil(y0 / step) * step; y <= y1; y += step) { g.moveTo(x0, y); g.lineTo(x1, y); }
+  g.stroke();
+}
+
+// a bar of a round length at the bottom left, in screen pixels
+function scaleBar(h, scale) {
+  const nice = [0.1, 0.2, 0.5, 1, 2, 5, 10, 20, 50];
+  const metres = nice.find((m) => m * scale >= 60) || 50, len = metres * scale;
+  g.strokeStyle = "#222"; g.lineWidth = 2; g.beginPath();
+  g.moveTo(12, h - 14); g.lineTo(12 + len, h - 14);
+  g.moveTo(12, h - 19); g.lineTo(12, h - 9); g.moveTo(12 + len, h - 19); g.lineTo(12 + len, h - 9);
+  g.stroke();
+  g.fillStyle = "#222"; g.font = "12px system-ui, sans-serif";
+  g.fillText(`${metres} m`, 16 + len, h - 10);
+  canvas.dataset.scaleBar = String(metres);
+}
+
+function startsDrawn(px) {
+  (S.world.starts || []).forEach(([x, y, yaw], i) => {
+    g.save(); g.translate(x, y); g.rotate(yaw);
+    g.strokeStyle = "rgba(40,120,40,0.8)"; g.lineWidth = 1.5 * px; g.beginPath();
+    g.moveTo(0.2, 0); g.lineTo(-0.12, 0.12); g.lineTo(-0.12, -0.12); g.closePath(); g.stroke();
+    g.restore();
+    g.save(); g.translate(x, y); g.scale(px, -px);
+    g.fillStyle = "rgba(40,120,40,0.9)"; g.font = "11px system-ui, sans-serif";
+    g.fillText(String(i + 1), 10, -8);
+    g.restore();
+  });
+}
+
+// the trail, each piece in the colour of who drove it (null: a jump)
+function trail(px) {
+  const t = S.trail;
+  g.lineWidth = 2 * px; g.lineCap = "round"; g.globalAlpha = 0.75;
+  let colour = null; // one path per run of the same driver
+  for (let i = 1; i < t.length; i++) {
+    const a = t[i - 1], b = t[i];
+    if (!a || !b) continue;
+    if (COLOURS[b[2]] !== colour) {
+      if (colour) g.stroke();
+      colour = COLOURS[b[2]]; g.strokeStyle = colour; g.beginPath();
+    }
+    g.moveTo(a[0], a[1]); g.lineTo(b[0], b[1]);
+  }
+  if (colour) g.stroke();
+  g.globalAlpha = 1;
+}
+
+// where the learned robot looped (purple ring), stalled (teal square), collided (crimson X);
+// where it is stuck now, a pulsing ring
+function marks(px) {
+  const m = S.teach;
+  if (!m) return;
+  for (const k of m.markers) {
+    g.strokeStyle = MARKS[k.kind] || "#000"; g.fillStyle = g.strokeStyle; g.lineWidth = 2.5 * px;
+    const r = 0.18;
+    g.beginPath();
+    if (k.kind === "loop") g.arc(k.x, k.y, r, 0, 2 * Math.PI);
+    else if (k.kind === "stall") g.rect(k.x - r, k.y - r, 2 * r, 2 * r);
+    else { g.moveTo(k.x - r, k.y - r); g.lineTo(k.x + r, k.y + r); g.moveTo(k.x - r, k.y + r); g.lineTo(k.x + r, k.y - r); }
+    g.stroke();
+    if (k.count > 1) {
+      g.save(); g.translate(k.x, k.y); g.scale(px, -px);
+      g.font = "bold 11px system-ui, sans-serif"; g.fillText(`\u00d7${k.count}`, 10, 14); g.restore();
+    }
+  }
+  if (m.stuck && Number.isFinite(m.stuck.x)) {
+    const r = 0.35 + 0.1 * Math.sin(performance.now() / 200);
+    g.strokeStyle = MARKS.loop; g.lineWidth = 3 * px;
+    g.beginPath(); g.arc(m.stuck.x, m.stuck.y, r, 0, 2 * Math.PI); g.stroke();
+  }
 }
 
 function panel() {
@@ -297,6 +555,15 @@ function panel() {
   $("driver").dataset.driver = drv;
   const c = drv ? S.cmds[drv.split(/[-:.]/)[0]] || S.cmds[drv] : null;
   $("action").textContent = !st ? "-" : !drv ? "stopped" : c ? c.action : "?";
+  $("action").dataset.action = st && drv && c ? c.action : "";
+  if (st) {
+    const ck = $("clock");
+    if (ck.dataset.t !== st.ts.toFixed(2)) {
+      ck.dataset.t = st.ts.toFixed(2);
+      const m = Math.floor(st.ts / 60), sec = st.ts - 60 * m;
+      ck.textContent = `${m}:${sec.toFixed(1).padStart(4, "0")} (${st.ts.toFixed(1)} s)`;
+    }
+  }
   const n = S.notice;
   if (n) {
     const t = $("tree");
@@ -339,6 +606,23 @@ function frame(now) {
 // while a key is held, say so at least every 200 ms even when scans come slowly (the console
 // stops the person's commands after 0.5 s without a word from the page)
 setInterval(() => { if (S.sent && S.scan) send({ t: "drive", action: S.sent, scan_id: S.scan.id }); }, 200);
+
+// What the page shows now, for a person model driving the page (benchmarks/bench_teach.py) or a
+// test: read-only, a fresh copy each call; the keys are pressed on the page like a person's.
+Object.defineProperty(window, "rhbl", { value: Object.freeze({
+  view() {
+    const st = S.state, sh = S.shown || {}, drv = st ? st.driver : "";
+    const c = drv ? S.cmds[drv.split(/[-:.]/)[0]] || S.cmds[drv] : null;
+    return {
+      t: st ? st.ts : null, pose: sh.pose ? sh.pose.slice() : null,
+      walls: S.world ? S.world.walls.map((w) => w.slice()) : [], starts: S.world ? (S.world.starts || []).map((p) => p.slice()) : [],
+      mode: S.mode, driver: drv, action: drv && c ? c.action : null,
+      scan_id: sh.scan ? sh.scan.id : null, holder: $("hold").dataset.holder || "",
+      stuck: S.teach && S.teach.stuck ? S.teach.stuck.why : null, link: $("link").dataset.state || "",
+      markers: S.teach ? S.teach.markers.map((k) => ({ ...k })) : [],
+    };
+  },
+}) });
 
 connect();
 requestAnimationFrame(frame);

@@ -1,0 +1,435 @@
+"""Teaching by hand, measured: person models drive the real console page in a real headless
+Chromium, and the tree they taught is evaluated.
+
+Per run (one person model, one seed, one learner): a real ``rhbl server`` (the room world, real
+time), a real ``rhbl learner``, a real ``rhbl console`` and Debian's Chromium on the page
+(selenium). The person (``benchmarks/people.py``: ``PEOPLE[name](seed=...)``) is fed what the
+page shows at each frame (``window.rhbl.view()``: the page's clock, the robot as drawn, the
+walls, the mode, who drives, the action executed, the scan displayed) and the keys it holds are
+pressed and released on the page like a person's (selenium key events: arrows, ``Home``, ``C``).
+
+1. demonstrate: the robot at its start pose (``Home``), the person drives for ``--demo`` s;
+2. correct: a ``rhbl controller --from-learner --follow`` drives the learner's tree, the page in
+   correct mode (``C``): the person takes over when they judge it necessary, for ``--correct`` s;
+3. the learner's saved tree is evaluated (``lab.evaluate``) from every start pose of the room it
+   was taught in and of the unseen rooms (``--unseen``).
+
+The table gives per run and per model (mean over its seeds) the success in the taught room and
+in the unseen rooms, the oscillation loops and collisions in those evaluations, the tree's size
+and the labels (given at the page; standing in the learner's journal). ``--learners default,literal``
+runs each person and seed twice: with the learner's defaults, and with the paper's literal
+algorithm (``--literal-args``, default ``--spawn all``) as a baseline.
+
+    python benchmarks/bench_teach.py --people steady,hurried --seeds 0,1,2 \
+        [--demo 240] [--correct 120] [--learners default,literal] [--json out.json]
+
+``--people`` takes names, ``dev``, ``held-out`` or ``all``. The budget per run is at most 240 s
+demonstrating plus 120 s correcting (real time).
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures
+import contextlib
+import json
+import math
+import shlex
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests" / "integration"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+MAX_DEMO, MAX_CORRECT = 240.0, 120.0
+UNSEEN = ("eval-room-jagged", "eval-room-l", "eval-room-ring")
+LITERAL = "--spawn all"
+# the keys held for each action (the page combines them as a person's fingers do)
+ARROWS = {None: (), "fwd": ("ARROW_UP",), "fwd-left": ("ARROW_UP", "ARROW_LEFT"),
+          "rot-left": ("ARROW_LEFT",), "fwd-right": ("ARROW_UP", "ARROW_RIGHT"),
+          "rot-right": ("ARROW_RIGHT",)}
+
+
+class Page:
+    """The console page in a browser, as a person sees and touches it."""
+
+    def __init__(self, browser, url: str):
+        from selenium.webdriver.support.ui import WebDriverWait
+
+        self.b = browser
+        browser.get(url)
+        WebDriverWait(browser, 30, poll_frequency=0.05).until(
+            lambda d: (v := self.view_raw()) and v["link"] == "open" and v["pose"]
+            and v["walls"] and v["t"] is not None)
+        browser.find_element("id", "view").click()  # the keys reach the page
+        self.held: set[str] = set()
+        self._walls = None
+
+    def view_raw(self) -> dict:
+        return self.b.execute_script("return window.rhbl ? window.rhbl.view() : null")
+
+    def view(self, people):
+        """A ``people.View`` of what the page shows now (None before a pose and a clock)."""
+        v = self.view_raw()
+        if not v or v["pose"] is None or v["t"] is None:
+            return None
+        if self._walls is None or len(self._walls) != len(v["walls"]):
+            self._walls = np.asarray(v["walls"], dtype=float).reshape(-1, 4)
+        return people.View(t=float(v["t"]), pose=tuple(float(x) for x in v["pose"]),
+                           walls=self._walls, mode=v["mode"], driver=v["driver"] or "",
+                           action=v["action"], scan_id=v["scan_id"])
+
+    def hold(self, action: str | None) -> None:
+        """Hold the keys of ``action`` (None: none), releasing the others."""
+        from selenium.webdriver.common.action_chains import ActionChains
+        from selenium.webdriver.common.keys import Keys
+
+        want = set(ARROWS[action])
+        if want == self.held:
+            return
+        chain = ActionChains(self.b)
+        for k in sorted(self.held - want):
+            chain = chain.key_up(getattr(Keys, k))
+        for k in sorted(want - self.held):
+            chain = chain.key_down(getattr(Keys, k))
+        chain.perform()
+        self.held = want
+
+    def press(self, key: str) -> None:
+        from selenium.webdriver.common.action_chains import ActionChains
+        from selenium.webdriver.common.keys import Keys
+
+        k = getattr(Keys, key) if len(key) > 1 else key
+        ActionChains(self.b).key_down(k).key_up(k).perform()
+
+    def data(self, el: str, name: str) -> str:
+        return self.b.find_element("id", el).get_attribute(f"data-{name}") or ""
+
+    def until(self, pred, timeout: float, what: str) -> None:
+        from selenium.common.exceptions import TimeoutException
+        from selenium.webdriver.support.ui import WebDriverWait
+
+        try:
+            WebDriverWait(self.b, timeout, poll_frequency=0.05).until(lambda d: pred(self))
+        except TimeoutException:
+            raise RuntimeError(f"the page: not within {timeout:g} s: {what}") from None
+
+
+def teach(page: Page, person, people, seconds: float, mode: str) -> dict:
+    """The person at the page for ``seconds`` of the page's clock; what they did."""
+    v = None
+    while v is None:
+        v = page.view(people)
+    t0, frames, keys_held, presses = v.t, 0, 0, 0
+    last = None
+    while True:
+        v = page.view(people)
+        if v is None:
+            continue
+        if v.t - t0 >= seconds:
+            break
+        key = person.observe(v)
+        if key != last:
+            presses += key is not None
+            last = key
+        page.hold(key)
+        frames += 1
+        keys_held += key is not None
+    page.hold(None)
+    return {"mode": mode, "seconds": round(v.t - t0, 2), "frames": frames,
+            "frames_with_a_key": keys_held, "presses": presses}
+
+
+def _labels(page: Page) -> dict:
+    return {k: int(page.data("labels", k) or 0) for k in ("given", "held", "waiting",
+                                                          "withdrawn")}
+
+
+def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
+              learner: str = "default", literal_args: str = LITERAL, learner_args: str = "",
+              world: str = "room", workdir: Path | None = None, log=print) -> dict:
+    """A person teaches at the page: demonstrating, then correcting (see the module); what they
+    did and the learner's tree (``tree_path``), not evaluated yet."""
+    import people
+    import zenoh  # noqa: F401 - fail early without it
+    from browser import ConsoleProcess, chromium, close_chromium
+
+    from lab.children import Child, rhbl_argv
+    from tests.conftest import _server_factory
+
+    work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-bench-teach-"))
+    work.mkdir(parents=True, exist_ok=True)
+    out = work / "tree.rhbl"
+    extra = shlex.split(literal_args if learner == "literal" else learner_args)
+    started, children, browser = [], [], None
+    result = {"person": person_name, "seed": seed, "learner": learner,
+              "learner_args": " ".join(extra), "world": world,
+              "demo_budget": demo, "correct_budget": correct, "workdir": str(work)}
+    t_start = time.monotonic()
+    try:
+        srv = _server_factory(started)(world)
+        lrn = Child("learner", rhbl_argv("learner", "--features", "wall", "--out", str(out),
+                                         "--snapshot-every", "1", "--stats",
+                                         str(work / "learner.json"), "--connect", srv.endpoint,
+                                         *extra), work, cwd=ROOT, stop_signal=signal.SIGINT,
+                    stop_timeout=60.0).start()
+        children.append(lrn)
+        console = ConsoleProcess(srv.endpoint, "--stats", str(work / "console.json"))
+        children.append(console)
+        url = console.wait_url()
+        browser = chromium()
+        page = Page(browser, url)
+        page.until(lambda p: p.data("learner", "up") == "1", 60, "a learner is up")
+        person = people.PEOPLE[person_name](seed=seed)
+        person.reset()
+        page.press("HOME")  # the robot at its start pose
+        page.until(lambda p: "reset" in p.b.find_element("id", "info").text, 10, "reset")
+        log(f"  {person_name} seed {seed} ({learner}): demonstrating {demo:g} s")
+        result["demonstrate"] = teach(page, person, people, demo, "demonstrate")
+        result["labels_demonstrated"] = _labels(page)["given"]
+        ctl = Child("controller", rhbl_argv("controller", "--from-learner", "--follow",
+                                            "--connect", srv.endpoint), work, cwd=ROOT,
+                    stop_signal=signal.SIGINT, stop_timeout=30.0).start()
+        children.append(ctl)
+        page.press("c")  # correct mode
+        page.until(lambda p: (p.view_raw() or {}).get("driver", "").startswith("controller"),
+                   60, "the controller drives the learner's tree")
+        log(f"  {person_name} seed {seed} ({learner}): correcting {correct:g} s")
+        result["correct"] = teach(page, person, people, correct, "correct")
+        result["loop_marks"] = int(page.data("trouble", "loops") or 0)
+        result["collision_marks"] = int(page.data("trouble", "collisions") or 0)
+        result["agreement"] = page.data("agreement", "value")
+        ctl.stop()
+        page.press("t")
+        page.until(lambda p: _labels(p)["waiting"] == 0, 60, "every label acknowledged")
+        result["labels"] = _labels(page)
+        console.stop()
+        rc = lrn.stop()
+        if rc != 0:
+            raise RuntimeError(f"the learner exited {rc}:\n{lrn.output()[-2000:]}")
+    finally:
+        if browser is not None:
+            close_chromium(browser)
+        for c in reversed(children):
+            with contextlib.suppress(Exception):
+                c.stop()
+        for s in started:
+            with contextlib.suppress(Exception):
+                s.stop()
+    result["teaching_wall_s"] = round(time.monotonic() - t_start, 1)
+    stats = json.loads((work / "learner.json").read_text())
+    result["labels_standing"] = stats.get("standing")
+    result["tree_path"] = str(out)
+    return result
+
+
+def evaluate_run(result: dict, world: str = "room", unseen=UNSEEN,
+                 eval_episodes: int | None = None, eval_seconds: float | None = None) -> dict:
+    """Evaluate a run's tree (``rhbl evaluate``, i.e. ``lab.evaluate``, in its own process) in
+    the room it was taught in and in the unseen rooms; the figures added to ``result``."""
+    from lab.children import rhbl_argv
+
+    work = Path(result["workdir"])
+    result["eval"] = {}
+    for name in (world, *unseen):
+        out = work / f"eval-{name}.json"
+        argv = rhbl_argv("evaluate", "--world", name, "--tree", result["tree_path"],
+                         "--seed", str(result["seed"]), "--json", str(out))
+        if eval_episodes is not None:
+            argv += ["--episodes", str(eval_episodes)]
+        if eval_seconds is not None:
+            argv += ["--seconds", str(eval_seconds)]
+        done = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=3600)
+        if done.returncode != 0:
+            raise RuntimeError(f"rhbl evaluate --world {name} exited {done.returncode}: "
+                               f"{done.stdout[-500:]}{done.stderr[-1000:]}")
+        rep = json.loads(out.read_text())
+        result["tree"] = rep["tree"]
+        result["eval"][name] = {
+            "success_rate": rep["success_rate"], "episodes": rep["episodes"],
+            "loops": len(rep["loops"]),
+            "collisions": int(sum(e["collisions"] for e in rep["learner"])),
+            "wall_band": round(statistics.fmean(e["wall_band_fraction"] for e in rep["learner"]), 3),
+            "teacher_success_rate": rep["teacher_success_rate"]}
+    taught = result["eval"][world]
+    others = [result["eval"][n] for n in unseen]
+    result["success_taught"] = taught["success_rate"]
+    result["success_unseen"] = (statistics.fmean(e["success_rate"] for e in others)
+                                if others else None)
+    result["loops"] = sum(e["loops"] for e in result["eval"].values())
+    result["loops_taught"] = taught["loops"]
+    result["collisions"] = sum(e["collisions"] for e in result["eval"].values())
+    return result
+
+
+def run_one(person_name: str, seed: int, demo: float, correct: float, *, world: str = "room",
+            unseen=UNSEEN, eval_episodes: int | None = None, eval_seconds: float | None = None,
+            **kw) -> dict:
+    """One run, taught then evaluated (see the module); its figures."""
+    r = teach_one(person_name, seed, demo, correct, world=world, **kw)
+    return evaluate_run(r, world, unseen, eval_episodes, eval_seconds)
+
+
+def _pct(v) -> str:
+    return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{100 * v:.0f}%"
+
+
+def table(results: list[dict]) -> str:
+    """The runs, then per person model and learner the means over its seeds (markdown)."""
+    rows = ["| person | learner | seed | taught room | unseen rooms | loops | collisions | "
+            "tree nodes | labels given | labels standing |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        if "error" in r:
+            rows.append(f"| {r['person']} | {r['learner']} | {r['seed']} | failed: "
+                        f"{r['error'][:60]} | | | | | | |")
+            continue
+        rows.append(f"| {r['person']} | {r['learner']} | {r['seed']} | {_pct(r['success_taught'])} "
+                    f"| {_pct(r['success_unseen'])} | {r['loops']} | {r['collisions']} | "
+                    f"{r['tree']['nodes']} | {r['labels']['given']} | {r['labels_standing']} |")
+    rows += ["", "| person | learner | runs | taught room (mean) | unseen rooms (mean) | "
+             "loops (mean) | collisions (mean) | tree nodes (mean) | labels (mean) |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for r in results:
+        if "error" not in r:
+            groups.setdefault((r["person"], r["learner"]), []).append(r)
+    for (p, lrn), rs in groups.items():
+        def mean(f, rs=rs):
+            return statistics.fmean(f(r) for r in rs)
+        rows.append(f"| {p} | {lrn} | {len(rs)} | {_pct(mean(lambda r: r['success_taught']))} | "
+                    f"{_pct(mean(lambda r: r['success_unseen'] or 0.0))} | "
+                    f"{mean(lambda r: r['loops']):.1f} | {mean(lambda r: r['collisions']):.1f} | "
+                    f"{mean(lambda r: r['tree']['nodes']):.0f} | "
+                    f"{mean(lambda r: r['labels']['given']):.0f} |")
+    return "\n".join(rows)
+
+
+def _names(text: str, people) -> list[str]:
+    if text == "all":
+        return list(people.PEOPLE)
+    if text == "dev":
+        return list(people.DEV)
+    if text == "held-out":
+        return list(people.HELD_OUT)
+    names = [n for n in text.split(",") if n]
+    bad = [n for n in names if n not in people.PEOPLE]
+    if bad or not names:
+        raise ValueError(f"--people: unknown {', '.join(bad) or '(none)'}; one of "
+                         f"{', '.join(people.PEOPLE)}, dev, held-out, all")
+    return names
+
+
+def _seeds(text: str) -> list[int]:
+    try:
+        seeds = [int(s) for s in text.split(",") if s.strip()]
+    except ValueError:
+        raise ValueError(f"--seeds must be integers separated by commas, got {text!r}") from None
+    if not seeds or any(s < 0 for s in seeds):
+        raise ValueError(f"--seeds must be integers >= 0, got {text!r}")
+    return seeds
+
+
+def main(argv=None) -> int:
+    import people
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--people", default="dev", help="names, dev, held-out or all (default dev)")
+    ap.add_argument("--seeds", default="0,1,2", help="seeds, e.g. 0,1,2 (default)")
+    ap.add_argument("--demo", type=float, default=MAX_DEMO,
+                    help=f"seconds demonstrating per run (at most {MAX_DEMO:g}; default)")
+    ap.add_argument("--correct", type=float, default=MAX_CORRECT,
+                    help=f"seconds correcting per run (at most {MAX_CORRECT:g}; default)")
+    ap.add_argument("--learners", default="default",
+                    help="default, literal or default,literal (the paper's literal algorithm "
+                         "as a baseline)")
+    ap.add_argument("--literal-args", default=LITERAL,
+                    help=f"the learner's options for the literal algorithm (default {LITERAL!r})")
+    ap.add_argument("--learner-args", default="",
+                    help="the learner's options for the default runs (default: none, the "
+                         "learner's own defaults), e.g. '--teacher person'")
+    ap.add_argument("--world", default="room", help="the room taught in (default room)")
+    ap.add_argument("--unseen", default=",".join(UNSEEN),
+                    help=f"unseen rooms, comma-separated (default {','.join(UNSEEN)})")
+    ap.add_argument("--eval-episodes", type=int, default=None,
+                    help="episodes per evaluated room (default: one per start pose)")
+    ap.add_argument("--eval-seconds", type=float, default=None,
+                    help="sim seconds per evaluated episode (default: rhbl evaluate's)")
+    ap.add_argument("--json", default=None, help="write every run's figures here")
+    ap.add_argument("--workdir", default=None, help="keep each run's logs and tree under here")
+    args = ap.parse_args(argv)
+    try:
+        names = _names(args.people, people)
+        seeds = _seeds(args.seeds)
+        if not 0 < args.demo <= MAX_DEMO or not 0 < args.correct <= MAX_CORRECT:
+            raise ValueError(f"--demo must be in (0, {MAX_DEMO:g}] and --correct in "
+                             f"(0, {MAX_CORRECT:g}] seconds")
+        learners = [x for x in args.learners.split(",") if x]
+        if not learners or any(x not in ("default", "literal") for x in learners):
+            raise ValueError(f"--learners: default, literal or both, got {args.learners!r}")
+        unseen = [x for x in args.unseen.split(",") if x]
+        from lab.harness import resolve_world
+
+        for w in (args.world, *unseen):
+            resolve_world(w)
+        if args.eval_episodes is not None and args.eval_episodes < 1:
+            raise ValueError("--eval-episodes must be >= 1")
+        if args.eval_seconds is not None and not args.eval_seconds > 0:
+            raise ValueError("--eval-seconds must be > 0")
+    except Exception as exc:  # noqa: BLE001 - one line, exit 2
+        print(f"bench_teach: error: {exc}", file=sys.stderr)
+        return 2
+    top = Path(args.workdir) if args.workdir else Path(tempfile.mkdtemp(prefix="rhbl-bench-teach-"))
+    print(f"bench_teach: {len(names)} people x {len(seeds)} seeds x {len(learners)} learners, "
+          f"{args.demo:g} s demonstrating + {args.correct:g} s correcting each; logs in {top}",
+          flush=True)
+    results: list[dict] = []
+
+    def save() -> None:
+        if args.json:
+            Path(args.json).write_text(json.dumps(results, indent=1))
+
+    def evaluated(r: dict) -> dict:
+        try:
+            evaluate_run(r, args.world, unseen, args.eval_episodes, args.eval_seconds)
+        except Exception as exc:  # noqa: BLE001 - said in the table
+            r["error"] = f"evaluation: {type(exc).__name__}: {exc}"
+        print(f"  -> {json.dumps({k: v for k, v in r.items() if k != 'eval'})}", flush=True)
+        save()
+        return r
+
+    # each run's tree is evaluated while the next person teaches (real time, mostly waiting)
+    with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool:
+        pending = []
+        for name in names:
+            for seed in seeds:
+                for lrn in learners:
+                    try:
+                        r = teach_one(name, seed, args.demo, args.correct, learner=lrn,
+                                      literal_args=args.literal_args,
+                                      learner_args=args.learner_args, world=args.world,
+                                      workdir=top / f"{name}-{seed}-{lrn}",
+                                      log=lambda s: print(s, flush=True))
+                    except Exception as exc:  # noqa: BLE001 - the next run still runs; said
+                        r = {"person": name, "seed": seed, "learner": lrn,
+                             "error": f"{type(exc).__name__}: {exc}"}
+                    results.append(r)
+                    if "error" not in r:
+                        pending.append(pool.submit(evaluated, r))
+                    save()
+        concurrent.futures.wait(pending)
+    print(table(results))
+    return 0 if all("error" not in r for r in results) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

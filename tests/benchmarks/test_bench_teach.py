@@ -1,0 +1,63 @@
+"""A CI-sized run of ``benchmarks/bench_teach.py``: one person model (``steady``) drives the
+real console page in a real headless Chromium for a short budget (demonstrating, then
+correcting a ``--follow`` controller), against a real server, learner, console and controller;
+then the learner's saved tree is evaluated in the room it was taught in.
+
+The learner learns as it does for a person (``--teacher person``: lag pairing, majority labels)
+and the controller keeps its loop guard (on by default). The harness must work every time (the
+labels given at the page all reach the learner's journal, the controller drove in correct mode,
+a tree came out); the learned robot must not loop nor leave the wall. A 45-second budget is far
+below the issue's 4 + 2 minutes and does not always teach the whole room: when the learned
+robot loops or leaves the wall, that part is an expected failure, said with the figures
+(``benchmarks/bench_teach.py`` measures the full budget).
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("zenoh")
+pytest.importorskip("selenium")
+
+pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(420)]
+
+
+@pytest.fixture(scope="module")
+def bench():
+    """``benchmarks/bench_teach.py`` (it puts ``benchmarks/`` and the browser helpers on the
+    path itself)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    return importlib.import_module("bench_teach")
+
+
+def test_a_short_person_teaches_a_robot_that_follows_the_wall(bench, tmp_path):
+    from browser import find_chromium, in_ci
+
+    found = find_chromium()
+    if isinstance(found, str):
+        if in_ci():
+            pytest.fail(f"CI=true and {found}")
+        pytest.skip(found)
+    r = bench.run_one("steady", 0, demo=45.0, correct=20.0, unseen=(), eval_episodes=2,
+                      eval_seconds=60.0, learner_args="--teacher person", workdir=tmp_path,
+                      log=lambda s: None)
+    # the harness: a person at the real page, every label delivered and kept
+    assert r["demonstrate"]["seconds"] >= 45.0 and r["correct"]["seconds"] >= 20.0
+    assert r["demonstrate"]["presses"] > 5 and r["demonstrate"]["frames_with_a_key"] > 0
+    assert r["labels"]["given"] >= 200  # 45 s at 10 Hz, minus hesitations
+    assert r["labels"]["waiting"] == 0
+    assert r["labels"]["held"] == r["labels"]["given"]
+    assert r["labels_standing"] == r["labels"]["given"] - r["labels"]["withdrawn"]
+    assert r["tree"]["nodes"] >= 2
+    ev = r["eval"]["room"]
+    assert ev["episodes"] == 2
+    # the learned robot: no loop, on the wall
+    if r["loops"] or ev["wall_band"] < 0.8 or ev["collisions"]:
+        pytest.xfail(f"45 s of teaching did not teach the room: {r['loops']} loops, "
+                     f"wall band {ev['wall_band']:.2f}, {ev['collisions']} collisions, success "
+                     f"{ev['success_rate']:.0%} ({r['tree']['nodes']} nodes, "
+                     f"{r['labels']['given']} labels)")

@@ -1,0 +1,127 @@
+"""The console's pure parts: episodes, undo and agreement (``Teaching``), where the learned
+robot got into trouble (``Trouble``), the HTTP edge's refusals and message checks (``web``) and
+what waits for a page (``_Page``: bounded)."""
+
+from __future__ import annotations
+
+import pytest
+
+pytest.importorskip("aiohttp")
+
+from client.roles.console.app import MAX_ERRORS, MAX_KINDS, _Page  # noqa: E402
+from client.roles.console.teaching import UNDO_MAX, Teaching, Trouble  # noqa: E402
+from client.roles.console.web import MAX_DEPTH, Refusals, read_message  # noqa: E402
+
+
+def _teach(t: Teaching, seqs, t0: float, dt: float = 0.1, pose=(1.0, 2.0, 0.0)):
+    for k, seq in enumerate(seqs):
+        t.labelled(seq, t0 + k * dt, pose)
+
+
+def test_the_first_label_opens_an_episode_and_discard_gives_its_range():
+    t = Teaching()
+    _teach(t, range(0, 10), 0.0)
+    assert t.current.n == 1 and t.current.start_pose == (1.0, 2.0, 0.0)
+    t.stop(1.0)
+    t.start((3.0, 4.0, 1.0), 2.0)
+    _teach(t, range(10, 15), 2.0)
+    e, first, upto = t.discard()
+    assert (e.n, first, upto) == (2, 10, 15)
+    assert t.withdrawn_range(first, upto) == 5
+    t.discarded(e)
+    assert e.state == "discarded" and e.labels == 0
+    e, first, upto = t.discard()  # then the last one kept
+    assert (e.n, first, upto) == (1, 0, 10)
+
+
+def test_undo_takes_the_last_seconds_of_labels_still_standing():
+    t = Teaching()
+    _teach(t, range(0, 50), 0.0)  # 0.0 .. 4.9 s
+    assert t.undo(1.0) == (40, 50)  # 3.9 .. 4.9
+    assert t.withdrawn_range(40, 50) == 10
+    assert t.undo(1.0) == (30, 40)  # again: the second before, not the withdrawn ones
+    assert t.withdrawn_range(30, 40) == 10 and t.withdrawn == 20
+    assert t.undo(UNDO_MAX) == (0, 30)
+    t.withdrawn_range(0, 30)
+    assert t.undo(1.0) is None
+    for bad in (0, -1, UNDO_MAX + 1, float("nan"), "5", True, None):
+        with pytest.raises(ValueError):
+            t.undo(bad)
+
+
+def test_agreement_counts_the_last_window_only():
+    t = Teaching(window=60.0)
+    for k in range(10):
+        t.scored(k, agree=k % 2 == 0)
+    assert t.agreement() == (0.5, 10)
+    t.scored(100.0, True)  # the others are more than 60 s older
+    assert t.agreement() == (1.0, 1)
+    assert t.agreement(now=200.0) == (None, 0)
+
+
+def test_a_rot_left_rot_right_loop_is_marked_where_it_began_and_the_robot_is_stuck():
+    tr = Trouble()
+    ts = 0.0
+    for k in range(40):
+        ts = k * 0.1
+        tr.state(ts, (5.0, 5.0, 0.0), stall=False, controller_drives=True)
+        tr.command(ts, "rot-left" if (k // 2) % 2 == 0 else "rot-right")
+    assert tr.stuck is not None and tr.stuck["why"] == "loop"
+    assert [m.kind for m in tr.markers].count("loop") == 1
+    m = next(m for m in tr.markers if m.kind == "loop")
+    assert (m.x, m.y) == (5.0, 5.0)
+    tr.state(ts + 0.1, (5.0, 5.0, 0.0), stall=False, controller_drives=False)  # a person drives
+    assert tr.stuck is None
+    tr.clear()
+    assert tr.markers == []
+
+
+def test_a_collision_and_a_stall_are_marked_once_each():
+    tr = Trouble(stall_seconds=1.0)
+    for k in range(30):
+        tr.state(k * 0.1, (1.0, 1.0, 0.0), stall=10 <= k < 15, controller_drives=True)
+        tr.command(k * 0.1, "fwd")
+    kinds = sorted(m.kind for m in tr.markers)
+    assert kinds == ["collision", "stall"]
+    assert tr.stuck == {"why": "stall", "x": 1.0, "y": 1.0}
+
+
+def test_refusals_say_a_burst_then_count_the_rest():
+    now = [0.0]
+    lines = []
+
+    class _Log:
+        def warning(self, fmt, *args):
+            lines.append(fmt % args)
+
+    r = Refusals(_Log(), burst=3, per=10.0, clock=lambda: now[0])
+    for _ in range(100):
+        r.say("GET / from 1.2.3.4: 400")
+    assert len(lines) == 3 and r.total == 100
+    now[0] = 11.0
+    r.say("again")
+    assert lines[3] == "97 more requests refused in 10 s (not each said)"
+    assert len(lines) == 5
+
+
+def test_read_message_refuses_deep_nesting_before_parsing():
+    assert read_message('{"t": "undo", "seconds": 5}') == {"t": "undo", "seconds": 5}
+    assert read_message('{"t": "x", "s": "[[[[[[[[[[[[["}')["s"].startswith("[")  # in a string
+    with pytest.raises(ValueError, match="nested more than"):
+        read_message("[" * 2000 + "]" * 2000)
+    with pytest.raises(ValueError, match="nested more than"):
+        read_message('{"a":' * (MAX_DEPTH + 1) + "1" + "}" * (MAX_DEPTH + 1))
+    with pytest.raises(ValueError, match="JSON object"):
+        read_message("[1, 2]")
+
+
+def test_what_waits_for_a_page_that_does_not_read_is_bounded():
+    page = _Page(1, ws=None, robot="r0")
+    for k in range(10_000):
+        page.push("error", f'{{"t": "error", "error": "bad {k}"}}')
+        page.push(f"kind-{k}", "{}")  # sources invented on the bus
+        page.push("scan", f'{{"k": {k}}}')
+    assert len(page.pending) <= MAX_ERRORS + 1 + MAX_KINDS
+    texts = page.take()
+    assert '"k": 9999' in next(t for t in texts if '"k"' in t)  # the latest scan
+    assert any("more errors" in t for t in texts)
