@@ -141,13 +141,16 @@ def test_the_majority_outvotes_a_wrong_key(tmp_path):
 
 @pytest.mark.parametrize(("argv", "needle"), [
     (["learner", "--features", "wall", "--teacher", "person", "--lag", "-1", "--out", "t.rhbl"],
-     "--lag must be >= 0"),
-    (["controller", "--tree", "t.rhbl", "--guard-hold", "-2"], "--guard-hold must be >= 0"),
+     "--lag must be an integer >= 0"),
+    (["controller", "--tree", "t.rhbl", "--guard-hold", "-2"],
+     "--guard-hold must be an integer >= 0"),
 ])
 def test_bad_lag_or_guard_hold_is_refused_before_connecting(tmp_path, argv, needle):
     import subprocess
     import sys
 
+    if argv[0] == "controller":  # an input file must exist for the parse to reach --guard-hold
+        (tmp_path / "t.rhbl").write_bytes(b"")
     proc = subprocess.run([sys.executable, "-m", "lab.cli", *argv, "--connect", "tcp/127.0.0.1:1"],
                           capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert proc.returncode == 2, proc.stderr

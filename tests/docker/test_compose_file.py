@@ -28,6 +28,8 @@ def _parse(command: str, argv: list[str]):
 
     with syntax_only():
         return build_parser(command).parse_args(argv)
+
+
 DOCKER = ROOT / "docker"
 COMPOSE = DOCKER / "compose.yaml"
 SCHEMA = DOCKER / "schema" / "compose-spec.json"
@@ -135,7 +137,7 @@ def test_the_documented_ros2_service_is_valid(raw, tmp_path):
     service = compose_local.load_compose(path, env={})["services"]["ros2"]
     argv = compose_local.rhbl_argv(service)
     assert argv and argv[0] == "ros2"
-    args = build_parser("ros2").parse_args(argv[1:])
+    args = _parse("ros2", argv[1:])
     assert args.mode == "client" and args.connect == ["tls/router:7447"]
     assert not args.multicast_scouting
     assert args.zenoh_config == "/run/secrets/ros2.json5"

@@ -116,9 +116,12 @@ def test_person_learner_rebuilds_only_when_labels_came():
     person.observe_vectors([FEATURES["wall"].extract(r) for r in ranges[:30]], labels[:30])
     first = person.classifier
     assert person.classifier is first  # no new label: the same tree
-    policy = TreePolicy.from_learner(person)
+    published = TreePolicy(first, person.features, person.actions)  # a snapshot: it stays
+    follows = TreePolicy.from_learner(person)  # a corrective round's: the tree as it is now
     person.observe(ranges[30], 0.0, labels[30])
-    assert person.classifier is not first and policy.classifier is first  # a published tree stays
+    second = person.classifier
+    assert second is not first and published.classifier is first
+    assert follows.classifier is second and person.classifier is second  # built once
     assert person.vectors == 31
 
 
