@@ -40,6 +40,13 @@ must still be processed.
   Origins and Hosts, no Host, repeated headers, oversized headers, requests that are no
   upgrade, random bytes and a header never finished: each refused (never 101), a valid
   upgrade after each burst gets 101, the bridge alive and its log bounded.
+- ``console`` (``--per-key / 100`` of each kind): two real ``rhbl console`` processes (loopback
+  without a token, and with one) sent no Host, foreign Hosts, 5,000-character paths, oversized
+  headers, random bytes, WebSocket upgrades with a foreign Origin, the static files and the
+  page without the token or with a wrong one, a page's message nested 2,000 deep and a header
+  never finished: each refused (a 4xx, the connection or WebSocket closed, an error message;
+  never 101, the page or a 5xx), the page with a valid request after each burst gets 200,
+  both consoles alive, no traceback, their refusal lines bounded.
 - ``cli``: every option of every ``rhbl`` command with the hostile values of its type
   (``cli_hostile``): each refused by the parser, one line naming the option, exit 2.
 
@@ -1063,15 +1070,50 @@ def _http(port: int, raw: bytes, timeout: float = 30.0) -> bytes:
 
 
 def _upgrade(host: str | None = None, path: str = "/", origin: str | None = None,
-             extra: str = "") -> bytes:
+             extra: str = "", protocol: str | None = "foxglove.sdk.v1") -> bytes:
     import base64
 
     key = base64.b64encode(os.urandom(16)).decode()
     lines = [f"GET {path} HTTP/1.1", *([f"Host: {host}"] if host is not None else []),
              "Upgrade: websocket", "Connection: Upgrade", f"Sec-WebSocket-Key: {key}",
-             "Sec-WebSocket-Version: 13", "Sec-WebSocket-Protocol: foxglove.sdk.v1",
+             "Sec-WebSocket-Version: 13",
+             *([f"Sec-WebSocket-Protocol: {protocol}"] if protocol is not None else []),
              *([f"Origin: {origin}"] if origin is not None else [])]
     return ("\r\n".join(lines) + "\r\n" + extra + "\r\n").encode()
+
+
+def _bursts(name: str, port: int, kinds: dict[str, Callable[[], bytes]], per_kind: int,
+            refused: Callable[[bytes], bool], control: Callable[[], bool]) -> list[KeyResult]:
+    """``per_kind`` requests of each kind sent to ``port``, each answer's first line judged by
+    ``refused``; after each burst the positive control (``control()`` True when served)."""
+    results = []
+    for what, make in kinds.items():
+        res = KeyResult(f"{name}: {what}")
+        for _ in range(per_kind):
+            res.sent += 1
+            line = _http(port, make())
+            if refused(line):
+                res.rejected += 1
+            elif len(res.notes) < 3:
+                res.notes.append(f"got {line[:60]!r}")
+        res.valid_sent += 1
+        res.valid_processed += int(control())
+        results.append(res)
+    return results
+
+
+def _alive(name: str, child: Child, refusal: str, elapsed: float, slack: int) -> KeyResult:
+    """The child still runs, logged no traceback and at most one line holding ``refusal`` a
+    second (plus ``slack``)."""
+    alive = KeyResult(f"{name}: alive, log bounded", valid_sent=1)
+    alive.valid_processed = int(child.proc is not None and child.proc.poll() is None)
+    out = child.output()
+    refused_lines = sum(refusal in ln for ln in out.splitlines())
+    if refused_lines > elapsed + slack:
+        alive.notes.append(f"{refused_lines} refusal lines logged in {elapsed:.0f} s")
+    if "Traceback" in out:
+        alive.notes.append("a traceback in its log")
+    return alive
 
 
 def fuzz_bridge(per_kind: int, seed: int = 0, workdir: Path | None = None) -> list[KeyResult]:
@@ -1110,18 +1152,9 @@ def fuzz_bridge(per_kind: int, seed: int = 0, workdir: Path | None = None) -> li
                                                   b"GET /" + b"a" * 5000 + b" HTTP/1.1\r\n\r\n"]),
             "random bytes": lambda: os.urandom(rng.randint(1, 2000)) + b"\r\n\r\n",
         }
-        for what, make in kinds.items():
-            res = KeyResult(f"foxglove bridge: {what}")
-            for _ in range(per_kind):
-                res.sent += 1
-                line = _http(port, make())
-                if b" 101 " not in line:
-                    res.rejected += 1
-                elif len(res.notes) < 3:
-                    res.notes.append(f"got {line[:60]!r}")
-            res.valid_sent += 1
-            res.valid_processed += int(b" 101 " in _http(port, _upgrade(here)))
-            results.append(res)
+        results += _bursts("foxglove bridge", port, kinds, per_kind,
+                           lambda line: b" 101 " not in line,
+                           lambda: b" 101 " in _http(port, _upgrade(here)))
         # a header never finished: closed within the gate's timeout, then still serving
         import socket
 
@@ -1139,15 +1172,152 @@ def fuzz_bridge(per_kind: int, seed: int = 0, workdir: Path | None = None) -> li
         res.valid_sent += 1
         res.valid_processed += int(b" 101 " in _http(port, _upgrade(here)))
         results.append(res)
-        alive = KeyResult("foxglove bridge: alive, log bounded", valid_sent=1)
-        refused_lines = fx.output().count("refused a request from")
-        alive.valid_processed = int(fx.proc is not None and fx.proc.poll() is None)
-        elapsed = time.monotonic() - t_start
-        if refused_lines > elapsed + 2:  # one line a second at most
-            alive.notes.append(f"{refused_lines} refusal lines logged in {elapsed:.0f} s")
-        results.append(alive)
+        results.append(_alive("foxglove bridge", fx, "refused a request from",
+                              time.monotonic() - t_start, 2))
     finally:
         fx.stop()
+    return results
+
+
+# ------------------------------------------------------------------------------- the console
+def _ws_refuses(port: int, message: str, refusal: str, timeout: float = 20.0) -> bool:
+    """A page (a WebSocket with the console's own Host and Origin) sends ``message``: True when
+    the console answers with an error message saying ``refusal``, or closes the WebSocket."""
+    import asyncio
+    import json
+
+    import aiohttp
+
+    here = f"127.0.0.1:{port}"
+
+    async def go() -> bool:
+        async with aiohttp.ClientSession() as http, http.ws_connect(
+                f"http://{here}/ws", origin=f"http://{here}",
+                timeout=aiohttp.ClientWSTimeout(ws_close=timeout)) as ws:
+            await ws.send_str(message)
+            while True:
+                msg = await ws.receive(timeout)
+                if msg.type != aiohttp.WSMsgType.TEXT:  # closed, or broken
+                    return True
+                reply = json.loads(msg.data)
+                if reply.get("t") == "error":
+                    return refusal in reply.get("error", "")
+
+    try:
+        return asyncio.run(asyncio.wait_for(go(), timeout))
+    except TimeoutError:
+        return False
+
+
+def _console_refused(line: bytes) -> bool:
+    """An HTTP refusal (4xx) or a closed connection: never 101, 2xx, 3xx or 5xx."""
+    if not line:
+        return True
+    parts = line.split(b" ", 2)
+    return (len(parts) >= 2 and parts[0].startswith(b"HTTP/") and parts[1].isdigit()
+            and 400 <= int(parts[1]) < 500)
+
+
+def fuzz_console(per_kind: int, seed: int = 0, workdir: Path | None = None) -> list[KeyResult]:
+    """Two real ``rhbl console`` processes (zenoh peers, no server needed): one on loopback
+    without a token (``--header-timeout 1``), one with a token. Hostile requests, ``per_kind``
+    of each kind: no Host, a foreign Host, a 5,000-character path, ``/static/index.html`` and
+    the other static files without the token, a wrong token, random bytes, an oversized
+    header, a foreign Origin on the WebSocket upgrade, a header never finished, a page's
+    message nested 2,000 deep: each refused (a 4xx, a closed connection or an error message
+    on the WebSocket; never 101, the page or a 5xx); after each burst the page with a valid
+    request gets 200 (the positive control); both consoles alive at the end, no traceback, a
+    bounded number of refusal lines (rate-limited)."""
+    import secrets
+    import socket
+
+    rng = random.Random(seed)
+    work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-console-"))
+    ports = {"open": free_port(), "secured": free_port()}
+    extra = {"open": ("--header-timeout", "1"), "secured": ("--token", secrets.token_urlsafe(18))}
+    kids = {name: Child(f"console-{name}", rhbl_argv(
+        "console", "--mode", "peer", "--listen", f"tcp/127.0.0.1:{free_port()}", "--http",
+        f"127.0.0.1:{port}", *extra[name]), work, cwd=ROOT).start()
+        for name, port in ports.items()}
+    results: list[KeyResult] = []
+    try:
+        for name, kid in kids.items():
+            if not kid.wait_for_line("console: http", 120):
+                raise RuntimeError(f"the console ({name}) did not start:\n{kid.tail()}")
+        url = next(ln for ln in kids["secured"].output().splitlines()
+                   if ln.startswith("console: "))
+        token = url.split("?token=", 1)[1].strip()
+        t_start = time.monotonic()
+        op, sp = ports["open"], ports["secured"]
+        here, there = f"127.0.0.1:{op}", f"127.0.0.1:{sp}"
+
+        def get(path: str, host: str | None, headers: str = "") -> bytes:
+            return (f"GET {path} HTTP/1.1\r\n" + (f"Host: {host}\r\n" if host is not None
+                                                  else "") + headers + "\r\n").encode()
+
+        def page(port: int, host: str, query: str = "") -> bool:
+            return b" 200 " in _http(port, get("/" + query, host))
+
+        static = ["/static/index.html", "/static/console.js", "/static/console.css",
+                  "/static/index.html?token=" + token, "/?token=", "/"]
+        open_kinds: dict[str, Callable[[], bytes]] = {
+            "no Host": lambda: rng.choice([b"GET / HTTP/1.1\r\n\r\n", b"GET / HTTP/1.0\r\n\r\n",
+                                           b"GET /static/console.js HTTP/1.1\r\n\r\n",
+                                           b"GET /ws HTTP/1.1\r\nUpgrade: websocket\r\n\r\n"]),
+            "foreign Host": lambda: get(rng.choice(["/", "/static/console.js", "/ws"]),
+                                        rng.choice(["attacker.example", "attacker.example:8080",
+                                                    "127.0.0.1.nip.io", "localhost.evil",
+                                                    "[::2]:1", "0.0.0.0", "10.0.0.1"])),
+            "5,000-character path": lambda: get(rng.choice(["/", "/static/", "/ws/"])
+                                                + rng.choice("ab%.") * 5000, here),
+            "oversized header": lambda: get("/", here, "X: " + "y" * rng.randint(
+                9000, 70_000) + "\r\n"),
+            "random bytes": lambda: os.urandom(rng.randint(1, 2000)) + b"\r\n\r\n",
+            "WebSocket upgrade, foreign Origin": lambda: _upgrade(
+                here, path="/ws", protocol=None, origin=rng.choice(
+                    ["http://evil.example", "null", f"http://{here}.evil.example",
+                     f"https://{here}", "file://", f"http://localhost:{op}"])),
+        }
+        results += _bursts("console", op, open_kinds, per_kind, _console_refused,
+                           lambda: page(op, here))
+        secured_kinds: dict[str, Callable[[], bytes]] = {
+            "static files and page without the token": lambda: get(rng.choice(static), there),
+            "wrong token": lambda: get(rng.choice(["/", "/static/console.js", "/ws"]) + "?token="
+                                       + rng.choice([token[:-1], token + "x", "%00", token.upper(),
+                                                     "a" * 5000]), there),
+        }
+        results += _bursts("console", sp, secured_kinds, per_kind, _console_refused,
+                           lambda: page(sp, there, "?token=" + token))
+        res = KeyResult("console: a page's message nested 2,000 deep")
+        for _ in range(per_kind):
+            res.sent += 1
+            open_, close = rng.choice([("[", "]"), ('{"t":', "}")])
+            res.rejected += int(_ws_refuses(op, open_ * 2000 + "0" + close * 2000,
+                                             "nested more than"))
+        res.valid_sent += 1
+        res.valid_processed += int(page(op, here))
+        results.append(res)
+        # a header never finished: closed within --header-timeout (1 s), then still serving
+        res = KeyResult("console: header never finished")
+        with socket.create_connection(("127.0.0.1", op), timeout=30) as s:
+            s.sendall(b"GET / HTTP/1.1\r\nHost: " + here.encode() + b"\r\nX-Slow: ")
+            res.sent += 1
+            t0 = time.monotonic()
+            answer = b""
+            with contextlib.suppress(OSError):
+                while part := s.recv(4096):
+                    answer += part
+            res.rejected += int(_console_refused(answer.split(b"\r\n", 1)[0])
+                                and time.monotonic() - t0 < 1 + 15)
+        res.valid_sent += 1
+        res.valid_processed += int(page(op, here))
+        results.append(res)
+        elapsed = time.monotonic() - t_start
+        for name, kid in kids.items():  # 10 lines a 10 s window, then one summing up
+            results.append(_alive(f"console ({name})", kid, "refused", elapsed, 12))
+    finally:
+        for kid in kids.values():
+            kid.stop()
     return results
 
 
@@ -1155,9 +1325,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--per-key", type=int, default=10_000, help="hostile messages per key")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--only", default="server,clients,files,written,recordings,bridge,cli",
+    ap.add_argument("--only",
+                    default="server,clients,files,written,recordings,bridge,console,cli",
                     help="comma list of parts: server, clients, files, written, recordings, "
-                         "bridge, cli")
+                         "bridge, console, cli")
     args = ap.parse_args(argv)
     parts = set(args.only.split(","))
     results: list[KeyResult] = []
@@ -1174,6 +1345,8 @@ def main(argv: list[str] | None = None) -> int:
         results += fuzz_recordings(max(1, args.per_key // 10), args.seed)
     if "bridge" in parts:
         results += fuzz_bridge(max(1, args.per_key // 100), args.seed)
+    if "console" in parts:
+        results += fuzz_console(max(1, args.per_key // 100), args.seed)
     if "cli" in parts:
         results += fuzz_cli()
     print(f"fuzz: seed {args.seed}, {args.per_key} hostile messages per key, "

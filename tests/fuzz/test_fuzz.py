@@ -1,6 +1,7 @@
 """The fuzz campaign of ``campaigns.fuzz`` at CI size (the full one: ``python -m campaigns.fuzz``, 10,000
 hostile messages per key): every key and queryable of the server, learner, teacher and
-controller, and the snapshot, journal and world files."""
+controller, the snapshot, journal and world files, and both web servers' HTTP edges (the
+Foxglove bridge, the console)."""
 
 from __future__ import annotations
 
@@ -65,3 +66,9 @@ def test_hostile_recordings_are_refused_or_read_up_to_the_cut(tmp_path):
 def test_the_foxglove_bridge_refuses_every_hostile_request_and_keeps_serving(tmp_path):
     results = fuzz.fuzz_bridge(per_kind=20, seed=5, workdir=tmp_path)
     _check(results)
+
+
+def test_the_console_refuses_every_hostile_request_and_keeps_serving(tmp_path):
+    results = fuzz.fuzz_console(per_kind=20, seed=6, workdir=tmp_path)
+    _check(results)
+    assert len(results) == 12  # 9 kinds, a header never finished, both consoles alive
