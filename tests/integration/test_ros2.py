@@ -391,7 +391,8 @@ def test_malformed_cdr_on_cmd_vel_is_rejected_counted_and_moves_nothing(server, 
 ])
 def test_bad_ros2_options_exit_2_before_connecting(argv, says, tmp_path):
     """One line naming the option, exit 2, before any connection (nothing listens there)."""
-    argv = [a if a != "x.mcap" else str(tmp_path / a) for a in argv]
+    (tmp_path / "t.rhbl").write_bytes(b"")  # an input file must exist for the parse to go on
+    argv = [str(tmp_path / a) if a in ("x.mcap", "t.rhbl") else a for a in argv]
     c = Child("bad", rhbl_argv(*argv, "--connect", f"tcp/127.0.0.1:{free_port()}"), cwd=ROOT)
     assert c.start().wait(60) == 2, c.output()
     assert says in c.output(), c.output()
