@@ -39,6 +39,7 @@ import zenoh
 
 from client.behaviour.features import FeatureSpec
 from client.behaviour.resample import TAUGHT_BEAMS, CoverageError, LaserResampler
+from protocol import arguments
 from protocol.codec import DecodeError
 from protocol.decoding import Decoder
 from protocol.messages import Scan, VelCmd
@@ -131,6 +132,11 @@ _DESTS = {"domain": "domain", "namespace": "ros_namespace", "scan": "scan_topic"
 _FLAGS = {"--" + dest.replace("_", "-"): dest for dest in _DESTS.values()}
 
 
+# a ROS 2 domain id, as ROS_DOMAIN_ID (rmw_zenoh: 0-232); the names are checked as ROS 2 names
+# by Ros2Options, after the parse
+DOMAIN_ID = arguments.Number(int, 0, 232, name="ROS 2 domain id", note=" (a ROS 2 domain id)")
+
+
 def add_ros2_arguments(parser: argparse.ArgumentParser, bridge: bool = True,
                        when: str = "", domain: bool = True) -> None:
     """The ROS 2 options (defaults: ``Ros2Options``); ``bridge``: also ``/tf`` and ``/clock``
@@ -140,16 +146,17 @@ def add_ros2_arguments(parser: argparse.ArgumentParser, bridge: bool = True,
     w = f" ({when})" if when else ""
     g = parser.add_argument_group("ROS 2 (docs/ros2.md)")
     if domain:
-        g.add_argument("--domain", type=int, default=None, metavar="ID",
+        g.add_argument("--domain", type=DOMAIN_ID, default=None, metavar="ID",
                        help=f"ROS 2 domain id, as ROS_DOMAIN_ID (default {d.domain}){w}")
-    g.add_argument("--ros-namespace", default=None, metavar="NS",
+    g.add_argument("--ros-namespace", type=arguments.text, default=None, metavar="NS",
                    help=f"ROS 2 namespace of the robots' topics: <NS>/<robot>/scan (default "
                         f"{d.namespace}; not the zenoh --namespace){w}")
     topics = [("scan", "LaserScan"), ("odom", "Odometry"), ("cmd_vel", "Twist")]
     if bridge:
         topics += [("tf", "TFMessage, odom -> base_link"), ("clock", "Clock (sim time)")]
     for name, what in topics:
-        g.add_argument(f"--{name.replace('_', '-')}-topic", default=None, metavar="NAME",
+        g.add_argument(f"--{name.replace('_', '-')}-topic", type=arguments.text, default=None,
+                       metavar="NAME",
                        help=f"topic of the {what} (default {getattr(d, name)}: a relative name "
                             f"goes under <NS>/<robot>){w}")
 

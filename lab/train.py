@@ -402,7 +402,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--teacher", choices=["script", "person"], default="script",
                         help="with --from-recording: 'person' learns labels given by hand as "
                              "rhbl learner --teacher person does (docs/teaching.md)")
-    parser.add_argument("--lag", type=int, default=LAG, metavar="SCANS",
+    parser.add_argument("--lag", type=arguments.non_negative_int, default=LAG, metavar="SCANS",
                         help=f"with --teacher person: a label answers the scan this many scans "
                              f"before the one it names (default {LAG})")
 

@@ -29,7 +29,7 @@ import threading
 from client.player import PlayerClient, RequestError
 from client.roles.common import wait_for_server
 from client.ros2 import Cdr, Ros2Graph, Ros2Options, add_ros2_arguments
-from protocol import keys
+from protocol import arguments, keys
 from protocol.codec import DecodeError
 from protocol.decoding import Decoder
 from protocol.messages import MAX_VA, MAX_VX
@@ -55,10 +55,11 @@ NODE = "rhbl_bridge"  # the ROS 2 node of each robot
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_zenoh_arguments(parser)
     parser.add_argument("--robot", action="append", dest="robots", metavar="NAME",
-                        help="bridge this robot (repeatable; default: r0); a ROS 2 name: "
+                        type=arguments.key_chunk, help="bridge this robot (repeatable; default: r0); a ROS 2 name: "
                              "letters, digits and '_'")
     add_ros2_arguments(parser, bridge=True)
-    parser.add_argument("--wait-server", type=float, default=10.0, metavar="SECONDS",
+    parser.add_argument("--wait-server", type=arguments.seconds_or_zero, default=10.0,
+                        metavar="SECONDS",
                         help="how long to wait for each robot's first scan before giving up "
                              "(0 = wait forever, logging every few seconds; default: 10)")
     add_report_arguments(parser)

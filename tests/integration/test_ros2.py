@@ -269,10 +269,13 @@ def test_the_bridges_tokens_and_attachments_are_rmw_zenohs(bridged):
         if m["type"]:
             pkg, name = re.match(r"(\w+)::msg::dds_::(\w+)_$", m["type"]).groups()
             assert m["hash"] == STORE.hash_rihs01(f"{pkg}/msg/{name}")
-    # each publisher's samples: 33 bytes, sequence 1, 2, ... (subscribed before the bridge
+    # each publisher's samples: 33 bytes, a sequence number 1, 2, ... (subscribed before the bridge
     # started), its wall-clock time, and the GID rmw_zenoh derives from the token key
     gids = {m["topic"].replace("%", "/"): xxhash.xxh3_128_intdigest(key.encode()).to_bytes(
         16, "little") for key, m in parsed.items() if m["kind"] == "MP"}
+    want = [ros2_key(0, t, typename) for t, typename in KEYS.items()]
+    bus.wait(lambda: all(len(bus.samples.get(k, [])) >= 3 for k in want),
+             why=f"samples on {want}: got {sorted(bus.samples)}")  # the tokens come first
     with bus.cond:
         samples = {t: list(bus.samples[ros2_key(0, t, typename)]) for t, typename in KEYS.items()}
     now = time.time_ns()
@@ -280,7 +283,10 @@ def test_the_bridges_tokens_and_attachments_are_rmw_zenohs(bridged):
         atts = [att for _, att in got]
         assert all(att is not None and len(att) == 33 and att[16] == 16 for att in atts)
         seqs = [struct.unpack_from("<q", att)[0] for att in atts]
-        assert seqs == list(range(1, len(seqs) + 1)), topic
+        # numbered 1, 2, ... in publishing order; a sample a busy subscriber missed leaves a
+        # gap (rmw_zenoh drops rather than blocks for a KEEP_LAST topic), never a reordering
+        assert seqs == sorted(set(seqs)) and seqs[0] >= 1, topic
+        assert len(seqs) >= seqs[-1] // 2, (topic, seqs)
         stamps = [struct.unpack_from("<q", att, 8)[0] for att in atts]
         assert stamps == sorted(stamps) and now - 600e9 < stamps[0] <= now
         assert {att[17:] for att in atts} == {gids[topic]}, topic
@@ -377,8 +383,8 @@ def test_malformed_cdr_on_cmd_vel_is_rejected_counted_and_moves_nothing(server, 
 
 @pytest.mark.parametrize(("argv", "says"), [
     (["ros2", "--robot", "r-1"], "has no ROS 2 name"),
-    (["ros2", "--domain", "-1"], "--domain must be a ROS 2 domain id"),
-    (["ros2", "--domain", "233"], "--domain must be a ROS 2 domain id"),
+    (["ros2", "--domain", "-1"], "(a ROS 2 domain id)"),
+    (["ros2", "--domain", "233"], "(a ROS 2 domain id)"),
     (["ros2", "--ros-namespace", "fleet"], "--ros-namespace: a ROS 2 namespace"),
     (["ros2", "--scan-topic", "a b"], "--scan-topic: a ROS 2 topic name"),
     (["ros2", "--clock-topic", "~/clock"], "--clock-topic: a ROS 2 topic name"),

@@ -338,7 +338,8 @@ def _server(*args: str):
 
 
 def _one_error_line(stderr: str) -> str:
-    errors = [ln for ln in stderr.splitlines() if " ERROR " in ln]
+    errors = [ln for ln in stderr.splitlines()  # a log line, or the parser's own (an argument)
+              if " ERROR " in ln or ln.startswith("rhbl server: error:")]
     assert len(errors) == 1 and "Traceback" not in stderr, stderr
     return errors[0]
 

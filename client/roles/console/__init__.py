@@ -27,6 +27,8 @@ import sys
 from client.roles.common import add_process_arguments, run_role
 from protocol import arguments
 
+HEADER_TIMEOUT = arguments.Number(float, 0, 3600, low_open=True, name="seconds")
+
 __all__ = ["add_arguments", "main"]
 
 
@@ -48,7 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the certificate's private key")
     parser.add_argument("--view-only", action="store_true",
                         help="watch only: no commands, no labels, no liveliness token")
-    parser.add_argument("--header-timeout", type=float, default=10.0, metavar="SECONDS",
+    parser.add_argument("--header-timeout", type=HEADER_TIMEOUT, default=10.0, metavar="SECONDS",
                         help="close a connection whose request headers have not all arrived "
                              "within this (or that is idle this long between requests; "
                              "default 10)")
