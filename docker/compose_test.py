@@ -66,9 +66,10 @@ LOCK_FILE = HERE / "requirements.lock"
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NO_ENGINE = 0, 1, 2, 3
 ROBOT = "r0"
 ROLES = ("server", "learner", "teacher", "controller", "console")
-# roles whose root filesystem compose makes read-only (the server needs a writable one: numba
-# loads the image's compiled kernels only from a folder it can write to)
-READ_ONLY = ("secrets", "learner", "teacher", "controller", "console")
+# roles whose root filesystem compose makes read-only (the server, the learner and the
+# controller need a writable one: numba loads the image's compiled kernels, the laser's and the
+# tree's, only from a folder it can write to)
+READ_ONLY = ("secrets", "teacher", "console")
 NUMBA_CACHE = "/var/cache/rhbl-numba"  # the Dockerfile's NUMBA_CACHE_DIR
 HOST_CA_BUNDLE = Path("/etc/ssl/certs/ca-certificates.crt")
 PROJECT_LABEL = "com.docker.compose.project"
