@@ -234,7 +234,19 @@ def _screen(browser, x: float, y: float) -> tuple[int, int]:
     return round((x - cx) * scale), round(-(y - cy) * scale)
 
 
-def test_keys_put_the_robot_at_a_start_dragging_moves_it_and_home_resets(env, browser):
+def test_keys_put_the_robot_at_a_start_dragging_moves_it_and_home_resets(env, browser,
+                                                                         tmp_path):
+    # a learner listening: after an earlier test's learner went away the console holds the
+    # robot (labels would go nowhere) until one is back
+    learner = _learner(env, tmp_path, "places")
+    try:
+        _wait_learner(env, learner)
+        _places(env, browser)
+    finally:
+        learner.stop()
+
+
+def _places(env, browser) -> None:
     from selenium.webdriver.common.action_chains import ActionChains
 
     w, starts = env["watch"], env["starts"]
