@@ -29,7 +29,7 @@ import threading
 from client.player import PlayerClient, RequestError
 from client.roles.common import wait_for_server
 from client.ros2 import Cdr, Ros2Graph, Ros2Options, add_ros2_arguments
-from protocol import arguments, keys
+from protocol import arguments
 from protocol.codec import DecodeError
 from protocol.decoding import Decoder
 from protocol.messages import MAX_VA, MAX_VX
@@ -69,13 +69,10 @@ def _check(args: argparse.Namespace) -> tuple[list[str], Ros2Options]:
     """The robots and ROS 2 options, or a ValueError naming what is wrong (before connecting)."""
     robots = args.robots or ["r0"]
     options = Ros2Options.from_args(args)
-    for r in robots:
-        keys.check_chunk(r, "--robot")
+    for r in robots:  # each a key chunk already (its argument type)
         options.topics(r)
     if len(set(robots)) != len(robots):
         raise ValueError(f"--robot: each robot once, got {robots}")
-    if not args.wait_server >= 0:
-        raise ValueError(f"--wait-server must be >= 0, got {args.wait_server:g}")
     return robots, options
 
 
