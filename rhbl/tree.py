@@ -24,13 +24,15 @@ import importlib
 import logging
 import math
 import os
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from . import _layout, _reference
 
-__all__ = ["ALGORITHMS", "DISTANCES", "Growth", "SphereTree", "Totals", "load_kernels"]
+__all__ = ["ALGORITHMS", "DISTANCES", "Growth", "SphereTree", "Totals", "load_kernels",
+           "threads"]
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +49,11 @@ _F64 = np.dtype(np.float64)
 # set to "jit" to use numba's kernels even where kernels compiled ahead of time are installed
 # (the tests and benchmarks compare the two)
 KERNELS_ENV = "RHBL_KERNELS"
+# a batch of at least this many rows searched on the search table is cut into one slice per
+# thread (the kernels run without the GIL), ``RHBL_THREADS`` threads (default: the cores this
+# process may run on; 1: never)
+PARALLEL_BATCH = 1024
+THREADS_ENV = "RHBL_THREADS"
 
 
 class _Kernels:
@@ -107,6 +114,33 @@ def load_kernels() -> str:
     at once. Building a tree does it anyway; a process calls it to pay it before it serves.
     Returns where they come from: ``"ahead-of-time"`` or ``"numba"``."""
     return _kernels().origin
+
+
+@functools.cache
+def threads() -> int:
+    """How many threads search a large batch: ``RHBL_THREADS``, else the cores this process
+    may run on."""
+    value = os.environ.get(THREADS_ENV, "")
+    if not value:
+        affinity = getattr(os, "sched_getaffinity", None)
+        return len(affinity(0)) if affinity else (os.cpu_count() or 1)
+    try:
+        count = int(value)
+    except ValueError:
+        count = 0
+    if count < 1:
+        raise ValueError(f"{THREADS_ENV} must be an integer >= 1, got {value!r}")
+    return count
+
+
+@functools.cache
+def _pool() -> ThreadPoolExecutor:
+    """The threads that search the slices of a large batch (made on first use)."""
+    return ThreadPoolExecutor(max(threads(), 2), thread_name_prefix="rhbl-search")
+
+
+if hasattr(os, "register_at_fork"):  # a forked child has none of its parent's threads
+    os.register_at_fork(after_in_child=_pool.cache_clear)
 
 
 class _Search(NamedTuple):
@@ -528,7 +562,9 @@ class SphereTree:
         tests every (query, sphere) pair at once; its descent carries the queries each sphere
         encloses). All give exactly the same answers. The compiled descent runs on the search
         table (built for it if the tree changed since the last), but for a batch of fewer than
-        32 rows of a tree that has just changed: it walks the node table then.
+        32 rows of a tree that has just changed: it walks the node table then. A batch of
+        ``PARALLEL_BATCH`` rows or more on the search table is cut into one slice per thread
+        (:func:`threads`).
         """
         return self._searched(X, algorithm, compiled)[0]
 
@@ -537,10 +573,11 @@ class SphereTree:
         (the root is never tested: it encloses the whole cube)."""
         return self._searched(X, algorithm, True)[1]
 
-    def _searched(self, X: np.ndarray, algorithm: str, compiled: bool, *, walk: bool = False
-                  ) -> tuple[np.ndarray, np.ndarray | None]:
+    def _searched(self, X: np.ndarray, algorithm: str, compiled: bool, *, walk: bool = False,
+                  parts: int | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """(winners, spheres tested per row); ``walk``: the descent on the node table, not on
-        the search table (the tests check both)."""
+        the search table (the tests check both); ``parts``: the threads for a large batch on
+        the search table (default :func:`threads`; the tests and benchmarks compare)."""
         if algorithm not in ALGORITHMS:
             raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
         if not compiled:
@@ -555,7 +592,16 @@ class SphereTree:
                                brute, out, visited)
         else:
             search = self._search_table()
-            search.many(search.table, search.nodes, X, self._eps, self._euclidean, out, visited)
+            m, parts = X.shape[0], parts or threads()
+            if parts == 1 or m < PARALLEL_BATCH:
+                search.many(search.table, search.nodes, X, self._eps, self._euclidean, out,
+                            visited)
+            else:  # a slice of rows per thread
+                cuts = [m * k // parts for k in range(parts + 1)]
+                for job in [_pool().submit(search.many, search.table, search.nodes, X[a:b],
+                                           self._eps, self._euclidean, out[a:b], visited[a:b])
+                            for a, b in zip(cuts, cuts[1:], strict=False)]:
+                    job.result()
         return out, visited
 
     def predict(self, X: np.ndarray, algorithm: str = "auto", *, compiled: bool = True
