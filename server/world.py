@@ -675,7 +675,15 @@ class World:
 
     def scan(self, i: int) -> np.ndarray:
         """Ray-cast robot ``i``'s laser: float32 ranges, ``ranges[0]`` at ``LASER.min_angle``."""
-        return self.scans([i])[0]
+        if self.n_robots > 1:
+            return self.scans([i])[0]
+        # one robot (training, evaluation): what scans([i]) computes, without its batching
+        b = self._robots[i].body
+        x, y = _body_position(b)
+        yaw = wrap_angle(_body_angle(b))
+        origin = np.array([[x + LASER.offset * math.cos(yaw), y + LASER.offset * math.sin(yaw)]])
+        out = self._laser.cast(origin, np.array([yaw]), _ROW0, _NO_CENTRES)[0]
+        return self._add_noise(out) if self.range_noise > 0.0 else out
 
     def scans(self, indices: list[int] | None = None) -> np.ndarray:
         """Ray-cast the lasers of robots ``indices`` (default: all) together: float32 array
