@@ -24,6 +24,7 @@ import importlib
 import logging
 import math
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, NamedTuple
 
@@ -49,10 +50,11 @@ _F64 = np.dtype(np.float64)
 # set to "jit" to use numba's kernels even where kernels compiled ahead of time are installed
 # (the tests and benchmarks compare the two)
 KERNELS_ENV = "RHBL_KERNELS"
-# a batch of at least this many rows searched on the search table is cut into one slice per
-# thread (the kernels run without the GIL), ``RHBL_THREADS`` threads (default: the cores this
-# process may run on; 1: never)
+# a batch of at least this many rows searched on the search table is cut into slices of at
+# least PARALLEL_SLICE rows, searched by ``RHBL_THREADS`` threads (default: the cores this
+# process may run on; 1: never; the kernels run without the GIL)
 PARALLEL_BATCH = 1024
+PARALLEL_SLICE = 256
 THREADS_ENV = "RHBL_THREADS"
 
 
@@ -563,8 +565,8 @@ class SphereTree:
         encloses). All give exactly the same answers. The compiled descent runs on the search
         table (built for it if the tree changed since the last), but for a batch of fewer than
         32 rows of a tree that has just changed: it walks the node table then. A batch of
-        ``PARALLEL_BATCH`` rows or more on the search table is cut into one slice per thread
-        (:func:`threads`).
+        ``PARALLEL_BATCH`` rows or more on the search table is cut into slices searched by
+        :func:`threads` threads.
         """
         return self._searched(X, algorithm, compiled)[0]
 
@@ -596,13 +598,37 @@ class SphereTree:
             if parts == 1 or m < PARALLEL_BATCH:
                 search.many(search.table, search.nodes, X, self._eps, self._euclidean, out,
                             visited)
-            else:  # a slice of rows per thread
-                cuts = [m * k // parts for k in range(parts + 1)]
-                for job in [_pool().submit(search.many, search.table, search.nodes, X[a:b],
-                                           self._eps, self._euclidean, out[a:b], visited[a:b])
-                            for a, b in zip(cuts, cuts[1:], strict=False)]:
-                    job.result()
+            else:
+                self._search_sliced(search, X, out, visited, parts)
         return out, visited
+
+    def _search_sliced(self, search: _Search, X: np.ndarray, out: np.ndarray,
+                       visited: np.ndarray, parts: int) -> None:
+        """A large batch on ``parts`` threads: the rows cut into two slices a thread
+        (``PARALLEL_SLICE`` rows or more, each searched in its own Z order), which the calling
+        thread and ``parts - 1`` pool threads take as each comes free (a thread the machine
+        holds back delays a slice, not the batch)."""
+        m = X.shape[0]
+        step = max(PARALLEL_SLICE, -(-m // (2 * parts)))
+        starts = iter(range(0, m, step))
+        lock = threading.Lock()
+
+        def work() -> None:
+            while True:
+                with lock:
+                    a = next(starts, None)
+                if a is None:
+                    return
+                b = a + step
+                search.many(search.table, search.nodes, X[a:b], self._eps, self._euclidean,
+                            out[a:b], visited[a:b])
+
+        helpers = [_pool().submit(work) for _ in range(parts - 1)]
+        try:
+            work()
+        finally:
+            for helper in helpers:
+                helper.result()
 
     def predict(self, X: np.ndarray, algorithm: str = "auto", *, compiled: bool = True
                 ) -> np.ndarray:
