@@ -120,18 +120,21 @@ def load_kernels() -> str:
 
 @functools.cache
 def threads() -> int:
-    """How many threads search a large batch: ``RHBL_THREADS``, else the cores this process
-    may run on."""
+    """How many threads search a large batch: ``RHBL_THREADS``, else (unset, or not an integer
+    >= 1: logged) the cores this process may run on."""
+    affinity = getattr(os, "sched_getaffinity", None)
+    cores = len(affinity(0)) if affinity else (os.cpu_count() or 1)
     value = os.environ.get(THREADS_ENV, "")
     if not value:
-        affinity = getattr(os, "sched_getaffinity", None)
-        return len(affinity(0)) if affinity else (os.cpu_count() or 1)
+        return cores
     try:
         count = int(value)
     except ValueError:
         count = 0
     if count < 1:
-        raise ValueError(f"{THREADS_ENV} must be an integer >= 1, got {value!r}")
+        log.warning("%s must be an integer >= 1, got %r: using %d (the cores this process may "
+                    "run on)", THREADS_ENV, value, cores)
+        return cores
     return count
 
 

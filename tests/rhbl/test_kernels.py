@@ -225,12 +225,17 @@ def test_visits_count_the_spheres_tested():
 
 
 @pytest.mark.parametrize("value", ["0", "two", "-1"])
-def test_a_bad_thread_count_is_refused_by_name(monkeypatch, value):
-    monkeypatch.setenv("RHBL_THREADS", value)
+def test_a_bad_thread_count_is_named_and_the_cores_used(monkeypatch, caplog, value):
+    """A bad ``RHBL_THREADS`` never stops a process: it is logged, and the default used."""
+    monkeypatch.delenv("RHBL_THREADS", raising=False)
     rhbl.tree.threads.cache_clear()
     try:
-        with pytest.raises(ValueError, match=f"RHBL_THREADS must be an integer >= 1, got '{value}'"):
-            rhbl.tree.threads()
+        cores = rhbl.tree.threads()
+        monkeypatch.setenv("RHBL_THREADS", value)
+        rhbl.tree.threads.cache_clear()
+        with caplog.at_level("WARNING", logger="rhbl.tree"):
+            assert rhbl.tree.threads() == cores
+        assert f"RHBL_THREADS must be an integer >= 1, got '{value}'" in caplog.text
         monkeypatch.setenv("RHBL_THREADS", "3")
         rhbl.tree.threads.cache_clear()
         assert rhbl.tree.threads() == 3
