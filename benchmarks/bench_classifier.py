@@ -3,6 +3,7 @@
     python benchmarks/bench_classifier.py           # full run (several minutes)
     python benchmarks/bench_classifier.py --quick   # trees up to 10k spheres, fewer repeats
     python benchmarks/bench_classifier.py --check   # exit 1 if a target is missed
+    python benchmarks/bench_classifier.py --wall-only --repeat 5   # the issue's targets only
 
 Every figure is measured in the same run, on the same machine, the peers' calls alternating:
 
@@ -494,11 +495,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--data", default=None, help="the tree's training vectors (.npz: X, y)")
     parser.add_argument("--wall-tree", default=None, metavar="SNAPSHOT",
                         help="the wall tree to measure (default: train it with rhbl train)")
+    parser.add_argument("--wall-only", action="store_true",
+                        help="only the wall tree's section (the issue's targets)")
+    parser.add_argument("--repeat", type=int, default=None, metavar="N",
+                        help="passes and batch calls, best of N (default 3; --quick 1)")
     args = parser.parse_args(argv)
+    if args.repeat is not None and args.repeat < 1:
+        parser.error(f"--repeat must be >= 1, got {args.repeat}")
     if (args.tree is None) != (args.data is None):
         parser.error("--tree and --data go together")
     args.single = 100 if args.quick else 400
-    args.repeat = 1 if args.quick else 3
+    if args.repeat is None:
+        args.repeat = 1 if args.quick else 3
     n_batch = 5000 if args.quick else 20000
     m_syn = 1500 if args.quick else 4000
 
@@ -510,6 +518,8 @@ def main(argv: list[str] | None = None) -> int:
           f"{args.repeat} passes over {args.single} queries, mean per call; batches = best of "
           f"{args.repeat} calls")
     ok = wall_run(args)
+    if args.wall_only:
+        return 0 if (ok or not args.check) else 1
     scaling_run(args)
     startup_run(args)
 
