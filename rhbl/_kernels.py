@@ -3,8 +3,8 @@
 The kernels work on the tables of :mod:`rhbl._layout`: the node table of
 :class:`rhbl.tree.SphereTree` (creation order: training and the searches of a tree that has
 just changed) and the search table built from it (:func:`layout`: depth-first pre-order, with
-each sphere's rank in the winner order and the end of its subtree, which the searches of a tree
-that stays the same use: :func:`search_kernels`).
+each sphere's rank in the winner order, the end of its subtree and the lowest rank in it, which
+the searches of a tree that stays the same use: :func:`search_kernels`).
 
 The arithmetic is that of the numpy code in :mod:`rhbl._reference` (the tests compare them
 array by array): the distance is ``sum((c - x)**2)`` accumulated in feature order (its square
