@@ -15,6 +15,7 @@ metadata; every flag left out takes the task's recipe value (``lab.recipe.RECIPE
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import math
 import time
@@ -35,7 +36,6 @@ from lab.harness import (
     step_world,
 )
 from lab.recipe import Recipe, add_recipe_arguments, recipe_for, recipe_from_args
-from lab.sim_tap import record_run
 from protocol import arguments
 from server import world_arg
 from server.world import World, WorldSpec, free_pose, sample_pose
@@ -428,7 +428,13 @@ def main(args) -> int:
             args.resume, features=recipe.feature_spec() if args.features else None)
     else:
         learner = make_learner(recipe)
-    with record_run(args.record, "rhbl train") as tap:  # None without --record
+    if args.record:  # imported only then (the recordings' writer and its libraries)
+        from lab.sim_tap import record_run
+
+        recording = record_run(args.record, "rhbl train")
+    else:
+        recording = contextlib.nullcontext()
+    with recording as tap:  # None without --record
         ep = train(spec, learner, recipe, seed=args.seed, start=args.start,
                    range_noise=args.range_noise, odom_noise=args.odom_noise,
                    on_step=None if tap is None else tap.step)
