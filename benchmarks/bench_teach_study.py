@@ -52,7 +52,7 @@ from client.behaviour.actions import DEFAULT_ACTIONS  # noqa: E402
 from client.behaviour.features import FEATURES  # noqa: E402
 from client.behaviour.guard import RotationGuard  # noqa: E402
 from client.behaviour.learning import DemonstrationLearner, TreePolicy  # noqa: E402
-from client.behaviour.teaching import LAG, PersonLearner, answered_scan  # noqa: E402
+from client.behaviour.teaching import MAX_LAG, PersonLearner, answered_scan  # noqa: E402
 from lab import metrics  # noqa: E402
 from lab.episode import DT, Episode  # noqa: E402
 from lab.evaluate import evaluate  # noqa: E402
@@ -84,26 +84,28 @@ class Session:
 
 @dataclass(frozen=True)
 class Method:
-    """A learner and the lag of the scans its labels are tied to (``answered_scan``)."""
+    """A learner and the lag of the scans its labels are tied to (``answered_scan``; None:
+    estimated by the person's learner from the scans before each label's own)."""
 
     name: str
-    lag: int
+    lag: int | None
     options: dict
 
     def learner(self) -> DemonstrationLearner:
         spec, task = FEATURES["wall"], "wall-following"
         if self.name == "person":
-            return PersonLearner(spec, DEFAULT_ACTIONS, task=task, **self.options)
+            return PersonLearner(spec, DEFAULT_ACTIONS, task=task, lag=self.lag, **self.options)
         spawn = "all" if self.name == "literal" else "winner"
         return DemonstrationLearner(spec, DEFAULT_ACTIONS, task=task, spawn=spawn,
                                     **self.options)
 
 
-METHODS = {"today": 0, "literal": 0, "person": LAG}  # name -> the default lag
+METHODS = {"today": 0, "literal": 0, "person": None}  # name -> the default lag (None: estimated)
 
 
 def make_method(text: str) -> Method:
-    """``person``, ``person:lag=2+k=25+vote=mean``: a method with those settings."""
+    """``person``, ``person:lag=2+k=25+vote=mean``: a method with those settings
+    (``lag=auto``: estimated, the person's default)."""
     name, _, opts = text.partition(":")
     if name not in METHODS:
         raise ValueError(f"unknown method {name!r}; known: {', '.join(METHODS)}")
@@ -112,7 +114,10 @@ def make_method(text: str) -> Method:
         key, _, value = part.partition("=")
         options[key] = (value if value.replace("-", "").isalpha()
                         else float(value) if "." in value else int(value))
-    lag = int(options.pop("lag", METHODS[name]))
+    lag = options.pop("lag", METHODS[name])
+    lag = None if lag in (None, "auto") else int(lag)
+    if lag is None and name != "person":
+        raise ValueError(f"method {name!r} needs a fixed lag")
     return Method(name, lag, options)
 
 
@@ -163,9 +168,19 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
         key = person.observe(View(t=t, pose=scans[shown][2], walls=walls, mode=mode,
                                   driver=driver, action=action, scan_id=shown))
         if key is not None:
-            ranges, odom, _ = scans[answered_scan(shown, scans, method.lag,
-                                                  pose=lambda s: s[2])]
-            learner.observe(ranges, odom[2], key)
+            if method.lag is None:  # the label's own scan, and the scans before it
+                ranges, odom, _ = scans[shown]
+                earlier = []
+                for lag in range(1, MAX_LAG + 1):
+                    sid = answered_scan(shown, scans, lag, pose=lambda s: s[2])
+                    if sid == shown:
+                        break
+                    earlier.append(learner.features.extract(scans[sid][0], scans[sid][1][2]))
+                learner.observe(ranges, odom[2], key, earlier=earlier)
+            else:
+                ranges, odom, _ = scans[answered_scan(shown, scans, method.lag,
+                                                      pose=lambda s: s[2])]
+                learner.observe(ranges, odom[2], key)
             rec.labels += 1
             rec.wrong += person.wrong_now
             if mode == "correct":
@@ -282,6 +297,9 @@ def run_one(model: str, seed: int, method: str, worlds, *, demo: float = 240.0,
             "corrections": rec.corrections, "takeovers": rec.takeovers,
             "wrong": rec.wrong, "teaching_collisions": rec.collisions,
             "nodes": learner.nodes, "height": learner.height,
+            "lag": getattr(learner, "estimated_lag", 0),
+            "agreement": [round(a, 3) for a in getattr(learner, "lag_agreement", [])],
+            "reaction": PEOPLE[model](seed=seed).style.reaction,
             "worlds": scores, "wall_time": round(time.perf_counter() - t0, 1)}
 
 
@@ -324,7 +342,8 @@ def table(rows: list[dict], taught: str, unseen) -> str:
                           []).append(r)
     lines = ["| model | method | seeds | taught room | unseen rooms | at the person's pace: "
              "taught / unseen | loops | collisions | nodes | labels | corrections | wrong keys "
-             "| failed episodes |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| lag (scans) | failed episodes |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
     def cell(rs, key, worlds):
         v = [_mean([r["worlds"][w][key] for w in worlds]) for r in rs]
@@ -343,7 +362,7 @@ def table(rows: list[dict], taught: str, unseen) -> str:
             f"| {_mean([r['labels'] for r in rs]):.0f} | "
             f"{_mean([r['corrections'] for r in rs]):.0f} | "
             f"{100 * _mean([r['wrong'] / max(1, r['labels']) for r in rs]):.0f}% | "
-            f"{_failures(rs)} |")
+            f"{'/'.join(str(r['lag']) for r in rs)} | {_failures(rs)} |")
     return "\n".join(lines)
 
 
@@ -399,6 +418,7 @@ def main(argv=None) -> int:
                 print(f"{method:>12} {model:>12} seed {seed}: "
                       + " ".join(f"{w} {100 * s['success']:.0f}%/{s['loops']}L"
                                  for w, s in r["worlds"].items())
+                      + f" | lag {r['lag']} (reaction {r['reaction']:.2f} s)"
                       + f" | {r['nodes']} nodes, {r['labels']} labels ({r['corrections']} "
                         f"corrections, {r['takeovers']} takeovers), {r['wrong']} wrong, "
                         f"{r['wall_time']} s", flush=True)
