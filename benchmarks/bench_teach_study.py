@@ -52,7 +52,7 @@ from client.behaviour.actions import DEFAULT_ACTIONS  # noqa: E402
 from client.behaviour.features import FEATURES  # noqa: E402
 from client.behaviour.guard import RotationGuard  # noqa: E402
 from client.behaviour.learning import DemonstrationLearner, TreePolicy  # noqa: E402
-from client.behaviour.teaching import MAX_LAG, PersonLearner, answered_scan  # noqa: E402
+from client.behaviour.teaching import LAG, MAX_LAG, PersonLearner, answered_scan  # noqa: E402
 from lab import metrics  # noqa: E402
 from lab.episode import DT, Episode  # noqa: E402
 from lab.evaluate import evaluate  # noqa: E402
@@ -100,12 +100,12 @@ class Method:
                                     **self.options)
 
 
-METHODS = {"today": 0, "literal": 0, "person": None}  # name -> the default lag (None: estimated)
+METHODS = {"today": 0, "literal": 0, "person": LAG}  # name -> the default lag
 
 
 def make_method(text: str) -> Method:
     """``person``, ``person:lag=2+k=25+vote=mean``: a method with those settings
-    (``lag=auto``: estimated, the person's default)."""
+    (``lag=auto``: estimated by the person's learner)."""
     name, _, opts = text.partition(":")
     if name not in METHODS:
         raise ValueError(f"unknown method {name!r}; known: {', '.join(METHODS)}")

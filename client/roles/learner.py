@@ -32,7 +32,8 @@ withdrawal of labels folded into a snapshot is journaled but cannot take them ou
 
 ``--teacher person`` (labels given by hand at ``rhbl console``): each label is paired with the
 scan ``--lag`` scans before the one it names (a person's key answers what they saw a reaction
-time earlier: ``client.labels.Pairing``), and the tree is rebuilt from every label journaled,
+time earlier: ``client.labels.Pairing``; ``--lag auto``: each label is journaled with the scans
+displayed before it and the lag is estimated from the labels), and the tree is rebuilt from every label journaled,
 each taking the label most of its nearest labels carry
 (``client.behaviour.teaching.PersonLearner``: one wrong key does not carve a sphere for ever).
 Such a lineage is rebuilt from its whole journal on a restart (no ``--fold-journal``, no
@@ -60,7 +61,7 @@ from client.behaviour.learning import (
     load_snapshot,
 )
 from client.behaviour.tasks import task_of_features
-from client.behaviour.teaching import MAX_LAG, PERSON_RULE, PersonLearner
+from client.behaviour.teaching import LAG, MAX_LAG, PERSON_RULE, PersonLearner, parse_lag
 from client.journal import (
     Journal,
     JournalError,
@@ -129,10 +130,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "with the scan --lag scans earlier, the tree rebuilt from every "
                              "label by the majority of its nearest labels); a lineage keeps "
                              "the rule it was made with")
-    parser.add_argument("--lag", type=arguments.non_negative_int, default=None, metavar="SCANS",
+    parser.add_argument("--lag", type=arguments.Checked("lag", parse_lag), default=LAG,
+                        metavar="SCANS|auto",
                         help="with --teacher person: a label answers the scan this many scans "
-                             f"(0..{MAX_LAG}) before the one it names (default: estimated from "
-                             "the labels, re-estimated as they accumulate; see docs/teaching.md)")
+                             f"(0..{MAX_LAG}) before the one it names (default {LAG}: 0.3 s at "
+                             "10 Hz); 'auto': estimated from the labels, re-estimated as they "
+                             "accumulate (docs/teaching.md)")
 
 
 # ---- the learning core (no zenoh: testable on its own) --------------------------------------
@@ -152,7 +155,7 @@ class LearnerCore:
                  tree_params: dict | None = None, stride: int = 1, min_delta: float = 0.0,
                  fsync_interval: float = 1.0, actions: ActionSet = DEFAULT_ACTIONS,
                  fold_journal: bool = False, journal_write=os.write, teacher: str = "script",
-                 lag: int | None = None):
+                 lag: int | None = LAG):
         if lag is not None and not (isinstance(lag, int) and 0 <= lag <= MAX_LAG):
             raise ProcessError(f"learner: --lag must be 0..{MAX_LAG} scans, got {lag!r}",
                                EXIT_USAGE)

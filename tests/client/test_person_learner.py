@@ -102,7 +102,7 @@ def test_a_window_pairs_each_label_with_its_own_scan_and_the_scans_before():
 
 def test_an_estimated_lag_is_journaled_and_a_restart_rebuilds_the_same_tree(tmp_path):
     out = tmp_path / "t.rhbl"
-    core = LearnerCore(out, features="wall", teacher="person")  # --lag not given: estimated
+    core = LearnerCore(out, features="wall", teacher="person", lag=None)  # --lag auto
     assert core.person and core.estimates and core.lag is None
     rng = np.random.default_rng(5)
     scans = [(rng.uniform(0.2, 3.0, 360).astype(np.float32), float(rng.uniform(-3, 3)))
@@ -188,7 +188,7 @@ def test_the_majority_outvotes_a_wrong_key(tmp_path):
 
 @pytest.mark.parametrize(("argv", "needle"), [
     (["learner", "--features", "wall", "--teacher", "person", "--lag", "-1", "--out", "t.rhbl"],
-     "--lag must be an integer >= 0"),
+     "--lag must be 'auto' or an integer 0..6"),
     (["controller", "--tree", "t.rhbl", "--guard-hold", "-2"],
      "--guard-hold must be an integer >= 0"),
 ])

@@ -18,6 +18,7 @@ from client.behaviour.teaching import (
     majority_labels,
     mean_actions,
     nearest_votes,
+    parse_lag,
 )
 from rhbl import load
 
@@ -139,7 +140,7 @@ def test_person_learner_copies_are_seeded_and_the_tree_saves(tmp_path):
     assert a.classifier.tree_.equal(b.classifier.tree_)
     path = a.save(tmp_path / "person.rhbl")
     meta = load(path).metadata
-    assert meta["learning"] == {"rule": "person", "lag": None, "estimated_lag": LAG,
+    assert meta["learning"] == {"rule": "person", "lag": LAG, "estimated_lag": LAG,
                                 "k": PERSON_DEFAULTS["k"],
                                 "copies": 2,
                                 "sigma": PERSON_DEFAULTS["sigma"], "vote": "majority",
@@ -205,7 +206,7 @@ def test_estimate_lag_finds_the_lag_the_labels_answer(lag):
 
 def test_person_learner_estimates_its_lag_from_the_earlier_scans():
     W, y = _delayed_labels(4)
-    a = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, k=5)
+    a = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, k=5, lag=None)
     fixed = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, k=5, lag=4)
     assert a.lag is None and a.estimated_lag == LAG  # no labels yet: the fixed default
     for w, label in zip(W, y, strict=True):
@@ -218,3 +219,7 @@ def test_person_learner_estimates_its_lag_from_the_earlier_scans():
     assert a.metadata()["learning"]["estimated_lag"] == 4
     with pytest.raises(ValueError, match="lag"):
         PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, lag=MAX_LAG + 1)
+    assert parse_lag("auto") is None and parse_lag(" 4") == 4
+    for bad in ("7", "-1", "x", ""):
+        with pytest.raises(ValueError, match="'auto' or an integer 0..6"):
+            parse_lag(bad)
