@@ -58,11 +58,14 @@ from lab.episode import DT, Episode  # noqa: E402
 from lab.evaluate import evaluate  # noqa: E402
 from lab.harness import resolve_world  # noqa: E402
 from lab.recipe import EVAL_SECONDS  # noqa: E402
-from server.world import World, free_pose  # noqa: E402
+from server.world import World, free_pose, sample_pose  # noqa: E402
 
 TAUGHT = "room"
 UNSEEN_DEV = ("eval-room-l", "eval-room-ring", "eval-room-jagged", "eval-holdout-room-t")
 UNSEEN_HELD_OUT = ("eval-holdout-room-oct", "eval-holdout2-room-spike", "eval-holdout4-room-open")
+# --where near: the robot dragged off its path (m, normal), turned (rad, uniform), and left at
+# least this far from every wall (m): the person then shows the way back
+NEAR = (0.2, 0.8, 0.35)
 SCAN_MEMORY = 128  # scans the console keeps (client/console/app.py)
 
 
@@ -135,8 +138,10 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
     """One session (see the module's docstring). ``guard``: the controller drives through a
     ``RotationGuard``. ``restarts`` = (demonstrate, correct) seconds: > 0, the person puts the
     robot elsewhere this often in that mode (the console's set_pose): at the world's next start
-    pose (``where="starts"``) or anywhere in the free space, any heading (``"free"``:
-    ``server.world.free_pose``, as a person dragging the robot about would)."""
+    pose (``where="starts"``), anywhere in the free space, any heading (``"free"``:
+    ``server.world.free_pose``, as a person dragging the robot about would), or a little off
+    where it is (``"near"``: ``server.world.sample_pose`` with ``NEAR``: dragged off its path
+    and turned, so the person shows the way back)."""
     rng = np.random.default_rng(seed + 555)
     learner = method.learner()
     world = World(spec, robots=1, seed=seed)
@@ -158,7 +163,9 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
         if every > 0 and t > 0 and (t - moved_at >= every - 1e-9
                                     or (mode == "correct" and moved_at < demo)):
             moved_at, next_start = t, next_start + 1  # the next start pose (set_pose)
-            pose = free_pose(spec, rng) if where == "free" else None
+            pose = (free_pose(spec, rng) if where == "free"
+                    else sample_pose(spec, [world.pose(0)], rng, jitter=NEAR[0], turn=NEAR[1],
+                                     clearance=NEAR[2]) if where == "near" else None)
             world.set_pose(0, pose or starts[next_start % len(starts)])
         scans[k] = (world.scan(0), world.odom(0), world.pose(0))
         while len(scans) > SCAN_MEMORY:
@@ -384,9 +391,10 @@ def main(argv=None) -> int:
                     help="demonstrating: put the robot at the next start pose every S s (0: never)")
     ap.add_argument("--restart-correct", type=float, default=0.0, metavar="S",
                     help="correcting: put the robot at the next start pose every S s (0: never)")
-    ap.add_argument("--where", choices=["starts", "free"], default="starts",
-                    help="--restart-*: at the world's next start pose, or anywhere in the free "
-                         "space with any heading (as a person dragging the robot about)")
+    ap.add_argument("--where", choices=["starts", "free", "near"], default="starts",
+                    help="--restart-*: at the world's next start pose, anywhere in the free "
+                         "space with any heading (as a person dragging the robot about), or "
+                         "dragged a little off where it is and turned ('near')")
     ap.add_argument("--guard", action="store_true",
                     help="the controller (and the evaluation) drive the tree through "
                          "client.behaviour.guard.RotationGuard")
