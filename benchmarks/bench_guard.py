@@ -41,6 +41,7 @@ def trial(task: str, seed: int, worlds) -> dict:
             row[name] = {"success": rep["success_rate"], "loops": len(rep["loops"]),
                          "collisions": sum(e["collisions"] for e in rep["learner"])}
         row["overruled"] = guard.overruled  # reversals the guard overruled in these episodes
+        row["avoided"] = guard.avoided  # forward orders it turned into a rotation in place
         out["worlds"][spec.name] = row
     return out
 
@@ -62,8 +63,9 @@ def main(argv=None) -> int:
                           for w, r in rows[-1]["worlds"].items()), flush=True)
     print(f"\n{args.task}, {args.trials} trials: success mean (min over trials), loops, "
           "collisions; without | with the guard")
-    print("| world | without the guard | with the guard | reversals overruled |")
-    print("|---|---|---|---|")
+    print("| world | without the guard | with the guard | reversals overruled | forward orders "
+          "avoided |")
+    print("|---|---|---|---|---|")
     for w in rows[0]["worlds"]:
         cells = []
         for name in ("plain", "guard"):
@@ -73,7 +75,8 @@ def main(argv=None) -> int:
             cells.append(f"{100 * sum(s) / len(s):.1f}% ({100 * min(s):.0f}), {loops} loops, "
                          f"{coll} collisions")
         print(f"| {w} | {cells[0]} | {cells[1]} | "
-              f"{sum(r['worlds'][w]['overruled'] for r in rows)} |")
+              f"{sum(r['worlds'][w]['overruled'] for r in rows)} | "
+              f"{sum(r['worlds'][w]['avoided'] for r in rows)} |")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
     return 0

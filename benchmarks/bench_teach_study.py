@@ -50,7 +50,7 @@ from people import DEV, HELD_OUT, PEOPLE, View  # noqa: E402
 
 from client.behaviour.actions import DEFAULT_ACTIONS  # noqa: E402
 from client.behaviour.features import FEATURES  # noqa: E402
-from client.behaviour.guard import RotationGuard  # noqa: E402
+from client.behaviour.guard import CLEARANCE, RotationGuard  # noqa: E402
 from client.behaviour.learning import DemonstrationLearner, TreePolicy  # noqa: E402
 from client.behaviour.teaching import LAG, MAX_LAG, PersonLearner, answered_scan  # noqa: E402
 from lab import metrics  # noqa: E402
@@ -133,10 +133,10 @@ def snapshot(learner: DemonstrationLearner) -> TreePolicy | None:
 
 def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float = 120.0,
           seed: int = 0, latency: float = 0.03, refresh: float = 2.0, guard: bool = False,
-          restarts: tuple[float, float] = (0.0, 0.0),
-          where: str = "starts") -> tuple[Session, DemonstrationLearner]:
+          restarts: tuple[float, float] = (0.0, 0.0), where: str = "starts",
+          clearance: float = CLEARANCE) -> tuple[Session, DemonstrationLearner]:
     """One session (see the module's docstring). ``guard``: the controller drives through a
-    ``RotationGuard``. ``restarts`` = (demonstrate, correct) seconds: > 0, the person puts the
+    ``RotationGuard`` (``clearance``: its path check, 0 off). ``restarts`` = (demonstrate, correct) seconds: > 0, the person puts the
     robot elsewhere this often in that mode (the console's set_pose): at the world's next start
     pose (``where="starts"``), anywhere in the free space, any heading (``"free"``:
     ``server.world.free_pose``, as a person dragging the robot about would), or a little off
@@ -202,7 +202,7 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
             next_refresh = t + refresh
             tree = snapshot(learner)
             if tree is not None:
-                drive = RotationGuard(tree) if guard else tree
+                drive = RotationGuard(tree, clearance=clearance) if guard else tree
                 drive.reset()
         if key is not None:
             name, driver = key, "teacher"
@@ -291,15 +291,19 @@ def score(policy, worlds, model: str, seed: int = 0) -> dict:
 
 def run_one(model: str, seed: int, method: str, worlds, *, demo: float = 240.0,
             correct: float = 120.0, latency: float = 0.03, guard: bool = False,
-            restarts: tuple[float, float] = (0.0, 0.0), where: str = "starts") -> dict:
+            restarts: tuple[float, float] = (0.0, 0.0), where: str = "starts",
+            clearance: float = CLEARANCE) -> dict:
     """One person model, one seed, one method: teach, then evaluate."""
     t0 = time.perf_counter()
     rec, learner = teach(resolve_world(TAUGHT), PEOPLE[model](seed=seed), make_method(method),
                          demo=demo, correct=correct, seed=seed, latency=latency, guard=guard,
-                         restarts=restarts, where=where)
+                         restarts=restarts, where=where, clearance=clearance)
     policy = TreePolicy.from_learner(learner)
-    scores = score(RotationGuard(policy) if guard else policy, worlds, model, seed=seed)
-    return {"model": model, "seed": seed, "method": method, "guard": guard,
+    scores = score(RotationGuard(policy, clearance=clearance) if guard else policy, worlds,
+                   model, seed=seed)
+    return {"model": model, "seed": seed, "method": method,
+            "guard": guard and (f"guard, clearance {clearance:g}" if clearance
+                                else "guard, no clearance"),
             "labels": rec.labels, "demo_labels": rec.demo_labels,
             "corrections": rec.corrections, "takeovers": rec.takeovers,
             "wrong": rec.wrong, "teaching_collisions": rec.collisions,
@@ -345,7 +349,7 @@ def table(rows: list[dict], taught: str, unseen) -> str:
     """Per model and method: means over seeds (min over seeds in brackets)."""
     groups: dict = {}
     for r in rows:
-        groups.setdefault((r["model"], r["method"] + (" +guard" if r["guard"] else "")),
+        groups.setdefault((r["model"], r["method"] + (f" +{r['guard']}" if r["guard"] else "")),
                           []).append(r)
     lines = ["| model | method | seeds | taught room | unseen rooms | at the person's pace: "
              "taught / unseen | loops | collisions | nodes | labels | corrections | wrong keys "
@@ -398,6 +402,11 @@ def main(argv=None) -> int:
     ap.add_argument("--guard", action="store_true",
                     help="the controller (and the evaluation) drive the tree through "
                          "client.behaviour.guard.RotationGuard")
+    ap.add_argument("--clearance", type=float, default=CLEARANCE, metavar="M",
+                    help="with --guard: its path check (RotationGuard(clearance=M)): a forward "
+                         "order with a laser return within 0.5 m ahead and M m of the centre "
+                         f"line becomes a rotation in place (default {CLEARANCE:g}, as rhbl "
+                         "controller; 0: off)")
     ap.add_argument("--alone", action="store_true",
                     help="also print how each person model does driving by itself")
     ap.add_argument("--json", default=None, help="write every run here")
@@ -421,7 +430,7 @@ def main(argv=None) -> int:
                 r = run_one(model, seed, method, worlds, demo=args.demo, correct=args.correct,
                             latency=args.latency, guard=args.guard,
                             restarts=(args.restart_demo, args.restart_correct),
-                            where=args.where)
+                            where=args.where, clearance=args.clearance)
                 rows.append(r)
                 print(f"{method:>12} {model:>12} seed {seed}: "
                       + " ".join(f"{w} {100 * s['success']:.0f}%/{s['loops']}L"
