@@ -29,7 +29,7 @@ Pure (no zenoh): the controller process and the in-process harness use this same
 
 from __future__ import annotations
 
-__all__ = ["CLEARANCE", "LOOKAHEAD", "RotationGuard", "in_path"]
+__all__ = ["CLEARANCE", "LOOKAHEAD", "RotationGuard", "clearance_for", "in_path"]
 
 import numpy as np
 
@@ -37,6 +37,17 @@ _OPPOSITE = {"rot-left": "rot-right", "rot-right": "rot-left"}
 _FORWARD = ("fwd", "fwd-left", "fwd-right")
 CLEARANCE = 0.3  # m either side of the centre line: the robot's radius (0.25 m) and a margin
 LOOKAHEAD = 0.5  # m ahead: two scans' travel at full speed and a margin
+
+
+def clearance_for(metadata) -> float:
+    """The path check's clearance ``rhbl controller`` uses for a tree (its snapshot metadata):
+    ``CLEARANCE`` for a tree taught by hand (learning rule ``person``), 0 (off) for the scripted
+    teacher's, whose demonstrations keep their own distance (docs/teaching.md: with the check
+    its trees collided less but reached the 5-tier maze's goal less often)."""
+    from .teaching import PERSON_RULE
+
+    rule = ((metadata or {}).get("learning") or {}).get("rule")
+    return CLEARANCE if rule == PERSON_RULE else 0.0
 
 
 def in_path(ranges, clearance: float, lookahead: float, bearings=None) -> float:
@@ -68,7 +79,7 @@ class RotationGuard:
     controller, whose tree may be swapped while the guard's memory goes on)."""
 
     def __init__(self, policy=None, hold: int = 30, memory: int = 5,
-                 clearance: float = CLEARANCE, lookahead: float = LOOKAHEAD):
+                 clearance: float = 0.0, lookahead: float = LOOKAHEAD):
         if hold < 0 or memory < 0:
             raise ValueError(f"hold and memory must be >= 0 scans, got {hold}, {memory}")
         self.policy = policy

@@ -16,9 +16,10 @@ default, ``--no-guard`` to drive the tree's answers as they are): an order to ro
 way within 5 scans of a rotation is overruled (the robot keeps turning as it was, for at most
 ``--guard-hold`` scans in a row), so the robot does not bounce between a rot-left and a rot-right
 sphere for ever; every overruled reversal is counted (``--stats``: ``overruled``) and logged at a
-bounded rate; and a forward order while a laser return lies in the robot's path (within 0.5 m
-ahead and ``--guard-clearance`` m of its centre line) becomes a rotation in place (``--stats``:
-``avoided``; docs/teaching.md has the study behind both).
+bounded rate; and, for a tree taught by hand (or with ``--guard-clearance M`` for any tree), a
+forward order while a laser return lies in the robot's path (within 0.5 m ahead and 0.3 m of
+its centre line) becomes a rotation in place (``--stats``: ``avoided``; docs/teaching.md has
+the study behind both).
 
 With ``--ros2`` it drives a ROS 2 robot instead (``client.ros2.Ros2Robot``, docs/ros2.md): its
 ``LaserScan`` (any beam count and span, resampled to the tree's features, or refused with exit 2
@@ -36,7 +37,7 @@ import zenoh
 
 from client.behaviour.actions import ActionSet
 from client.behaviour.features import FEATURES, FeatureSpec
-from client.behaviour.guard import CLEARANCE, LOOKAHEAD, RotationGuard
+from client.behaviour.guard import CLEARANCE, LOOKAHEAD, RotationGuard, clearance_for
 from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, check_compatible
 from client.decision import Decider
 from client.player import PlayerClient
@@ -83,10 +84,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --guard: at most this many overruled reversals in a row, "
                              "then the tree's answer is taken (default 30: 3 s at 10 Hz)")
     parser.add_argument("--guard-clearance", type=arguments.non_negative_float,
-                        default=CLEARANCE, metavar="M",
+                        default=None, metavar="M",
                         help="with --guard: a forward order while a laser return lies within "
                              f"{LOOKAHEAD:g} m ahead and M m of the robot's centre line becomes "
-                             f"a rotation in place (default {CLEARANCE:g}; 0: off)")
+                             f"a rotation in place (0: off; default {CLEARANCE:g} for a tree "
+                             "taught by hand, 0 for the scripted teacher's)")
     parser.add_argument("--ros2", action="store_true",
                         help="drive a ROS 2 robot (rmw_zenoh's keys): its LaserScan and Odometry "
                              "in, a Twist on cmd_vel out; --robot names its topics "
@@ -171,7 +173,7 @@ class ControllerProcess:
         self.ctx, self.args = ctx, ctx.args
         # kept across tree swaps: a new tree does not reset what the robot is doing
         self.guard = (RotationGuard(hold=self.args.guard_hold,
-                                    clearance=self.args.guard_clearance)
+                                    clearance=self.args.guard_clearance or 0.0)
                       if self.args.guard else None)
         self.policy: TreePolicy | None = None  # swapped between scans by the follower
         # subscribed before the first query: a tree announced meanwhile is not missed
@@ -199,10 +201,17 @@ class ControllerProcess:
                             block=True)
 
     def swap(self, policy: TreePolicy) -> None:
+        self._clearance(policy)
         self.policy = policy
+
+    def _clearance(self, policy: TreePolicy) -> None:
+        """The guard's path check for this tree (``--guard-clearance``, or by who taught it)."""
+        if self.guard is not None and self.args.guard_clearance is None:
+            self.guard.clearance = clearance_for(policy.metadata)
 
     def run(self) -> int:
         self.policy = self.first_tree()
+        self._clearance(self.policy)
         log.info("tree loaded: %s; features %s", _describe(self.policy),
                  self.policy.features.to_dict())
         if self.follower is not None:

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from client.behaviour.guard import RotationGuard, in_path
+from client.behaviour.guard import CLEARANCE, RotationGuard, clearance_for, in_path
 
 
 class Script:
@@ -103,5 +103,11 @@ def test_with_clearance_a_forward_order_into_the_path_rotates_away():
     for _ in range(6):                                     # the rotation forgotten (memory 5)
         g.choose("fwd", _scan({}))
     assert g.choose("fwd-right", _scan({30: 0.35})) == "rot-right" and g.avoided == 3
-    off = RotationGuard(clearance=0.0)                     # no path check
+    off = RotationGuard()                                  # clearance 0: no path check
     assert off.choose("fwd", corner) == "fwd" and off.avoided == 0
+
+
+def test_the_controllers_clearance_is_on_for_a_tree_taught_by_hand_only():
+    assert clearance_for({"learning": {"rule": "person", "lag": 3}}) == CLEARANCE > 0
+    assert clearance_for({"learning": {"stride": 1}}) == 0.0
+    assert clearance_for({}) == 0.0 and clearance_for(None) == 0.0
