@@ -14,10 +14,11 @@ tree copies the noise. Two pieces cope with it (docs/teaching.md has the study b
   own; the lag is the shift at which the labels agree best with the features of the scan that
   many scans earlier, held out in blocks of time (a person's key is most predictable from what
   they saw a reaction time ago), re-estimated from every label at each build.
-* **the majority** (``PersonLearner``, on the learner's side): every label is kept as given;
-  the tree is built from all of them at once, each labelled vector taking the label most of its
-  ``k`` nearest labelled vectors carry (a wrong key or a late release is outvoted by the labels
-  around it), optionally with jittered copies labelled by the same vote (``copies``).
+* **the vote** (``PersonLearner``, on the learner's side): every label is kept as given; the
+  tree is built from all of them at once, each labelled vector taking the action nearest to the
+  mean command of its ``k`` nearest labelled vectors (``vote="mean"``, the default) or the label
+  most of them carry (``"majority"``): a wrong key or a late release is outvoted by the labels
+  around it; optionally with jittered copies labelled by the same vote (``copies``).
 
     shown = 812                                         # the scan the page displayed
     answered = answered_scan(shown, scans, lag=LAG)     # scans: id -> scan (with .pose)
@@ -175,7 +176,7 @@ def estimate_lag(W: np.ndarray, y: np.ndarray, k: int, n_labels: int, block: int
 PERSON_RULE = "person"  # the snapshot metadata's learning rule of a PersonLearner
 
 # the defaults docs/teaching.md chose on the teaching study
-PERSON_DEFAULTS = {"k": 25, "copies": 0, "sigma": 0.06, "vote": "majority", "passes": 1,
+PERSON_DEFAULTS = {"k": 25, "copies": 0, "sigma": 0.06, "vote": "mean", "passes": 1,
                    "build": "batch"}
 
 

@@ -34,7 +34,7 @@ withdrawal of labels folded into a snapshot is journaled but cannot take them ou
 scan ``--lag`` scans before the one it names (a person's key answers what they saw a reaction
 time earlier: ``client.labels.Pairing``; ``--lag auto``: each label is journaled with the scans
 displayed before it and the lag is estimated from the labels), and the tree is rebuilt from every label journaled,
-each taking the label most of its nearest labels carry
+each taking what its nearest labels vote
 (``client.behaviour.teaching.PersonLearner``: one wrong key does not carve a sphere for ever).
 Such a lineage is rebuilt from its whole journal on a restart (no ``--fold-journal``, no
 ``--resume``); docs/teaching.md has the study behind it.
@@ -128,7 +128,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="who labels a new tree: 'script' (rhbl teacher: each label learned "
                              "as it arrives, default) or 'person' (rhbl console: labels paired "
                              "with the scan --lag scans earlier, the tree rebuilt from every "
-                             "label by the majority of its nearest labels); a lineage keeps "
+                             "label by the vote of its nearest labels); a lineage keeps "
                              "the rule it was made with")
     parser.add_argument("--lag", type=arguments.Checked("lag", parse_lag), default=LAG,
                         metavar="SCANS|auto",
@@ -425,7 +425,8 @@ class LearnerCore:
         if self.person:
             lag = (f"the lag estimated, {learner.estimated_lag} scans so far" if self.estimates
                    else f"shifted {learner.lag} scans back")
-            rule = f"; a person's labels ({lag}, the majority of {learner.k} nearest)"
+            rule = (f"; a person's labels ({lag}, the {learner.vote} vote of {learner.k} "
+                    f"nearest)")
         return (f"features {self.features.to_dict()['beams']}, {learner.vectors} vectors so far "
                 f"({self.applied} journaled in lineage {self.journal.lineage}), "
                 f"{learner.nodes} nodes{rule}")

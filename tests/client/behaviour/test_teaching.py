@@ -143,7 +143,7 @@ def test_person_learner_copies_are_seeded_and_the_tree_saves(tmp_path):
     assert meta["learning"] == {"rule": "person", "lag": LAG, "estimated_lag": LAG,
                                 "k": PERSON_DEFAULTS["k"],
                                 "copies": 2,
-                                "sigma": PERSON_DEFAULTS["sigma"], "vote": "majority",
+                                "sigma": PERSON_DEFAULTS["sigma"], "vote": PERSON_DEFAULTS["vote"],
                                 "passes": PERSON_DEFAULTS["passes"],
                                 "build": PERSON_DEFAULTS["build"], "seed": 4}
     assert meta["tree_params"]["spawn"] == "winner"
