@@ -1,7 +1,8 @@
 """The in-process teaching study: models of people teach wall following at a simulated console.
 
     python benchmarks/bench_teach_study.py [--models steady,hurried] [--seeds 3] \
-        [--methods today,literal,person,person:k=25] [--guard] [--restart-correct 20] \
+        [--methods today,literal,person,person:k=25,person:lag=auto] [--guard] [--clearance 0.3] \
+        [--restart-correct 20] [--restart-demo 20 --where starts|free|near] \
         [--worlds room,eval-room-l,...] [--json out.json]
 
 No zenoh, no browser: the world is stepped at 10 Hz as ``lab.harness`` does, and the page's and
