@@ -53,7 +53,7 @@ from client.behaviour.actions import DEFAULT_ACTIONS  # noqa: E402
 from client.behaviour.features import FEATURES  # noqa: E402
 from client.behaviour.guard import CLEARANCE, RotationGuard  # noqa: E402
 from client.behaviour.learning import DemonstrationLearner, TreePolicy  # noqa: E402
-from client.behaviour.teaching import LAG, MAX_LAG, PersonLearner, answered_scan  # noqa: E402
+from client.behaviour.teaching import MAX_LAG, PersonLearner, answered_scan  # noqa: E402
 from lab import metrics  # noqa: E402
 from lab.episode import DT, Episode  # noqa: E402
 from lab.evaluate import evaluate  # noqa: E402
@@ -104,7 +104,7 @@ class Method:
                                     **self.options)
 
 
-METHODS = {"today": 0, "literal": 0, "person": LAG}  # name -> the default lag
+METHODS = {"today": 0, "literal": 0, "person": None}  # name -> the default lag (None: estimated)
 
 
 def make_method(text: str) -> Method:

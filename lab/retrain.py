@@ -27,7 +27,7 @@ from client.behaviour.actions import DEFAULT_ACTIONS
 from client.behaviour.features import FEATURES, FeatureError
 from client.behaviour.learning import DemonstrationLearner
 from client.behaviour.tasks import task_of_features
-from client.behaviour.teaching import LAG, MAX_LAG, PersonLearner
+from client.behaviour.teaching import MAX_LAG, PersonLearner
 from client.recording.mcap_file import RecordingError, read_recording
 from protocol.messages import Scan, TeacherAction
 
@@ -83,7 +83,7 @@ def labeled_scans(path: str | Path, robots: list[str] | None = None,
 def retrain(paths, features: str = "wall", robots: list[str] | None = None,
             task: str | None = None, stride: int = 1, min_delta: float = 0.0,
             tree_params: dict | None = None, record: bool = False, teacher: str = "script",
-            lag: int | None = LAG) -> tuple[DemonstrationLearner, dict]:
+            lag: int | None = None) -> tuple[DemonstrationLearner, dict]:
     """A tree learned from the recordings' teacher labels (in order, files in the order
     given), as ``rhbl learner`` learns: labels that are no action of the tree and scans the
     features cannot use are skipped and counted. ``record``: the learner keeps its vectors

@@ -9,8 +9,8 @@ tree copies the noise. Two pieces cope with it (docs/teaching.md has the study b
   is displayed answers what the person saw ``lag`` scans earlier, so the label is tied to scan
   ``n - lag`` (the scan displayed when the key went out, as today, if that one is unknown or the
   robot was moved since).
-* **the lag estimated from the data** (``PersonLearner(lag=None)``, ``rhbl learner --lag auto``;
-  ``estimate_lag``; not the default: the fixed ``LAG`` gave better trees in the study): each label also carries the scans shown up to ``MAX_LAG`` scans before its
+* **the lag estimated from the data** (``PersonLearner(lag=None)``, the default; ``rhbl learner
+  --lag auto``; ``estimate_lag``): each label also carries the scans shown up to ``MAX_LAG`` scans before its
   own; the lag is the shift at which the labels agree best with the features of the scan that
   many scans earlier, held out in blocks of time (a person's key is most predictable from what
   they saw a reaction time ago), re-estimated from every label at each build.
@@ -196,7 +196,7 @@ class PersonLearner(DemonstrationLearner):
                  k: int = PERSON_DEFAULTS["k"], copies: int = PERSON_DEFAULTS["copies"],
                  sigma: float = PERSON_DEFAULTS["sigma"], vote: str = PERSON_DEFAULTS["vote"],
                  passes: int = PERSON_DEFAULTS["passes"], build: str = PERSON_DEFAULTS["build"],
-                 seed: int = 0, lag: int | None = LAG, task: str | None = None,
+                 seed: int = 0, lag: int | None = None, task: str | None = None,
                  parent: str | None = None, provenance: Mapping | None = None, **tree_params):
         if not (isinstance(k, int) and k >= 1):
             raise ValueError(f"k must be an integer >= 1, got {k!r}")

@@ -130,12 +130,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "with the scan --lag scans earlier, the tree rebuilt from every "
                              "label by the vote of its nearest labels); a lineage keeps "
                              "the rule it was made with")
-    parser.add_argument("--lag", type=arguments.Checked("lag", parse_lag), default=LAG,
+    parser.add_argument("--lag", type=arguments.Checked("lag", parse_lag), default=None,
                         metavar="SCANS|auto",
                         help="with --teacher person: a label answers the scan this many scans "
-                             f"(0..{MAX_LAG}) before the one it names (default {LAG}: 0.3 s at "
-                             "10 Hz); 'auto': estimated from the labels, re-estimated as they "
-                             "accumulate (docs/teaching.md)")
+                             f"(0..{MAX_LAG}) before the one it names; 'auto' (default): "
+                             "estimated from the labels, re-estimated as they accumulate "
+                             f"({LAG} until there are enough; docs/teaching.md)")
 
 
 # ---- the learning core (no zenoh: testable on its own) --------------------------------------
@@ -155,7 +155,7 @@ class LearnerCore:
                  tree_params: dict | None = None, stride: int = 1, min_delta: float = 0.0,
                  fsync_interval: float = 1.0, actions: ActionSet = DEFAULT_ACTIONS,
                  fold_journal: bool = False, journal_write=os.write, teacher: str = "script",
-                 lag: int | None = LAG):
+                 lag: int | None = None):
         if lag is not None and not (isinstance(lag, int) and 0 <= lag <= MAX_LAG):
             raise ProcessError(f"learner: --lag must be 0..{MAX_LAG} scans, got {lag!r}",
                                EXIT_USAGE)

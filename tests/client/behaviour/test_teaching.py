@@ -140,7 +140,7 @@ def test_person_learner_copies_are_seeded_and_the_tree_saves(tmp_path):
     assert a.classifier.tree_.equal(b.classifier.tree_)
     path = a.save(tmp_path / "person.rhbl")
     meta = load(path).metadata
-    assert meta["learning"] == {"rule": "person", "lag": LAG, "estimated_lag": LAG,
+    assert meta["learning"] == {"rule": "person", "lag": None, "estimated_lag": LAG,
                                 "k": PERSON_DEFAULTS["k"],
                                 "copies": 2,
                                 "sigma": PERSON_DEFAULTS["sigma"], "vote": PERSON_DEFAULTS["vote"],
