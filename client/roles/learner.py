@@ -30,10 +30,10 @@ withdrawal of labels folded into a snapshot is journaled but cannot take them ou
     rhbl learner --resume tree.rhbl --out tree2.rhbl             # extend a tree: a new lineage
     rhbl learner --features wall --teacher person --out tree.rhbl  # taught by hand (rhbl console)
 
-``--teacher person`` (labels given by hand at ``rhbl console``): each label is paired with the
-scan ``--lag`` scans before the one it names (a person's key answers what they saw a reaction
-time earlier: ``client.labels.Pairing``; ``--lag auto``: each label is journaled with the scans
-displayed before it and the lag is estimated from the labels), and the tree is rebuilt from every label journaled,
+``--teacher person`` (labels given by hand at ``rhbl console``): a person's key answers what
+they saw a reaction time earlier: each label is journaled with the scans displayed before it
+and the lag is estimated from the labels (``--lag auto``, the default), or paired with the scan
+``--lag N`` scans before the one it names (``client.labels.Pairing``), and the tree is rebuilt from every label journaled,
 each taking what its nearest labels vote
 (``client.behaviour.teaching.PersonLearner``: one wrong key does not carve a sphere for ever).
 Such a lineage is rebuilt from its whole journal on a restart (no ``--fold-journal``, no
