@@ -25,7 +25,7 @@ import numpy as np
 from client.behaviour.learning import DemonstrationLearner, TreePolicy
 from client.behaviour.policies import Demonstrator, takes_over
 from client.behaviour.tasks import TASKS, make_policy
-from client.behaviour.teaching import LAG
+from client.behaviour.teaching import parse_lag
 from lab.episode import DT, Episode
 from lab.harness import (
     OnStep,
@@ -402,9 +402,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--teacher", choices=["script", "person"], default="script",
                         help="with --from-recording: 'person' learns labels given by hand as "
                              "rhbl learner --teacher person does (docs/teaching.md)")
-    parser.add_argument("--lag", type=arguments.non_negative_int, default=LAG, metavar="SCANS",
-                        help=f"with --teacher person: a label answers the scan this many scans "
-                             f"before the one it names (default {LAG})")
+    parser.add_argument("--lag", type=arguments.Checked("lag", parse_lag), default=None,
+                        metavar="SCANS|auto",
+                        help="with --teacher person: a label answers the scan this many scans "
+                             "before the one it names ('auto', the default: estimated from "
+                             "the labels)")
 
 
 def main(args) -> int:
@@ -415,7 +417,7 @@ def main(args) -> int:
         return train_main(args)  # every flag that cannot apply is a named error there
     if not args.world:
         raise ValueError("--world is required (or --from-recording FILE)")
-    if args.teacher != "script" or args.lag != LAG:
+    if args.teacher != "script" or args.lag is not None:
         raise ValueError("--teacher and --lag go with --from-recording (a simulated run's "
                          "teacher is the scripted expert)")
     spec = resolve_world(args.world)

@@ -30,10 +30,11 @@ withdrawal of labels folded into a snapshot is journaled but cannot take them ou
     rhbl learner --resume tree.rhbl --out tree2.rhbl             # extend a tree: a new lineage
     rhbl learner --features wall --teacher person --out tree.rhbl  # taught by hand (rhbl console)
 
-``--teacher person`` (labels given by hand at ``rhbl console``): each label is paired with the
-scan ``--lag`` scans before the one it names (a person's key answers what they saw a reaction
-time earlier: ``client.labels.Pairing``), and the tree is rebuilt from every label journaled,
-each taking the label most of its nearest labels carry
+``--teacher person`` (labels given by hand at ``rhbl console``): a person's key answers what
+they saw a reaction time earlier: each label is journaled with the scans displayed before it
+and the lag is estimated from the labels (``--lag auto``, the default), or paired with the scan
+``--lag N`` scans before the one it names (``client.labels.Pairing``), and the tree is rebuilt from every label journaled,
+each taking what its nearest labels vote
 (``client.behaviour.teaching.PersonLearner``: one wrong key does not carve a sphere for ever).
 Such a lineage is rebuilt from its whole journal on a restart (no ``--fold-journal``, no
 ``--resume``); docs/teaching.md has the study behind it.
@@ -60,7 +61,7 @@ from client.behaviour.learning import (
     load_snapshot,
 )
 from client.behaviour.tasks import task_of_features
-from client.behaviour.teaching import LAG, PERSON_RULE, PersonLearner
+from client.behaviour.teaching import LAG, MAX_LAG, PERSON_RULE, PersonLearner, parse_lag
 from client.journal import (
     Journal,
     JournalError,
@@ -127,14 +128,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="who labels a new tree: 'script' (rhbl teacher: each label learned "
                              "as it arrives, default) or 'person' (rhbl console: labels paired "
                              "with the scan --lag scans earlier, the tree rebuilt from every "
-                             "label by the majority of its nearest labels); a lineage keeps "
+                             "label by the vote of its nearest labels); a lineage keeps "
                              "the rule it was made with")
-    parser.add_argument("--lag", type=arguments.non_negative_int, default=LAG, metavar="SCANS",
-                        help=f"with --teacher person: a label answers the scan this many scans "
-                             f"before the one it names (default {LAG}: 0.3 s at 10 Hz)")
+    parser.add_argument("--lag", type=arguments.Checked("lag", parse_lag), default=None,
+                        metavar="SCANS|auto",
+                        help="with --teacher person: a label answers the scan this many scans "
+                             f"(0..{MAX_LAG}) before the one it names; 'auto' (default): "
+                             "estimated from the labels, re-estimated as they accumulate "
+                             f"({LAG} until there are enough; docs/teaching.md)")
 
 
 # ---- the learning core (no zenoh: testable on its own) --------------------------------------
+def _replay(learner: DemonstrationLearner, rec) -> None:
+    """Learn one journal record again (a person's label with the scans journaled before it)."""
+    if rec.earlier is not None and isinstance(learner, PersonLearner):
+        learner.observe(rec.ranges, rec.yaw, rec.label, earlier=rec.earlier)
+    else:
+        learner.observe(rec.ranges, rec.yaw, rec.label)
+
+
 class LearnerCore:
     """Snapshot + journal + DemonstrationLearner: ``learn`` a labeled scan, ``snapshot``."""
 
@@ -143,9 +155,10 @@ class LearnerCore:
                  tree_params: dict | None = None, stride: int = 1, min_delta: float = 0.0,
                  fsync_interval: float = 1.0, actions: ActionSet = DEFAULT_ACTIONS,
                  fold_journal: bool = False, journal_write=os.write, teacher: str = "script",
-                 lag: int = LAG):
-        if not (isinstance(lag, int) and lag >= 0):
-            raise ProcessError(f"learner: --lag must be >= 0 scans, got {lag!r}", EXIT_USAGE)
+                 lag: int | None = None):
+        if lag is not None and not (isinstance(lag, int) and 0 <= lag <= MAX_LAG):
+            raise ProcessError(f"learner: --lag must be 0..{MAX_LAG} scans, got {lag!r}",
+                               EXIT_USAGE)
         self.out = Path(out)
         self.fold_journal = bool(fold_journal)
         self.jpath = journal_path(self.out)
@@ -214,9 +227,16 @@ class LearnerCore:
         return isinstance(self.learner, PersonLearner)
 
     @property
-    def lag(self) -> int:
-        """Scans a label is shifted back by when paired (0: the scan it names)."""
+    def lag(self) -> int | None:
+        """Scans a label is shifted back by when paired (0: the scan it names; None: a person's
+        lag estimated by the learner from the scans before each label, ``estimates``)."""
         return self.learner.lag if self.person else 0
+
+    @property
+    def estimates(self) -> bool:
+        """A person's lineage whose lag is estimated from the data: each label is journaled
+        and learned with the scans displayed before it (``Pairing(window=MAX_LAG)``)."""
+        return self.person and self.learner.lag is None
 
     @property
     def actions(self) -> ActionSet:
@@ -280,7 +300,7 @@ class LearnerCore:
                 log.error("labels were withdrawn after the last snapshot, but the journal was "
                           "folded (--fold-journal): those in the snapshot stay in the tree")
             for rec in self.journal.standing(start, withdrawn=self.withdrawals):
-                learner.observe(rec.ranges, rec.yaw, rec.label)
+                _replay(learner, rec)
                 self.standing += 1
         self.replayed = len(self.journal) - start
         log.info("recovered lineage %s: snapshot held %d journal records, replayed %d more in "
@@ -328,7 +348,7 @@ class LearnerCore:
         learner = self._lineage_start()
         self.standing = 0
         for rec in self.journal.standing(withdrawn=self.withdrawals):
-            learner.observe(rec.ranges, rec.yaw, rec.label)
+            _replay(learner, rec)
             self.standing += 1
         learner.parent = self.journal.header.get("parent")
         self.rebuilds += 1
@@ -367,7 +387,8 @@ class LearnerCore:
         return True
 
     def learn(self, scan_id: int, ts: float, ranges, yaw: float, label: str,
-              origin: str | None = None, seq: int | None = None) -> bool | None:
+              origin: str | None = None, seq: int | None = None,
+              earlier=()) -> bool | None:
         """Journal (flushed) then learn one labeled scan; True when it reached the tree. A label
         with an identity (``origin``, ``seq``) is recorded in ``labels`` once journaled; one
         held already (a resend) is neither journaled nor learned again: None. Raises
@@ -377,9 +398,16 @@ class LearnerCore:
         if self.holds(origin, seq):
             return None
         x = self.learner.features.extract(ranges, yaw)
-        self.journal.append(scan_id, ts, label, ranges, yaw, x.astype(np.float32), origin, seq)
+        back = None
+        if self.estimates:  # the scans before it, (ranges, yaw) nearest first: the lag's data
+            back = np.zeros((len(earlier), len(x)), np.float32)
+            for i, (r, a) in enumerate(earlier):
+                back[i] = self.learner.features.extract(r, a)
+        self.journal.append(scan_id, ts, label, ranges, yaw, x.astype(np.float32), origin, seq,
+                            back)
         self._journaled(origin, seq)
-        learned = self.learner.observe(ranges, yaw, label)
+        learned = (self.learner.observe(ranges, yaw, label, earlier=back) if self.estimates
+                   else self.learner.observe(ranges, yaw, label))
         self.applied += 1
         self.standing += 1
         return learned
@@ -393,8 +421,12 @@ class LearnerCore:
         learned from (a tree extended with ``--resume`` holds its parent's too) and how many of
         them this lineage's journal holds, its size."""
         learner = self.learner
-        rule = (f"; a person's labels (shifted {learner.lag} scans back, the majority of "
-                f"{learner.k} nearest)" if self.person else "")
+        rule = ""
+        if self.person:
+            lag = (f"the lag estimated, {learner.estimated_lag} scans so far" if self.estimates
+                   else f"shifted {learner.lag} scans back")
+            rule = (f"; a person's labels ({lag}, the {learner.vote} vote of {learner.k} "
+                    f"nearest)")
         return (f"features {self.features.to_dict()['beams']}, {learner.vectors} vectors so far "
                 f"({self.applied} journaled in lineage {self.journal.lineage}), "
                 f"{learner.nodes} nodes{rule}")
@@ -480,7 +512,8 @@ class LearnerProcess:
         self.watch = ScanWatch("learner", keys.scan_key(ctx.robot), stale=3.0)
         # labels are paired with their scans as they arrive: nothing but labeled scans is queued
         self.pairing = Pairing(self.args.scan_buffer, self.args.match_timeout,
-                               on_scan_seen=self.watch.seen, lag=self.core.lag)
+                               on_scan_seen=self.watch.seen, lag=self.core.lag or 0,
+                               window=MAX_LAG if self.core.estimates else 0)
         self.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0, "duplicates": 0,
                       "withdrawals": 0, "withdrawn_skipped": 0}
         # teachers' withdrawals as they arrive (decoded in zenoh's thread), applied by the loop
@@ -605,8 +638,9 @@ class LearnerProcess:
         while self.backlog:
             scan, act = self.backlog[0]
             try:
-                learned = self.core.learn(scan.id, scan.ts, scan.ranges, float(scan.pose[2]),
-                                          act.action, act.origin, act.seq)
+                learned = self.core.learn(
+                    scan.id, scan.ts, scan.ranges, float(scan.pose[2]), act.action, act.origin,
+                    act.seq, [(s.ranges, float(s.pose[2])) for s in getattr(scan, "earlier", ())])
             except FeatureError as exc:  # a scan the features cannot use (bad input)
                 self._pop()
                 self.stats["rejected"] += 1
