@@ -225,6 +225,13 @@ class Scan(_Message):
 
     @classmethod
     def from_map(cls, m):
+        # a scan as senders write it is checked in bulk; anything else field by field (the
+        # same values accepted, and those checks name what is wrong)
+        scan = _scan_in_bulk(cls, m)
+        return scan if scan is not None else cls._from_map_by_field(m)
+
+    @classmethod
+    def _from_map_by_field(cls, m):
         w = cls.WHAT
         return cls(
             ts=get_float(m, "ts", w),
@@ -237,6 +244,47 @@ class Scan(_Message):
             max_range=get_float(m, "max_range", w),
             truth=_opt_vec3(m, "truth", w),
         )
+
+
+_F32LE = np.dtype("<f4")
+
+
+def _floats3(v) -> tuple[float, float, float] | None:
+    """``v`` as a tuple when it is a list of 3 Python floats (finiteness not checked)."""
+    if type(v) is list and len(v) == 3:
+        a, b, c = v
+        if type(a) is float and type(b) is float and type(c) is float:
+            return a, b, c
+    return None
+
+
+def _scan_in_bulk(cls, m: dict):
+    """The scan of ``m`` when every field is as a sender encodes it (numbers as msgpack
+    floats, ``id`` an integer >= 0, ``pose``/``truth`` lists of 3 floats, ``ranges`` 1..100,000
+    float32 values) and all numbers are finite, checked with one sum of them all (float64:
+    finite exactly when every value is, as a float32 sum of 100,000 values cannot overflow);
+    None otherwise, and ``_from_map_by_field`` then accepts what is valid or names what is
+    not. The same values as that path."""
+    get = m.get
+    ts, lo, hi, res, mr = (get("ts"), get("min_angle"), get("max_angle"), get("resolution"),
+                           get("max_range"))
+    sid, raw, truth = get("id"), get("ranges"), get("truth")
+    pose = _floats3(get("pose"))
+    if not (type(ts) is float and type(lo) is float and type(hi) is float
+            and type(res) is float and type(mr) is float and type(sid) is int and sid >= 0
+            and type(raw) is bytes and pose is not None):
+        return None
+    if truth is not None and (truth := _floats3(truth)) is None:
+        return None
+    n = len(raw)
+    if n % 4 or not 0 < n <= 4 * _MAX_BEAMS:
+        return None
+    ranges = np.frombuffer(raw, _F32LE)
+    total = ts + lo + hi + res + mr + sum(pose) + (0.0 if truth is None else sum(truth))
+    if not math.isfinite(total + float(np.add.reduce(ranges, dtype=np.float64))):
+        return None
+    return cls(ts=ts, id=sid, ranges=ranges.astype(np.float32), pose=pose, min_angle=lo,
+               max_angle=hi, resolution=res, max_range=mr, truth=truth)
 
 
 def _get_ranges(m: dict, name: str, what: str) -> np.ndarray:

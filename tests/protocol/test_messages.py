@@ -255,3 +255,60 @@ def test_withdrawal_message_and_the_ack_of_withdrawals():
             Withdrawal.decode(msgpack.packb({**ok, **bad}))
     with pytest.raises(DecodeError, match="'withdrawn'"):
         LearnerAck.decode(msgpack.packb({"v": 1, "origin": "a", "upto": 1, "withdrawn": -1}))
+
+
+def _same_scan(a: Scan, b: Scan) -> bool:
+    return (a.ranges.dtype == b.ranges.dtype == np.float32 and a.ranges.flags.writeable
+            and np.array_equal(a.ranges, b.ranges)
+            and {k: v for k, v in vars(a).items() if k != "ranges"}
+            == {k: v for k, v in vars(b).items() if k != "ranges"})
+
+
+scan_numbers = st.one_of(st.floats(), st.integers(-(2**63), 2**64 - 1), st.booleans(), st.none(),
+                         st.text(max_size=2))
+scan_ranges = st.one_of(
+    st.lists(st.floats(width=32), min_size=0, max_size=12).map(
+        lambda v: np.array(v, "<f4").tobytes()),
+    st.binary(max_size=9), st.lists(st.floats(), max_size=3))
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.fixed_dictionaries(
+    {k: scan_numbers for k in ("ts", "min_angle", "max_angle", "resolution", "max_range")}
+    | {"id": scan_numbers, "ranges": scan_ranges,
+       "pose": st.one_of(st.lists(scan_numbers, min_size=2, max_size=4), scan_numbers)},
+    optional={"truth": st.one_of(st.lists(scan_numbers, min_size=3, max_size=3), st.none(),
+                                 scan_numbers)}))
+def test_scan_checked_in_bulk_accepts_and_gives_what_the_field_checks_do(m):
+    """The bulk path (a scan as senders write it) is only a shortcut: what it accepts the
+    field-by-field checks accept with the same values; what it declines they judge (refusing
+    with the field's name, or accepting, e.g. an integer time)."""
+    from protocol.messages import _scan_in_bulk
+
+    bulk = _scan_in_bulk(Scan, m)
+    try:
+        checked = Scan._from_map_by_field(m)
+    except DecodeError:
+        assert bulk is None
+        with pytest.raises(DecodeError):
+            Scan.decode(msgpack.packb({"v": PROTOCOL_VERSION, **m}, use_bin_type=True))
+        return
+    assert bulk is None or _same_scan(bulk, checked)
+    assert _same_scan(Scan.decode(msgpack.packb({"v": PROTOCOL_VERSION, **m},
+                                                use_bin_type=True)), checked)
+
+
+def test_a_sent_scan_takes_the_bulk_path():
+    from protocol.messages import _scan_in_bulk
+
+    r = np.linspace(0.1, 8, 360).astype(np.float32)
+    for truth in (None, (1.0, 2.0, 0.5)):
+        m = msgpack.unpackb(Scan(ts=2.5, id=7, ranges=r, pose=(1.0, 2.0, 3.0),
+                                 truth=truth).encode())
+        bulk = _scan_in_bulk(Scan, m)
+        assert bulk is not None and _same_scan(bulk, Scan._from_map_by_field(m))
+    for bad in ([np.nan], [np.inf], [1.0, -np.inf]):
+        m["ranges"] = np.array(bad, "<f4").tobytes()
+        assert _scan_in_bulk(Scan, m) is None
+        with pytest.raises(DecodeError, match="'ranges': expected finite"):
+            Scan.from_map(m)
