@@ -320,7 +320,9 @@ class ControllerProcess:
         """The loop guard's action for the tree's ``name`` (an overruled reversal logged at a
         bounded rate)."""
         before = self.guard.overruled
-        chosen = self.guard.choose(name, scan.ranges, scan.bearings())
+        # the beams' bearings only for the path check (off for the scripted teacher's trees)
+        chosen = self.guard.choose(name, scan.ranges,
+                                   scan.bearings() if self.guard.clearance > 0 else None)
         n = self.guard.overruled
         if n > before and (n <= 3 or n % 100 == 0):
             log.info("loop guard: the tree reversed its rotation at scan %d (%s): kept %s "
