@@ -53,7 +53,7 @@ from protocol.messages import (
     SetPose,
     SimPose,
     State,
-    VelCmd,
+    VelCmdPacker,
     WorldInfo,
 )
 from protocol.session import make_config
@@ -107,6 +107,7 @@ class PlayerClient:
         if block:
             opts["congestion_control"] = zenoh.CongestionControl.BLOCK
         self._cmd_pub = self.session.declare_publisher(cmd_key, **opts)
+        self._packer = VelCmdPacker(source)
         self._position2d: Position2dProxy | None = None
         self._laser: LaserProxy | None = None
         self._simulation: SimulationProxy | None = None
@@ -225,8 +226,11 @@ class PlayerClient:
         :meth:`answer`)."""
         if not (math.isfinite(vx) and math.isfinite(va)):
             raise ValueError(f"speeds must be finite, got vx={vx!r}, va={va!r}")
-        msg = VelCmd(vx=vx, va=va, state=state, source=self.source, scan_id=scan_id, ts=ts)
-        self._cmd_pub.put(msg.encode())
+        # VelCmd(vx=vx, va=va, state=state, source=self.source, ...).encode(), its fixed parts
+        # packed once (again if the source was changed)
+        if self._packer.source != self.source:
+            self._packer = VelCmdPacker(self.source)
+        self._cmd_pub.put(self._packer.pack(vx, va, state, scan_id, ts))
 
     def answer(self, scan: Scan, vx: float, va: float) -> None:
         """Command ``(vx, va)`` as the answer to ``scan``: the command names its id and sim

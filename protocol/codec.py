@@ -25,6 +25,7 @@ __all__ = [
     "get_str",
     "get_vec",
     "pack",
+    "pack_value",
     "unpack",
 ]
 
@@ -46,6 +47,12 @@ def pack(fields: dict[str, Any]) -> bytes:
     out = {"v": PROTOCOL_VERSION}
     out.update(fields)
     return msgpack.packb(out, use_bin_type=True)
+
+
+def pack_value(value: Any) -> bytes:
+    """One value as msgpack bytes, as :func:`pack` encodes it inside a map (a message's parts
+    packed once: ``protocol.messages.VelCmdPacker``)."""
+    return msgpack.packb(value, use_bin_type=True)
 
 
 def unpack(data: Any, what: str = "message", max_size: int = MAX_PAYLOAD) -> dict[str, Any]:

@@ -312,3 +312,17 @@ def test_a_sent_scan_takes_the_bulk_path():
         assert _scan_in_bulk(Scan, m) is None
         with pytest.raises(DecodeError, match="'ranges': expected finite"):
             Scan.from_map(m)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.text(max_size=40), st.floats(allow_nan=False, allow_infinity=False),
+       st.floats(allow_nan=False, allow_infinity=False), st.booleans(),
+       st.none() | st.integers(0, 2**64 - 1), st.none() | st.floats(allow_nan=False))
+def test_velcmd_packer_gives_the_encoded_command_byte_for_byte(source, vx, va, state, sid, ts):
+    from protocol.messages import VelCmdPacker
+
+    data = VelCmdPacker(source).pack(vx, va, state, sid, ts)
+    cmd = VelCmd(vx=vx, va=va, state=state, source=source, scan_id=sid, ts=ts)
+    assert data == cmd.encode()
+    if ts is None or math.isfinite(ts):
+        assert VelCmd.decode(data) == cmd
