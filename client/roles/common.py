@@ -207,7 +207,8 @@ class ScanWatch:
 
     def seen(self) -> None:
         self._last = time.monotonic()
-        self.first.set()
+        if not self.first.is_set():  # set() takes a lock and notifies: once is enough
+            self.first.set()
         if self._stalled:
             self._stalled = False
             log.info("%s: scans resumed on %s", self.role, self.key)
