@@ -10,13 +10,16 @@ on loopback); the others connect to it as clients.
   room) with a ``VelCmd`` carrying that scan's id: decode, features, ``predict_one``, encode,
   publish, through the same router.
 
-One message in flight at a time, the two kinds interleaved. Prints p50/p99 and the ratio
-(target: sense-to-act p50 within 3x of the raw round trip). ``--breakdown`` runs the controller
+One message in flight at a time, the kinds interleaved. Prints p50/p99 and the ratio (target:
+sense-to-act p50 within 1.3x of the raw round trip). ``--peer DIR`` also runs the controller of
+another checkout of rhbl (DIR, e.g. ``git archive`` of an older commit unpacked; this
+interpreter, the same tree, robot ``r1``) and interleaves its round trips with the others: the
+two versions side by side under the same load. ``--breakdown`` runs this checkout's controller
 with a clock around each stage of its loop (the scan's bytes taken from the ring channel and
 decoded, features and tree, the command encoded and put, the decision for viewers) and prints
 each stage's median beside the round trips.
 
-    python benchmarks/bench_latency.py [--n 1000] [--breakdown]
+    python benchmarks/bench_latency.py [--n 1000] [--breakdown] [--peer DIR]
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ from protocol.messages import Scan, VelCmd  # noqa: E402
 from protocol.session import make_config  # noqa: E402
 
 PING, PONG = "bench/ping", "bench/pong"
+ROBOT, PEER = "r0", "r1"  # this checkout's controller drives r0, the --peer's r1
 
 
 def echo(endpoint: str) -> int:
@@ -130,6 +134,9 @@ def main() -> int:
     ap.add_argument("--n", type=int, default=1000, help="round trips of each kind")
     ap.add_argument("--breakdown", action="store_true",
                     help="also time each stage of the controller's loop")
+    ap.add_argument("--peer", metavar="DIR", type=Path,
+                    help="also the controller of another checkout of rhbl (its top folder), "
+                         "interleaved with this one's")
     ap.add_argument("--echo", metavar="ENDPOINT", help=argparse.SUPPRESS)
     ap.add_argument("--timed-controller", metavar="OUT", help=argparse.SUPPRESS)
     args, rest = ap.parse_known_args()
@@ -139,6 +146,8 @@ def main() -> int:
         return timed_controller(args.timed_controller, rest)
     if rest:
         ap.error(f"unrecognized arguments: {' '.join(rest)}")
+    if args.peer is not None and not (args.peer / "lab" / "cli.py").is_file():
+        ap.error(f"--peer {args.peer}: not a checkout of rhbl (no lab/cli.py in it)")
 
     from lab.harness import resolve_world
     from server.world import World
@@ -155,8 +164,12 @@ def main() -> int:
         Child("controller", [sys.executable, __file__, "--timed-controller", str(stages), *argv]
               if args.breakdown else rhbl_argv(*argv), cwd=ROOT),
     ]
-    raw, s2a, lost = _measure(endpoint, children, probe, args.n)
-    _report(raw, s2a, lost, probe.size, args.n, tree)
+    robots = [ROBOT]
+    if args.peer is not None:  # its own code: ``-m`` imports from the folder it runs in
+        children.append(Child("peer", rhbl_argv(*argv, "--robot", PEER), cwd=args.peer))
+        robots.append(PEER)
+    raw, s2a, lost = _measure(endpoint, children, probe, robots, args.n)
+    _report(raw, s2a, lost, probe.size, args.n, tree, args.peer)
     if args.breakdown:
         _report_stages(stages)
     return 0
@@ -185,7 +198,8 @@ class _Probe:
         self.got = threading.Event()
         self.box: dict = {}
         self.sid = 0
-        self.scan_pub = self.ping_pub = None  # set once the session is open
+        self.scan_pubs: dict = {}  # robot -> its scan publisher, once the session is open
+        self.ping_pub = None
         self.size = len(self.scan_payload(1))
 
     def scan_payload(self, i: int) -> bytes:
@@ -202,13 +216,14 @@ class _Probe:
             self.box["t"] = t
             self.got.set()
 
-    def one_scan(self) -> float | None:
+    def one_scan(self, robot: str = ROBOT) -> float | None:
         self.sid += 1
         self.box["want"] = self.sid
         data = self.scan_payload(self.sid)
+        pub = self.scan_pubs[robot]
         self.got.clear()
         t0 = time.perf_counter()
-        self.scan_pub.put(data)
+        pub.put(data)
         return (self.box["t"] - t0) if self.got.wait(1.0) else None
 
     def one_ping(self) -> float | None:
@@ -220,19 +235,20 @@ class _Probe:
         return (self.box["t"] - t0) if self.got.wait(1.0) else None
 
 
-def _measure(endpoint: str, children: list[Child], probe: _Probe, n: int):
+def _measure(endpoint: str, children: list[Child], probe: _Probe, robots: list[str], n: int):
     """This process as the router on ``endpoint``: start ``children``, then n round trips of
-    each kind, interleaved. Returns (raw seconds, sense-to-act seconds, lost)."""
-    robot = "r0"
+    each kind, interleaved. Returns (raw seconds, {robot: sense-to-act seconds}, lost)."""
     with zenoh.open(make_config(mode="router", listen=[endpoint])) as s:
-        probe.scan_pub = s.declare_publisher(keys.scan_key(robot), express=True)
         probe.ping_pub = s.declare_publisher(PING, express=True)
-        subs = [s.declare_subscriber(PONG, probe.on_pong),
-                s.declare_subscriber(keys.cmd_vel_key(robot, source="controller"), probe.on_cmd)]
+        subs = [s.declare_subscriber(PONG, probe.on_pong)]
+        for robot in robots:
+            probe.scan_pubs[robot] = s.declare_publisher(keys.scan_key(robot), express=True)
+            subs.append(s.declare_subscriber(keys.cmd_vel_key(robot, source="controller"),
+                                             probe.on_cmd))
         try:
             for c in children:
                 c.start()
-            return _round_trips(probe, n)
+            return _round_trips(probe, robots, n)
         finally:
             for sub in subs:
                 sub.undeclare()
@@ -240,37 +256,42 @@ def _measure(endpoint: str, children: list[Child], probe: _Probe, n: int):
                 c.stop()
 
 
-def _round_trips(probe: _Probe, n: int) -> tuple[list[float], list[float], int]:
-    # warm up: both children answering
+def _round_trips(probe: _Probe, robots: list[str], n: int
+                 ) -> tuple[list[float], dict[str, list[float]], int]:
+    # warm up: every child answering
     deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and (probe.one_scan() is None or probe.one_ping() is None):
+    while time.monotonic() < deadline and (probe.one_ping() is None
+                                           or any(probe.one_scan(r) is None for r in robots)):
         time.sleep(0.05)
     for _ in range(50):
-        probe.one_scan(), probe.one_ping()
-    raw, s2a, lost = [], [], 0
+        probe.one_ping(), [probe.one_scan(r) for r in robots]
+    raw, s2a, lost = [], {r: [] for r in robots}, 0
     for _ in range(n):
-        a, b = probe.one_ping(), probe.one_scan()
-        lost += (a is None) + (b is None)
-        if a is not None:
-            raw.append(a)
-        if b is not None:
-            s2a.append(b)
+        for got, into in [(probe.one_ping(), raw), *((probe.one_scan(r), s2a[r]) for r in robots)]:
+            if got is None:
+                lost += 1
+            else:
+                into.append(got)
     return raw, s2a, lost
 
 
-def _report(raw, s2a, lost: int, size: int, n: int, tree: Path) -> None:
+def _report(raw, s2a: dict, lost: int, size: int, n: int, tree: Path, peer: Path | None
+            ) -> None:
     r50, r99 = _pct(raw)
-    c50, c99 = _pct(s2a)
     from rhbl import load
 
     nodes = load(tree).node_count_
     print(f"payload {size} bytes (360-beam scan), {n} round trips each, one in flight; "
           f"tree {nodes} nodes; lost {lost}")
-    print("| path | p50 us | p99 us |")
-    print("|---|---|---|")
-    print(f"| raw zenoh round trip (echo process) | {r50:.0f} | {r99:.0f} |")
-    print(f"| scan -> rhbl controller -> command | {c50:.0f} | {c99:.0f} |")
-    print(f"ratio p50 {c50 / r50:.2f}x (target <= 3x), p99 {c99 / r99:.2f}x")
+    print("| path | p50 us | p99 us | p50 / raw |")
+    print("|---|---|---|---|")
+    print(f"| raw zenoh round trip (echo process) | {r50:.0f} | {r99:.0f} | 1 |")
+    for robot, what in ((ROBOT, "rhbl controller"), (PEER, f"the peer's controller ({peer})")):
+        if robot in s2a:
+            c50, c99 = _pct(s2a[robot])
+            print(f"| scan -> {what} -> command | {c50:.0f} | {c99:.0f} | {c50 / r50:.2f}x |")
+    c50, c99 = _pct(s2a[ROBOT])
+    print(f"ratio p50 {c50 / r50:.2f}x (target <= 1.3x), p99 {c99 / r99:.2f}x")
 
 
 if __name__ == "__main__":
