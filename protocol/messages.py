@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import struct
+import sys
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -250,6 +251,7 @@ class Scan(_Message):
 
 
 _F32LE = np.dtype("<f4")
+_LITTLE = sys.byteorder == "little"  # the wire's float32s are this machine's
 
 
 def _floats3(v) -> tuple[float, float, float] | None:
@@ -282,11 +284,13 @@ def _scan_in_bulk(cls, m: dict):
     n = len(raw)
     if n % 4 or not 0 < n <= 4 * _MAX_BEAMS:
         return None
-    ranges = np.frombuffer(raw, _F32LE)
+    # a writable array of its own: the bytes copied once (on a big-endian machine, converted)
+    ranges = (np.frombuffer(bytearray(raw), np.float32) if _LITTLE
+              else np.frombuffer(raw, _F32LE).astype(np.float32))
     total = ts + lo + hi + res + mr + sum(pose) + (0.0 if truth is None else sum(truth))
     if not math.isfinite(total + float(np.add.reduce(ranges, dtype=np.float64))):
         return None
-    return cls(ts=ts, id=sid, ranges=ranges.astype(np.float32), pose=pose, min_angle=lo,
+    return cls(ts=ts, id=sid, ranges=ranges, pose=pose, min_angle=lo,
                max_angle=hi, resolution=res, max_range=mr, truth=truth)
 
 
