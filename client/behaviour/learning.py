@@ -336,3 +336,12 @@ class TreePolicy:
     def act(self, ranges, pose) -> str:
         yaw = float(pose[2]) if pose is not None else 0.0
         return str(self.classifier.predict_one(self.features.extract(ranges, yaw)))
+
+    def act_many(self, ranges, yaws=None) -> list[str]:
+        """``act`` for many scans of one beam count at once (``ranges`` (scans, beams), a
+        heading per scan): their features together and one batched tree query (a controller
+        serving a fleet answers a tick's scans so); the same actions as ``act`` one by one."""
+        x = self.features.extract_many(ranges, yaws)
+        if not len(x):
+            return []
+        return [str(a) for a in self.classifier.predict(x).tolist()]
