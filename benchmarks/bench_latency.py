@@ -19,7 +19,14 @@ with a clock around each stage of its loop (the scan's bytes taken from the ring
 decoded, features and tree, the command encoded and put, the decision for viewers) and prints
 each stage's median beside the round trips.
 
+``--fleet N,N,...`` instead times, in this process, the controller's own work for a tick of a
+fleet of N robots (their scans in tiled copies of the room): each scan's features and tree query
+one by one (``TreePolicy.act``, as ``rhbl controller`` answers a scan) against all of them at
+once (``TreePolicy.act_many``: the features together, one batched tree query), best of 5, the
+actions checked to be the same.
+
     python benchmarks/bench_latency.py [--n 1000] [--breakdown] [--peer DIR]
+    python benchmarks/bench_latency.py --fleet 1,10,100,400
 """
 
 from __future__ import annotations
@@ -137,6 +144,9 @@ def main() -> int:
     ap.add_argument("--peer", metavar="DIR", type=Path,
                     help="also the controller of another checkout of rhbl (its top folder), "
                          "interleaved with this one's")
+    ap.add_argument("--fleet", metavar="N,N,...",
+                    help="only the in-process figure: a tick of N robots' scans answered one "
+                         "by one against one batched query")
     ap.add_argument("--echo", metavar="ENDPOINT", help=argparse.SUPPRESS)
     ap.add_argument("--timed-controller", metavar="OUT", help=argparse.SUPPRESS)
     args, rest = ap.parse_known_args()
@@ -152,9 +162,19 @@ def main() -> int:
     from lab.harness import resolve_world
     from server.world import World
 
+    fleet = None
+    if args.fleet:
+        try:
+            fleet = [int(x) for x in args.fleet.split(",")]
+        except ValueError:
+            ap.error(f"--fleet {args.fleet}: expected robot counts like 1,10,100")
+        if min(fleet) < 1:
+            ap.error(f"--fleet {args.fleet}: robot counts must be >= 1")
     tmp = Path(tempfile.mkdtemp(prefix="rhbl-bench-"))
     tree = tmp / "tree.rhbl"
     _train_tree(tree)
+    if fleet:
+        return fleet_ticks(tree, fleet)
     probe = _Probe(World(resolve_world("room")).scan(0))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     argv = ["controller", "--tree", str(tree), "--connect", endpoint, "--log-level", "WARNING"]
@@ -173,6 +193,50 @@ def main() -> int:
     if args.breakdown:
         _report_stages(stages)
     return 0
+
+
+def fleet_ticks(tree: Path, sizes: list[int]) -> int:
+    """The controller's work for one tick of each fleet size: one by one against batched."""
+    import math
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from bench_sim import fleet_poses, free_poses, tiled
+
+    from client.roles.controller import load_tree
+    from lab.harness import resolve_world
+    from server.world import World
+
+    policy = load_tree(str(tree))
+    spec = resolve_world("room")
+    capacity = len(free_poses(spec, 10_000))
+    print(f"tree {policy.classifier.node_count_} nodes; a tick's scans answered in this "
+          f"process (best of 5, ms per tick):")
+    print("| robots | one by one (act) | batched (act_many) | ratio |")
+    print("|---|---|---|---|")
+    for n in sizes:
+        tiles = max(1, math.ceil(n / capacity))
+        world = World(tiled(spec, tiles), robots=n)
+        poses = fleet_poses(spec, tiles, n)
+        world.reset(poses=poses)
+        scans, yaws = world.scans(), [p[2] for p in poses]
+
+        def one_by_one(scans=scans, yaws=yaws):
+            return [policy.act(r, (0.0, 0.0, y)) for r, y in zip(scans, yaws, strict=True)]
+
+        def batched(scans=scans, yaws=yaws):
+            return policy.act_many(scans, yaws)
+
+        if one_by_one() != batched():
+            raise SystemExit(f"{n} robots: the batched actions differ from act's")
+        a, b = (min(_seconds(f) for _ in range(5)) for f in (one_by_one, batched))
+        print(f"| {n} | {a * 1e3:.3f} | {b * 1e3:.3f} | {a / b:.1f}x |")
+    return 0
+
+
+def _seconds(f) -> float:
+    t = time.perf_counter()
+    f()
+    return time.perf_counter() - t
 
 
 def _report_stages(path: Path) -> None:
