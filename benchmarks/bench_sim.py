@@ -15,6 +15,10 @@
    CPU (median), the server process's CPU (zenoh's threads and the command handler included)
    and the controller process's. A world too small for N robots is tiled (``--tiles``: copies side by side,
    1 m apart; a robot sees only its own room's robots, the walls hide the rest).
+   ``--fleet-tree one|batch``: the controller drives every robot with a tree (trained for 120 s
+   of the room, as ``bench_latency.py``'s) instead of the reflex; it takes every scan waiting,
+   the latest of each robot, and answers them one by one (``TreePolicy.act``) or in one
+   batched query (``TreePolicy.act_many``).
 
 The laser of all robots is cast together, in one compiled call per tick (``World.scans``,
 ``server.laser``): the robots-seen-by-robots part no longer grows with the square of the fleet.
@@ -202,8 +206,11 @@ def fleet_poses(spec, tiles: int, n: int) -> list[tuple[float, float, float]]:
     return out
 
 
-def serve_controller(endpoint: str) -> int:
-    """Child process: one controller for every robot, answering each scan with its id."""
+def serve_controller(endpoint: str, tree: str | None = None, batch: bool = False) -> int:
+    """Child process: one controller for every robot, answering each scan with its id (with
+    ``tree``: the tree's actions, ``serve_tree``)."""
+    if tree is not None:
+        return serve_tree(endpoint, tree, batch)
     import os
     import signal
     import threading
@@ -241,6 +248,63 @@ def serve_controller(endpoint: str) -> int:
     return 0
 
 
+def serve_tree(endpoint: str, tree: str, batch: bool) -> int:
+    """Child process: one controller for every robot driving it with ``tree``: every scan
+    waiting taken, the latest of each robot answered, one by one or (``batch``) together."""
+    import os
+    import signal
+    import threading
+
+    import zenoh
+
+    from client.roles.controller import load_tree
+    from protocol import keys
+    from protocol.messages import Scan, VelCmdPacker
+    from protocol.session import make_config
+
+    policy = load_tree(tree)
+    packer = VelCmdPacker("controller")
+    done = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    with zenoh.open(make_config(mode="client", connect=[endpoint])) as s:
+        pubs: dict[str, object] = {}
+        sub = s.declare_subscriber(keys.scan_key(keys.EVERY), zenoh.handlers.FifoChannel(4096))
+
+        def serve() -> None:
+            recv, take = sub.handler.recv, sub.handler.try_recv
+            while not done.is_set():
+                latest = {}
+                try:
+                    sample = recv()
+                except zenoh.ZError:  # the session closed: stopping
+                    return
+                while sample is not None:  # every scan waiting: the latest of each robot
+                    latest[keys.parse(sample.key_expr).robot] = sample
+                    sample = take()
+                robots = list(latest)
+                scans = [Scan.decode(latest[r].payload.to_bytes()) for r in robots]
+                if batch:
+                    names = policy.act_many(np.stack([sc.ranges for sc in scans]),
+                                            [sc.pose[2] for sc in scans])
+                else:
+                    names = [policy.act(sc.ranges, sc.pose) for sc in scans]
+                for robot, sc, name in zip(robots, scans, names, strict=True):
+                    pub = pubs.get(robot)
+                    if pub is None:
+                        pub = pubs[robot] = s.declare_publisher(
+                            keys.cmd_vel_key(robot, source="controller"), express=True)
+                    vx, va = policy.actions[name]
+                    pub.put(packer.pack(vx, va, True, sc.id, sc.ts))
+
+        threading.Thread(target=serve, daemon=True).start()
+        t0 = os.times()
+        print("ready", flush=True)
+        done.wait()
+        t1 = os.times()  # CPU seconds while serving, for the parent's figures
+        print(f"cpu {t1.user + t1.system - t0.user - t0.system:.3f}", flush=True)
+    return 0
+
+
 class _TimedPub:
     """A scan publisher that notes when each robot's scan went out."""
 
@@ -252,16 +316,24 @@ class _TimedPub:
         self.sent[self.name] = time.time()  # the clock of zenoh's timestamps
 
 
-def fleet_run(spec, n: int, tiles: int, seconds: float) -> dict:
+def fleet_run(spec, n: int, tiles: int, seconds: float, tree: str | None = None) -> dict:
     """n robots at 10 Hz real time, driven by one controller process: missed ticks and
-    sense-to-act latency (a robot's scan out -> its answer in at the server)."""
+    sense-to-act latency (a robot's scan out -> its answer in at the server). ``tree``:
+    ``one`` or ``batch``, the controller drives with a tree (``serve_tree``)."""
     import subprocess
+    import tempfile
 
+    argv = [sys.executable, __file__]
+    if tree is not None:
+        from bench_latency import _train_tree
+
+        path = Path(tempfile.mkdtemp(prefix="rhbl-bench-")) / "tree.rhbl"
+        _train_tree(path)
+        argv += ["--tree", str(path), *(["--batch"] if tree == "batch" else [])]
     session, node, endpoint = _fleet_node(spec, n, tiles)
     probe = _Latency(node)
-    child = subprocess.Popen(
-        [sys.executable, __file__, "--serve-controller", endpoint],
-        stdout=subprocess.PIPE, text=True, start_new_session=True)
+    child = subprocess.Popen([*argv, "--serve-controller", endpoint], stdout=subprocess.PIPE, text=True,
+                             start_new_session=True)
     try:
         if child.stdout.readline().strip() != "ready":
             raise SystemExit("the controller process did not start")
@@ -430,7 +502,7 @@ def compare_scans(spec, n: int, tiles: int, repeats: int = 5) -> tuple[float, fl
 def main(argv: list[str] | None = None) -> int:
     args = _parse(argv)
     if args.serve_controller:
-        return serve_controller(args.serve_controller)
+        return serve_controller(args.serve_controller, args.tree, args.batch)
     spec = load_world(server.world_path(args.world))
     capacity = len(free_poses(spec, 10_000))
 
@@ -471,7 +543,12 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--tiles", type=int, default=None,
                    help="copies of the world side by side (default: as few as fit the fleet)")
     p.add_argument("--fleet-seconds", type=float, default=20.0, help="real seconds (20)")
+    p.add_argument("--fleet-tree", choices=("one", "batch"), default=None,
+                   help="with --fleet: drive every robot with a tree, each scan answered one by "
+                        "one or a batch of them in one query (default: a reflex)")
     p.add_argument("--serve-controller", metavar="ENDPOINT", help=argparse.SUPPRESS)
+    p.add_argument("--tree", help=argparse.SUPPRESS)
+    p.add_argument("--batch", action="store_true", help=argparse.SUPPRESS)
     return p.parse_args(argv)
 
 
@@ -501,9 +578,11 @@ def _report_real_time(args, spec, tiles_for) -> None:
 
 
 def _report_fleet(args, spec, tiles_for) -> None:
-    r = fleet_run(spec, args.fleet, tiles_for(args.fleet), args.fleet_seconds)
+    r = fleet_run(spec, args.fleet, tiles_for(args.fleet), args.fleet_seconds, args.fleet_tree)
+    how = ("a reflex" if args.fleet_tree is None else
+           f"a tree, {'one query per scan' if args.fleet_tree == 'one' else 'batched queries'}")
     print(f"fleet: {r['robots']} robots in {r['tiles']} x {args.world!r} at 10 Hz, one "
-          f"controller process for all, {r['ticks']} ticks ({r['hz']:.2f} Hz): "
+          f"controller process for all ({how}), {r['ticks']} ticks ({r['hz']:.2f} Hz): "
           f"{r['missed']} ticks missed, worst tick {r['worst_ms']:.1f} ms; "
           f"{r['answered'] * 100:.1f}% of scans answered in time; sense-to-act "
           f"p50 {r['p50']:.1f} ms, p90 {r['p90']:.1f} ms, p99 {r['p99']:.1f} ms; "
