@@ -9,6 +9,11 @@ pose of a world and measure how well it behaves (metrics in ``lab.metrics``).
 
 Success: wall following = no collision, wall band fraction >= 0.8 and distance >= 70% of the
 teacher's from the same start; maze = goal reached with no collision within S.
+
+``rhbl evaluate`` drives a tree taught by hand through the controller's guard, as ``rhbl
+controller`` drives it (``client.behaviour.guard``: the loop hysteresis and the path check);
+the scripted teacher's trees alone, as their published figures are (``--guard``/``--no-guard``
+force either; the report's ``guard`` says what was used and what it overruled).
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from client.behaviour import guard
 from client.behaviour.learning import TreePolicy
 from client.behaviour.tasks import make_policy
 from lab import metrics
@@ -166,6 +172,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--spheres", default=None, metavar="I,J",
                         type=arguments.checked_list("feature pair", _feature_pair, "0,1"),
                         help="with --plot: also draw the tree's spheres projected on features I,J")
+    guard.add_arguments(parser, default=None,
+                        default_help="default: on for a tree taught by hand, as rhbl "
+                                     "controller drives it; off for the scripted teacher's, "
+                                     "whose figures are the tree's own")
     parser.add_argument("--record", metavar="FILE", default=None, type=arguments.output_file,
                         help="also write the episodes (tree and teacher runs) as an MCAP "
                              "recording (docs/recording.md)")
@@ -181,13 +191,21 @@ def main(args) -> int:
         raise ValueError(f"--spheres {dims[0]},{dims[1]}: the tree {args.tree} has "
                          f"{policy.classifier.n_features_in_} features (0 .. "
                          f"{policy.classifier.n_features_in_ - 1})")
+    guarded = guard.from_arguments(args, policy)  # None: the tree's answers as they are
     with record_run(args.record, "rhbl evaluate") as tap:  # None without --record
-        report = evaluate(spec, policy, episodes=args.episodes, seconds=args.seconds,
+        report = evaluate(spec, guarded or policy, episodes=args.episodes, seconds=args.seconds,
                           seed=args.seed, range_noise=args.range_noise,
                           odom_noise=args.odom_noise, keep_paths=bool(args.plot),
                           on_step=None if tap is None else tap.step)
     paths = report.pop("_paths", None)
+    report["guard"] = None if guarded is None else {
+        "hold": guarded.hold, "clearance": guarded.clearance,
+        "overruled": guarded.overruled, "avoided": guarded.avoided}
     print(format_table(report))
+    if guarded is not None:
+        print(f"driven through the controller's guard (--no-guard: the tree alone): "
+              f"{guarded.overruled} rotation reversals overruled, {guarded.avoided} forward "
+              f"orders turned into a rotation (path check {guarded.clearance:g} m)")
     if args.json:
         files.write_text(args.json, json.dumps(report, indent=1), "--json")
         print(f"wrote {args.json}")

@@ -29,9 +29,14 @@ Pure (no zenoh): the controller process and the in-process harness use this same
 
 from __future__ import annotations
 
-__all__ = ["CLEARANCE", "LOOKAHEAD", "RotationGuard", "clearance_for", "in_path"]
+__all__ = ["CLEARANCE", "LOOKAHEAD", "RotationGuard", "add_arguments", "clearance_for",
+           "from_arguments", "in_path"]
+
+import argparse
 
 import numpy as np
+
+from protocol import arguments
 
 _OPPOSITE = {"rot-left": "rot-right", "rot-right": "rot-left"}
 _FORWARD = ("fwd", "fwd-left", "fwd-right")
@@ -39,15 +44,54 @@ CLEARANCE = 0.3  # m either side of the centre line: the robot's radius (0.25 m)
 LOOKAHEAD = 0.5  # m ahead: two scans' travel at full speed and a margin
 
 
+def _taught_by_hand(metadata) -> bool:
+    from .teaching import PERSON_RULE
+
+    return ((metadata or {}).get("learning") or {}).get("rule") == PERSON_RULE
+
+
 def clearance_for(metadata) -> float:
     """The path check's clearance ``rhbl controller`` uses for a tree (its snapshot metadata):
     ``CLEARANCE`` for a tree taught by hand (learning rule ``person``), 0 (off) for the scripted
     teacher's, whose demonstrations keep their own distance (docs/teaching.md: with the check
     its trees collided less but reached the 5-tier maze's goal less often)."""
-    from .teaching import PERSON_RULE
+    return CLEARANCE if _taught_by_hand(metadata) else 0.0
 
-    rule = ((metadata or {}).get("learning") or {}).get("rule")
-    return CLEARANCE if rule == PERSON_RULE else 0.0
+
+def add_arguments(parser: argparse.ArgumentParser, default: bool | None = True,
+                  default_help: str = "default on") -> None:
+    """The guard's options (``--guard``/``--no-guard``, ``--guard-hold``, ``--guard-clearance``)
+    as ``rhbl controller`` (``default`` True) and ``rhbl evaluate`` (None: on for a tree taught
+    by hand) take them; ``from_arguments`` makes the guard they ask for."""
+    parser.add_argument("--guard", action=argparse.BooleanOptionalAction, default=default,
+                        help="the loop guard: never reverse a rotation at once (an order to "
+                             "rotate the other way within 5 scans of a rotation is overruled, "
+                             f"for at most --guard-hold scans in a row; {default_help})")
+    parser.add_argument("--guard-hold", type=arguments.non_negative_int, default=30,
+                        metavar="SCANS",
+                        help="with --guard: at most this many overruled reversals in a row, "
+                             "then the tree's answer is taken (default 30: 3 s at 10 Hz)")
+    parser.add_argument("--guard-clearance", type=arguments.non_negative_float,
+                        default=None, metavar="M",
+                        help="with --guard: a forward order while a laser return lies within "
+                             f"{LOOKAHEAD:g} m ahead and M m of the robot's centre line becomes "
+                             f"a rotation in place (0: off; default {CLEARANCE:g} for a tree "
+                             "taught by hand, 0 for the scripted teacher's)")
+
+
+def from_arguments(args: argparse.Namespace, policy=None) -> RotationGuard | None:
+    """The guard ``add_arguments``' options ask for, None with ``--no-guard``. With
+    ``policy`` (a tree to evaluate) the guard wraps it, ``--guard`` unset means on for a tree
+    taught by hand, and the path check is set by who taught it unless ``--guard-clearance``
+    says; without (the controller, whose trees are swapped) the clearance is set per tree."""
+    metadata = getattr(policy, "metadata", None)
+    on = args.guard if args.guard is not None else _taught_by_hand(metadata)
+    if not on:
+        return None
+    clearance = args.guard_clearance
+    if clearance is None:
+        clearance = clearance_for(metadata) if policy is not None else 0.0
+    return RotationGuard(policy, hold=args.guard_hold, clearance=clearance)
 
 
 def in_path(ranges, clearance: float, lookahead: float, bearings=None) -> float:

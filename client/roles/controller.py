@@ -35,9 +35,10 @@ import time
 
 import zenoh
 
+from client.behaviour import guard
 from client.behaviour.actions import ActionSet
 from client.behaviour.features import FEATURES, FeatureSpec
-from client.behaviour.guard import CLEARANCE, LOOKAHEAD, RotationGuard, clearance_for
+from client.behaviour.guard import clearance_for
 from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, check_compatible
 from client.decision import Decider
 from client.player import PlayerClient
@@ -76,19 +77,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(queried again at each tree notice and every second, logging "
                              "every few seconds; 0 = forever). Default: forever with --follow, "
                              "otherwise one query (no learner or no tree yet: exit 4)")
-    parser.add_argument("--guard", action=argparse.BooleanOptionalAction, default=True,
-                        help="the loop guard: never reverse a rotation at once (an order to "
-                             "rotate the other way within 5 scans of a rotation is overruled, "
-                             "for at most --guard-hold scans in a row; default on)")
-    parser.add_argument("--guard-hold", type=arguments.non_negative_int, default=30, metavar="SCANS",
-                        help="with --guard: at most this many overruled reversals in a row, "
-                             "then the tree's answer is taken (default 30: 3 s at 10 Hz)")
-    parser.add_argument("--guard-clearance", type=arguments.non_negative_float,
-                        default=None, metavar="M",
-                        help="with --guard: a forward order while a laser return lies within "
-                             f"{LOOKAHEAD:g} m ahead and M m of the robot's centre line becomes "
-                             f"a rotation in place (0: off; default {CLEARANCE:g} for a tree "
-                             "taught by hand, 0 for the scripted teacher's)")
+    guard.add_arguments(parser)
     parser.add_argument("--ros2", action="store_true",
                         help="drive a ROS 2 robot (rmw_zenoh's keys): its LaserScan and Odometry "
                              "in, a Twist on cmd_vel out; --robot names its topics "
@@ -172,9 +161,7 @@ class ControllerProcess:
     def __init__(self, ctx: Context):
         self.ctx, self.args = ctx, ctx.args
         # kept across tree swaps: a new tree does not reset what the robot is doing
-        self.guard = (RotationGuard(hold=self.args.guard_hold,
-                                    clearance=self.args.guard_clearance or 0.0)
-                      if self.args.guard else None)
+        self.guard = guard.from_arguments(self.args)
         self.policy: TreePolicy | None = None  # swapped between scans by the follower
         # subscribed before the first query: a tree announced meanwhile is not missed
         self.follower = _Follower(ctx, self.swap) if self.args.follow else None
