@@ -332,7 +332,9 @@ def test_a_twist_from_rosbags_moves_the_robot_and_the_watchdog_stops_it(bridged)
     # the server's watchdog (0.5 s sim after the last Twist it got) and a tick
     assert stopped - driving[-1][0] <= 0.5 + 0.25
     after = [v for ts, d, v in seen if ts > stopped]
-    assert after and all(abs(v) < 1e-9 for v in after)  # it stands still
+    # it stands still: no command drives it; a robot that touched a wall while driving is
+    # still pushed out of it by the contact solver at a few 1e-7 m/s
+    assert after and all(abs(v) < 1e-5 for v in after)
 
 
 def test_malformed_cdr_on_cmd_vel_is_rejected_counted_and_moves_nothing(server, tmp_path):
