@@ -42,6 +42,7 @@ __all__ = [
     "DRAIN",
     "MAX_BACKLOG",
     "OUTBOX",
+    "PERSON_SOURCES",
     "RESEND_AFTER",
     "Acknowledgements",
     "Hold",
@@ -49,11 +50,23 @@ __all__ = [
     "Outbox",
     "Pairing",
     "LabelPublisher",
+    "SOURCE",
+    "by_person",
 ]
 
 log = logging.getLogger(__name__)
 
-SOURCE = "teacher"
+SOURCE = "teacher"  # the labels' ``source`` of a scripted teacher (rhbl teacher --policy wall...)
+# the labels' ``source`` of a person teaching by hand: at the console's page, at a terminal
+# (rhbl teacher --policy keyboard); a learner's ``--teacher auto`` learns a new lineage by the
+# person rule when its first label comes from one of these (``by_person``)
+PERSON_SOURCES = ("console", "keyboard")
+
+
+def by_person(source: str | None) -> bool:
+    """True when a label's ``source`` says a person gave it by hand (``PERSON_SOURCES``)."""
+    return source in PERSON_SOURCES
+
 # labels published and not yet acknowledged by a learner, at most (then the teacher pauses):
 # about 3 minutes of labels at 10 Hz, ~1.5 KB each (the label and its scan)
 OUTBOX = 2000
@@ -258,13 +271,16 @@ class LabelPublisher:
     once when a learner's token appears (the first learner, a restarted one) and the missed
     ones (``Outbox.due``), while a learner is up. The caller stops labelling while
     ``outbox.full``. ``withdraw`` takes labels back (``rhbl/<robot>/teacher/withdraw``), kept
-    and resent the same way until acknowledged."""
+    and resent the same way until acknowledged. ``source`` is the labels' ``source`` field:
+    ``SOURCE`` for a scripted teacher, one of ``PERSON_SOURCES`` for a person (the learner's
+    ``--teacher auto`` picks its rule by it)."""
 
     def __init__(self, session, robot: str, outbox: int = OUTBOX,
-                 resend_after: float = RESEND_AFTER):
+                 resend_after: float = RESEND_AFTER, source: str = SOURCE):
         import zenoh
 
         self.robot = robot
+        self.source = source
         self.act_pub = session.declare_publisher(keys.teacher_action_key(robot),
                                                  congestion_control=zenoh.CongestionControl.BLOCK)
         self.outbox: Outbox | None = None
@@ -297,10 +313,10 @@ class LabelPublisher:
         (None without an outbox)."""
         self.published += 1
         if self.outbox is None:
-            act = TeacherAction(scan_id=scan.id, action=action, source=SOURCE, ts=scan.ts,
+            act = TeacherAction(scan_id=scan.id, action=action, source=self.source, ts=scan.ts,
                                 executed=executed)
         else:  # kept before it is published: an acknowledgement cannot come first
-            act = self.outbox.label(scan, action, executed, SOURCE).action_message()
+            act = self.outbox.label(scan, action, executed, self.source).action_message()
         self.act_pub.put(act.encode())
         return act.seq
 
@@ -481,15 +497,18 @@ class Pairing:
     (their reaction time): with ``lag`` > 0 each label is paired with that earlier scan instead
     (``client.behaviour.teaching.answered_scan``: the label's own scan when the earlier one is
     no longer held or the robot was put elsewhere in between, counted ``unshifted``); the
-    newest ``scan_buffer`` scans, labeled or not, are kept for it.
+    newest ``scan_buffer`` scans, labeled or not, are kept for it. ``lag_of(label)``, when
+    given, says each label's lag instead (``lag`` or 0: a learner whose rule is not chosen yet,
+    ``--teacher auto``, shifts a person's labels only).
     """
 
     def __init__(self, scan_buffer: int = 512, match_timeout: float = 2.0,
                  max_ready: int = MAX_BACKLOG, behind: int = BEHIND, on_scan_seen=None,
-                 clock=time.monotonic, lag: int = 0):
+                 clock=time.monotonic, lag: int = 0, lag_of=None):
         if not (isinstance(lag, int) and lag >= 0):
             raise ValueError(f"lag must be an integer >= 0 scans, got {lag!r}")
         self.lag = lag
+        self._lag_of = lag_of
         self.recent: OrderedDict[int, Scan] = OrderedDict()  # every scan (lag > 0 only)
         self.scan_buffer = max(1, int(scan_buffer))
         self.match_timeout = match_timeout
@@ -576,12 +595,12 @@ class Pairing:
                 del self.pending[act.scan_id]  # the same label, its scan never came
             self._ready(scan, act)
 
-    def _answered(self, scan: Scan) -> Scan:  # under the lock
+    def _answered(self, scan: Scan, lag: int) -> Scan:  # under the lock
         """The scan a label given while ``scan`` was displayed answers (``lag``)."""
         from client.behaviour.teaching import answered_scan
 
         held = self.recent if scan.id in self.recent else {**self.recent, scan.id: scan}
-        sid = answered_scan(scan.id, held, self.lag)
+        sid = answered_scan(scan.id, held, lag)
         if sid == scan.id:
             self.stats["unshifted"] += 1
             return scan
@@ -589,8 +608,9 @@ class Pairing:
         return held[sid]
 
     def _ready(self, scan: Scan, act: TeacherAction) -> None:  # under the lock
-        if self.lag:
-            scan = self._answered(scan)
+        lag = self.lag if self._lag_of is None else self._lag_of(act)
+        if lag:
+            scan = self._answered(scan, lag)
         self.ready.append((scan, act))
         n = len(self.ready)
         self.stats["max_ready"] = max(self.stats["max_ready"], n)

@@ -69,7 +69,7 @@ from client.journal import (
     Withdrawals,
     journal_path,
 )
-from client.labels import MAX_BACKLOG, Acknowledgements, Pairing
+from client.labels import MAX_BACKLOG, Acknowledgements, Pairing, by_person
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
 from protocol import arguments, files, keys
 from protocol.decoding import Decoder
@@ -123,14 +123,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "this long before the final snapshot (default 5)")
     parser.add_argument("--scan-buffer", type=arguments.positive_int, default=512,
                         help="how many recent unlabeled scans are kept for pairing")
-    parser.add_argument("--teacher", choices=["script", "person"], default="script",
-                        help="who labels a new tree: 'script' (rhbl teacher: each label learned "
-                             "as it arrives, default) or 'person' (rhbl console: labels paired "
-                             "with the scan --lag scans earlier, the tree rebuilt from every "
-                             "label by the majority of its nearest labels); a lineage keeps "
-                             "the rule it was made with")
+    parser.add_argument("--teacher", choices=["auto", "script", "person"], default="auto",
+                        help="who labels a new tree: 'auto' (default) chooses by the first "
+                             "label's source, the person rule for a person's (rhbl console, "
+                             "rhbl teacher --policy keyboard), else the script rule (with "
+                             "--resume or --fold-journal: the script rule); 'script' forces "
+                             "the script rule (each label learned as it arrives); 'person' the "
+                             "person rule (labels paired with the scan --lag scans earlier, the "
+                             "tree rebuilt from every label by the majority of its nearest "
+                             "labels). A lineage keeps the rule it was made with (its journal's "
+                             "header)")
     parser.add_argument("--lag", type=arguments.non_negative_int, default=LAG, metavar="SCANS",
-                        help=f"with --teacher person: a label answers the scan this many scans "
+                        help=f"with the person rule: a label answers the scan this many scans "
                              f"before the one it names (default {LAG}: 0.3 s at 10 Hz)")
 
 
@@ -169,40 +173,107 @@ class LearnerCore:
             if teacher == "person" and fold_journal:
                 raise ProcessError("--teacher person rebuilds its tree from every label of its "
                                    "journal: --fold-journal cannot be used with it", EXIT_USAGE)
-            fork = None  # where the parent's journal stood when it was extended
-            if resume is not None:
-                if teacher == "person":
-                    raise ProcessError("--teacher person builds its tree from its own labels: "
-                                       "it cannot --resume another tree", EXIT_USAGE)
-                learner = _resume(resume, spec)
-                parent = str(Path(resume).resolve())
-                j = (load_snapshot(resume)[3].get("provenance") or {}).get("journal") or {}
-                if j.get("lineage"):
-                    fork = {"lineage": j["lineage"], "records": int(j.get("records", 0))}
+            if resume is not None and teacher == "person":
+                raise ProcessError("--teacher person builds its tree from its own labels: "
+                                   "it cannot --resume another tree", EXIT_USAGE)
+            if resume is None and spec is None:
+                raise ProcessError("a new tree needs --features (wall or maze)", EXIT_USAGE)
+            self._new = {"spec": spec, "resume": resume, "features": features, "task": task,
+                         "params": {"spawn": "winner", **(tree_params or {})},
+                         "stride": stride, "min_delta": min_delta, "lag": lag,
+                         "fsync_interval": fsync_interval, "write": journal_write,
+                         "actions": actions}
+            self.journal = None
+            if teacher == "auto" and (resume is not None or fold_journal):
+                log.info("--teacher auto with %s: the scripted rule (a person's rule "
+                         "rebuilds its tree from its own whole journal)",
+                         "--resume" if resume is not None else "--fold-journal")
+                teacher = "script"
+            if teacher == "auto":
+                # the rule is chosen by the first label's source (``choose``): until then a
+                # scripted learner stands in (it learns nothing) and no journal exists
+                self.learner = self._start_learner("script")
+                self.applied = 0
+                self._early: list[Withdrawal] = []  # withdrawals before the first label
+                log.info("new tree lineage at %s: its rule is chosen by the first label "
+                         "(a person's at the console or keyboard: the person rule; else the "
+                         "scripted teacher's)", self.out)
             else:
-                if spec is None:
-                    raise ProcessError("a new tree needs --features (wall or maze)", EXIT_USAGE)
-                params = {"spawn": "winner", **(tree_params or {})}
-                if teacher == "person":
-                    learner = PersonLearner(spec, actions, task=task or task_of_features(features),
-                                            lag=lag, **params)
-                else:
-                    learner = DemonstrationLearner(
-                        spec, actions, task=task or task_of_features(features),
-                        stride=stride, min_delta=min_delta, **params)
-                parent = None
-            header = {"parent": parent, "fork": fork, "meta": learner.metadata()}
-            self.journal = Journal.create(self.jpath, header, fsync_interval=fsync_interval,
-                                          write=journal_write)
-            self.learner, self.applied = learner, 0
-            log.info("new tree lineage %s at %s%s", self.journal.lineage, self.out,
-                     f" (extending {parent})" if parent else "")
+                self._create("person" if teacher == "person" else "script")
+        if self.journal is not None:
+            self._started()
+        self.saved_applied = self.applied if self.out.exists() else -1
+        self.seq = 0
+
+    def _start_learner(self, rule: str) -> DemonstrationLearner:
+        """A new lineage's learner for ``rule`` (``script`` or ``person``), or its parent's
+        (``--resume``)."""
+        n = self._new
+        if n["resume"] is not None:
+            return _resume(n["resume"], n["spec"])
+        task = n["task"] or task_of_features(n["features"])
+        if rule == "person":
+            return PersonLearner(n["spec"], n["actions"], task=task, lag=n["lag"],
+                                 **n["params"])
+        return DemonstrationLearner(n["spec"], n["actions"], task=task,
+                                    stride=n["stride"], min_delta=n["min_delta"], **n["params"])
+
+    def _create(self, rule: str, why: str = "") -> None:
+        """Start the new lineage: its learner for ``rule`` and its journal (the header keeps
+        the rule). Raises JournalError (nothing written: call again later)."""
+        n = self._new
+        learner = self._start_learner(rule)
+        fork = parent = None  # fork: where the parent's journal stood when it was extended
+        if n["resume"] is not None:
+            parent = str(Path(n["resume"]).resolve())
+            j = (load_snapshot(n["resume"])[3].get("provenance") or {}).get("journal") or {}
+            if j.get("lineage"):
+                fork = {"lineage": j["lineage"], "records": int(j.get("records", 0))}
+        header = {"parent": parent, "fork": fork, "meta": learner.metadata()}
+        self.journal = Journal.create(self.jpath, header, fsync_interval=n["fsync_interval"],
+                                      write=n["write"])
+        self.learner, self.applied = learner, 0
+        log.info("new tree lineage %s at %s%s%s", self.journal.lineage, self.out,
+                 f" (extending {parent})" if parent else "", why)
+
+    @property
+    def undecided(self) -> bool:
+        """A new lineage whose rule waits for its first label (``--teacher auto``)."""
+        return self.journal is None
+
+    def lag_for(self, source: str | None) -> int:
+        """The lag of a label from ``source``: this lineage's (``lag``), or, while the rule is
+        not chosen yet, the one it would take for that label (a person's: ``--lag``)."""
+        if not self.undecided:
+            return self.lag
+        return self._new["lag"] if by_person(source) else 0
+
+    def choose(self, source: str | None) -> None:
+        """The first label came from ``source``: start the lineage by the person rule when a
+        person gave it (``client.labels.by_person``), else by the scripted teacher's; the
+        withdrawals that came before it are journaled. Raises JournalError (call again)."""
+        if not self.undecided:
+            return
+        rule = "person" if by_person(source) else "script"
+        self._create(rule, f": the first label came from {source or 'an unnamed teacher'!r}, "
+                           f"so it learns by the {'person' if rule == 'person' else 'scripted'}"
+                           f" rule ({self.describe_rule() or 'each label as it arrives'})")
+        for w in self._early:
+            self.journal.append_withdrawal(w.origin, w.id, w.first, w.upto, w.ts, w.reason)
+            self.applied += 1
+        self._early = []
+        self._started()
+
+    def describe_rule(self) -> str:
+        learner = self.learner
+        return (f"labels shifted {learner.lag} scans back, the majority of {learner.k} nearest"
+                if self.person else "")
+
+    def _started(self) -> None:
         self.learner.parent = self.journal.header.get("parent")
         if self.person and self.fold_journal:
             raise ProcessError(f"{self.out} is a person's tree, rebuilt from every label of its "
                                "journal: --fold-journal cannot be used with it", EXIT_USAGE)
-        self.saved_applied = self.applied if self.out.exists() else -1
-        self.seq = 0
 
     @property
     def features(self) -> FeatureSpec:
@@ -342,6 +413,10 @@ class LearnerCore:
         if self.withdrawals.holds(w.origin, w.id):
             self._hold_withdrawal(w.origin, w.id, w.first, w.upto)
             return None
+        if self.undecided:  # no label journaled yet: journaled with the lineage (``choose``)
+            self._early.append(w)
+            self._hold_withdrawal(w.origin, w.id, w.first, w.upto)
+            return False
         self.journal.append_withdrawal(w.origin, w.id, w.first, w.upto, w.ts, w.reason)
         self.applied += 1
         self._hold_withdrawal(w.origin, w.id, w.first, w.upto)
@@ -367,15 +442,19 @@ class LearnerCore:
         return True
 
     def learn(self, scan_id: int, ts: float, ranges, yaw: float, label: str,
-              origin: str | None = None, seq: int | None = None) -> bool | None:
+              origin: str | None = None, seq: int | None = None,
+              source: str | None = None) -> bool | None:
         """Journal (flushed) then learn one labeled scan; True when it reached the tree. A label
         with an identity (``origin``, ``seq``) is recorded in ``labels`` once journaled; one
         held already (a resend) is neither journaled nor learned again: None. Raises
         FeatureError (a scan the features cannot use: nothing written) or JournalError (the
         journal cannot be written, e.g. disk full: nothing written, nothing learned; call again
-        later with the same vector)."""
+        later with the same vector). The first label of a lineage whose rule is not chosen
+        yet chooses it by its ``source`` (``choose``)."""
         if self.holds(origin, seq):
             return None
+        if self.undecided:
+            self.choose(source)
         x = self.learner.features.extract(ranges, yaw)
         self.journal.append(scan_id, ts, label, ranges, yaw, x.astype(np.float32), origin, seq)
         self._journaled(origin, seq)
@@ -393,8 +472,10 @@ class LearnerCore:
         learned from (a tree extended with ``--resume`` holds its parent's too) and how many of
         them this lineage's journal holds, its size."""
         learner = self.learner
-        rule = (f"; a person's labels (shifted {learner.lag} scans back, the majority of "
-                f"{learner.k} nearest)" if self.person else "")
+        if self.undecided:
+            return (f"features {self.features.to_dict()['beams']}, a new tree: its rule is "
+                    f"chosen by the first label's source (--teacher auto)")
+        rule = f"; a person's labels ({self.describe_rule()})" if self.person else ""
         return (f"features {self.features.to_dict()['beams']}, {learner.vectors} vectors so far "
                 f"({self.applied} journaled in lineage {self.journal.lineage}), "
                 f"{learner.nodes} nodes{rule}")
@@ -429,7 +510,8 @@ class LearnerCore:
         return self.out.read_bytes()
 
     def close(self) -> None:
-        self.journal.close()
+        if self.journal is not None:
+            self.journal.close()
 
 
 def _resume(path, spec: FeatureSpec | None) -> DemonstrationLearner:
@@ -479,8 +561,11 @@ class LearnerProcess:
         self.snap_key = keys.learner_snapshot_key(ctx.robot)
         self.watch = ScanWatch("learner", keys.scan_key(ctx.robot), stale=3.0)
         # labels are paired with their scans as they arrive: nothing but labeled scans is queued
+        # (a lineage whose rule is not chosen yet shifts a person's labels only: ``lag_for``)
         self.pairing = Pairing(self.args.scan_buffer, self.args.match_timeout,
-                               on_scan_seen=self.watch.seen, lag=self.core.lag)
+                               on_scan_seen=self.watch.seen,
+                               lag=self.args.lag if self.core.undecided else self.core.lag,
+                               lag_of=self._lag_of if self.core.undecided else None)
         self.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0, "duplicates": 0,
                       "withdrawals": 0, "withdrawn_skipped": 0}
         # teachers' withdrawals as they arrive (decoded in zenoh's thread), applied by the loop
@@ -496,6 +581,9 @@ class LearnerProcess:
         self.drain_until: float | None = None  # after a stop request: finish what arrived
         self.notice_pub = self.subs = None
         self.acks: Acknowledgements | None = None  # once the ack publisher is declared
+
+    def _lag_of(self, act: TeacherAction) -> int:  # zenoh's threads, under the pairing's lock
+        return self.core.lag_for(act.source)
 
     @staticmethod
     def open_core(args: argparse.Namespace, journal_write=os.write) -> LearnerCore:
@@ -606,7 +694,7 @@ class LearnerProcess:
             scan, act = self.backlog[0]
             try:
                 learned = self.core.learn(scan.id, scan.ts, scan.ranges, float(scan.pose[2]),
-                                          act.action, act.origin, act.seq)
+                                          act.action, act.origin, act.seq, act.source)
             except FeatureError as exc:  # a scan the features cannot use (bad input)
                 self._pop()
                 self.stats["rejected"] += 1

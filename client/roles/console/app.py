@@ -452,7 +452,8 @@ class Console:
         if r.pubs is None:
             r.client = PlayerClient(session=self.session, robot=r.name, source="teacher",
                                     express=True, block=True)
-            r.pubs = LabelPublisher(self.session, r.name)
+            # labels marked as a person's: a learner's --teacher auto takes the person rule
+            r.pubs = LabelPublisher(self.session, r.name, source="console")
             # the teacher's hold token, one per robot driven (its ident names that robot)
             r.hold = Hold(self.session, f"{r.name}-{os.getpid()}")
 
