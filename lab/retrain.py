@@ -10,7 +10,8 @@ Retraining replays the live learner's pairing: the recorded scans and teacher la
 order the recorder received them, through ``client.labels.Pairing`` (a label is paired with
 exactly the scan it answers) into ``DemonstrationLearner.observe``, the learner's code path; so
 with the live learner's features and settings the tree is the one it built. ``teacher="person"``
-(``rhbl train --from-recording ... --teacher person``) retrains labels given by hand as
+(``rhbl train --from-recording ... --teacher person``, or ``auto``, the default, when the first
+label came from a person) retrains labels given by hand as
 ``rhbl learner --teacher person`` learns them: each paired with the scan ``lag`` scans earlier,
 the tree built by the neighbours' vote (``client.behaviour.teaching.PersonLearner``).
 """

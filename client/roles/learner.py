@@ -28,9 +28,12 @@ withdrawal of labels folded into a snapshot is journaled but cannot take them ou
 
     rhbl learner --features wall --out tree.rhbl                 # new tree (or continue tree.rhbl)
     rhbl learner --resume tree.rhbl --out tree2.rhbl             # extend a tree: a new lineage
-    rhbl learner --features wall --teacher person --out tree.rhbl  # taught by hand (rhbl console)
+    rhbl learner --features wall --teacher person --out tree.rhbl  # force the person rule
 
-``--teacher person`` (labels given by hand at ``rhbl console``): each label is paired with the
+``--teacher auto`` (the default) chooses a new lineage's rule by its first label's ``source``
+(``client.labels.by_person``): a person's (``console``, ``keyboard``) gives the person rule, any
+other the script rule (the paper's: each label learned as it arrives); the journal's header keeps
+it. The person rule (labels given by hand at ``rhbl console``): each label is paired with the
 scan ``--lag`` scans before the one it names (a person's key answers what they saw a reaction
 time earlier: ``client.labels.Pairing``), and the tree is rebuilt from every label journaled,
 each taking the label most of its nearest labels carry

@@ -2,7 +2,7 @@
 learner and console process: what a person at the page needs to teach well.
 
 - labels given before any learner is up are kept, the page says so, and a learner that comes up
-  gets every one of them;
+  gets every one of them (its default ``--teacher auto`` learns them by the person rule);
 - episodes (record, stop, discard) and undo withdraw labels: the learner rebuilds its tree
   without them and its journal keeps them out;
 - the keys 1-9 put the robot at a start pose, dragging it on the map moves it, Home resets;
@@ -146,6 +146,10 @@ def test_labels_before_any_learner_are_kept_shown_and_delivered(env, browser, tm
     assert rc == 0, learner.output()
     with Journal.open(journal_path(learner.out), readonly=True) as j:
         assert len(list(j.standing())) == given
+        # the learner's default --teacher auto: the page's labels are a person's, so the new
+        # lineage learns by the person rule, and its journal's header says so
+        assert j.header["meta"]["learning"]["rule"] == "person"
+    assert "the first label came from 'console'" in learner.output()
     assert _errors(browser) == []
 
 
