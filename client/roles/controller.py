@@ -16,7 +16,9 @@ default, ``--no-guard`` to drive the tree's answers as they are): an order to ro
 way within 5 scans of a rotation is overruled (the robot keeps turning as it was, for at most
 ``--guard-hold`` scans in a row), so the robot does not bounce between a rot-left and a rot-right
 sphere for ever; every overruled reversal is counted (``--stats``: ``overruled``) and logged at a
-bounded rate (docs/teaching.md has the study behind it).
+bounded rate (docs/teaching.md has the study behind it). Its decisions (``Decision``, for
+viewers) say when the guard stepped in lately (``looping``) and what it commanded instead
+(``executed``): ``rhbl console`` then asks the person to show the robot the way out.
 
 With ``--ros2`` it drives a ROS 2 robot instead (``client.ros2.Ros2Robot``, docs/ros2.md): its
 ``LaserScan`` (any beam count and span, resampled to the tree's features, or refused with exit 2
@@ -176,6 +178,7 @@ class ControllerProcess:
         self.decider = Decider(ctx.session, ctx.robot)
         ctx.scope.callback(self.decider.close)
         self.t0: float | None = None
+        self.executed: str | None = None  # the action commanded for the last scan answered
         self.n = self.bad = 0
         ctx.scope.callback(self.close)  # on every path, after "stopping (signal)"
         ctx.report(self.counters)
@@ -290,6 +293,7 @@ class ControllerProcess:
             name = str(p.classifier.predict_one(x))
             if self.guard is not None:
                 name = self.guard_choose(name, scan)
+            self.executed = name
             return p.actions[name], p, x
         except Exception as exc:  # noqa: BLE001 - a scan the tree cannot use: no command
             self.bad += 1
@@ -312,8 +316,9 @@ class ControllerProcess:
     def publish_decision(self, policy, x, scan: Scan) -> None:
         """The decision of the scan just answered, for viewers; a failure here is logged and
         never stops the controller (the command is already out)."""
-        try:
-            self.decider.publish(policy, x, scan)
+        try:  # with the loop guard's state: a console asks the person to show the way out
+            self.decider.publish(policy, x, scan, executed=self.executed,
+                                 looping=self.guard is not None and self.guard.looping)
         except Exception as exc:  # noqa: BLE001 - viewers only
             log.debug("decision of scan %d not published: %s", scan.id, exc)
 
