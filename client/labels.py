@@ -595,6 +595,14 @@ class Pairing:
                 del self.pending[act.scan_id]  # the same label, its scan never came
             self._ready(scan, act)
 
+    def settle(self, lag: int) -> None:
+        """Every label from now on is paired with ``lag`` (a learner's rule was chosen: no
+        ``lag_of`` any more); with 0 the recent scans are no longer kept."""
+        with self._cond:
+            self.lag, self._lag_of = int(lag), None
+            if not self.lag:
+                self.recent.clear()
+
     def _answered(self, scan: Scan, lag: int) -> Scan:  # under the lock
         """The scan a label given while ``scan`` was displayed answers (``lag``)."""
         from client.behaviour.teaching import answered_scan

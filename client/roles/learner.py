@@ -695,6 +695,7 @@ class LearnerProcess:
         """Journal and learn the waiting labeled scans, in order, until the journal fails."""
         while self.backlog:
             scan, act = self.backlog[0]
+            undecided = self.core.undecided
             try:
                 learned = self.core.learn(scan.id, scan.ts, scan.ranges, float(scan.pose[2]),
                                           act.action, act.origin, act.seq, act.source)
@@ -708,6 +709,8 @@ class LearnerProcess:
                 self._journal_failed(exc)
                 return
             self._pop()
+            if undecided and not self.core.undecided:  # this label chose the rule
+                self.pairing.settle(self.core.lag)
             self.acks.handled(act, journaled=True)  # (again, for a duplicate: its ack was lost)
             if learned is None:  # resent, or live and resent: journaled once only
                 self.stats["duplicates"] += 1

@@ -41,6 +41,11 @@ def test_the_pairing_shifts_a_persons_labels_only():
     p.on_label(TeacherAction(scan_id=9, action="fwd", source="teacher").encode())
     got = [(scan.id, act.scan_id) for scan, act in iter(lambda: p.get(0.0), None)]
     assert got == [(5, 8), (9, 9)]
+    p.settle(0)  # the learner chose the scripted rule: no lag, no recent scans kept
+    assert p.recent == {} and p.lag == 0
+    p.on_scan(Scan(ts=1.0, id=10, ranges=np.full(8, 1.0, np.float32)).encode())
+    p.on_label(TeacherAction(scan_id=10, action="fwd", source="console").encode())
+    assert p.get(0.0)[0].id == 10 and p.recent == {}
 
 
 def _core(tmp_path, name: str = "t", **kw) -> LearnerCore:
