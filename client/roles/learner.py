@@ -164,6 +164,7 @@ class LearnerCore:
         self.spans: dict[str, tuple[int, int]] = {}  # origin -> lowest, highest seq journaled
         self.standing = 0  # labelled vectors journaled and not withdrawn
         self.rebuilds = 0
+        self._early: list[Withdrawal] = []  # withdrawals before the lineage's first label
         if self.jpath.exists():
             self.journal = Journal.open(self.jpath, fsync_interval=fsync_interval,
                                         write=journal_write)
@@ -197,7 +198,6 @@ class LearnerCore:
                 # scripted learner stands in (it learns nothing) and no journal exists
                 self.learner = self._start_learner("script")
                 self.applied = 0
-                self._early: list[Withdrawal] = []  # withdrawals before the first label
                 log.info("new tree lineage at %s: its rule is chosen by the first label "
                          "(a person's at the console or keyboard: the person rule; else the "
                          "scripted teacher's)", self.out)
@@ -261,11 +261,17 @@ class LearnerCore:
         self._create(rule, f": the first label came from {source or 'an unnamed teacher'!r}, "
                            f"so it learns by the {'person' if rule == 'person' else 'scripted'}"
                            f" rule ({self.describe_rule() or 'each label as it arrives'})")
-        for w in self._early:
-            self.journal.append_withdrawal(w.origin, w.id, w.first, w.upto, w.ts, w.reason)
-            self.applied += 1
-        self._early = []
         self._started()
+        self._journal_early()
+
+    def _journal_early(self) -> None:
+        """Journal the withdrawals that came before the lineage's first label (each once,
+        also when a write failed half way: called again before the next label)."""
+        while self._early:
+            w = self._early[0]
+            self.journal.append_withdrawal(w.origin, w.id, w.first, w.upto, w.ts, w.reason)
+            self._early.pop(0)
+            self.applied += 1
 
     def describe_rule(self) -> str:
         learner = self.learner
@@ -458,6 +464,8 @@ class LearnerCore:
             return None
         if self.undecided:
             self.choose(source)
+        elif self._early:
+            self._journal_early()
         x = self.learner.features.extract(ranges, yaw)
         self.journal.append(scan_id, ts, label, ranges, yaw, x.astype(np.float32), origin, seq)
         self._journaled(origin, seq)

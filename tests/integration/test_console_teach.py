@@ -312,6 +312,23 @@ def _purple_near(browser, x: float, y: float) -> bool:
         return false;""", ox, oy)
 
 
+def _ring_then_show_the_way(browser, w) -> dict:
+    """The loop's mark drawn on the map (a purple ring of 0.18 m about it), then the person
+    shows the way: the prompt goes while they drive. The loop's marker."""
+    loop = next(m for m in browser.execute_script("return window.rhbl.view().markers")
+                if m["kind"] == "loop")
+    _until(browser, lambda d: _purple_near(d, loop["x"] + 0.18, loop["y"]), 5,
+           "the loop's ring on the canvas")
+    _keys(browser, ("down", "ARROW_UP"))
+    try:
+        w.wait(lambda w: w.state.driver == "teacher", 5, "the person takes over")
+        _until(browser, lambda d: not d.find_element("id", "stuck").is_displayed(), 10,
+               "the prompt goes while the person drives")
+    finally:
+        _keys(browser, ("up", "ARROW_UP"))
+    return loop
+
+
 class _Looper:
     """A stand-in for a learned robot that loops: a controller-source client answering every
     scan of r0, two scans rot-left then two rot-right (a rot-left/rot-right alternation)."""
@@ -347,19 +364,7 @@ def test_correct_mode_marks_a_loop_and_asks_the_person_to_show_the_way(env, brow
         assert "show it the way" in _text(browser, "stuck")
         assert _int(browser, "trouble", "loops") > markers0
         assert browser.find_element("id", "stuck").is_displayed()
-        # the loop's mark is drawn on the map: a purple ring of 0.18 m about it
-        loop = next(m for m in browser.execute_script("return window.rhbl.view().markers")
-                    if m["kind"] == "loop")
-        _until(browser, lambda d: _purple_near(d, loop["x"] + 0.18, loop["y"]), 5,
-               "the loop's ring on the canvas")
-        # the person shows the way: the prompt goes while they drive
-        _keys(browser, ("down", "ARROW_UP"))
-        try:
-            w.wait(lambda w: w.state.driver == "teacher", 5, "the person takes over")
-            _until(browser, lambda d: not d.find_element("id", "stuck").is_displayed(), 10,
-                   "the prompt goes while the person drives")
-        finally:
-            _keys(browser, ("up", "ARROW_UP"))
+        _ring_then_show_the_way(browser, w)
     finally:
         looper.close()
     w.wait(Watch.stopped, 5, "the robot stops")
@@ -412,20 +417,10 @@ def test_the_controllers_loop_guard_asks_the_person_to_show_the_way(env, browser
         text = _text(browser, "stuck")
         assert "the robot is stuck here" in text and "show it the way" in text
         assert "loop guard" in text
-        assert _attr(browser, "decision", "looping") in ("0", "1")
-        loop = next(m for m in browser.execute_script("return window.rhbl.view().markers")
-                    if m["kind"] == "loop")
+        _until(browser, lambda d: _attr(d, "decision", "looping") == "1", 10,
+               "the decision panel: the guard stepped in")
+        loop = _ring_then_show_the_way(browser, w)
         assert _near((loop["x"], loop["y"]), start, 0.2)  # where the robot turns in place
-        _until(browser, lambda d: _purple_near(d, loop["x"] + 0.18, loop["y"]), 5,
-               "the loop's ring on the canvas")
-        # the person shows the way: the prompt goes while they drive
-        _keys(browser, ("down", "ARROW_UP"))
-        try:
-            w.wait(lambda w: w.state.driver == "teacher", 5, "the person takes over")
-            _until(browser, lambda d: not d.find_element("id", "stuck").is_displayed(), 10,
-                   "the prompt goes while the person drives")
-        finally:
-            _keys(browser, ("up", "ARROW_UP"))
     finally:
         rc = ctl.stop()
     assert rc == 0, ctl.output()
