@@ -370,7 +370,7 @@ def table(results: list[dict]) -> str:
                     f"{r['tree']['nodes']} | {r['labels']['given']} | {r['labels_standing']} | "
                     f"{_rate(r, 'person_hz')} | {_rate(r, 'page_fps')} "
                     f"({_rate(r, 'page_fps_p10')}) |")
-    rows += ["", "| person | learner | runs | taught room (mean) | unseen rooms (mean) | "
+    rows += ["", "| person | learner | runs | taught room (mean, worst) | unseen rooms (mean, worst) | "
              "loops (mean) | collisions (mean) | tree nodes (mean) | labels (mean) |",
              "|---|---|---|---|---|---|---|---|---|"]
     groups: dict[tuple[str, str], list[dict]] = {}
@@ -380,8 +380,11 @@ def table(results: list[dict]) -> str:
     for (p, lrn), rs in groups.items():
         def mean(f, rs=rs):
             return statistics.fmean(f(r) for r in rs)
-        rows.append(f"| {p} | {lrn} | {len(rs)} | {_pct(mean(lambda r: r['success_taught']))} | "
-                    f"{_pct(mean(lambda r: r['success_unseen'] or 0.0))} | "
+        taught = [r["success_taught"] for r in rs]
+        unseen = [r["success_unseen"] or 0.0 for r in rs]
+        rows.append(f"| {p} | {lrn} | {len(rs)} | {_pct(statistics.fmean(taught))} "
+                    f"({_pct(min(taught))}) | {_pct(statistics.fmean(unseen))} "
+                    f"({_pct(min(unseen))}) | "
                     f"{mean(lambda r: r['loops']):.1f} | {mean(lambda r: r['collisions']):.1f} | "
                     f"{mean(lambda r: r['tree']['nodes']):.0f} | "
                     f"{mean(lambda r: r['labels']['given']):.0f} |")
@@ -447,7 +450,21 @@ def main(argv=None) -> int:
                     help="sim seconds per evaluated episode (default: rhbl evaluate's)")
     ap.add_argument("--json", default=None, help="write every run's figures here")
     ap.add_argument("--workdir", default=None, help="keep each run's logs and tree under here")
+    ap.add_argument("--table", default=None, metavar="JSON",
+                    help="no session: print the table of the runs a --json file holds (those "
+                         "of --people only, when given)")
     args = ap.parse_args(argv)
+    if args.table:
+        try:
+            runs = json.loads(Path(args.table).read_text())
+            if "--people" in (argv if argv is not None else sys.argv):
+                keep = set(_names(args.people, people))
+                runs = [r for r in runs if r["person"] in keep]
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            print(f"bench_teach: error: --table {args.table}: {exc}", file=sys.stderr)
+            return 2
+        print(table(runs))
+        return 0
     try:
         names = _names(args.people, people)
         seeds = _seeds(args.seeds)
