@@ -270,9 +270,10 @@ def _places(env, browser) -> None:
     _press(browser, "r")
     _until(browser, lambda d: _attr(d, "episode", "state") == "recording", 10, "recording")
     n = _attr(browser, "episode", "n")
-    _hold_until(browser, "ARROW_UP", lambda d: _int(d, "episode", "labels") >= 5, "5 labels")
+    # held until 5 labels and the robot moved (a loaded machine may label faster than it moves)
+    _hold_until(browser, "ARROW_UP", lambda d: _int(d, "episode", "labels") >= 5
+                and not _near(w.state.truth, starts[2], 0.2), "5 labels, the robot moved")
     w.wait(Watch.stopped, 5, "the robot stops")
-    w.wait(lambda w: not _near(w.state.truth, starts[2], 0.2), 5, "it moved")
     _fresh(browser)
     withdrawn, labels = _int(browser, "labels", "withdrawn"), _int(browser, "episode", "labels")
     _press(browser, "e")
