@@ -247,9 +247,6 @@ def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
             raise RuntimeError(f"the learner exited {rc}:\n{lrn.output()[-2000:]}")
         if record and (rc := rec.stop()) != 0:
             raise RuntimeError(f"the recorder exited {rc}:\n{rec.output()[-2000:]}")
-        result["rule"] = next((ln.split("learns by the ", 1)[1].split(" rule", 1)[0]
-                               for ln in lrn.output().splitlines() if "learns by the " in ln),
-                              "forced" if extra else "?")
     finally:
         if browser is not None:
             close_chromium(browser)
@@ -262,6 +259,7 @@ def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
     result["teaching_wall_s"] = round(time.monotonic() - t_start, 1)
     stats = json.loads((work / "learner.json").read_text())
     result["labels_standing"] = stats.get("standing")
+    result["rule"] = stats.get("rule")  # the rule the learner's lineage took
     result["tree_path"] = str(out)
     return result
 

@@ -904,7 +904,8 @@ class LearnerProcess:
     def counters(self) -> dict:
         """The learner's counters (``--stats``): this run's, the pairing's and the tree's."""
         core = self.core
-        return {**self.stats, "vectors": core.applied, "replayed": core.replayed,
+        rule = "undecided" if core.undecided else "person" if core.person else "script"
+        return {**self.stats, "rule": rule, "vectors": core.applied, "replayed": core.replayed,
                 "standing": core.standing, "rebuilds": core.rebuilds,
                 "withdrawn_labels": core.withdrawals.labels(),
                 "nodes": core.learner.nodes, "height": core.learner.height,

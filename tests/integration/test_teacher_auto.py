@@ -7,6 +7,7 @@ too, tests/integration/test_console_teach.py.)"""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import time
@@ -62,7 +63,7 @@ def _rule(out: Path) -> str | None:
 
 def _learner(procs, srv, out: Path, name: str = "learner"):
     p = procs(name, "learner", "--features", "wall", "--out", str(out), "--snapshot-every",
-              "0.3", "--connect", srv.endpoint)
+              "0.3", "--connect", srv.endpoint, "--stats", str(out.with_suffix(".json")))
     assert p.wait_for_line("its rule is chosen by the first label", 60), p.output()
     return p
 
@@ -78,6 +79,7 @@ def test_a_scripted_teachers_labels_give_the_scripted_rule(start_server, procs, 
     _wait_records(out, 5, learner)
     assert learner.stop() == 0, learner.output()
     assert _rule(out) != "person"
+    assert json.loads(out.with_suffix(".json").read_text())["rule"] == "script"  # --stats
     assert "the first label came from 'teacher', so it learns by the scripted rule" in \
         learner.output()
 
@@ -102,6 +104,7 @@ def test_a_person_at_the_keyboard_gives_the_person_rule(start_server, procs, tmp
         os.close(slave)
     assert learner.stop() == 0, learner.output()
     assert _rule(out) == "person"
+    assert json.loads(out.with_suffix(".json").read_text())["rule"] == "person"
     assert "the first label came from 'keyboard', so it learns by the person rule" in \
         learner.output()
     # a restart keeps the person rule, even when told --teacher script
