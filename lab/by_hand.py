@@ -15,7 +15,8 @@ client), and the processes a person needs to teach by hand, each a separate OS p
 3. the processes stop in order (the controller, the console once the learner acknowledged
    every label, the learner with its final snapshot, the server), and ``rhbl evaluate`` drives
    the tree alone from the world's start poses (``--starts``, ``--drive-seconds``): its table
-   is printed, with the commands to evaluate it again in other rooms.
+   is printed, with the commands to evaluate it again in other rooms. ``--record`` records
+   the session (every bus message) to retrain it later (``rhbl train --from-recording``).
 
 Children are stopped by PID on every exit path; the exit status is non-zero if one failed.
 docs/teaching.md says how to teach well.
@@ -34,8 +35,7 @@ __all__ = ["ByHand", "NOT_BY_HAND", "check_args"]
 
 # the demo's options that drive its scripted teacher: refused with --by-hand, by name
 NOT_BY_HAND = {"scenario": "wall-following", "teach_seconds": None, "rounds": None,
-               "round_seconds": None, "style": "reactive", "speedup": None, "seed": 0,
-               "record": None}
+               "round_seconds": None, "style": "reactive", "speedup": None, "seed": 0}
 
 
 def check_args(args) -> None:
@@ -45,7 +45,7 @@ def check_args(args) -> None:
     if bad:
         raise ValueError(f"--by-hand: {', '.join(bad)} drive the scripted teacher's demo and do "
                          f"not apply (you teach; --world, --out, --console, --demonstrate, "
-                         f"--correct, --starts and --drive-seconds do)")
+                         f"--correct, --starts, --drive-seconds and --record do)")
 
 
 class ByHand(Demo):
@@ -91,39 +91,55 @@ class ByHand(Demo):
 
         args = self.args
         self.say(f"rhbl demo --by-hand: world {self.spec.name}, output {self.out}")
+        from client.recording.record import demo_recording, say_demo_recording
+        from client.recording.tap import BusTap
+
         with zenoh.open(make_config(mode="router", listen=[self.endpoint])) as session:
             self.session = session
-            learner = self.child("learner", "learner", "--features", "wall", "--out",
-                                 str(self.tree), "--snapshot-every", "1", "--wait-server", "60")
-            self.wait_token("learner", learner)  # no label before the learner listens
-            server = self.child("server", "server", "--mode", "client", "--world",
-                                str(self.spec.path))
-            console = self.child("console", "console", "--http", self.address)
-            if not console.wait_for_line("console: ", timeout=30.0):
-                self.check_alive(console)
-                raise DemoError(f"the console did not start within 30 s:\n{console.tail()}")
-            url = next(ln.split(" ", 1)[1] for ln in console.lines
-                       if ln.startswith("console: "))
-            print(f"console: {url}", flush=True)
-            print(f"1. demonstrate ({args.demonstrate:g} s; Enter here ends it sooner): open the "
-                  "URL, press Home (the robot at its start pose) and hold the arrow keys to "
-                  "follow the wall on the robot's right; letting go stops the robot.",
-                  flush=True)
-            how = self.wait(args.demonstrate, "demonstrating", learner, server, console)
-            self.say(f"demonstration over ({'Enter' if how == 'enter' else 'time'})")
-            controller = self.child("controller", "controller", "--from-learner", "--follow",
-                                    "--wait-tree", "60")
-            print(f"2. correct ({args.correct:g} s; Enter or Ctrl-C here ends it sooner): the "
-                  "controller drives the learned tree now. Press C on the page (correct mode): "
-                  "keep your hands off while it does well, take over with the keys where it goes "
-                  "wrong or where the page says \"the robot is stuck here: show it the way\", "
-                  "then let go.", flush=True)
+            # --record: every bus message of the session (to retrain it: rhbl train
+            # --from-recording OUT/run.mcap ..., docs/recording.md)
+            writer = demo_recording(args.record, self.out, self.say)
+            tap = None if writer is None else BusTap(session, [writer], world=True)
             try:
-                how = self.wait(args.correct, "correcting", learner, server, console, controller)
-                self.say(f"correcting over ({'Enter' if how == 'enter' else 'time'})")
-            except KeyboardInterrupt:
-                self.say("correcting over (Ctrl-C)")
-            return self.finish(learner, server, console, controller)
+                return self.phases(args)
+            finally:
+                if tap is not None:
+                    tap.close()
+                    say_demo_recording(tap, writer, self.say)
+
+    def phases(self, args) -> int:
+        """The phases (see the module); the exit status."""
+        learner = self.child("learner", "learner", "--features", "wall", "--out",
+                             str(self.tree), "--snapshot-every", "1", "--wait-server", "60")
+        self.wait_token("learner", learner)  # no label before the learner listens
+        server = self.child("server", "server", "--mode", "client", "--world",
+                            str(self.spec.path))
+        console = self.child("console", "console", "--http", self.address)
+        if not console.wait_for_line("console: ", timeout=30.0):
+            self.check_alive(console)
+            raise DemoError(f"the console did not start within 30 s:\n{console.tail()}")
+        url = next(ln.split(" ", 1)[1] for ln in console.lines
+                   if ln.startswith("console: "))
+        print(f"console: {url}", flush=True)
+        print(f"1. demonstrate ({args.demonstrate:g} s; Enter here ends it sooner): open the "
+              "URL, press Home (the robot at its start pose) and hold the arrow keys to "
+              "follow the wall on the robot's right; letting go stops the robot.",
+              flush=True)
+        how = self.wait(args.demonstrate, "demonstrating", learner, server, console)
+        self.say(f"demonstration over ({'Enter' if how == 'enter' else 'time'})")
+        controller = self.child("controller", "controller", "--from-learner", "--follow",
+                                "--wait-tree", "60")
+        print(f"2. correct ({args.correct:g} s; Enter or Ctrl-C here ends it sooner): the "
+              "controller drives the learned tree now. Press C on the page (correct mode): "
+              "keep your hands off while it does well, take over with the keys where it goes "
+              "wrong or where the page says \"the robot is stuck here: show it the way\", "
+              "then let go.", flush=True)
+        try:
+            how = self.wait(args.correct, "correcting", learner, server, console, controller)
+            self.say(f"correcting over ({'Enter' if how == 'enter' else 'time'})")
+        except KeyboardInterrupt:
+            self.say("correcting over (Ctrl-C)")
+        return self.finish(learner, server, console, controller)
 
     def finish(self, learner: Child, server: Child, console: Child, controller: Child) -> int:
         """Stop in order, then the tree alone from the world's start poses."""

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
 import time
 from pathlib import Path
 
@@ -20,7 +21,9 @@ pytest.importorskip("aiohttp")
 from test_console_teach import _attr, _int, _keys, _open, _press, _until  # noqa: E402
 
 from client.journal import Journal, journal_path  # noqa: E402
+from client.recording.mcap_file import read_recording  # noqa: E402
 from lab.children import Child, rhbl_argv  # noqa: E402
+from protocol.messages import TeacherAction  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
 
@@ -32,7 +35,7 @@ def test_a_person_teaches_by_hand_with_one_command(browser, tmp_path):
     master, slave = os.openpty()
     demo = Child("demo", rhbl_argv("demo", "--by-hand", "--console", "127.0.0.1:0", "--out",
                                    str(out), "--demonstrate", "600", "--correct", "600",
-                                   "--starts", "1", "--drive-seconds", "10"),
+                                   "--starts", "1", "--drive-seconds", "10", "--record"),
                  tmp_path, cwd=ROOT, stop_signal=signal.SIGINT, stop_timeout=60.0,
                  preexec_fn=lambda: os.dup2(slave, 0)).start()
     try:
@@ -74,3 +77,14 @@ def test_a_person_teaches_by_hand_with_one_command(browser, tmp_path):
     with Journal.open(journal_path(out / "tree.rhbl"), readonly=True) as j:
         assert j.header["meta"]["learning"]["rule"] == "person"
         assert len(list(j.standing())) >= 15
+    # the session's recording: the page's labels say they are a person's, so retraining it
+    # (rhbl train --from-recording, its default --teacher auto) takes the person rule too
+    labels = [TeacherAction.decode(m.data) for m in read_recording(out / "run.mcap")
+              if m.kind == "label"]
+    assert len(labels) >= 15 and {a.source for a in labels} == {"console"}
+    done = subprocess.run(rhbl_argv("train", "--from-recording", str(out / "run.mcap"),
+                                    "--features", "wall", "--out", str(tmp_path / "again.rhbl")),
+                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "the person (--teacher auto chose it: the first label came from 'console') rule" \
+        in done.stdout, done.stdout
