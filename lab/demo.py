@@ -148,13 +148,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=arguments.seed, default=0,
                         help="seed of the teacher's perturbations")
     parser.add_argument("--timeout", type=arguments.seconds, default=600.0, metavar="SECONDS",
-                        help="give up (and fail) after this much wall time")
+                        help="give up (and fail) after this much wall time (not with "
+                             "--by-hand: you end it)")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     parser.add_argument("--console", nargs="?", const="127.0.0.1:8080", default=None,
                         metavar="HOST:PORT", type=arguments.address,
                         help="also serve the teacher's console (view-only) to watch the loop "
                              "live in a browser (default address 127.0.0.1:8080; the URL is "
-                             "printed)")
+                             "printed); with --by-hand the console you teach with, there")
     parser.add_argument("--record", nargs="?", const="", default=None, metavar="FILE",
                         type=arguments.output_file_or_default,
                         help="record the whole run (every bus message) as MCAP into FILE "
