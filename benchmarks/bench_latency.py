@@ -11,9 +11,12 @@ on loopback); the others connect to it as clients.
   publish, through the same router.
 
 One message in flight at a time, the two kinds interleaved. Prints p50/p99 and the ratio
-(target: sense-to-act p50 within 3x of the raw round trip).
+(target: sense-to-act p50 within 3x of the raw round trip). ``--breakdown`` runs the controller
+with a clock around each stage of its loop (the scan's bytes taken from the ring channel and
+decoded, features and tree, the command encoded and put, the decision for viewers) and prints
+each stage's median beside the round trips.
 
-    python benchmarks/bench_latency.py [--n 1000]
+    python benchmarks/bench_latency.py [--n 1000] [--breakdown]
 """
 
 from __future__ import annotations
@@ -55,6 +58,57 @@ def echo(endpoint: str) -> int:
     return 0
 
 
+# the controller's stages --breakdown times: (label, what is wrapped)
+STAGES = (("decode", "the scan's bytes from the ring channel to a Scan"),
+          ("answer", "features, the tree's predict_one, the guard"),
+          ("command", "the VelCmd encoded and put"),
+          ("in hand -> out", "from the scan's bytes in hand to the command put"),
+          ("decision", "the decision for viewers, after the command"))
+
+
+def timed_controller(out: str, argv: list[str]) -> int:
+    """Child process (--breakdown): ``rhbl controller ARGV`` with a clock around each stage of
+    its loop; the durations (seconds) are written to ``out`` (JSON) when it ends."""
+    import atexit
+    import json
+
+    import client.player as player
+    import client.roles.controller as controller
+    from lab.cli import main as rhbl_main
+
+    times: dict[str, list[float]] = {name: [] for name, _ in STAGES}
+    clock = time.perf_counter
+    mark = [0.0]
+
+    def recv(self):
+        sample = self._recv()
+        t = mark[0] = clock()
+        scan = self._decoder.decode(Scan, sample.payload.to_bytes())
+        times["decode"].append(clock() - t)
+        return scan
+
+    def timed(cls, name: str, stage: str, end_to_end: bool = False) -> None:
+        inner = getattr(cls, name)
+
+        def wrapper(self, *a):
+            t = clock()
+            result = inner(self, *a)
+            now = clock()
+            times[stage].append(now - t)
+            if end_to_end:
+                times["in hand -> out"].append(now - mark[0])
+            return result
+
+        setattr(cls, name, wrapper)
+
+    player.ScanChannel.recv = recv
+    timed(controller.ControllerProcess, "answer", "answer")
+    timed(player.PlayerClient, "answer", "command", end_to_end=True)
+    timed(controller.ControllerProcess, "publish_decision", "decision")
+    atexit.register(lambda: Path(out).write_text(json.dumps(times)))
+    return rhbl_main(argv)
+
+
 def _train_tree(path: Path) -> None:
     from lab.harness import make_learner, resolve_world
     from lab.recipe import RECIPES
@@ -74,10 +128,17 @@ def _pct(a) -> tuple[float, float]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=1000, help="round trips of each kind")
+    ap.add_argument("--breakdown", action="store_true",
+                    help="also time each stage of the controller's loop")
     ap.add_argument("--echo", metavar="ENDPOINT", help=argparse.SUPPRESS)
-    args = ap.parse_args()
+    ap.add_argument("--timed-controller", metavar="OUT", help=argparse.SUPPRESS)
+    args, rest = ap.parse_known_args()
     if args.echo:
         return echo(args.echo)
+    if args.timed_controller:
+        return timed_controller(args.timed_controller, rest)
+    if rest:
+        ap.error(f"unrecognized arguments: {' '.join(rest)}")
 
     from lab.harness import resolve_world
     from server.world import World
@@ -87,14 +148,32 @@ def main() -> int:
     _train_tree(tree)
     probe = _Probe(World(resolve_world("room")).scan(0))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
+    argv = ["controller", "--tree", str(tree), "--connect", endpoint, "--log-level", "WARNING"]
+    stages = tmp / "stages.json"
     children = [
         Child("echo", [sys.executable, __file__, "--echo", endpoint]),
-        Child("controller", rhbl_argv("controller", "--tree", str(tree), "--connect", endpoint,
-                                      "--log-level", "WARNING"), cwd=ROOT),
+        Child("controller", [sys.executable, __file__, "--timed-controller", str(stages), *argv]
+              if args.breakdown else rhbl_argv(*argv), cwd=ROOT),
     ]
     raw, s2a, lost = _measure(endpoint, children, probe, args.n)
     _report(raw, s2a, lost, probe.size, args.n, tree)
+    if args.breakdown:
+        _report_stages(stages)
     return 0
+
+
+def _report_stages(path: Path) -> None:
+    import json
+
+    if not path.exists():
+        print("the timed controller wrote no stage times (did it end cleanly?)")
+        return
+    times = json.loads(path.read_text())
+    print("the controller's loop, per scan (p50 us, in the controller's process, the clock "
+          "calls included):")
+    for name, what in STAGES:
+        if times.get(name):
+            print(f"  {name:<15} {np.percentile(np.asarray(times[name]) * 1e6, 50):7.1f}  {what}")
 
 
 class _Probe:

@@ -1,7 +1,8 @@
 """The in-process teaching study: models of people teach wall following at a simulated console.
 
     python benchmarks/bench_teach_study.py [--models steady,hurried] [--seeds 3] \
-        [--methods today,literal,person,person:k=25] [--guard] [--restart-correct 20] \
+        [--methods today,literal,person,person:k=25,person:lag=auto] [--guard] [--clearance 0.3] \
+        [--restart-correct 20] [--restart-demo 20 --where starts|free|near] \
         [--worlds room,eval-room-l,...] [--json out.json]
 
 No zenoh, no browser: the world is stepped at 10 Hz as ``lab.harness`` does, and the page's and
@@ -50,19 +51,22 @@ from people import DEV, HELD_OUT, PEOPLE, View  # noqa: E402
 
 from client.behaviour.actions import DEFAULT_ACTIONS  # noqa: E402
 from client.behaviour.features import FEATURES  # noqa: E402
-from client.behaviour.guard import RotationGuard  # noqa: E402
+from client.behaviour.guard import CLEARANCE, RotationGuard  # noqa: E402
 from client.behaviour.learning import DemonstrationLearner, TreePolicy  # noqa: E402
-from client.behaviour.teaching import LAG, PersonLearner, answered_scan  # noqa: E402
+from client.behaviour.teaching import MAX_LAG, PersonLearner, answered_scan  # noqa: E402
 from lab import metrics  # noqa: E402
 from lab.episode import DT, Episode  # noqa: E402
 from lab.evaluate import evaluate  # noqa: E402
 from lab.harness import resolve_world  # noqa: E402
 from lab.recipe import EVAL_SECONDS  # noqa: E402
-from server.world import World, free_pose  # noqa: E402
+from server.world import World, free_pose, sample_pose  # noqa: E402
 
 TAUGHT = "room"
 UNSEEN_DEV = ("eval-room-l", "eval-room-ring", "eval-room-jagged", "eval-holdout-room-t")
 UNSEEN_HELD_OUT = ("eval-holdout-room-oct", "eval-holdout2-room-spike", "eval-holdout4-room-open")
+# --where near: the robot dragged off its path (m, normal), turned (rad, uniform), and left at
+# least this far from every wall (m): the person then shows the way back
+NEAR = (0.2, 0.8, 0.35)
 SCAN_MEMORY = 128  # scans the console keeps (client/console/app.py)
 
 
@@ -84,26 +88,28 @@ class Session:
 
 @dataclass(frozen=True)
 class Method:
-    """A learner and the lag of the scans its labels are tied to (``answered_scan``)."""
+    """A learner and the lag of the scans its labels are tied to (``answered_scan``; None:
+    estimated by the person's learner from the scans before each label's own)."""
 
     name: str
-    lag: int
+    lag: int | None
     options: dict
 
     def learner(self) -> DemonstrationLearner:
         spec, task = FEATURES["wall"], "wall-following"
         if self.name == "person":
-            return PersonLearner(spec, DEFAULT_ACTIONS, task=task, **self.options)
+            return PersonLearner(spec, DEFAULT_ACTIONS, task=task, lag=self.lag, **self.options)
         spawn = "all" if self.name == "literal" else "winner"
         return DemonstrationLearner(spec, DEFAULT_ACTIONS, task=task, spawn=spawn,
                                     **self.options)
 
 
-METHODS = {"today": 0, "literal": 0, "person": LAG}  # name -> the default lag
+METHODS = {"today": 0, "literal": 0, "person": None}  # name -> the default lag (None: estimated)
 
 
 def make_method(text: str) -> Method:
-    """``person``, ``person:lag=2+k=25+vote=mean``: a method with those settings."""
+    """``person``, ``person:lag=2+k=25+vote=mean``: a method with those settings
+    (``lag=auto``: estimated by the person's learner)."""
     name, _, opts = text.partition(":")
     if name not in METHODS:
         raise ValueError(f"unknown method {name!r}; known: {', '.join(METHODS)}")
@@ -112,7 +118,10 @@ def make_method(text: str) -> Method:
         key, _, value = part.partition("=")
         options[key] = (value if value.replace("-", "").isalpha()
                         else float(value) if "." in value else int(value))
-    lag = int(options.pop("lag", METHODS[name]))
+    lag = options.pop("lag", METHODS[name])
+    lag = None if lag in (None, "auto") else int(lag)
+    if lag is None and name != "person":
+        raise ValueError(f"method {name!r} needs a fixed lag")
     return Method(name, lag, options)
 
 
@@ -125,13 +134,15 @@ def snapshot(learner: DemonstrationLearner) -> TreePolicy | None:
 
 def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float = 120.0,
           seed: int = 0, latency: float = 0.03, refresh: float = 2.0, guard: bool = False,
-          restarts: tuple[float, float] = (0.0, 0.0),
-          where: str = "starts") -> tuple[Session, DemonstrationLearner]:
+          restarts: tuple[float, float] = (0.0, 0.0), where: str = "starts",
+          clearance: float = CLEARANCE) -> tuple[Session, DemonstrationLearner]:
     """One session (see the module's docstring). ``guard``: the controller drives through a
-    ``RotationGuard``. ``restarts`` = (demonstrate, correct) seconds: > 0, the person puts the
+    ``RotationGuard`` (``clearance``: its path check, 0 off). ``restarts`` = (demonstrate, correct) seconds: > 0, the person puts the
     robot elsewhere this often in that mode (the console's set_pose): at the world's next start
-    pose (``where="starts"``) or anywhere in the free space, any heading (``"free"``:
-    ``server.world.free_pose``, as a person dragging the robot about would)."""
+    pose (``where="starts"``), anywhere in the free space, any heading (``"free"``:
+    ``server.world.free_pose``, as a person dragging the robot about would), or a little off
+    where it is (``"near"``: ``server.world.sample_pose`` with ``NEAR``: dragged off its path
+    and turned, so the person shows the way back)."""
     rng = np.random.default_rng(seed + 555)
     learner = method.learner()
     world = World(spec, robots=1, seed=seed)
@@ -153,7 +164,9 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
         if every > 0 and t > 0 and (t - moved_at >= every - 1e-9
                                     or (mode == "correct" and moved_at < demo)):
             moved_at, next_start = t, next_start + 1  # the next start pose (set_pose)
-            pose = free_pose(spec, rng) if where == "free" else None
+            pose = (free_pose(spec, rng) if where == "free"
+                    else sample_pose(spec, [world.pose(0)], rng, jitter=NEAR[0], turn=NEAR[1],
+                                     clearance=NEAR[2]) if where == "near" else None)
             world.set_pose(0, pose or starts[next_start % len(starts)])
         scans[k] = (world.scan(0), world.odom(0), world.pose(0))
         while len(scans) > SCAN_MEMORY:
@@ -163,9 +176,19 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
         key = person.observe(View(t=t, pose=scans[shown][2], walls=walls, mode=mode,
                                   driver=driver, action=action, scan_id=shown))
         if key is not None:
-            ranges, odom, _ = scans[answered_scan(shown, scans, method.lag,
-                                                  pose=lambda s: s[2])]
-            learner.observe(ranges, odom[2], key)
+            if method.lag is None:  # the label's own scan, and the scans before it
+                ranges, odom, _ = scans[shown]
+                earlier = []
+                for lag in range(1, MAX_LAG + 1):
+                    sid = answered_scan(shown, scans, lag, pose=lambda s: s[2])
+                    if sid == shown:
+                        break
+                    earlier.append(learner.features.extract(scans[sid][0], scans[sid][1][2]))
+                learner.observe(ranges, odom[2], key, earlier=earlier)
+            else:
+                ranges, odom, _ = scans[answered_scan(shown, scans, method.lag,
+                                                      pose=lambda s: s[2])]
+                learner.observe(ranges, odom[2], key)
             rec.labels += 1
             rec.wrong += person.wrong_now
             if mode == "correct":
@@ -180,7 +203,7 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
             next_refresh = t + refresh
             tree = snapshot(learner)
             if tree is not None:
-                drive = RotationGuard(tree) if guard else tree
+                drive = RotationGuard(tree, clearance=clearance) if guard else tree
                 drive.reset()
         if key is not None:
             name, driver = key, "teacher"
@@ -269,19 +292,26 @@ def score(policy, worlds, model: str, seed: int = 0) -> dict:
 
 def run_one(model: str, seed: int, method: str, worlds, *, demo: float = 240.0,
             correct: float = 120.0, latency: float = 0.03, guard: bool = False,
-            restarts: tuple[float, float] = (0.0, 0.0), where: str = "starts") -> dict:
+            restarts: tuple[float, float] = (0.0, 0.0), where: str = "starts",
+            clearance: float = CLEARANCE) -> dict:
     """One person model, one seed, one method: teach, then evaluate."""
     t0 = time.perf_counter()
     rec, learner = teach(resolve_world(TAUGHT), PEOPLE[model](seed=seed), make_method(method),
                          demo=demo, correct=correct, seed=seed, latency=latency, guard=guard,
-                         restarts=restarts, where=where)
+                         restarts=restarts, where=where, clearance=clearance)
     policy = TreePolicy.from_learner(learner)
-    scores = score(RotationGuard(policy) if guard else policy, worlds, model, seed=seed)
-    return {"model": model, "seed": seed, "method": method, "guard": guard,
+    scores = score(RotationGuard(policy, clearance=clearance) if guard else policy, worlds,
+                   model, seed=seed)
+    return {"model": model, "seed": seed, "method": method,
+            "guard": guard and (f"guard, clearance {clearance:g}" if clearance
+                                else "guard, no clearance"),
             "labels": rec.labels, "demo_labels": rec.demo_labels,
             "corrections": rec.corrections, "takeovers": rec.takeovers,
             "wrong": rec.wrong, "teaching_collisions": rec.collisions,
             "nodes": learner.nodes, "height": learner.height,
+            "lag": getattr(learner, "estimated_lag", 0),
+            "agreement": [round(a, 3) for a in getattr(learner, "lag_agreement", [])],
+            "reaction": PEOPLE[model](seed=seed).style.reaction,
             "worlds": scores, "wall_time": round(time.perf_counter() - t0, 1)}
 
 
@@ -320,11 +350,12 @@ def table(rows: list[dict], taught: str, unseen) -> str:
     """Per model and method: means over seeds (min over seeds in brackets)."""
     groups: dict = {}
     for r in rows:
-        groups.setdefault((r["model"], r["method"] + (" +guard" if r["guard"] else "")),
+        groups.setdefault((r["model"], r["method"] + (f" +{r['guard']}" if r["guard"] else "")),
                           []).append(r)
     lines = ["| model | method | seeds | taught room | unseen rooms | at the person's pace: "
              "taught / unseen | loops | collisions | nodes | labels | corrections | wrong keys "
-             "| failed episodes |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| lag (scans) | failed episodes |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
     def cell(rs, key, worlds):
         v = [_mean([r["worlds"][w][key] for w in worlds]) for r in rs]
@@ -343,7 +374,7 @@ def table(rows: list[dict], taught: str, unseen) -> str:
             f"| {_mean([r['labels'] for r in rs]):.0f} | "
             f"{_mean([r['corrections'] for r in rs]):.0f} | "
             f"{100 * _mean([r['wrong'] / max(1, r['labels']) for r in rs]):.0f}% | "
-            f"{_failures(rs)} |")
+            f"{'/'.join(str(r['lag']) for r in rs)} | {_failures(rs)} |")
     return "\n".join(lines)
 
 
@@ -365,12 +396,18 @@ def main(argv=None) -> int:
                     help="demonstrating: put the robot at the next start pose every S s (0: never)")
     ap.add_argument("--restart-correct", type=float, default=0.0, metavar="S",
                     help="correcting: put the robot at the next start pose every S s (0: never)")
-    ap.add_argument("--where", choices=["starts", "free"], default="starts",
-                    help="--restart-*: at the world's next start pose, or anywhere in the free "
-                         "space with any heading (as a person dragging the robot about)")
+    ap.add_argument("--where", choices=["starts", "free", "near"], default="starts",
+                    help="--restart-*: at the world's next start pose, anywhere in the free "
+                         "space with any heading (as a person dragging the robot about), or "
+                         "dragged a little off where it is and turned ('near')")
     ap.add_argument("--guard", action="store_true",
                     help="the controller (and the evaluation) drive the tree through "
                          "client.behaviour.guard.RotationGuard")
+    ap.add_argument("--clearance", type=float, default=CLEARANCE, metavar="M",
+                    help="with --guard: its path check (RotationGuard(clearance=M)): a forward "
+                         "order with a laser return within 0.5 m ahead and M m of the centre "
+                         f"line becomes a rotation in place (default {CLEARANCE:g}, as rhbl "
+                         "controller; 0: off)")
     ap.add_argument("--alone", action="store_true",
                     help="also print how each person model does driving by itself")
     ap.add_argument("--json", default=None, help="write every run here")
@@ -394,11 +431,12 @@ def main(argv=None) -> int:
                 r = run_one(model, seed, method, worlds, demo=args.demo, correct=args.correct,
                             latency=args.latency, guard=args.guard,
                             restarts=(args.restart_demo, args.restart_correct),
-                            where=args.where)
+                            where=args.where, clearance=args.clearance)
                 rows.append(r)
                 print(f"{method:>12} {model:>12} seed {seed}: "
                       + " ".join(f"{w} {100 * s['success']:.0f}%/{s['loops']}L"
                                  for w, s in r["worlds"].items())
+                      + f" | lag {r['lag']} (reaction {r['reaction']:.2f} s)"
                       + f" | {r['nodes']} nodes, {r['labels']} labels ({r['corrections']} "
                         f"corrections, {r['takeovers']} takeovers), {r['wrong']} wrong, "
                         f"{r['wall_time']} s", flush=True)

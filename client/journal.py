@@ -12,7 +12,9 @@ File format (little-endian)::
     frame i := record i-1, a msgpack map {"i", "scan", "ts", "label", "yaw", "ranges", "x"}
                (ranges and x as float32 bytes), plus "origin" and "seq" when the label carries
                its identity (the teacher session and its number, for acknowledgements and
-               deduplication: ``LabelSet``); journals without them read the same
+               deduplication: ``LabelSet``); journals without them read the same; plus
+               "earlier" (float32 bytes, rows of len(x)) for a person's label whose lag the
+               learner estimates: the features of the scans displayed 1, 2, ... before it
             or a tombstone {"i", "ts", "withdraw": {"origin", "id", "first", "upto", "reason"}}:
                the teacher withdrew its labels ``first <= seq < upto`` of session ``origin``
                (``JournalWithdrawal``; its withdrawal number ``id``). The labelled vectors that
@@ -94,6 +96,9 @@ class JournalRecord:
     features: np.ndarray  # float32 feature vector as extracted when it was learned
     origin: str | None = None  # the label's identity (teacher session, its number), if any
     seq: int | None = None
+    # a person's label whose lag the learner estimates: float32 features of the scans displayed
+    # 1, 2, ... scans before this one (rows, nearest first; None: not kept)
+    earlier: np.ndarray | None = None
 
     def to_payload(self) -> dict:
         p = {
@@ -108,11 +113,15 @@ class JournalRecord:
         if self.origin is not None:
             p["origin"] = str(self.origin)
             p["seq"] = int(self.seq)
+        if self.earlier is not None:
+            p["earlier"] = np.asarray(self.earlier, dtype="<f4").tobytes()
         return p
 
     @classmethod
     def from_payload(cls, p: Mapping) -> JournalRecord:
         origin = p.get("origin")
+        x = np.frombuffer(p["x"], dtype="<f4")
+        earlier = p.get("earlier")
         return cls(
             index=int(p["i"]),
             scan_id=int(p["scan"]),
@@ -120,9 +129,11 @@ class JournalRecord:
             label=str(p["label"]),
             yaw=float(p["yaw"]),
             ranges=np.frombuffer(p["ranges"], dtype="<f4"),
-            features=np.frombuffer(p["x"], dtype="<f4"),
+            features=x,
             origin=None if origin is None else str(origin),
             seq=None if origin is None else int(p["seq"]),
+            earlier=(None if earlier is None
+                     else np.frombuffer(earlier, dtype="<f4").reshape(-1, max(1, len(x)))),
         )
 
 
@@ -512,12 +523,13 @@ class Journal:
 
     # ---- writing ------------------------------------------------------------------------
     def append(self, scan_id: int, ts: float, label: str, ranges, yaw: float,
-               features, origin: str | None = None, seq: int | None = None) -> int:
-        """Append one labeled vector (with the label's ``origin`` and ``seq`` when it has them);
-        returns its index. Durable against a killed process on return; fsync'd within
+               features, origin: str | None = None, seq: int | None = None,
+               earlier=None) -> int:
+        """Append one labeled vector (with the label's ``origin`` and ``seq`` when it has them,
+        and the ``earlier`` scans' features of a person's label); returns its index. Durable against a killed process on return; fsync'd within
         ``fsync_interval`` seconds."""
         return self._append(JournalRecord(len(self), scan_id, ts, label, ranges, yaw,
-                                          features, origin, seq))
+                                          features, origin, seq, earlier))
 
     def append_withdrawal(self, origin: str, wid: int, first: int, upto: int,
                           ts: float = 0.0, reason: str = "") -> int:

@@ -29,6 +29,7 @@ import threading
 import time
 import uuid
 from collections import OrderedDict, deque
+from dataclasses import dataclass, fields
 
 from client.journal import LabelSet, Withdrawals
 from protocol import keys
@@ -45,6 +46,7 @@ __all__ = [
     "PERSON_SOURCES",
     "RESEND_AFTER",
     "Acknowledgements",
+    "AnsweredScan",
     "Hold",
     "Learners",
     "Outbox",
@@ -471,6 +473,14 @@ class Learners:
             return bool(self._keys)
 
 
+@dataclass
+class AnsweredScan(Scan):
+    """A labeled scan with the scans displayed before it (``Pairing(window=...)``): the
+    person's learner estimates which of them the label answered."""
+
+    earlier: tuple = ()
+
+
 class Pairing:
     """Pairs every label with exactly the scan it answers (by scan id, whichever arrives first),
     at arrival: ``on_scan`` and ``on_label`` are the subscribers' callbacks (any thread); the
@@ -497,17 +507,23 @@ class Pairing:
     (their reaction time): with ``lag`` > 0 each label is paired with that earlier scan instead
     (``client.behaviour.teaching.answered_scan``: the label's own scan when the earlier one is
     no longer held or the robot was put elsewhere in between, counted ``unshifted``); the
-    newest ``scan_buffer`` scans, labeled or not, are kept for it. ``lag_of(label)``, when
-    given, says each label's lag instead (``lag`` or 0: a learner whose rule is not chosen yet,
-    ``--teacher auto``, shifts a person's labels only).
+    newest ``scan_buffer`` scans, labeled or not, are kept for it. With ``window`` > 0 instead
+    (the lag estimated by the learner), each label keeps its own scan and carries the scans
+    displayed 1 .. ``window`` scans before it (``AnsweredScan.earlier``, nearest first; cut
+    where ``answered_scan`` would keep the label's own scan). ``lag_of(label)``, when given,
+    says each label's ``(lag, window)`` instead (a learner whose rule is not chosen yet,
+    ``--teacher auto``, treats a person's labels only so; ``settle`` ends it).
     """
 
     def __init__(self, scan_buffer: int = 512, match_timeout: float = 2.0,
                  max_ready: int = MAX_BACKLOG, behind: int = BEHIND, on_scan_seen=None,
-                 clock=time.monotonic, lag: int = 0, lag_of=None):
+                 clock=time.monotonic, lag: int = 0, window: int = 0, lag_of=None):
         if not (isinstance(lag, int) and lag >= 0):
             raise ValueError(f"lag must be an integer >= 0 scans, got {lag!r}")
-        self.lag = lag
+        if not (isinstance(window, int) and window >= 0) or (window and lag):
+            raise ValueError(f"window must be an integer >= 0 scans (and lag 0 with it), got "
+                             f"{window!r}")
+        self.lag, self.window = lag, window
         self._lag_of = lag_of
         self.recent: OrderedDict[int, Scan] = OrderedDict()  # every scan (lag > 0 only)
         self.scan_buffer = max(1, int(scan_buffer))
@@ -543,7 +559,7 @@ class Pairing:
                 self.recent.clear()
                 self.forgot_upto = -1
             self.last_id = scan.id
-            if self.lag:
+            if self.lag or self.window or self._lag_of is not None:
                 self.recent[scan.id] = scan
                 while len(self.recent) > self.scan_buffer:
                     self.recent.popitem(last=False)
@@ -595,12 +611,13 @@ class Pairing:
                 del self.pending[act.scan_id]  # the same label, its scan never came
             self._ready(scan, act)
 
-    def settle(self, lag: int) -> None:
-        """Every label from now on is paired with ``lag`` (a learner's rule was chosen: no
-        ``lag_of`` any more); with 0 the recent scans are no longer kept."""
+    def settle(self, lag: int, window: int = 0) -> None:
+        """Every label from now on is paired with ``lag`` or carries ``window`` earlier scans
+        (a learner's rule was chosen: no ``lag_of`` any more); with neither the recent scans
+        are no longer kept."""
         with self._cond:
-            self.lag, self._lag_of = int(lag), None
-            if not self.lag:
+            self.lag, self.window, self._lag_of = int(lag), int(window), None
+            if not (self.lag or self.window):
                 self.recent.clear()
 
     def _answered(self, scan: Scan, lag: int) -> Scan:  # under the lock
@@ -615,10 +632,27 @@ class Pairing:
         self.stats["shifted"] += 1
         return held[sid]
 
+    def _windowed(self, scan: Scan, window: int) -> AnsweredScan:  # under the lock
+        """``scan`` with the scans displayed 1 .. ``window`` before it."""
+        from client.behaviour.teaching import answered_scan
+
+        held = self.recent if scan.id in self.recent else {**self.recent, scan.id: scan}
+        earlier = []
+        for lag in range(1, window + 1):
+            sid = answered_scan(scan.id, held, lag)
+            if sid == scan.id:
+                break
+            earlier.append(held[sid])
+        self.stats["shifted" if earlier else "unshifted"] += 1
+        return AnsweredScan(**{f.name: getattr(scan, f.name) for f in fields(Scan)},
+                            earlier=tuple(earlier))
+
     def _ready(self, scan: Scan, act: TeacherAction) -> None:  # under the lock
-        lag = self.lag if self._lag_of is None else self._lag_of(act)
+        lag, window = (self.lag, self.window) if self._lag_of is None else self._lag_of(act)
         if lag:
             scan = self._answered(scan, lag)
+        elif window:
+            scan = self._windowed(scan, window)
         self.ready.append((scan, act))
         n = len(self.ready)
         self.stats["max_ready"] = max(self.stats["max_ready"], n)

@@ -76,7 +76,9 @@ def side_distance(ranges, side: str = "right", sector_deg: float = 60.0,
                   fov_deg: float = 180.0) -> float:
     """Nearest wall on one side: min range over the beams within ``sector_deg`` of that side's
     edge of a ``fov_deg`` scan (ranges[0] is the robot's right)."""
-    r = np.asarray(ranges, dtype=np.float64)
+    r = np.asarray(ranges)
+    if r.dtype.kind != "f":  # a float32 scan's minimum is the same number as a float64 copy's
+        r = r.astype(np.float64)
     k = int(round(sector_deg / fov_deg * (r.size - 1)))
     part = r[: k + 1] if side == "right" else r[r.size - 1 - k:]
     return float(part.min())

@@ -28,7 +28,7 @@ from client.behaviour.actions import DEFAULT_ACTIONS
 from client.behaviour.features import FEATURES, FeatureError
 from client.behaviour.learning import DemonstrationLearner
 from client.behaviour.tasks import task_of_features
-from client.behaviour.teaching import LAG, PersonLearner
+from client.behaviour.teaching import MAX_LAG, PersonLearner
 from client.labels import by_person
 from client.recording.mcap_file import RecordingError, read_recording
 from protocol.messages import Scan, TeacherAction
@@ -49,11 +49,11 @@ class _Clock:
 
 def labeled_scans(path: str | Path, robots: list[str] | None = None,
                   match_timeout: float = 2.0, scan_buffer: int = 512,
-                  stats: dict | None = None, lag: int = 0
+                  stats: dict | None = None, lag: int = 0, window: int = 0
                   ) -> Iterator[tuple[str, Scan, TeacherAction]]:
     """(robot, scan, label) in the order the live learner paired them: the recording's scans
-    and labels through ``client.labels.Pairing`` (one per robot, ``lag`` as its own), clocked by
-    receive time."""
+    and labels through ``client.labels.Pairing`` (one per robot, ``lag`` and ``window`` as its
+    own), clocked by receive time."""
     from client.labels import Pairing
 
     pairings: dict[str, tuple[Pairing, _Clock]] = {}
@@ -63,7 +63,8 @@ def labeled_scans(path: str | Path, robots: list[str] | None = None,
         p = pairings.get(m.robot)
         if p is None:
             clock = _Clock()
-            p = pairings[m.robot] = (Pairing(scan_buffer, match_timeout, clock=clock, lag=lag),
+            p = pairings[m.robot] = (Pairing(scan_buffer, match_timeout, clock=clock, lag=lag,
+                                                     window=window),
                                      clock)
         pairing, clock = p
         clock.now = m.log_time / 1e9
@@ -97,7 +98,7 @@ def first_label_source(paths, robots: list[str] | None = None) -> str | None:
 def retrain(paths, features: str = "wall", robots: list[str] | None = None,
             task: str | None = None, stride: int = 1, min_delta: float = 0.0,
             tree_params: dict | None = None, record: bool = False, teacher: str = "auto",
-            lag: int = LAG) -> tuple[DemonstrationLearner, dict]:
+            lag: int | None = None) -> tuple[DemonstrationLearner, dict]:
     """A tree learned from the recordings' teacher labels (in order, files in the order
     given), as ``rhbl learner`` learns: labels that are no action of the tree and scans the
     features cannot use are skipped and counted. ``record``: the learner keeps its vectors
@@ -122,18 +123,22 @@ def retrain(paths, features: str = "wall", robots: list[str] | None = None,
         learner = DemonstrationLearner(spec, DEFAULT_ACTIONS, task=task, stride=stride,
                                        min_delta=min_delta, record=record, **params)
         lag = 0
+    window = MAX_LAG if lag is None else 0  # a person's lag estimated: the scans before each
     stats = {"paired": 0, "learned": 0, "rejected": 0, "recordings": [],
              "rule": f"{teacher}{chose}"}
     t0 = time.perf_counter()
     for path in paths:
         pstats: dict = {}
         n0 = stats["paired"]
-        for _robot, scan, act in labeled_scans(path, robots, stats=pstats, lag=lag):
+        for _robot, scan, act in labeled_scans(path, robots, stats=pstats, lag=lag or 0,
+                                               window=window):
             if act.action not in learner.actions:
                 stats["rejected"] += 1
                 continue
             try:
-                if learner.observe(scan.ranges, float(scan.pose[2]), act.action):
+                extra = ({"earlier": [spec.extract(s.ranges, float(s.pose[2]))
+                                      for s in scan.earlier]} if window else {})
+                if learner.observe(scan.ranges, float(scan.pose[2]), act.action, **extra):
                     stats["learned"] += 1
             except FeatureError as exc:
                 stats["rejected"] += 1

@@ -15,6 +15,7 @@ metadata; every flag left out takes the task's recipe value (``lab.recipe.RECIPE
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import math
 import time
@@ -24,7 +25,7 @@ import numpy as np
 from client.behaviour.learning import DemonstrationLearner, TreePolicy
 from client.behaviour.policies import Demonstrator, takes_over
 from client.behaviour.tasks import TASKS, make_policy
-from client.behaviour.teaching import LAG
+from client.behaviour.teaching import parse_lag
 from lab.episode import DT, Episode
 from lab.harness import (
     OnStep,
@@ -35,7 +36,6 @@ from lab.harness import (
     step_world,
 )
 from lab.recipe import Recipe, add_recipe_arguments, recipe_for, recipe_from_args
-from lab.sim_tap import record_run
 from protocol import arguments
 from server import world_arg
 from server.world import World, WorldSpec, free_pose, sample_pose
@@ -405,9 +405,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "from a person (rhbl console, rhbl teacher --policy keyboard), "
                              "else by the script rule; 'script' or 'person' force one "
                              "(docs/teaching.md)")
-    parser.add_argument("--lag", type=arguments.non_negative_int, default=LAG, metavar="SCANS",
-                        help=f"with the person rule: a label answers the scan this many scans "
-                             f"before the one it names (default {LAG})")
+    parser.add_argument("--lag", type=arguments.Checked("lag", parse_lag), default=None,
+                        metavar="SCANS|auto",
+                        help="with the person rule: a label answers the scan this many scans "
+                             "before the one it names ('auto', the default: estimated from "
+                             "the labels)")
 
 
 def main(args) -> int:
@@ -418,7 +420,7 @@ def main(args) -> int:
         return train_main(args)  # every flag that cannot apply is a named error there
     if not args.world:
         raise ValueError("--world is required (or --from-recording FILE)")
-    if args.teacher not in ("auto", "script") or args.lag != LAG:
+    if args.teacher not in ("auto", "script") or args.lag is not None:
         raise ValueError("--teacher and --lag go with --from-recording (a simulated run's "
                          "teacher is the scripted expert)")
     spec = resolve_world(args.world)
@@ -431,7 +433,13 @@ def main(args) -> int:
             args.resume, features=recipe.feature_spec() if args.features else None)
     else:
         learner = make_learner(recipe)
-    with record_run(args.record, "rhbl train") as tap:  # None without --record
+    if args.record:  # imported only then (the recordings' writer and its libraries)
+        from lab.sim_tap import record_run
+
+        recording = record_run(args.record, "rhbl train")
+    else:
+        recording = contextlib.nullcontext()
+    with recording as tap:  # None without --record
         ep = train(spec, learner, recipe, seed=args.seed, start=args.start,
                    range_noise=args.range_noise, odom_noise=args.odom_noise,
                    on_step=None if tap is None else tap.step)

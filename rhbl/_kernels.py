@@ -3,8 +3,8 @@
 The kernels work on the tables of :mod:`rhbl._layout`: the node table of
 :class:`rhbl.tree.SphereTree` (creation order: training and the searches of a tree that has
 just changed) and the search table built from it (:func:`layout`: depth-first pre-order, with
-each sphere's rank in the winner order and the end of its subtree, which the searches of a tree
-that stays the same use: :func:`search_kernels`).
+each sphere's rank in the winner order, the end of its subtree and the lowest rank in it, which
+the searches of a tree that stays the same use: :func:`search_kernels`).
 
 The arithmetic is that of the numpy code in :mod:`rhbl._reference` (the tests compare them
 array by array): the distance is ``sum((c - x)**2)`` accumulated in feature order (its square
@@ -27,6 +27,7 @@ import numpy as np
 from numba import njit
 
 from ._layout import (
+    BOUND,
     DEPTH,
     FIRST,
     INT_COLUMNS,
@@ -262,8 +263,8 @@ def learn(table, X, labels, start, n, height, eps, euclidean, winner_only, min_r
 
 @_jit
 def layout(table, n, rank, search, nodes):
-    """Fill the search table ``search`` (flat, ``n`` rows of the centre, the radius, ``SKIP``
-    and ``RANK``) and ``nodes`` (each position's creation index) from the first ``n`` spheres
+    """Fill the search table ``search`` (flat, ``n`` rows of the centre, the radius, ``SKIP``,
+    ``RANK`` and ``BOUND``) and ``nodes`` (each position's creation index) from the first ``n`` spheres
     of the node table, in depth-first pre-order (children in creation order); ``rank``: each
     sphere's place in the winner order (by creation index)."""
     tf = table.view(np.float64)
@@ -272,8 +273,12 @@ def layout(table, n, rank, search, nodes):
     w = f + 1 + SEARCH_INT_COLUMNS
     c_parent, c_first, c_next = f + 1 + PARENT, f + 1 + FIRST, f + 1 + NEXT
     size = np.ones(n, dtype=np.int64)  # of each subtree
+    bound = rank[:n].copy()  # the lowest rank in each subtree
     for i in range(n - 1, 0, -1):  # parents precede their children
-        size[table[i, c_parent]] += size[i]
+        p = table[i, c_parent]
+        size[p] += size[i]
+        if bound[i] < bound[p]:
+            bound[p] = bound[i]
     stack = np.empty(n, dtype=np.int64)
     stack[0] = 0
     top = 1
@@ -286,6 +291,7 @@ def layout(table, n, rank, search, nodes):
             sf[b + k] = tf[i, k]
         search[b + f + 1 + SKIP] = pos + size[i]
         search[b + f + 1 + RANK] = rank[i]
+        search[b + f + 1 + BOUND] = bound[i]
         nodes[pos] = i
         pos += 1
         bottom = top
@@ -303,12 +309,13 @@ def layout(table, n, rank, search, nodes):
 
 @_jit
 def _query_order(X):
-    """The rows of ``X`` in Z order (Morton: the bits of the coordinates interleaved, 8 per
-    coordinate at most), so that consecutive queries take similar paths down the tree (the
-    branches and the cache see the same spheres again). Only the order changes, never an
-    answer."""
+    """The rows of ``X`` in Z order (Morton: the bits of the coordinates interleaved, 3 per
+    coordinate, at most 24 bits in all), so that consecutive queries take similar paths down
+    the tree (the branches and the cache see the same spheres again); sorted by an LSD radix
+    sort, 8 bits a pass (linear time: a finer order gains no more than it costs to sort). Only
+    the order changes, never an answer."""
     m, f = X.shape
-    bits = min(8, 63 // f)
+    bits = min(3, 24 // f)
     if bits == 0:
         return np.arange(m)
     top = (1 << bits) - 1
@@ -322,7 +329,21 @@ def _query_order(X):
             for k in range(f):
                 key = (key << 1) | ((cells[k] >> b) & 1)
         keys[q] = key
-    return np.argsort(keys)
+    order = np.arange(m)
+    spare = np.empty(m, dtype=np.int64)
+    count = np.empty(257, dtype=np.int64)
+    for shift in range(0, bits * f, 8):
+        count[:] = 0
+        for q in range(m):
+            count[((keys[order[q]] >> shift) & 255) + 1] += 1
+        for v in range(1, 257):
+            count[v] += count[v - 1]
+        for q in range(m):
+            v = (keys[order[q]] >> shift) & 255
+            spare[count[v]] = order[q]
+            count[v] += 1
+        order, spare = spare, order
+    return order
 
 
 # batches of at least this many rows are searched in Z order
@@ -333,14 +354,16 @@ ORDERED_BATCH = 64
 def _descend_flat(search, x, f, eps, euclidean):
     """(the winner's position, the number of spheres whose distance was computed) for ``x``
     of ``f`` features: in pre-order, a sphere that encloses ``x`` is followed by its first
-    child, any other by the position after its subtree (which is thereby skipped). Indices are
-    unsigned (no check for negative indices in the loop)."""
+    child, any other by the position after its subtree (which is thereby skipped); so is a
+    sphere whose subtree holds no rank below the best found so far, untested (nothing in it
+    can win). Indices are unsigned (no check for negative indices in the loop)."""
     sf = search.view(np.float64)
     w = np.uint64(f + 1 + SEARCH_INT_COLUMNS)
     n = np.uint64(search.shape[0]) // w
     c_r = np.uint64(f)
     c_skip = np.uint64(f + 1 + SKIP)
     c_rank = np.uint64(f + 1 + RANK)
+    c_bound = np.uint64(f + 1 + BOUND)
     one = np.uint64(1)
     best = np.uint64(0)
     best_rank = search[c_rank]
@@ -348,6 +371,9 @@ def _descend_flat(search, x, f, eps, euclidean):
     i = one
     while i < n:
         b = i * w
+        if search[b + c_bound] >= best_rank:
+            i = np.uint64(search[b + c_skip])
+            continue
         d = 0.0
         for k in range(f):
             t = sf[b + np.uint64(k)] - x[k]

@@ -11,7 +11,9 @@ column ``features``; the integer columns follow, numbered here from ``features +
 * The search table (built from the node table when the tree is searched, flat, in depth-first
   pre-order): ``SKIP``, the position just after the sphere's subtree, and ``RANK``, the
   sphere's place in the winner order (smallest radius, then deepest, then earliest created:
-  the lower rank wins); a second array gives each position's creation index.
+  the lower rank wins) and ``BOUND``, the lowest rank in the sphere's subtree (a search that
+  holds a better winner skips the subtree untested); a second array gives each position's
+  creation index.
 
 This module imports nothing (the kernels' loader reads it without numba), and
 :func:`source_hash` names the kernels' code, so that kernels compiled ahead of time are used
@@ -29,8 +31,8 @@ __all__ = ["INT_COLUMNS", "SEARCH_INT_COLUMNS", "SPECIALISED", "source_hash"]
 PARENT, DEPTH, LABEL, FIRST, NEXT, LAST = range(6)
 INT_COLUMNS = 6
 # the search table's integer columns
-SKIP, RANK = range(2)
-SEARCH_INT_COLUMNS = 2
+SKIP, RANK, BOUND = range(3)
+SEARCH_INT_COLUMNS = 3
 # feature counts whose searches have kernels of their own, compiled ahead of time (the loop over
 # the features unrolled: about a quarter faster): the shipped feature specs' (5 beams, and 5
 # beams with the heading); other counts use the general kernel. Each count is two more kernels

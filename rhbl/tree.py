@@ -24,13 +24,16 @@ import importlib
 import logging
 import math
 import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from . import _layout, _reference
 
-__all__ = ["ALGORITHMS", "DISTANCES", "Growth", "SphereTree", "Totals", "load_kernels"]
+__all__ = ["ALGORITHMS", "DISTANCES", "Growth", "SphereTree", "Totals", "load_kernels",
+           "threads"]
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +50,12 @@ _F64 = np.dtype(np.float64)
 # set to "jit" to use numba's kernels even where kernels compiled ahead of time are installed
 # (the tests and benchmarks compare the two)
 KERNELS_ENV = "RHBL_KERNELS"
+# a batch of at least this many rows searched on the search table is cut into slices of at
+# least PARALLEL_SLICE rows, searched by ``RHBL_THREADS`` threads (default: the cores this
+# process may run on; 1: never; the kernels run without the GIL)
+PARALLEL_BATCH = 1024
+PARALLEL_SLICE = 256
+THREADS_ENV = "RHBL_THREADS"
 
 
 class _Kernels:
@@ -107,6 +116,36 @@ def load_kernels() -> str:
     at once. Building a tree does it anyway; a process calls it to pay it before it serves.
     Returns where they come from: ``"ahead-of-time"`` or ``"numba"``."""
     return _kernels().origin
+
+
+@functools.cache
+def threads() -> int:
+    """How many threads search a large batch: ``RHBL_THREADS``, else (unset, or not an integer
+    >= 1: logged) the cores this process may run on."""
+    affinity = getattr(os, "sched_getaffinity", None)
+    cores = len(affinity(0)) if affinity else (os.cpu_count() or 1)
+    value = os.environ.get(THREADS_ENV, "")
+    if not value:
+        return cores
+    try:
+        count = int(value)
+    except ValueError:
+        count = 0
+    if count < 1:
+        log.warning("%s must be an integer >= 1, got %r: using %d (the cores this process may "
+                    "run on)", THREADS_ENV, value, cores)
+        return cores
+    return count
+
+
+@functools.cache
+def _pool() -> ThreadPoolExecutor:
+    """The threads that search the slices of a large batch (made on first use)."""
+    return ThreadPoolExecutor(max(threads(), 2), thread_name_prefix="rhbl-search")
+
+
+if hasattr(os, "register_at_fork"):  # a forked child has none of its parent's threads
+    os.register_at_fork(after_in_child=_pool.cache_clear)
 
 
 class _Search(NamedTuple):
@@ -528,7 +567,9 @@ class SphereTree:
         tests every (query, sphere) pair at once; its descent carries the queries each sphere
         encloses). All give exactly the same answers. The compiled descent runs on the search
         table (built for it if the tree changed since the last), but for a batch of fewer than
-        32 rows of a tree that has just changed: it walks the node table then.
+        32 rows of a tree that has just changed: it walks the node table then. A batch of
+        ``PARALLEL_BATCH`` rows or more on the search table is cut into slices searched by
+        :func:`threads` threads.
         """
         return self._searched(X, algorithm, compiled)[0]
 
@@ -537,10 +578,11 @@ class SphereTree:
         (the root is never tested: it encloses the whole cube)."""
         return self._searched(X, algorithm, True)[1]
 
-    def _searched(self, X: np.ndarray, algorithm: str, compiled: bool, *, walk: bool = False
-                  ) -> tuple[np.ndarray, np.ndarray | None]:
+    def _searched(self, X: np.ndarray, algorithm: str, compiled: bool, *, walk: bool = False,
+                  parts: int | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """(winners, spheres tested per row); ``walk``: the descent on the node table, not on
-        the search table (the tests check both)."""
+        the search table (the tests check both); ``parts``: the threads for a large batch on
+        the search table (default :func:`threads`; the tests and benchmarks compare)."""
         if algorithm not in ALGORITHMS:
             raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
         if not compiled:
@@ -555,8 +597,41 @@ class SphereTree:
                                brute, out, visited)
         else:
             search = self._search_table()
-            search.many(search.table, search.nodes, X, self._eps, self._euclidean, out, visited)
+            m, parts = X.shape[0], parts or threads()
+            if parts == 1 or m < PARALLEL_BATCH:
+                search.many(search.table, search.nodes, X, self._eps, self._euclidean, out,
+                            visited)
+            else:
+                self._search_sliced(search, X, out, visited, parts)
         return out, visited
+
+    def _search_sliced(self, search: _Search, X: np.ndarray, out: np.ndarray,
+                       visited: np.ndarray, parts: int) -> None:
+        """A large batch on ``parts`` threads: the rows cut into two slices a thread
+        (``PARALLEL_SLICE`` rows or more, each searched in its own Z order), which the calling
+        thread and ``parts - 1`` pool threads take as each comes free (a thread the machine
+        holds back delays a slice, not the batch)."""
+        m = X.shape[0]
+        step = max(PARALLEL_SLICE, -(-m // (2 * parts)))
+        starts = iter(range(0, m, step))
+        lock = threading.Lock()
+
+        def work() -> None:
+            while True:
+                with lock:
+                    a = next(starts, None)
+                if a is None:
+                    return
+                b = a + step
+                search.many(search.table, search.nodes, X[a:b], self._eps, self._euclidean,
+                            out[a:b], visited[a:b])
+
+        helpers = [_pool().submit(work) for _ in range(parts - 1)]
+        try:
+            work()
+        finally:
+            for helper in helpers:
+                helper.result()
 
     def predict(self, X: np.ndarray, algorithm: str = "auto", *, compiled: bool = True
                 ) -> np.ndarray:

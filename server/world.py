@@ -33,6 +33,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 import pymunk
+from pymunk import _chipmunk_cffi
 
 from protocol.messages import MAX_VA, MAX_VX
 from server import laser
@@ -381,12 +382,27 @@ def load_world(path: str | Path) -> WorldSpec:
 
 _WALL_RADIUS = 0.02  # m, physics half-thickness of a wall segment (the laser sees the centre line)
 _MAX_SUBSTEP = 0.025  # s
-# pymunk's Body properties called directly: the same getters and setters without the
-# attribute lookup of every access (the step sets every robot's velocity at every substep)
-_body_position = pymunk.Body.position.fget
-_body_angle = pymunk.Body.angle.fget
-_body_set_velocity = pymunk.Body.velocity.fset
+# the step calls Chipmunk's functions itself (pymunk's cffi library, which its Body and Space
+# methods call): cpSpaceStep is what Space.step runs, without its bookkeeping for shapes added
+# or removed and callbacks registered during a step, which the world never does (no collision
+# handlers, no post-step callbacks); the bodies' getters and setters are those the properties
+# call, without the attribute lookup and the Vec2d of every access (the step sets every
+# robot's velocity at every substep). About half of a step's time.
+_cp = _chipmunk_cffi.lib
 _body_set_angular_velocity = pymunk.Body.angular_velocity.fset
+
+
+def _body_position(body: pymunk.Body) -> tuple[float, float]:
+    """``body.position`` as a tuple."""
+    p = _cp.cpBodyGetPosition(body._body)
+    return p.x, p.y
+
+
+def _body_angle(body: pymunk.Body) -> float:
+    """``body.angle``."""
+    return _cp.cpBodyGetAngle(body._body)
+
+
 _NO_CENTRES = np.zeros((0, 2))  # a world of one robot: the laser sees walls only
 _ROW0 = np.zeros(1, dtype=np.intp)
 
@@ -502,7 +518,7 @@ class World:
         h = dt / n
         robots = self._robots
         position, angle = _body_position, _body_angle
-        set_velocity, set_angular_velocity = _body_set_velocity, _body_set_angular_velocity
+        set_angular_velocity = _body_set_angular_velocity
         cos, sin = math.cos, math.sin
         for r in robots:
             r.stall = False
@@ -512,14 +528,15 @@ class World:
             # a robot's moment of inertia is infinite and the space undamped: nothing but this
             # changes its angular velocity, so it is set once a step
             set_angular_velocity(b, r.cmd[1])
-        space = self._space
+        space = self._space._space  # Chipmunk's (see _cp)
+        bodies = [(r.body._body, r.cmd[0]) for r in robots]
+        space_step, get_angle, set_body_velocity = (_cp.cpSpaceStep, _cp.cpBodyGetAngle,
+                                                    _cp.cpBodySetVelocity)
         for _ in range(n):
-            for r in robots:
-                b = r.body
-                vx = r.cmd[0]
-                a = angle(b)
-                set_velocity(b, (vx * cos(a), vx * sin(a)))
-            space.step(h)
+            for b, vx in bodies:
+                a = get_angle(b)
+                set_body_velocity(b, (vx * cos(a), vx * sin(a)))
+            space_step(space, h)
         for r in robots:
             self._update_odometry(r, dt)
             self._check_stall(r)
@@ -557,7 +574,8 @@ class World:
         if vx == 0.0:
             return
         b = r.body
-        cmd_dir = (vx * math.cos(b.angle), vx * math.sin(b.angle))
+        a = _body_angle(b)
+        cmd_dir = (vx * math.cos(a), vx * math.sin(a))
         hit = False
 
         def visit(arb: pymunk.Arbiter) -> None:
@@ -657,7 +675,15 @@ class World:
 
     def scan(self, i: int) -> np.ndarray:
         """Ray-cast robot ``i``'s laser: float32 ranges, ``ranges[0]`` at ``LASER.min_angle``."""
-        return self.scans([i])[0]
+        if self.n_robots > 1:
+            return self.scans([i])[0]
+        # one robot (training, evaluation): what scans([i]) computes, without its batching
+        b = self._robots[i].body
+        x, y = _body_position(b)
+        yaw = wrap_angle(_body_angle(b))
+        origin = np.array([[x + LASER.offset * math.cos(yaw), y + LASER.offset * math.sin(yaw)]])
+        out = self._laser.cast(origin, np.array([yaw]), _ROW0, _NO_CENTRES)[0]
+        return self._add_noise(out) if self.range_noise > 0.0 else out
 
     def scans(self, indices: list[int] | None = None) -> np.ndarray:
         """Ray-cast the lasers of robots ``indices`` (default: all) together: float32 array

@@ -98,21 +98,21 @@ class FeatureSpec:
         return self._cache[key]
 
     def extract(self, ranges, yaw: float = 0.0) -> np.ndarray:
-        r = np.asarray(ranges)
+        r = ranges if type(ranges) is np.ndarray else np.asarray(ranges)
         if r.ndim != 1 or r.size < 2:
             raise FeatureError(f"ranges must be a 1-D scan, got shape {r.shape}")
-        out = np.empty(self.dim, dtype=np.float64)
-        n = len(self.beams)
         at = self._reduce_at(r.size)
         if at is not None:  # every window's minimum in one call (as the loop below gives)
-            v = np.minimum.reduceat(r, at)[::2].astype(np.float64)
+            mins = np.minimum.reduceat(r, at)[::2].tolist()
         else:
-            v = np.array([r[lo:hi].min() for lo, hi in self._slices(r.size)], dtype=np.float64)
-        v[~(v >= 0.0)] = self.clamp  # NaN or negative: treat as no reading (far)
-        np.divide(np.minimum(v, self.clamp), self.scale, out=out[:n])
+            mins = [float(r[lo:hi].min()) for lo, hi in self._slices(r.size)]
+        # a few beams: Python's floats (doubles, as numpy's float64) cost less than arrays
+        clamp, scale = self.clamp, self.scale
+        v = [(x if x <= clamp else clamp) / scale if x >= 0.0 else clamp / scale
+             for x in mins]  # NaN or negative: treat as no reading (far)
         if self.heading == "lr":
-            out[-1] = HEADING_RIGHT if math.cos(yaw) >= 0.0 else HEADING_LEFT
-        return out
+            v.append(HEADING_RIGHT if math.cos(yaw) >= 0.0 else HEADING_LEFT)
+        return np.array(v, dtype=np.float64)
 
     def to_dict(self) -> dict:
         return {

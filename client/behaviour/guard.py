@@ -9,21 +9,62 @@ row; then the policy's answer is taken as it is. Every overruled reversal is cou
 ``looping`` says the guard had to step in lately: the place where a person should show the way
 out (a loop is a state the teacher has not shown yet).
 
+Given the scan, the guard also keeps the robot from driving into what is straight ahead: a
+forward order while a laser return lies in the robot's path (within ``LOOKAHEAD`` m ahead and
+``CLEARANCE`` m of its centre line: ``in_path``) becomes a rotation in place, the way the robot
+rotated lately or else away from that return (counted ``avoided``). A tree taught in one room
+meets corners it never saw elsewhere (a convex corner approached at an angle); a person's
+demonstrations show how to follow a wall, not how close is too close.
+
     policy = RotationGuard(TreePolicy.load("tree.rhbl"))
     action = policy.act(ranges, pose)        # one call per scan
     policy.looping, policy.overruled         # for the console: "stuck here: show it the way"
+    policy.avoided                           # forward orders turned into a rotation
 
     guard = RotationGuard()                  # no policy: the controller asks its tree itself
-    action = guard.choose(tree_action)       # the action to execute, one call per scan
+    action = guard.choose(tree_action, ranges, bearings)  # one call per scan (ranges: optional)
 
 Pure (no zenoh): the controller process and the in-process harness use this same code.
 """
 
 from __future__ import annotations
 
-__all__ = ["RotationGuard"]
+__all__ = ["CLEARANCE", "LOOKAHEAD", "RotationGuard", "clearance_for", "in_path"]
+
+import numpy as np
 
 _OPPOSITE = {"rot-left": "rot-right", "rot-right": "rot-left"}
+_FORWARD = ("fwd", "fwd-left", "fwd-right")
+CLEARANCE = 0.3  # m either side of the centre line: the robot's radius (0.25 m) and a margin
+LOOKAHEAD = 0.5  # m ahead: two scans' travel at full speed and a margin
+
+
+def clearance_for(metadata) -> float:
+    """The path check's clearance ``rhbl controller`` uses for a tree (its snapshot metadata):
+    ``CLEARANCE`` for a tree taught by hand (learning rule ``person``), 0 (off) for the scripted
+    teacher's, whose demonstrations keep their own distance (docs/teaching.md: with the check
+    its trees collided less but reached the 5-tier maze's goal less often)."""
+    from .teaching import PERSON_RULE
+
+    rule = ((metadata or {}).get("learning") or {}).get("rule")
+    return CLEARANCE if rule == PERSON_RULE else 0.0
+
+
+def in_path(ranges, clearance: float, lookahead: float, bearings=None) -> float:
+    """The side of the nearest laser return in the robot's path straight ahead: a point at
+    most ``lookahead`` m ahead and less than ``clearance`` m to either side of the robot's
+    centre line (``bearings`` in rad, 0 ahead, positive left; default: spread evenly over 180
+    degrees, ``ranges[0]`` on the right). Negative: it is on the right, positive: on the left,
+    0.0: the path is clear."""
+    r = np.asarray(ranges, dtype=np.float64)
+    b = (np.linspace(-np.pi / 2, np.pi / 2, len(r)) if bearings is None
+         else np.asarray(bearings, dtype=np.float64))
+    x, y = r * np.cos(b), r * np.sin(b)
+    hit = np.flatnonzero((x > 0) & (x < lookahead) & (np.abs(y) < clearance) & np.isfinite(r))
+    if not len(hit):
+        return 0.0
+    near = hit[np.argmin(r[hit])]
+    return float(y[near]) if y[near] != 0 else -1e-9
 
 
 class RotationGuard:
@@ -37,12 +78,15 @@ class RotationGuard:
     policy's. Without a policy, ``choose(action)`` filters the actions of any source (the
     controller, whose tree may be swapped while the guard's memory goes on)."""
 
-    def __init__(self, policy=None, hold: int = 30, memory: int = 5):
+    def __init__(self, policy=None, hold: int = 30, memory: int = 5,
+                 clearance: float = 0.0, lookahead: float = LOOKAHEAD):
         if hold < 0 or memory < 0:
             raise ValueError(f"hold and memory must be >= 0 scans, got {hold}, {memory}")
         self.policy = policy
         self.hold, self.memory = int(hold), int(memory)
+        self.clearance, self.lookahead = float(clearance), float(lookahead)
         self.overruled = 0
+        self.avoided = 0  # forward orders turned into a rotation away from a return in the path
         self.reset()
 
     def __getattr__(self, name):  # classifier, features, actions, metadata: the policy's
@@ -63,10 +107,25 @@ class RotationGuard:
         return self._last_overruled <= self.memory
 
     def act(self, ranges, pose) -> str:
-        return self.choose(self.policy.act(ranges, pose))
+        return self.choose(self.policy.act(ranges, pose), ranges)
 
-    def choose(self, want: str) -> str:
-        """The action to execute when the policy wants ``want`` (one call per scan)."""
+    def choose(self, want: str, ranges=None, bearings=None) -> str:
+        """The action to execute when the policy wants ``want`` (one call per scan). With
+        ``clearance`` > 0 and the scan's ``ranges``: a forward order while a laser return lies
+        in the robot's path (``in_path``: within ``lookahead`` m ahead, ``clearance`` m of the
+        centre line) becomes a rotation in place: the way the robot rotated within ``memory``
+        scans, else away from that return (counted ``avoided``)."""
+        if self.clearance > 0 and ranges is not None and want in _FORWARD:
+            side = in_path(ranges, self.clearance, self.lookahead, bearings)
+            if side:
+                self.avoided += 1
+                # rotating in place is safe (a round robot); keep turning as it was, if it
+                # did lately (no reversal: the hysteresis below), else away from the return
+                want = (self._turn if self._turn is not None and self._since <= self.memory
+                        else "rot-left" if side < 0 else "rot-right")
+                self._last_overruled += 1
+                self._held, self._turn, self._since = 0, want, 0
+                return want
         self._last_overruled += 1
         if (self._turn is not None and want == _OPPOSITE.get(self._turn)
                 and self._since <= self.memory and self._held < self.hold):

@@ -368,7 +368,8 @@ class ReactiveFollower(Policy):
 
     def decide(self, s) -> str:
         """The label of sector minima ``s`` = (R, RD, D, FR, F) in metres (right side)."""
-        rr, rd, d, fr, f = (float(v) for v in s[:5])
+        rr, rd, d, fr, f = (s[:5].tolist() if isinstance(s, np.ndarray)
+                            else [float(v) for v in s[:5]])
         if f < self.stop or fr < self.stop_fr:
             return "rot-left"
         near = min(rr, rd, d)

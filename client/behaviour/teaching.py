@@ -9,10 +9,16 @@ tree copies the noise. Two pieces cope with it (docs/teaching.md has the study b
   is displayed answers what the person saw ``lag`` scans earlier, so the label is tied to scan
   ``n - lag`` (the scan displayed when the key went out, as today, if that one is unknown or the
   robot was moved since).
-* **the majority** (``PersonLearner``, on the learner's side): every label is kept as given;
-  the tree is built from all of them at once, each labelled vector taking the label most of its
-  ``k`` nearest labelled vectors carry (a wrong key or a late release is outvoted by the labels
-  around it), optionally with jittered copies labelled by the same vote (``copies``).
+* **the lag estimated from the data** (``PersonLearner(lag=None)``, the default; ``rhbl learner
+  --lag auto``; ``estimate_lag``): each label also carries the scans shown up to ``MAX_LAG`` scans before its
+  own; the lag is the shift at which the labels agree best with the features of the scan that
+  many scans earlier, held out in blocks of time (a person's key is most predictable from what
+  they saw a reaction time ago), re-estimated from every label at each build.
+* **the vote** (``PersonLearner``, on the learner's side): every label is kept as given; the
+  tree is built from all of them at once, each labelled vector taking the action nearest to the
+  mean command of its ``k`` nearest labelled vectors (``vote="mean"``, the default) or the label
+  most of them carry (``"majority"``): a wrong key or a late release is outvoted by the labels
+  around it; optionally with jittered copies labelled by the same vote (``copies``).
 
     shown = 812                                         # the scan the page displayed
     answered = answered_scan(shown, scans, lag=LAG)     # scans: id -> scan (with .pose)
@@ -39,6 +45,9 @@ __all__ = [
     "JUMP",
     "PERSON_RULE",
     "LAG",
+    "MAX_LAG",
+    "estimate_lag",
+    "parse_lag",
     "PERSON_DEFAULTS",
     "PersonLearner",
     "answered_scan",
@@ -48,6 +57,8 @@ __all__ = [
 ]
 
 LAG = 3  # scans (0.3 s at 10 Hz) between what a person saw and the scan shown when the key went out
+MAX_LAG = 6  # scans: the longest lag estimated (0.6 s at 10 Hz)
+MIN_ESTIMATE = 200  # labels: fewer, and the lag is not estimated (LAG is used)
 JUMP = 0.5  # m: the robot moved farther than this between two scans: it was put there (set_pose)
 _CHUNK = 1 << 22  # distances computed per block (query rows x references)
 
@@ -111,10 +122,61 @@ def mean_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
     return ((mean[:, None, :] - v[None, :, :]) ** 2).sum(axis=2).argmin(axis=1)
 
 
+def parse_lag(text: str) -> int | None:
+    """A ``--lag`` value: ``auto`` (None: estimated from the labels) or an integer 0..MAX_LAG
+    (ValueError naming what is wrong otherwise)."""
+    if text.strip() == "auto":
+        return None
+    try:
+        lag = int(text.strip())
+    except ValueError:
+        lag = -1
+    if not 0 <= lag <= MAX_LAG:
+        raise ValueError(f"must be 'auto' or an integer 0..{MAX_LAG} (scans), got {text!r}")
+    return lag
+
+
+def estimate_lag(W: np.ndarray, y: np.ndarray, k: int, n_labels: int, block: int = 50,
+                 folds: int = 5) -> tuple[int, list[float]]:
+    """The lag (0 .. ``W.shape[1] - 1`` scans) at which the person's decisions are best
+    predicted from the features ``W[:, lag]`` of the scan that many scans before each label's
+    own, and the agreement at every lag. ``W``: (labels, lags, dim) in the order given.
+
+    The decisions are the labels on either side of a change of key (the last label of a key
+    and the first of the next): while a key is held every lag sees nearly the same place, so
+    only the changes tell when the person reacted; at the right lag the last label before a
+    change still sees the old side of the person's boundary and the first after it the new
+    side (a shorter lag sees the new side already before the change, a longer one the old side
+    still after it). Each is answered by the majority of its ``k``
+    nearest labels held out by time (the labels cut in blocks of ``block`` consecutive ones,
+    dealt round-robin into ``folds`` folds; the references are the other folds: consecutive
+    labels are near copies of each other). The agreement is smoothed over neighbouring lags
+    (weights 1/4, 1/2, 1/4: a few hundred decisions are noisy) and ties go to the shorter lag.
+    Deterministic: a function of ``W`` and ``y`` only."""
+    n = len(y)
+    fold = (np.arange(n) // block) % folds
+    change = y[1:] != y[:-1]
+    q = np.flatnonzero(np.r_[True, change] | np.r_[change, False])
+    raw = []
+    for lag in range(W.shape[1]):
+        X = W[:, lag]
+        hit = 0
+        for f in range(folds):
+            qi, ri = q[fold[q] == f], np.flatnonzero(fold != f)
+            if not len(qi) or not len(ri):
+                continue
+            votes = nearest_votes(X[qi], X[ri], y[ri], k, n_labels)
+            hit += int((votes.argmax(axis=1) == y[qi]).sum())
+        raw.append(hit / max(1, len(q)))
+    a = np.array(raw)
+    smooth = 0.5 * a + 0.25 * np.r_[a[:1], a[:-1]] + 0.25 * np.r_[a[1:], a[-1:]]
+    return int(np.argmax(smooth)), [float(v) for v in smooth]
+
+
 PERSON_RULE = "person"  # the snapshot metadata's learning rule of a PersonLearner
 
 # the defaults docs/teaching.md chose on the teaching study
-PERSON_DEFAULTS = {"k": 25, "copies": 0, "sigma": 0.06, "vote": "majority", "passes": 1,
+PERSON_DEFAULTS = {"k": 25, "copies": 0, "sigma": 0.06, "vote": "mean", "passes": 1,
                    "build": "batch"}
 
 
@@ -134,7 +196,7 @@ class PersonLearner(DemonstrationLearner):
                  k: int = PERSON_DEFAULTS["k"], copies: int = PERSON_DEFAULTS["copies"],
                  sigma: float = PERSON_DEFAULTS["sigma"], vote: str = PERSON_DEFAULTS["vote"],
                  passes: int = PERSON_DEFAULTS["passes"], build: str = PERSON_DEFAULTS["build"],
-                 seed: int = 0, lag: int = LAG, task: str | None = None,
+                 seed: int = 0, lag: int | None = None, task: str | None = None,
                  parent: str | None = None, provenance: Mapping | None = None, **tree_params):
         if not (isinstance(k, int) and k >= 1):
             raise ValueError(f"k must be an integer >= 1, got {k!r}")
@@ -150,8 +212,15 @@ class PersonLearner(DemonstrationLearner):
             raise ValueError(f"build must be 'batch' or 'repair', got {build!r}")
         if build == "repair" and copies:
             raise ValueError("build 'repair' learns the labelled vectors only (copies=0)")
+        if lag is not None and not (isinstance(lag, int) and 0 <= lag <= MAX_LAG):
+            raise ValueError(f"lag must be None (estimated) or an integer 0..{MAX_LAG}, got "
+                             f"{lag!r}")
         self.build = build
-        self.lag = int(lag)  # recorded only: the scans the labels were shifted by when paired
+        # None: estimated from the labels (each keeps the scans before its own: ``observe``'s
+        # ``earlier``); an integer: fixed, the scans the labels were shifted by when paired
+        self.lag = lag
+        self._ws: list[np.ndarray] = []  # lag None: per label its features at lags 0..MAX_LAG
+        self._estimate: tuple[int, int, list[float]] | None = None  # (labels, lag, agreement)
         self.k, self.copies, self.sigma, self.vote = k, copies, float(sigma), vote
         self.passes, self.seed = passes, seed
         self._xs: list[np.ndarray] = []
@@ -175,27 +244,65 @@ class PersonLearner(DemonstrationLearner):
         self._clf = clf
         self._built = len(self._ys)
 
-    def _learn(self, x: np.ndarray, label: str) -> None:
+    def _learn(self, x: np.ndarray, label: str, earlier=None) -> None:
         self._xs.append(np.asarray(x, dtype=np.float64).reshape(-1))
         self._ys.append(self.actions.names.index(label))
+        if self.lag is None:  # lags 0..MAX_LAG; those not held: the label's own scan
+            w = np.repeat(self._xs[-1][None, :], MAX_LAG + 1, axis=0)
+            if earlier is not None and len(earlier):
+                e = np.asarray(earlier, dtype=np.float64).reshape(-1, self.features.dim)
+                w[1:1 + min(len(e), MAX_LAG)] = e[:MAX_LAG]
+            self._ws.append(w)
         self.vectors += 1
         if self._rec_x is not None:
             self._rec_x.append(self._xs[-1])
             self._rec_y.append(label)
 
-    def observe(self, ranges, yaw: float, label: str) -> bool:
-        """Keep one labelled observation (every one is kept: True)."""
-        return self.observe_vector(self.features.extract(ranges, yaw), label)
+    def observe(self, ranges, yaw: float, label: str, earlier=None) -> bool:
+        """Keep one labelled observation (every one is kept: True). ``earlier``: with the lag
+        estimated (``lag=None``), the feature vectors of the scans shown 1, 2, ... scans before
+        this one (nearest first, at most ``MAX_LAG``; fewer when they are not known or the
+        robot was put elsewhere: the lags beyond take this scan)."""
+        return self.observe_vector(self.features.extract(ranges, yaw), label, earlier)
 
-    def observe_vector(self, x: np.ndarray, label: str) -> bool:
+    def observe_vector(self, x: np.ndarray, label: str, earlier=None) -> bool:
         self._check_label(label)
         self.seen += 1
-        self._learn(x, label)
+        self._learn(x, label, earlier)
         return True
+
+    @property
+    def estimated_lag(self) -> int:
+        """The lag the tree is built with: fixed, or estimated from every label so far
+        (``estimate_lag`` over lags 0..MAX_LAG; ``LAG`` below ``MIN_ESTIMATE`` labels)."""
+        if self.lag is not None:
+            return self.lag
+        n = len(self._ys)
+        if self._estimate is None or self._estimate[0] != n:
+            if n < MIN_ESTIMATE:
+                self._estimate = (n, LAG, [])
+            else:
+                lag, agree = estimate_lag(np.stack(self._ws), np.array(self._ys, np.int64),
+                                          self.k, len(self.actions))
+                self._estimate = (n, lag, agree)
+        return self._estimate[1]
+
+    @property
+    def lag_agreement(self) -> list[float]:
+        """The held-out agreement at each lag 0..MAX_LAG behind ``estimated_lag`` (empty when
+        the lag is fixed or not estimated yet)."""
+        _ = self.estimated_lag
+        return list(self._estimate[2]) if self.lag is None else []
+
+    def _vectors(self) -> np.ndarray:
+        """The labelled vectors at the lag the tree is built with."""
+        if self.lag is None and self._ws:
+            return np.stack(self._ws)[:, self.estimated_lag]
+        return np.array(self._xs, dtype=np.float64).reshape(-1, self.features.dim)
 
     def observe_vectors(self, X: np.ndarray, labels) -> int:
         X, labels = self._checked(X, labels)
-        for x, label in zip(X, labels, strict=True):
+        for x, label in zip(X, labels, strict=True):  # (no earlier scans: lag 0 if estimated)
             self.seen += 1
             self._learn(x, label)
         return len(X)
@@ -204,7 +311,7 @@ class PersonLearner(DemonstrationLearner):
         """``(X, y)`` the tree is built from: the labelled vectors with the vote's labels (and
         the jittered copies), label indices into ``actions.names``, in the order the tree
         learns them (shuffled with ``seed``)."""
-        X = np.array(self._xs, dtype=np.float64).reshape(-1, self.features.dim)
+        X = self._vectors()
         y = np.array(self._ys, dtype=np.int64)
         if len(y) == 0:
             return X, y
@@ -234,7 +341,7 @@ class PersonLearner(DemonstrationLearner):
 
         if self.build == "repair" and getattr(self._clf, "tree_", None) is not None:
             clf = self._clf  # the tree so far, repaired where it disagrees with the vote
-            X = np.array(self._xs, dtype=np.float64)
+            X = self._vectors()
             y = np.array(self._ys, dtype=np.int64)
             y = majority_labels(X, y, self.k, len(self.actions))
         else:
@@ -256,7 +363,8 @@ class PersonLearner(DemonstrationLearner):
 
     def metadata(self) -> dict:
         meta = super().metadata()
-        meta["learning"] = {"rule": PERSON_RULE, "lag": self.lag, "k": self.k, "copies": self.copies,
+        meta["learning"] = {"rule": PERSON_RULE, "lag": self.lag,
+                            "estimated_lag": self.estimated_lag, "k": self.k, "copies": self.copies,
                             "sigma": self.sigma, "vote": self.vote, "passes": self.passes,
                             "build": self.build,
                             "seed": self.seed}

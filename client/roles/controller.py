@@ -16,9 +16,12 @@ default, ``--no-guard`` to drive the tree's answers as they are): an order to ro
 way within 5 scans of a rotation is overruled (the robot keeps turning as it was, for at most
 ``--guard-hold`` scans in a row), so the robot does not bounce between a rot-left and a rot-right
 sphere for ever; every overruled reversal is counted (``--stats``: ``overruled``) and logged at a
-bounded rate (docs/teaching.md has the study behind it). Its decisions (``Decision``, for
-viewers) say when the guard stepped in lately (``looping``) and what it commanded instead
-(``executed``): ``rhbl console`` then asks the person to show the robot the way out.
+bounded rate; and, for a tree taught by hand (or with ``--guard-clearance M`` for any tree), a
+forward order while a laser return lies in the robot's path (within 0.5 m ahead and 0.3 m of
+its centre line) becomes a rotation in place (``--stats``: ``avoided``; docs/teaching.md has
+the study behind both). Its decisions (``Decision``, for viewers) say when the guard stepped in
+lately on a reversal (``looping``) and what it commanded instead of the tree's (``executed``):
+``rhbl console`` then asks the person to show the robot the way out.
 
 With ``--ros2`` it drives a ROS 2 robot instead (``client.ros2.Ros2Robot``, docs/ros2.md): its
 ``LaserScan`` (any beam count and span, resampled to the tree's features, or refused with exit 2
@@ -36,7 +39,7 @@ import zenoh
 
 from client.behaviour.actions import ActionSet
 from client.behaviour.features import FEATURES, FeatureSpec
-from client.behaviour.guard import RotationGuard
+from client.behaviour.guard import CLEARANCE, LOOKAHEAD, RotationGuard, clearance_for
 from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, check_compatible
 from client.decision import Decider
 from client.player import PlayerClient
@@ -82,6 +85,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--guard-hold", type=arguments.non_negative_int, default=30, metavar="SCANS",
                         help="with --guard: at most this many overruled reversals in a row, "
                              "then the tree's answer is taken (default 30: 3 s at 10 Hz)")
+    parser.add_argument("--guard-clearance", type=arguments.non_negative_float,
+                        default=None, metavar="M",
+                        help="with --guard: a forward order while a laser return lies within "
+                             f"{LOOKAHEAD:g} m ahead and M m of the robot's centre line becomes "
+                             f"a rotation in place (0: off; default {CLEARANCE:g} for a tree "
+                             "taught by hand, 0 for the scripted teacher's)")
     parser.add_argument("--ros2", action="store_true",
                         help="drive a ROS 2 robot (rmw_zenoh's keys): its LaserScan and Odometry "
                              "in, a Twist on cmd_vel out; --robot names its topics "
@@ -165,7 +174,8 @@ class ControllerProcess:
     def __init__(self, ctx: Context):
         self.ctx, self.args = ctx, ctx.args
         # kept across tree swaps: a new tree does not reset what the robot is doing
-        self.guard = (RotationGuard(hold=self.args.guard_hold)
+        self.guard = (RotationGuard(hold=self.args.guard_hold,
+                                    clearance=self.args.guard_clearance or 0.0)
                       if self.args.guard else None)
         self.policy: TreePolicy | None = None  # swapped between scans by the follower
         # subscribed before the first query: a tree announced meanwhile is not missed
@@ -194,10 +204,17 @@ class ControllerProcess:
                             block=True)
 
     def swap(self, policy: TreePolicy) -> None:
+        self._clearance(policy)
         self.policy = policy
+
+    def _clearance(self, policy: TreePolicy) -> None:
+        """The guard's path check for this tree (``--guard-clearance``, or by who taught it)."""
+        if self.guard is not None and self.args.guard_clearance is None:
+            self.guard.clearance = clearance_for(policy.metadata)
 
     def run(self) -> int:
         self.policy = self.first_tree()
+        self._clearance(self.policy)
         log.info("tree loaded: %s; features %s", _describe(self.policy),
                  self.policy.features.to_dict())
         if self.follower is not None:
@@ -217,6 +234,7 @@ class ControllerProcess:
     def counters(self) -> dict:
         return {"commands": self.n, "unanswered": self.bad,
                 "overruled": 0 if self.guard is None else self.guard.overruled,
+                "avoided": 0 if self.guard is None else self.guard.avoided,
                 "swaps": 0 if self.follower is None else self.follower.swaps,
                 "dropped": {**self.client.decoder.counts,
                             **({} if self.follower is None else self.follower.decoder.counts)}}
@@ -306,7 +324,7 @@ class ControllerProcess:
         """The loop guard's action for the tree's ``name`` (an overruled reversal logged at a
         bounded rate)."""
         before = self.guard.overruled
-        chosen = self.guard.choose(name)
+        chosen = self.guard.choose(name, scan.ranges, scan.bearings())
         n = self.guard.overruled
         if n > before and (n <= 3 or n % 100 == 0):
             log.info("loop guard: the tree reversed its rotation at scan %d (%s): kept %s "

@@ -33,10 +33,11 @@ withdrawal of labels folded into a snapshot is journaled but cannot take them ou
 ``--teacher auto`` (the default) chooses a new lineage's rule by its first label's ``source``
 (``client.labels.by_person``): a person's (``console``, ``keyboard``) gives the person rule, any
 other the script rule (the paper's: each label learned as it arrives); the journal's header keeps
-it. The person rule (labels given by hand at ``rhbl console``): each label is paired with the
-scan ``--lag`` scans before the one it names (a person's key answers what they saw a reaction
-time earlier: ``client.labels.Pairing``), and the tree is rebuilt from every label journaled,
-each taking the label most of its nearest labels carry
+it. The person rule (labels given by hand at ``rhbl console``): a person's key answers what
+they saw a reaction time earlier: each label is journaled with the scans displayed before it
+and the lag is estimated from the labels (``--lag auto``, the default), or paired with the scan
+``--lag N`` scans before the one it names (``client.labels.Pairing``), and the tree is rebuilt from every label journaled,
+each taking what its nearest labels vote
 (``client.behaviour.teaching.PersonLearner``: one wrong key does not carve a sphere for ever).
 Such a lineage is rebuilt from its whole journal on a restart (no ``--fold-journal``, no
 ``--resume``); docs/teaching.md has the study behind it.
@@ -63,7 +64,7 @@ from client.behaviour.learning import (
     load_snapshot,
 )
 from client.behaviour.tasks import task_of_features
-from client.behaviour.teaching import LAG, PERSON_RULE, PersonLearner
+from client.behaviour.teaching import LAG, MAX_LAG, PERSON_RULE, PersonLearner, parse_lag
 from client.journal import (
     Journal,
     JournalError,
@@ -132,16 +133,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "rhbl teacher --policy keyboard), else the script rule (with "
                              "--resume or --fold-journal: the script rule); 'script' forces "
                              "the script rule (each label learned as it arrives); 'person' the "
-                             "person rule (labels paired with the scan --lag scans earlier, the "
-                             "tree rebuilt from every label by the majority of its nearest "
-                             "labels). A lineage keeps the rule it was made with (its journal's "
-                             "header)")
-    parser.add_argument("--lag", type=arguments.non_negative_int, default=LAG, metavar="SCANS",
-                        help=f"with the person rule: a label answers the scan this many scans "
-                             f"before the one it names (default {LAG}: 0.3 s at 10 Hz)")
+                             "person rule (labels paired with the scan a reaction time --lag "
+                             "earlier, the tree rebuilt from every label by the vote of its "
+                             "nearest labels). A lineage keeps the rule it was made with (its "
+                             "journal's header)")
+    parser.add_argument("--lag", type=arguments.Checked("lag", parse_lag), default=None,
+                        metavar="SCANS|auto",
+                        help="with the person rule: a label answers the scan this many scans "
+                             f"(0..{MAX_LAG}) before the one it names; 'auto' (default): "
+                             "estimated from the labels, re-estimated as they accumulate "
+                             f"({LAG} until there are enough; docs/teaching.md)")
 
 
 # ---- the learning core (no zenoh: testable on its own) --------------------------------------
+def _replay(learner: DemonstrationLearner, rec) -> None:
+    """Learn one journal record again (a person's label with the scans journaled before it)."""
+    if rec.earlier is not None and isinstance(learner, PersonLearner):
+        learner.observe(rec.ranges, rec.yaw, rec.label, earlier=rec.earlier)
+    else:
+        learner.observe(rec.ranges, rec.yaw, rec.label)
+
+
 class LearnerCore:
     """Snapshot + journal + DemonstrationLearner: ``learn`` a labeled scan, ``snapshot``."""
 
@@ -150,9 +162,10 @@ class LearnerCore:
                  tree_params: dict | None = None, stride: int = 1, min_delta: float = 0.0,
                  fsync_interval: float = 1.0, actions: ActionSet = DEFAULT_ACTIONS,
                  fold_journal: bool = False, journal_write=os.write, teacher: str = "script",
-                 lag: int = LAG):
-        if not (isinstance(lag, int) and lag >= 0):
-            raise ProcessError(f"learner: --lag must be >= 0 scans, got {lag!r}", EXIT_USAGE)
+                 lag: int | None = None):
+        if lag is not None and not (isinstance(lag, int) and 0 <= lag <= MAX_LAG):
+            raise ProcessError(f"learner: --lag must be 0..{MAX_LAG} scans, got {lag!r}",
+                               EXIT_USAGE)
         self.out = Path(out)
         self.fold_journal = bool(fold_journal)
         self.jpath = journal_path(self.out)
@@ -244,12 +257,20 @@ class LearnerCore:
         """A new lineage whose rule waits for its first label (``--teacher auto``)."""
         return self.journal is None
 
-    def lag_for(self, source: str | None) -> int:
-        """The lag of a label from ``source``: this lineage's (``lag``), or, while the rule is
-        not chosen yet, the one it would take for that label (a person's: ``--lag``)."""
+    def lag_for(self, source: str | None) -> tuple[int, int]:
+        """``(lag, window)`` of the pairing of a label from ``source`` (``Pairing``): this
+        lineage's, or, while the rule is not chosen yet, the one it would take for that label
+        (a person's: ``--lag N`` shifts it, ``--lag auto`` keeps the scans before it)."""
         if not self.undecided:
-            return self.lag
-        return self._new["lag"] if by_person(source) else 0
+            return self.pairing()
+        if not by_person(source):
+            return 0, 0
+        lag = self._new["lag"]
+        return (0, MAX_LAG) if lag is None else (lag, 0)
+
+    def pairing(self) -> tuple[int, int]:
+        """``(lag, window)`` of this lineage's pairing (``Pairing(lag=..., window=...)``)."""
+        return self.lag or 0, MAX_LAG if self.estimates else 0
 
     def choose(self, source: str | None) -> None:
         """The first label came from ``source``: start the lineage by the person rule when a
@@ -274,9 +295,13 @@ class LearnerCore:
             self.applied += 1
 
     def describe_rule(self) -> str:
+        """How a person's lineage learns (its lag, its vote); "" for the script rule."""
+        if not self.person:
+            return ""
         learner = self.learner
-        return (f"labels shifted {learner.lag} scans back, the majority of {learner.k} nearest"
-                if self.person else "")
+        lag = (f"the lag estimated, {learner.estimated_lag} scans so far" if self.estimates
+               else f"shifted {learner.lag} scans back")
+        return f"{lag}, the {learner.vote} vote of {learner.k} nearest"
 
     def _started(self) -> None:
         self.learner.parent = self.journal.header.get("parent")
@@ -294,9 +319,16 @@ class LearnerCore:
         return isinstance(self.learner, PersonLearner)
 
     @property
-    def lag(self) -> int:
-        """Scans a label is shifted back by when paired (0: the scan it names)."""
+    def lag(self) -> int | None:
+        """Scans a label is shifted back by when paired (0: the scan it names; None: a person's
+        lag estimated by the learner from the scans before each label, ``estimates``)."""
         return self.learner.lag if self.person else 0
+
+    @property
+    def estimates(self) -> bool:
+        """A person's lineage whose lag is estimated from the data: each label is journaled
+        and learned with the scans displayed before it (``Pairing(window=MAX_LAG)``)."""
+        return self.person and self.learner.lag is None
 
     @property
     def actions(self) -> ActionSet:
@@ -360,7 +392,7 @@ class LearnerCore:
                 log.error("labels were withdrawn after the last snapshot, but the journal was "
                           "folded (--fold-journal): those in the snapshot stay in the tree")
             for rec in self.journal.standing(start, withdrawn=self.withdrawals):
-                learner.observe(rec.ranges, rec.yaw, rec.label)
+                _replay(learner, rec)
                 self.standing += 1
         self.replayed = len(self.journal) - start
         log.info("recovered lineage %s: snapshot held %d journal records, replayed %d more in "
@@ -408,7 +440,7 @@ class LearnerCore:
         learner = self._lineage_start()
         self.standing = 0
         for rec in self.journal.standing(withdrawn=self.withdrawals):
-            learner.observe(rec.ranges, rec.yaw, rec.label)
+            _replay(learner, rec)
             self.standing += 1
         learner.parent = self.journal.header.get("parent")
         self.rebuilds += 1
@@ -452,7 +484,7 @@ class LearnerCore:
 
     def learn(self, scan_id: int, ts: float, ranges, yaw: float, label: str,
               origin: str | None = None, seq: int | None = None,
-              source: str | None = None) -> bool | None:
+              earlier=(), source: str | None = None) -> bool | None:
         """Journal (flushed) then learn one labeled scan; True when it reached the tree. A label
         with an identity (``origin``, ``seq``) is recorded in ``labels`` once journaled; one
         held already (a resend) is neither journaled nor learned again: None. Raises
@@ -467,9 +499,16 @@ class LearnerCore:
         elif self._early:
             self._journal_early()
         x = self.learner.features.extract(ranges, yaw)
-        self.journal.append(scan_id, ts, label, ranges, yaw, x.astype(np.float32), origin, seq)
+        back = None
+        if self.estimates:  # the scans before it, (ranges, yaw) nearest first: the lag's data
+            back = np.zeros((len(earlier), len(x)), np.float32)
+            for i, (r, a) in enumerate(earlier):
+                back[i] = self.learner.features.extract(r, a)
+        self.journal.append(scan_id, ts, label, ranges, yaw, x.astype(np.float32), origin, seq,
+                            back)
         self._journaled(origin, seq)
-        learned = self.learner.observe(ranges, yaw, label)
+        learned = (self.learner.observe(ranges, yaw, label, earlier=back) if self.estimates
+                   else self.learner.observe(ranges, yaw, label))
         self.applied += 1
         self.standing += 1
         return learned
@@ -575,8 +614,9 @@ class LearnerProcess:
         # (a lineage whose rule is not chosen yet shifts a person's labels only: ``lag_for``)
         self.pairing = Pairing(self.args.scan_buffer, self.args.match_timeout,
                                on_scan_seen=self.watch.seen,
-                               lag=self.args.lag if self.core.undecided else self.core.lag,
-                               lag_of=self._lag_of if self.core.undecided else None)
+                               **({"lag_of": self._lag_of} if self.core.undecided else
+                                  {"lag": self.core.lag or 0,
+                                   "window": MAX_LAG if self.core.estimates else 0}))
         self.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0, "duplicates": 0,
                       "withdrawals": 0, "withdrawn_skipped": 0}
         # teachers' withdrawals as they arrive (decoded in zenoh's thread), applied by the loop
@@ -705,8 +745,10 @@ class LearnerProcess:
             scan, act = self.backlog[0]
             undecided = self.core.undecided
             try:
-                learned = self.core.learn(scan.id, scan.ts, scan.ranges, float(scan.pose[2]),
-                                          act.action, act.origin, act.seq, act.source)
+                learned = self.core.learn(
+                    scan.id, scan.ts, scan.ranges, float(scan.pose[2]), act.action, act.origin,
+                    act.seq, [(s.ranges, float(s.pose[2])) for s in getattr(scan, "earlier", ())],
+                    act.source)
             except FeatureError as exc:  # a scan the features cannot use (bad input)
                 self._pop()
                 self.stats["rejected"] += 1
@@ -718,7 +760,7 @@ class LearnerProcess:
                 return
             self._pop()
             if undecided and not self.core.undecided:  # this label chose the rule
-                self.pairing.settle(self.core.lag)
+                self.pairing.settle(*self.core.pairing())
             self.acks.handled(act, journaled=True)  # (again, for a duplicate: its ack was lost)
             if learned is None:  # resent, or live and resent: journaled once only
                 self.stats["duplicates"] += 1

@@ -9,7 +9,7 @@ import types
 
 import pytest
 
-from client.behaviour.guard import RotationGuard
+from client.behaviour.guard import RotationGuard, clearance_for
 from client.behaviour.learning import TreePolicy
 from lab.evaluate import evaluate
 from lab.harness import resolve_world
@@ -74,6 +74,7 @@ def test_make_method_reads_options_and_names_mistakes(study):
     m = study.make_method("person:lag=2+k=25+vote=mean+sigma=0.05")
     assert (m.name, m.lag, m.options) == ("person", 2, {"k": 25, "vote": "mean", "sigma": 0.05})
     assert study.make_method("today").lag == 0
+    assert study.make_method("person").lag is None and study.make_method("person:lag=3").lag == 3
     with pytest.raises(ValueError, match="unknown method 'magic'"):
         study.make_method("magic")
 
@@ -87,7 +88,9 @@ def test_a_short_session_by_hand_gives_a_robot_that_follows_the_wall(study, peop
                                study.make_method("person"), demo=120.0, correct=60.0,
                                guard=True)
     assert rec.labels > 1000 and rec.wrong > 0  # the person did press wrong keys
-    report = evaluate(spec, RotationGuard(TreePolicy.from_learner(learner)), seconds=60.0)
+    report = evaluate(spec, RotationGuard(TreePolicy.from_learner(learner),
+                                          clearance=clearance_for(learner.metadata())),
+                      seconds=60.0)
     for ep in report["learner"]:
         assert ep["oscillation_loops"] == [], ep["start"]
         assert ep["collisions"] == 0, ep["start"]

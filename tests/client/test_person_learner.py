@@ -82,6 +82,53 @@ def test_a_resent_label_is_shifted_when_its_scans_are_held_and_no_lag_pairs_as_n
         Pairing(lag=-1)
 
 
+def test_a_window_pairs_each_label_with_its_own_scan_and_the_scans_before():
+    p = Pairing(scan_buffer=16, window=3)
+    for sid in range(5):
+        p.on_scan(_scan(sid))
+    for sid in range(5, 9):
+        p.on_scan(_scan(sid, x=5.0))  # set_pose between scans 4 and 5
+    p.on_label(_label(3))             # scans 0..3: three before it
+    p.on_label(_label(1))             # only scan 0 before it
+    p.on_label(_label(6))             # the jump cuts it after scan 5
+    got = []
+    while (item := p.get(0.0)) is not None:
+        got.append((item[0].id, [s.id for s in item[0].earlier]))
+    assert got == [(3, [2, 1, 0]), (1, [0]), (6, [5])]
+    assert p.stats["shifted"] == 3 and p.stats["unshifted"] == 0
+    with pytest.raises(ValueError, match="window"):
+        Pairing(lag=2, window=3)      # one or the other
+
+
+def test_an_estimated_lag_is_journaled_and_a_restart_rebuilds_the_same_tree(tmp_path):
+    out = tmp_path / "t.rhbl"
+    core = LearnerCore(out, features="wall", teacher="person", lag=None)  # --lag auto
+    assert core.person and core.estimates and core.lag is None
+    rng = np.random.default_rng(5)
+    scans = [(rng.uniform(0.2, 3.0, 360).astype(np.float32), float(rng.uniform(-3, 3)))
+             for _ in range(260)]
+    for k in range(6, 260):
+        earlier = [scans[k - i] for i in range(1, min(k, 6) + 1)]
+        core.learn(k, 0.1 * k, *scans[k], LABELS[(k // 7) % 5], origin="p" * 16, seq=k,
+                   earlier=earlier)
+    core.snapshot()
+    lag, agree = core.learner.estimated_lag, core.learner.lag_agreement
+    assert len(agree) == 7 and 0 <= lag <= 6
+    rec = next(iter(core.journal.records()))
+    assert rec.earlier.shape == (6, 5)  # the features of the 6 scans before the label's own
+    core.close()
+    _clf, _f, _a, meta = load_snapshot(out)
+    assert meta["learning"]["lag"] is None and meta["learning"]["estimated_lag"] == lag
+    again = LearnerCore(out, features="wall")
+    assert again.estimates and again.learner.estimated_lag == lag
+    assert again.learner.lag_agreement == agree
+    assert again.learner.classifier.tree_equal(core.learner.classifier)
+    assert "the lag estimated" in again.describe()
+    again.close()
+    with pytest.raises(ProcessError, match="--lag must be 0..6"):
+        LearnerCore(tmp_path / "n.rhbl", features="wall", teacher="person", lag=7)
+
+
 def _feed(core: LearnerCore, n: int, seed: int, start_id: int = 0) -> None:
     rng = np.random.default_rng(seed)
     for k in range(n):
@@ -141,7 +188,7 @@ def test_the_majority_outvotes_a_wrong_key(tmp_path):
 
 @pytest.mark.parametrize(("argv", "needle"), [
     (["learner", "--features", "wall", "--teacher", "person", "--lag", "-1", "--out", "t.rhbl"],
-     "--lag must be an integer >= 0"),
+     "--lag must be 'auto' or an integer 0..6"),
     (["controller", "--tree", "t.rhbl", "--guard-hold", "-2"],
      "--guard-hold must be an integer >= 0"),
 ])

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from client.behaviour.learning import load_snapshot
-from client.behaviour.teaching import PersonLearner
+from client.behaviour.teaching import MAX_LAG, PersonLearner
 from client.journal import Journal, journal_path
 from client.labels import PERSON_SOURCES, SOURCE, Pairing, by_person
 from client.recording.mcap_file import RecordingWriter
@@ -33,7 +33,7 @@ def test_sources_of_people_and_of_the_scripted_teacher():
 
 
 def test_the_pairing_shifts_a_persons_labels_only():
-    p = Pairing(scan_buffer=16, lag=3, lag_of=lambda a: 3 if by_person(a.source) else 0)
+    p = Pairing(scan_buffer=16, lag_of=lambda a: (3, 0) if by_person(a.source) else (0, 0))
     for sid in range(10):
         p.on_scan(Scan(ts=0.1 * sid, id=sid, ranges=np.full(8, 1.0, np.float32),
                        pose=(0.01 * sid, 0.0, 0.0)).encode())
@@ -41,7 +41,7 @@ def test_the_pairing_shifts_a_persons_labels_only():
     p.on_label(TeacherAction(scan_id=9, action="fwd", source="teacher").encode())
     got = [(scan.id, act.scan_id) for scan, act in iter(lambda: p.get(0.0), None)]
     assert got == [(5, 8), (9, 9)]
-    p.settle(0)  # the learner chose the scripted rule: no lag, no recent scans kept
+    p.settle(0, 0)  # the learner chose the scripted rule: no lag, no recent scans kept
     assert p.recent == {} and p.lag == 0
     p.on_scan(Scan(ts=1.0, id=10, ranges=np.full(8, 1.0, np.float32)).encode())
     p.on_label(TeacherAction(scan_id=10, action="fwd", source="console").encode())
@@ -58,13 +58,15 @@ def test_the_first_label_chooses_the_rule_and_the_journal_keeps_it(tmp_path, sou
     core = _core(tmp_path)
     assert core.undecided and not journal_path(core.out).exists()
     assert "chosen by the first label" in core.describe()
-    assert core.lag_for("console") == 3 and core.lag_for("teacher") == 0
+    # a person's label would carry the scans before it (the lag estimated: --lag auto)
+    assert core.lag_for("console") == (0, MAX_LAG) and core.lag_for("teacher") == (0, 0)
     rng = np.random.default_rng(0)
     for k in range(30):
         core.learn(k, 0.1 * k, _ranges(rng), 0.0, LABELS[k % 5], origin="o" * 16, seq=k,
                    source=source if k == 0 else "teacher")  # the first label decides
     assert not core.undecided and core.person is person
-    assert core.lag == (3 if person else 0) and core.lag_for("teacher") == core.lag
+    assert core.estimates is person and core.lag_for("teacher") == core.pairing()
+    assert core.pairing() == ((0, MAX_LAG) if person else (0, 0))
     rule = (Journal.open(core.jpath).header["meta"].get("learning") or {}).get("rule")
     assert (rule == "person") is person
     core.snapshot()
@@ -75,6 +77,14 @@ def test_the_first_label_chooses_the_rule_and_the_journal_keeps_it(tmp_path, sou
         again = LearnerCore(core.out, features="wall", teacher=teacher)
         assert again.person is person and len(again.journal) == 30
         again.close()
+
+
+def test_a_fixed_lag_shifts_a_persons_first_label(tmp_path):
+    core = _core(tmp_path, lag=2)
+    assert core.lag_for("keyboard") == (2, 0) and core.lag_for("teacher") == (0, 0)
+    core.learn(0, 0.0, _ranges(np.random.default_rng(4)), 0.0, "fwd", source="keyboard")
+    assert core.person and core.lag == 2 and core.pairing() == (2, 0)
+    core.close()
 
 
 def test_forced_rules_and_the_cases_auto_cannot_choose_the_person_rule(tmp_path):

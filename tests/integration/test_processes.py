@@ -467,5 +467,38 @@ def test_a_persons_learner_pairs_each_label_with_the_scan_lag_scans_earlier(env)
         assert c.wait(60) == 0, c.output()
         st = _stats(c)
         assert st["commands"] > 0 and st["overruled"] >= 0 and st["unanswered"] == 0
+        assert st["avoided"] >= 0
+    finally:
+        sim.set_pose2d(*start)
+
+
+def test_a_persons_learner_with_lag_auto_journals_the_scans_before_each_label(env):
+    """``rhbl learner --teacher person --lag auto``: each label journaled with its own scan and
+    the features of the scans displayed before it (up to 6), the lag estimated from them; a
+    restart with the same command rebuilds the same tree."""
+    session = env["session"]
+    sim = PlayerClient(session=session, source="test").simulation
+    start = sim.get_pose2d()
+    out = env["tmp"] / "auto.rhbl"
+    argv = ("learner", "--features", "wall", "--teacher", "person", "--lag", "auto", "--out",
+            str(out), "--snapshot-every", "0.3")
+    try:
+        learner = env["start"]("learner", *argv)
+        _wait_token(session, "learner", learner)
+        n = _teach(env, 6, seed=7)
+        _wait_journal(out, n)
+        assert learner.stop() == 0, learner.output()
+        with Journal.open(journal_path(out), readonly=True) as j:
+            recs = list(j.records())
+        assert len(recs) == n
+        assert sum(r.earlier is not None and r.earlier.shape == (6, 5) for r in recs) >= n - 7
+        meta = load_snapshot(out)[3]
+        assert meta["learning"]["lag"] is None and 0 <= meta["learning"]["estimated_lag"] <= 6
+        tree = load_snapshot(out)[0]
+        out.rename(out.with_suffix(".first"))  # a restart with the journal alone
+        again = env["start"]("learner", *argv)
+        _wait_token(session, "learner", again)
+        assert again.stop() == 0, again.output()
+        assert load_snapshot(out)[0].tree_equal(tree)
     finally:
         sim.set_pose2d(*start)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from client.behaviour.actions import DEFAULT_ACTIONS
 from client.behaviour.features import FEATURES
@@ -176,6 +177,18 @@ def test_a_recording_retrained_as_a_persons_labels(tmp_path, capsys):
     for _r, s, a in labeled_scans(rec, lag=3):
         ref.observe(s.ranges, float(s.pose[2]), a.action)
     assert ref.classifier.tree_equal(TreePolicy.load(tree).classifier)
+    # --lag auto: each label with the scans before it, the lag estimated from them
+    auto = tmp_path / "a.rhbl"
+    assert main(["train", "--from-recording", str(rec), "--out", str(auto), "--teacher",
+                 "person", "--lag", "auto"]) == 0
+    learning = TreePolicy.load(auto).metadata["learning"]
+    assert learning["lag"] is None and 0 <= learning["estimated_lag"] <= 6
+    windows = [(s.id, [e.id for e in s.earlier]) for _r, s, _a in labeled_scans(rec, window=6)]
+    assert sum(ids == list(range(sid - 1, sid - 7, -1)) for sid, ids in windows) >= len(windows) - 6
+    with pytest.raises(SystemExit) as bad:
+        main(["train", "--from-recording", str(rec), "--out", str(tmp_path / "y.rhbl"),
+              "--teacher", "person", "--lag", "soon"])
+    assert bad.value.code == 2 and "'auto' or an integer 0..6" in capsys.readouterr().err
     for flags in (["--world", "room", "--teacher", "person"], ["--world", "room", "--lag", "2"]):
         assert main(["train", "--out", str(tmp_path / "x.rhbl"), *flags]) == 2
         assert "go with --from-recording" in capsys.readouterr().err

@@ -103,6 +103,11 @@ def assert_same_winners(tree: SphereTree, Q: np.ndarray) -> np.ndarray:
             got = tree.apply(Q, algorithm, compiled=compiled)
             np.testing.assert_array_equal(got, want, err_msg=f"{algorithm} compiled={compiled}")
     assert [tree.apply_one(q) for q in Q] == want.tolist()
+    # a batch large enough to be cut among threads: the same in one thread and in three
+    big = np.resize(Q, (max(len(Q), rhbl.tree.PARALLEL_BATCH), Q.shape[1]))
+    for parts in (1, 3):
+        np.testing.assert_array_equal(tree._searched(big, "auto", True, parts=parts)[0],
+                                      np.resize(want, len(big)), err_msg=f"{parts} threads")
     return want
 
 
@@ -201,13 +206,15 @@ def test_visits_count_the_spheres_tested():
     X, y = noisy_labels(800, 4, 0.1, seed=2)
     tree = HypersphereClassifier(0).fit(X, y).tree_
     Q = np.random.default_rng(3).random((200, 4))
-    visits = tree.visits(Q)
-    assert visits.shape == (200,) and visits.min() >= len(tree.children[0])
+    walked = tree._searched(Q, "descent", True, walk=True)[1]  # on the node table
+    visits = tree.visits(Q)  # on the search table, which also skips what cannot win
+    assert visits.shape == (200,) and visits.min() >= 1
     assert visits.max() < tree.node_count - 1  # the descent skips subtrees
+    assert (visits <= walked).all() and (visits < walked).any()
     assert (tree.visits(Q, "brute") == tree.node_count - 1).all()
-    # exactly the children of the spheres each query reaches
+    # the walk: exactly the children of the spheres each query reaches
     reached = [set(tree.path(w)) for w in tree.apply(Q)]  # at least the winner's path
-    for q, v, path in zip(Q, visits, reached, strict=True):
+    for q, v, path in zip(Q, walked, reached, strict=True):
         d = ((tree.centers - q) ** 2).sum(axis=1)
         ok = np.zeros(tree.node_count, dtype=bool)
         ok[0] = True
@@ -215,6 +222,26 @@ def test_visits_count_the_spheres_tested():
             ok[i] = d[i] <= tree.radii[i] + tree.eps and ok[tree.parent[i]]
         assert path <= set(np.flatnonzero(ok).tolist())
         assert v == sum(len(tree.children[i]) for i in np.flatnonzero(ok))
+
+
+@pytest.mark.parametrize("value", ["0", "two", "-1"])
+def test_a_bad_thread_count_is_named_and_the_cores_used(monkeypatch, caplog, value):
+    """A bad ``RHBL_THREADS`` never stops a process: it is logged, and the default used."""
+    monkeypatch.delenv("RHBL_THREADS", raising=False)
+    rhbl.tree.threads.cache_clear()
+    try:
+        cores = rhbl.tree.threads()
+        monkeypatch.setenv("RHBL_THREADS", value)
+        rhbl.tree.threads.cache_clear()
+        with caplog.at_level("WARNING", logger="rhbl.tree"):
+            assert rhbl.tree.threads() == cores
+        assert f"RHBL_THREADS must be an integer >= 1, got '{value}'" in caplog.text
+        monkeypatch.setenv("RHBL_THREADS", "3")
+        rhbl.tree.threads.cache_clear()
+        assert rhbl.tree.threads() == 3
+    finally:
+        monkeypatch.undo()
+        rhbl.tree.threads.cache_clear()
 
 
 def test_odd_query_arrays_get_the_same_answers():

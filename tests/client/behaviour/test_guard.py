@@ -1,8 +1,9 @@
 """The controller's guard against rot-left/rot-right loops."""
 
+import numpy as np
 import pytest
 
-from client.behaviour.guard import RotationGuard
+from client.behaviour.guard import CLEARANCE, RotationGuard, clearance_for, in_path
 
 
 class Script:
@@ -69,3 +70,44 @@ def test_without_a_policy_the_guard_filters_actions():
     assert g.overruled == 2
     g.reset()  # no policy to reset
     assert not g.looping
+
+
+def _scan(points):
+    """A 360-beam scan over 180 degrees (ranges[0] on the right), 8 m everywhere except the
+    beams at ``points`` (bearing in degrees, 0 ahead, negative right -> range)."""
+    r = np.full(360, 8.0, np.float32)
+    for deg, dist in points.items():
+        r[int(round((deg + 90.0) / 180.0 * 359))] = dist
+    return r
+
+
+def test_in_path_finds_the_return_ahead_and_its_side():
+    assert in_path(_scan({}), 0.3, 0.5) == 0.0
+    assert in_path(_scan({-90: 0.3}), 0.3, 0.5) == 0.0     # the wall beside: not in the path
+    assert in_path(_scan({0: 0.8}), 0.3, 0.5) == 0.0       # ahead, but farther than 0.5 m
+    assert in_path(_scan({-30: 0.4}), 0.3, 0.5) < 0        # a corner ahead on the right
+    assert in_path(_scan({25: 0.4, -60: 0.9}), 0.3, 0.5) > 0
+    ahead = np.array([0.4, 8.0], np.float32)                # any beams: bearings given
+    assert in_path(ahead, 0.3, 0.5, bearings=[0.0, 1.0]) != 0.0
+    assert in_path(ahead, 0.3, 0.5, bearings=[1.5, 0.0]) == 0.0
+
+
+def test_with_clearance_a_forward_order_into_the_path_rotates_away():
+    g = RotationGuard(clearance=0.3)
+    corner = _scan({-30: 0.4})
+    assert g.choose("fwd", corner) == "rot-left" and g.avoided == 1
+    # just after rotating left it keeps rotating left (no reversal), whichever side the return
+    assert g.choose("fwd-right", _scan({30: 0.35})) == "rot-left" and g.avoided == 2
+    assert g.choose("rot-left", corner) == "rot-left"      # rotations are not forward orders
+    assert g.choose("fwd", _scan({})) == "fwd" and g.avoided == 2
+    for _ in range(6):                                     # the rotation forgotten (memory 5)
+        g.choose("fwd", _scan({}))
+    assert g.choose("fwd-right", _scan({30: 0.35})) == "rot-right" and g.avoided == 3
+    off = RotationGuard()                                  # clearance 0: no path check
+    assert off.choose("fwd", corner) == "fwd" and off.avoided == 0
+
+
+def test_the_controllers_clearance_is_on_for_a_tree_taught_by_hand_only():
+    assert clearance_for({"learning": {"rule": "person", "lag": 3}}) == CLEARANCE > 0
+    assert clearance_for({"learning": {"stride": 1}}) == 0.0
+    assert clearance_for({}) == 0.0 and clearance_for(None) == 0.0

@@ -10,12 +10,15 @@ from client.behaviour.features import FEATURES
 from client.behaviour.learning import DemonstrationLearner, TreePolicy
 from client.behaviour.teaching import (
     LAG,
+    MAX_LAG,
     PERSON_DEFAULTS,
     PersonLearner,
     answered_scan,
+    estimate_lag,
     majority_labels,
     mean_actions,
     nearest_votes,
+    parse_lag,
 )
 from rhbl import load
 
@@ -137,9 +140,10 @@ def test_person_learner_copies_are_seeded_and_the_tree_saves(tmp_path):
     assert a.classifier.tree_.equal(b.classifier.tree_)
     path = a.save(tmp_path / "person.rhbl")
     meta = load(path).metadata
-    assert meta["learning"] == {"rule": "person", "lag": LAG, "k": PERSON_DEFAULTS["k"],
+    assert meta["learning"] == {"rule": "person", "lag": None, "estimated_lag": LAG,
+                                "k": PERSON_DEFAULTS["k"],
                                 "copies": 2,
-                                "sigma": PERSON_DEFAULTS["sigma"], "vote": "majority",
+                                "sigma": PERSON_DEFAULTS["sigma"], "vote": PERSON_DEFAULTS["vote"],
                                 "passes": PERSON_DEFAULTS["passes"],
                                 "build": PERSON_DEFAULTS["build"], "seed": 4}
     assert meta["tree_params"]["spawn"] == "winner"
@@ -174,3 +178,48 @@ def test_observe_vectors_learns_as_one_by_one():
         batch.observe_vectors(X[:2], labels[:1])
     with pytest.raises(ValueError, match="'jump' is not an action"):
         batch.observe_vectors(X[:1], ["jump"])
+
+
+def _delayed_labels(lag: int, n: int = 1500, seed: int = 0):
+    """A robot's features drifting smoothly (5 slow sinusoids per feature), the label the
+    nearest of 5 prototypes to the features ``lag`` steps earlier (a person answering what they
+    saw a reaction time ago): (W, y), W[t, l] the features l steps before t."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n + 8)[:, None, None]
+    f = rng.uniform(0.05, 0.2, (1, 5, 5))
+    ph = rng.uniform(0, 2 * np.pi, (1, 5, 5))
+    x = 0.5 + 0.1 * np.sin(f * t + ph).sum(axis=2)  # (n + 8, 5)
+    protos = rng.uniform(0.3, 0.7, (5, 5))
+    lab = ((x[:, None, :] - protos[None]) ** 2).sum(axis=2).argmin(axis=1)
+    idx = np.arange(8, n + 8)
+    W = np.stack([x[idx - lag_] for lag_ in range(MAX_LAG + 1)], axis=1)
+    return W, lab[idx - lag]
+
+
+@pytest.mark.parametrize("lag", [3, 4, 5])
+def test_estimate_lag_finds_the_lag_the_labels_answer(lag):
+    W, y = _delayed_labels(lag)
+    found, agreement = estimate_lag(W, y, k=5, n_labels=5)
+    assert found == lag, agreement
+    assert len(agreement) == MAX_LAG + 1 and agreement[lag] > agreement[0]
+
+
+def test_person_learner_estimates_its_lag_from_the_earlier_scans():
+    W, y = _delayed_labels(4)
+    a = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, k=5, lag=None)
+    fixed = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, k=5, lag=4)
+    assert a.lag is None and a.estimated_lag == LAG  # no labels yet: the fixed default
+    for w, label in zip(W, y, strict=True):
+        a.observe_vector(w[0], NAMES[label], earlier=w[1:])
+        fixed.observe_vector(w[4], NAMES[label])  # paired 4 scans back, as Pairing(lag=4) does
+    assert a.estimated_lag == 4 and fixed.estimated_lag == 4 and fixed.lag_agreement == []
+    assert len(a.lag_agreement) == MAX_LAG + 1
+    # built at the estimated lag: the same training set as the learner with that lag fixed
+    assert a.classifier.tree_.equal(fixed.classifier.tree_)
+    assert a.metadata()["learning"]["estimated_lag"] == 4
+    with pytest.raises(ValueError, match="lag"):
+        PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, lag=MAX_LAG + 1)
+    assert parse_lag("auto") is None and parse_lag(" 4") == 4
+    for bad in ("7", "-1", "x", ""):
+        with pytest.raises(ValueError, match="'auto' or an integer 0..6"):
+            parse_lag(bad)

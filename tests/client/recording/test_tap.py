@@ -3,6 +3,8 @@ out, the others go on; ``sync`` waits until what arrived was delivered."""
 
 from __future__ import annotations
 
+import threading
+
 import pytest
 
 zenoh = pytest.importorskip("zenoh")
@@ -17,14 +19,26 @@ from protocol.session import make_config  # noqa: E402
 class ListSink:
     def __init__(self, fail_after: int | None = None):
         self.got, self.alive, self.closed, self.fail_after = [], [], False, fail_after
+        self._changed = threading.Condition()
 
     def write(self, key, data, recv_ns, kind=None, robot=None, sim_time=None):
         if self.fail_after is not None and len(self.got) >= self.fail_after:
             raise RecordingError("the disk is full")
-        self.got.append((key, kind, robot, data))
+        with self._changed:
+            self.got.append((key, kind, robot, data))
+            self._changed.notify_all()
 
     def write_alive(self, key, alive, recv_ns):
-        self.alive.append((key, alive))
+        with self._changed:
+            self.alive.append((key, alive))
+            self._changed.notify_all()
+
+    def wait_for(self, messages: int, alive: int = 0, timeout: float = 10.0) -> bool:
+        """Until the tap delivered ``messages`` messages and ``alive`` liveliness changes
+        (puts reach the session's own subscribers on zenoh's threads, after ``put`` returns)."""
+        with self._changed:
+            return self._changed.wait_for(
+                lambda: len(self.got) >= messages and len(self.alive) >= alive, timeout)
 
     def maybe_flush(self, now=None):
         pass
@@ -43,6 +57,7 @@ def test_every_sink_gets_the_bus_and_a_failing_one_is_left_out(free_port):
         for data in notices:
             session.put(keys.learner_notice_key("r0"), data)
         session.put(keys.learner_notice_key("r1"), notices[0])  # not a robot it taps
+        assert good.wait_for(len(notices), alive=1)
         assert tap.sync()
         assert [d for _k, _kind, _r, d in good.got] == notices
         assert {(k, kind, r) for k, kind, r, _d in good.got} == {
