@@ -572,7 +572,8 @@ class Decision(_Message):
     ``snapshot_id`` names the tree (``<lineage>:<vectors>`` as in the learner's notices, ``""``
     when unknown) and ``nodes`` its size. The controller's loop guard
     (``client.behaviour.guard.RotationGuard``): ``executed`` the action commanded when the
-    guard overruled the tree's (None: the tree's was), ``looping`` the guard stepped in lately
+    guard overruled the tree's (a reversal of the rotation, or a forward order into what lies
+    ahead; None: the tree's was), ``looping`` the guard overruled a reversal lately
     (``RotationGuard.looping``: the robot is held from a rot-left/rot-right loop; a person
     should show it the way out)."""
 

@@ -581,7 +581,7 @@ function panel() {
   if (d && d !== panel.shown) {
     panel.shown = d;
     const win = d.path[d.path.length - 1];
-    const guard = d.executed ? ` (the loop guard kept ${d.executed})` : "";
+    const guard = d.executed ? ` (the guard commanded ${d.executed})` : "";
     $("decision").dataset.looping = d.looping ? "1" : "0";
     $("decision").textContent = win
       ? `${d.action}${guard}: sphere #${win.index}, radius ${win.radius === null ? "inf" : win.radius.toFixed(3)}, depth ${win.depth} (scan ${d.scan_id}, tree ${d.snapshot_id || "from a file"}, ${d.nodes} nodes)`
