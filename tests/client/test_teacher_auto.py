@@ -2,7 +2,7 @@
 label comes from a person (``source`` ``console`` or ``keyboard``), the scripted rule
 otherwise; the journal's header keeps the rule, ``--teacher script|person`` still force it, and
 ``rhbl train --from-recording`` chooses alike (the real processes: tests/integration/
-test_teacher_auto.py)."""
+test_auto_rule_processes.py)."""
 
 from __future__ import annotations
 
