@@ -1,7 +1,7 @@
 """Teaching by hand, measured: person models drive the real console page in a real headless
 Chromium, and the tree they taught is evaluated.
 
-Per run (one person model, one seed, one learner): a real ``rhbl server`` (the room world, real
+Per run (one person model, one seed): a real ``rhbl server`` (the room world, real
 time), a real ``rhbl learner``, a real ``rhbl console`` and Debian's Chromium on the page
 (selenium). The person (``benchmarks/people.py``: ``PEOPLE[name](seed=...)``) is fed what the
 page shows at each frame (``window.rhbl.view()``: the page's clock, the robot as drawn, the
@@ -15,16 +15,23 @@ pressed and released on the page like a person's (selenium key events: arrows, `
    was taught in and of the unseen rooms (``--unseen``).
 
 The table gives per run and per model (mean over its seeds) the success in the taught room and
-in the unseen rooms, the oscillation loops and collisions in those evaluations, the tree's size
-and the labels (given at the page; standing in the learner's journal). ``--learners default,literal``
-runs each person and seed twice: with the learner's defaults, and with the paper's literal
-algorithm (``--literal-args``, default ``--spawn all``) as a baseline.
+in the unseen rooms, the oscillation loops and collisions in those evaluations, the tree's size,
+the labels (given at the page; standing in the learner's journal) and what the person saw (the
+views of the page they decided on per second, the page's own frame rate). With ``--learners
+default,literal`` (the default) the session is also recorded (``rhbl record``) and the paper's
+literal algorithm (``--literal-args``, default ``--teacher script --spawn all``: each label
+learned as it arrives, with the scan it names, every sphere spawned) is retrained from that
+recording (``rhbl train --from-recording``, the live learner's own pairing) and evaluated the
+same way: a baseline on exactly the labels the person taught the default learner, corrections
+included (given while the default learner's tree drove), at no extra session.
 
     python benchmarks/bench_teach.py --people steady,hurried --seeds 0,1,2 \
-        [--demo 240] [--correct 120] [--learners default,literal] [--json out.json]
+        [--demo 240] [--correct 120] [--learners default[,literal]] [--jobs 2] [--json out.json]
 
 ``--people`` takes names, ``dev``, ``held-out`` or ``all``. The budget per run is at most 240 s
-demonstrating plus 120 s correcting (real time).
+demonstrating plus 120 s correcting (real time). ``--jobs 2`` runs two sessions at once, each
+with its own server, ports, console and browser (the views/s and frames/s columns say whether
+the machine kept up: compare them with a single run's).
 """
 
 from __future__ import annotations
@@ -40,6 +47,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -52,7 +60,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 MAX_DEMO, MAX_CORRECT = 240.0, 120.0
 UNSEEN = ("eval-room-jagged", "eval-room-l", "eval-room-ring")
-LITERAL = "--spawn all"
+LITERAL = "--teacher script --spawn all"  # rhbl train --from-recording: the paper's rule
 # the keys held for each action (the page combines them as a person's fingers do)
 ARROWS = {None: (), "fwd": ("ARROW_UP",), "fwd-left": ("ARROW_UP", "ARROW_LEFT"),
           "rot-left": ("ARROW_LEFT",), "fwd-right": ("ARROW_UP", "ARROW_RIGHT"),
@@ -130,13 +138,19 @@ def teach(page: Page, person, people, seconds: float, mode: str) -> dict:
     while v is None:
         v = page.view(people)
     t0, frames, keys_held, presses = v.t, 0, 0, 0
+    w0 = time.monotonic()
     last = None
+    fps, next_fps = [], w0 + 1.0  # the page's own frame rate, read once a second
     while True:
         v = page.view(people)
         if v is None:
             continue
         if v.t - t0 >= seconds:
             break
+        if time.monotonic() >= next_fps:
+            next_fps += 1.0
+            with contextlib.suppress(ValueError):
+                fps.append(float(page.data("fps", "fps")))
         key = person.observe(v)
         if key != last:
             presses += key is not None
@@ -145,8 +159,14 @@ def teach(page: Page, person, people, seconds: float, mode: str) -> dict:
         frames += 1
         keys_held += key is not None
     page.hold(None)
+    wall = time.monotonic() - w0
     return {"mode": mode, "seconds": round(v.t - t0, 2), "frames": frames,
-            "frames_with_a_key": keys_held, "presses": presses}
+            "frames_with_a_key": keys_held, "presses": presses,
+            # what the person saw: the views they decided on per wall second, and the page's
+            # frames per second (its #fps, once a second: median and the lowest tenth)
+            "person_hz": round(frames / wall, 1) if wall > 0 else None,
+            "page_fps": round(statistics.median(fps), 1) if fps else None,
+            "page_fps_p10": round(sorted(fps)[len(fps) // 10], 1) if fps else None}
 
 
 def _labels(page: Page) -> dict:
@@ -155,10 +175,11 @@ def _labels(page: Page) -> dict:
 
 
 def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
-              learner: str = "default", literal_args: str = LITERAL, learner_args: str = "",
-              world: str = "room", workdir: Path | None = None, log=print) -> dict:
+              record: bool = False, learner_args: str = "", world: str = "room",
+              workdir: Path | None = None, log=print) -> dict:
     """A person teaches at the page: demonstrating, then correcting (see the module); what they
-    did and the learner's tree (``tree_path``), not evaluated yet."""
+    did and the learner's tree (``tree_path``), not evaluated yet. ``record``: a ``rhbl
+    record`` of the session too (``recording``), for the literal baseline (``literal_run``)."""
     import people
     import zenoh  # noqa: F401 - fail early without it
     from browser import ConsoleProcess, chromium, close_chromium
@@ -169,14 +190,22 @@ def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
     work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-bench-teach-"))
     work.mkdir(parents=True, exist_ok=True)
     out = work / "tree.rhbl"
-    extra = shlex.split(literal_args if learner == "literal" else learner_args)
+    extra = shlex.split(learner_args)
     started, children, browser = [], [], None
-    result = {"person": person_name, "seed": seed, "learner": learner,
+    result = {"person": person_name, "seed": seed, "learner": "default",
               "learner_args": " ".join(extra), "world": world,
               "demo_budget": demo, "correct_budget": correct, "workdir": str(work)}
     t_start = time.monotonic()
     try:
         srv = _server_factory(started)(world)
+        if record:  # every message of the session, before any label can be given
+            rec = Child("recorder", rhbl_argv("record", "--out", str(work / "session.mcap"),
+                                              "--connect", srv.endpoint), work, cwd=ROOT,
+                        stop_signal=signal.SIGINT, stop_timeout=60.0).start()
+            children.append(rec)
+            if not rec.wait_for_line("recording ", 60):
+                raise RuntimeError(f"the recorder did not start:\n{rec.output()[-2000:]}")
+            result["recording"] = str(work / "session.mcap")
         lrn = Child("learner", rhbl_argv("learner", "--features", "wall", "--out", str(out),
                                          "--snapshot-every", "1", "--stats",
                                          str(work / "learner.json"), "--connect", srv.endpoint,
@@ -193,7 +222,7 @@ def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
         person.reset()
         page.press("HOME")  # the robot at its start pose
         page.until(lambda p: "reset" in p.b.find_element("id", "info").text, 10, "reset")
-        log(f"  {person_name} seed {seed} ({learner}): demonstrating {demo:g} s")
+        log(f"  {person_name} seed {seed}: demonstrating {demo:g} s")
         result["demonstrate"] = teach(page, person, people, demo, "demonstrate")
         result["labels_demonstrated"] = _labels(page)["given"]
         ctl = Child("controller", rhbl_argv("controller", "--from-learner", "--follow",
@@ -203,7 +232,7 @@ def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
         page.press("c")  # correct mode
         page.until(lambda p: (p.view_raw() or {}).get("driver", "").startswith("controller"),
                    60, "the controller drives the learner's tree")
-        log(f"  {person_name} seed {seed} ({learner}): correcting {correct:g} s")
+        log(f"  {person_name} seed {seed}: correcting {correct:g} s")
         result["correct"] = teach(page, person, people, correct, "correct")
         result["loop_marks"] = int(page.data("trouble", "loops") or 0)
         result["collision_marks"] = int(page.data("trouble", "collisions") or 0)
@@ -216,6 +245,8 @@ def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
         rc = lrn.stop()
         if rc != 0:
             raise RuntimeError(f"the learner exited {rc}:\n{lrn.output()[-2000:]}")
+        if record and (rc := rec.stop()) != 0:
+            raise RuntimeError(f"the recorder exited {rc}:\n{rec.output()[-2000:]}")
     finally:
         if browser is not None:
             close_chromium(browser)
@@ -228,8 +259,35 @@ def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
     result["teaching_wall_s"] = round(time.monotonic() - t_start, 1)
     stats = json.loads((work / "learner.json").read_text())
     result["labels_standing"] = stats.get("standing")
+    result["rule"] = stats.get("rule")  # the rule the learner's lineage took
     result["tree_path"] = str(out)
     return result
+
+
+def literal_run(result: dict, literal_args: str = LITERAL) -> dict:
+    """The paper's literal algorithm on the very labels of a run (the baseline): its recording
+    retrained (``rhbl train --from-recording``, the live learner's pairing; ``literal_args``,
+    by default the scripted rule, no lag, every sphere spawned); a result to evaluate like the
+    run's own. Its labels are those the person taught the default learner, corrections
+    included (given while the default learner's tree drove)."""
+    from lab.children import rhbl_argv
+
+    work = Path(result["workdir"])
+    out = work / "literal.rhbl"
+    argv = rhbl_argv("train", "--from-recording", result["recording"], "--features", "wall",
+                     *shlex.split(literal_args), "--out", str(out))
+    t0 = time.monotonic()
+    done = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=3600)
+    if done.returncode != 0:
+        raise RuntimeError(f"retraining the literal baseline exited {done.returncode}: "
+                           f"{done.stdout[-500:]}{done.stderr[-1000:]}")
+    line = next(ln for ln in done.stdout.splitlines() if ln.startswith("trained from"))
+    paired = int(line.split(": ", 1)[1].split(" labeled", 1)[0])
+    keep = ("person", "seed", "world", "demo_budget", "correct_budget", "workdir", "labels",
+            "demonstrate", "correct", "labels_demonstrated")
+    return {**{k: result[k] for k in keep if k in result}, "learner": "literal",
+            "learner_args": literal_args, "rule": "literal", "tree_path": str(out),
+            "labels_standing": paired, "retrain_s": round(time.monotonic() - t0, 1)}
 
 
 def evaluate_run(result: dict, world: str = "room", unseen=UNSEEN,
@@ -273,30 +331,44 @@ def evaluate_run(result: dict, world: str = "room", unseen=UNSEEN,
 
 def run_one(person_name: str, seed: int, demo: float, correct: float, *, world: str = "room",
             unseen=UNSEEN, eval_episodes: int | None = None, eval_seconds: float | None = None,
-            **kw) -> dict:
-    """One run, taught then evaluated (see the module); its figures."""
-    r = teach_one(person_name, seed, demo, correct, world=world, **kw)
-    return evaluate_run(r, world, unseen, eval_episodes, eval_seconds)
+            literal: str | None = None, **kw) -> list[dict]:
+    """One run, taught then evaluated (see the module); its figures, then (``literal``: the
+    literal algorithm's options) the literal baseline's on the same labels."""
+    r = teach_one(person_name, seed, demo, correct, world=world, record=literal is not None,
+                  **kw)
+    out = [evaluate_run(r, world, unseen, eval_episodes, eval_seconds)]
+    if literal is not None:
+        out.append(evaluate_run(literal_run(r, literal), world, unseen, eval_episodes,
+                                eval_seconds))
+    return out
 
 
 def _pct(v) -> str:
     return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{100 * v:.0f}%"
 
 
+def _rate(r: dict, key: str) -> str:
+    vals = [r[m][key] for m in ("demonstrate", "correct") if r.get(m, {}).get(key) is not None]
+    return f"{min(vals):.0f}" if vals else "-"
+
+
 def table(results: list[dict]) -> str:
     """The runs, then per person model and learner the means over its seeds (markdown)."""
     rows = ["| person | learner | seed | taught room | unseen rooms | loops | collisions | "
-            "tree nodes | labels given | labels standing |",
-            "|---|---|---|---|---|---|---|---|---|---|"]
+            "tree nodes | labels given | labels standing | person views/s | page frames/s "
+            "(low tenth) |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         if "error" in r:
             rows.append(f"| {r['person']} | {r['learner']} | {r['seed']} | failed: "
-                        f"{r['error'][:60]} | | | | | | |")
+                        f"{r['error'][:60]} | | | | | | | | |")
             continue
         rows.append(f"| {r['person']} | {r['learner']} | {r['seed']} | {_pct(r['success_taught'])} "
                     f"| {_pct(r['success_unseen'])} | {r['loops']} | {r['collisions']} | "
-                    f"{r['tree']['nodes']} | {r['labels']['given']} | {r['labels_standing']} |")
-    rows += ["", "| person | learner | runs | taught room (mean) | unseen rooms (mean) | "
+                    f"{r['tree']['nodes']} | {r['labels']['given']} | {r['labels_standing']} | "
+                    f"{_rate(r, 'person_hz')} | {_rate(r, 'page_fps')} "
+                    f"({_rate(r, 'page_fps_p10')}) |")
+    rows += ["", "| person | learner | runs | taught room (mean, worst) | unseen rooms (mean, worst) | "
              "loops (mean) | collisions (mean) | tree nodes (mean) | labels (mean) |",
              "|---|---|---|---|---|---|---|---|---|"]
     groups: dict[tuple[str, str], list[dict]] = {}
@@ -306,8 +378,11 @@ def table(results: list[dict]) -> str:
     for (p, lrn), rs in groups.items():
         def mean(f, rs=rs):
             return statistics.fmean(f(r) for r in rs)
-        rows.append(f"| {p} | {lrn} | {len(rs)} | {_pct(mean(lambda r: r['success_taught']))} | "
-                    f"{_pct(mean(lambda r: r['success_unseen'] or 0.0))} | "
+        taught = [r["success_taught"] for r in rs]
+        unseen = [r["success_unseen"] or 0.0 for r in rs]
+        rows.append(f"| {p} | {lrn} | {len(rs)} | {_pct(statistics.fmean(taught))} "
+                    f"({_pct(min(taught))}) | {_pct(statistics.fmean(unseen))} "
+                    f"({_pct(min(unseen))}) | "
                     f"{mean(lambda r: r['loops']):.1f} | {mean(lambda r: r['collisions']):.1f} | "
                     f"{mean(lambda r: r['tree']['nodes']):.0f} | "
                     f"{mean(lambda r: r['labels']['given']):.0f} |")
@@ -349,14 +424,21 @@ def main(argv=None) -> int:
                     help=f"seconds demonstrating per run (at most {MAX_DEMO:g}; default)")
     ap.add_argument("--correct", type=float, default=MAX_CORRECT,
                     help=f"seconds correcting per run (at most {MAX_CORRECT:g}; default)")
-    ap.add_argument("--learners", default="default",
-                    help="default, literal or default,literal (the paper's literal algorithm "
-                         "as a baseline)")
+    ap.add_argument("--learners", default="default,literal",
+                    help="default (the learner's defaults) or default,literal (default: also "
+                         "the paper's literal algorithm as a baseline, learned from the same "
+                         "session's labels: its recording retrained)")
     ap.add_argument("--literal-args", default=LITERAL,
-                    help=f"the learner's options for the literal algorithm (default {LITERAL!r})")
+                    help=f"the literal baseline's rhbl train --from-recording options (default "
+                         f"{LITERAL!r})")
     ap.add_argument("--learner-args", default="",
                     help="the learner's options for the default runs (default: none, the "
-                         "learner's own defaults), e.g. '--teacher person'")
+                         "learner's own defaults: --teacher auto takes the person rule for the "
+                         "page's labels)")
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="sessions at once (1 or 2; each its own server, ports, console and "
+                         "browser): check the person views/s and page frames/s columns against "
+                         "a single run")
     ap.add_argument("--world", default="room", help="the room taught in (default room)")
     ap.add_argument("--unseen", default=",".join(UNSEEN),
                     help=f"unseen rooms, comma-separated (default {','.join(UNSEEN)})")
@@ -366,7 +448,21 @@ def main(argv=None) -> int:
                     help="sim seconds per evaluated episode (default: rhbl evaluate's)")
     ap.add_argument("--json", default=None, help="write every run's figures here")
     ap.add_argument("--workdir", default=None, help="keep each run's logs and tree under here")
+    ap.add_argument("--table", default=None, metavar="JSON",
+                    help="no session: print the table of the runs a --json file holds (those "
+                         "of --people only, when given)")
     args = ap.parse_args(argv)
+    if args.table:
+        try:
+            runs = json.loads(Path(args.table).read_text())
+            if "--people" in (argv if argv is not None else sys.argv):
+                keep = set(_names(args.people, people))
+                runs = [r for r in runs if r["person"] in keep]
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            print(f"bench_teach: error: --table {args.table}: {exc}", file=sys.stderr)
+            return 2
+        print(table(runs))
+        return 0
     try:
         names = _names(args.people, people)
         seeds = _seeds(args.seeds)
@@ -374,8 +470,11 @@ def main(argv=None) -> int:
             raise ValueError(f"--demo must be in (0, {MAX_DEMO:g}] and --correct in "
                              f"(0, {MAX_CORRECT:g}] seconds")
         learners = [x for x in args.learners.split(",") if x]
-        if not learners or any(x not in ("default", "literal") for x in learners):
-            raise ValueError(f"--learners: default, literal or both, got {args.learners!r}")
+        if learners not in (["default"], ["default", "literal"]):
+            raise ValueError(f"--learners: default or default,literal (the literal baseline "
+                             f"learns the default run's labels), got {args.learners!r}")
+        if args.jobs not in (1, 2):
+            raise ValueError(f"--jobs must be 1 or 2, got {args.jobs}")
         unseen = [x for x in args.unseen.split(",") if x]
         from lab.harness import resolve_world
 
@@ -389,44 +488,59 @@ def main(argv=None) -> int:
         print(f"bench_teach: error: {exc}", file=sys.stderr)
         return 2
     top = Path(args.workdir) if args.workdir else Path(tempfile.mkdtemp(prefix="rhbl-bench-teach-"))
-    print(f"bench_teach: {len(names)} people x {len(seeds)} seeds x {len(learners)} learners, "
-          f"{args.demo:g} s demonstrating + {args.correct:g} s correcting each; logs in {top}",
-          flush=True)
+    literal = args.literal_args if "literal" in learners else None
+    print(f"bench_teach: {len(names)} people x {len(seeds)} seeds, {args.jobs} at a time, "
+          f"{args.demo:g} s demonstrating + {args.correct:g} s correcting each"
+          f"{', with the literal baseline' if literal else ''}; logs in {top}", flush=True)
     results: list[dict] = []
+    lock = threading.Lock()
 
     def save() -> None:
         if args.json:
-            Path(args.json).write_text(json.dumps(results, indent=1))
+            with lock:
+                Path(args.json).write_text(json.dumps(results, indent=1))
 
-    def evaluated(r: dict) -> dict:
+    def evaluated(r: dict) -> None:
+        runs = [r]
         try:
-            evaluate_run(r, args.world, unseen, args.eval_episodes, args.eval_seconds)
+            if literal is not None:
+                runs.append(literal_run(r, literal))
         except Exception as exc:  # noqa: BLE001 - said in the table
-            r["error"] = f"evaluation: {type(exc).__name__}: {exc}"
-        print(f"  -> {json.dumps({k: v for k, v in r.items() if k != 'eval'})}", flush=True)
+            runs.append({"person": r["person"], "seed": r["seed"], "learner": "literal",
+                         "error": f"retraining: {type(exc).__name__}: {exc}"})
+        for x in runs:
+            if "error" in x:
+                continue
+            try:
+                evaluate_run(x, args.world, unseen, args.eval_episodes, args.eval_seconds)
+            except Exception as exc:  # noqa: BLE001 - said in the table
+                x["error"] = f"evaluation: {type(exc).__name__}: {exc}"
+            print(f"  -> {json.dumps({k: v for k, v in x.items() if k != 'eval'})}", flush=True)
+        with lock:
+            results.extend(runs)
         save()
-        return r
 
-    # each run's tree is evaluated while the next person teaches (real time, mostly waiting)
-    with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool:
-        pending = []
-        for name in names:
-            for seed in seeds:
-                for lrn in learners:
-                    try:
-                        r = teach_one(name, seed, args.demo, args.correct, learner=lrn,
-                                      literal_args=args.literal_args,
-                                      learner_args=args.learner_args, world=args.world,
-                                      workdir=top / f"{name}-{seed}-{lrn}",
-                                      log=lambda s: print(s, flush=True))
-                    except Exception as exc:  # noqa: BLE001 - the next run still runs; said
-                        r = {"person": name, "seed": seed, "learner": lrn,
-                             "error": f"{type(exc).__name__}: {exc}"}
-                    results.append(r)
-                    if "error" not in r:
-                        pending.append(pool.submit(evaluated, r))
-                    save()
-        concurrent.futures.wait(pending)
+    def session(name: str, seed: int) -> None:
+        try:
+            r = teach_one(name, seed, args.demo, args.correct, record=literal is not None,
+                          learner_args=args.learner_args, world=args.world,
+                          workdir=top / f"{name}-{seed}", log=lambda s: print(s, flush=True))
+        except Exception as exc:  # noqa: BLE001 - the next run still runs; said
+            with lock:
+                results.append({"person": name, "seed": seed, "learner": "default",
+                                "error": f"{type(exc).__name__}: {exc}"})
+            save()
+            return
+        evals.submit(evaluated, r)
+
+    # ``--jobs`` people teach at once (real time, mostly waiting on the page); each run's trees
+    # are evaluated one at a time while the next people teach
+    with (concurrent.futures.ThreadPoolExecutor(max_workers=1) as evals,
+          concurrent.futures.ThreadPoolExecutor(max_workers=args.jobs) as teach_pool):
+        list(teach_pool.map(lambda ns: session(*ns), [(n, s) for n in names for s in seeds]))
+    order = {(n, s): k for k, (n, s) in enumerate((n, s) for n in names for s in seeds)}
+    results.sort(key=lambda r: (order.get((r["person"], r["seed"]), 0), r["learner"]))
+    save()
     print(table(results))
     return 0 if all("error" not in r for r in results) else 1
 

@@ -42,9 +42,12 @@ class Decider:
     def _on_matching(self, status: zenoh.MatchingStatus) -> None:
         self._watched = status.matching
 
-    def publish(self, policy, x, scan: Scan) -> str | None:
+    def publish(self, policy, x, scan: Scan, executed: str | None = None,
+                looping: bool = False) -> str | None:
         """Publish the decision of the policy's tree for the features ``x`` of ``scan``; returns
-        the action (the winner's label), or None when nothing subscribes to decisions."""
+        the action (the winner's label), or None when nothing subscribes to decisions.
+        ``executed``: the action commanded, when the loop guard overruled the tree's (said
+        only when it differs); ``looping``: the guard stepped in lately."""
         if not self._watched:
             return None
         clf = policy.classifier
@@ -56,6 +59,8 @@ class Decider:
             scan_id=scan.id, ts=scan.ts, action=action, snapshot_id=self._sid,
             nodes=int(getattr(clf, "node_count_", 0)),
             path=tuple((e["index"], e["depth"], e["radius"], str(e["label"])) for e in path),
+            executed=executed if executed is not None and executed != action else None,
+            looping=bool(looping),
         ).encode())
         return action
 

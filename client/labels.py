@@ -43,6 +43,7 @@ __all__ = [
     "DRAIN",
     "MAX_BACKLOG",
     "OUTBOX",
+    "PERSON_SOURCES",
     "RESEND_AFTER",
     "Acknowledgements",
     "AnsweredScan",
@@ -51,11 +52,23 @@ __all__ = [
     "Outbox",
     "Pairing",
     "LabelPublisher",
+    "SOURCE",
+    "by_person",
 ]
 
 log = logging.getLogger(__name__)
 
-SOURCE = "teacher"
+SOURCE = "teacher"  # the labels' ``source`` of a scripted teacher (rhbl teacher --policy wall...)
+# the labels' ``source`` of a person teaching by hand: at the console's page, at a terminal
+# (rhbl teacher --policy keyboard); a learner's ``--teacher auto`` learns a new lineage by the
+# person rule when its first label comes from one of these (``by_person``)
+PERSON_SOURCES = ("console", "keyboard")
+
+
+def by_person(source: str | None) -> bool:
+    """True when a label's ``source`` says a person gave it by hand (``PERSON_SOURCES``)."""
+    return source in PERSON_SOURCES
+
 # labels published and not yet acknowledged by a learner, at most (then the teacher pauses):
 # about 3 minutes of labels at 10 Hz, ~1.5 KB each (the label and its scan)
 OUTBOX = 2000
@@ -260,13 +273,16 @@ class LabelPublisher:
     once when a learner's token appears (the first learner, a restarted one) and the missed
     ones (``Outbox.due``), while a learner is up. The caller stops labelling while
     ``outbox.full``. ``withdraw`` takes labels back (``rhbl/<robot>/teacher/withdraw``), kept
-    and resent the same way until acknowledged."""
+    and resent the same way until acknowledged. ``source`` is the labels' ``source`` field:
+    ``SOURCE`` for a scripted teacher, one of ``PERSON_SOURCES`` for a person (the learner's
+    ``--teacher auto`` picks its rule by it)."""
 
     def __init__(self, session, robot: str, outbox: int = OUTBOX,
-                 resend_after: float = RESEND_AFTER):
+                 resend_after: float = RESEND_AFTER, source: str = SOURCE):
         import zenoh
 
         self.robot = robot
+        self.source = source
         self.act_pub = session.declare_publisher(keys.teacher_action_key(robot),
                                                  congestion_control=zenoh.CongestionControl.BLOCK)
         self.outbox: Outbox | None = None
@@ -299,10 +315,10 @@ class LabelPublisher:
         (None without an outbox)."""
         self.published += 1
         if self.outbox is None:
-            act = TeacherAction(scan_id=scan.id, action=action, source=SOURCE, ts=scan.ts,
+            act = TeacherAction(scan_id=scan.id, action=action, source=self.source, ts=scan.ts,
                                 executed=executed)
         else:  # kept before it is published: an acknowledgement cannot come first
-            act = self.outbox.label(scan, action, executed, SOURCE).action_message()
+            act = self.outbox.label(scan, action, executed, self.source).action_message()
         self.act_pub.put(act.encode())
         return act.seq
 
@@ -494,18 +510,21 @@ class Pairing:
     newest ``scan_buffer`` scans, labeled or not, are kept for it. With ``window`` > 0 instead
     (the lag estimated by the learner), each label keeps its own scan and carries the scans
     displayed 1 .. ``window`` scans before it (``AnsweredScan.earlier``, nearest first; cut
-    where ``answered_scan`` would keep the label's own scan).
+    where ``answered_scan`` would keep the label's own scan). ``lag_of(label)``, when given,
+    says each label's ``(lag, window)`` instead (a learner whose rule is not chosen yet,
+    ``--teacher auto``, treats a person's labels only so; ``settle`` ends it).
     """
 
     def __init__(self, scan_buffer: int = 512, match_timeout: float = 2.0,
                  max_ready: int = MAX_BACKLOG, behind: int = BEHIND, on_scan_seen=None,
-                 clock=time.monotonic, lag: int = 0, window: int = 0):
+                 clock=time.monotonic, lag: int = 0, window: int = 0, lag_of=None):
         if not (isinstance(lag, int) and lag >= 0):
             raise ValueError(f"lag must be an integer >= 0 scans, got {lag!r}")
         if not (isinstance(window, int) and window >= 0) or (window and lag):
             raise ValueError(f"window must be an integer >= 0 scans (and lag 0 with it), got "
                              f"{window!r}")
         self.lag, self.window = lag, window
+        self._lag_of = lag_of
         self.recent: OrderedDict[int, Scan] = OrderedDict()  # every scan (lag > 0 only)
         self.scan_buffer = max(1, int(scan_buffer))
         self.match_timeout = match_timeout
@@ -540,7 +559,7 @@ class Pairing:
                 self.recent.clear()
                 self.forgot_upto = -1
             self.last_id = scan.id
-            if self.lag or self.window:
+            if self.lag or self.window or self._lag_of is not None:
                 self.recent[scan.id] = scan
                 while len(self.recent) > self.scan_buffer:
                     self.recent.popitem(last=False)
@@ -592,25 +611,34 @@ class Pairing:
                 del self.pending[act.scan_id]  # the same label, its scan never came
             self._ready(scan, act)
 
-    def _answered(self, scan: Scan) -> Scan:  # under the lock
+    def settle(self, lag: int, window: int = 0) -> None:
+        """Every label from now on is paired with ``lag`` or carries ``window`` earlier scans
+        (a learner's rule was chosen: no ``lag_of`` any more); with neither the recent scans
+        are no longer kept."""
+        with self._cond:
+            self.lag, self.window, self._lag_of = int(lag), int(window), None
+            if not (self.lag or self.window):
+                self.recent.clear()
+
+    def _answered(self, scan: Scan, lag: int) -> Scan:  # under the lock
         """The scan a label given while ``scan`` was displayed answers (``lag``)."""
         from client.behaviour.teaching import answered_scan
 
         held = self.recent if scan.id in self.recent else {**self.recent, scan.id: scan}
-        sid = answered_scan(scan.id, held, self.lag)
+        sid = answered_scan(scan.id, held, lag)
         if sid == scan.id:
             self.stats["unshifted"] += 1
             return scan
         self.stats["shifted"] += 1
         return held[sid]
 
-    def _windowed(self, scan: Scan) -> AnsweredScan:  # under the lock
-        """``scan`` with the scans displayed 1 .. ``window`` before it (``window``)."""
+    def _windowed(self, scan: Scan, window: int) -> AnsweredScan:  # under the lock
+        """``scan`` with the scans displayed 1 .. ``window`` before it."""
         from client.behaviour.teaching import answered_scan
 
         held = self.recent if scan.id in self.recent else {**self.recent, scan.id: scan}
         earlier = []
-        for lag in range(1, self.window + 1):
+        for lag in range(1, window + 1):
             sid = answered_scan(scan.id, held, lag)
             if sid == scan.id:
                 break
@@ -620,10 +648,11 @@ class Pairing:
                             earlier=tuple(earlier))
 
     def _ready(self, scan: Scan, act: TeacherAction) -> None:  # under the lock
-        if self.lag:
-            scan = self._answered(scan)
-        elif self.window:
-            scan = self._windowed(scan)
+        lag, window = (self.lag, self.window) if self._lag_of is None else self._lag_of(act)
+        if lag:
+            scan = self._answered(scan, lag)
+        elif window:
+            scan = self._windowed(scan, window)
         self.ready.append((scan, act))
         n = len(self.ready)
         self.stats["max_ready"] = max(self.stats["max_ready"], n)

@@ -148,17 +148,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=arguments.seed, default=0,
                         help="seed of the teacher's perturbations")
     parser.add_argument("--timeout", type=arguments.seconds, default=600.0, metavar="SECONDS",
-                        help="give up (and fail) after this much wall time")
+                        help="give up (and fail) after this much wall time (not with "
+                             "--by-hand: you end it)")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     parser.add_argument("--console", nargs="?", const="127.0.0.1:8080", default=None,
                         metavar="HOST:PORT", type=arguments.address,
                         help="also serve the teacher's console (view-only) to watch the loop "
                              "live in a browser (default address 127.0.0.1:8080; the URL is "
-                             "printed)")
+                             "printed); with --by-hand the console you teach with, there")
     parser.add_argument("--record", nargs="?", const="", default=None, metavar="FILE",
                         type=arguments.output_file_or_default,
                         help="record the whole run (every bus message) as MCAP into FILE "
                              "(default: OUT/run.mcap; docs/recording.md)")
+    parser.add_argument("--by-hand", action="store_true",
+                        help="teach it yourself instead of the scripted teacher: a server "
+                             "(--world, default room, real time), a learner (its --teacher auto "
+                             "takes the person rule), the console (at --console, default "
+                             "127.0.0.1:8080; its URL printed) and, after --demonstrate, a "
+                             "following controller for correct mode; then the tree is evaluated "
+                             "(lab.by_hand, docs/teaching.md)")
+    parser.add_argument("--demonstrate", type=arguments.seconds, default=240.0, metavar="S",
+                        help="with --by-hand: wall seconds you demonstrate before the controller "
+                             "starts (default 240; Enter at the terminal ends it sooner)")
+    parser.add_argument("--correct", type=arguments.seconds, default=120.0, metavar="S",
+                        help="with --by-hand: wall seconds you correct (default 120; Enter or "
+                             "Ctrl-C ends it sooner)")
 
 
 
@@ -585,7 +599,14 @@ class Demo:
 def main(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(message)s")
     try:
-        demo = Demo(args)
+        if args.by_hand:
+            from lab.by_hand import ByHand
+
+            demo = ByHand(args)
+        else:
+            if args.demonstrate != 240.0 or args.correct != 120.0:
+                raise ValueError("--demonstrate and --correct go with --by-hand")
+            demo = Demo(args)
     except (OSError, ValueError) as exc:  # WorldError, FileNotFoundError, ...
         print(f"rhbl demo FAILED: {exc}", file=sys.stderr, flush=True)
         return 2

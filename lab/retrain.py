@@ -10,7 +10,8 @@ Retraining replays the live learner's pairing: the recorded scans and teacher la
 order the recorder received them, through ``client.labels.Pairing`` (a label is paired with
 exactly the scan it answers) into ``DemonstrationLearner.observe``, the learner's code path; so
 with the live learner's features and settings the tree is the one it built. ``teacher="person"``
-(``rhbl train --from-recording ... --teacher person``) retrains labels given by hand as
+(``rhbl train --from-recording ... --teacher person``, or ``auto``, the default, when the first
+label came from a person) retrains labels given by hand as
 ``rhbl learner --teacher person`` learns them: each paired with the scan ``lag`` scans earlier,
 the tree built by the neighbours' vote (``client.behaviour.teaching.PersonLearner``).
 """
@@ -28,10 +29,11 @@ from client.behaviour.features import FEATURES, FeatureError
 from client.behaviour.learning import DemonstrationLearner
 from client.behaviour.tasks import task_of_features
 from client.behaviour.teaching import MAX_LAG, PersonLearner
+from client.labels import by_person
 from client.recording.mcap_file import RecordingError, read_recording
 from protocol.messages import Scan, TeacherAction
 
-__all__ = ["labeled_scans", "retrain", "save_retrained", "train_main"]
+__all__ = ["first_label_source", "labeled_scans", "retrain", "save_retrained", "train_main"]
 
 log = logging.getLogger(__name__)
 
@@ -80,29 +82,50 @@ def labeled_scans(path: str | Path, robots: list[str] | None = None,
                 stats[f"{robot}.{k}"] = v
 
 
+def first_label_source(paths, robots: list[str] | None = None) -> str | None:
+    """The ``source`` of the recordings' first teacher label (files in the order given), None
+    when they hold none (a malformed label is skipped)."""
+    for path in paths:
+        for m in read_recording(path):
+            if m.kind == "label" and not (robots and m.robot not in robots):
+                try:
+                    return TeacherAction.decode(m.data).source
+                except Exception:  # noqa: BLE001 - a malformed label: the pairing counts it
+                    continue
+    return None
+
+
 def retrain(paths, features: str = "wall", robots: list[str] | None = None,
             task: str | None = None, stride: int = 1, min_delta: float = 0.0,
-            tree_params: dict | None = None, record: bool = False, teacher: str = "script",
+            tree_params: dict | None = None, record: bool = False, teacher: str = "auto",
             lag: int | None = None) -> tuple[DemonstrationLearner, dict]:
     """A tree learned from the recordings' teacher labels (in order, files in the order
     given), as ``rhbl learner`` learns: labels that are no action of the tree and scans the
     features cannot use are skipped and counted. ``record``: the learner keeps its vectors
-    (to compact on them). ``teacher="person"``: as ``rhbl learner --teacher person --lag``.
+    (to compact on them). ``teacher="person"``: as ``rhbl learner --teacher person --lag``;
+    ``"auto"``: the person rule when the first label came from a person (``by_person``).
     Returns (learner, stats)."""
     spec = FEATURES[features]
     params = {"spawn": "winner", **(tree_params or {})}
     task = task or task_of_features(features)
+    chose = ""
+    if teacher == "auto":  # as the live learner chooses: by the first label's source
+        source = first_label_source(paths, robots)
+        teacher = "person" if by_person(source) else "script"
+        chose = f" (--teacher auto chose it: the first label came from {source!r})"
     if teacher == "person":
         if record or stride != 1 or min_delta:
-            raise ValueError("--teacher person learns every label (no --stride) and its tree is "
-                             "rebuilt from them (no --compact: compact the snapshot it writes)")
+            raise ValueError(f"the person rule{chose} learns every label (no --stride) and its "
+                             "tree is rebuilt from them (no --compact: compact the snapshot it "
+                             "writes; or force --teacher script)")
         learner = PersonLearner(spec, DEFAULT_ACTIONS, task=task, lag=lag, **params)
     else:
         learner = DemonstrationLearner(spec, DEFAULT_ACTIONS, task=task, stride=stride,
                                        min_delta=min_delta, record=record, **params)
         lag = 0
     window = MAX_LAG if lag is None else 0  # a person's lag estimated: the scans before each
-    stats = {"paired": 0, "learned": 0, "rejected": 0, "recordings": []}
+    stats = {"paired": 0, "learned": 0, "rejected": 0, "recordings": [],
+             "rule": f"{teacher}{chose}"}
     t0 = time.perf_counter()
     for path in paths:
         pstats: dict = {}
@@ -201,6 +224,7 @@ def train_main(args) -> int:
     print(f"trained from {len(stats['recordings'])} recording(s): {stats['paired']} labeled scans "
           f"({stats['learned']} learned, {stats['rejected']} rejected, "
           f"{sum(r['unmatched'] for r in stats['recordings'])} labels without their scan), tree "
-          f"{learner.nodes} nodes, height {learner.height}; {stats['seconds']:.1f} s")
+          f"{learner.nodes} nodes, height {learner.height}; {stats['seconds']:.1f} s; the "
+          f"{stats['rule']} rule")
     print(f"wrote {out}")
     return 0

@@ -399,12 +399,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         type=arguments.input_file,
                         help="no simulation: learn the teacher labels of these recordings "
                              "(with --features and the tree options; docs/recording.md)")
-    parser.add_argument("--teacher", choices=["script", "person"], default="script",
-                        help="with --from-recording: 'person' learns labels given by hand as "
-                             "rhbl learner --teacher person does (docs/teaching.md)")
+    parser.add_argument("--teacher", choices=["auto", "script", "person"], default="auto",
+                        help="with --from-recording, as rhbl learner: 'auto' (default) learns "
+                             "by the person rule when the first label of the recordings came "
+                             "from a person (rhbl console, rhbl teacher --policy keyboard), "
+                             "else by the script rule; 'script' or 'person' force one "
+                             "(docs/teaching.md)")
     parser.add_argument("--lag", type=arguments.Checked("lag", parse_lag), default=None,
                         metavar="SCANS|auto",
-                        help="with --teacher person: a label answers the scan this many scans "
+                        help="with the person rule: a label answers the scan this many scans "
                              "before the one it names ('auto', the default: estimated from "
                              "the labels)")
 
@@ -417,7 +420,7 @@ def main(args) -> int:
         return train_main(args)  # every flag that cannot apply is a named error there
     if not args.world:
         raise ValueError("--world is required (or --from-recording FILE)")
-    if args.teacher != "script" or args.lag is not None:
+    if args.teacher not in ("auto", "script") or args.lag is not None:
         raise ValueError("--teacher and --lag go with --from-recording (a simulated run's "
                          "teacher is the scripted expert)")
     spec = resolve_world(args.world)

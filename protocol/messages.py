@@ -666,13 +666,19 @@ class Decision(_Message):
     (sim time ``ts``) and the tree's decision ``path`` from the root to the winning sphere, one
     ``(index, depth, radius, label)`` per node (the last is the winner, its label the action's);
     ``snapshot_id`` names the tree (``<lineage>:<vectors>`` as in the learner's notices, ``""``
-    when unknown) and ``nodes`` its size."""
+    when unknown) and ``nodes`` its size. The controller's loop guard
+    (``client.behaviour.guard.RotationGuard``): ``executed`` the action commanded when the
+    guard overruled the tree's (a reversal of the rotation, or a forward order into what lies
+    ahead; None: the tree's was), ``looping`` the guard overruled a reversal lately
+    (``RotationGuard.looping``: the robot is held from a rot-left/rot-right loop; a person
+    should show it the way out)."""
 
     WHAT: ClassVar[str] = "controller/decision"
     FIELDS = {"scan_id": UINT, "ts": NUM, "action": STR, "snapshot_id": STR, "nodes": UINT,
               "path": {"type": "array", "maxItems": 1024,
                        "description": "[index, depth, radius, label] per node, root to winner",
-                       "items": {"type": "array", "minItems": 4, "maxItems": 4}}}
+                       "items": {"type": "array", "minItems": 4, "maxItems": 4}},
+              "executed": STR, "looping": BOOL}
     REQUIRED = ("scan_id", "action")
     MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
     MAX_PATH: ClassVar[int] = 1024
@@ -682,9 +688,11 @@ class Decision(_Message):
     ts: float = 0.0
     snapshot_id: str = ""
     nodes: int = 0
+    executed: str | None = None
+    looping: bool = False
 
     def to_map(self):
-        return {
+        m = {
             "scan_id": int(self.scan_id),
             "ts": float(self.ts),
             "action": self.action,
@@ -692,6 +700,11 @@ class Decision(_Message):
             "snapshot_id": self.snapshot_id,
             "nodes": int(self.nodes),
         }
+        if self.executed is not None:
+            m["executed"] = self.executed
+        if self.looping:
+            m["looping"] = True
+        return m
 
     @classmethod
     def from_map(cls, m):
@@ -718,6 +731,8 @@ class Decision(_Message):
             ts=get_opt(m, "ts", get_float, w, default=0.0),
             snapshot_id=get_opt(m, "snapshot_id", get_str, w, default=""),
             nodes=get_opt(m, "nodes", get_int, w, minimum=0, default=0),
+            executed=get_opt(m, "executed", get_str, w),
+            looping=get_opt(m, "looping", get_bool, w, default=False),
         )
 
 

@@ -19,7 +19,9 @@ sphere for ever; every overruled reversal is counted (``--stats``: ``overruled``
 bounded rate; and, for a tree taught by hand (or with ``--guard-clearance M`` for any tree), a
 forward order while a laser return lies in the robot's path (within 0.5 m ahead and 0.3 m of
 its centre line) becomes a rotation in place (``--stats``: ``avoided``; docs/teaching.md has
-the study behind both).
+the study behind both). Its decisions (``Decision``, for viewers) say when the guard stepped in
+lately on a reversal (``looping``) and what it commanded instead of the tree's (``executed``):
+``rhbl console`` then asks the person to show the robot the way out.
 
 With ``--ros2`` it drives a ROS 2 robot instead (``client.ros2.Ros2Robot``, docs/ros2.md): its
 ``LaserScan`` (any beam count and span, resampled to the tree's features, or refused with exit 2
@@ -173,6 +175,7 @@ class ControllerProcess:
         self.decider = Decider(ctx.session, ctx.robot)
         ctx.scope.callback(self.decider.close)
         self.t0: float | None = None
+        self.executed: str | None = None  # the action commanded for the last scan answered
         self.n = self.bad = 0
         ctx.scope.callback(self.close)  # on every path, after "stopping (signal)"
         ctx.report(self.counters)
@@ -295,6 +298,7 @@ class ControllerProcess:
             name = str(p.classifier.predict_one(x))
             if self.guard is not None:
                 name = self.guard_choose(name, scan)
+            self.executed = name
             return p.actions[name], p, x
         except Exception as exc:  # noqa: BLE001 - a scan the tree cannot use: no command
             self.bad += 1
@@ -319,8 +323,9 @@ class ControllerProcess:
     def publish_decision(self, policy, x, scan: Scan) -> None:
         """The decision of the scan just answered, for viewers; a failure here is logged and
         never stops the controller (the command is already out)."""
-        try:
-            self.decider.publish(policy, x, scan)
+        try:  # with the loop guard's state: a console asks the person to show the way out
+            self.decider.publish(policy, x, scan, executed=self.executed,
+                                 looping=self.guard is not None and self.guard.looping)
         except Exception as exc:  # noqa: BLE001 - viewers only
             log.debug("decision of scan %d not published: %s", scan.id, exc)
 

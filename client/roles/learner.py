@@ -28,9 +28,12 @@ withdrawal of labels folded into a snapshot is journaled but cannot take them ou
 
     rhbl learner --features wall --out tree.rhbl                 # new tree (or continue tree.rhbl)
     rhbl learner --resume tree.rhbl --out tree2.rhbl             # extend a tree: a new lineage
-    rhbl learner --features wall --teacher person --out tree.rhbl  # taught by hand (rhbl console)
+    rhbl learner --features wall --teacher person --out tree.rhbl  # force the person rule
 
-``--teacher person`` (labels given by hand at ``rhbl console``): a person's key answers what
+``--teacher auto`` (the default) chooses a new lineage's rule by its first label's ``source``
+(``client.labels.by_person``): a person's (``console``, ``keyboard``) gives the person rule, any
+other the script rule (the paper's: each label learned as it arrives); the journal's header keeps
+it. The person rule (labels given by hand at ``rhbl console``): a person's key answers what
 they saw a reaction time earlier: each label is journaled with the scans displayed before it
 and the lag is estimated from the labels (``--lag auto``, the default), or paired with the scan
 ``--lag N`` scans before the one it names (``client.labels.Pairing``), and the tree is rebuilt from every label journaled,
@@ -70,7 +73,7 @@ from client.journal import (
     Withdrawals,
     journal_path,
 )
-from client.labels import MAX_BACKLOG, Acknowledgements, Pairing
+from client.labels import MAX_BACKLOG, Acknowledgements, Pairing, by_person
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
 from protocol import arguments, files, keys
 from protocol.decoding import Decoder
@@ -124,15 +127,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "this long before the final snapshot (default 5)")
     parser.add_argument("--scan-buffer", type=arguments.positive_int, default=512,
                         help="how many recent unlabeled scans are kept for pairing")
-    parser.add_argument("--teacher", choices=["script", "person"], default="script",
-                        help="who labels a new tree: 'script' (rhbl teacher: each label learned "
-                             "as it arrives, default) or 'person' (rhbl console: labels paired "
-                             "with the scan --lag scans earlier, the tree rebuilt from every "
-                             "label by the vote of its nearest labels); a lineage keeps "
-                             "the rule it was made with")
+    parser.add_argument("--teacher", choices=["auto", "script", "person"], default="auto",
+                        help="who labels a new tree: 'auto' (default) chooses by the first "
+                             "label's source, the person rule for a person's (rhbl console, "
+                             "rhbl teacher --policy keyboard), else the script rule (with "
+                             "--resume or --fold-journal: the script rule); 'script' forces "
+                             "the script rule (each label learned as it arrives); 'person' the "
+                             "person rule (labels paired with the scan a reaction time --lag "
+                             "earlier, the tree rebuilt from every label by the vote of its "
+                             "nearest labels). A lineage keeps the rule it was made with (its "
+                             "journal's header)")
     parser.add_argument("--lag", type=arguments.Checked("lag", parse_lag), default=None,
                         metavar="SCANS|auto",
-                        help="with --teacher person: a label answers the scan this many scans "
+                        help="with the person rule: a label answers the scan this many scans "
                              f"(0..{MAX_LAG}) before the one it names; 'auto' (default): "
                              "estimated from the labels, re-estimated as they accumulate "
                              f"({LAG} until there are enough; docs/teaching.md)")
@@ -170,6 +177,7 @@ class LearnerCore:
         self.spans: dict[str, tuple[int, int]] = {}  # origin -> lowest, highest seq journaled
         self.standing = 0  # labelled vectors journaled and not withdrawn
         self.rebuilds = 0
+        self._early: list[Withdrawal] = []  # withdrawals before the lineage's first label
         if self.jpath.exists():
             self.journal = Journal.open(self.jpath, fsync_interval=fsync_interval,
                                         write=journal_write)
@@ -182,40 +190,124 @@ class LearnerCore:
             if teacher == "person" and fold_journal:
                 raise ProcessError("--teacher person rebuilds its tree from every label of its "
                                    "journal: --fold-journal cannot be used with it", EXIT_USAGE)
-            fork = None  # where the parent's journal stood when it was extended
-            if resume is not None:
-                if teacher == "person":
-                    raise ProcessError("--teacher person builds its tree from its own labels: "
-                                       "it cannot --resume another tree", EXIT_USAGE)
-                learner = _resume(resume, spec)
-                parent = str(Path(resume).resolve())
-                j = (load_snapshot(resume)[3].get("provenance") or {}).get("journal") or {}
-                if j.get("lineage"):
-                    fork = {"lineage": j["lineage"], "records": int(j.get("records", 0))}
+            if resume is not None and teacher == "person":
+                raise ProcessError("--teacher person builds its tree from its own labels: "
+                                   "it cannot --resume another tree", EXIT_USAGE)
+            if resume is None and spec is None:
+                raise ProcessError("a new tree needs --features (wall or maze)", EXIT_USAGE)
+            self._new = {"spec": spec, "resume": resume, "features": features, "task": task,
+                         "params": {"spawn": "winner", **(tree_params or {})},
+                         "stride": stride, "min_delta": min_delta, "lag": lag,
+                         "fsync_interval": fsync_interval, "write": journal_write,
+                         "actions": actions}
+            self.journal = None
+            if teacher == "auto" and (resume is not None or fold_journal):
+                log.info("--teacher auto with %s: the scripted rule (a person's rule "
+                         "rebuilds its tree from its own whole journal)",
+                         "--resume" if resume is not None else "--fold-journal")
+                teacher = "script"
+            if teacher == "auto":
+                # the rule is chosen by the first label's source (``choose``): until then a
+                # scripted learner stands in (it learns nothing) and no journal exists
+                self.learner = self._start_learner("script")
+                self.applied = 0
+                log.info("new tree lineage at %s: its rule is chosen by the first label "
+                         "(a person's at the console or keyboard: the person rule; else the "
+                         "scripted teacher's)", self.out)
             else:
-                if spec is None:
-                    raise ProcessError("a new tree needs --features (wall or maze)", EXIT_USAGE)
-                params = {"spawn": "winner", **(tree_params or {})}
-                if teacher == "person":
-                    learner = PersonLearner(spec, actions, task=task or task_of_features(features),
-                                            lag=lag, **params)
-                else:
-                    learner = DemonstrationLearner(
-                        spec, actions, task=task or task_of_features(features),
-                        stride=stride, min_delta=min_delta, **params)
-                parent = None
-            header = {"parent": parent, "fork": fork, "meta": learner.metadata()}
-            self.journal = Journal.create(self.jpath, header, fsync_interval=fsync_interval,
-                                          write=journal_write)
-            self.learner, self.applied = learner, 0
-            log.info("new tree lineage %s at %s%s", self.journal.lineage, self.out,
-                     f" (extending {parent})" if parent else "")
+                self._create("person" if teacher == "person" else "script")
+        if self.journal is not None:
+            self._started()
+        self.saved_applied = self.applied if self.out.exists() else -1
+        self.seq = 0
+
+    def _start_learner(self, rule: str) -> DemonstrationLearner:
+        """A new lineage's learner for ``rule`` (``script`` or ``person``), or its parent's
+        (``--resume``)."""
+        n = self._new
+        if n["resume"] is not None:
+            return _resume(n["resume"], n["spec"])
+        task = n["task"] or task_of_features(n["features"])
+        if rule == "person":
+            return PersonLearner(n["spec"], n["actions"], task=task, lag=n["lag"],
+                                 **n["params"])
+        return DemonstrationLearner(n["spec"], n["actions"], task=task,
+                                    stride=n["stride"], min_delta=n["min_delta"], **n["params"])
+
+    def _create(self, rule: str, why: str = "") -> None:
+        """Start the new lineage: its learner for ``rule`` and its journal (the header keeps
+        the rule). Raises JournalError (nothing written: call again later)."""
+        n = self._new
+        learner = self._start_learner(rule)
+        fork = parent = None  # fork: where the parent's journal stood when it was extended
+        if n["resume"] is not None:
+            parent = str(Path(n["resume"]).resolve())
+            j = (load_snapshot(n["resume"])[3].get("provenance") or {}).get("journal") or {}
+            if j.get("lineage"):
+                fork = {"lineage": j["lineage"], "records": int(j.get("records", 0))}
+        header = {"parent": parent, "fork": fork, "meta": learner.metadata()}
+        self.journal = Journal.create(self.jpath, header, fsync_interval=n["fsync_interval"],
+                                      write=n["write"])
+        self.learner, self.applied = learner, 0
+        log.info("new tree lineage %s at %s%s%s", self.journal.lineage, self.out,
+                 f" (extending {parent})" if parent else "", why)
+
+    @property
+    def undecided(self) -> bool:
+        """A new lineage whose rule waits for its first label (``--teacher auto``)."""
+        return self.journal is None
+
+    def lag_for(self, source: str | None) -> tuple[int, int]:
+        """``(lag, window)`` of the pairing of a label from ``source`` (``Pairing``): this
+        lineage's, or, while the rule is not chosen yet, the one it would take for that label
+        (a person's: ``--lag N`` shifts it, ``--lag auto`` keeps the scans before it)."""
+        if not self.undecided:
+            return self.pairing()
+        if not by_person(source):
+            return 0, 0
+        lag = self._new["lag"]
+        return (0, MAX_LAG) if lag is None else (lag, 0)
+
+    def pairing(self) -> tuple[int, int]:
+        """``(lag, window)`` of this lineage's pairing (``Pairing(lag=..., window=...)``)."""
+        return self.lag or 0, MAX_LAG if self.estimates else 0
+
+    def choose(self, source: str | None) -> None:
+        """The first label came from ``source``: start the lineage by the person rule when a
+        person gave it (``client.labels.by_person``), else by the scripted teacher's; the
+        withdrawals that came before it are journaled. Raises JournalError (call again)."""
+        if not self.undecided:
+            return
+        rule = "person" if by_person(source) else "script"
+        self._create(rule, f": the first label came from {source or 'an unnamed teacher'!r}, "
+                           f"so it learns by the {'person' if rule == 'person' else 'scripted'}"
+                           f" rule ({self.describe_rule() or 'each label as it arrives'})")
+        self._started()
+        self._journal_early()
+
+    def _journal_early(self) -> None:
+        """Journal the withdrawals that came before the lineage's first label (each once,
+        also when a write failed half way: called again before the next label)."""
+        while self._early:
+            w = self._early[0]
+            self.journal.append_withdrawal(w.origin, w.id, w.first, w.upto, w.ts, w.reason)
+            self._early.pop(0)
+            self.applied += 1
+
+    def describe_rule(self) -> str:
+        """How a person's lineage learns (its lag, its vote); "" for the script rule."""
+        if not self.person:
+            return ""
+        learner = self.learner
+        lag = (f"the lag estimated, {learner.estimated_lag} scans so far" if self.estimates
+               else f"shifted {learner.lag} scans back")
+        return f"{lag}, the {learner.vote} vote of {learner.k} nearest"
+
+    def _started(self) -> None:
         self.learner.parent = self.journal.header.get("parent")
         if self.person and self.fold_journal:
             raise ProcessError(f"{self.out} is a person's tree, rebuilt from every label of its "
                                "journal: --fold-journal cannot be used with it", EXIT_USAGE)
-        self.saved_applied = self.applied if self.out.exists() else -1
-        self.seq = 0
 
     @property
     def features(self) -> FeatureSpec:
@@ -362,6 +454,10 @@ class LearnerCore:
         if self.withdrawals.holds(w.origin, w.id):
             self._hold_withdrawal(w.origin, w.id, w.first, w.upto)
             return None
+        if self.undecided:  # no label journaled yet: journaled with the lineage (``choose``)
+            self._early.append(w)
+            self._hold_withdrawal(w.origin, w.id, w.first, w.upto)
+            return False
         self.journal.append_withdrawal(w.origin, w.id, w.first, w.upto, w.ts, w.reason)
         self.applied += 1
         self._hold_withdrawal(w.origin, w.id, w.first, w.upto)
@@ -388,15 +484,20 @@ class LearnerCore:
 
     def learn(self, scan_id: int, ts: float, ranges, yaw: float, label: str,
               origin: str | None = None, seq: int | None = None,
-              earlier=()) -> bool | None:
+              earlier=(), source: str | None = None) -> bool | None:
         """Journal (flushed) then learn one labeled scan; True when it reached the tree. A label
         with an identity (``origin``, ``seq``) is recorded in ``labels`` once journaled; one
         held already (a resend) is neither journaled nor learned again: None. Raises
         FeatureError (a scan the features cannot use: nothing written) or JournalError (the
         journal cannot be written, e.g. disk full: nothing written, nothing learned; call again
-        later with the same vector)."""
+        later with the same vector). The first label of a lineage whose rule is not chosen
+        yet chooses it by its ``source`` (``choose``)."""
         if self.holds(origin, seq):
             return None
+        if self.undecided:
+            self.choose(source)
+        elif self._early:
+            self._journal_early()
         x = self.learner.features.extract(ranges, yaw)
         back = None
         if self.estimates:  # the scans before it, (ranges, yaw) nearest first: the lag's data
@@ -421,12 +522,10 @@ class LearnerCore:
         learned from (a tree extended with ``--resume`` holds its parent's too) and how many of
         them this lineage's journal holds, its size."""
         learner = self.learner
-        rule = ""
-        if self.person:
-            lag = (f"the lag estimated, {learner.estimated_lag} scans so far" if self.estimates
-                   else f"shifted {learner.lag} scans back")
-            rule = (f"; a person's labels ({lag}, the {learner.vote} vote of {learner.k} "
-                    f"nearest)")
+        if self.undecided:
+            return (f"features {self.features.to_dict()['beams']}, a new tree: its rule is "
+                    f"chosen by the first label's source (--teacher auto)")
+        rule = f"; a person's labels ({self.describe_rule()})" if self.person else ""
         return (f"features {self.features.to_dict()['beams']}, {learner.vectors} vectors so far "
                 f"({self.applied} journaled in lineage {self.journal.lineage}), "
                 f"{learner.nodes} nodes{rule}")
@@ -461,7 +560,8 @@ class LearnerCore:
         return self.out.read_bytes()
 
     def close(self) -> None:
-        self.journal.close()
+        if self.journal is not None:
+            self.journal.close()
 
 
 def _resume(path, spec: FeatureSpec | None) -> DemonstrationLearner:
@@ -511,9 +611,12 @@ class LearnerProcess:
         self.snap_key = keys.learner_snapshot_key(ctx.robot)
         self.watch = ScanWatch("learner", keys.scan_key(ctx.robot), stale=3.0)
         # labels are paired with their scans as they arrive: nothing but labeled scans is queued
+        # (a lineage whose rule is not chosen yet shifts a person's labels only: ``lag_for``)
         self.pairing = Pairing(self.args.scan_buffer, self.args.match_timeout,
-                               on_scan_seen=self.watch.seen, lag=self.core.lag or 0,
-                               window=MAX_LAG if self.core.estimates else 0)
+                               on_scan_seen=self.watch.seen,
+                               **({"lag_of": self._lag_of} if self.core.undecided else
+                                  {"lag": self.core.lag or 0,
+                                   "window": MAX_LAG if self.core.estimates else 0}))
         self.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0, "duplicates": 0,
                       "withdrawals": 0, "withdrawn_skipped": 0}
         # teachers' withdrawals as they arrive (decoded in zenoh's thread), applied by the loop
@@ -529,6 +632,9 @@ class LearnerProcess:
         self.drain_until: float | None = None  # after a stop request: finish what arrived
         self.notice_pub = self.subs = None
         self.acks: Acknowledgements | None = None  # once the ack publisher is declared
+
+    def _lag_of(self, act: TeacherAction) -> int:  # zenoh's threads, under the pairing's lock
+        return self.core.lag_for(act.source)
 
     @staticmethod
     def open_core(args: argparse.Namespace, journal_write=os.write) -> LearnerCore:
@@ -637,10 +743,12 @@ class LearnerProcess:
         """Journal and learn the waiting labeled scans, in order, until the journal fails."""
         while self.backlog:
             scan, act = self.backlog[0]
+            undecided = self.core.undecided
             try:
                 learned = self.core.learn(
                     scan.id, scan.ts, scan.ranges, float(scan.pose[2]), act.action, act.origin,
-                    act.seq, [(s.ranges, float(s.pose[2])) for s in getattr(scan, "earlier", ())])
+                    act.seq, [(s.ranges, float(s.pose[2])) for s in getattr(scan, "earlier", ())],
+                    act.source)
             except FeatureError as exc:  # a scan the features cannot use (bad input)
                 self._pop()
                 self.stats["rejected"] += 1
@@ -651,6 +759,8 @@ class LearnerProcess:
                 self._journal_failed(exc)
                 return
             self._pop()
+            if undecided and not self.core.undecided:  # this label chose the rule
+                self.pairing.settle(*self.core.pairing())
             self.acks.handled(act, journaled=True)  # (again, for a duplicate: its ack was lost)
             if learned is None:  # resent, or live and resent: journaled once only
                 self.stats["duplicates"] += 1
@@ -836,7 +946,8 @@ class LearnerProcess:
     def counters(self) -> dict:
         """The learner's counters (``--stats``): this run's, the pairing's and the tree's."""
         core = self.core
-        return {**self.stats, "vectors": core.applied, "replayed": core.replayed,
+        rule = "undecided" if core.undecided else "person" if core.person else "script"
+        return {**self.stats, "rule": rule, "vectors": core.applied, "replayed": core.replayed,
                 "standing": core.standing, "rebuilds": core.rebuilds,
                 "withdrawn_labels": core.withdrawals.labels(),
                 "nodes": core.learner.nodes, "height": core.learner.height,

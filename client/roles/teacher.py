@@ -52,6 +52,7 @@ from client.behaviour.actions import DEFAULT_ACTIONS
 from client.behaviour.policies import STYLES, TAKEOVER, Demonstrator, takes_over
 from client.behaviour.tasks import TASKS, make_policy, task_of_teacher
 from client.labels import DRAIN, OUTBOX, RESEND_AFTER, Hold, LabelPublisher
+from client.labels import SOURCE as LABEL_SOURCE
 from client.player import PlayerClient
 from client.roles.common import (
     ScanWatch,
@@ -168,7 +169,10 @@ class TeacherProcess:
         # the outbox (labels kept until acknowledged, resent) only when a learner records
         self.labels = LabelPublisher(
             ctx.session, robot, outbox=self.args.outbox if self.args.wait_learner else 0,
-            resend_after=self.args.resend_after)
+            resend_after=self.args.resend_after,
+            # a person's labels at the keyboard say so: a learner's --teacher auto then
+            # learns them by the person rule
+            source="keyboard" if self.args.policy == "keyboard" else LABEL_SOURCE)
         ctx.scope.callback(self.labels.close)
         # commands on .../cmd/vel/teacher, express and never dropped
         self.client = PlayerClient(session=ctx.session, robot=robot, source=SOURCE,

@@ -3,8 +3,9 @@ real console page in a real headless Chromium for a short budget (demonstrating,
 correcting a ``--follow`` controller), against a real server, learner, console and controller;
 then the learner's saved tree is evaluated in the room it was taught in.
 
-The learner learns as it does for a person (``--teacher person``: lag pairing, majority labels)
-and the controller keeps its loop guard (on by default). The harness must work every time (the
+The learner runs with its defaults (``--teacher auto``: the page's labels are a person's, so
+lag pairing and majority labels) and the controller keeps its loop guard (on by default); the
+session is recorded and the paper's literal algorithm retrained from it as the baseline. The harness must work every time (the
 labels given at the page all reach the learner's journal, the controller drove in correct mode,
 a tree came out); the learned robot must not loop nor leave the wall. A 45-second budget is far
 below the issue's 4 + 2 minutes and does not always teach the whole room: when the learned
@@ -42,9 +43,17 @@ def test_a_short_person_teaches_a_robot_that_follows_the_wall(bench, tmp_path):
         if in_ci():
             pytest.fail(f"CI=true and {found}")
         pytest.skip(found)
-    r = bench.run_one("steady", 0, demo=45.0, correct=20.0, unseen=(), eval_episodes=2,
-                      eval_seconds=60.0, learner_args="--teacher person", workdir=tmp_path,
-                      log=lambda s: None)
+    r, lit = bench.run_one("steady", 0, demo=45.0, correct=20.0, unseen=(), eval_episodes=2,
+                           eval_seconds=60.0, literal=bench.LITERAL, workdir=tmp_path,
+                           log=lambda s: None)
+    # the learner's default (--teacher auto) took the person rule for the page's labels
+    assert r["rule"] == "person"
+    # the literal baseline: the same session's labels (its recording), the paper's rule
+    assert lit["learner"] == "literal" and lit["labels"] == r["labels"]
+    assert lit["labels_standing"] >= r["labels"]["given"] - r["labels"]["withdrawn"] - 5
+    assert lit["tree"]["nodes"] >= 2 and lit["eval"]["room"]["episodes"] == 2
+    # what the person saw: the page kept drawing and the person kept deciding
+    assert r["demonstrate"]["page_fps"] > 0 and r["demonstrate"]["person_hz"] > 0
     # the harness: a person at the real page, every label delivered and kept
     assert r["demonstrate"]["seconds"] >= 45.0 and r["correct"]["seconds"] >= 20.0
     assert r["demonstrate"]["presses"] > 5 and r["demonstrate"]["frames_with_a_key"] > 0

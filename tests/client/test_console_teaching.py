@@ -76,6 +76,32 @@ def test_a_rot_left_rot_right_loop_is_marked_where_it_began_and_the_robot_is_stu
     assert tr.markers == []
 
 
+def test_the_controllers_guard_stepping_in_counts_as_a_loop_until_it_stays_out():
+    tr = Trouble(guard_seconds=2.0)
+    for k in range(10):  # the controller drives; its guard has not stepped in
+        tr.state(k * 0.1, (2.0, 3.0, 0.0), stall=False, controller_drives=True)
+        tr.guarded(k * 0.1, False)
+    assert tr.stuck is None and tr.markers == []
+    tr.guarded(1.0, True)  # it overruled a reversal: the loop is marked where the robot is
+    tr.state(1.0, (2.0, 3.0, 0.5), stall=False, controller_drives=True)
+    assert tr.stuck == {"why": "guard", "x": 2.0, "y": 3.0}
+    assert [(m.kind, m.x, m.y) for m in tr.markers] == [("loop", 2.0, 3.0)]
+    for k in range(11, 40):  # it steps in again and again: still one marker, still stuck
+        tr.guarded(k * 0.1, k % 10 < 5)
+        tr.state(k * 0.1, (2.0, 3.0, 0.1 * k), stall=False, controller_drives=True)
+    assert tr.stuck["why"] == "guard" and len(tr.markers) == 1
+    assert not any(m.kind == "stall" for m in tr.markers)  # turning in place: the guard's loop
+    tr.state(6.5, (2.0, 3.0, 0.0), stall=False, controller_drives=True)  # 2 s without it
+    assert tr.stuck is None or tr.stuck["why"] != "guard"
+    tr.guarded(6.6, True)
+    tr.state(6.6, (2.0, 3.0, 0.0), stall=False, controller_drives=True)
+    assert tr.stuck["why"] == "guard" and tr.markers[0].count == 2  # the same place again
+    tr.state(6.7, (2.0, 3.0, 0.0), stall=False, controller_drives=False)  # a person drives
+    assert tr.stuck is None
+    tr.guarded(6.8, True)  # a decision while the person drives: not the learned robot's
+    assert tr.stuck is None and tr.markers[0].count == 2
+
+
 def test_a_collision_and_a_stall_are_marked_once_each():
     tr = Trouble(stall_seconds=1.0)
     for k in range(30):

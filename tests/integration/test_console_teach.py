@@ -2,12 +2,14 @@
 learner and console process: what a person at the page needs to teach well.
 
 - labels given before any learner is up are kept, the page says so, and a learner that comes up
-  gets every one of them;
+  gets every one of them (its default ``--teacher auto`` learns them by the person rule);
 - episodes (record, stop, discard) and undo withdraw labels: the learner rebuilds its tree
   without them and its journal keeps them out;
 - the keys 1-9 put the robot at a start pose, dragging it on the map moves it, Home resets;
 - in correct mode, a controller looping rot-left/rot-right is marked on the map and the page
-  says "the robot is stuck here: show it the way"; a key takes over and the prompt goes;
+  says "the robot is stuck here: show it the way"; a key takes over and the prompt goes; so
+  does a real ``rhbl controller`` whose loop guard holds the robot from a loop (its
+  decisions say so);
 - at 1200x800 the side panel never overflows sideways, with long tree ids and big numbers.
 
 Keys are pressed as a person presses them (selenium's key events); tests wait on events (a
@@ -17,6 +19,7 @@ Chromium is installed, except in CI (``CI=true``).
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from pathlib import Path
@@ -146,6 +149,10 @@ def test_labels_before_any_learner_are_kept_shown_and_delivered(env, browser, tm
     assert rc == 0, learner.output()
     with Journal.open(journal_path(learner.out), readonly=True) as j:
         assert len(list(j.standing())) == given
+        # the learner's default --teacher auto: the page's labels are a person's, so the new
+        # lineage learns by the person rule, and its journal's header says so
+        assert j.header["meta"]["learning"]["rule"] == "person"
+    assert "the first label came from 'console'" in learner.output()
     assert _errors(browser) == []
 
 
@@ -263,9 +270,10 @@ def _places(env, browser) -> None:
     _press(browser, "r")
     _until(browser, lambda d: _attr(d, "episode", "state") == "recording", 10, "recording")
     n = _attr(browser, "episode", "n")
-    _hold_until(browser, "ARROW_UP", lambda d: _int(d, "episode", "labels") >= 5, "5 labels")
+    # held until 5 labels and the robot moved (a loaded machine may label faster than it moves)
+    _hold_until(browser, "ARROW_UP", lambda d: _int(d, "episode", "labels") >= 5
+                and not _near(w.state.truth, starts[2], 0.2), "5 labels, the robot moved")
     w.wait(Watch.stopped, 5, "the robot stops")
-    w.wait(lambda w: not _near(w.state.truth, starts[2], 0.2), 5, "it moved")
     _fresh(browser)
     withdrawn, labels = _int(browser, "labels", "withdrawn"), _int(browser, "episode", "labels")
     _press(browser, "e")
@@ -305,6 +313,23 @@ def _purple_near(browser, x: float, y: float) -> bool:
         return false;""", ox, oy)
 
 
+def _ring_then_show_the_way(browser, w) -> dict:
+    """The loop's mark drawn on the map (a purple ring of 0.18 m about it), then the person
+    shows the way: the prompt goes while they drive. The loop's marker."""
+    loop = next(m for m in browser.execute_script("return window.rhbl.view().markers")
+                if m["kind"] == "loop")
+    _until(browser, lambda d: _purple_near(d, loop["x"] + 0.18, loop["y"]), 5,
+           "the loop's ring on the canvas")
+    _keys(browser, ("down", "ARROW_UP"))
+    try:
+        w.wait(lambda w: w.state.driver == "teacher", 5, "the person takes over")
+        _until(browser, lambda d: not d.find_element("id", "stuck").is_displayed(), 10,
+               "the prompt goes while the person drives")
+    finally:
+        _keys(browser, ("up", "ARROW_UP"))
+    return loop
+
+
 class _Looper:
     """A stand-in for a learned robot that loops: a controller-source client answering every
     scan of r0, two scans rot-left then two rot-right (a rot-left/rot-right alternation)."""
@@ -340,22 +365,68 @@ def test_correct_mode_marks_a_loop_and_asks_the_person_to_show_the_way(env, brow
         assert "show it the way" in _text(browser, "stuck")
         assert _int(browser, "trouble", "loops") > markers0
         assert browser.find_element("id", "stuck").is_displayed()
-        # the loop's mark is drawn on the map: a purple ring of 0.18 m about it
-        loop = next(m for m in browser.execute_script("return window.rhbl.view().markers")
-                    if m["kind"] == "loop")
-        _until(browser, lambda d: _purple_near(d, loop["x"] + 0.18, loop["y"]), 5,
-               "the loop's ring on the canvas")
-        # the person shows the way: the prompt goes while they drive
-        _keys(browser, ("down", "ARROW_UP"))
-        try:
-            w.wait(lambda w: w.state.driver == "teacher", 5, "the person takes over")
-            _until(browser, lambda d: not d.find_element("id", "stuck").is_displayed(), 10,
-                   "the prompt goes while the person drives")
-        finally:
-            _keys(browser, ("up", "ARROW_UP"))
+        _ring_then_show_the_way(browser, w)
     finally:
         looper.close()
     w.wait(Watch.stopped, 5, "the robot stops")
+    _press(browser, "t")
+    assert _errors(browser) == []
+
+
+def _looping_tree(path: Path, pose) -> Path:
+    """A learned tree that sends the robot at ``pose`` into a rot-left/rot-right loop: taught
+    there, heading by heading, rot-left and rot-right in bands of 15 degrees (each rotation
+    brings the robot into a band of the other)."""
+    from client.behaviour.actions import DEFAULT_ACTIONS
+    from client.behaviour.features import FEATURES
+    from client.behaviour.learning import DemonstrationLearner
+    from lab.harness import resolve_world
+    from server.world import World
+
+    world = World(resolve_world("room"))
+    learner = DemonstrationLearner(FEATURES["wall"], DEFAULT_ACTIONS, task="wall-following")
+    for k in range(720):
+        yaw = -math.pi + 2 * math.pi * k / 720
+        world.set_pose(0, (pose[0], pose[1], yaw))
+        learner.observe(world.scan(0), yaw, "rot-left" if int(math.degrees(yaw + math.pi) // 15)
+                        % 2 else "rot-right")
+    learner.save(path)
+    return path
+
+
+def test_the_controllers_loop_guard_asks_the_person_to_show_the_way(env, browser, tmp_path):
+    """A real ``rhbl controller`` (its loop guard on, the default) drives a tree that loops: the
+    guard keeps the loop off the bus (no rot-left/rot-right alternation for the console's own
+    detector), and its decisions say it stepped in; in correct mode the page says "the robot
+    is stuck here: show it the way" there, and marks the place."""
+    w = env["watch"]
+    start = env["starts"][0]
+    tree = _looping_tree(tmp_path / "loop.rhbl", start)
+    env["sim"].set_pose2d(*start)
+    _open(browser, env["console"].url)
+    _press(browser, "c")
+    _until(browser, lambda d: d.find_element("css selector", "#modes input[value=correct]")
+           .is_selected(), 5, "correct mode")
+    _press(browser, "HOME")  # no marks of earlier tests
+    _until(browser, lambda d: _int(d, "trouble", "markers") == 0, 10, "no trouble marks")
+    ctl = _rhbl("controller", tmp_path, "controller", "--tree", str(tree), "--connect",
+                env["srv"].endpoint, "--stats", str(tmp_path / "controller.json"))
+    try:
+        w.wait(lambda w: w.state.driver.startswith("controller"), 30, "the controller drives")
+        _until(browser, lambda d: _attr(d, "stuck", "why") == "guard", 30,
+               "the guard's stuck prompt")
+        text = _text(browser, "stuck")
+        assert "the robot is stuck here" in text and "show it the way" in text
+        assert "loop guard" in text
+        _until(browser, lambda d: _attr(d, "decision", "looping") == "1", 10,
+               "the decision panel: the guard stepped in")
+        loop = _ring_then_show_the_way(browser, w)
+        assert _near((loop["x"], loop["y"]), start, 0.2)  # where the robot turns in place
+    finally:
+        rc = ctl.stop()
+    assert rc == 0, ctl.output()
+    stats = json.loads((tmp_path / "controller.json").read_text())
+    assert stats["overruled"] > 0, stats  # it was the guard that stepped in
     _press(browser, "t")
     assert _errors(browser) == []
 

@@ -23,6 +23,19 @@ def test_decision_round_trip():
     assert msgpack.unpackb(d.encode())["path"][1] == [3, 1, 1.25, "fwd-left"]
 
 
+def test_the_loop_guards_fields_are_optional():
+    d = Decision(scan_id=7, action="rot-left", executed="rot-right", looping=True)
+    assert Decision.decode(d.encode()) == d
+    plain = msgpack.unpackb(Decision(scan_id=7, action="fwd").encode())
+    assert "looping" not in plain and "executed" not in plain  # said only when they apply
+    back = Decision.decode(msgpack.packb({"v": 1, "scan_id": 1, "action": "fwd"}))
+    assert back.looping is False and back.executed is None
+    with pytest.raises(DecodeError, match="looping"):
+        Decision.decode(_raw(looping="yes"))
+    with pytest.raises(DecodeError, match="executed"):
+        Decision.decode(_raw(executed=3))
+
+
 def _raw(**fields):
     m = {"v": 1, "scan_id": 1, "action": "fwd", "path": [[0, 0, 1.0, "fwd"]]}
     m.update(fields)

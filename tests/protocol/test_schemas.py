@@ -28,7 +28,7 @@ FULL = [
     m.Withdrawal(origin="o1", id=0, first=10, upto=60, ts=1.0, reason="undo 5 s"),
     m.TreeNotice(seq=1, nodes=7, height=3, vectors=12, snapshot_id="l:12", ts=1.0),
     m.Decision(scan_id=3, action="fwd", path=((0, 0, 1.5, "fwd"),), ts=1.0, snapshot_id="l:1",
-               nodes=7),
+               nodes=7, executed="rot-left", looping=True),
     m.Geometry(pose=(0, 0, 0), size=(0.5, 0.4), radius=0.25),
     m.LaserConfig(min_angle=-1.5, max_angle=1.5, resolution=0.01, max_range=8.0, count=360),
     m.SetOdom(pose=(0, 0, 0)),

@@ -277,7 +277,8 @@ class Console:
                 for i, dp, r, lab in d.path]
         self._hand(robot, "decision", json.dumps({
             "t": "decision", "robot": robot, "scan_id": d.scan_id, "ts": d.ts,
-            "action": d.action, "snapshot_id": d.snapshot_id, "nodes": d.nodes, "path": path}))
+            "action": d.action, "snapshot_id": d.snapshot_id, "nodes": d.nodes, "path": path,
+            "executed": d.executed, "looping": d.looping}), d)
 
     def _on_cmd(self, sample) -> None:
         c, robot = self._decode(VelCmd, sample)
@@ -345,6 +346,10 @@ class Console:
         elif kind == "notice":
             r.tree_wanted = msg.snapshot_id or f"notice-{msg.seq}"
             self._fetch_tree(r)
+        elif kind == "decision" and msg is not None:
+            # the controller's loop guard: where it holds the robot from a loop, a person
+            # should show the way out (the decisions come while the controller drives)
+            r.trouble.guarded(msg.ts, msg.looping)
         elif kind.startswith("cmd-") and msg[0].split("-", 1)[0] == "controller":
             st = r.state
             if st is not None and st.driver.startswith("controller"):
@@ -452,7 +457,8 @@ class Console:
         if r.pubs is None:
             r.client = PlayerClient(session=self.session, robot=r.name, source="teacher",
                                     express=True, block=True)
-            r.pubs = LabelPublisher(self.session, r.name)
+            # labels marked as a person's: a learner's --teacher auto takes the person rule
+            r.pubs = LabelPublisher(self.session, r.name, source="console")
             # the teacher's hold token, one per robot driven (its ident names that robot)
             r.hold = Hold(self.session, f"{r.name}-{os.getpid()}")
 

@@ -18,7 +18,11 @@ console's server side, ``client.roles.console.app``, feeds it and says it to the
   detector (``client.behaviour.loops.LoopDetector``) and its states through a stall and a
   collision watch; each loop, stall (hardly moving for ``STALL_SECONDS``) and collision leaves a
   ``Marker`` where it happened, and ``stuck`` says the robot loops or stalls now (the page's
-  "the robot is stuck here: show it the way").
+  "the robot is stuck here: show it the way"). The controller's own loop guard
+  (``client.behaviour.guard.RotationGuard``) keeps such a loop off the bus: its decisions say
+  when it stepped in (``Decision.looping``, fed to ``guarded``), which counts as a loop too
+  (``stuck`` ``why`` ``guard``, a loop marker where it began) until ``GUARD_SECONDS`` pass
+  without it.
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ from dataclasses import asdict, dataclass
 
 from client.behaviour.loops import LoopDetector
 
-__all__ = ["AGREEMENT_WINDOW", "STALL_SECONDS", "UNDO_MAX", "Episode", "Marker", "Teaching",
+__all__ = ["AGREEMENT_WINDOW", "GUARD_SECONDS", "STALL_SECONDS", "UNDO_MAX", "Episode", "Marker", "Teaching",
            "Trouble"]
 
 AGREEMENT_WINDOW = 60.0  # s of sim time the agreement is measured over
@@ -37,6 +41,7 @@ UNDO_MAX = 120.0  # s: the longest undo
 HISTORY = 36_000  # labels remembered for undo (an hour at 10 Hz)
 STALL_SECONDS = 5.0  # s of sim time the controller drives without moving STALL_METRES
 STALL_METRES = 0.1
+GUARD_SECONDS = 5.0  # s of sim time the guard's loop counts after the guard last stepped in
 MARKERS = 200  # markers kept per robot (the newest)
 NEAR = 0.3  # m: a marker of the same kind this close counts again instead of a new one
 
@@ -203,8 +208,12 @@ class Teaching:
 class Trouble:
     """Where the learned robot looped, stalled or collided (see the module)."""
 
-    def __init__(self, stall_seconds: float = STALL_SECONDS, stall_metres: float = STALL_METRES):
+    def __init__(self, stall_seconds: float = STALL_SECONDS, stall_metres: float = STALL_METRES,
+                 guard_seconds: float = GUARD_SECONDS):
         self.stall_seconds, self.stall_metres = float(stall_seconds), float(stall_metres)
+        self.guard_seconds = float(guard_seconds)
+        self._guard_ts: float | None = None  # sim time the controller's guard last stepped in
+        self._now: float | None = None  # the latest State's sim time
         self.detector = LoopDetector()
         self.markers: list[Marker] = []
         self._poses: deque[tuple[float, float, float]] = deque()  # (ts, x, y) while it drives
@@ -213,26 +222,39 @@ class Trouble:
         self.changed = False  # a marker or the stuck state changed since the last look
 
     @property
+    def guarding(self) -> bool:
+        """The controller's loop guard stepped in within the last ``guard_seconds``."""
+        return (self._guard_ts is not None and self._now is not None
+                and self._guard_ts - 1e-6 <= self._now <= self._guard_ts + self.guard_seconds)
+
+    @property
     def stuck(self) -> dict | None:
-        """``{"why": "loop"|"stall", "x", "y"}`` while the controller loops or stalls now."""
-        if not self._driving or not (self.detector.looping or self._stalled):
+        """``{"why": "guard"|"loop"|"stall", "x", "y"}`` while the controller loops (its guard
+        holds it from a loop, or its commands alternate) or stalls now."""
+        guarding = self.guarding
+        if not self._driving or not (guarding or self.detector.looping or self._stalled):
             return None
-        why = "loop" if self.detector.looping else "stall"
+        why = "guard" if guarding else "loop" if self.detector.looping else "stall"
         _, x, y = self._poses[-1] if self._poses else (0.0, math.nan, math.nan)
         return {"why": why, "x": round(x, 3), "y": round(y, 3)}
 
     def state(self, ts: float, pose, stall: bool, controller_drives: bool) -> None:
         """A State of the robot: its sim time, true pose, stall flag, and whether the
         controller drives it."""
+        was = self.guarding
+        self._now = float(ts)
         if not controller_drives:
             if self._driving:
                 self._driving = False
                 self.detector.reset()
                 self._poses.clear()
                 self._stalled = self._looped = self._collided = False
+                self._guard_ts = None
                 self.changed = True
             return
         self._driving = True
+        if self.guarding != was:
+            self.changed = True
         x, y = float(pose[0]), float(pose[1])
         if self._poses and ts < self._poses[-1][0]:
             self._poses.clear()  # the server restarted
@@ -246,11 +268,28 @@ class Trouble:
         still = (self._poses[0][0] <= ts - self.stall_seconds
                  and max(math.hypot(px - window[0][1], py - window[0][2])
                          for _, px, py in window) < self.stall_metres)
-        if still and not self._stalled and not self.detector.looping:
+        if still and not self._stalled and not self.detector.looping and not self.guarding:
             self._mark("stall", ts, x, y)
         if still != self._stalled:
             self._stalled = still
             self.changed = True
+
+    def guarded(self, ts: float, looping: bool) -> None:
+        """A decision of the controller for the scan of sim time ``ts``: whether its loop
+        guard stepped in lately (``Decision.looping``). The first of a stretch leaves a loop
+        marker where the robot is."""
+        if not self._driving or not looping:
+            return
+        if self._guard_ts is not None and ts < self._guard_ts - 1e-6:
+            self._guard_ts = None  # the server restarted
+        if not self.guarding:
+            _, x, y = self._poses[-1] if self._poses else (0.0, math.nan, math.nan)
+            if math.isfinite(x):
+                self._mark("loop", ts, x, y)
+            self.changed = True
+        self._guard_ts = float(ts)
+        if self._now is None or self._now < ts:
+            self._now = float(ts)
 
     def command(self, ts: float, action: str) -> None:
         """The action the controller commanded for the scan of sim time ``ts`` (while it
@@ -282,6 +321,7 @@ class Trouble:
         """Forget the markers and the current state (a reset of the scene, a teleport)."""
         self.markers.clear()
         self.detector.reset()
+        self._guard_ts = None
         self._poses.clear()
         self._stalled = self._looped = self._collided = False
         self.changed = True

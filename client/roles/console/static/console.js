@@ -173,10 +173,17 @@ function showTeach() {
   stuck.dataset.why = show ? m.stuck.why : "";
   if (show) {
     stuck.textContent = S.mode === "correct"
-      ? `the robot is stuck here (${m.stuck.why === "loop" ? "it turns left and right in a loop" : "it hardly moves"}): show it the way`
+      ? `the robot is stuck here (${STUCK[m.stuck.why] || m.stuck.why}): show it the way`
       : `the robot is stuck here (${m.stuck.why}): switch to correct (C) to show it the way`;
   }
 }
+
+// why the learned robot is stuck, as the panel says it
+const STUCK = {
+  loop: "it turns left and right in a loop",
+  guard: "it would turn left and right in a loop: the controller's loop guard keeps it turning one way",
+  stall: "it hardly moves",
+};
 
 function setRobots(names) {
   const sel = $("robot");
@@ -574,8 +581,10 @@ function panel() {
   if (d && d !== panel.shown) {
     panel.shown = d;
     const win = d.path[d.path.length - 1];
+    const guard = d.executed ? ` (the guard commanded ${d.executed})` : "";
+    $("decision").dataset.looping = d.looping ? "1" : "0";
     $("decision").textContent = win
-      ? `${d.action}: sphere #${win.index}, radius ${win.radius === null ? "inf" : win.radius.toFixed(3)}, depth ${win.depth} (scan ${d.scan_id}, tree ${d.snapshot_id || "from a file"}, ${d.nodes} nodes)`
+      ? `${d.action}${guard}: sphere #${win.index}, radius ${win.radius === null ? "inf" : win.radius.toFixed(3)}, depth ${win.depth} (scan ${d.scan_id}, tree ${d.snapshot_id || "from a file"}, ${d.nodes} nodes)`
       : d.action;
     $("path").innerHTML = "";
     for (const e of d.path) {
