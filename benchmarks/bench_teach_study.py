@@ -37,6 +37,7 @@ from __future__ import annotations
 import argparse
 import copy
 import json
+import math
 import sys
 import time
 from collections import OrderedDict
@@ -56,7 +57,7 @@ from client.behaviour.learning import DemonstrationLearner, TreePolicy  # noqa: 
 from client.behaviour.teaching import MAX_LAG, PersonLearner, answered_scan  # noqa: E402
 from lab import metrics  # noqa: E402
 from lab.episode import DT, Episode  # noqa: E402
-from lab.evaluate import evaluate  # noqa: E402
+from lab.evaluate import evaluate, success  # noqa: E402
 from lab.harness import resolve_world  # noqa: E402
 from lab.recipe import EVAL_SECONDS  # noqa: E402
 from server.world import World, free_pose, sample_pose  # noqa: E402
@@ -64,6 +65,9 @@ from server.world import World, free_pose, sample_pose  # noqa: E402
 TAUGHT = "room"
 UNSEEN_DEV = ("eval-room-l", "eval-room-ring", "eval-room-jagged", "eval-holdout-room-t")
 UNSEEN_HELD_OUT = ("eval-holdout-room-oct", "eval-holdout2-room-spike", "eval-holdout4-room-open")
+# --task maze: taught in the tiered maze, the unseen mazes of docs/experiments.md's first table
+MAZE_WORLDS = ("maze", "eval-maze-3tier", "eval-maze-5tier", "eval-maze-narrow")
+DEFAULT_WORLDS = {"wall-following": (TAUGHT, *UNSEEN_DEV), "maze": MAZE_WORLDS}
 # --where near: the robot dragged off its path (m, normal), turned (rad, uniform), and left at
 # least this far from every wall (m): the person then shows the way back
 NEAR = (0.2, 0.8, 0.35)
@@ -82,6 +86,7 @@ class Session:
     takeovers: int = 0
     wrong: int = 0                  # labels whose key was not the one the person meant
     collisions: int = 0             # while teaching
+    goals: int = 0                  # times the robot reached the goal (then put at a start)
     poses: list = field(default_factory=list)
     side: list = field(default_factory=list)   # right-hand wall distance (lab.metrics) per step
 
@@ -95,8 +100,8 @@ class Method:
     lag: int | None
     options: dict
 
-    def learner(self) -> DemonstrationLearner:
-        spec, task = FEATURES["wall"], "wall-following"
+    def learner(self, task: str = "wall-following") -> DemonstrationLearner:
+        spec = FEATURES["wall"]  # the features of both tasks' recipes (lab.recipe.RECIPES)
         if self.name == "person":
             return PersonLearner(spec, DEFAULT_ACTIONS, task=task, lag=self.lag, **self.options)
         spawn = "all" if self.name == "literal" else "winner"
@@ -142,9 +147,11 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
     pose (``where="starts"``), anywhere in the free space, any heading (``"free"``:
     ``server.world.free_pose``, as a person dragging the robot about would), or a little off
     where it is (``"near"``: ``server.world.sample_pose`` with ``NEAR``: dragged off its path
-    and turned, so the person shows the way back)."""
+    and turned, so the person shows the way back). A world with a goal (the maze): when the
+    robot reaches it, in either mode, the person puts it at the world's next start pose (the
+    console's set_pose) and teaches the way again (``Session.goals`` counts them)."""
     rng = np.random.default_rng(seed + 555)
-    learner = method.learner()
+    learner = method.learner() if spec.task == "wall-following" else method.learner(spec.task)
     world = World(spec, robots=1, seed=seed)
     world.reset(poses=[tuple(spec.pose)])
     walls = spec.segments()
@@ -161,6 +168,11 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
         if mode == "correct" and k == int(round(demo / DT)):
             in_control = False  # the person switches the page to correct mode
         every = restarts[0] if mode == "demonstrate" else restarts[1]
+        if spec.goal is not None and k > 0 and math.dist(world.pose(0)[:2],
+                                                         spec.goal.center) <= spec.goal.radius:
+            rec.goals += 1
+            moved_at, next_start = t, next_start + 1
+            world.set_pose(0, starts[next_start % len(starts)])
         if every > 0 and t > 0 and (t - moved_at >= every - 1e-9
                                     or (mode == "correct" and moved_at < demo)):
             moved_at, next_start = t, next_start + 1  # the next start pose (set_pose)
@@ -254,17 +266,19 @@ def alone(model: str, seed: int, world: str) -> list[dict]:
         spec = resolve_world(world)
         seconds = EVAL_SECONDS[spec.task]
         _ALONE[key] = [drive_alone(spec, PEOPLE[model](seed=1000 * seed + i), st, seconds,
-                                   seed=seed).metrics()
+                                   seed=seed).metrics(spec.goal)
                        for i, st in enumerate(spec.start_poses)]
     return _ALONE[key]
 
 
 def _why(lm: dict) -> str:
-    """Why an episode failed (``lab.metrics.wall_success``): the first reason that holds."""
+    """Why an episode failed (``lab.evaluate.success``): the first reason that holds."""
     if lm["oscillation_loops"]:
         return "loop"
     if lm["collisions"]:
         return "collision"
+    if lm["goal_reached"] is False:  # a world with a goal (None: none)
+        return "goal not reached"
     if lm["wall_band_fraction"] < 0.8:
         return "off the wall"
     return "too short"  # under 70% of the scripted teacher's distance
@@ -281,7 +295,9 @@ def score(policy, worlds, model: str, seed: int = 0) -> dict:
             if not lm["success"]:
                 w = _why(lm)
                 why[w] = why.get(w, 0) + 1
-        pace = [metrics.wall_success(lm, own["distance"])
+        # at the person's pace (wall following: 70% of their distance; the maze's rule has no
+        # distance: the same as success)
+        pace = [success(rep["task"], lm, own)
                 for lm, own in zip(rep["learner"], alone(model, seed, name), strict=True)]
         out[name] = {"success": rep["success_rate"], "pace": float(np.mean(pace)),
                      "loops": len(rep["loops"]),
@@ -296,7 +312,7 @@ def run_one(model: str, seed: int, method: str, worlds, *, demo: float = 240.0,
             clearance: float = CLEARANCE) -> dict:
     """One person model, one seed, one method: teach, then evaluate."""
     t0 = time.perf_counter()
-    rec, learner = teach(resolve_world(TAUGHT), PEOPLE[model](seed=seed), make_method(method),
+    rec, learner = teach(resolve_world(worlds[0]), PEOPLE[model](seed=seed), make_method(method),
                          demo=demo, correct=correct, seed=seed, latency=latency, guard=guard,
                          restarts=restarts, where=where, clearance=clearance)
     policy = TreePolicy.from_learner(learner)
@@ -307,7 +323,7 @@ def run_one(model: str, seed: int, method: str, worlds, *, demo: float = 240.0,
                                 else "guard, no clearance"),
             "labels": rec.labels, "demo_labels": rec.demo_labels,
             "corrections": rec.corrections, "takeovers": rec.takeovers,
-            "wrong": rec.wrong, "teaching_collisions": rec.collisions,
+            "wrong": rec.wrong, "teaching_collisions": rec.collisions, "goals": rec.goals,
             "nodes": learner.nodes, "height": learner.height,
             "lag": getattr(learner, "estimated_lag", 0),
             "agreement": [round(a, 3) for a in getattr(learner, "lag_agreement", [])],
@@ -328,7 +344,7 @@ def person_row(model: str, seeds, worlds) -> dict:
         for seed in seeds:
             for st, own in zip(spec.start_poses, alone(model, seed, name), strict=True):
                 tt = _teacher_episode(spec, DEFAULT_ACTIONS, st, seconds, 0, 0.0, 0.0, DT)
-                ok.append(metrics.wall_success(own, tt.metrics()["distance"]))
+                ok.append(success(spec.task, own, tt.metrics(spec.goal)))
         out[name] = float(np.mean(ok))
     return out
 
@@ -352,12 +368,14 @@ def table(rows: list[dict], taught: str, unseen) -> str:
     for r in rows:
         groups.setdefault((r["model"], r["method"] + (f" +{r['guard']}" if r["guard"] else "")),
                           []).append(r)
-    lines = ["| model | method | seeds | taught room | unseen rooms | at the person's pace: "
+    lines = ["| model | method | seeds | taught world | unseen worlds | at the person's pace: "
              "taught / unseen | loops | collisions | nodes | labels | corrections | wrong keys "
              "| lag (scans) | failed episodes |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
     def cell(rs, key, worlds):
+        if not worlds:
+            return float("nan"), float("nan")
         v = [_mean([r["worlds"][w][key] for w in worlds]) for r in rs]
         return 100 * _mean(v), 100 * min(v)
 
@@ -387,8 +405,12 @@ def main(argv=None) -> int:
     ap.add_argument("--methods", default="today,literal,person",
                     help=f"learning methods ({', '.join(METHODS)}; options after a colon: "
                          "person:lag=2+k=25)")
-    ap.add_argument("--worlds", default=",".join((TAUGHT, *UNSEEN_DEV)),
-                    help="worlds to evaluate in (the first is the one taught in)")
+    ap.add_argument("--task", choices=sorted(DEFAULT_WORLDS), default="wall-following",
+                    help="the default --worlds: the room and the unseen rooms, or the tiered "
+                         "maze and the unseen mazes")
+    ap.add_argument("--worlds", default=None,
+                    help="worlds to evaluate in (the first is the one taught in; default: "
+                         "--task's)")
     ap.add_argument("--demo", type=float, default=240.0, help="s of demonstrating")
     ap.add_argument("--correct", type=float, default=120.0, help="s of correcting")
     ap.add_argument("--latency", type=float, default=0.03, help="s the page is behind the world")
@@ -422,7 +444,9 @@ def main(argv=None) -> int:
             make_method(m)
         except (ValueError, TypeError) as exc:
             ap.error(str(exc))
-    worlds = [w for w in args.worlds.split(",") if w]
+    worlds = [w for w in (args.worlds or ",".join(DEFAULT_WORLDS[args.task])).split(",") if w]
+    if not worlds:
+        ap.error("--worlds: no world given")
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     rows = []
     for method in methods:
@@ -437,6 +461,7 @@ def main(argv=None) -> int:
                       + " ".join(f"{w} {100 * s['success']:.0f}%/{s['loops']}L"
                                  for w, s in r["worlds"].items())
                       + f" | lag {r['lag']} (reaction {r['reaction']:.2f} s)"
+                      + (f" | goal {r['goals']}x while teaching" if r["goals"] else "")
                       + f" | {r['nodes']} nodes, {r['labels']} labels ({r['corrections']} "
                         f"corrections, {r['takeovers']} takeovers), {r['wrong']} wrong, "
                         f"{r['wall_time']} s", flush=True)
