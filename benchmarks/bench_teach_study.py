@@ -3,7 +3,7 @@
     python benchmarks/bench_teach_study.py [--models steady,hurried] [--seeds 3] \
         [--methods today,literal,person,person:k=25,person:lag=auto] [--guard] [--clearance 0.3] \
         [--restart-correct 20] [--restart-demo 20 --where starts|free|near] \
-        [--worlds room,eval-room-l,...] [--json out.json]
+        [--task wall-following|maze] [--worlds room,eval-room-l,...] [--bare] [--json out.json]
 
 No zenoh, no browser: the world is stepped at 10 Hz as ``lab.harness`` does, and the page's and
 the console's semantics are reproduced. The person (``benchmarks/people.py``) sees each frame
@@ -28,8 +28,12 @@ success as ``lab.evaluate`` judges it (no collision, >= 80% of the time with the
 within 0.3-1.2 m, and at least 70% of the scripted teacher's distance), success at the person's
 own pace (70% of the distance the person covers from the same start, the rest unchanged),
 oscillation loops, collisions, tree size, labels, corrections, wrong keys and why episodes
-failed. ``--alone`` also drives each person model by itself from every start pose: what the
-person does, judged the same way (their own pace is that reference).
+failed. ``--task maze`` teaches in the tiered maze (``maze``) and evaluates there and in the
+unseen mazes: success is then the maze's (the goal reached with no collision), and when the
+robot reaches the goal while teaching the person puts it at the next start pose. ``--bare``
+(with ``--guard``) also evaluates the tree alone. ``--alone`` also drives each person model by
+itself from every start pose: what the person does, judged the same way (their own pace is
+that reference).
 """
 
 from __future__ import annotations
@@ -309,8 +313,9 @@ def score(policy, worlds, model: str, seed: int = 0) -> dict:
 def run_one(model: str, seed: int, method: str, worlds, *, demo: float = 240.0,
             correct: float = 120.0, latency: float = 0.03, guard: bool = False,
             restarts: tuple[float, float] = (0.0, 0.0), where: str = "starts",
-            clearance: float = CLEARANCE) -> dict:
-    """One person model, one seed, one method: teach, then evaluate."""
+            clearance: float = CLEARANCE, bare: bool = False) -> dict:
+    """One person model, one seed, one method: teach, then evaluate (``bare``, with ``guard``:
+    also the tree alone, as ``rhbl evaluate`` and ``rhbl experiment`` judge it: ``"bare"``)."""
     t0 = time.perf_counter()
     rec, learner = teach(resolve_world(worlds[0]), PEOPLE[model](seed=seed), make_method(method),
                          demo=demo, correct=correct, seed=seed, latency=latency, guard=guard,
@@ -328,7 +333,9 @@ def run_one(model: str, seed: int, method: str, worlds, *, demo: float = 240.0,
             "lag": getattr(learner, "estimated_lag", 0),
             "agreement": [round(a, 3) for a in getattr(learner, "lag_agreement", [])],
             "reaction": PEOPLE[model](seed=seed).style.reaction,
-            "worlds": scores, "wall_time": round(time.perf_counter() - t0, 1)}
+            "worlds": scores,
+            **({"bare": score(policy, worlds, model, seed=seed)} if guard and bare else {}),
+            "wall_time": round(time.perf_counter() - t0, 1)}
 
 
 def person_row(model: str, seeds, worlds) -> dict:
@@ -430,6 +437,9 @@ def main(argv=None) -> int:
                          "order with a laser return within 0.5 m ahead and M m of the centre "
                          f"line becomes a rotation in place (default {CLEARANCE:g}, as rhbl "
                          "controller; 0: off)")
+    ap.add_argument("--bare", action="store_true",
+                    help="with --guard: also evaluate the tree alone (no guard, as rhbl "
+                         "evaluate and rhbl experiment judge it) and print its table too")
     ap.add_argument("--alone", action="store_true",
                     help="also print how each person model does driving by itself")
     ap.add_argument("--json", default=None, help="write every run here")
@@ -455,7 +465,7 @@ def main(argv=None) -> int:
                 r = run_one(model, seed, method, worlds, demo=args.demo, correct=args.correct,
                             latency=args.latency, guard=args.guard,
                             restarts=(args.restart_demo, args.restart_correct),
-                            where=args.where, clearance=args.clearance)
+                            where=args.where, clearance=args.clearance, bare=args.bare)
                 rows.append(r)
                 print(f"{method:>12} {model:>12} seed {seed}: "
                       + " ".join(f"{w} {100 * s['success']:.0f}%/{s['loops']}L"
@@ -467,6 +477,10 @@ def main(argv=None) -> int:
                         f"{r['wall_time']} s", flush=True)
     print()
     print(table(rows, worlds[0], worlds[1:]))
+    if args.bare and args.guard:
+        print()
+        print(table([dict(r, worlds=r["bare"], guard="tree alone, no guard") for r in rows],
+                    worlds[0], worlds[1:]))
     if args.alone:
         print()
         print("| person alone (lab.evaluate's rule) | " + " | ".join(worlds) + " |")
