@@ -3,7 +3,7 @@
     python benchmarks/bench_teach_study.py [--models steady,hurried] [--seeds 3] \
         [--methods today,literal,person,person:k=25,person:lag=auto] [--guard] [--clearance 0.3] \
         [--restart-correct 20] [--restart-demo 20 --where starts|free|near] \
-        [--worlds room,eval-room-l,...] [--json out.json]
+        [--task wall-following|maze] [--worlds room,eval-room-l,...] [--bare] [--json out.json]
 
 No zenoh, no browser: the world is stepped at 10 Hz as ``lab.harness`` does, and the page's and
 the console's semantics are reproduced. The person (``benchmarks/people.py``) sees each frame
@@ -28,8 +28,12 @@ success as ``lab.evaluate`` judges it (no collision, >= 80% of the time with the
 within 0.3-1.2 m, and at least 70% of the scripted teacher's distance), success at the person's
 own pace (70% of the distance the person covers from the same start, the rest unchanged),
 oscillation loops, collisions, tree size, labels, corrections, wrong keys and why episodes
-failed. ``--alone`` also drives each person model by itself from every start pose: what the
-person does, judged the same way (their own pace is that reference).
+failed. ``--task maze`` teaches in the tiered maze (``maze``) and evaluates there and in the
+unseen mazes: success is then the maze's (the goal reached with no collision), and when the
+robot reaches the goal while teaching the person puts it at the next start pose. ``--bare``
+(with ``--guard``) also evaluates the tree alone. ``--alone`` also drives each person model by
+itself from every start pose: what the person does, judged the same way (their own pace is
+that reference).
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ from __future__ import annotations
 import argparse
 import copy
 import json
+import math
 import sys
 import time
 from collections import OrderedDict
@@ -56,7 +61,7 @@ from client.behaviour.learning import DemonstrationLearner, TreePolicy  # noqa: 
 from client.behaviour.teaching import MAX_LAG, PersonLearner, answered_scan  # noqa: E402
 from lab import metrics  # noqa: E402
 from lab.episode import DT, Episode  # noqa: E402
-from lab.evaluate import evaluate  # noqa: E402
+from lab.evaluate import evaluate, success  # noqa: E402
 from lab.harness import resolve_world  # noqa: E402
 from lab.recipe import EVAL_SECONDS  # noqa: E402
 from server.world import World, free_pose, sample_pose  # noqa: E402
@@ -64,6 +69,9 @@ from server.world import World, free_pose, sample_pose  # noqa: E402
 TAUGHT = "room"
 UNSEEN_DEV = ("eval-room-l", "eval-room-ring", "eval-room-jagged", "eval-holdout-room-t")
 UNSEEN_HELD_OUT = ("eval-holdout-room-oct", "eval-holdout2-room-spike", "eval-holdout4-room-open")
+# --task maze: taught in the tiered maze, the unseen mazes of docs/experiments.md's first table
+MAZE_WORLDS = ("maze", "eval-maze-3tier", "eval-maze-5tier", "eval-maze-narrow")
+DEFAULT_WORLDS = {"wall-following": (TAUGHT, *UNSEEN_DEV), "maze": MAZE_WORLDS}
 # --where near: the robot dragged off its path (m, normal), turned (rad, uniform), and left at
 # least this far from every wall (m): the person then shows the way back
 NEAR = (0.2, 0.8, 0.35)
@@ -82,6 +90,7 @@ class Session:
     takeovers: int = 0
     wrong: int = 0                  # labels whose key was not the one the person meant
     collisions: int = 0             # while teaching
+    goals: int = 0                  # times the robot reached the goal (then put at a start)
     poses: list = field(default_factory=list)
     side: list = field(default_factory=list)   # right-hand wall distance (lab.metrics) per step
 
@@ -95,8 +104,8 @@ class Method:
     lag: int | None
     options: dict
 
-    def learner(self) -> DemonstrationLearner:
-        spec, task = FEATURES["wall"], "wall-following"
+    def learner(self, task: str = "wall-following") -> DemonstrationLearner:
+        spec = FEATURES["wall"]  # the features of both tasks' recipes (lab.recipe.RECIPES)
         if self.name == "person":
             return PersonLearner(spec, DEFAULT_ACTIONS, task=task, lag=self.lag, **self.options)
         spawn = "all" if self.name == "literal" else "winner"
@@ -142,9 +151,11 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
     pose (``where="starts"``), anywhere in the free space, any heading (``"free"``:
     ``server.world.free_pose``, as a person dragging the robot about would), or a little off
     where it is (``"near"``: ``server.world.sample_pose`` with ``NEAR``: dragged off its path
-    and turned, so the person shows the way back)."""
+    and turned, so the person shows the way back). A world with a goal (the maze): when the
+    robot reaches it, in either mode, the person puts it at the world's next start pose (the
+    console's set_pose) and teaches the way again (``Session.goals`` counts them)."""
     rng = np.random.default_rng(seed + 555)
-    learner = method.learner()
+    learner = method.learner() if spec.task == "wall-following" else method.learner(spec.task)
     world = World(spec, robots=1, seed=seed)
     world.reset(poses=[tuple(spec.pose)])
     walls = spec.segments()
@@ -161,6 +172,11 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
         if mode == "correct" and k == int(round(demo / DT)):
             in_control = False  # the person switches the page to correct mode
         every = restarts[0] if mode == "demonstrate" else restarts[1]
+        if spec.goal is not None and k > 0 and math.dist(world.pose(0)[:2],
+                                                         spec.goal.center) <= spec.goal.radius:
+            rec.goals += 1
+            moved_at, next_start = t, next_start + 1
+            world.set_pose(0, starts[next_start % len(starts)])
         if every > 0 and t > 0 and (t - moved_at >= every - 1e-9
                                     or (mode == "correct" and moved_at < demo)):
             moved_at, next_start = t, next_start + 1  # the next start pose (set_pose)
@@ -254,17 +270,19 @@ def alone(model: str, seed: int, world: str) -> list[dict]:
         spec = resolve_world(world)
         seconds = EVAL_SECONDS[spec.task]
         _ALONE[key] = [drive_alone(spec, PEOPLE[model](seed=1000 * seed + i), st, seconds,
-                                   seed=seed).metrics()
+                                   seed=seed).metrics(spec.goal)
                        for i, st in enumerate(spec.start_poses)]
     return _ALONE[key]
 
 
 def _why(lm: dict) -> str:
-    """Why an episode failed (``lab.metrics.wall_success``): the first reason that holds."""
+    """Why an episode failed (``lab.evaluate.success``): the first reason that holds."""
     if lm["oscillation_loops"]:
         return "loop"
     if lm["collisions"]:
         return "collision"
+    if lm["goal_reached"] is False:  # a world with a goal (None: none)
+        return "goal not reached"
     if lm["wall_band_fraction"] < 0.8:
         return "off the wall"
     return "too short"  # under 70% of the scripted teacher's distance
@@ -281,7 +299,9 @@ def score(policy, worlds, model: str, seed: int = 0) -> dict:
             if not lm["success"]:
                 w = _why(lm)
                 why[w] = why.get(w, 0) + 1
-        pace = [metrics.wall_success(lm, own["distance"])
+        # at the person's pace (wall following: 70% of their distance; the maze's rule has no
+        # distance: the same as success)
+        pace = [success(rep["task"], lm, own)
                 for lm, own in zip(rep["learner"], alone(model, seed, name), strict=True)]
         out[name] = {"success": rep["success_rate"], "pace": float(np.mean(pace)),
                      "loops": len(rep["loops"]),
@@ -293,10 +313,11 @@ def score(policy, worlds, model: str, seed: int = 0) -> dict:
 def run_one(model: str, seed: int, method: str, worlds, *, demo: float = 240.0,
             correct: float = 120.0, latency: float = 0.03, guard: bool = False,
             restarts: tuple[float, float] = (0.0, 0.0), where: str = "starts",
-            clearance: float = CLEARANCE) -> dict:
-    """One person model, one seed, one method: teach, then evaluate."""
+            clearance: float = CLEARANCE, bare: bool = False) -> dict:
+    """One person model, one seed, one method: teach, then evaluate (``bare``, with ``guard``:
+    also the tree alone, as ``rhbl evaluate`` and ``rhbl experiment`` judge it: ``"bare"``)."""
     t0 = time.perf_counter()
-    rec, learner = teach(resolve_world(TAUGHT), PEOPLE[model](seed=seed), make_method(method),
+    rec, learner = teach(resolve_world(worlds[0]), PEOPLE[model](seed=seed), make_method(method),
                          demo=demo, correct=correct, seed=seed, latency=latency, guard=guard,
                          restarts=restarts, where=where, clearance=clearance)
     policy = TreePolicy.from_learner(learner)
@@ -307,12 +328,14 @@ def run_one(model: str, seed: int, method: str, worlds, *, demo: float = 240.0,
                                 else "guard, no clearance"),
             "labels": rec.labels, "demo_labels": rec.demo_labels,
             "corrections": rec.corrections, "takeovers": rec.takeovers,
-            "wrong": rec.wrong, "teaching_collisions": rec.collisions,
+            "wrong": rec.wrong, "teaching_collisions": rec.collisions, "goals": rec.goals,
             "nodes": learner.nodes, "height": learner.height,
             "lag": getattr(learner, "estimated_lag", 0),
             "agreement": [round(a, 3) for a in getattr(learner, "lag_agreement", [])],
             "reaction": PEOPLE[model](seed=seed).style.reaction,
-            "worlds": scores, "wall_time": round(time.perf_counter() - t0, 1)}
+            "worlds": scores,
+            **({"bare": score(policy, worlds, model, seed=seed)} if guard and bare else {}),
+            "wall_time": round(time.perf_counter() - t0, 1)}
 
 
 def person_row(model: str, seeds, worlds) -> dict:
@@ -328,7 +351,7 @@ def person_row(model: str, seeds, worlds) -> dict:
         for seed in seeds:
             for st, own in zip(spec.start_poses, alone(model, seed, name), strict=True):
                 tt = _teacher_episode(spec, DEFAULT_ACTIONS, st, seconds, 0, 0.0, 0.0, DT)
-                ok.append(metrics.wall_success(own, tt.metrics()["distance"]))
+                ok.append(success(spec.task, own, tt.metrics(spec.goal)))
         out[name] = float(np.mean(ok))
     return out
 
@@ -352,12 +375,14 @@ def table(rows: list[dict], taught: str, unseen) -> str:
     for r in rows:
         groups.setdefault((r["model"], r["method"] + (f" +{r['guard']}" if r["guard"] else "")),
                           []).append(r)
-    lines = ["| model | method | seeds | taught room | unseen rooms | at the person's pace: "
+    lines = ["| model | method | seeds | taught world | unseen worlds | at the person's pace: "
              "taught / unseen | loops | collisions | nodes | labels | corrections | wrong keys "
              "| lag (scans) | failed episodes |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
     def cell(rs, key, worlds):
+        if not worlds:
+            return float("nan"), float("nan")
         v = [_mean([r["worlds"][w][key] for w in worlds]) for r in rs]
         return 100 * _mean(v), 100 * min(v)
 
@@ -387,8 +412,12 @@ def main(argv=None) -> int:
     ap.add_argument("--methods", default="today,literal,person",
                     help=f"learning methods ({', '.join(METHODS)}; options after a colon: "
                          "person:lag=2+k=25)")
-    ap.add_argument("--worlds", default=",".join((TAUGHT, *UNSEEN_DEV)),
-                    help="worlds to evaluate in (the first is the one taught in)")
+    ap.add_argument("--task", choices=sorted(DEFAULT_WORLDS), default="wall-following",
+                    help="the default --worlds: the room and the unseen rooms, or the tiered "
+                         "maze and the unseen mazes")
+    ap.add_argument("--worlds", default=None,
+                    help="worlds to evaluate in (the first is the one taught in; default: "
+                         "--task's)")
     ap.add_argument("--demo", type=float, default=240.0, help="s of demonstrating")
     ap.add_argument("--correct", type=float, default=120.0, help="s of correcting")
     ap.add_argument("--latency", type=float, default=0.03, help="s the page is behind the world")
@@ -408,6 +437,9 @@ def main(argv=None) -> int:
                          "order with a laser return within 0.5 m ahead and M m of the centre "
                          f"line becomes a rotation in place (default {CLEARANCE:g}, as rhbl "
                          "controller; 0: off)")
+    ap.add_argument("--bare", action="store_true",
+                    help="with --guard: also evaluate the tree alone (no guard, as rhbl "
+                         "evaluate and rhbl experiment judge it) and print its table too")
     ap.add_argument("--alone", action="store_true",
                     help="also print how each person model does driving by itself")
     ap.add_argument("--json", default=None, help="write every run here")
@@ -422,7 +454,9 @@ def main(argv=None) -> int:
             make_method(m)
         except (ValueError, TypeError) as exc:
             ap.error(str(exc))
-    worlds = [w for w in args.worlds.split(",") if w]
+    worlds = [w for w in (args.worlds or ",".join(DEFAULT_WORLDS[args.task])).split(",") if w]
+    if not worlds:
+        ap.error("--worlds: no world given")
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     rows = []
     for method in methods:
@@ -431,17 +465,22 @@ def main(argv=None) -> int:
                 r = run_one(model, seed, method, worlds, demo=args.demo, correct=args.correct,
                             latency=args.latency, guard=args.guard,
                             restarts=(args.restart_demo, args.restart_correct),
-                            where=args.where, clearance=args.clearance)
+                            where=args.where, clearance=args.clearance, bare=args.bare)
                 rows.append(r)
                 print(f"{method:>12} {model:>12} seed {seed}: "
                       + " ".join(f"{w} {100 * s['success']:.0f}%/{s['loops']}L"
                                  for w, s in r["worlds"].items())
                       + f" | lag {r['lag']} (reaction {r['reaction']:.2f} s)"
+                      + (f" | goal {r['goals']}x while teaching" if r["goals"] else "")
                       + f" | {r['nodes']} nodes, {r['labels']} labels ({r['corrections']} "
                         f"corrections, {r['takeovers']} takeovers), {r['wrong']} wrong, "
                         f"{r['wall_time']} s", flush=True)
     print()
     print(table(rows, worlds[0], worlds[1:]))
+    if args.bare and args.guard:
+        print()
+        print(table([dict(r, worlds=r["bare"], guard="tree alone, no guard") for r in rows],
+                    worlds[0], worlds[1:]))
     if args.alone:
         print()
         print("| person alone (lab.evaluate's rule) | " + " | ".join(worlds) + " |")

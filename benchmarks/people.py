@@ -77,6 +77,8 @@ class Percept:
     right: float        # nearest wall point on the robot's right (bearing -150..-30 deg)
     angle: float        # heading against that wall's direction (> 0: heading away from it)
     behind: float       # nearest wall point behind-right (bearing -180..-100 deg)
+    tip: bool = False   # that right-hand point is a wall's free end (a fin's or an inner
+                        # wall's tip), abeam or behind (bearing -150..-60 deg): the wall ends
 
 
 def _wrap(a: float) -> float:
@@ -96,6 +98,14 @@ def _ray(walls: np.ndarray, ox: float, oy: float, ang: float, far: float = 8.0) 
     return float(min(far, s[hit].min())) if hit.any() else far
 
 
+def _free_ends(walls: np.ndarray) -> np.ndarray:
+    """(S, 2) booleans: the start and the end of each segment is a free end (a point no other
+    segment's end meets: a fin's or an inner wall's tip, not a corner)."""
+    ends = np.round(np.concatenate([walls[:, :2], walls[:, 2:]]), 6)
+    _, inverse, counts = np.unique(ends, axis=0, return_inverse=True, return_counts=True)
+    return (counts[inverse.reshape(-1)] == 1).reshape(2, -1).T
+
+
 def percept(view: View) -> Percept:
     """The person's reading of the map at ``view`` (their own geometry, not the laser's)."""
     x, y, yaw = view.pose
@@ -111,6 +121,7 @@ def percept(view: View) -> Percept:
     bearing = np.arctan2(np.sin(bearing), np.cos(bearing))
     right_side = (bearing > math.radians(-150)) & (bearing < math.radians(-30))
     right = angle = math.inf
+    tip = False
     if right_side.any():
         k = int(np.argmin(np.where(right_side, dist, np.inf)))
         right = float(dist[k])
@@ -118,13 +129,16 @@ def percept(view: View) -> Percept:
         # with the wall on the right (along a straight wall: the wall itself; round a corner
         # or a fin's tip: the circle about it)
         angle = _wrap(yaw - math.atan2(v[k, 0], -v[k, 1]))
+        end = 0 if t[k] <= 1e-9 else 1 if t[k] >= 1.0 - 1e-9 else None
+        tip = (end is not None and bool(_free_ends(w)[k, end])
+               and bearing[k] < math.radians(-60))
     behind_side = (bearing > math.radians(-180)) & (bearing < math.radians(-100))
     behind = float(dist[behind_side].min()) if behind_side.any() else math.inf
     c, s = math.cos(yaw), math.sin(yaw)
     front = min(_ray(w, x - s * o, y + c * o, yaw) for o in (-0.2, 0.0, 0.2))
     front_right = _ray(w, x, y, yaw - math.radians(40))
     return Percept(front=front, front_right=front_right, right=right,
-                   angle=0.0 if math.isinf(angle) else angle, behind=behind)
+                   angle=0.0 if math.isinf(angle) else angle, behind=behind, tip=tip)
 
 
 @dataclass(frozen=True)
@@ -246,6 +260,16 @@ class Person:
     def wanted(self, p: Percept) -> str:
         """The key this person means for what they see."""
         s = self.style
+        if p.tip and p.right < s.lost:
+            # the wall on the right ends here (an inner wall's or a fin's tip): go round its
+            # end, keeping it at the liked distance, whatever lies ahead beyond the turn (a
+            # wall too close ahead: rotate towards the way round, to the right)
+            if p.front < s.stop:
+                return "rot-right"
+            u = s.k_d * (p.right - s.target) + s.k_a * p.angle
+            if u > s.band:
+                return "rot-right" if s.sharp and p.right > s.target + 0.2 else "fwd-right"
+            return "fwd-left" if u < -s.band else "fwd"
         if p.front < s.stop:
             return "rot-left"
         if p.front < s.slow or p.front_right < s.diag:

@@ -83,3 +83,19 @@ def test_a_person_takes_over_a_robot_spinning_in_place(people, view):
         keys.append(person.observe(view(0.1 * k, (5.0, 1.2, yaw), mode="correct",
                                          driver="controller", action="rot-left")))
     assert any(k is not None for k in keys[40:])
+
+
+def test_a_person_goes_round_the_end_of_the_wall_on_the_right(people):
+    """A wall's free end (an inner wall's tip) abeam on the right: the person turns right round
+    it, even with a wall ahead (rotating right in place when it is close); at a corner (the
+    same wall end joined to another wall) they turn left as before."""
+    person = people.Person(people.Style("test", noise=0.0))
+    inner = [0.0, 0.0, 5.0, 0.0]  # ends free at x = 5; the robot just past it, 0.7 m off
+    for ahead, key in ((6.2, "fwd-right"), (5.7, "rot-right")):
+        walls = np.array([inner, [ahead, -3.0, ahead, 3.0]])
+        p = people.percept(people.View(t=0.0, pose=(5.3, 0.65, 0.0), walls=walls))
+        assert p.tip and p.front == pytest.approx(ahead - 5.3)
+        assert person.wanted(p) == key
+    corner = np.array([inner, [5.0, 0.0, 5.0, -3.0], [6.2, -3.0, 6.2, 3.0]])
+    p = people.percept(people.View(t=0.0, pose=(5.3, 0.65, 0.0), walls=corner))
+    assert not p.tip and person.wanted(p) == "fwd-left"

@@ -4,6 +4,7 @@ follows the wall without a loop."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import types
 
@@ -13,6 +14,7 @@ from client.behaviour.guard import RotationGuard, clearance_for
 from client.behaviour.learning import TreePolicy
 from lab.evaluate import evaluate
 from lab.harness import resolve_world
+from server.world import Goal
 
 
 class Scripted:
@@ -97,3 +99,16 @@ def test_a_short_session_by_hand_gives_a_robot_that_follows_the_wall(study, peop
         assert ep["wall_band_fraction"] >= 0.8, ep["start"]
         assert not ep["stuck"], ep["start"]
     assert math.isfinite(report["tree"]["nodes"])
+
+
+def test_a_robot_at_the_goal_is_put_at_the_next_start(study):
+    """A world with a goal: reaching it (in either mode), the person puts the robot at the
+    world's next start pose and goes on teaching."""
+    spec = dataclasses.replace(resolve_world("maze"), goal=Goal((2.0, 1.1), 0.3))
+    rec, _ = study.teach(spec, Scripted([(0.0, 4.0, "fwd")]), study.make_method("today"),
+                         demo=4.0, correct=0.0)
+    x = [p[0] for p in rec.poses]
+    assert rec.goals >= 1
+    jump = next(k for k in range(1, len(x)) if x[k] < x[k - 1] - 0.1)
+    assert x[jump - 1] >= 1.7 - 1e-6  # at the goal's edge, then at a start pose
+    assert rec.poses[jump][:2] == pytest.approx(spec.start_poses[1][:2], abs=0.05)
