@@ -857,7 +857,11 @@ class LearnerProcess:
                 self.acks.publish()
             if self.core.dirty and now - last_snap >= self.args.snapshot_every:
                 self.publish()
-                last_snap = now
+                # from the end of this snapshot: a snapshot that takes longer than
+                # --snapshot-every (a person's tree rebuilt from thousands of labels on a busy
+                # machine) still leaves that long to learning, or the learner would learn one
+                # label per rebuild and fall ever further behind its teacher
+                last_snap = time.monotonic()
             if now - last_log >= 5.0:
                 last_log = now
                 self.log_progress()
