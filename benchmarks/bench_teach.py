@@ -239,7 +239,9 @@ def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
         result["agreement"] = page.data("agreement", "value")
         ctl.stop()
         page.press("t")
-        page.until(lambda p: _labels(p)["waiting"] == 0, 60, "every label acknowledged")
+        t_ack = time.monotonic()  # a learner behind its teacher catches up now: how long
+        page.until(lambda p: _labels(p)["waiting"] == 0, 600, "every label acknowledged")
+        result["ack_wait_s"] = round(time.monotonic() - t_ack, 1)
         result["labels"] = _labels(page)
         console.stop()
         rc = lrn.stop()

@@ -631,6 +631,7 @@ class LearnerProcess:
         self.failures = 0  # journal writes failed in a row
         self.drain_until: float | None = None  # after a stop request: finish what arrived
         self.notice_pub = self.subs = None
+        self.tree_size = (0, 0)  # nodes, height of the last snapshot written
         self.acks: Acknowledgements | None = None  # once the ack publisher is declared
 
     def _lag_of(self, act: TeacherAction) -> int:  # zenoh's threads, under the pairing's lock
@@ -704,7 +705,8 @@ class LearnerProcess:
             log.error("cannot write snapshot %s (%s); retrying in %.0f s (the journal holds "
                       "every labeled vector)", core.out, exc, self.args.snapshot_every)
             return False
-        note = TreeNotice(seq=core.seq, nodes=core.learner.nodes, height=core.learner.height,
+        self.tree_size = (core.learner.nodes, core.learner.height)  # as just written
+        note = TreeNotice(seq=core.seq, nodes=self.tree_size[0], height=self.tree_size[1],
                           vectors=core.standing,
                           snapshot_id=f"{core.journal.lineage}:{core.applied}", ts=time.time())
         self.notice_pub.put(note.encode())
@@ -833,6 +835,7 @@ class LearnerProcess:
             except OSError as exc:  # the journal holds every vector; retried while learning
                 log.error("cannot write snapshot %s (%s); retrying later", core.out, exc)
         log.info("learning: %s; snapshot %s", core.describe(), core.out)
+        self.tree_size = (core.learner.nodes, core.learner.height)
 
     def loop(self) -> None:
         now = time.monotonic()
@@ -857,9 +860,13 @@ class LearnerProcess:
                 self.acks.publish()
             if self.core.dirty and now - last_snap >= self.args.snapshot_every:
                 self.publish()
-                last_snap = now
-            if now - last_log >= 5.0:
-                last_log = now
+                # from the end of this snapshot: a snapshot that takes longer than
+                # --snapshot-every (a person's tree rebuilt from thousands of labels on a busy
+                # machine) still leaves that long to learning, or the learner would learn one
+                # label per rebuild and fall ever further behind its teacher
+                last_snap = time.monotonic()
+            if time.monotonic() - last_log >= 5.0:
+                last_log = time.monotonic()
                 self.log_progress()
 
     def begin_drain(self) -> None:
@@ -878,12 +885,14 @@ class LearnerProcess:
         return True
 
     def log_progress(self) -> None:
+        """The progress line; the tree's size as last written (a person's tree is rebuilt
+        when asked for its size: asking here cost a rebuild every 5 s)."""
         ps, core = self.pairing.stats, self.core
-        log.info("vectors %d (learned %d this run), nodes %d, height %d, unmatched %d; "
-                 "%d labeled scans waiting, %d unlabeled scans forgotten",
-                 core.applied, self.stats["learned"], core.learner.nodes,
-                 core.learner.height, ps["unmatched"], self.pairing.waiting(),
-                 ps["forgotten"])
+        nodes, height = self.tree_size
+        log.info("vectors %d (learned %d this run), nodes %d, height %d (last snapshot), "
+                 "unmatched %d; %d labeled scans waiting, %d unlabeled scans forgotten",
+                 core.applied, self.stats["learned"], nodes, height, ps["unmatched"],
+                 self.pairing.waiting(), ps["forgotten"])
 
     # -- stopping --
     def finish(self) -> int:
