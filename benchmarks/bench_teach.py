@@ -293,15 +293,18 @@ def literal_run(result: dict, literal_args: str = LITERAL) -> dict:
 
 
 def evaluate_run(result: dict, world: str = "room", unseen=UNSEEN,
-                 eval_episodes: int | None = None, eval_seconds: float | None = None) -> dict:
-    """Evaluate a run's tree (``rhbl evaluate``, i.e. ``lab.evaluate``, in its own process) in
-    the room it was taught in and in the unseen rooms; the figures added to ``result``."""
+                 eval_episodes: int | None = None, eval_seconds: float | None = None,
+                 tag: str = "") -> dict:
+    """Evaluate a run's tree (``rhbl evaluate``, i.e. ``lab.evaluate``, in its own process, with
+    its defaults: a tree taught by hand through the controller's guard) in the room it was
+    taught in and in the unseen rooms; the figures added to ``result`` (each room's report in
+    the run's folder, ``eval<tag>-<room>.json``)."""
     from lab.children import rhbl_argv
 
     work = Path(result["workdir"])
     result["eval"] = {}
     for name in (world, *unseen):
-        out = work / f"eval-{name}.json"
+        out = work / f"eval{tag}-{name}.json"
         argv = rhbl_argv("evaluate", "--world", name, "--tree", result["tree_path"],
                          "--seed", str(result["seed"]), "--json", str(out))
         if eval_episodes is not None:
@@ -319,7 +322,7 @@ def evaluate_run(result: dict, world: str = "room", unseen=UNSEEN,
             "loops": len(rep["loops"]),
             "collisions": int(sum(e["collisions"] for e in rep["learner"])),
             "wall_band": round(statistics.fmean(e["wall_band_fraction"] for e in rep["learner"]), 3),
-            "teacher_success_rate": rep["teacher_success_rate"]}
+            "teacher_success_rate": rep["teacher_success_rate"], "guard": rep.get("guard")}
     taught = result["eval"][world]
     others = [result["eval"][n] for n in unseen]
     result["success_taught"] = taught["success_rate"]
@@ -416,6 +419,32 @@ def _seeds(text: str) -> list[int]:
     return seeds
 
 
+def _evaluate_again(args) -> int:
+    """``--evaluate-again``: the saved runs' trees evaluated again (see ``main``)."""
+    try:
+        runs = json.loads(Path(args.evaluate_again).read_text())
+        trees = [Path(r["tree_path"]) for r in runs]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        print(f"bench_teach: error: --evaluate-again {args.evaluate_again}: {exc}",
+              file=sys.stderr)
+        return 2
+    if missing := [str(t) for t in trees if not t.is_file()]:
+        print(f"bench_teach: error: --evaluate-again: trees not found: {', '.join(missing)}",
+              file=sys.stderr)
+        return 2
+    unseen = [x for x in args.unseen.split(",") if x]
+    for r in runs:
+        evaluate_run(r, world=args.world, unseen=unseen, eval_episodes=args.eval_episodes,
+                     eval_seconds=args.eval_seconds, tag="-again")
+        print(f"{r['person']} seed {r['seed']} {r['learner']}: taught "
+              f"{_pct(r['success_taught'])}, unseen {_pct(r['success_unseen'])}, loops "
+              f"{r['loops']}, collisions {r['collisions']}", flush=True)
+    if args.json:
+        Path(args.json).write_text(json.dumps(runs, indent=1))
+    print(table(runs))
+    return 0
+
+
 def main(argv=None) -> int:
     import people
 
@@ -453,7 +482,13 @@ def main(argv=None) -> int:
     ap.add_argument("--table", default=None, metavar="JSON",
                     help="no session: print the table of the runs a --json file holds (those "
                          "of --people only, when given)")
+    ap.add_argument("--evaluate-again", default=None, metavar="JSON",
+                    help="no session: evaluate the trees of the runs a --json file holds again "
+                         "with this checkout's rhbl evaluate (--world, --unseen, --eval-*), "
+                         "print their table and, with --json, write it")
     args = ap.parse_args(argv)
+    if args.evaluate_again:
+        return _evaluate_again(args)
     if args.table:
         try:
             runs = json.loads(Path(args.table).read_text())

@@ -70,3 +70,14 @@ def test_a_short_person_teaches_a_robot_that_follows_the_wall(bench, tmp_path):
                      f"wall band {ev['wall_band']:.2f}, {ev['collisions']} collisions, success "
                      f"{ev['success_rate']:.0%} ({r['tree']['nodes']} nodes, "
                      f"{r['labels']['given']} labels)")
+
+
+def test_evaluate_again_names_a_bad_file_or_a_missing_tree(bench, tmp_path, capsys):
+    """``--evaluate-again`` (no session) refuses with one line and exit 2 what it cannot use."""
+    assert bench.main(["--evaluate-again", str(tmp_path / "none.json")]) == 2
+    assert "--evaluate-again" in capsys.readouterr().err
+    runs = tmp_path / "runs.json"
+    runs.write_text('[{"tree_path": "%s"}]' % (tmp_path / "gone.rhbl"))
+    assert bench.main(["--evaluate-again", str(runs)]) == 2
+    err = capsys.readouterr().err
+    assert "trees not found" in err and "gone.rhbl" in err
