@@ -298,13 +298,13 @@ def evaluate_run(result: dict, world: str = "room", unseen=UNSEEN,
     """Evaluate a run's tree (``rhbl evaluate``, i.e. ``lab.evaluate``, in its own process, with
     its defaults: a tree taught by hand through the controller's guard) in the room it was
     taught in and in the unseen rooms; the figures added to ``result`` (each room's report in
-    the run's folder, ``eval<tag>-<room>.json``)."""
+    the run's folder, ``eval<tag>-<learner>-<room>.json``: default and literal share it)."""
     from lab.children import rhbl_argv
 
     work = Path(result["workdir"])
     result["eval"] = {}
     for name in (world, *unseen):
-        out = work / f"eval{tag}-{name}.json"
+        out = work / f"eval{tag}-{result['learner']}-{name}.json"  # default, literal
         argv = rhbl_argv("evaluate", "--world", name, "--tree", result["tree_path"],
                          "--seed", str(result["seed"]), "--json", str(out))
         if eval_episodes is not None:
