@@ -25,7 +25,7 @@ import numpy as np
 from client.behaviour.learning import DemonstrationLearner, TreePolicy
 from client.behaviour.policies import Demonstrator, takes_over
 from client.behaviour.tasks import TASKS, make_policy
-from client.behaviour.teaching import parse_lag
+from client.behaviour.teaching import add_lag_argument
 from lab.episode import DT, Episode
 from lab.harness import (
     OnStep,
@@ -405,11 +405,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "from a person (rhbl console, rhbl teacher --policy keyboard), "
                              "else by the script rule; 'script' or 'person' force one "
                              "(docs/teaching.md)")
-    parser.add_argument("--lag", type=arguments.Checked("lag", parse_lag), default=None,
-                        metavar="SCANS|auto",
-                        help="with the person rule: a label answers the scan this many scans "
-                             "before the one it names ('auto', the default: estimated from "
-                             "the labels)")
+    add_lag_argument(parser)
 
 
 def main(args) -> int:

@@ -37,6 +37,8 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
+from protocol import arguments
+
 from .actions import DEFAULT_ACTIONS, ActionSet
 from .features import FeatureSpec
 from .learning import DemonstrationLearner
@@ -134,6 +136,17 @@ def parse_lag(text: str) -> int | None:
     if not 0 <= lag <= MAX_LAG:
         raise ValueError(f"must be 'auto' or an integer 0..{MAX_LAG} (scans), got {text!r}")
     return lag
+
+
+def add_lag_argument(parser) -> None:
+    """``--lag SCANS|auto`` as ``rhbl learner`` and ``rhbl train --from-recording`` take it
+    (``parse_lag``; None: estimated)."""
+    parser.add_argument("--lag", type=arguments.Checked("lag", parse_lag), default=None,
+                        metavar="SCANS|auto",
+                        help="with the person rule: a label answers the scan this many scans "
+                             f"(0..{MAX_LAG}) before the one it names; 'auto' (default): "
+                             "estimated from the labels, re-estimated as they accumulate "
+                             f"({LAG} until there are enough; docs/teaching.md)")
 
 
 def estimate_lag(W: np.ndarray, y: np.ndarray, k: int, n_labels: int, block: int = 50,

@@ -64,7 +64,7 @@ from client.behaviour.learning import (
     load_snapshot,
 )
 from client.behaviour.tasks import task_of_features
-from client.behaviour.teaching import LAG, MAX_LAG, PERSON_RULE, PersonLearner, parse_lag
+from client.behaviour.teaching import MAX_LAG, PERSON_RULE, PersonLearner, add_lag_argument
 from client.journal import (
     Journal,
     JournalError,
@@ -137,12 +137,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "earlier, the tree rebuilt from every label by the vote of its "
                              "nearest labels). A lineage keeps the rule it was made with (its "
                              "journal's header)")
-    parser.add_argument("--lag", type=arguments.Checked("lag", parse_lag), default=None,
-                        metavar="SCANS|auto",
-                        help="with the person rule: a label answers the scan this many scans "
-                             f"(0..{MAX_LAG}) before the one it names; 'auto' (default): "
-                             "estimated from the labels, re-estimated as they accumulate "
-                             f"({LAG} until there are enough; docs/teaching.md)")
+    add_lag_argument(parser)
 
 
 # ---- the learning core (no zenoh: testable on its own) --------------------------------------
