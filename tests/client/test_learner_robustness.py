@@ -161,22 +161,24 @@ def test_a_flood_of_scans_keeps_a_slow_learner_bounded_and_every_label_learned(f
             scan_pub.put(Scan(ts=0.0, id=0, ranges=ranges[0]).encode())  # the server is up
             act_pub.put(TeacherAction(scan_id=0, action="fwd").encode())  # and learning is
             _wait(lambda: _records(out) == [0], 30, "the first label learned", proc)
-            before = peak = _rss_mb(proc.pid)
+            before = _rss_mb(proc.pid)
+            rss = []  # every 1000 scans
             for sid in range(1, n + 1):
                 scan_pub.put(Scan(ts=0.01 * sid, id=sid, ranges=ranges[sid % 8]).encode())
                 if sid % every == 0:
                     act_pub.put(TeacherAction(scan_id=sid, action="fwd").encode())
                 if sid % 1000 == 0:
-                    peak = max(peak, _rss_mb(proc.pid))
+                    rss.append(_rss_mb(proc.pid))
             labeled = [0, *range(every, n + 1, every)]
-
-            def learned() -> bool:  # the memory watched until the last scans are taken in
-                nonlocal peak
-                peak = max(peak, _rss_mb(proc.pid))
-                return _records(out) == labeled
-
-            _wait(learned, 60, "every label learned", proc)
-            assert peak - before < 20, (before, peak)
+            _wait(lambda: _records(out) == labeled, 60, "every label learned", proc)
+            after = _rss_mb(proc.pid)
+            # flat, not growing with the flood: the buffers fill in the first few thousand
+            # scans, then the middle of the flood and its end hold the same (a queue growing
+            # with the backlog climbs all along: ~50 MB over this flood). Medians, because
+            # zenoh's own receive buffers swell for a moment whenever the learner's callback
+            # falls behind (spikes of ~10 MB seen on an idle machine, more under load)
+            middle, end = float(np.median(rss[5:15])), float(np.median(rss[-10:]))
+            assert end - middle < 8 and after - before < 20, (before, middle, end, after, rss)
             proc.send_signal(signal.SIGINT)
             assert proc.wait(30) == 0, proc.output()
         finally:

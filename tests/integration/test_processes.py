@@ -310,9 +310,10 @@ def test_teacher_pauses_while_no_learner_is_up(env):
     learner = env["start"]("learner", *args)
     _wait_token(env["session"], "learner", learner)
     end = time.monotonic() + 10
-    while t.output().count("learner is up") < 2 and time.monotonic() < end:
+    ups = "INFO learner is up: "  # not "a learner is up: sending the labels ..." (a resend)
+    while t.output().count(ups) < 2 and time.monotonic() < end:
         time.sleep(0.05)
-    assert t.output().count("learner is up") == 2, t.output()
+    assert t.output().count(ups) == 2, t.output()
     _wait_journal(out, paused + 20)  # demonstrating again
     assert t.stop() == 0, t.output()
     n = _stats(t)["labels"]
