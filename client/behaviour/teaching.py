@@ -61,6 +61,7 @@ __all__ = [
 LAG = 3  # scans (0.3 s at 10 Hz) between what a person saw and the scan shown when the key went out
 MAX_LAG = 6  # scans: the longest lag estimated (0.6 s at 10 Hz)
 MIN_ESTIMATE = 200  # labels: fewer, and the lag is not estimated (LAG is used)
+MAX_DECISIONS = 2000  # the lag estimate answers at most this many changes of key
 JUMP = 0.5  # m: the robot moved farther than this between two scans: it was put there (set_pose)
 _CHUNK = 1 << 22  # distances computed per block (query rows x references)
 
@@ -150,7 +151,7 @@ def add_lag_argument(parser) -> None:
 
 
 def estimate_lag(W: np.ndarray, y: np.ndarray, k: int, n_labels: int, block: int = 50,
-                 folds: int = 5) -> tuple[int, list[float]]:
+                 folds: int = 5, decisions: int = MAX_DECISIONS) -> tuple[int, list[float]]:
     """The lag (0 .. ``W.shape[1] - 1`` scans) at which the person's decisions are best
     predicted from the features ``W[:, lag]`` of the scan that many scans before each label's
     own, and the agreement at every lag. ``W``: (labels, lags, dim) in the order given.
@@ -165,11 +166,16 @@ def estimate_lag(W: np.ndarray, y: np.ndarray, k: int, n_labels: int, block: int
     dealt round-robin into ``folds`` folds; the references are the other folds: consecutive
     labels are near copies of each other). The agreement is smoothed over neighbouring lags
     (weights 1/4, 1/2, 1/4: a few hundred decisions are noisy) and ties go to the shorter lag.
+    More than ``decisions`` decisions (a session of tens of minutes): that many of them, evenly
+    spread over the session, are answered (each against every other fold's label as before),
+    so the estimate's cost grows with the labels, not with their square.
     Deterministic: a function of ``W`` and ``y`` only."""
     n = len(y)
     fold = (np.arange(n) // block) % folds
     change = y[1:] != y[:-1]
     q = np.flatnonzero(np.r_[True, change] | np.r_[change, False])
+    if len(q) > decisions:
+        q = q[np.linspace(0, len(q) - 1, decisions).round().astype(np.int64)]
     raw = []
     for lag in range(W.shape[1]):
         X = W[:, lag]

@@ -23,6 +23,11 @@ def load(name: str):
 
 
 @pytest.fixture(scope="session")
+def load_benchmark():
+    return load
+
+
+@pytest.fixture(scope="session")
 def people():
     return load("people")
 

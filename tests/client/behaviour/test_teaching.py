@@ -204,6 +204,21 @@ def test_estimate_lag_finds_the_lag_the_labels_answer(lag):
     assert len(agreement) == MAX_LAG + 1 and agreement[lag] > agreement[0]
 
 
+def test_a_long_sessions_lag_is_estimated_from_an_even_spread_of_its_decisions():
+    """Past ``decisions`` changes of key the estimate answers that many, evenly spread (its cost
+    grows with the labels, not their square); below it nothing changes."""
+    W, y = _delayed_labels(4, n=3000)
+    change = y[1:] != y[:-1]
+    n_decisions = int((np.r_[True, change] | np.r_[change, False]).sum())
+    assert n_decisions > 300
+    full = estimate_lag(W, y, k=5, n_labels=5)
+    assert estimate_lag(W, y, k=5, n_labels=5, decisions=n_decisions) == full  # the cap unused
+    assert estimate_lag(W, y, k=5, n_labels=5, decisions=10**6) == full
+    found, agreement = estimate_lag(W, y, k=5, n_labels=5, decisions=300)
+    assert found == 4 and agreement != full[1]  # fewer decisions answered, the same lag
+    assert estimate_lag(W, y, k=5, n_labels=5, decisions=300) == (found, agreement)
+
+
 def test_person_learner_estimates_its_lag_from_the_earlier_scans():
     W, y = _delayed_labels(4)
     a = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, k=5, lag=None)

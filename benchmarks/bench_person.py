@@ -1,0 +1,143 @@
+"""The person rule's rebuild as a teaching session grows: what one snapshot of ``rhbl learner
+--teacher person`` costs at N labels (10 labels a second: 1,000 is under two minutes, 36,000 an
+hour of teaching).
+
+Labels come from the scripted teacher driving the room (``lab.train``'s world, the wall
+features: real feature vectors, consecutive scans alike), 12% of them replaced by a wrong key
+(a person's), each with the 6 scans shown before it (as the learner's pairing keeps them, for
+the lag estimate). For each N it times, in this process, the three parts of a rebuild
+(``PersonLearner``'s defaults: the lag estimated, the mean vote of 25 neighbours): the lag
+estimate (``estimate_lag``), the vote (``nearest_votes`` + ``mean_actions``) and the tree
+learning the voted labels, best of ``--repeat``; beside it the same vote answered by
+scikit-learn's ``KNeighborsClassifier`` (kd-tree, the same k) as the peer a user would reach for.
+
+    python benchmarks/bench_person.py [--sizes 1000,5000,10000,36000] [--repeat 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from client.behaviour.actions import DEFAULT_ACTIONS  # noqa: E402
+from client.behaviour.teaching import (  # noqa: E402
+    MAX_LAG,
+    PERSON_DEFAULTS,
+    estimate_lag,
+    mean_actions,
+    nearest_votes,
+)
+
+
+def demonstration(n: int, wrong: float = 0.12, seed: int = 0):
+    """``(W, y)``: n labels of the scripted wall follower in the room, ``W`` (n, MAX_LAG + 1,
+    dim) the features of each label's scan and of the 6 before it, ``y`` action indices with
+    ``wrong`` of them replaced by another action."""
+    from client.behaviour.features import FEATURES
+    from client.behaviour.policies import WallFollower
+    from lab.harness import resolve_world
+    from server.world import World
+
+    spec = resolve_world("room")
+    features = FEATURES["wall"]
+    world = World(spec, robots=1, seed=seed)
+    teacher = WallFollower()
+    names = DEFAULT_ACTIONS.names
+    rng = np.random.default_rng(seed)
+    xs, ys = [], []
+    starts = list(spec.start_poses)
+    world.reset(poses=[tuple(starts[0])])
+    teacher.reset()
+    for k in range(n + MAX_LAG):
+        if k and k % 600 == 0:  # a new start every minute, as a person pressing Home
+            world.set_pose(0, starts[(k // 600) % len(starts)])
+            teacher.reset()
+        ranges, odom = world.scan(0), world.odom(0)
+        xs.append(features.extract(ranges, odom[2]))
+        label = teacher.act(ranges, odom)
+        ys.append(names.index(label))
+        world.set_command(0, *DEFAULT_ACTIONS[label])
+        world.step(0.1)
+    X = np.asarray(xs, dtype=np.float64)
+    y = np.asarray(ys[MAX_LAG:], dtype=np.int64)
+    flip = rng.random(len(y)) < wrong
+    y[flip] = (y[flip] + rng.integers(1, len(names), flip.sum())) % len(names)
+    W = np.stack([X[MAX_LAG - j:MAX_LAG - j + n] for j in range(MAX_LAG + 1)], axis=1)
+    return W, y
+
+
+def best(f, repeat: int) -> float:
+    out = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        f()
+        out.append(time.perf_counter() - t)
+    return min(out)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="1000,5000,10000,36000",
+                    help="label counts, comma-separated (default 1000,5000,10000,36000)")
+    ap.add_argument("--repeat", type=int, default=3, help="best of this many (default 3)")
+    args = ap.parse_args(argv)
+    try:
+        sizes = [int(s) for s in args.sizes.split(",") if s]
+    except ValueError:
+        ap.error(f"--sizes {args.sizes!r}: expected label counts like 1000,5000")
+    if not sizes or min(sizes) < 50 or args.repeat < 1:
+        ap.error("--sizes: each at least 50 labels; --repeat at least 1")
+    try:
+        from sklearn.neighbors import KNeighborsClassifier
+    except ImportError:  # the peer is optional (pip install -e '.[dev]')
+        KNeighborsClassifier = None
+    from rhbl import HypersphereClassifier
+
+    k, n_actions = PERSON_DEFAULTS["k"], len(DEFAULT_ACTIONS)
+    W_all, y_all = demonstration(max(sizes))
+    print(f"the person rule's rebuild (k={k}, mean vote, lag estimated over 0..{MAX_LAG}), "
+          f"best of {args.repeat}, seconds:")
+    print("| labels | decisions | lag estimate | ... every decision answered (once) | "
+          "vote (rhbl) | vote (scikit-learn kd-tree) | tree | rebuild | tree nodes |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for n in sizes:
+        W, y = W_all[:n], y_all[:n]
+        lag_s = best(lambda W=W, y=y: estimate_lag(W, y, k, n_actions), args.repeat)
+        lag, _ = estimate_lag(W, y, k, n_actions)
+        change = y[1:] != y[:-1]
+        decisions = int((np.r_[True, change] | np.r_[change, False]).sum())
+        every_s = best(lambda W=W, y=y, n=n: estimate_lag(W, y, k, n_actions, decisions=n), 1)
+        X = np.ascontiguousarray(W[:, lag])
+        vote_s = best(lambda X=X, y=y: mean_actions(nearest_votes(X, X, y, k, n_actions),
+                                                    DEFAULT_ACTIONS), args.repeat)
+        ym = mean_actions(nearest_votes(X, X, y, k, n_actions), DEFAULT_ACTIONS)
+        peer = "-"
+        if KNeighborsClassifier is not None:
+            def sk(X=X, y=y):
+                knn = KNeighborsClassifier(k, algorithm="kd_tree").fit(X, y)
+                return mean_actions(knn.predict_proba(X) * k, DEFAULT_ACTIONS)
+            peer = f"{best(sk, args.repeat):.3f}"
+        labels = np.array(DEFAULT_ACTIONS.names)[ym]
+        order = np.random.default_rng(0).permutation(n)
+        clf = None
+
+        def tree(X=X, labels=labels, order=order):
+            nonlocal clf
+            clf = HypersphereClassifier(default_label=DEFAULT_ACTIONS.names[0], spawn="winner")
+            clf.partial_fit(X[order], labels[order])
+        tree_s = best(tree, args.repeat)
+        print(f"| {n} | {decisions} | {lag_s:.3f} | {every_s:.3f} | {vote_s:.3f} | {peer} | "
+              f"{tree_s:.3f} | "
+              f"{lag_s + vote_s + tree_s:.3f} | {clf.node_count_} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
