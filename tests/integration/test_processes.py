@@ -452,7 +452,11 @@ def test_a_persons_learner_pairs_each_label_with_the_scan_lag_scans_earlier(env)
         _wait_journal(out, n)
         assert learner.stop() == 0, learner.output()
         pairing = _stats(learner)["pairing"]
-        assert pairing["shifted"] + pairing["unshifted"] == n and pairing["shifted"] >= n - 3
+        # every label paired, and more often only by the teacher's resends (a label the learner
+        # had not acknowledged within 2 s comes again; the journal keeps it once: below);
+        # all but the first few shifted
+        paired = pairing["shifted"] + pairing["unshifted"]
+        assert n <= paired <= n + pairing["resent"] and pairing["shifted"] >= paired - 3, pairing
         with Journal.open(journal_path(out), readonly=True) as j:
             learned = [r.scan_id for r in j.records()]
         # the labels this test saw (its subscription may miss the first few): each one's
