@@ -211,48 +211,27 @@ def serve_controller(endpoint: str, tree: str | None = None, batch: bool = False
     ``tree``: the tree's actions, ``serve_tree``)."""
     if tree is not None:
         return serve_tree(endpoint, tree, batch)
-    import os
-    import signal
-    import threading
-
-    import zenoh
-
     from protocol import keys
     from protocol.messages import Scan, VelCmd
-    from protocol.session import make_config
 
-    done = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: done.set())
-    with zenoh.open(make_config(mode="client", connect=[endpoint])) as s:
-        pubs: dict[str, object] = {}
-
+    def start(s, done, publisher):
         def on_scan(sample) -> None:
             robot = keys.parse(sample.key_expr).robot
             scan = Scan.decode(sample.payload.to_bytes())
             vx, va = reflex(np.asarray(scan.ranges))
             if done.is_set():  # stopping: the session may close under a late callback
                 return
-            pub = pubs.get(robot)
-            if pub is None:
-                pub = pubs[robot] = s.declare_publisher(
-                    keys.cmd_vel_key(robot, source="controller"), express=True)
-            pub.put(VelCmd(vx=vx, va=va, source="controller", scan_id=scan.id).encode())
+            publisher(robot).put(VelCmd(vx=vx, va=va, source="controller",
+                                        scan_id=scan.id).encode())
 
-        sub = s.declare_subscriber(keys.scan_key(keys.EVERY), on_scan)
-        t0 = os.times()
-        print("ready", flush=True)
-        done.wait()
-        sub.undeclare()
-        t1 = os.times()  # CPU seconds while serving, for the parent's figures
-        print(f"cpu {t1.user + t1.system - t0.user - t0.system:.3f}", flush=True)
-    return 0
+        return s.declare_subscriber(keys.scan_key(keys.EVERY), on_scan).undeclare
+
+    return _serve(endpoint, start)
 
 
 def serve_tree(endpoint: str, tree: str, batch: bool) -> int:
     """Child process: one controller for every robot driving it with ``tree``: every scan
     waiting taken, the latest of each robot answered, one by one or (``batch``) together."""
-    import os
-    import signal
     import threading
 
     import zenoh
@@ -260,14 +239,11 @@ def serve_tree(endpoint: str, tree: str, batch: bool) -> int:
     from client.roles.controller import load_tree
     from protocol import keys
     from protocol.messages import Scan, VelCmdPacker
-    from protocol.session import make_config
 
     policy = load_tree(tree)
     packer = VelCmdPacker("controller")
-    done = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: done.set())
-    with zenoh.open(make_config(mode="client", connect=[endpoint])) as s:
-        pubs: dict[str, object] = {}
+
+    def start(s, done, publisher):
         sub = s.declare_subscriber(keys.scan_key(keys.EVERY), zenoh.handlers.FifoChannel(4096))
 
         def serve() -> None:
@@ -289,17 +265,47 @@ def serve_tree(endpoint: str, tree: str, batch: bool) -> int:
                 else:
                     names = [policy.act(sc.ranges, sc.pose) for sc in scans]
                 for robot, sc, name in zip(robots, scans, names, strict=True):
-                    pub = pubs.get(robot)
-                    if pub is None:
-                        pub = pubs[robot] = s.declare_publisher(
-                            keys.cmd_vel_key(robot, source="controller"), express=True)
                     vx, va = policy.actions[name]
-                    pub.put(packer.pack(vx, va, True, sc.id, sc.ts))
+                    publisher(robot).put(packer.pack(vx, va, True, sc.id, sc.ts))
 
         threading.Thread(target=serve, daemon=True).start()
+        return None
+
+    return _serve(endpoint, start)
+
+
+def _serve(endpoint: str, start) -> int:
+    """A controller child's frame: a zenoh session on ``endpoint``; ``start(session, done,
+    publisher)`` sets up the answering (``publisher(robot)``: that robot's command publisher)
+    and returns what stops it, or None; "ready", then on SIGTERM the CPU seconds spent
+    serving, both on stdout for the parent (``fleet_run``)."""
+    import os
+    import signal
+    import threading
+
+    import zenoh
+
+    from protocol import keys
+    from protocol.session import make_config
+
+    done = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    with zenoh.open(make_config(mode="client", connect=[endpoint])) as s:
+        pubs: dict[str, object] = {}
+
+        def publisher(robot: str):
+            pub = pubs.get(robot)
+            if pub is None:
+                pub = pubs[robot] = s.declare_publisher(
+                    keys.cmd_vel_key(robot, source="controller"), express=True)
+            return pub
+
+        stop = start(s, done, publisher)
         t0 = os.times()
         print("ready", flush=True)
         done.wait()
+        if stop is not None:
+            stop()
         t1 = os.times()  # CPU seconds while serving, for the parent's figures
         print(f"cpu {t1.user + t1.system - t0.user - t0.system:.3f}", flush=True)
     return 0

@@ -40,7 +40,6 @@ import zenoh
 from client.behaviour import guard
 from client.behaviour.actions import ActionSet
 from client.behaviour.features import FEATURES, FeatureSpec
-from client.behaviour.guard import clearance_for
 from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, check_compatible
 from client.decision import Decider
 from client.player import PlayerClient
@@ -197,7 +196,7 @@ class ControllerProcess:
     def _clearance(self, policy: TreePolicy) -> None:
         """The guard's path check for this tree (``--guard-clearance``, or by who taught it)."""
         if self.guard is not None and self.args.guard_clearance is None:
-            self.guard.clearance = clearance_for(policy.metadata)
+            self.guard.clearance = guard.clearance_for(policy.metadata)
 
     def run(self) -> int:
         self.policy = self.first_tree()

@@ -859,9 +859,9 @@ class LearnerProcess:
                 # --snapshot-every (a person's tree rebuilt from thousands of labels on a busy
                 # machine) still leaves that long to learning, or the learner would learn one
                 # label per rebuild and fall ever further behind its teacher
-                last_snap = time.monotonic()
-            if time.monotonic() - last_log >= 5.0:
-                last_log = time.monotonic()
+                last_snap = now = time.monotonic()
+            if now - last_log >= 5.0:
+                last_log = now
                 self.log_progress()
 
     def begin_drain(self) -> None:
