@@ -6,7 +6,7 @@ Labels come from the scripted teacher driving the room (``lab.train``'s world, t
 features: real feature vectors, consecutive scans alike), 12% of them replaced by a wrong key
 (a person's), each with the 6 scans shown before it (as the learner's pairing keeps them, for
 the lag estimate). For each N it times, in this process, the three parts of a rebuild
-(``PersonLearner``'s defaults: the lag estimated, the mean vote of 25 neighbours): the lag
+(``PersonLearner``'s defaults: the lag estimated, the mean vote of 50 neighbours): the lag
 estimate (``estimate_lag``), the vote (``nearest_votes`` + ``mean_actions``) and the tree
 learning the voted labels, best of ``--repeat``; beside it the same vote answered by
 scikit-learn's ``KNeighborsClassifier`` (kd-tree, the same k) as the peer a user would reach for.

@@ -55,6 +55,7 @@ __all__ = [
     "answered_scan",
     "majority_labels",
     "mean_actions",
+    "median_actions",
     "nearest_votes",
 ]
 
@@ -123,6 +124,28 @@ def mean_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
     v = v / np.maximum(np.abs(v).max(axis=0), 1e-12)
     mean = votes @ v / np.maximum(votes.sum(axis=1, keepdims=True), 1e-12)
     return ((mean[:, None, :] - v[None, :, :]) ** 2).sum(axis=2).argmin(axis=1)
+
+
+def median_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
+    """Per row of ``votes`` (counts per action index) the index of the action nearest to the
+    votes' median command: the median of the forward speeds and the median of the turning
+    speeds, each taken apart (scaled as in ``mean_actions``; a count split exactly in half
+    takes the midpoint of the two middle values). Unlike the mean, a minority of keys on the
+    other side (left and right confused) does not pull a turn towards forward."""
+    v = np.array([actions[n] for n in actions.names], dtype=np.float64)
+    v = v / np.maximum(np.abs(v).max(axis=0), 1e-12)
+    half = votes.sum(axis=1, keepdims=True) / 2.0
+    med = np.empty((len(votes), v.shape[1]))
+    for c in range(v.shape[1]):
+        order = np.argsort(v[:, c], kind="stable")
+        cum = np.cumsum(votes[:, order], axis=1)
+        lo = v[order, c][np.argmax(cum >= half - 1e-9, axis=1)]
+        hi = v[order, c][np.argmax(cum > half + 1e-9, axis=1)]
+        med[:, c] = 0.5 * (lo + hi)
+    return ((med[:, None, :] - v[None, :, :]) ** 2).sum(axis=2).argmin(axis=1)
+
+
+_VOTES = {"mean": mean_actions, "median": median_actions}
 
 
 def parse_lag(text: str) -> int | None:
@@ -195,7 +218,7 @@ def estimate_lag(W: np.ndarray, y: np.ndarray, k: int, n_labels: int, block: int
 PERSON_RULE = "person"  # the snapshot metadata's learning rule of a PersonLearner
 
 # the defaults docs/teaching.md chose on the teaching study
-PERSON_DEFAULTS = {"k": 25, "copies": 0, "sigma": 0.06, "vote": "mean", "passes": 1,
+PERSON_DEFAULTS = {"k": 50, "copies": 0, "sigma": 0.06, "vote": "mean", "passes": 1,
                    "build": "batch"}
 
 
@@ -223,8 +246,8 @@ class PersonLearner(DemonstrationLearner):
             raise ValueError(f"copies must be an integer >= 0, got {copies!r}")
         if not (sigma >= 0 and math.isfinite(sigma)):
             raise ValueError(f"sigma must be a finite number >= 0, got {sigma!r}")
-        if vote not in ("majority", "mean"):
-            raise ValueError(f"vote must be 'majority' or 'mean', got {vote!r}")
+        if vote not in ("majority", *_VOTES):
+            raise ValueError(f"vote must be 'majority', 'mean' or 'median', got {vote!r}")
         if not (isinstance(passes, int) and passes >= 1):
             raise ValueError(f"passes must be an integer >= 1, got {passes!r}")
         if build not in ("batch", "repair"):
@@ -335,8 +358,8 @@ class PersonLearner(DemonstrationLearner):
         if len(y) == 0:
             return X, y
         n = len(self.actions)
-        if self.vote == "mean":
-            ym = mean_actions(nearest_votes(X, X, y, self.k, n), self.actions)
+        if self.vote in _VOTES:
+            ym = _VOTES[self.vote](nearest_votes(X, X, y, self.k, n), self.actions)
         else:
             ym = majority_labels(X, y, self.k, n)
         rng = np.random.default_rng(self.seed)
@@ -346,7 +369,8 @@ class PersonLearner(DemonstrationLearner):
         Q = np.clip(np.repeat(X, self.copies, axis=0)
                     + rng.normal(0.0, self.sigma, (len(X) * self.copies, X.shape[1])), 0.0, 1.0)
         votes = nearest_votes(Q, X, y, self.k, n)
-        yq = mean_actions(votes, self.actions) if self.vote == "mean" else votes.argmax(axis=1)
+        yq = (_VOTES[self.vote](votes, self.actions) if self.vote in _VOTES
+              else votes.argmax(axis=1))
         XA, yA = np.concatenate([X, Q]), np.concatenate([ym, yq])
         order = rng.permutation(len(yA))
         return XA[order], yA[order]

@@ -17,6 +17,7 @@ from client.behaviour.teaching import (
     estimate_lag,
     majority_labels,
     mean_actions,
+    median_actions,
     nearest_votes,
     parse_lag,
 )
@@ -78,6 +79,19 @@ def test_mean_action_of_left_and_right_steering_is_forward():
     votes[2, i["fwd-right"]] = 1
     assert [NAMES[a] for a in mean_actions(votes, DEFAULT_ACTIONS)] == [
         "fwd", "rot-left", "fwd-right"]
+
+
+def test_median_action_keeps_a_turn_a_minority_of_confused_keys_pulls_to_forward():
+    votes = np.zeros((3, 5))
+    i = {n: k for k, n in enumerate(NAMES)}
+    votes[0, i["fwd-right"]], votes[0, i["rot-left"]] = 6, 4     # left and right confused
+    votes[1, [i["fwd-left"], i["fwd-right"]]] = 5                 # zig-zag: forward
+    votes[2, i["rot-right"]], votes[2, i["fwd-left"]] = 6, 4
+    assert [NAMES[a] for a in median_actions(votes, DEFAULT_ACTIONS)] == [
+        "fwd-right", "fwd", "rot-right"]
+    # the mean averages the minority in: forward, forward, an arc
+    assert [NAMES[a] for a in mean_actions(votes, DEFAULT_ACTIONS)] == [
+        "fwd", "fwd", "fwd-right"]
 
 
 def _walk(n=200, seed=0):
@@ -155,8 +169,8 @@ def test_person_learner_rejects_bad_settings_and_labels():
         PersonLearner(FEATURES["wall"], k=0)
     with pytest.raises(ValueError, match="copies must be"):
         PersonLearner(FEATURES["wall"], copies=-1)
-    with pytest.raises(ValueError, match="vote must be 'majority' or 'mean'"):
-        PersonLearner(FEATURES["wall"], vote="median")
+    with pytest.raises(ValueError, match="vote must be 'majority', 'mean' or 'median'"):
+        PersonLearner(FEATURES["wall"], vote="mode")
     person = PersonLearner(FEATURES["wall"])
     with pytest.raises(ValueError, match="'jump' is not an action"):
         person.observe(np.full(360, 1.0), 0.0, "jump")

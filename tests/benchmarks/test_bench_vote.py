@@ -1,0 +1,48 @@
+"""``benchmarks/bench_vote.py``: a session's labels learned again with other settings."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from client.behaviour.actions import DEFAULT_ACTIONS
+from client.behaviour.features import FEATURES
+from client.behaviour.teaching import PersonLearner
+
+
+@pytest.fixture(scope="module")
+def bench(request):
+    return request.getfixturevalue("load_benchmark")("bench_vote")
+
+
+@pytest.fixture(scope="module")
+def session(request):
+    W, y = request.getfixturevalue("load_benchmark")("bench_person").demonstration(300, wrong=0.1)
+    return W, [DEFAULT_ACTIONS.names[i] for i in y]
+
+
+def test_the_labels_learned_again_are_the_labels_as_a_learner_took_them(bench, session):
+    W, labels = session
+    again = bench.learn_again("person", W, labels, shuffle=3)
+    direct = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, task="wall-following", seed=3)
+    for w, label in zip(W, labels, strict=True):
+        direct.observe_vector(w[0], label, earlier=w[1:])
+    X1, y1 = again.training_set()
+    X2, y2 = direct.training_set()
+    assert np.array_equal(X1, X2) and np.array_equal(y1, y2)
+    assert again.estimated_lag == direct.estimated_lag
+    # another shuffle: the same vectors and votes, learned in another order
+    X3, y3 = bench.learn_again("person", W, labels, shuffle=4).training_set()
+    assert not np.array_equal(X1, X3)
+    assert sorted(map(tuple, X1)) == sorted(map(tuple, X3))
+    # a fixed lag takes the scan that many before each label's own
+    fixed = bench.learn_again("person:lag=2+k=10", W, labels, shuffle=0)
+    assert fixed.k == 10 and fixed.estimated_lag == 2
+    assert np.array_equal(np.sort(fixed.training_set()[0], axis=0), np.sort(W[:, 2], axis=0))
+
+
+def test_it_refuses_an_unknown_method_or_person_before_teaching(bench):
+    with pytest.raises(ValueError, match="unknown method"):
+        bench.main(["--sessions", "steady:0", "--methods", "person,best"])
+    with pytest.raises(SystemExit, match="no person model 'nobody'"):
+        bench.main(["--sessions", "nobody:0"])
