@@ -409,13 +409,14 @@ def _names(text: str, people) -> list[str]:
     return names
 
 
-def _seeds(text: str) -> list[int]:
+def parse_seeds(text: str, option: str = "--seeds") -> list[int]:
+    """A comma list of seeds (integers >= 0); ValueError naming ``option`` otherwise."""
     try:
         seeds = [int(s) for s in text.split(",") if s.strip()]
     except ValueError:
-        raise ValueError(f"--seeds must be integers separated by commas, got {text!r}") from None
+        raise ValueError(f"{option} must be integers separated by commas, got {text!r}") from None
     if not seeds or any(s < 0 for s in seeds):
-        raise ValueError(f"--seeds must be integers >= 0, got {text!r}")
+        raise ValueError(f"{option} must be integers >= 0, got {text!r}")
     return seeds
 
 
@@ -502,7 +503,7 @@ def main(argv=None) -> int:
         return 0
     try:
         names = _names(args.people, people)
-        seeds = _seeds(args.seeds)
+        seeds = parse_seeds(args.seeds)
         if not 0 < args.demo <= MAX_DEMO or not 0 < args.correct <= MAX_CORRECT:
             raise ValueError(f"--demo must be in (0, {MAX_DEMO:g}] and --correct in "
                              f"(0, {MAX_CORRECT:g}] seconds")

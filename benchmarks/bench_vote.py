@@ -33,6 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from bench_teach import UNSEEN, parse_seeds  # noqa: E402
 from bench_teach_study import make_method, teach  # noqa: E402
 from people import PEOPLE  # noqa: E402
 
@@ -42,7 +43,7 @@ from lab.evaluate import evaluate  # noqa: E402
 from lab.harness import resolve_world  # noqa: E402
 from lab.retrain import retrain  # noqa: E402
 
-WORLDS = "room,eval-room-jagged,eval-room-l,eval-room-ring"
+WORLDS = ",".join(("room", *UNSEEN))
 
 
 def labels_of(session: str) -> tuple[np.ndarray, list[str]]:
@@ -54,10 +55,13 @@ def labels_of(session: str) -> tuple[np.ndarray, list[str]]:
         model, _, seed = session.partition(":")
         if model not in PEOPLE:
             raise SystemExit(f"--sessions: no person model {model!r}; known: {', '.join(PEOPLE)}")
-        _, learner = teach(resolve_world("room"), PEOPLE[model](seed=int(seed or 0)),
-                           make_method("person"), seed=int(seed or 0), guard=True)
-    names = learner.actions.names
-    return np.stack(learner._ws), [names[i] for i in learner._ys]
+        try:
+            seed = parse_seeds(seed or "0", f"--sessions {session!r}: the seed")[0]
+        except ValueError as exc:
+            raise SystemExit(str(exc)) from None
+        _, learner = teach(resolve_world("room"), PEOPLE[model](seed=seed),
+                           make_method("person"), seed=seed, guard=True)
+    return learner.labelled()
 
 
 def learn_again(method: str, W: np.ndarray, labels: list[str], shuffle: int):
@@ -85,7 +89,10 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None, help="append a JSON line per run here")
     args = ap.parse_args(argv)
     worlds = args.worlds.split(",")
-    shuffles = [int(s) for s in args.shuffles.split(",")]
+    try:
+        shuffles = parse_seeds(args.shuffles, "--shuffles")
+    except ValueError as exc:
+        ap.error(str(exc))
     methods = args.methods.split(",")
     for m in methods:
         make_method(m)  # refuse a bad one before any session is taught

@@ -16,8 +16,9 @@ tree copies the noise. Two pieces cope with it (docs/teaching.md has the study b
   they saw a reaction time ago), re-estimated from every label at each build.
 * **the vote** (``PersonLearner``, on the learner's side): every label is kept as given; the
   tree is built from all of them at once, each labelled vector taking the action nearest to the
-  mean command of its ``k`` nearest labelled vectors (``vote="mean"``, the default) or the label
-  most of them carry (``"majority"``): a wrong key or a late release is outvoted by the labels
+  mean command of its ``k`` nearest labelled vectors (``vote="mean"``, the default), to the
+  median forward and turning speeds (``"median"``) or the label most of them carry
+  (``"majority"``): a wrong key or a late release is outvoted by the labels
   around it; optionally with jittered copies labelled by the same vote (``copies``).
 
     shown = 812                                         # the scan the page displayed
@@ -116,14 +117,24 @@ def majority_labels(X: np.ndarray, y: np.ndarray, k: int, n_labels: int) -> np.n
     return np.where(votes[rows, y] >= votes[rows, best], y, best)
 
 
+def _commands(actions: ActionSet) -> np.ndarray:
+    """(actions, 2): each action's (vx, va), each scaled by the largest of the set."""
+    v = np.array([actions[n] for n in actions.names], dtype=np.float64)
+    return v / np.maximum(np.abs(v).max(axis=0), 1e-12)
+
+
+def _nearest_action(points: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Per row of ``points`` (scaled commands) the index of the nearest row of ``v``."""
+    return ((points[:, None, :] - v[None, :, :]) ** 2).sum(axis=2).argmin(axis=1)
+
+
 def mean_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
     """Per row of ``votes`` (counts per action index) the index of the action nearest to the
     votes' mean command ((vx, va) averaged, each scaled by the largest of the set): a person
     steering left, right, left along a wall means forward."""
-    v = np.array([actions[n] for n in actions.names], dtype=np.float64)
-    v = v / np.maximum(np.abs(v).max(axis=0), 1e-12)
+    v = _commands(actions)
     mean = votes @ v / np.maximum(votes.sum(axis=1, keepdims=True), 1e-12)
-    return ((mean[:, None, :] - v[None, :, :]) ** 2).sum(axis=2).argmin(axis=1)
+    return _nearest_action(mean, v)
 
 
 def median_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
@@ -132,8 +143,7 @@ def median_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
     speeds, each taken apart (scaled as in ``mean_actions``; a count split exactly in half
     takes the midpoint of the two middle values). Unlike the mean, a minority of keys on the
     other side (left and right confused) does not pull a turn towards forward."""
-    v = np.array([actions[n] for n in actions.names], dtype=np.float64)
-    v = v / np.maximum(np.abs(v).max(axis=0), 1e-12)
+    v = _commands(actions)
     half = votes.sum(axis=1, keepdims=True) / 2.0
     med = np.empty((len(votes), v.shape[1]))
     for c in range(v.shape[1]):
@@ -142,7 +152,7 @@ def median_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
         lo = v[order, c][np.argmax(cum >= half - 1e-9, axis=1)]
         hi = v[order, c][np.argmax(cum > half + 1e-9, axis=1)]
         med[:, c] = 0.5 * (lo + hi)
-    return ((med[:, None, :] - v[None, :, :]) ** 2).sum(axis=2).argmin(axis=1)
+    return _nearest_action(med, v)
 
 
 _VOTES = {"mean": mean_actions, "median": median_actions}
@@ -229,7 +239,8 @@ class PersonLearner(DemonstrationLearner):
     built from all of them (spawn rule and other ``**tree_params`` as for
     ``DemonstrationLearner``, default ``spawn="winner"``), rebuilt when labels came since it
     was last asked for, in up to ``passes`` shuffled passes (``_build``). ``k``: neighbours of the vote. ``vote``: ``"majority"`` (the label most
-    of them carry) or ``"mean"`` (the action nearest to their mean command). ``copies``,
+    of them carry), ``"mean"`` (the action nearest to their mean command) or ``"median"``
+    (nearest to their median command: ``median_actions``). ``copies``,
     ``sigma``: jittered copies of each vector (normal noise of ``sigma`` in feature units,
     seeded with ``seed``) the tree also learns the vote's answer at (0: none). Sample
     selection (``stride``, ``min_delta``) does not apply: the vote needs every label."""
@@ -341,6 +352,14 @@ class PersonLearner(DemonstrationLearner):
         if self.lag is None and self._ws:
             return np.stack(self._ws)[:, self.estimated_lag]
         return np.array(self._xs, dtype=np.float64).reshape(-1, self.features.dim)
+
+    def labelled(self) -> tuple[np.ndarray, list[str]]:
+        """The labels as given, in order: per label its features at lags 0..``MAX_LAG`` (the
+        scan it names, then the scans shown before it; with a fixed lag, one column: the scan
+        it was paired with), (labels, lags, dim), and its action's name."""
+        W = (np.stack(self._ws) if self.lag is None and self._ws
+             else np.array(self._xs, dtype=np.float64).reshape(-1, 1, self.features.dim))
+        return W, [self.actions.names[i] for i in self._ys]
 
     def observe_vectors(self, X: np.ndarray, labels) -> int:
         X, labels = self._checked(X, labels)

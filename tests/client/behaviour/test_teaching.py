@@ -252,3 +252,17 @@ def test_person_learner_estimates_its_lag_from_the_earlier_scans():
     for bad in ("7", "-1", "x", ""):
         with pytest.raises(ValueError, match="'auto' or an integer 0..6"):
             parse_lag(bad)
+
+
+def test_labelled_gives_the_labels_as_given_with_their_earlier_scans():
+    person = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, task="wall-following")
+    x = np.linspace(0.1, 0.5, FEATURES["wall"].dim)
+    person.observe_vector(x, "fwd", earlier=[x + 0.1, x + 0.2])
+    person.observe_vector(x + 0.3, "rot-left")
+    W, labels = person.labelled()
+    assert labels == ["fwd", "rot-left"] and W.shape == (2, MAX_LAG + 1, len(x))
+    assert np.allclose(W[0, 0], x) and np.allclose(W[0, 1], x + 0.1)
+    assert np.allclose(W[0, 3:], x)  # lags not held: the label's own scan
+    fixed = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, lag=2)
+    fixed.observe_vector(x, "fwd")
+    assert fixed.labelled()[0].shape == (1, 1, len(x))
