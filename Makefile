@@ -15,7 +15,8 @@ BIN := $(VENV)/bin
 # install compiles them ahead of time where a C compiler is found); removing $(VENV) starts
 # afresh
 STAMP := $(VENV)/.rhbl-installed
-KERNEL_SOURCES := setup.py rhbl/_layout.py rhbl/_kernels.py server/_laser_kernels.py
+KERNEL_SOURCES := setup.py rhbl/_layout.py rhbl/_kernels.py server/_laser_kernels.py \
+                  client/behaviour/_payload_layout.py client/behaviour/_payload_kernels.py
 # the environment's commands (hadolint, shellcheck, rhbl) first on PATH for the tests
 RUN := PATH="$(abspath $(BIN)):$$PATH"
 

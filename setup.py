@@ -1,5 +1,6 @@
-"""The compiled kernels, ahead of time: the tree's (``rhbl/_kernels.py``) and the laser's
-(``server/_laser_kernels.py``) numba functions compiled into extension modules when rhbl is
+"""The compiled kernels, ahead of time: the tree's (``rhbl/_kernels.py``), the laser's
+(``server/_laser_kernels.py``) and the scan payload reader's (``client/behaviour/
+_payload_kernels.py``) numba functions compiled into extension modules when rhbl is
 installed (``pip install``, ``make install``, the image's wheel), so that a process loads them
 in about a millisecond and imports no numba (numba's own set-up is about a second per process).
 
@@ -27,16 +28,20 @@ ROOT = Path(__file__).resolve().parent
 KERNELS = (
     ("rhbl", "_kernels", "_layout", "_kernels_aot"),
     ("server", "_laser_kernels", "_laser_layout", "_laser_aot"),
+    ("client.behaviour", "_payload_kernels", "_payload_layout", "_payload_aot"),
 )
 
 
 def _module(package: str, name: str) -> types.ModuleType:
     """``package.name`` imported from this source tree without running the package's
     ``__init__`` (which imports the package's dependencies, not needed to compile)."""
-    if package not in sys.modules:
-        stub = types.ModuleType(package)
-        stub.__path__ = [str(ROOT / package)]
-        sys.modules[package] = stub
+    parts = package.split(".")
+    for depth in range(1, len(parts) + 1):  # the package and its parents, as stubs
+        stub_name = ".".join(parts[:depth])
+        if stub_name not in sys.modules:
+            stub = types.ModuleType(stub_name)
+            stub.__path__ = [str(ROOT.joinpath(*parts[:depth]))]
+            sys.modules[stub_name] = stub
     return importlib.import_module(f"{package}.{name}")
 
 

@@ -70,8 +70,8 @@ def echo(endpoint: str) -> int:
 
 
 # the controller's stages --breakdown times: (label, what is wrapped)
-STAGES = (("decode", "the scan's bytes from the ring channel to a Scan"),
-          ("answer", "features, the tree's predict_one, the guard"),
+STAGES = (("decode", "the scan's bytes read in place with the tree's features (one call)"),
+          ("answer", "the tree's predict_one, the guard"),
           ("command", "the VelCmd encoded and put"),
           ("in hand -> out", "from the scan's bytes in hand to the command put"),
           ("decision", "the decision for viewers, after the command"))
@@ -91,11 +91,16 @@ def timed_controller(out: str, argv: list[str]) -> int:
     clock = time.perf_counter
     mark = [0.0]
 
-    def recv(self):
-        sample = self._recv()
-        t = mark[0] = clock()
-        scan = self._decoder.decode(Scan, sample.payload.to_bytes())
-        times["decode"].append(clock() - t)
+    recv_payload, receive = player.ScanChannel.recv_payload, controller.ControllerProcess.receive
+
+    def timed_recv_payload(self):
+        data = recv_payload(self)
+        mark[0] = clock()
+        return data
+
+    def timed_receive(self):
+        scan = receive(self)
+        times["decode"].append(clock() - mark[0])
         return scan
 
     def timed(cls, name: str, stage: str, end_to_end: bool = False) -> None:
@@ -112,7 +117,8 @@ def timed_controller(out: str, argv: list[str]) -> int:
 
         setattr(cls, name, wrapper)
 
-    player.ScanChannel.recv = recv
+    player.ScanChannel.recv_payload = timed_recv_payload
+    controller.ControllerProcess.receive = timed_receive
     timed(controller.ControllerProcess, "answer", "answer")
     timed(player.PlayerClient, "answer", "command", end_to_end=True)
     timed(controller.ControllerProcess, "publish_decision", "decision")

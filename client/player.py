@@ -305,7 +305,16 @@ class ScanChannel:
         self._recv, self._try = self._sub.handler.recv, self._sub.handler.try_recv
 
     def recv(self) -> Scan | None:
-        return self._decoder.decode(Scan, self._recv().payload.to_bytes())
+        return self.decode(self.recv_payload())
+
+    def recv_payload(self) -> bytes:
+        """The next scan's payload, not decoded (blocks; ``decode`` it, or read it in place with
+        a ``client.behaviour.features.PayloadReader``)."""
+        return self._recv().payload.to_bytes()
+
+    def decode(self, data: bytes) -> Scan | None:
+        """The scan of the payload ``data`` (None: malformed, dropped and counted)."""
+        return self._decoder.decode(Scan, data)
 
     def try_recv(self) -> Scan | None:
         sample = self._try()

@@ -36,6 +36,7 @@ from protocol.keys import parse as parse_key
 __all__ = [
     "CARRIES",
     "COMMAND_MAX_PAYLOAD",
+    "MAX_BEAMS",
     "Decision",
     "PROTOCOL_VERSION",
     "Ack",
@@ -69,7 +70,7 @@ COMMAND_MAX_PAYLOAD = 64 * 1024  # bytes: commands and requests are small
 # rad/s (100 deg/s); a server clamps every command to them, a bridge can clamp the same way
 MAX_VX = 0.5
 MAX_VA = math.radians(100.0)
-_MAX_BEAMS = 100_000
+MAX_BEAMS = 100_000
 MAX_ORIGIN = 64  # characters of a teacher session's identity (``origin``)
 MAX_WITHDRAWN = 100_000  # labels one withdrawal may name (hours of demonstration at 10 Hz)
 
@@ -282,7 +283,7 @@ def _scan_in_bulk(cls, m: dict):
     if truth is not None and (truth := _floats3(truth)) is None:
         return None
     n = len(raw)
-    if n % 4 or not 0 < n <= 4 * _MAX_BEAMS:
+    if n % 4 or not 0 < n <= 4 * MAX_BEAMS:
         return None
     # a writable array of its own: the bytes copied once (on a big-endian machine, converted)
     ranges = (np.frombuffer(bytearray(raw), np.float32) if _LITTLE
@@ -297,9 +298,9 @@ def _scan_in_bulk(cls, m: dict):
 def _get_ranges(m: dict, name: str, what: str) -> np.ndarray:
     """1..100,000 finite little-endian float32 values (bytes) as a float32 array."""
     raw = get_bytes(m, name, what)
-    if len(raw) % 4 or not 0 < len(raw) // 4 <= _MAX_BEAMS:
+    if len(raw) % 4 or not 0 < len(raw) // 4 <= MAX_BEAMS:
         raise DecodeError(
-            f"{what}: field '{name}': expected 1..{_MAX_BEAMS} little-endian float32 values, "
+            f"{what}: field '{name}': expected 1..{MAX_BEAMS} little-endian float32 values, "
             f"got {len(raw)} bytes"
         )
     ranges = np.frombuffer(raw, dtype="<f4").astype(np.float32)

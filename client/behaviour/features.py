@@ -11,23 +11,56 @@ the scan (0 = right, 90 = straight ahead, 180 = left), so a spec does not depend
 Each beam value is the minimum over +/- ``window`` degrees around it (``window=0`` is the paper's
 single ping), clamped to ``clamp`` metres and divided by ``scale`` (paper: 2.0 and 2.0).
 
+``spec.reader()`` reads scans in place from their payloads with these features, one compiled
+call each (``PayloadReader``: the controller's hot path; ``Scan.decode`` for any other layout).
+
 ``heading="lr"`` appends the paper's maze feature: 0.66 when the robot is right-directional
 (cos(yaw) >= 0, heading towards +x) and 0.33 when left-directional.
 """
 
 from __future__ import annotations
 
+import functools
+import importlib
+import logging
 import math
+import os
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["FeatureSpec", "FeatureError", "FEATURES", "HEADING_LEFT", "HEADING_RIGHT"]
+from protocol.messages import Scan
+
+from . import _payload_layout as _layout
+
+__all__ = ["FeatureSpec", "FeatureError", "FEATURES", "HEADING_LEFT", "HEADING_RIGHT",
+           "PayloadReader"]
 
 HEADING_LEFT = 0.33
 HEADING_RIGHT = 0.66
 _HEADINGS = (None, "lr")
+
+
+log = logging.getLogger(__name__)
+_LITTLE = sys.byteorder == "little"  # the payload kernel reads the wire's float32s as this machine's
+# set to "jit" to use numba's kernels even where kernels compiled ahead of time are installed
+KERNELS_ENV = "RHBL_KERNELS"
+
+
+@functools.cache
+def _payload_kernel():
+    """The payload kernel of this process: compiled ahead of time (``_payload_aot``, from this
+    checkout's source) or numba's (compiled on first use or loaded from numba's cache)."""
+    if os.environ.get(KERNELS_ENV, "") != "jit":
+        try:
+            aot = importlib.import_module("._payload_aot", __package__)
+        except ImportError:
+            aot = None
+        if aot is not None and aot.source_hash() == _layout.source_hash():
+            return aot.read_features
+    return importlib.import_module("._payload_kernels", __package__).read_features
 
 
 class FeatureError(ValueError):
@@ -114,6 +147,10 @@ class FeatureSpec:
             v.append(HEADING_RIGHT if math.cos(yaw) >= 0.0 else HEADING_LEFT)
         return np.array(v, dtype=np.float64)
 
+    def reader(self) -> PayloadReader:
+        """A ``PayloadReader``: scans read in place from their payloads with these features."""
+        return PayloadReader(self)
+
     def extract_many(self, ranges, yaws=None) -> np.ndarray:
         """The features of many scans of one beam count at once: ``ranges`` (scans, beams),
         ``yaws`` one per scan (default 0); row i is ``extract(ranges[i], yaws[i])``, bit for bit
@@ -175,3 +212,94 @@ FEATURES: dict[str, FeatureSpec] = {
     "maze": FeatureSpec(beams=(0.0, 45.0, 90.0, 135.0, 180.0), heading="lr"),
     "maze-right": FeatureSpec(beams=(0.0, 30.0, 60.0, 90.0, 120.0), window=10.0),
 }
+
+
+class PayloadReader:
+    """Scans read in place from their payloads with the features of ``spec``, one compiled call
+    each (the controller's hot path: no map built, no array made, the ranges not copied).
+
+    After ``read(data)`` returned True, until the next ``read``: ``ts``, ``id``, ``x`` (the
+    features, ``spec.extract(scan.ranges, scan.pose[2])``: equal values), ``ranges`` (a
+    read-only view into ``data``), ``pose``, ``min_angle``, ``max_angle``, ``resolution``,
+    ``max_range``, ``truth``, ``bearings()`` are those of the scan ``Scan.decode(data)`` gives,
+    and ``to_scan()`` is that ``Scan``. ``read`` is False for a payload not laid out exactly as
+    ``Scan.encode`` writes it (the fields in its order, every number a float64 but ``v`` and
+    ``id``) or with a value that is not finite, valid or not: ``Scan.decode`` then accepts it
+    or names what is wrong. One thread at a time (its buffers are reused)."""
+
+    def __init__(self, spec: FeatureSpec) -> None:
+        self.spec = spec
+        self.x = np.empty(spec.dim)
+        self._head = np.empty(_layout.HEAD)
+        self._ints = np.empty(_layout.INTS, dtype=np.int64)
+        self._data = b""
+        self._read = _payload_kernel()
+        self._windows(360)
+        self.ts, self.id = 0.0, 0
+        # numba's kernel compiled (or loaded from its cache) now, not at the first scan
+        warm_up = Scan(ts=0.0, id=0, ranges=np.ones(360, dtype=np.float32)).encode()
+        try:
+            self.read(warm_up)
+        except OSError as e:  # the cache folder took the index, not the code (disk full, ...)
+            log.warning("cannot cache the scan reader's compiled code (%s): compiled in this "
+                        "process", e)
+            importlib.import_module("._payload_kernels", __package__).disable_cache()
+            self.read(warm_up)
+
+    def _windows(self, count: int) -> None:
+        """The kernel's windows (each beam's ``lo, hi``) and scaling, for ``count`` beams."""
+        windows = np.array(self.spec._slices(count), dtype=np.int64).ravel()
+        self._count = count
+        self._args = (windows, self.spec.clamp, self.spec.scale)
+
+    def read(self, data: bytes) -> bool:
+        """Read the scan whose payload is ``data`` (bytes, as received); False: not read."""
+        if type(data) is not bytes or len(data) > Scan.MAX_SIZE or not _LITTLE:
+            return False
+        beams = self._read(data, *self._args, self.x, self._head, self._ints)
+        if beams and beams != self._count:  # another beam count: its windows, then again
+            if abs(beams) < 2:  # a scan the features cannot take (extract names why)
+                return False
+            self._windows(abs(beams))
+            beams = self._read(data, *self._args, self.x, self._head, self._ints)
+        if beams < 2:
+            return False
+        self._data = data
+        self.ts, self.id = self._head.item(_layout.TS), self._ints.item(_layout.ID)
+        if self.spec.heading == "lr":
+            yaw = self._head.item(_layout.YAW)
+            self.x[-1] = HEADING_RIGHT if math.cos(yaw) >= 0.0 else HEADING_LEFT
+        return True
+
+    @property
+    def count(self) -> int:
+        return self._ints.item(_layout.BEAMS)
+
+    @property
+    def ranges(self) -> np.ndarray:
+        return np.frombuffer(self._data, np.float32, self.count, self._ints.item(_layout.OFFSET))
+
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        x, y, yaw = self._head[_layout.X:_layout.X + 3].tolist()
+        return x, y, yaw
+
+    @property
+    def truth(self) -> tuple[float, float, float] | None:
+        if self._ints.item(_layout.FIELDS) != len(_layout.KEYS):
+            return None
+        x, y, yaw = self._head[_layout.TRUTH:_layout.TRUTH + 3].tolist()
+        return x, y, yaw
+
+    min_angle = property(lambda self: self._head.item(_layout.MIN_ANGLE))
+    max_angle = property(lambda self: self._head.item(_layout.MAX_ANGLE))
+    resolution = property(lambda self: self._head.item(_layout.RESOLUTION))
+    max_range = property(lambda self: self._head.item(_layout.MAX_RANGE))
+    bearings = Scan.bearings  # min_angle + i * resolution, as the scan's
+
+    def to_scan(self) -> Scan:
+        """The ``Scan`` read (its ranges a copy of its own)."""
+        return Scan(ts=self.ts, id=self.id, ranges=self.ranges.copy(), pose=self.pose,
+                    min_angle=self.min_angle, max_angle=self.max_angle,
+                    resolution=self.resolution, max_range=self.max_range, truth=self.truth)
+

@@ -39,7 +39,7 @@ import zenoh
 
 from client.behaviour import guard
 from client.behaviour.actions import ActionSet
-from client.behaviour.features import FEATURES, FeatureSpec
+from client.behaviour.features import FEATURES, FeatureSpec, PayloadReader
 from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, check_compatible
 from client.decision import Decider
 from client.player import PlayerClient
@@ -164,6 +164,7 @@ class ControllerProcess:
         # kept across tree swaps: a new tree does not reset what the robot is doing
         self.guard = guard.from_arguments(self.args)
         self.policy: TreePolicy | None = None  # swapped between scans by the follower
+        self.reader: PayloadReader | None = None  # the policy's features read with each scan
         # subscribed before the first query: a tree announced meanwhile is not missed
         self.follower = _Follower(ctx, self.swap) if self.args.follow else None
         self.client = self.robot()
@@ -191,7 +192,12 @@ class ControllerProcess:
 
     def swap(self, policy: TreePolicy) -> None:
         self._clearance(policy)
+        self._reader(policy)
         self.policy = policy
+
+    def _reader(self, policy: TreePolicy) -> None:
+        """The payload reader of ``policy``'s features (none for a ROS 2 robot's scans)."""
+        self.reader = None if self.args.ros2 else policy.features.reader()
 
     def _clearance(self, policy: TreePolicy) -> None:
         """The guard's path check for this tree (``--guard-clearance``, or by who taught it)."""
@@ -201,6 +207,7 @@ class ControllerProcess:
     def run(self) -> int:
         self.policy = self.first_tree()
         self._clearance(self.policy)
+        self._reader(self.policy)
         log.info("tree loaded: %s; features %s", _describe(self.policy),
                  self.policy.features.to_dict())
         if self.follower is not None:
@@ -267,7 +274,7 @@ class ControllerProcess:
     def step(self, scan: Scan | None = None) -> bool:
         """Answer ``scan`` or the next one; False when done (``--seconds``)."""
         if scan is None:
-            scan = self.scans.recv()  # None: a malformed one (dropped, counted)
+            scan = self.receive()  # None: a malformed one (dropped, counted)
             self.watch.seen()
             if scan is None:
                 return True
@@ -288,12 +295,25 @@ class ControllerProcess:
             self.publish_decision(policy, x, scan)  # after the command: for viewers only
         return True
 
-    def answer(self, scan: Scan):
+    def receive(self) -> Scan | PayloadReader | None:
+        """The next scan: read in place by the tree's ``PayloadReader`` (its features with it:
+        the hot path), else decoded (None: malformed, dropped and counted). The reader holds it
+        until the next scan is received."""
+        reader = self.reader
+        if reader is None:  # a ROS 2 robot's scans: resampled, then decoded
+            return self.scans.recv()
+        data = self.scans.recv_payload()
+        return reader if reader.read(data) else self.scans.decode(data)
+
+    def answer(self, scan: Scan | PayloadReader):
         """``((vx, va), policy, features)`` of the tree's action for ``scan`` (the policy that
         answered: a follower may swap in another one meanwhile); None (logged) when it cannot."""
         p = self.policy
         try:
-            x = p.features.extract(scan.ranges, scan.pose[2])
+            if type(scan) is PayloadReader and scan.spec is p.features:
+                x = scan.x  # read with the scan
+            else:
+                x = p.features.extract(scan.ranges, scan.pose[2])
             name = str(p.classifier.predict_one(x))
             if self.guard is not None:
                 name = self.guard_choose(name, scan)

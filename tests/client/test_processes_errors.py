@@ -3,6 +3,7 @@ a tree that does not fit, scans that stop. Each runs a real process for a second
 
 from __future__ import annotations
 
+import contextlib
 import json
 import signal
 import subprocess
@@ -97,9 +98,11 @@ def test_controller_reports_when_scans_stop(start_server, tmp_path):
         p.kill()  # nothing if it ended
 
 
-def test_controller_survives_a_scan_its_tree_cannot_use(free_port, tmp_path):
-    """A well-formed scan with one beam (features need more): no command for it, a warning,
-    and the next good scan is answered (before: the controller died)."""
+@contextlib.contextmanager
+def _answering_controller(free_port, tmp_path):
+    """A real ``rhbl controller`` on a router of this process, answering good scans already:
+    yields ``(put, answered, p, until)``: ``put(payload)`` publishes a scan's bytes, ``answered``
+    the scan ids of its commands so far, ``p`` the process, ``until(cond, what)`` waits."""
     from protocol import keys
     from protocol.messages import Scan, VelCmd
 
@@ -113,8 +116,6 @@ def test_controller_survives_a_scan_its_tree_cannot_use(free_port, tmp_path):
         p = Child("controller", rhbl_argv("controller", "--connect", ep, "--tree",
                                           str(_tree(tmp_path))), tmp_path, cwd=ROOT).start()
         try:
-            good = np.full(360, 2.0, np.float32)
-
             def until(cond, what):
                 end = time.monotonic() + 30
                 while not cond() and time.monotonic() < end:
@@ -125,19 +126,60 @@ def test_controller_survives_a_scan_its_tree_cannot_use(free_port, tmp_path):
             sid = 0
             while not answered:  # the first scans also tell it the server is up
                 sid += 1
-                pub.put(Scan(ts=0.1 * sid, id=sid, ranges=good).encode())
+                pub.put(Scan(ts=0.1 * sid, id=sid, ranges=GOOD).encode())
                 assert p.poll() is None, p.output()
                 time.sleep(0.1)
                 assert sid < 300, p.output()
-            bad_id = sid + 1
-            pub.put(Scan(ts=0.1 * bad_id, id=bad_id, ranges=np.ones(1, np.float32)).encode())
-            assert p.wait_for_line("not answered", 30), f"the warning:\n{p.output()}"
-            pub.put(Scan(ts=0.1 * (bad_id + 1), id=bad_id + 1, ranges=good).encode())
-            until(lambda: bad_id + 1 in answered, "the next scan answered")
-            assert bad_id not in answered and p.poll() is None
+            yield pub.put, answered, p, until
             assert p.stop(signal.SIGTERM, 20) == 0, p.output()  # then SIGKILL (-9) after 20 s
         finally:
             p.kill()  # nothing if it ended
+
+
+GOOD = np.full(360, 2.0, np.float32)
+FIRST = 1000  # the scan ids the tests send after the controller answers (below: warm-up)
+
+
+def test_controller_survives_a_scan_its_tree_cannot_use(free_port, tmp_path):
+    """A well-formed scan with one beam (features need more): no command for it, a warning,
+    and the next good scan is answered (before: the controller died)."""
+    from protocol.messages import Scan
+
+    with _answering_controller(free_port, tmp_path) as (put, answered, p, until):
+        put(Scan(ts=0.1 * FIRST, id=FIRST, ranges=np.ones(1, np.float32)).encode())
+        assert p.wait_for_line("not answered", 30), f"the warning:\n{p.output()}"
+        put(Scan(ts=0.1 * (FIRST + 1), id=FIRST + 1, ranges=GOOD).encode())
+        until(lambda: FIRST + 1 in answered, "the next scan answered")
+        assert FIRST not in answered and p.poll() is None
+
+
+def test_controller_answers_a_scan_in_any_valid_layout_and_drops_a_malformed_one(free_port,
+                                                                                tmp_path):
+    """The controller reads a scan laid out as ``Scan.encode`` writes it in place (its hot
+    path, ``PayloadReader``); one laid out otherwise (the fields in another order, a float32
+    number, a negative fixint version... any valid msgpack) is decoded and answered the same;
+    a malformed one (a NaN range, a truncated map) gets no command and the next is answered."""
+    import msgpack
+
+    from protocol.messages import Scan
+
+    def scan(sid, ranges=GOOD):
+        return Scan(ts=0.1 * sid, id=sid, ranges=ranges)
+
+    with _answering_controller(free_port, tmp_path) as (put, answered, p, until):
+        fields = {"v": 1, **scan(FIRST).to_map()}
+        put(msgpack.packb(dict(reversed(list(fields.items()))), use_bin_type=True))
+        until(lambda: FIRST in answered, "a scan with its fields in another order answered")
+        fields = {"v": 1, **scan(FIRST + 1).to_map()}
+        put(msgpack.packb(fields, use_bin_type=True, use_single_float=True))
+        until(lambda: FIRST + 1 in answered, "a scan of float32 numbers answered")
+        put(scan(FIRST + 2, np.r_[GOOD[:-1], np.nan].astype(np.float32)).encode())
+        assert p.wait_for_line("dropped a malformed scan (1 so far)", 30), p.output()
+        put(scan(FIRST + 3).encode()[:-5])
+        assert p.wait_for_line("dropped a malformed scan (2 so far)", 30), p.output()
+        put(scan(FIRST + 4).encode())
+        until(lambda: FIRST + 4 in answered, "the next good scan answered")
+        assert FIRST + 2 not in answered and FIRST + 3 not in answered and p.poll() is None
 
 
 def test_a_robot_name_that_is_not_a_key_chunk_is_bad_input():
