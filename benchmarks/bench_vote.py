@@ -6,14 +6,14 @@ A session's labels (each with the scans shown before its own: ``PersonLearner``'
 paired as ``rhbl train --from-recording`` pairs them) or from an in-process session of the
 teaching study (``model:seed``: ``bench_teach_study.teach`` with the default learner and the
 guard, deterministic). Every method (``bench_teach_study.make_method``'s syntax:
-``person``, ``person:k=50``, ``person:vote=median``) learns each session's labels again, once per
+``person``, ``person:k=25``, ``person:vote=median``) learns each session's labels again, once per
 shuffle seed (``PersonLearner(seed=...)``: the order the tree learns its vectors in), and the
 tree is evaluated through the controller's guard (path check on) from every start pose of
 ``--worlds`` (the first: the taught room). Corrections were given while the session's own tree
 drove; here they are labels like the others.
 
     python benchmarks/bench_vote.py --sessions novice:0,steady:1,.../session.mcap \
-        --methods person,person:k=50,person:vote=median --shuffles 0,1,2 [--json out.jsonl]
+        --methods person,person:k=25,person:vote=median --shuffles 0,1,2 [--json out.jsonl]
 
 Prints a line per (session, method, shuffle), then per method the mean success, the runs under
 90% in the taught room and under 80% unseen, and per session the mean over the shuffles.
