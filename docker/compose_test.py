@@ -67,8 +67,8 @@ EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NO_ENGINE = 0, 1, 2, 3
 ROBOT = "r0"
 ROLES = ("server", "learner", "teacher", "controller", "console")
 # roles whose root filesystem compose makes read-only (the server, the learner and the
-# controller need a writable one: numba loads the image's compiled kernels, the laser's and the
-# tree's, only from a folder it can write to)
+# controller need a writable one: numba loads the image's compiled kernels, the laser's, the
+# tree's and the scan reader's, only from a folder it can write to)
 READ_ONLY = ("secrets", "teacher", "console")
 NUMBA_CACHE = "/var/cache/rhbl-numba"  # the Dockerfile's NUMBA_CACHE_DIR
 HOST_CA_BUNDLE = Path("/etc/ssl/certs/ca-certificates.crt")
