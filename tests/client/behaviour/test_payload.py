@@ -54,7 +54,7 @@ scans = st.builds(
         min_angle=angles[0], max_angle=angles[1], resolution=angles[2], max_range=angles[3]),
     finite, st.one_of(st.integers(0, 300), st.integers(0, 2**64 - 1)),
     st.lists(ranges_values, min_size=1, max_size=400), poses, st.none() | poses,
-    st.tuples(finite, finite, finite, finite))
+    st.tuples(*[st.floats(-1e6, 1e6)] * 4))
 
 
 def assert_read_as_decoded(reader: PayloadReader, data: bytes) -> None:
