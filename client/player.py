@@ -318,14 +318,14 @@ class ScanChannel:
 
     def try_recv(self) -> Scan | None:
         sample = self._try()
-        return None if sample is None else self._decoder.decode(Scan, sample.payload.to_bytes())
+        return None if sample is None else self.decode(sample.payload.to_bytes())
 
     def latest(self) -> Scan | None:
         """Take every scan waiting; the last of them (None: none, or it was malformed)."""
         last = None
         while (sample := self._try()) is not None:
             last = sample
-        return None if last is None else self._decoder.decode(Scan, last.payload.to_bytes())
+        return None if last is None else self.decode(last.payload.to_bytes())
 
     def close(self) -> None:
         try:

@@ -1,5 +1,5 @@
 """A scan's features straight from its bytes, compiled (numba): the controller's hot path
-(:meth:`client.behaviour.features.FeatureSpec.from_payload` calls it and says what it gives).
+(:class:`client.behaviour.features.PayloadReader` calls it and says what it gives).
 
 One call reads a scan's msgpack map when it is laid out exactly as ``Scan.encode`` writes it
 (the fields in that order, every number a float64 but ``v`` and ``id``, ``ranges`` a bin of
@@ -90,11 +90,12 @@ def _double(data, p, bits):
 def read_features(data, windows, clamp, scale, x, head, ints):
     """The beams of the scan ``data`` (its payload, bytes) when it is laid out as
     ``Scan.encode`` writes it with every value finite, else 0 (minus the beams when a window
-    does not fit them: windows made for another beam count). On success ``x[k]`` is beam
-    window ``windows[2k]:windows[2k + 1]``'s minimum (as a float64), clamped to ``clamp`` (a negative one taken
-    as no reading: ``clamp``) and divided by ``scale``, for every window; ``head`` holds ts,
-    min_angle, max_angle, resolution, max_range, the pose and the truth, ``ints`` the id, the
-    offset of the ranges in ``data``, the beam count and the map's field count (10: a truth). Little-endian machines only (the caller's)."""
+    does not fit them: windows made for another beam count). On success ``x[k]`` is beam window
+    ``windows[2k]:windows[2k + 1]``'s minimum (as a float64), clamped to ``clamp`` (a negative
+    one taken as no reading: ``clamp``) and divided by ``scale``, for every window; ``head``
+    holds ts, min_angle, max_angle, resolution, max_range, the pose and the truth, ``ints`` the
+    id, the offset of the ranges in ``data``, the beam count and the map's field count (10: a
+    truth). Little-endian machines only (the caller's)."""
     n = len(data)
     if n < 1 or (data[0] != 0x89 and data[0] != 0x8A):  # a fixmap of 9 fields, or 10 (truth)
         return 0

@@ -34,8 +34,11 @@ def _template() -> tuple[int, ...]:
 
 
 TEMPLATE = _template()
-VERSION = 1  # protocol.codec.PROTOCOL_VERSION (tests/client/behaviour/test_payload.py holds them equal)
-MAX_BEAMS = 100_000  # protocol.messages.MAX_BEAMS (likewise)
+# protocol.codec.PROTOCOL_VERSION and protocol.messages.MAX_BEAMS (this module imports no
+# protocol: setup.py compiles the kernel without the package's dependencies);
+# tests/client/behaviour/test_payload.py holds them equal
+VERSION = 1
+MAX_BEAMS = 100_000
 
 
 def source_hash() -> int:

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from protocol.messages import Scan
+from rhbl.tree import KERNELS_ENV
 
 from . import _payload_layout as _layout
 
@@ -44,15 +45,14 @@ _HEADINGS = (None, "lr")
 
 
 log = logging.getLogger(__name__)
-_LITTLE = sys.byteorder == "little"  # the payload kernel reads the wire's float32s as this machine's
-# set to "jit" to use numba's kernels even where kernels compiled ahead of time are installed
-KERNELS_ENV = "RHBL_KERNELS"
+_LITTLE = sys.byteorder == "little"  # the payload kernel reads the wire's float32s as its own
 
 
 @functools.cache
 def _payload_kernel():
     """The payload kernel of this process: compiled ahead of time (``_payload_aot``, from this
-    checkout's source) or numba's (compiled on first use or loaded from numba's cache)."""
+    checkout's source) or numba's (compiled on first use or loaded from numba's cache; always
+    with ``RHBL_KERNELS=jit``, as the tree's)."""
     if os.environ.get(KERNELS_ENV, "") != "jit":
         try:
             aot = importlib.import_module("._payload_aot", __package__)
