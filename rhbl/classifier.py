@@ -41,6 +41,9 @@ from ._errors import NotFittedError, SnapshotError
 from .compact import compact
 from .tree import ALGORITHMS, DISTANCES, SphereTree, Totals, load_kernels
 
+_NDARRAY = np.ndarray
+_F64 = np.dtype(np.float64)  # builtin dtypes are singletons: another float64 takes the checks
+
 __all__ = ["HypersphereClassifier", "load", "loads"]
 
 _SPAWNS = ("all", "winner")
@@ -431,8 +434,8 @@ class HypersphereClassifier:
     def predict_one(self, x: Any) -> Any:
         """The label of one vector (the fast path for controllers). Returns a plain str/int."""
         tree = getattr(self, "tree_", None)
-        if (self.compiled and tree is not None and type(x) is np.ndarray
-                and x.shape == (self.n_features_in_,) and x.dtype == np.float64):
+        if (type(x) is _NDARRAY and x.dtype is _F64 and self.compiled and tree is not None
+                and x.shape == (self.n_features_in_,)):
             label = tree.predict_one(x)  # the kernel checks that x is in the cube
             if label >= 0:
                 return self._labels[label]

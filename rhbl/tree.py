@@ -156,6 +156,7 @@ class _Search(NamedTuple):
     nodes: np.ndarray  # each row's creation index
     one: Any  # search_one kernel
     many: Any  # search_many kernel
+    labels: list  # each sphere's label index, by creation index (a list: the fastest lookup)
 
 
 class Growth(NamedTuple):
@@ -539,12 +540,19 @@ class SphereTree:
             nodes = np.empty(n, dtype=np.int64)
             kernels = _kernels()
             kernels.layout(self._table, n, rank, table, nodes)
-            self._search = _Search(table, nodes, *kernels.search(f))
+            self._search = _Search(table, nodes, *kernels.search(f),
+                                   self._table[:n, self._label_column].tolist())
         return self._search
 
     def predict_one(self, x: np.ndarray, *, compiled: bool = True) -> int:
         """The label index of the winning sphere for one checked query vector (compiled: -1
         for a vector outside the unit cube, as :meth:`apply_one`)."""
+        search = self._search
+        if compiled and search is not None and x.dtype is _F64:
+            flags = x.flags
+            if flags.c_contiguous and flags.writeable:  # apply_one's search, inlined
+                node = search.one(search.table, search.nodes, x, self._eps, self._euclidean)
+                return -1 if node < 0 else search.labels[node]
         node = self.apply_one(x, compiled=compiled)
         return -1 if node < 0 else self._table.item(node, self._label_column)
 
