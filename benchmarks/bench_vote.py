@@ -3,7 +3,9 @@ the tree's success, on sessions already taught.
 
 A session's labels (each with the scans shown before its own: ``PersonLearner``'s
 ``earlier``) come from a recording of the real page (``bench_teach.py``'s ``session.mcap``,
-paired as ``rhbl train --from-recording`` pairs them) or from an in-process session of the
+paired as ``rhbl train --from-recording`` pairs them), from the learner's own tree and journal
+of a session (``bench_teach.py``'s ``tree.rhbl``: the labels it holds, as a restarted
+``rhbl learner`` recovers them, withdrawn ones left out) or from an in-process session of the
 teaching study (``model:seed``: ``bench_teach_study.teach`` with the default learner and the
 guard, deterministic). Every method (``bench_teach_study.make_method``'s syntax:
 ``person``, ``person:k=25``, ``person:vote=median``) learns each session's labels again, once per
@@ -12,7 +14,7 @@ tree is evaluated through the controller's guard (path check on) from every star
 ``--worlds`` (the first: the taught room). Corrections were given while the session's own tree
 drove; here they are labels like the others.
 
-    python benchmarks/bench_vote.py --sessions novice:0,steady:1,.../session.mcap \
+    python benchmarks/bench_vote.py --sessions novice:0,.../session.mcap,.../tree.rhbl \
         --methods person,person:k=25,person:vote=median --shuffles 0,1,2 [--json out.jsonl]
 
 Prints a line per (session, method, shuffle), then per method the mean success, the runs under
@@ -23,7 +25,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -39,6 +43,8 @@ from people import PEOPLE  # noqa: E402
 
 from client.behaviour.guard import CLEARANCE, RotationGuard  # noqa: E402
 from client.behaviour.learning import TreePolicy  # noqa: E402
+from client.journal import journal_path  # noqa: E402
+from client.roles.learner import LearnerCore  # noqa: E402
 from lab.evaluate import evaluate  # noqa: E402
 from lab.harness import resolve_world  # noqa: E402
 from lab.retrain import retrain  # noqa: E402
@@ -51,6 +57,8 @@ def labels_of(session: str) -> tuple[np.ndarray, list[str]]:
     scans shown before it) and the key, in the order given."""
     if session.endswith(".mcap"):
         learner, _ = retrain([session], teacher="person", lag=None)
+    elif session.endswith(".rhbl"):
+        learner = journaled(Path(session))
     else:
         model, _, seed = session.partition(":")
         if model not in PEOPLE:
@@ -62,6 +70,25 @@ def labels_of(session: str) -> tuple[np.ndarray, list[str]]:
         _, learner = teach(resolve_world("room"), PEOPLE[model](seed=seed),
                            make_method("person"), seed=seed, guard=True)
     return learner.labelled()
+
+
+def journaled(tree: Path):
+    """The person's learner of ``tree``'s journal, recovered as ``rhbl learner`` does, from
+    a copy (the session's files are never opened for writing)."""
+    if not journal_path(tree).exists():
+        raise SystemExit(f"--sessions: {tree} has no journal {journal_path(tree).name}")
+    with tempfile.TemporaryDirectory() as tmp:
+        copy = Path(tmp) / tree.name
+        for src in (tree, journal_path(tree)):
+            if src.exists():
+                shutil.copy(src, Path(tmp) / src.name)
+        core = LearnerCore(copy)
+        try:
+            if not core.person:
+                raise SystemExit(f"--sessions: {tree} is not a person's lineage")
+            return core.learner
+        finally:
+            core.close()
 
 
 def learn_again(method: str, W: np.ndarray, labels: list[str], shuffle: int):

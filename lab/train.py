@@ -25,7 +25,7 @@ import numpy as np
 from client.behaviour.learning import DemonstrationLearner, TreePolicy
 from client.behaviour.policies import Demonstrator, takes_over
 from client.behaviour.tasks import TASKS, make_policy
-from client.behaviour.teaching import add_lag_argument
+from client.behaviour.teaching import add_person_arguments
 from lab.episode import DT, Episode
 from lab.harness import (
     OnStep,
@@ -405,7 +405,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "from a person (rhbl console, rhbl teacher --policy keyboard), "
                              "else by the script rule; 'script' or 'person' force one "
                              "(docs/teaching.md)")
-    add_lag_argument(parser)
+    add_person_arguments(parser)
 
 
 def main(args) -> int:
@@ -416,9 +416,9 @@ def main(args) -> int:
         return train_main(args)  # every flag that cannot apply is a named error there
     if not args.world:
         raise ValueError("--world is required (or --from-recording FILE)")
-    if args.teacher not in ("auto", "script") or args.lag is not None:
-        raise ValueError("--teacher and --lag go with --from-recording (a simulated run's "
-                         "teacher is the scripted expert)")
+    if args.teacher not in ("auto", "script") or args.lag is not None or args.vote is not None:
+        raise ValueError("--teacher, --lag and --vote go with --from-recording (a simulated "
+                         "run's teacher is the scripted expert)")
     spec = resolve_world(args.world)
     recipe = recipe_from_args(spec.task, args)
     if args.resume:

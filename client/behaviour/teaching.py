@@ -17,7 +17,8 @@ tree copies the noise. Two pieces cope with it (docs/teaching.md has the study b
 * **the vote** (``PersonLearner``, on the learner's side): every label is kept as given; the
   tree is built from all of them at once, each labelled vector taking the action nearest to the
   mean command of its ``k`` nearest labelled vectors (``vote="mean"``, the default), to the
-  median forward and turning speeds (``"median"``) or the label most of them carry
+  median forward and turning speeds (``"median"``), to their median turning and mean forward
+  speed (``"median-turn"``) or the label most of them carry
   (``"majority"``): a wrong key or a late release is outvoted by the labels
   around it; optionally with jittered copies labelled by the same vote (``copies``).
 
@@ -53,10 +54,13 @@ __all__ = [
     "parse_lag",
     "PERSON_DEFAULTS",
     "PersonLearner",
+    "VOTES",
     "answered_scan",
     "majority_labels",
     "mean_actions",
     "median_actions",
+    "median_turn_actions",
+    "trimmed_actions",
     "nearest_votes",
 ]
 
@@ -137,13 +141,10 @@ def mean_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
     return _nearest_action(mean, v)
 
 
-def median_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
-    """Per row of ``votes`` (counts per action index) the index of the action nearest to the
-    votes' median command: the median of the forward speeds and the median of the turning
-    speeds, each taken apart (scaled as in ``mean_actions``; a count split exactly in half
-    takes the midpoint of the two middle values). Unlike the mean, a minority of keys on the
-    other side (left and right confused) does not pull a turn towards forward."""
-    v = _commands(actions)
+def _median_commands(votes: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(len(votes), 2): per row the median of each column of the scaled commands ``v``
+    weighted by the counts (a count split exactly in half takes the midpoint of the two middle
+    values)."""
     half = votes.sum(axis=1, keepdims=True) / 2.0
     med = np.empty((len(votes), v.shape[1]))
     for c in range(v.shape[1]):
@@ -152,10 +153,58 @@ def median_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
         lo = v[order, c][np.argmax(cum >= half - 1e-9, axis=1)]
         hi = v[order, c][np.argmax(cum > half + 1e-9, axis=1)]
         med[:, c] = 0.5 * (lo + hi)
-    return _nearest_action(med, v)
+    return med
 
 
-_VOTES = {"mean": mean_actions, "median": median_actions}
+def median_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
+    """Per row of ``votes`` (counts per action index) the index of the action nearest to the
+    votes' median command: the median of the forward speeds and the median of the turning
+    speeds, each taken apart (scaled as in ``mean_actions``). Unlike the mean, a minority of
+    keys on the other side (left and right confused) does not pull a turn towards forward."""
+    v = _commands(actions)
+    return _nearest_action(_median_commands(votes, v), v)
+
+
+def median_turn_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
+    """Per row of ``votes`` the index of the action nearest to the median turning speed and
+    the mean forward speed (scaled as in ``mean_actions``): the turn is kept from a minority
+    on the other side as by ``median_actions``, the pace is the mean's (a median of the
+    forward speeds drops to a rotation on the spot as soon as half the keys were one)."""
+    v = _commands(actions)
+    cmd = _median_commands(votes, v)
+    cmd[:, 0] = (votes @ v[:, 0]) / np.maximum(votes.sum(axis=1), 1e-12)
+    return _nearest_action(cmd, v)
+
+
+def _trimmed_commands(votes: np.ndarray, v: np.ndarray, trim: float) -> np.ndarray:
+    """(len(votes), 2): per row the mean of each column of the scaled commands ``v`` weighted
+    by the counts, the lowest and the highest ``trim`` of the counts left out (0: the mean;
+    towards 0.5: the median)."""
+    total = votes.sum(axis=1, keepdims=True)
+    lo, hi = trim * total, (1.0 - trim) * total
+    out = np.empty((len(votes), v.shape[1]))
+    for c in range(v.shape[1]):
+        order = np.argsort(v[:, c], kind="stable")
+        cum = np.cumsum(votes[:, order], axis=1)
+        kept = np.clip(np.minimum(cum, hi) - np.maximum(cum - votes[:, order], lo), 0.0, None)
+        out[:, c] = kept @ v[order, c] / np.maximum(hi - lo, 1e-12)[:, 0]
+    return out
+
+
+def trimmed_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
+    """Per row of ``votes`` the index of the action nearest to the votes' interquartile mean
+    command: the forward and the turning speeds each taken apart, their lowest and highest
+    quarter left out, the middle half averaged (scaled as in ``mean_actions``). Between the
+    mean and the median: a zig-zag of left and right keys in like numbers still averages to
+    forward, and a quarter of keys on the other side (left and right confused) does not pull a
+    turn towards forward."""
+    v = _commands(actions)
+    return _nearest_action(_trimmed_commands(votes, v, 0.25), v)
+
+
+_VOTES = {"mean": mean_actions, "median": median_actions, "median-turn": median_turn_actions,
+          "trimmed": trimmed_actions}
+VOTES = ("majority", *_VOTES)  # PersonLearner's vote= and --vote
 
 
 def parse_lag(text: str) -> int | None:
@@ -172,15 +221,22 @@ def parse_lag(text: str) -> int | None:
     return lag
 
 
-def add_lag_argument(parser) -> None:
-    """``--lag SCANS|auto`` as ``rhbl learner`` and ``rhbl train --from-recording`` take it
-    (``parse_lag``; None: estimated)."""
+def add_person_arguments(parser) -> None:
+    """``--lag SCANS|auto`` (``parse_lag``; None: estimated) and ``--vote`` (None: the
+    default, ``PERSON_DEFAULTS``) as ``rhbl learner`` and ``rhbl train --from-recording``
+    take them."""
     parser.add_argument("--lag", type=arguments.Checked("lag", parse_lag), default=None,
                         metavar="SCANS|auto",
                         help="with the person rule: a label answers the scan this many scans "
                              f"(0..{MAX_LAG}) before the one it names; 'auto' (default): "
                              "estimated from the labels, re-estimated as they accumulate "
                              f"({LAG} until there are enough; docs/teaching.md)")
+    parser.add_argument("--vote", choices=VOTES, default=None,
+                        help="with the person rule, a new tree's vote of the nearest labels: "
+                             "the action nearest to their mean command, their median command, "
+                             "their median turning and mean forward speed (median-turn) or "
+                             f"the label most of them carry (default {PERSON_DEFAULTS['vote']}; "
+                             "docs/teaching.md)")
 
 
 def estimate_lag(W: np.ndarray, y: np.ndarray, k: int, n_labels: int, block: int = 50,
@@ -228,7 +284,7 @@ def estimate_lag(W: np.ndarray, y: np.ndarray, k: int, n_labels: int, block: int
 PERSON_RULE = "person"  # the snapshot metadata's learning rule of a PersonLearner
 
 # the defaults docs/teaching.md chose on the teaching study
-PERSON_DEFAULTS = {"k": 50, "copies": 0, "sigma": 0.06, "vote": "mean", "passes": 1,
+PERSON_DEFAULTS = {"k": 50, "copies": 0, "sigma": 0.06, "vote": "trimmed", "passes": 1,
                    "build": "batch"}
 
 
@@ -239,8 +295,9 @@ class PersonLearner(DemonstrationLearner):
     built from all of them (spawn rule and other ``**tree_params`` as for
     ``DemonstrationLearner``, default ``spawn="winner"``), rebuilt when labels came since it
     was last asked for, in up to ``passes`` shuffled passes (``_build``). ``k``: neighbours of the vote. ``vote``: ``"majority"`` (the label most
-    of them carry), ``"mean"`` (the action nearest to their mean command) or ``"median"``
-    (nearest to their median command: ``median_actions``). ``copies``,
+    of them carry), ``"mean"`` (the action nearest to their mean command), ``"median"``
+    (nearest to their median command: ``median_actions``) or ``"median-turn"`` (their median
+    turning and mean forward speed: ``median_turn_actions``). ``copies``,
     ``sigma``: jittered copies of each vector (normal noise of ``sigma`` in feature units,
     seeded with ``seed``) the tree also learns the vote's answer at (0: none). Sample
     selection (``stride``, ``min_delta``) does not apply: the vote needs every label."""
@@ -257,8 +314,9 @@ class PersonLearner(DemonstrationLearner):
             raise ValueError(f"copies must be an integer >= 0, got {copies!r}")
         if not (sigma >= 0 and math.isfinite(sigma)):
             raise ValueError(f"sigma must be a finite number >= 0, got {sigma!r}")
-        if vote not in ("majority", *_VOTES):
-            raise ValueError(f"vote must be 'majority', 'mean' or 'median', got {vote!r}")
+        if vote not in VOTES:
+            raise ValueError("vote must be one of " + ", ".join(map(repr, VOTES))
+                             + f", got {vote!r}")
         if not (isinstance(passes, int) and passes >= 1):
             raise ValueError(f"passes must be an integer >= 1, got {passes!r}")
         if build not in ("batch", "repair"):

@@ -64,7 +64,13 @@ from client.behaviour.learning import (
     load_snapshot,
 )
 from client.behaviour.tasks import task_of_features
-from client.behaviour.teaching import MAX_LAG, PERSON_RULE, PersonLearner, add_lag_argument
+from client.behaviour.teaching import (
+    MAX_LAG,
+    PERSON_RULE,
+    VOTES,
+    PersonLearner,
+    add_person_arguments,
+)
 from client.journal import (
     Journal,
     JournalError,
@@ -137,7 +143,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "earlier, the tree rebuilt from every label by the vote of its "
                              "nearest labels). A lineage keeps the rule it was made with (its "
                              "journal's header)")
-    add_lag_argument(parser)
+    add_person_arguments(parser)
 
 
 # ---- the learning core (no zenoh: testable on its own) --------------------------------------
@@ -157,10 +163,16 @@ class LearnerCore:
                  tree_params: dict | None = None, stride: int = 1, min_delta: float = 0.0,
                  fsync_interval: float = 1.0, actions: ActionSet = DEFAULT_ACTIONS,
                  fold_journal: bool = False, journal_write=os.write, teacher: str = "script",
-                 lag: int | None = None):
+                 lag: int | None = None, vote: str | None = None):
         if lag is not None and not (isinstance(lag, int) and 0 <= lag <= MAX_LAG):
             raise ProcessError(f"learner: --lag must be 0..{MAX_LAG} scans, got {lag!r}",
                                EXIT_USAGE)
+        if vote is not None and vote not in VOTES:
+            raise ProcessError(f"learner: --vote must be one of {', '.join(VOTES)}, got {vote!r}",
+                               EXIT_USAGE)
+        if vote is not None and (teacher == "script" or resume is not None or fold_journal):
+            raise ProcessError("learner: --vote is the person rule's, for a new tree (--teacher "
+                               "person or auto, no --resume or --fold-journal)", EXIT_USAGE)
         self.out = Path(out)
         self.fold_journal = bool(fold_journal)
         self.jpath = journal_path(self.out)
@@ -192,7 +204,7 @@ class LearnerCore:
                 raise ProcessError("a new tree needs --features (wall or maze)", EXIT_USAGE)
             self._new = {"spec": spec, "resume": resume, "features": features, "task": task,
                          "params": {"spawn": "winner", **(tree_params or {})},
-                         "stride": stride, "min_delta": min_delta, "lag": lag,
+                         "stride": stride, "min_delta": min_delta, "lag": lag, "vote": vote,
                          "fsync_interval": fsync_interval, "write": journal_write,
                          "actions": actions}
             self.journal = None
@@ -224,7 +236,8 @@ class LearnerCore:
             return _resume(n["resume"], n["spec"])
         task = n["task"] or task_of_features(n["features"])
         if rule == "person":
-            return PersonLearner(n["spec"], n["actions"], task=task, lag=n["lag"],
+            vote = {} if n["vote"] is None else {"vote": n["vote"]}
+            return PersonLearner(n["spec"], n["actions"], task=task, lag=n["lag"], **vote,
                                  **n["params"])
         return DemonstrationLearner(n["spec"], n["actions"], task=task,
                                     stride=n["stride"], min_delta=n["min_delta"], **n["params"])
@@ -643,7 +656,8 @@ class LearnerProcess:
                              **({"max_nodes": args.max_nodes} if args.max_nodes else {})},
                 stride=args.stride, min_delta=args.min_delta,
                 fsync_interval=args.fsync_interval, fold_journal=args.fold_journal,
-                journal_write=journal_write, teacher=args.teacher, lag=args.lag)
+                journal_write=journal_write, teacher=args.teacher, lag=args.lag,
+                vote=args.vote)
         except JournalError as exc:
             raise ProcessError(f"learner: {exc}") from exc
 

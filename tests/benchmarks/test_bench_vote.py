@@ -46,3 +46,29 @@ def test_it_refuses_an_unknown_method_or_person_before_teaching(bench):
         bench.main(["--sessions", "steady:0", "--methods", "person,best"])
     with pytest.raises(SystemExit, match="no person model 'nobody'"):
         bench.main(["--sessions", "nobody:0"])
+
+
+def test_a_learners_journal_gives_the_labels_it_holds_and_is_left_as_it_was(bench, tmp_path):
+    from client.roles.learner import LearnerCore
+    from protocol.messages import Withdrawal
+
+    out = tmp_path / "tree.rhbl"
+    core = LearnerCore(out, features="wall", teacher="person")
+    rng = np.random.default_rng(2)
+    scans = [(rng.uniform(0.2, 3.0, 360).astype(np.float32), float(rng.uniform(-3, 3)))
+             for _ in range(60)]
+    for k in range(6, 60):
+        core.learn(k, 0.1 * k, *scans[k], DEFAULT_ACTIONS.names[k % 5], origin="p" * 16, seq=k,
+                   earlier=[scans[k - i] for i in range(1, 7)])
+    assert core.withdraw(Withdrawal(origin="p" * 16, id=0, first=50, upto=60, reason="undo"))
+    assert core.rebuild()
+    core.snapshot()
+    held = core.learner.labelled()
+    core.close()
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    W, labels = bench.labels_of(str(out))
+    assert W.shape == (44, 7, 5) and len(labels) == 44  # the 10 withdrawn are left out
+    assert np.array_equal(W, held[0]) and labels == held[1]
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    with pytest.raises(SystemExit, match="has no journal"):
+        bench.labels_of(str(tmp_path / "other.rhbl"))

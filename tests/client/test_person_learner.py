@@ -170,6 +170,29 @@ def test_a_persons_lineage_is_rebuilt_from_its_whole_journal(tmp_path):
         LearnerCore(tmp_path / "n.rhbl", features="wall", teacher="person", lag=-1)
 
 
+def test_a_new_persons_lineage_takes_the_vote_asked_for_and_keeps_it(tmp_path):
+    out = tmp_path / "t.rhbl"
+    core = LearnerCore(out, features="wall", teacher="person", vote="median-turn")
+    assert core.learner.vote == "median-turn"
+    _feed(core, 60, seed=0)
+    core.snapshot()
+    core.close()
+    assert load_snapshot(out)[3]["learning"]["vote"] == "median-turn"
+    again = LearnerCore(out, features="wall")  # the journal's header keeps it
+    assert again.learner.vote == "median-turn" and "median-turn vote" in again.describe()
+    ref = LearnerCore(tmp_path / "ref.rhbl", features="wall", teacher="person",
+                      vote="median-turn")
+    _feed(ref, 60, seed=0)
+    assert again.learner.classifier.tree_equal(ref.learner.classifier)
+    for c in (again, ref):
+        c.close()
+    for kw in ({"teacher": "script"}, {"teacher": "auto", "fold_journal": True}):
+        with pytest.raises(ProcessError, match="--vote is the person rule's"):
+            LearnerCore(tmp_path / "s.rhbl", features="wall", vote="mean", **kw)
+    with pytest.raises(ProcessError, match="--vote must be one of"):
+        LearnerCore(tmp_path / "b.rhbl", features="wall", teacher="person", vote="loudest")
+
+
 def test_the_majority_outvotes_a_wrong_key(tmp_path):
     cores = {"person": LearnerCore(tmp_path / "t.rhbl", features="wall", teacher="person")}
     rng = np.random.default_rng(3)

@@ -18,8 +18,10 @@ from client.behaviour.teaching import (
     majority_labels,
     mean_actions,
     median_actions,
+    median_turn_actions,
     nearest_votes,
     parse_lag,
+    trimmed_actions,
 )
 from rhbl import load
 
@@ -93,6 +95,33 @@ def test_median_action_keeps_a_turn_a_minority_of_confused_keys_pulls_to_forward
     assert [NAMES[a] for a in mean_actions(votes, DEFAULT_ACTIONS)] == [
         "fwd", "fwd", "fwd-right"]
 
+
+
+def test_median_turn_keeps_the_turn_of_the_median_and_the_pace_of_the_mean():
+    votes = np.zeros((2, 5))
+    i = {n: k for k, n in enumerate(NAMES)}
+    votes[0, i["fwd-right"]], votes[0, i["rot-left"]] = 6, 4     # left and right confused
+    votes[1, i["rot-left"]], votes[1, i["fwd"]] = 6, 4            # turning, often going on
+    assert [NAMES[a] for a in median_turn_actions(votes, DEFAULT_ACTIONS)] == [
+        "fwd-right", "fwd-left"]
+    # the median stops to rotate once half the keys were a rotation; the mean goes straight
+    assert [NAMES[a] for a in median_actions(votes, DEFAULT_ACTIONS)] == [
+        "fwd-right", "rot-left"]
+    assert [NAMES[a] for a in mean_actions(votes, DEFAULT_ACTIONS)] == ["fwd", "fwd-left"]
+
+
+def test_the_interquartile_mean_averages_a_zig_zag_and_keeps_a_confused_turn():
+    votes = np.zeros((4, 5))
+    i = {n: k for k, n in enumerate(NAMES)}
+    votes[0, i["fwd-right"]], votes[0, i["fwd-left"]] = 55, 45    # over-steering: forward
+    votes[1, i["fwd-right"]], votes[1, i["rot-left"]] = 6, 4      # left and right confused
+    votes[2, i["rot-left"]], votes[2, i["fwd"]] = 6, 4
+    votes[3, i["rot-right"]] = 3                                  # all agree
+    assert [NAMES[a] for a in trimmed_actions(votes, DEFAULT_ACTIONS)] == [
+        "fwd", "fwd-right", "fwd-left", "rot-right"]
+    # the median keeps the zig-zag's larger side; the mean lets the confusion pull to forward
+    assert NAMES[median_actions(votes[:1], DEFAULT_ACTIONS)[0]] == "fwd-right"
+    assert NAMES[mean_actions(votes[1:2], DEFAULT_ACTIONS)[0]] == "fwd"
 
 def _walk(n=200, seed=0):
     """A run along a wall: the right-hand distance grows slowly; the person steers right
@@ -169,7 +198,7 @@ def test_person_learner_rejects_bad_settings_and_labels():
         PersonLearner(FEATURES["wall"], k=0)
     with pytest.raises(ValueError, match="copies must be"):
         PersonLearner(FEATURES["wall"], copies=-1)
-    with pytest.raises(ValueError, match="vote must be 'majority', 'mean' or 'median'"):
+    with pytest.raises(ValueError, match="vote must be one of 'majority', 'mean', 'median', 'median-turn', 'trimmed'"):
         PersonLearner(FEATURES["wall"], vote="mode")
     person = PersonLearner(FEATURES["wall"])
     with pytest.raises(ValueError, match="'jump' is not an action"):
