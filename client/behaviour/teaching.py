@@ -16,7 +16,8 @@ tree copies the noise. Two pieces cope with it (docs/teaching.md has the study b
   they saw a reaction time ago), re-estimated from every label at each build.
 * **the vote** (``PersonLearner``, on the learner's side): every label is kept as given; the
   tree is built from all of them at once, each labelled vector taking the action nearest to the
-  mean command of its ``k`` nearest labelled vectors (``vote="mean"``, the default), to the
+  interquartile mean command of its ``k`` nearest labelled vectors (``vote="trimmed"``, the
+  default: ``trimmed_actions``), to their mean command (``"mean"``), to their
   median forward and turning speeds (``"median"``), to their median turning and mean forward
   speed (``"median-turn"``) or the label most of them carry
   (``"majority"``): a wrong key or a late release is outvoted by the labels
@@ -233,8 +234,9 @@ def add_person_arguments(parser) -> None:
                              f"({LAG} until there are enough; docs/teaching.md)")
     parser.add_argument("--vote", choices=VOTES, default=None,
                         help="with the person rule, a new tree's vote of the nearest labels: "
-                             "the action nearest to their mean command, their median command, "
-                             "their median turning and mean forward speed (median-turn) or "
+                             "the action nearest to their interquartile mean command (trimmed), "
+                             "their mean command, their median command, their median turning "
+                             "and mean forward speed (median-turn) or "
                              f"the label most of them carry (default {PERSON_DEFAULTS['vote']}; "
                              "docs/teaching.md)")
 
@@ -296,8 +298,9 @@ class PersonLearner(DemonstrationLearner):
     ``DemonstrationLearner``, default ``spawn="winner"``), rebuilt when labels came since it
     was last asked for, in up to ``passes`` shuffled passes (``_build``). ``k``: neighbours of the vote. ``vote``: ``"majority"`` (the label most
     of them carry), ``"mean"`` (the action nearest to their mean command), ``"median"``
-    (nearest to their median command: ``median_actions``) or ``"median-turn"`` (their median
-    turning and mean forward speed: ``median_turn_actions``). ``copies``,
+    (nearest to their median command: ``median_actions``), ``"median-turn"`` (their median
+    turning and mean forward speed: ``median_turn_actions``) or ``"trimmed"`` (their
+    interquartile mean command: ``trimmed_actions``; the default). ``copies``,
     ``sigma``: jittered copies of each vector (normal noise of ``sigma`` in feature units,
     seeded with ``seed``) the tree also learns the vote's answer at (0: none). Sample
     selection (``stride``, ``min_delta``) does not apply: the vote needs every label."""
