@@ -120,8 +120,7 @@ def retrain(paths, features: str = "wall", robots: list[str] | None = None,
             raise ValueError(f"the person rule{chose} learns every label (no --stride) and its "
                              "tree is rebuilt from them (no --compact: compact the snapshot it "
                              "writes; or force --teacher script)")
-        learner = PersonLearner(spec, DEFAULT_ACTIONS, task=task, lag=lag,
-                                **({} if vote is None else {"vote": vote}), **params)
+        learner = PersonLearner(spec, DEFAULT_ACTIONS, task=task, lag=lag, vote=vote, **params)
     else:
         if vote is not None:
             raise ValueError(f"--vote is the person rule's; the script rule{chose} learns each "

@@ -39,10 +39,9 @@ import numpy as np
 from . import snapshot
 from ._errors import NotFittedError, SnapshotError
 from .compact import compact
-from .tree import ALGORITHMS, DISTANCES, SphereTree, Totals, load_kernels
+from .tree import _F64, ALGORITHMS, DISTANCES, SphereTree, Totals, load_kernels
 
-_NDARRAY = np.ndarray
-_F64 = np.dtype(np.float64)  # builtin dtypes are singletons: another float64 takes the checks
+_NDARRAY = np.ndarray  # (_F64: builtin dtypes are singletons; another float64 takes the checks)
 
 __all__ = ["HypersphereClassifier", "load", "loads"]
 

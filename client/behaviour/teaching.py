@@ -138,8 +138,12 @@ def mean_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
     votes' mean command ((vx, va) averaged, each scaled by the largest of the set): a person
     steering left, right, left along a wall means forward."""
     v = _commands(actions)
-    mean = votes @ v / np.maximum(votes.sum(axis=1, keepdims=True), 1e-12)
-    return _nearest_action(mean, v)
+    return _nearest_action(_mean_commands(votes, v), v)
+
+
+def _mean_commands(votes: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(len(votes), 2): per row the mean of the scaled commands ``v`` weighted by the counts."""
+    return votes @ v / np.maximum(votes.sum(axis=1, keepdims=True), 1e-12)
 
 
 def _median_commands(votes: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -173,7 +177,7 @@ def median_turn_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
     forward speeds drops to a rotation on the spot as soon as half the keys were one)."""
     v = _commands(actions)
     cmd = _median_commands(votes, v)
-    cmd[:, 0] = (votes @ v[:, 0]) / np.maximum(votes.sum(axis=1), 1e-12)
+    cmd[:, 0] = _mean_commands(votes, v)[:, 0]
     return _nearest_action(cmd, v)
 
 
@@ -300,14 +304,14 @@ class PersonLearner(DemonstrationLearner):
     of them carry), ``"mean"`` (the action nearest to their mean command), ``"median"``
     (nearest to their median command: ``median_actions``), ``"median-turn"`` (their median
     turning and mean forward speed: ``median_turn_actions``) or ``"trimmed"`` (their
-    interquartile mean command: ``trimmed_actions``; the default). ``copies``,
+    interquartile mean command: ``trimmed_actions``; the default, also for None). ``copies``,
     ``sigma``: jittered copies of each vector (normal noise of ``sigma`` in feature units,
     seeded with ``seed``) the tree also learns the vote's answer at (0: none). Sample
     selection (``stride``, ``min_delta``) does not apply: the vote needs every label."""
 
     def __init__(self, features: FeatureSpec, actions: ActionSet = DEFAULT_ACTIONS, *,
                  k: int = PERSON_DEFAULTS["k"], copies: int = PERSON_DEFAULTS["copies"],
-                 sigma: float = PERSON_DEFAULTS["sigma"], vote: str = PERSON_DEFAULTS["vote"],
+                 sigma: float = PERSON_DEFAULTS["sigma"], vote: str | None = PERSON_DEFAULTS["vote"],
                  passes: int = PERSON_DEFAULTS["passes"], build: str = PERSON_DEFAULTS["build"],
                  seed: int = 0, lag: int | None = None, task: str | None = None,
                  parent: str | None = None, provenance: Mapping | None = None, **tree_params):
@@ -317,6 +321,7 @@ class PersonLearner(DemonstrationLearner):
             raise ValueError(f"copies must be an integer >= 0, got {copies!r}")
         if not (sigma >= 0 and math.isfinite(sigma)):
             raise ValueError(f"sigma must be a finite number >= 0, got {sigma!r}")
+        vote = PERSON_DEFAULTS["vote"] if vote is None else vote
         if vote not in VOTES:
             raise ValueError("vote must be one of " + ", ".join(map(repr, VOTES))
                              + f", got {vote!r}")

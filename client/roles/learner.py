@@ -236,9 +236,8 @@ class LearnerCore:
             return _resume(n["resume"], n["spec"])
         task = n["task"] or task_of_features(n["features"])
         if rule == "person":
-            vote = {} if n["vote"] is None else {"vote": n["vote"]}
-            return PersonLearner(n["spec"], n["actions"], task=task, lag=n["lag"], **vote,
-                                 **n["params"])
+            return PersonLearner(n["spec"], n["actions"], task=task, lag=n["lag"],
+                                 vote=n["vote"], **n["params"])
         return DemonstrationLearner(n["spec"], n["actions"], task=task,
                                     stride=n["stride"], min_delta=n["min_delta"], **n["params"])
 
