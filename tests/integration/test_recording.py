@@ -355,12 +355,20 @@ def test_replay_makes_a_controller_send_the_same_commands(live_run, procs, tmp_p
                 "--connect", srv.endpoint)
     assert ctl.wait(120) == 0, ctl.output()
     assert rec.stop() == 0, rec.output()
-    live = {}
+    live, recorded = {}, set()
     for m in read_recording(live_rec):
         if m.kind == "cmd" and m.key.endswith("/controller"):
             c = VelCmd.decode(m.data)
             live[c.scan_id] = (c.vx, c.va)
+        elif m.kind == "scan":
+            recorded.add(m.message().id)
     assert len(live) >= 70
+    # a scan the bus dropped on its way to the recorder (a subscriber that falls behind on a
+    # loaded machine; the controller got it and answered) is not in the recording, so the
+    # replay cannot send it: compare the commands of the scans the recording holds
+    missed = set(live) - recorded
+    assert len(missed) <= 0.02 * len(live), sorted(missed)
+    live = {k: v for k, v in live.items() if k in recorded}
 
     # replay on a fresh rendezvous: no simulator, a new controller with the same tree
     endpoint = f"tcp/127.0.0.1:{free_port()}"
