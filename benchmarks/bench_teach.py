@@ -28,7 +28,7 @@ included (given while the default learner's tree drove), at no extra session.
     python benchmarks/bench_teach.py --people steady,hurried --seeds 0,1,2 \
         [--demo 240] [--correct 120] [--learners default[,literal]] [--jobs 2] [--json out.json]
 
-``--people`` takes names, ``dev``, ``held-out`` or ``all``. The budget per run is at most 240 s
+``--people`` takes names, ``dev``, ``held-out``, ``fresh`` or ``all``. The budget per run is at most 240 s
 demonstrating plus 120 s correcting (real time). ``--jobs 2`` runs two sessions at once, each
 with its own server, ports, console and browser (the views/s and frames/s columns say whether
 the machine kept up: compare them with a single run's).
@@ -401,11 +401,13 @@ def _names(text: str, people) -> list[str]:
         return list(people.DEV)
     if text == "held-out":
         return list(people.HELD_OUT)
+    if text == "fresh":
+        return list(people.FRESH)
     names = [n for n in text.split(",") if n]
     bad = [n for n in names if n not in people.PEOPLE]
     if bad or not names:
         raise ValueError(f"--people: unknown {', '.join(bad) or '(none)'}; one of "
-                         f"{', '.join(people.PEOPLE)}, dev, held-out, all")
+                         f"{', '.join(people.PEOPLE)}, dev, held-out, fresh, all")
     return names
 
 
@@ -450,7 +452,8 @@ def main(argv=None) -> int:
     import people
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--people", default="dev", help="names, dev, held-out or all (default dev)")
+    ap.add_argument("--people", default="dev", help="names, dev, held-out, fresh or all (default dev; "
+                                                "benchmarks/people.py)")
     ap.add_argument("--seeds", default="0,1,2", help="seeds, e.g. 0,1,2 (default)")
     ap.add_argument("--demo", type=float, default=MAX_DEMO,
                     help=f"seconds demonstrating per run (at most {MAX_DEMO:g}; default)")

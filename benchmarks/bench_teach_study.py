@@ -52,7 +52,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from people import DEV, HELD_OUT, PEOPLE, View  # noqa: E402
+from people import DEV, FRESH, HELD_OUT, PEOPLE, View  # noqa: E402
 
 from client.behaviour.actions import DEFAULT_ACTIONS  # noqa: E402
 from client.behaviour.features import FEATURES  # noqa: E402
@@ -406,7 +406,8 @@ def table(rows: list[dict], taught: str, unseen) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--models", default=",".join(DEV),
-                    help=f"person models (dev: {', '.join(DEV)}; held out: {', '.join(HELD_OUT)})")
+                    help=f"person models (dev: {', '.join(DEV)}; held out: {', '.join(HELD_OUT)}; "
+                         f"fresh: {', '.join(FRESH)})")
     ap.add_argument("--seeds", type=int, default=3, help="seeds per model (0..N-1)")
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--methods", default="today,literal,person",

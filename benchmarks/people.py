@@ -27,7 +27,12 @@ wall, spinning in place (rotating without getting anywhere, or the action flicke
 rot-left and rot-right) or going round in circles; they drive until the robot is back on the wall, then let go.
 
 Models: ``DEV`` are the ones methods may be chosen on; ``HELD_OUT`` are evaluated once, at the
-end (docs/teaching.md).
+end (docs/teaching.md). ``FRESH`` (:class:`Pilot`) were written after every method and default
+was chosen and are measured, never tuned on: their steering is their own (pure pursuit of a point
+along the wall, not the models' distance-and-heading rule), their reaction times are skewed
+(log-normal) with lapses of attention during which the key stays held, one presses no arc keys
+at all (forward or a rotation in place, never both) and one drifts in how far from the wall it
+likes to be.
 """
 
 from __future__ import annotations
@@ -38,7 +43,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-__all__ = ["DEV", "HELD_OUT", "KEYS", "PEOPLE", "Person", "Style", "View", "percept"]
+__all__ = ["DEV", "FRESH", "HELD_OUT", "KEYS", "PEOPLE", "Person", "Pilot", "PilotStyle", "Style",
+           "View", "percept"]
 
 KEYS = ("fwd", "fwd-left", "rot-left", "fwd-right", "rot-right")
 _MIRROR = {"fwd": "fwd", "fwd-left": "fwd-right", "fwd-right": "fwd-left",
@@ -403,9 +409,89 @@ class Person:
         return m.key
 
 
+@dataclass(frozen=True)
+class PilotStyle(Style):
+    """A :class:`Pilot`'s style: :class:`Style`'s hands and correct mode, and its own steering
+    and attention."""
+
+    lookahead: float = 1.0          # the point aimed at lies this far ahead along the wall
+    aim: float = 0.12               # |bearing to that point| below this (rad): straight on
+    spin: float = 0.9               # above this: rotate in place (between: an arc)
+    arcs: bool = True               # False: never an arc key (forward or a rotation, not both)
+    rt_sigma: float = 0.3           # log-normal spread of the reaction time (its median: reaction)
+    lapse: float = 0.0              # rate (per s) of looking away, the key held meanwhile ...
+    lapse_for: tuple[float, float] = (0.5, 1.2)  # ... for this long
+    drift: float = 0.0              # the liked wall distance wanders this much (m, sd) ...
+    drift_time: float = 30.0        # ... over about this long
+
+
+class Pilot(Person):
+    """A person who steers by aiming at a point on the path they want (pure pursuit of a point
+    ``lookahead`` ahead along the right-hand wall at the distance they like), with skewed reaction
+    times and lapses of attention (:class:`PilotStyle`). The hands (wrong keys, over-steering,
+    hesitations, a key held at least ``min_hold``) and correct mode are :class:`Person`'s."""
+
+    style: PilotStyle
+
+    def reset(self) -> None:
+        super().reset()
+        self._lapse_until = -math.inf
+        self._target = self.style.target
+        self._last_t = None
+
+    def _perceived(self, now: float) -> View | None:
+        m, s = self.m, self.style
+        step = 0.0 if self._last_t is None else max(0.0, now - self._last_t)
+        self._last_t = now
+        if s.drift > 0 and step > 0:  # an Ornstein-Uhlenbeck wander around the liked distance
+            a = step / s.drift_time
+            self._target += a * (s.target - self._target) + s.drift * math.sqrt(2 * a) * float(
+                self.rng.normal())
+        if now < self._lapse_until:
+            return None  # looking away: nothing new decided, the key stays held
+        if s.lapse > 0 and self.rng.random() < s.lapse * step:
+            self._lapse_until = now + float(self.rng.uniform(*s.lapse_for))
+            return None
+        m.rt = max(0.15, s.reaction * math.exp(s.rt_sigma * float(self.rng.normal())))
+        seen = None
+        for v in m.views:
+            if now - m.rt + 1e-9 >= v.t >= m.seen_t:
+                seen = v
+        if seen is None:
+            return None
+        m.seen_t = seen.t
+        return seen
+
+    def _confuse(self, key: str) -> str:
+        wrong = super()._confuse(key)
+        if self.style.arcs or wrong not in ("fwd-left", "fwd-right"):
+            return wrong
+        side = "rot-left" if wrong == "fwd-left" else "rot-right"  # the key beside it
+        return "fwd" if side == key else side
+
+    def wanted(self, p: Percept) -> str:
+        s = self.style
+        target = min(max(self._target, 0.4), 1.0)
+        if p.front < s.stop:
+            return "rot-left"
+        if p.front < s.slow or p.front_right < s.diag:
+            return "fwd-left" if s.arcs else "rot-left"
+        if p.right > s.lost:
+            if p.behind < s.lost + 0.3:  # the wall fell away behind: round its end
+                return "fwd-right" if s.arcs else "rot-right"
+            return "fwd"
+        # the bearing of the point aimed at: off the wall by (right - target), lookahead ahead
+        turn = -(math.atan2(p.right - target, s.lookahead) + p.angle)  # > 0: to the left
+        if abs(turn) < s.aim:
+            return "fwd"
+        if abs(turn) >= s.spin or not s.arcs:
+            return "rot-left" if turn > 0 else "rot-right"
+        return "fwd-left" if turn > 0 else "fwd-right"
+
+
 def _model(style: Style):
     def make(seed: int = 0) -> Person:
-        return Person(style, seed=seed)
+        return (Pilot if isinstance(style, PilotStyle) else Person)(style, seed=seed)
 
     make.style = style  # type: ignore[attr-defined]
     return make
@@ -439,4 +525,16 @@ HELD_OUT = {
         sharp=True, close=0.3)),
 }
 
-PEOPLE = {**DEV, **HELD_OUT}
+# written after every default was chosen: measured, never tuned on (see the module's docstring)
+FRESH = {
+    "pilot": _model(PilotStyle(
+        "pilot", reaction=0.32, rt_sigma=0.35, wrong=0.10, oversteer=0.2, hesitate=0.02,
+        lapse=0.03, lapse_for=(0.6, 1.5), target=0.7, drift=0.12, drift_time=40.0,
+        lookahead=1.0, close=0.35, far=1.6)),
+    "bang": _model(PilotStyle(
+        "bang", reaction=0.28, rt_sigma=0.25, wrong=0.12, oversteer=0.15, hesitate=0.03,
+        min_hold=0.2, arcs=False, aim=0.35, lookahead=1.2, target=0.65, lapse=0.01,
+        close=0.35, far=1.6)),
+}
+
+PEOPLE = {**DEV, **HELD_OUT, **FRESH}

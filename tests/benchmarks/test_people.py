@@ -99,3 +99,41 @@ def test_a_person_goes_round_the_end_of_the_wall_on_the_right(people):
     corner = np.array([inner, [5.0, 0.0, 5.0, -3.0], [6.2, -3.0, 6.2, 3.0]])
     p = people.percept(people.View(t=0.0, pose=(5.3, 0.65, 0.0), walls=corner))
     assert not p.tip and person.wanted(p) == "fwd-left"
+
+
+def test_a_pilot_aims_at_a_point_along_the_wall(people):
+    style = people.PilotStyle("test", noise=0.0, lookahead=1.0, target=0.7, aim=0.12, spin=0.9)
+    pilot = people.Pilot(style)
+    along = people.percept(people.View(t=0.0, pose=(2.0, 0.7, 0.0), walls=WALLS))
+    assert pilot.wanted(along) == "fwd"
+    far = people.percept(people.View(t=0.0, pose=(2.0, 1.2, 0.0), walls=WALLS))
+    assert pilot.wanted(far) == "fwd-right"  # off the wall: aims back at the liked distance
+    away = people.percept(people.View(t=0.0, pose=(2.0, 0.7, 1.0), walls=WALLS))
+    assert pilot.wanted(away) == "rot-right"  # heading far off the wall's way: turn in place
+    bang = people.Pilot(people.PilotStyle("test", noise=0.0, arcs=False))
+    assert bang.wanted(far) == "rot-right"  # no arc keys: a rotation instead
+
+
+def test_a_model_without_arc_keys_never_presses_one(people, view):
+    person = people.PEOPLE["bang"](seed=1)
+    keys = {person.observe(view(0.1 * k, (2.0 + 0.03 * k, 0.4 + 0.03 * k, 0.2 * math.sin(k)))
+                           ) for k in range(300)}
+    assert keys <= {"fwd", "rot-left", "rot-right", None} and len(keys) >= 3
+
+
+def test_a_pilot_looking_away_keeps_the_key_held(people, view):
+    """A lapse of attention: nothing new is decided, the key stays down, then the pilot
+    answers what it sees again."""
+    style = people.PilotStyle("test", reaction=0.2, rt_sigma=0.0, wrong=0.0, hesitate=0.0,
+                              oversteer=0.0, noise=0.0, lapse=1e6, lapse_for=(1.0, 1.0))
+    pilot = people.Pilot(style)
+    pilot.m.next_decision = math.inf  # no decision yet: hold fwd by hand
+    pilot.m.intent = "fwd"
+    keys = [pilot.observe(view(0.1 * k, (9.6, 1.5, 0.0))) for k in range(8)]
+    assert keys == ["fwd"] * 8  # a wall 0.4 m ahead, but the pilot is not looking
+    pilot.m.next_decision = 0.0
+    pilot._lapse_until = -math.inf
+    pilot.style = people.PilotStyle("test", reaction=0.2, rt_sigma=0.0, wrong=0.0,
+                                    hesitate=0.0, oversteer=0.0, noise=0.0)
+    later = [pilot.observe(view(1.0 + 0.1 * k, (9.6, 1.5, 0.0))) for k in range(8)]
+    assert later[-1] == "rot-left"
