@@ -535,6 +535,14 @@ FRESH = {
         "bang", reaction=0.28, rt_sigma=0.25, wrong=0.12, oversteer=0.15, hesitate=0.03,
         min_hold=0.2, arcs=False, aim=0.35, lookahead=1.2, target=0.65, lapse=0.01,
         close=0.35, far=1.6)),
+    "jitter": _model(PilotStyle(
+        "jitter", reaction=0.22, rt_sigma=0.5, period=0.05, min_hold=0.08, wrong=0.15,
+        mirror=0.4, notice=0.1, oversteer=0.1, hesitate=0.1, pause=(0.3, 1.5), aim=0.06,
+        spin=0.7, lookahead=0.8, target=0.55, lapse=0.02, close=0.3, far=1.5, settle=1.0)),
+    "wide": _model(Style(
+        "wide", reaction=0.38, reaction_sd=0.06, period=0.12, wrong=0.10, oversteer=0.4,
+        hesitate=0.03, target=0.8, stop=0.6, slow=1.2, diag=0.7, lost=1.5, k_d=1.2, k_a=1.0,
+        band=0.35, close=0.4, far=1.9, patience=3.0, settle=2.0)),
 }
 
 PEOPLE = {**DEV, **HELD_OUT, **FRESH}

@@ -62,6 +62,7 @@ __all__ = [
     "median_actions",
     "median_turn_actions",
     "trimmed_actions",
+    "sided_actions",
     "nearest_votes",
 ]
 
@@ -207,8 +208,36 @@ def trimmed_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
     return _nearest_action(_trimmed_commands(votes, v, 0.25), v)
 
 
+SIDED = 2 / 3  # "sided": a turning side with less than this share of the other's is dropped
+
+
+def _sided_commands(votes: np.ndarray, v: np.ndarray, share: float = SIDED) -> np.ndarray:
+    """(len(votes), 2): per row the mean of the scaled commands ``v`` weighted by the counts,
+    the keys turning to one side left out when they weigh less than ``share`` of those turning
+    to the other (forward keys always count)."""
+    left, right = v[:, 1] > 0, v[:, 1] < 0
+    wl, wr = votes[:, left].sum(axis=1), votes[:, right].sum(axis=1)
+    keep = np.ones_like(votes)
+    keep[:, right] = (wr >= share * wl)[:, None]
+    keep[:, left] = (wl >= share * wr)[:, None]
+    return _mean_commands(votes * keep, v)
+
+
+def sided_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
+    """Per row of ``votes`` the index of the action nearest to the mean command of the keys
+    that agree on the side: turning keys to one side weighing less than two thirds of those
+    to the other are taken for confusions (left and right, or a turn let go of late) and left
+    out, the rest averaged (scaled as in ``mean_actions``). A zig-zag of left and right in like
+    numbers averages to forward, as with the mean; forward keys with a minority of turns to
+    one side (a person who steers by tapping a rotation between forward presses, never an
+    arc) keep that turn's weight, as with the mean and unlike the trimmed mean; a minority on
+    the other side does not pull a turn towards forward, as with the median."""
+    v = _commands(actions)
+    return _nearest_action(_sided_commands(votes, v), v)
+
+
 _VOTES = {"mean": mean_actions, "median": median_actions, "median-turn": median_turn_actions,
-          "trimmed": trimmed_actions}
+          "trimmed": trimmed_actions, "sided": sided_actions}
 VOTES = ("majority", *_VOTES)  # PersonLearner's vote= and --vote
 
 

@@ -21,6 +21,7 @@ from client.behaviour.teaching import (
     median_turn_actions,
     nearest_votes,
     parse_lag,
+    sided_actions,
     trimmed_actions,
 )
 from rhbl import load
@@ -123,6 +124,26 @@ def test_the_interquartile_mean_averages_a_zig_zag_and_keeps_a_confused_turn():
     assert NAMES[median_actions(votes[:1], DEFAULT_ACTIONS)[0]] == "fwd-right"
     assert NAMES[mean_actions(votes[1:2], DEFAULT_ACTIONS)[0]] == "fwd"
 
+
+def test_the_sided_vote_keeps_a_tapped_turn_and_drops_a_confused_side():
+    votes = np.zeros((5, 5))
+    i = {n: k for k, n in enumerate(NAMES)}
+    votes[0, i["fwd-right"]], votes[0, i["fwd-left"]] = 55, 45    # over-steering: forward
+    votes[1, i["fwd-right"]], votes[1, i["rot-left"]] = 7, 3      # left and right confused
+    votes[2, i["fwd"]], votes[2, i["rot-right"]] = 65, 35         # a turn tapped between
+    votes[2, i["rot-left"]] = 5                                   # forward presses, one wrong
+    votes[3, i["rot-right"]] = 3                                  # all agree
+    votes[4, i["fwd"]], votes[4, i["rot-left"]], votes[4, i["rot-right"]] = 80, 8, 7
+    assert [NAMES[a] for a in sided_actions(votes, DEFAULT_ACTIONS)] == [
+        "fwd", "fwd-right", "fwd-right", "rot-right", "fwd"]
+    # the interquartile mean hears the tapped turn as forward
+    assert NAMES[trimmed_actions(votes[2:3], DEFAULT_ACTIONS)[0]] == "fwd"
+    # two thirds: a side at least that heavy is kept (a zig-zag), a lighter one dropped
+    edge = np.zeros((2, 5))
+    edge[0, i["fwd-left"]], edge[0, i["fwd-right"]] = 3, 2
+    edge[1, i["fwd-left"]], edge[1, i["fwd-right"]] = 30, 19
+    assert [NAMES[a] for a in sided_actions(edge, DEFAULT_ACTIONS)] == ["fwd", "fwd-left"]
+
 def _walk(n=200, seed=0):
     """A run along a wall: the right-hand distance grows slowly; the person steers right
     once it is beyond 1 m; one key in twenty is wrong."""
@@ -198,7 +219,7 @@ def test_person_learner_rejects_bad_settings_and_labels():
         PersonLearner(FEATURES["wall"], k=0)
     with pytest.raises(ValueError, match="copies must be"):
         PersonLearner(FEATURES["wall"], copies=-1)
-    with pytest.raises(ValueError, match="vote must be one of 'majority', 'mean', 'median', 'median-turn', 'trimmed'"):
+    with pytest.raises(ValueError, match="vote must be one of 'majority', 'mean', 'median', 'median-turn', 'trimmed', 'sided'"):
         PersonLearner(FEATURES["wall"], vote="mode")
     person = PersonLearner(FEATURES["wall"])
     with pytest.raises(ValueError, match="'jump' is not an action"):
