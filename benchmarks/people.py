@@ -238,11 +238,18 @@ class Person:
         return self.m.wrong_key is not None and self.m.key == self.m.wrong_key
 
     # -- perception: the view of one reaction time ago ------------------------------------
-    def _perceived(self, now: float) -> View | None:
+    def _looking(self, now: float) -> bool:
+        """Whether the person looks at the page now (always), this decision's reaction time
+        set in ``m.rt``: it drifts slowly around the person's mean (never below 0.15 s)."""
         m, s = self.m, self.style
-        # the reaction time drifts slowly around the person's mean (never below 0.15 s)
         m.rt += 0.2 * (s.reaction - m.rt) + float(self.rng.normal(0.0, s.reaction_sd * 0.45))
         m.rt = max(0.15, m.rt)
+        return True
+
+    def _perceived(self, now: float) -> View | None:
+        m = self.m
+        if not self._looking(now):
+            return None
         seen = None
         for v in m.views:
             if v.t <= now - m.rt + 1e-9 and v.t >= m.seen_t:
@@ -439,7 +446,10 @@ class Pilot(Person):
         self._target = self.style.target
         self._last_t = None
 
-    def _perceived(self, now: float) -> View | None:
+    def _looking(self, now: float) -> bool:
+        """Not during a lapse of attention (nothing new decided, the key stays held); the
+        reaction time drawn afresh for each decision, log-normal about ``reaction``; the liked
+        distance wandering meanwhile."""
         m, s = self.m, self.style
         step = 0.0 if self._last_t is None else max(0.0, now - self._last_t)
         self._last_t = now
@@ -448,19 +458,12 @@ class Pilot(Person):
             self._target += a * (s.target - self._target) + s.drift * math.sqrt(2 * a) * float(
                 self.rng.normal())
         if now < self._lapse_until:
-            return None  # looking away: nothing new decided, the key stays held
+            return False
         if s.lapse > 0 and self.rng.random() < s.lapse * step:
             self._lapse_until = now + float(self.rng.uniform(*s.lapse_for))
-            return None
+            return False
         m.rt = max(0.15, s.reaction * math.exp(s.rt_sigma * float(self.rng.normal())))
-        seen = None
-        for v in m.views:
-            if now - m.rt + 1e-9 >= v.t >= m.seen_t:
-                seen = v
-        if seen is None:
-            return None
-        m.seen_t = seen.t
-        return seen
+        return True
 
     def _confuse(self, key: str) -> str:
         wrong = super()._confuse(key)
