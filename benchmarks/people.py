@@ -376,9 +376,9 @@ class Person:
         if intent is None:
             return None
         if intent in _TURNS and s.taps > 0:  # tapping a turn: on, off, on ...
-            if now < m.tap_off_until:
-                return None
-            if now >= m.tap_on_until:
+            if m.tap_on_until <= now < m.tap_off_until:
+                return None  # between two taps
+            if now >= m.tap_off_until:  # the next tap
                 m.tap_on_until = now + s.taps * float(self.rng.uniform(0.7, 1.3))
                 m.tap_off_until = m.tap_on_until + float(self.rng.uniform(*s.tap_gap))
         return intent

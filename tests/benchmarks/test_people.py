@@ -137,3 +137,18 @@ def test_a_pilot_looking_away_keeps_the_key_held(people, view):
                                     hesitate=0.0, oversteer=0.0, noise=0.0)
     later = [pilot.observe(view(1.0 + 0.1 * k, (9.6, 1.5, 0.0))) for k in range(8)]
     assert later[-1] == "rot-left"
+
+
+@pytest.mark.parametrize("hz", [30, 70, 170])
+def test_a_tapper_holds_each_tap_then_lets_go_whatever_the_page_rate(people, view, hz):
+    """Taps of about ``taps`` s with gaps of ``tap_gap`` between them, read at any rate (a
+    tap was once one poll long: the faster the page was read, the fewer labels it gave)."""
+    style = people.Style("test", reaction=0.2, reaction_sd=0.0, wrong=0.0, hesitate=0.0,
+                         oversteer=0.0, noise=0.0, taps=0.3, tap_gap=(0.2, 0.2))
+    person = people.Person(style)
+    keys = [person.observe(view(k / hz, (9.6, 1.5, 0.0))) for k in range(4 * hz)]
+    held = [k is not None for k in keys[hz:]]  # after the reaction: rot-left, tapped
+    assert set(keys[hz:]) == {"rot-left", None}
+    assert 0.5 < sum(held) / len(held) < 0.7  # 0.21-0.39 s on, 0.2 s off
+    starts = sum(1 for a, b in zip(held, held[1:], strict=False) if b and not a)
+    assert 4 <= starts <= 8  # about two taps a second over 3 s
