@@ -16,8 +16,9 @@ tree copies the noise. Two pieces cope with it (docs/teaching.md has the study b
   they saw a reaction time ago), re-estimated from every label at each build.
 * **the vote** (``PersonLearner``, on the learner's side): every label is kept as given; the
   tree is built from all of them at once, each labelled vector taking the action nearest to the
-  interquartile mean command of its ``k`` nearest labelled vectors (``vote="trimmed"``, the
-  default: ``trimmed_actions``), to their mean command (``"mean"``), to their
+  mean command of those of its ``k`` nearest labelled vectors that agree on the side
+  (``vote="sided"``, the default: ``sided_actions``), to their interquartile mean command
+  (``"trimmed"``), to their mean command (``"mean"``), to their
   median forward and turning speeds (``"median"``), to their median turning and mean forward
   speed (``"median-turn"``) or the label most of them carry
   (``"majority"``): a wrong key or a late release is outvoted by the labels
@@ -267,9 +268,10 @@ def add_person_arguments(parser) -> None:
                              f"({LAG} until there are enough; docs/teaching.md)")
     parser.add_argument("--vote", choices=VOTES, default=None,
                         help="with the person rule, a new tree's vote of the nearest labels: "
-                             "the action nearest to their interquartile mean command (trimmed), "
-                             "their mean command, their median command, their median turning "
-                             "and mean forward speed (median-turn) or "
+                             "the action nearest to the mean command of those that agree on the "
+                             "side (sided), their interquartile mean command (trimmed), their "
+                             "mean command, their median command, their median turning and mean "
+                             "forward speed (median-turn) or "
                              f"the label most of them carry (default {PERSON_DEFAULTS['vote']}; "
                              "docs/teaching.md)")
 
@@ -319,7 +321,7 @@ def estimate_lag(W: np.ndarray, y: np.ndarray, k: int, n_labels: int, block: int
 PERSON_RULE = "person"  # the snapshot metadata's learning rule of a PersonLearner
 
 # the defaults docs/teaching.md chose on the teaching study
-PERSON_DEFAULTS = {"k": 50, "copies": 0, "sigma": 0.06, "vote": "trimmed", "passes": 1,
+PERSON_DEFAULTS = {"k": 50, "copies": 0, "sigma": 0.06, "vote": "sided", "passes": 1,
                    "build": "batch"}
 
 
@@ -332,8 +334,9 @@ class PersonLearner(DemonstrationLearner):
     was last asked for, in up to ``passes`` shuffled passes (``_build``). ``k``: neighbours of the vote. ``vote``: ``"majority"`` (the label most
     of them carry), ``"mean"`` (the action nearest to their mean command), ``"median"``
     (nearest to their median command: ``median_actions``), ``"median-turn"`` (their median
-    turning and mean forward speed: ``median_turn_actions``) or ``"trimmed"`` (their
-    interquartile mean command: ``trimmed_actions``; the default, also for None). ``copies``,
+    turning and mean forward speed: ``median_turn_actions``), ``"trimmed"`` (their
+    interquartile mean command: ``trimmed_actions``) or ``"sided"`` (the mean command of those
+    that agree on the side: ``sided_actions``; the default, also for None). ``copies``,
     ``sigma``: jittered copies of each vector (normal noise of ``sigma`` in feature units,
     seeded with ``seed``) the tree also learns the vote's answer at (0: none). Sample
     selection (``stride``, ``min_delta``) does not apply: the vote needs every label."""
