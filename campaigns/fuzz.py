@@ -1234,7 +1234,10 @@ def fuzz_console(per_kind: int, seed: int = 0, workdir: Path | None = None) -> l
     rng = random.Random(seed)
     work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-console-"))
     ports = {"open": free_port(), "secured": free_port()}
-    extra = {"open": ("--header-timeout", "1"), "secured": ("--token", secrets.token_urlsafe(18))}
+    # one argument, --token=VALUE: a random token may begin with "-" (argparse would take
+    # "--token -x..." for a missing value)
+    extra = {"open": ("--header-timeout", "1"),
+             "secured": (f"--token={secrets.token_urlsafe(18)}",)}
     kids = {name: Child(f"console-{name}", rhbl_argv(
         "console", "--mode", "peer", "--listen", f"tcp/127.0.0.1:{free_port()}", "--http",
         f"127.0.0.1:{port}", *extra[name]), work, cwd=ROOT).start()

@@ -19,7 +19,7 @@ TIMEOUT = 3.0
 
 def _argv(pid: int) -> list[str]:
     raw = Path(f"/proc/{pid}/cmdline").read_bytes()
-    # NUL-terminated arguments; an empty one (compose's `--token ""`) is an argument too
+    # NUL-terminated arguments; an empty one (`--token ""`) is an argument too
     return [a.decode() for a in raw.removesuffix(b"\0").split(b"\0")] if raw else []
 
 

@@ -122,7 +122,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--token", default=None, type=arguments.token,
                         help="access token the WebSocket URL must carry (?token=...; default: "
                              "none on loopback, a random one on any other address; printed in "
-                             "the URL)")
+                             "the URL). A token beginning with '-' is given as --token=VALUE")
     parser.add_argument("--tls-cert", metavar="PEM", type=arguments.input_file,
                         help="serve WSS with this certificate (required on an address other "
                              "than loopback)")

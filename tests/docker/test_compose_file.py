@@ -158,6 +158,15 @@ def test_console_is_published_on_the_hosts_loopback_only(compose):
     assert access_token(parse_http(args.http)[0], args.token or None)
 
 
+@pytest.mark.parametrize("token", ["-Xy3_token", "--looks-like-a-flag", "plain"])
+def test_console_token_from_the_environment_is_taken_whatever_it_begins_with(token):
+    """RHBL_CONSOLE_TOKEN reaches the console as its token even when it begins with "-" (a
+    random token may): one argument, --token=VALUE, not a flag and a separate value."""
+    composed = compose_local.load_compose(COMPOSE, env={"RHBL_CONSOLE_TOKEN": token})
+    args = _parse("console", _rhbl_services(composed)["console"][1:])
+    assert args.token == token
+
+
 def test_learned_tree_lives_on_a_named_volume(compose):
     assert "rhbl-data" in compose["volumes"]
     for name in ("learner",):
@@ -396,7 +405,7 @@ def test_interpolation():
 
 
 def test_healthcheck_reads_every_argument_of_the_process():
-    """An empty argument (compose passes `--token ""` to the console) is kept: without it the
+    """An empty argument (`--token ""`, an unset token) is kept: without it the
     next flag would be taken for the token's value."""
     healthcheck = _module("healthcheck")
     code = "import sys; print('up', flush=True); sys.stdin.read()"

@@ -43,7 +43,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "free port). Any address but loopback requires an access token")
     parser.add_argument("--token", default=None, type=arguments.token,
                         help="access token the URL must carry (default: none on loopback, a "
-                             "random one on any other address; printed in the URL)")
+                             "random one on any other address; printed in the URL). A token "
+                             "beginning with '-' is given as --token=VALUE")
     parser.add_argument("--tls-cert", metavar="PEM", type=arguments.input_file,
                         help="serve HTTPS/WSS with this certificate")
     parser.add_argument("--tls-key", metavar="PEM", type=arguments.input_file,
