@@ -144,6 +144,7 @@ def test_the_sided_vote_keeps_a_tapped_turn_and_drops_a_confused_side():
     edge[1, i["fwd-left"]], edge[1, i["fwd-right"]] = 30, 19
     assert [NAMES[a] for a in sided_actions(edge, DEFAULT_ACTIONS)] == ["fwd", "fwd-left"]
 
+
 def _walk(n=200, seed=0):
     """A run along a wall: the right-hand distance grows slowly; the person steers right
     once it is beyond 1 m; one key in twenty is wrong."""
