@@ -22,7 +22,12 @@ tree copies the noise. Two pieces cope with it (docs/teaching.md has the study b
   median forward and turning speeds (``"median"``), to their median turning and mean forward
   speed (``"median-turn"``) or the label most of them carry
   (``"majority"``): a wrong key or a late release is outvoted by the labels
-  around it; optionally with jittered copies labelled by the same vote (``copies``).
+  around it.
+* **jittered copies** (``copies``, 1 by default): each labelled vector also gives the tree a
+  copy moved by normal noise of ``sigma`` (0.06: 12 cm of range), labelled by the same vote at
+  that place. A tree answers the states nobody showed with whichever sphere came first there;
+  the copies make it answer the states around the labels as their neighbours vote, whatever
+  the order it learned them in.
 
     shown = 812                                         # the scan the page displayed
     answered = answered_scan(shown, scans, lag=LAG)     # scans: id -> scan (with .pose)
@@ -321,7 +326,7 @@ def estimate_lag(W: np.ndarray, y: np.ndarray, k: int, n_labels: int, block: int
 PERSON_RULE = "person"  # the snapshot metadata's learning rule of a PersonLearner
 
 # the defaults docs/teaching.md chose on the teaching study
-PERSON_DEFAULTS = {"k": 50, "copies": 0, "sigma": 0.06, "vote": "sided", "passes": 1,
+PERSON_DEFAULTS = {"k": 50, "copies": 1, "sigma": 0.06, "vote": "sided", "passes": 1,
                    "build": "batch"}
 
 
@@ -338,7 +343,7 @@ class PersonLearner(DemonstrationLearner):
     interquartile mean command: ``trimmed_actions``) or ``"sided"`` (the mean command of those
     that agree on the side: ``sided_actions``; the default, also for None). ``copies``,
     ``sigma``: jittered copies of each vector (normal noise of ``sigma`` in feature units,
-    seeded with ``seed``) the tree also learns the vote's answer at (0: none). Sample
+    seeded with ``seed``) the tree also learns the vote's answer at (0: none; 1 by default). Sample
     selection (``stride``, ``min_delta``) does not apply: the vote needs every label."""
 
     def __init__(self, features: FeatureSpec, actions: ActionSet = DEFAULT_ACTIONS, *,

@@ -31,12 +31,18 @@ def test_the_labels_learned_again_are_the_labels_as_a_learner_took_them(bench, s
     X2, y2 = direct.training_set()
     assert np.array_equal(X1, X2) and np.array_equal(y1, y2)
     assert again.estimated_lag == direct.estimated_lag
-    # another shuffle: the same vectors and votes, learned in another order
-    X3, y3 = bench.learn_again("person", W, labels, shuffle=4).training_set()
-    assert not np.array_equal(X1, X3)
-    assert sorted(map(tuple, X1)) == sorted(map(tuple, X3))
+    # another shuffle: every labelled vector again, in another order, with other copies
+    other = bench.learn_again("person", W, labels, shuffle=4)
+    X3, y3 = other.training_set()
+    assert not np.array_equal(X1, X3) and len(X3) == len(X1) == 2 * len(labels)
+    labelled = set(map(tuple, direct._vectors()))
+    assert labelled <= set(map(tuple, X1)) and labelled <= set(map(tuple, X3))
+    # without copies: the same vectors and votes, only the order differs
+    a = bench.learn_again("person:copies=0", W, labels, shuffle=3).training_set()[0]
+    b = bench.learn_again("person:copies=0", W, labels, shuffle=4).training_set()[0]
+    assert not np.array_equal(a, b) and sorted(map(tuple, a)) == sorted(map(tuple, b))
     # a fixed lag takes the scan that many before each label's own
-    fixed = bench.learn_again("person:lag=2+k=10", W, labels, shuffle=0)
+    fixed = bench.learn_again("person:lag=2+k=10+copies=0", W, labels, shuffle=0)
     assert fixed.k == 10 and fixed.estimated_lag == 2
     assert np.array_equal(np.sort(fixed.training_set()[0], axis=0), np.sort(W[:, 2], axis=0))
 
