@@ -6,10 +6,12 @@ Labels come from the scripted teacher driving the room (``lab.train``'s world, t
 features: real feature vectors, consecutive scans alike), 12% of them replaced by a wrong key
 (a person's), each with the 6 scans shown before it (as the learner's pairing keeps them, for
 the lag estimate). For each N it times, in this process, the three parts of a rebuild
-(``PersonLearner``'s defaults: the lag estimated, the mean vote of 50 neighbours): the lag
-estimate (``estimate_lag``), the vote (``nearest_votes`` + ``mean_actions``) and the tree
-learning the voted labels, best of ``--repeat``; beside it the same vote answered by
-scikit-learn's ``KNeighborsClassifier`` (kd-tree, the same k) as the peer a user would reach for.
+(``PersonLearner``'s defaults: the lag estimated, the sided vote of 50 neighbours, one
+jittered copy of each label): the lag estimate (``estimate_lag``), the vote
+(``PersonLearner.training_set``: the labels' vote and their copies', ``nearest_votes``) and the
+tree learning the voted vectors, best of ``--repeat``; beside the vote the same neighbours
+found by scikit-learn's ``KNeighborsClassifier`` (kd-tree, the same k, the same queries: the
+labels and their copies) as the peer a user would reach for.
 
     python benchmarks/bench_person.py [--sizes 1000,5000,10000,36000] [--repeat 3]
 """
@@ -27,12 +29,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from client.behaviour.actions import DEFAULT_ACTIONS  # noqa: E402
+from client.behaviour.features import FEATURES  # noqa: E402
 from client.behaviour.teaching import (  # noqa: E402
     MAX_LAG,
     PERSON_DEFAULTS,
+    PersonLearner,
     estimate_lag,
-    mean_actions,
-    nearest_votes,
 )
 
 
@@ -40,7 +42,6 @@ def demonstration(n: int, wrong: float = 0.12, seed: int = 0):
     """``(W, y)``: n labels of the scripted wall follower in the room, ``W`` (n, MAX_LAG + 1,
     dim) the features of each label's scan and of the 6 before it, ``y`` action indices with
     ``wrong`` of them replaced by another action."""
-    from client.behaviour.features import FEATURES
     from client.behaviour.policies import WallFollower
     from lab.episode import DT
     from lab.harness import resolve_world
@@ -103,11 +104,13 @@ def main(argv=None) -> int:
     from rhbl import HypersphereClassifier
 
     k, n_actions = PERSON_DEFAULTS["k"], len(DEFAULT_ACTIONS)
+    names = np.array(DEFAULT_ACTIONS.names)
     W_all, y_all = demonstration(max(sizes))
-    print(f"the person rule's rebuild (k={k}, mean vote, lag estimated over 0..{MAX_LAG}), "
-          f"best of {args.repeat}, seconds:")
+    print(f"the person rule's rebuild (k={k}, {PERSON_DEFAULTS['vote']} vote, jittered copies "
+          f"a label: {PERSON_DEFAULTS['copies']}, lag estimated over 0..{MAX_LAG}), best of "
+          f"{args.repeat}, seconds:")
     print("| labels | decisions | lag estimate | ... every decision answered (once) | "
-          "vote (rhbl) | vote (scikit-learn kd-tree) | tree | rebuild | tree nodes |")
+          "vote (rhbl) | neighbours (scikit-learn kd-tree) | tree | rebuild | tree nodes |")
     print("|---|---|---|---|---|---|---|---|---|")
     for n in sizes:
         W, y = W_all[:n], y_all[:n]
@@ -117,19 +120,19 @@ def main(argv=None) -> int:
         every_s, _ = best(lambda W=W, y=y, n=n: estimate_lag(W, y, k, n_actions, decisions=n),
                           1)
         X = np.ascontiguousarray(W[:, lag])
-        vote_s, ym = best(lambda X=X, y=y: mean_actions(nearest_votes(X, X, y, k, n_actions),
-                                                        DEFAULT_ACTIONS), args.repeat)
+        learner = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, lag=int(lag))
+        learner.observe_vectors(X, names[y])
+        vote_s, (XT, yT) = best(learner.training_set, args.repeat)
         peer = "-"
         if KNeighborsClassifier is not None:
-            def sk(X=X, y=y):
+            def sk(X=X, y=y, XT=XT):
                 knn = KNeighborsClassifier(k, algorithm="kd_tree").fit(X, y)
-                return mean_actions(knn.predict_proba(X) * k, DEFAULT_ACTIONS)
+                return knn.kneighbors(XT, return_distance=False)
             peer = f"{best(sk, args.repeat)[0]:.3f}"
-        labels = np.array(DEFAULT_ACTIONS.names)[ym]
-        order = np.random.default_rng(0).permutation(n)
-        def tree(X=X, labels=labels, order=order):
-            clf = HypersphereClassifier(default_label=DEFAULT_ACTIONS.names[0], spawn="winner")
-            return clf.partial_fit(X[order], labels[order])
+        labels = names[yT]
+        def tree(XT=XT, labels=labels, params=learner.tree_params):
+            clf = HypersphereClassifier(default_label=DEFAULT_ACTIONS.names[0], **params)
+            return clf.partial_fit(XT, labels)
         tree_s, clf = best(tree, args.repeat)
         print(f"| {n} | {decisions} | {lag_s:.3f} | {every_s:.3f} | {vote_s:.3f} | {peer} | "
               f"{tree_s:.3f} | "
