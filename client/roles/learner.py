@@ -308,7 +308,9 @@ class LearnerCore:
         learner = self.learner
         lag = (f"the lag estimated, {learner.estimated_lag} scans so far" if self.estimates
                else f"shifted {learner.lag} scans back")
-        return f"{lag}, the {learner.vote} vote of {learner.k} nearest"
+        copies = (f", {learner.copies} jittered cop{'y' if learner.copies == 1 else 'ies'} a label"
+                  if learner.copies else "")
+        return f"{lag}, the {learner.vote} vote of {learner.k} nearest{copies}"
 
     def _started(self) -> None:
         self.learner.parent = self.journal.header.get("parent")
