@@ -62,6 +62,7 @@ __all__ = [
     "open_session",
     "run_process",
     "setup_logging",
+    "uninterrupted",
     "write_stats",
 ]
 
@@ -185,8 +186,26 @@ DEFER_S = 0.05
 _SWALLOWING = ("<frozen importlib",)
 
 
+_held = threading.local()  # .depth > 0: the main thread is in ``uninterrupted()``
+
+
+@contextlib.contextmanager
+def uninterrupted():
+    """A stop signal arriving inside this block is delivered again shortly after it instead of
+    raised in it: for a few statements that must all happen or none (a label put on the bus
+    and counted)."""
+    _held.depth = getattr(_held, "depth", 0) + 1
+    try:
+        yield
+    finally:
+        _held.depth -= 1
+
+
 def _swallowed_here(frame) -> bool:
-    """Whether an exception raised in ``frame`` would be swallowed by the interpreter."""
+    """Whether an exception raised in ``frame`` would be swallowed by the interpreter, or the
+    main thread is in ``uninterrupted()``."""
+    if getattr(_held, "depth", 0):
+        return True
     code = frame.f_code if frame is not None else None
     return code is not None and (code.co_name == "__del__"
                                  or code.co_filename.startswith(_SWALLOWING))

@@ -63,7 +63,7 @@ from client.roles.common import (
 )
 from protocol import arguments
 from protocol.messages import Scan
-from protocol.runtime import EXIT_USAGE, Context, ProcessError
+from protocol.runtime import EXIT_USAGE, Context, ProcessError, uninterrupted
 
 __all__ = ["TeacherProcess", "add_arguments", "main"]
 
@@ -335,8 +335,9 @@ class TeacherProcess:
             self.client.answer(scan, vx, va)
         elif self.hold is not None:
             self.hold.release()  # the controller drives from the next tick on
-        self.labels.label(scan, label, executed)
-        self.n += 1
+        with uninterrupted():  # a stop does not leave a label sent and uncounted
+            self.labels.label(scan, label, executed)
+            self.n += 1
         if self.correcting:
             self.took += executed is not None
         else:

@@ -144,3 +144,34 @@ def test_a_stop_signal_in_a_finaliser_stops_without_a_traceback(tmp_path):
         assert "Exception ignored" not in p.output() and "Traceback" not in p.output()
     finally:
         p.stop(signal.SIGKILL)
+
+
+# a stop signal inside ``uninterrupted()``: every statement of the block runs, then it stops
+IN_BLOCK = """
+import signal, time
+from protocol.runtime import install_signal_handlers, uninterrupted
+install_signal_handlers()
+done = 0
+try:
+    with uninterrupted():
+        signal.raise_signal(signal.SIGTERM)  # the handler runs at once, inside the block
+        for _ in range(1000):
+            done += 1
+        print("block ended", done, flush=True)
+    while True:
+        time.sleep(0.01)
+except SystemExit:
+    print("stopped after", done, flush=True)
+    raise
+"""
+
+
+def test_a_stop_signal_in_an_uninterrupted_block_lands_after_it(tmp_path):
+    p = Child("uninterrupted", [sys.executable, "-c", IN_BLOCK], tmp_path, cwd=ROOT,
+              env={**os.environ, "PYTHONPATH": str(ROOT)}, escalate=False).start()
+    try:
+        assert p.wait_for_line("stopped after 1000", 30), p.output()
+        assert "block ended 1000" in p.output()
+        assert p.wait(10) == 0, p.output()
+    finally:
+        p.stop(signal.SIGKILL)
