@@ -201,9 +201,9 @@ def uninterrupted():
         _held.depth -= 1
 
 
-def _swallowed_here(frame) -> bool:
-    """Whether an exception raised in ``frame`` would be swallowed by the interpreter, or the
-    main thread is in ``uninterrupted()``."""
+def _deferred_here(frame) -> bool:
+    """Whether a stop signal must not be raised in ``frame``: the interpreter would swallow the
+    exception there, or the main thread is in ``uninterrupted()``."""
     if getattr(_held, "depth", 0):
         return True
     code = frame.f_code if frame is not None else None
@@ -214,7 +214,7 @@ def _swallowed_here(frame) -> bool:
 def _raise_exit(signum, frame) -> None:
     first = not _stopping.is_set()
     _stopping.set()
-    if _swallowed_here(frame):  # raised here it would be lost, with a traceback printed
+    if _deferred_here(frame):  # raised here it would be lost, or cut an uninterrupted block
         threading.Thread(target=_redeliver, args=(signum, DEFER_S, False), name="stop-signal",
                          daemon=True).start()
         return

@@ -3,7 +3,7 @@
 People react 200-450 ms after what they see, press wrong keys, over-steer and correct
 themselves; the scripted teachers do none of that. Learning every label as it arrives (the
 paper's rule, ``DemonstrationLearner``) carves a sphere for every late or wrong key, and the
-tree copies the noise. Two pieces cope with it (docs/teaching.md has the study behind them):
+tree copies the noise. These pieces cope with it (docs/teaching.md has the study behind them):
 
 * **the reaction lag** (``answered_scan``, on the console's side): a key held while scan ``n``
   is displayed answers what the person saw ``lag`` scans earlier, so the label is tied to scan

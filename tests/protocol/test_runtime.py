@@ -14,6 +14,12 @@ from lab.children import Child
 
 ROOT = Path(__file__).resolve().parents[2]
 
+
+def _program(name: str, code: str, tmp_path: Path) -> Child:
+    """``code`` run by this Python with the repository importable, started."""
+    return Child(name, [sys.executable, "-c", code], tmp_path, cwd=ROOT,
+                 env={**os.environ, "PYTHONPATH": str(ROOT)}, escalate=False).start()
+
 # the first SystemExit is swallowed, as library code can; only a second one ends the program
 PROGRAM = """
 import sys, time
@@ -35,8 +41,7 @@ except SystemExit:
 
 
 def test_a_swallowed_stop_signal_is_delivered_again(tmp_path):
-    p = Child("swallower", [sys.executable, "-c", PROGRAM], tmp_path, cwd=ROOT,
-              env={**os.environ, "PYTHONPATH": str(ROOT)}, escalate=False).start()
+    p = _program("swallower", PROGRAM, tmp_path)
     try:
         assert p.wait_for_line("ready", 30), p.output()
         p.send_signal(signal.SIGTERM)  # once
@@ -136,8 +141,7 @@ except SystemExit:
 
 
 def test_a_stop_signal_in_a_finaliser_stops_without_a_traceback(tmp_path):
-    p = Child("finaliser", [sys.executable, "-c", IN_DEL], tmp_path, cwd=ROOT,
-              env={**os.environ, "PYTHONPATH": str(ROOT)}, escalate=False).start()
+    p = _program("finaliser", IN_DEL, tmp_path)
     try:
         assert p.wait_for_line("stopped", 30), p.output()
         assert p.wait(10) == 0, p.output()
@@ -167,8 +171,7 @@ except SystemExit:
 
 
 def test_a_stop_signal_in_an_uninterrupted_block_lands_after_it(tmp_path):
-    p = Child("uninterrupted", [sys.executable, "-c", IN_BLOCK], tmp_path, cwd=ROOT,
-              env={**os.environ, "PYTHONPATH": str(ROOT)}, escalate=False).start()
+    p = _program("uninterrupted", IN_BLOCK, tmp_path)
     try:
         assert p.wait_for_line("stopped after 1000", 30), p.output()
         assert "block ended 1000" in p.output()
