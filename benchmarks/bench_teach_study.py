@@ -1,7 +1,8 @@
 """The in-process teaching study: models of people teach wall following at a simulated console.
 
     python benchmarks/bench_teach_study.py [--models steady,hurried] [--seeds 3] \
-        [--methods today,literal,person,person:k=25,person:lag=auto] [--guard] [--clearance 0.3] \
+        [--methods today,literal,person,person:k=25,person:lag=auto] [--guard] \
+        [--clearance 0.3] [--no-guard-straight] \
         [--restart-correct 20] [--restart-demo 20 --where starts|free|near] \
         [--task wall-following|maze] [--worlds room,eval-room-l,...] [--bare] [--json out.json]
 
@@ -144,9 +145,11 @@ def snapshot(learner: DemonstrationLearner) -> TreePolicy | None:
 def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float = 120.0,
           seed: int = 0, latency: float = 0.03, refresh: float = 2.0, guard: bool = False,
           restarts: tuple[float, float] = (0.0, 0.0), where: str = "starts",
-          clearance: float = CLEARANCE) -> tuple[Session, DemonstrationLearner]:
+          clearance: float = CLEARANCE,
+          straight: bool = True) -> tuple[Session, DemonstrationLearner]:
     """One session (see the module's docstring). ``guard``: the controller drives through a
-    ``RotationGuard`` (``clearance``: its path check, 0 off). ``restarts`` = (demonstrate, correct) seconds: > 0, the person puts the
+    ``RotationGuard`` (``clearance``: its path check, 0 off; ``straight``: an overruled
+    reversal drives straight on while the path is clear). ``restarts`` = (demonstrate, correct) seconds: > 0, the person puts the
     robot elsewhere this often in that mode (the console's set_pose): at the world's next start
     pose (``where="starts"``), anywhere in the free space, any heading (``"free"``:
     ``server.world.free_pose``, as a person dragging the robot about would), or a little off
@@ -219,7 +222,8 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
             next_refresh = t + refresh
             tree = snapshot(learner)
             if tree is not None:
-                drive = RotationGuard(tree, clearance=clearance) if guard else tree
+                drive = (RotationGuard(tree, clearance=clearance, straight=straight)
+                         if guard else tree)
                 drive.reset()
         if key is not None:
             name, driver = key, "teacher"
@@ -313,19 +317,21 @@ def score(policy, worlds, model: str, seed: int = 0) -> dict:
 def run_one(model: str, seed: int, method: str, worlds, *, demo: float = 240.0,
             correct: float = 120.0, latency: float = 0.03, guard: bool = False,
             restarts: tuple[float, float] = (0.0, 0.0), where: str = "starts",
-            clearance: float = CLEARANCE, bare: bool = False) -> dict:
+            clearance: float = CLEARANCE, straight: bool = True, bare: bool = False) -> dict:
     """One person model, one seed, one method: teach, then evaluate (``bare``, with ``guard``:
     also the tree alone, as ``rhbl evaluate`` and ``rhbl experiment`` judge it: ``"bare"``)."""
     t0 = time.perf_counter()
     rec, learner = teach(resolve_world(worlds[0]), PEOPLE[model](seed=seed), make_method(method),
                          demo=demo, correct=correct, seed=seed, latency=latency, guard=guard,
-                         restarts=restarts, where=where, clearance=clearance)
+                         restarts=restarts, where=where, clearance=clearance,
+                         straight=straight)
     policy = TreePolicy.from_learner(learner)
-    scores = score(RotationGuard(policy, clearance=clearance) if guard else policy, worlds,
-                   model, seed=seed)
+    scores = score(RotationGuard(policy, clearance=clearance, straight=straight) if guard
+                   else policy, worlds, model, seed=seed)
     return {"model": model, "seed": seed, "method": method,
-            "guard": guard and (f"guard, clearance {clearance:g}" if clearance
-                                else "guard, no clearance"),
+            "guard": guard and ((f"guard, clearance {clearance:g}" if clearance
+                                 else "guard, no clearance")
+                                + ("" if straight or not clearance else ", turning on")),
             "labels": rec.labels, "demo_labels": rec.demo_labels,
             "corrections": rec.corrections, "takeovers": rec.takeovers,
             "wrong": rec.wrong, "teaching_collisions": rec.collisions, "goals": rec.goals,
@@ -438,6 +444,10 @@ def main(argv=None) -> int:
                          "order with a laser return within 0.5 m ahead and M m of the centre "
                          f"line becomes a rotation in place (default {CLEARANCE:g}, as rhbl "
                          "controller; 0: off)")
+    ap.add_argument("--guard-straight", action=argparse.BooleanOptionalAction, default=True,
+                    help="with --guard and a clearance: an overruled reversal drives straight "
+                         "on while the path is clear (RotationGuard(straight=...), as rhbl "
+                         "controller; --no-guard-straight: the robot keeps turning)")
     ap.add_argument("--bare", action="store_true",
                     help="with --guard: also evaluate the tree alone (no guard, as rhbl "
                          "evaluate and rhbl experiment judge it) and print its table too")
@@ -466,7 +476,8 @@ def main(argv=None) -> int:
                 r = run_one(model, seed, method, worlds, demo=args.demo, correct=args.correct,
                             latency=args.latency, guard=args.guard,
                             restarts=(args.restart_demo, args.restart_correct),
-                            where=args.where, clearance=args.clearance, bare=args.bare)
+                            where=args.where, clearance=args.clearance,
+                            straight=args.guard_straight, bare=args.bare)
                 rows.append(r)
                 print(f"{method:>12} {model:>12} seed {seed}: "
                       + " ".join(f"{w} {100 * s['success']:.0f}%/{s['loops']}L"

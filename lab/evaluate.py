@@ -199,13 +199,15 @@ def main(args) -> int:
                           on_step=None if tap is None else tap.step)
     paths = report.pop("_paths", None)
     report["guard"] = None if guarded is None else {
-        "hold": guarded.hold, "clearance": guarded.clearance,
-        "overruled": guarded.overruled, "avoided": guarded.avoided}
+        "hold": guarded.hold, "clearance": guarded.clearance, "straight": guarded.straight,
+        "overruled": guarded.overruled, "avoided": guarded.avoided,
+        "straight_on": guarded.straight_on}
     print(format_table(report))
     if guarded is not None:
         print(f"driven through the controller's guard (--no-guard: the tree alone): "
-              f"{guarded.overruled} rotation reversals overruled, {guarded.avoided} forward "
-              f"orders turned into a rotation (path check {guarded.clearance:g} m)")
+              f"{guarded.overruled} rotation reversals overruled ({guarded.straight_on} of them "
+              f"driven straight on), {guarded.avoided} forward orders turned into a rotation "
+              f"(path check {guarded.clearance:g} m)")
     if args.json:
         files.write_text(args.json, json.dumps(report, indent=1), "--json")
         print(f"wrote {args.json}")

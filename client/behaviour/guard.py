@@ -16,10 +16,20 @@ rotated lately or else away from that return (counted ``avoided``). A tree taugh
 meets corners it never saw elsewhere (a convex corner approached at an angle); a person's
 demonstrations show how to follow a wall, not how close is too close.
 
+With the path check on, an overruled reversal drives straight on while the path ahead is clear
+(``straight``, the default): a tree that asks for the other rotation right after one is torn
+between the two, and straight ahead is the action between them. Keeping on turning instead
+(``straight=False``, the guard before) spins a robot in place for as long as its tree is torn:
+the trees of a person who steers only by rotating in place (``bang`` in
+``benchmarks/people.py``) are torn that way along every wall (docs/teaching.md). Without the
+path check (``clearance`` 0, or no scan) the guard cannot know the way ahead is free and keeps
+turning.
+
     policy = RotationGuard(TreePolicy.load("tree.rhbl"))
     action = policy.act(ranges, pose)        # one call per scan
     policy.looping, policy.overruled         # for the console: "stuck here: show it the way"
     policy.avoided                           # forward orders turned into a rotation
+    policy.straight_on                       # overruled reversals driven straight on
 
     guard = RotationGuard()                  # no policy: the controller asks its tree itself
     action = guard.choose(tree_action, ranges, bearings)  # one call per scan (ranges: optional)
@@ -71,6 +81,11 @@ def add_arguments(parser: argparse.ArgumentParser, default: bool | None = True,
                         metavar="SCANS",
                         help="with --guard: at most this many overruled reversals in a row, "
                              "then the tree's answer is taken (default 30: 3 s at 10 Hz)")
+    parser.add_argument("--guard-straight", action=argparse.BooleanOptionalAction,
+                        default=True,
+                        help="with --guard and its path check: an overruled reversal drives "
+                             "straight on while the path ahead is clear (--no-guard-straight: "
+                             "the robot keeps turning as it was; default on)")
     parser.add_argument("--guard-clearance", type=arguments.non_negative_float,
                         default=None, metavar="M",
                         help="with --guard: a forward order while a laser return lies within "
@@ -91,7 +106,8 @@ def from_arguments(args: argparse.Namespace, policy=None) -> RotationGuard | Non
     clearance = args.guard_clearance
     if clearance is None:
         clearance = clearance_for(metadata) if policy is not None else 0.0
-    return RotationGuard(policy, hold=args.guard_hold, clearance=clearance)
+    return RotationGuard(policy, hold=args.guard_hold, clearance=clearance,
+                         straight=args.guard_straight)
 
 
 def in_path(ranges, clearance: float, lookahead: float, bearings=None) -> float:
@@ -118,18 +134,22 @@ class RotationGuard:
     rotation of about 140 degrees at the default 0.8 rad/s); ``memory``: a rotation counts as
     the current one for this many scans after the robot stopped rotating (a reversal right after
     a short arc is a loop too). ``looping`` is True for ``memory`` scans after a reversal was
-    overruled. ``classifier``, ``features``, ``actions``, ``metadata`` are the wrapped
+    overruled. ``straight``: with the path check (``clearance`` > 0), an overruled reversal drives
+    straight on (``fwd``) while the path ahead is clear (counted ``straight_on``), else the robot
+    keeps turning. ``classifier``, ``features``, ``actions``, ``metadata`` are the wrapped
     policy's. Without a policy, ``choose(action)`` filters the actions of any source (the
     controller, whose tree may be swapped while the guard's memory goes on)."""
 
     def __init__(self, policy=None, hold: int = 30, memory: int = 5,
-                 clearance: float = 0.0, lookahead: float = LOOKAHEAD):
+                 clearance: float = 0.0, lookahead: float = LOOKAHEAD, straight: bool = True):
         if hold < 0 or memory < 0:
             raise ValueError(f"hold and memory must be >= 0 scans, got {hold}, {memory}")
         self.policy = policy
         self.hold, self.memory = int(hold), int(memory)
         self.clearance, self.lookahead = float(clearance), float(lookahead)
+        self.straight = bool(straight)
         self.overruled = 0
+        self.straight_on = 0  # overruled reversals driven straight on (the path ahead clear)
         self.avoided = 0  # forward orders turned into a rotation away from a return in the path
         self.reset()
 
@@ -158,7 +178,8 @@ class RotationGuard:
         ``clearance`` > 0 and the scan's ``ranges``: a forward order while a laser return lies
         in the robot's path (``in_path``: within ``lookahead`` m ahead, ``clearance`` m of the
         centre line) becomes a rotation in place: the way the robot rotated within ``memory``
-        scans, else away from that return (counted ``avoided``)."""
+        scans, else away from that return (counted ``avoided``); and an overruled reversal
+        drives straight on while that path is clear (``straight``, counted ``straight_on``)."""
         if self.clearance > 0 and ranges is not None and want in _FORWARD:
             side = in_path(ranges, self.clearance, self.lookahead, bearings)
             if side:
@@ -177,6 +198,10 @@ class RotationGuard:
             self.overruled += 1
             self._last_overruled = 0
             self._since = 0
+            if (self.straight and self.clearance > 0 and ranges is not None
+                    and not in_path(ranges, self.clearance, self.lookahead, bearings)):
+                self.straight_on += 1
+                return "fwd"  # torn between the two rotations: the action between them
             return self._turn
         self._held = 0
         if want in _OPPOSITE:

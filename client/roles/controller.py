@@ -18,8 +18,9 @@ way within 5 scans of a rotation is overruled (the robot keeps turning as it was
 sphere for ever; every overruled reversal is counted (``--stats``: ``overruled``) and logged at a
 bounded rate; and, for a tree taught by hand (or with ``--guard-clearance M`` for any tree), a
 forward order while a laser return lies in the robot's path (within 0.5 m ahead and 0.3 m of
-its centre line) becomes a rotation in place (``--stats``: ``avoided``; docs/teaching.md has
-the study behind both). Its decisions (``Decision``, for viewers) say when the guard stepped in
+its centre line) becomes a rotation in place (``--stats``: ``avoided``), and an overruled
+reversal drives straight on while that path is clear (``--stats``: ``straight_on``;
+``--no-guard-straight``: keep turning; docs/teaching.md has the study behind all three). Its decisions (``Decision``, for viewers) say when the guard stepped in
 lately on a reversal (``looping``) and what it commanded instead of the tree's (``executed``):
 ``rhbl console`` then asks the person to show the robot the way out.
 
@@ -228,6 +229,7 @@ class ControllerProcess:
         return {"commands": self.n, "unanswered": self.bad,
                 "overruled": 0 if self.guard is None else self.guard.overruled,
                 "avoided": 0 if self.guard is None else self.guard.avoided,
+                "straight_on": 0 if self.guard is None else self.guard.straight_on,
                 "swaps": 0 if self.follower is None else self.follower.swaps,
                 "dropped": {**self.client.decoder.counts,
                             **({} if self.follower is None else self.follower.decoder.counts)}}
@@ -335,7 +337,7 @@ class ControllerProcess:
                                    scan.bearings() if self.guard.clearance > 0 else None)
         n = self.guard.overruled
         if n > before and (n <= 3 or n % 100 == 0):
-            log.info("loop guard: the tree reversed its rotation at scan %d (%s): kept %s "
+            log.info("loop guard: the tree reversed its rotation at scan %d (%s): drove %s "
                      "(%d overruled so far)", scan.id, name, chosen, n)
         return chosen
 

@@ -50,3 +50,5 @@ def test_a_tree_taught_by_hand_is_evaluated_as_the_controller_drives_it(tmp_path
     assert "driven through the controller's guard" in capsys.readouterr().out
     assert _evaluate(tmp_path, tree, "--no-guard")["guard"] is None
     assert _evaluate(tmp_path, tree, "--guard-hold", "7")["guard"]["hold"] == 7
+    assert report["guard"]["straight"] is True
+    assert _evaluate(tmp_path, tree, "--no-guard-straight")["guard"]["straight"] is False

@@ -1,9 +1,18 @@
 """The controller's guard against rot-left/rot-right loops."""
 
+import argparse
+
 import numpy as np
 import pytest
 
-from client.behaviour.guard import CLEARANCE, RotationGuard, clearance_for, in_path
+from client.behaviour.guard import (
+    CLEARANCE,
+    RotationGuard,
+    add_arguments,
+    clearance_for,
+    from_arguments,
+    in_path,
+)
 
 
 class Script:
@@ -111,3 +120,30 @@ def test_the_controllers_clearance_is_on_for_a_tree_taught_by_hand_only():
     assert clearance_for({"learning": {"rule": "person", "lag": 3}}) == CLEARANCE > 0
     assert clearance_for({"learning": {"stride": 1}}) == 0.0
     assert clearance_for({}) == 0.0 and clearance_for(None) == 0.0
+
+
+def test_an_overruled_reversal_drives_straight_on_while_the_path_is_clear():
+    clear, blocked = _scan({}), _scan({-10: 0.4})
+    g = RotationGuard(clearance=0.3)
+    assert g.choose("rot-left", clear) == "rot-left"
+    # torn between the two rotations: straight ahead, still counted as overruled (a loop)
+    assert g.choose("rot-right", clear) == "fwd"
+    assert (g.overruled, g.straight_on, g.looping) == (1, 1, True)
+    # the way ahead blocked: the robot keeps turning as it was
+    assert g.choose("rot-right", blocked) == "rot-left" and (g.overruled, g.straight_on) == (2, 1)
+    assert g.choose("rot-right", clear) == "fwd" and g.straight_on == 2  # still the same turn
+    # no path check (clearance 0, or no scan) or straight off: the robot keeps turning
+    for g, scan in ((RotationGuard(), clear), (RotationGuard(clearance=0.3), None),
+                    (RotationGuard(clearance=0.3, straight=False), clear)):
+        g.choose("rot-left", scan)
+        assert g.choose("rot-right", scan) == "rot-left"
+        assert (g.overruled, g.straight_on) == (1, 0)
+
+
+def test_the_options_make_the_guard_they_ask_for():
+    ap = argparse.ArgumentParser()
+    add_arguments(ap)
+    g = from_arguments(ap.parse_args(["--guard-clearance", "0.3", "--guard-hold", "4"]))
+    assert (g.clearance, g.hold, g.straight) == (0.3, 4, True)
+    assert from_arguments(ap.parse_args(["--no-guard-straight"])).straight is False
+    assert from_arguments(ap.parse_args(["--no-guard"])) is None
