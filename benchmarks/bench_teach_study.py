@@ -149,9 +149,10 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
           straight: bool = True) -> tuple[Session, DemonstrationLearner]:
     """One session (see the module's docstring). ``guard``: the controller drives through a
     ``RotationGuard`` (``clearance``: its path check, 0 off; ``straight``: an overruled
-    reversal drives straight on while the path is clear). ``restarts`` = (demonstrate, correct) seconds: > 0, the person puts the
-    robot elsewhere this often in that mode (the console's set_pose): at the world's next start
-    pose (``where="starts"``), anywhere in the free space, any heading (``"free"``:
+    reversal drives straight on while the path is clear). ``restarts`` = (demonstrate,
+    correct) seconds: > 0, the person puts the robot elsewhere this often in that mode (the
+    console's set_pose): at the world's next start pose (``where="starts"``), anywhere in the
+    free space, any heading (``"free"``:
     ``server.world.free_pose``, as a person dragging the robot about would), or a little off
     where it is (``"near"``: ``server.world.sample_pose`` with ``NEAR``: dragged off its path
     and turned, so the person shows the way back). A world with a goal (the maze): when the
@@ -314,6 +315,13 @@ def score(policy, worlds, model: str, seed: int = 0) -> dict:
     return out
 
 
+def _guard_name(clearance: float, straight: bool) -> str:
+    """The guard's settings as the tables name them."""
+    if not clearance:
+        return "guard, no clearance"
+    return f"guard, clearance {clearance:g}" + ("" if straight else ", turning on")
+
+
 def run_one(model: str, seed: int, method: str, worlds, *, demo: float = 240.0,
             correct: float = 120.0, latency: float = 0.03, guard: bool = False,
             restarts: tuple[float, float] = (0.0, 0.0), where: str = "starts",
@@ -329,9 +337,7 @@ def run_one(model: str, seed: int, method: str, worlds, *, demo: float = 240.0,
     scores = score(RotationGuard(policy, clearance=clearance, straight=straight) if guard
                    else policy, worlds, model, seed=seed)
     return {"model": model, "seed": seed, "method": method,
-            "guard": guard and ((f"guard, clearance {clearance:g}" if clearance
-                                 else "guard, no clearance")
-                                + ("" if straight or not clearance else ", turning on")),
+            "guard": guard and _guard_name(clearance, straight),
             "labels": rec.labels, "demo_labels": rec.demo_labels,
             "corrections": rec.corrections, "takeovers": rec.takeovers,
             "wrong": rec.wrong, "teaching_collisions": rec.collisions, "goals": rec.goals,

@@ -173,6 +173,13 @@ class RotationGuard:
     def act(self, ranges, pose) -> str:
         return self.choose(self.policy.act(ranges, pose), ranges)
 
+    def _path(self, ranges, bearings) -> float | None:
+        """``in_path`` of the scan with the guard's clearance; None: no path check (clearance
+        0, or no scan)."""
+        if self.clearance <= 0 or ranges is None:
+            return None
+        return in_path(ranges, self.clearance, self.lookahead, bearings)
+
     def choose(self, want: str, ranges=None, bearings=None) -> str:
         """The action to execute when the policy wants ``want`` (one call per scan). With
         ``clearance`` > 0 and the scan's ``ranges``: a forward order while a laser return lies
@@ -180,8 +187,8 @@ class RotationGuard:
         centre line) becomes a rotation in place: the way the robot rotated within ``memory``
         scans, else away from that return (counted ``avoided``); and an overruled reversal
         drives straight on while that path is clear (``straight``, counted ``straight_on``)."""
-        if self.clearance > 0 and ranges is not None and want in _FORWARD:
-            side = in_path(ranges, self.clearance, self.lookahead, bearings)
+        if want in _FORWARD:
+            side = self._path(ranges, bearings)
             if side:
                 self.avoided += 1
                 # rotating in place is safe (a round robot); keep turning as it was, if it
@@ -198,8 +205,7 @@ class RotationGuard:
             self.overruled += 1
             self._last_overruled = 0
             self._since = 0
-            if (self.straight and self.clearance > 0 and ranges is not None
-                    and not in_path(ranges, self.clearance, self.lookahead, bearings)):
+            if self.straight and self._path(ranges, bearings) == 0.0:  # checked, and clear
                 self.straight_on += 1
                 return "fwd"  # torn between the two rotations: the action between them
             return self._turn

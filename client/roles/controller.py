@@ -20,9 +20,10 @@ bounded rate; and, for a tree taught by hand (or with ``--guard-clearance M`` fo
 forward order while a laser return lies in the robot's path (within 0.5 m ahead and 0.3 m of
 its centre line) becomes a rotation in place (``--stats``: ``avoided``), and an overruled
 reversal drives straight on while that path is clear (``--stats``: ``straight_on``;
-``--no-guard-straight``: keep turning; docs/teaching.md has the study behind all three). Its decisions (``Decision``, for viewers) say when the guard stepped in
-lately on a reversal (``looping``) and what it commanded instead of the tree's (``executed``):
-``rhbl console`` then asks the person to show the robot the way out.
+``--no-guard-straight``: keep turning; docs/teaching.md has the study behind all three). Its
+decisions (``Decision``, for viewers) say when the guard stepped in lately on a reversal
+(``looping``) and what it commanded instead of the tree's (``executed``): ``rhbl console``
+then asks the person to show the robot the way out.
 
 With ``--ros2`` it drives a ROS 2 robot instead (``client.ros2.Ros2Robot``, docs/ros2.md): its
 ``LaserScan`` (any beam count and span, resampled to the tree's features, or refused with exit 2
