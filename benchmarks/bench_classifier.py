@@ -26,7 +26,7 @@ Every figure is measured in the same run, on the same machine, the peers' calls 
 * accuracy and speed on data sets (a synthetic 5-feature, 5-action set, scikit-learn's iris,
   wine and breast-cancer, min-max scaled to [0, 1]) beside 1-NN and a decision tree (median
   one-row latency, batch throughput of 20,000 queries, held-out accuracy).
-The compaction section compares a tree with its compacted copies (``rhbl.compact``: exact, and
+The compaction section compares a tree with its compacted copies (``rhbl.compaction``: exact, and
 pruned against the training labels); ``--tree SNAPSHOT --data FILE.npz`` adds a robot's tree
 compacted on its recorded training vectors (arrays X, y).
 """

@@ -29,9 +29,9 @@ sys.path.insert(0, str(ROOT / "tests" / "integration"))
 
 from browser import ConsoleProcess, chromium, close_chromium  # noqa: E402
 
+from process.session import make_config  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import VelCmd  # noqa: E402
-from protocol.session import make_config  # noqa: E402
 from tests.conftest import _server_factory  # noqa: E402
 
 KEY = ("window.__t = performance.timeOrigin + performance.now();"

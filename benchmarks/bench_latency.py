@@ -47,9 +47,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from lab.children import Child, free_port, rhbl_argv  # noqa: E402
+from process.session import make_config  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, VelCmd  # noqa: E402
-from protocol.session import make_config  # noqa: E402
 
 PING, PONG = "bench/ping", "bench/pong"
 ROBOT, PEER = "r0", "r1"  # this checkout's controller drives r0, the --peer's r1

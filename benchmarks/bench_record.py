@@ -136,7 +136,7 @@ def lockstep_rate(tmp: Path, tree: Path, seconds: float, record: bool) -> float:
                                 "--connect", ep, ready="recording "))
         import zenoh
 
-        from protocol.session import make_config
+        from process.session import make_config
 
         ids = []
         with zenoh.open(make_config(mode="client", connect=[ep])) as s:

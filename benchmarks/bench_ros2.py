@@ -40,14 +40,14 @@ import zenoh
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from client.ros2 import Ros2Graph  # noqa: E402
+from client.ros2.nodes import Ros2Graph  # noqa: E402
 from lab.children import Child, free_port, rhbl_argv  # noqa: E402
+from process.session import make_config  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import LaserConfig, Scan, State  # noqa: E402
 from protocol.ros2 import cdr  # noqa: E402
 from protocol.ros2.convert import Frames, laserscan_from_scan, stamp  # noqa: E402
 from protocol.ros2.graph import RobotTopics  # noqa: E402
-from protocol.session import make_config  # noqa: E402
 
 ROBOT = "r0"
 RELAY_IN, RELAY_OUT = "bench/relay/in", "bench/relay/out"

@@ -37,7 +37,7 @@ from lab.evaluate import evaluate, success  # noqa: E402
 from lab.harness import make_learner, resolve_world  # noqa: E402
 from lab.recipe import RECIPES  # noqa: E402
 from lab.train import train  # noqa: E402
-from protocol.session import make_config  # noqa: E402
+from process.session import make_config  # noqa: E402
 
 
 def main() -> int:

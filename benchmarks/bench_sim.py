@@ -135,7 +135,7 @@ def free_poses(spec, n: int, spacing: float = 0.7) -> list[tuple[float, float, f
 def _node(spec, n: int, tiles: int = 1):
     import zenoh
 
-    from protocol.session import make_config
+    from process.session import make_config
     from server.node import ServerNode
 
     session = zenoh.open(make_config(mode="router", listen=[f"tcp/127.0.0.1:{free_port()}"]))
@@ -285,8 +285,8 @@ def _serve(endpoint: str, start) -> int:
 
     import zenoh
 
+    from process.session import make_config
     from protocol import keys
-    from protocol.session import make_config
 
     done = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: done.set())
@@ -368,7 +368,7 @@ def _fleet_node(spec, n: int, tiles: int):
     and the port's endpoint."""
     import zenoh
 
-    from protocol.session import make_config
+    from process.session import make_config
     from server.node import ServerNode
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"

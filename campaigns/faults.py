@@ -78,7 +78,7 @@ class Campaign:
     def __init__(self, workdir: Path, robot: str = "r0") -> None:
         import zenoh
 
-        from protocol.session import make_config
+        from process.session import make_config
 
         self.dir = workdir
         self.robot = robot

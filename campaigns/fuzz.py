@@ -198,8 +198,8 @@ def _served_node() -> Iterator[_Served]:
     import zenoh
 
     import server as server_pkg
+    from process.session import make_config
     from protocol import keys
-    from protocol.session import make_config
     from server.node import ServerNode
     from server.world import World, load_world
 
@@ -518,7 +518,7 @@ def fuzz_clients(per_key: int, seed: int = 0, valid_every: int = 10,
     """Fuzz the keys the learner, teacher and controller processes listen to (module text)."""
     import zenoh
 
-    from protocol.session import make_config
+    from process.session import make_config
 
     rng = random.Random(seed)
     work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-"))
@@ -626,7 +626,7 @@ def fuzz_files(per_file: int, seed: int = 0, workdir: Path | None = None) -> lis
 
 # ----------------------------------------------------------------------- the command line
 # The walk of every option of every ``rhbl`` command (tests/test_cli_walk.py runs it too): the
-# hostile values of an option come from its argparse type (``protocol.arguments``: its kind
+# hostile values of an option come from its argparse type (``process.arguments``: its kind
 # and, for numbers, its range) or its choices.
 def cli_places(work: Path) -> dict[str, str]:
     """Files of every kind to give as paths, made in ``work``."""
@@ -681,7 +681,7 @@ def cli_hostile(action: argparse.Action, places: dict[str, str]) -> list[str]:
 
 
 def _cli_hostile(action: argparse.Action, places: dict[str, str]) -> list[str]:
-    from protocol.arguments import Checked, Number
+    from process.arguments import Checked, Number
 
     t = action.type
     if action.choices and not isinstance(t, Checked):
@@ -818,8 +818,8 @@ def _writers(work: Path) -> list[tuple[str, Callable[[Path], Any]]]:
     import numpy as np
 
     from client.recording.mcap_file import RecordingWriter
-    from protocol import files
-    from protocol.runtime import write_stats
+    from process import files
+    from process.runtime import write_stats
     from rhbl import HypersphereClassifier
 
     clf = HypersphereClassifier().fit(np.array([[0.0, 0.0], [1.0, 1.0]]), ["a", "b"])

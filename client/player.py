@@ -3,7 +3,7 @@
 ::
 
     from client.player import PlayerClient
-    from protocol.session import make_config
+    from process.session import make_config
 
     with PlayerClient(make_config(connect=["tcp/127.0.0.1:7447"]), robot="r0",
                       source="controller") as client:
@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 import zenoh
 
+from process.session import make_config
 from protocol import keys
 from protocol.codec import DecodeError, ProtocolError
 from protocol.decoding import Decoder
@@ -56,7 +57,6 @@ from protocol.messages import (
     VelCmdPacker,
     WorldInfo,
 )
-from protocol.session import make_config
 
 __all__ = ["LaserProxy", "PlayerClient", "Position2dProxy", "RequestError", "ScanChannel",
            "SimulationProxy"]

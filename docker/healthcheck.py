@@ -50,8 +50,8 @@ def check(pid: int = 1) -> tuple[bool, str]:
     import zenoh
 
     from lab.cli import build_parser
+    from process.session import config_from_args
     from protocol import keys
-    from protocol.session import config_from_args
 
     args = build_parser(role).parse_args(rest)
     connect = [e for v in args.connect or [] for e in v.split(",") if e]

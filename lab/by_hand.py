@@ -88,7 +88,7 @@ class ByHand(Demo):
     def run(self) -> int:
         import zenoh
 
-        from protocol.session import make_config
+        from process.session import make_config
 
         args = self.args
         self.say(f"rhbl demo --by-hand: world {self.spec.name}, output {self.out}")

@@ -4,7 +4,7 @@ Each subcommand lives in its own module, which defines ``add_arguments(parser)``
 ``main(args) -> int``. Modules are imported only when their command runs, so ``rhbl --help``
 stays fast and a heavy import (zenoh, pymunk, matplotlib) is paid only by the command using it.
 
-Options take their ``type=`` from ``protocol.arguments`` (checked numbers, paths, names,
+Options take their ``type=`` from ``process.arguments`` (checked numbers, paths, names,
 endpoints): a bad value is refused while parsing, before ``main`` runs, as one line naming the
 option (no usage block) and exit 2; so is a bad value found by ``main`` before it starts
 (a ``ValueError`` or ``OSError``).
@@ -23,7 +23,7 @@ __all__ = ["COMMANDS", "Parser", "build_parser", "main", "parse"]
 # name -> (module, one-line help). Order is the order shown by ``rhbl --help``.
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("lab.demo", "run the whole loop as separate processes: teach, learn, drive, report"),
-    "server": ("server.cli", "run the simulator server (Player-like position2d + laser over zenoh)"),
+    "server": ("server.command", "run the simulator server (Player-like position2d + laser over zenoh)"),
     "teacher": ("client.roles.teacher", "demonstrate: a scripted expert or keyboard teleop drives the robot"),
     "learner": ("client.roles.learner", "learn a hypersphere tree from the teacher's demonstrations"),
     "controller": ("client.roles.controller", "drive the robot with a learned tree"),
@@ -36,7 +36,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "replay": ("client.recording.replay", "republish a recording's sensor stream on zenoh with its timing"),
     "inspect": ("client.recording.inspect", "print what an MCAP recording holds"),
     "foxglove": ("client.recording.bridge", "serve the live bus to Foxglove/Lichtblick (WebSocket)"),
-    "ros2": ("client.roles.ros2", "an rhbl robot on ROS 2 (rmw_zenoh): scan, odom, tf, clock out; cmd_vel in"),
+    "ros2": ("client.ros2.bridge", "an rhbl robot on ROS 2 (rmw_zenoh): scan, odom, tf, clock out; cmd_vel in"),
     "example": ("lab.example", "a small end-to-end example of the learner on synthetic data"),
 }
 
@@ -110,9 +110,9 @@ def _values(value) -> list[str]:
 
 
 def prepare_outputs(args: argparse.Namespace) -> None:
-    """Make the folders of the output files given (``protocol.files``; FileRuleError, a
+    """Make the folders of the output files given (``process.files``; FileRuleError, a
     ValueError, when one cannot be made: /proc/nope passes the parse-time check as root)."""
-    from protocol import files
+    from process import files
 
     for option, path in getattr(args, "_outputs", []):
         files.check_output(path, option, make=True)

@@ -13,7 +13,7 @@ lineage (its own, and for a tree that extends another, ``rhbl learner --resume``
 up to where it was extended, and so on), or the recordings it was trained from (``rhbl train
 --from-recording``); a tree whose data cannot all be found is refused, naming what is
 missing. ``--method exact`` keeps every prediction on them; ``--method prune`` deletes the
-weakest spheres against their labels (``rhbl.compact``). The step is recorded in the snapshot's
+weakest spheres against their labels (``rhbl.compaction``). The step is recorded in the snapshot's
 ``metadata["compaction"]``.
 """
 
@@ -27,8 +27,8 @@ import numpy as np
 from client.behaviour.features import FeatureSpec
 from client.behaviour.learning import load_snapshot
 from client.journal import Journal, JournalError, journal_path
-from protocol import arguments
-from rhbl.compact import METHODS
+from process import arguments
+from rhbl.compaction import METHODS
 
 __all__ = ["add_arguments", "lineage_data", "load_data", "main"]
 

@@ -42,7 +42,7 @@ from lab.children import free_port
 from lab.children import rhbl_argv as _rhbl
 from lab.episode import Episode, EpisodeCollector
 from lab.recipe import EVAL_SECONDS, RECIPES, Recipe, per_task
-from protocol import arguments, files
+from process import arguments, files
 from server import world_arg
 
 __all__ = ["SCENARIOS", "Scenario", "add_arguments", "main", "free_port"]
@@ -362,7 +362,7 @@ class Demo:
     def run(self) -> int:
         import zenoh
 
-        from protocol.session import make_config
+        from process.session import make_config
 
         args = self.args
         self.say(f"rhbl demo: scenario {args.scenario}, world {self.spec.name}, output "

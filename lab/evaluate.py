@@ -29,7 +29,7 @@ from lab.harness import DT, OnStep, drive, resolve_world
 from lab.recipe import EVAL_SECONDS, per_task
 from lab.report import episode_table
 from lab.sim_tap import record_run
-from protocol import arguments, files
+from process import arguments, files
 from server import world_arg
 from server.world import WorldSpec
 

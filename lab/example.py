@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from protocol import arguments
+from process import arguments
 from rhbl import HypersphereClassifier, load
 
 ACTIONS = ["fwd", "fwd-left", "rot-left", "fwd-right", "rot-right"]

@@ -27,7 +27,7 @@ from lab.harness import make_learner, resolve_world
 from lab.recipe import Recipe, add_recipe_arguments, recipe_for, recipe_from_args
 from lab.report import table
 from lab.train import train
-from protocol import arguments, files
+from process import arguments, files
 from server import world_arg
 
 __all__ = ["PAPER", "TEACHERS", "add_arguments", "main", "run_experiment", "run_trial", "table_i"]

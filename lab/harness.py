@@ -27,7 +27,7 @@ from client.behaviour.tasks import TASKS
 from lab import metrics
 from lab.episode import DT, Episode
 from lab.recipe import Recipe, parse_floats, recipe_for
-from protocol.arguments import checked_list
+from process.arguments import checked_list
 from server.world import World, WorldSpec, load_world
 
 __all__ = [
@@ -65,7 +65,7 @@ def _parse_pose(text: str) -> tuple[float, float, float]:
     return vals  # type: ignore[return-value]
 
 
-# ``--start x,y,yaw`` (an argparse type: ``protocol.arguments.checked_list``)
+# ``--start x,y,yaw`` (an argparse type: ``process.arguments.checked_list``)
 parse_pose = checked_list("pose", _parse_pose, "1,1,0")
 
 

@@ -22,7 +22,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Circle  # noqa: E402
 
-from protocol import files  # noqa: E402
+from process import files  # noqa: E402
 
 __all__ = ["COLORS", "draw_path", "draw_spheres", "draw_world", "plot_paths"]
 
@@ -119,7 +119,7 @@ def plot_paths(world, paths: dict, out, title: str | None = None, spheres=None, 
     if spheres is not None:
         draw_spheres(axes[0][-1], spheres, dims=dims, feature_names=feature_names)
     fig.tight_layout()
-    try:  # a regular file or a new one only, written atomically (protocol.files)
+    try:  # a regular file or a new one only, written atomically (process.files)
         with files.replace_file(out) as tmp:
             fig.savefig(tmp, dpi=110, format=out.suffix[1:].lower() or "png")
     finally:

@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 from client.behaviour.features import FEATURES, FeatureSpec
 from client.behaviour.tasks import TASKS
-from protocol import arguments
-from protocol.arguments import checked_list
+from process import arguments
+from process.arguments import checked_list
 
 __all__ = [
     "DEMO",
@@ -46,7 +46,7 @@ STARTS = ("default", "world", "free")
 SPAWN = ("all", "winner")
 DISTANCE = ("squared", "euclidean")
 TREE_PARAMS = ("spawn", "distance", "min_radius", "max_nodes", "max_depth")
-# the compaction step's choices and the ``rhbl.compact`` settings each one means
+# the compaction step's choices and the ``rhbl.compaction`` settings each one means
 COMPACT: dict[str, dict] = {
     "none": {}, "exact": {"method": "exact"}, "prune": {"method": "prune"},
     "prune-balanced": {"method": "prune", "class_weight": "balanced"}}
@@ -84,7 +84,7 @@ class Recipe:
     # scale augmentation: each labelled state offered again with the scan scaled
     augment: int = 0
     augment_scale: float = 1.3
-    # the last step: compact the tree on every vector it learned (``rhbl.compact``). None by
+    # the last step: compact the tree on every vector it learned (``rhbl.compaction``). None by
     # default: every compaction measured, also between the rounds, lost closed-loop success on
     # some world for some seed (docs/experiments.md, "Compact trees (issue)")
     compact: str = "none"           # "none" | "exact" | "prune" | "prune-balanced"
@@ -311,7 +311,7 @@ _FLAGS: list[tuple[str, str, dict, str]] = [
      "repeat the corrective rounds in the training world scaled by these factors first "
      "('none': only the world itself)"),
     ("--compact", "compact", {"choices": list(COMPACT)},
-     "last step: compact the tree on every vector it learned (rhbl.compact; exact: no "
+     "last step: compact the tree on every vector it learned (rhbl.compaction; exact: no "
      "prediction on them changes; prune: also delete the weakest spheres; prune-balanced: "
      "errors weighted per label)"),
     ("--compact-max-nodes", "compact_max_nodes", {"type": arguments.positive_int},

@@ -36,7 +36,7 @@ from lab.harness import (
     step_world,
 )
 from lab.recipe import Recipe, add_recipe_arguments, recipe_for, recipe_from_args
-from protocol import arguments
+from process import arguments
 from server import world_arg
 from server.world import World, WorldSpec, free_pose, sample_pose
 
@@ -354,7 +354,7 @@ def _corrective_rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, p
 def visited_states(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None = None,
                    *, seed: int = 0, scales: tuple[float, ...] | None = None, rounds: int = 1,
                    policy=None, on_step: OnStep | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Held-out states for pruning (``rhbl.compact``): the states ``learner``'s tree reaches when
+    """Held-out states for pruning (``rhbl.compaction``): the states ``learner``'s tree reaches when
     it drives, labelled by the teacher, ``(X, y)``. The drives are ``rounds`` corrective rounds
     as ``recipe`` runs them (from every start pose and ``recipe.round_free`` free-space poses,
     ``round_seconds`` each, the teacher taking over near walls), first in copies of ``spec``

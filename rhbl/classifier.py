@@ -38,7 +38,7 @@ import numpy as np
 
 from . import snapshot
 from ._errors import NotFittedError, SnapshotError
-from .compact import compact
+from .compaction import compact
 from .tree import _F64, ALGORITHMS, DISTANCES, SphereTree, Totals, load_kernels
 
 _NDARRAY = np.ndarray  # (_F64: builtin dtypes are singletons; another float64 takes the checks)
@@ -547,7 +547,7 @@ class HypersphereClassifier:
                 max_error: float = 0.0, max_nodes: int | None = None,
                 sample_weight: Any = None, class_weight: str | None = None,
                 data: str | None = None) -> HypersphereClassifier:
-        """A smaller copy of this tree that keeps its behaviour on ``X`` (see ``rhbl.compact``):
+        """A smaller copy of this tree that keeps its behaviour on ``X`` (see ``rhbl.compaction``):
         ``method="exact"`` keeps every prediction on ``X``; ``"prune"`` deletes the weakest
         spheres against the labels ``y`` (``max_error``, ``max_nodes``, ``sample_weight``,
         ``class_weight="balanced"``). The copy is an ordinary

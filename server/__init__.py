@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from protocol.arguments import Checked
+from process.arguments import Checked
 
 __all__ = ["world_arg", "world_names", "world_path", "worlds_dir"]
 
@@ -38,7 +38,7 @@ def world_path(name: str | Path) -> Path:
 
 
 def _world(text: str) -> str:
-    from protocol.arguments import files_checked
+    from process.arguments import files_checked
 
     if not files_checked() and "/" in text:  # a path on another machine (syntax_only)
         return text

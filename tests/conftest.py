@@ -97,7 +97,7 @@ def start_module_server():
 def client_config():
     """Function ``client_config(endpoint) -> zenoh.Config``: a client-mode session connected to
     ``endpoint``, multicast scouting off."""
-    from protocol.session import make_config
+    from process.session import make_config
 
     def make(endpoint: str, mode: str = "client"):
         return make_config(mode=mode, connect=[endpoint])

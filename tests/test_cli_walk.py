@@ -1,7 +1,7 @@
 """Every option of every ``rhbl`` command, walked with hostile values made from its parser.
 
 For each option that takes a value, the values come from its argparse ``type`` (a
-``protocol.arguments.Checked``: its ``kind`` and, for numbers, its range) or its ``choices``
+``process.arguments.Checked``: its ``kind`` and, for numbers, its range) or its ``choices``
 (``campaigns.fuzz.cli_hostile``): negative, zero, NaN, infinities, huge, empty, not a number;
 a FIFO, a character device, a folder, a missing file, a path under a regular file; wildcards
 and separators in a name; bad endpoints, addresses and origins. Each must be refused by the
@@ -30,7 +30,7 @@ from campaigns.fuzz import (
     value_actions,
 )
 from lab.cli import COMMANDS, build_parser
-from protocol.arguments import Checked, Number
+from process.arguments import Checked, Number
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -44,7 +44,7 @@ def places(tmp_path_factory) -> dict[str, str]:
 def test_every_option_has_a_checked_type_or_choices(command):
     loose = [option_name(a) for a in value_actions(build_parser(command))
              if not isinstance(a.type, Checked) and not a.choices]
-    assert loose == [], (f"rhbl {command}: give these a type from protocol.arguments (or "
+    assert loose == [], (f"rhbl {command}: give these a type from process.arguments (or "
                          f"choices): {loose}")
 
 

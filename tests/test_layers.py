@@ -8,13 +8,14 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-OURS = {"rhbl", "protocol", "server", "client", "lab"}
+OURS = {"rhbl", "protocol", "process", "server", "client", "lab"}
 # package -> packages of ours it may import
 ALLOWED = {
     "rhbl": set(),
     "protocol": set(),
-    "server": {"protocol"},
-    "client": {"protocol", "rhbl"},
+    "process": {"protocol"},
+    "server": {"protocol", "process"},
+    "client": {"protocol", "process", "rhbl"},
     "lab": OURS,
 }
 

@@ -46,7 +46,7 @@ import argparse
 
 import numpy as np
 
-from protocol import arguments
+from process import arguments
 
 _OPPOSITE = {"rot-left": "rot-right", "rot-right": "rot-left"}
 _FORWARD = ("fwd", "fwd-left", "fwd-right")

@@ -229,7 +229,7 @@ class DemonstrationLearner:
         return len(X)
 
     def compact(self, method: str = "exact", *, data: str | None = None, **options) -> dict:
-        """Replace the tree by its compaction (``rhbl.compact``) on the recorded vectors (the
+        """Replace the tree by its compaction (``rhbl.compaction``) on the recorded vectors (the
         learner must have been made with ``record=True``); ``options`` go to
         ``HypersphereClassifier.compact`` (``max_error``, ``max_nodes``), ``data`` is added to
         the record's note of the data (such as "after round 2"). Returns the step's provenance

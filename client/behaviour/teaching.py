@@ -46,7 +46,7 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
-from protocol import arguments
+from process import arguments
 
 from .actions import DEFAULT_ACTIONS, ActionSet
 from .features import FeatureSpec

@@ -29,10 +29,10 @@ from client.recording import gate
 from client.recording.foxglove_schemas import ViewerFeed, ViewerMessage
 from client.recording.mcap_file import KINDS, classify
 from client.recording.tap import BusTap
-from protocol import arguments
+from process import arguments
+from process.runtime import EXIT_USAGE, Context, ProcessError, add_report_arguments, run_process
+from process.session import add_zenoh_arguments
 from protocol.decoding import Decoder
-from protocol.runtime import EXIT_USAGE, Context, ProcessError, add_report_arguments, run_process
-from protocol.session import add_zenoh_arguments
 
 __all__ = ["FoxgloveSink", "add_arguments", "main"]
 

@@ -32,7 +32,7 @@ import time
 from urllib.parse import parse_qs, urlsplit
 
 from client.roles.console.app import access_token, host_name, is_loopback
-from protocol.arguments import Checked
+from process.arguments import Checked
 
 __all__ = ["HEADER_TIMEOUT", "MAX_HEADER", "Gate", "access_token", "is_loopback", "origin"]
 

@@ -13,7 +13,7 @@ import os
 from collections import defaultdict
 
 from client.recording.mcap_file import RecordingError, RecordingReader
-from protocol import arguments
+from process import arguments
 
 __all__ = ["add_arguments", "format_summary", "main", "recording_summary"]
 

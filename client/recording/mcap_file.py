@@ -45,7 +45,7 @@ from pathlib import Path
 import msgpack
 from mcap.opcode import Opcode
 
-from protocol import files
+from process import files
 from protocol.codec import PROTOCOL_VERSION
 from protocol.decoding import Decoder
 from protocol.messages import CARRIES, kind_of
@@ -157,7 +157,7 @@ class RecordingWriter:
 
         self.path = Path(path)
         self.chunk_seconds = float(chunk_seconds)
-        try:  # a regular file or a new one only (protocol.files), its folder made
+        try:  # a regular file or a new one only (process.files), its folder made
             fd = files.open_output(self.path, overwrite=overwrite)
         except files.FileRuleError as exc:
             raise RecordingError(str(exc)) from None
@@ -389,7 +389,7 @@ class RecordingReader:
     the cut that sits in a complete record (chunk), then ends with a line in ``notes``; anything
     else wrong is ``RecordingError`` naming the file, the byte and what is wrong. ``metadata``:
     the metadata records read so far (name -> map). The file must be a regular file
-    (``protocol.files``: a FIFO or a device is refused, never read)."""
+    (``process.files``: a FIFO or a device is refused, never read)."""
 
     def __init__(self, path: str | os.PathLike):
         self.path = Path(path)

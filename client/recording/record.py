@@ -3,7 +3,7 @@
 
     rhbl record --out run.mcap                      # every robot it sees, until Ctrl-C
     rhbl record --out run.mcap --robot r0 --duration 120
-    rhbl record --ros2 --out bag.mcap               # ROS 2 messages (client.recording.ros2)
+    rhbl record --ros2 --out bag.mcap               # ROS 2 messages (client.ros2.bag)
 
 It needs no server: started before one, it waits for a router to connect to (``--wait-router``,
 forever by default, logging what it waits for) and records from then on. ``--out`` and the
@@ -20,12 +20,11 @@ import os
 import time
 
 from client.recording.mcap_file import CHUNK_SECONDS, RecordingError, RecordingWriter
-from client.recording.ros2 import Ros2Recording
 from client.recording.tap import BusTap
-from client.ros2 import Ros2Options, add_ros2_arguments
-from protocol import arguments, files, keys
-from protocol.messages import LaserConfig
-from protocol.runtime import (
+from client.ros2.bag import Ros2Recording
+from client.ros2.nodes import Ros2Options, add_ros2_arguments
+from process import arguments, files
+from process.runtime import (
     EXIT_FAILURE,
     EXIT_USAGE,
     Context,
@@ -33,7 +32,9 @@ from protocol.runtime import (
     add_report_arguments,
     run_process,
 )
-from protocol.session import add_zenoh_arguments
+from process.session import add_zenoh_arguments
+from protocol import keys
+from protocol.messages import LaserConfig
 
 __all__ = ["RecordProcess", "add_arguments", "check_out", "demo_recording", "main",
            "say_demo_recording"]
@@ -74,7 +75,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def check_out(path: str | os.PathLike, overwrite: bool) -> None:
     """ValueError unless ``path`` can be the new recording: a regular file or a new one
-    (``protocol.files``: never a device, a FIFO, a socket or a folder), not an existing file
+    (``process.files``: never a device, a FIFO, a socket or a folder), not an existing file
     unless ``overwrite``; its folder is made."""
     target = files.check_output(path, "--out")
     if target.exists() and not overwrite:

@@ -25,11 +25,12 @@ from dataclasses import dataclass, field
 import zenoh
 
 from client.recording.mcap_file import RecordedMessage, RecordingError, read_recording
-from protocol import arguments, keys
+from process import arguments
+from process.runtime import Context, add_report_arguments, run_process
+from process.session import add_zenoh_arguments
+from protocol import keys
 from protocol.decoding import Decoder
 from protocol.messages import Scan, VelCmd
-from protocol.runtime import Context, add_report_arguments, run_process
-from protocol.session import add_zenoh_arguments
 
 __all__ = ["MAX_GAP", "SENSOR_KINDS", "ReplayPlan", "ReplayProcess", "add_arguments", "main",
            "plan_replay", "sensor_messages"]

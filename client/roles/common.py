@@ -1,11 +1,11 @@
 """What the client's processes (teacher, learner, controller, console, record, replay, foxglove)
-share beyond ``protocol.runtime`` (exit codes ``EXIT_*``, ``ProcessError``, logging, signals,
+share beyond ``process.runtime`` (exit codes ``EXIT_*``, ``ProcessError``, logging, signals,
 ``open_session``, ``Context`` and its scope, shared with ``rhbl server``: import those from
 there):
 
-- ``add_process_arguments(parser)``: the common flags (zenoh flags from ``protocol.session``,
+- ``add_process_arguments(parser)``: the common flags (zenoh flags from ``process.session``,
   ``--robot``, ``--wait-server``, ``--log-level``).
-- ``run_role(role, args, body)``: ``protocol.runtime.run_process`` with the robot checked
+- ``run_role(role, args, body)``: ``process.runtime.run_process`` with the robot checked
   (``--robot`` must be a key chunk: exit 2) and the liveliness token ``rhbl/alive/<role>/<robot>-<pid>``.
 - ``wait_for_server(ctx)``: waits for the first scan of the robot, logging what it waits for,
   and fails with a message naming the endpoint and the key when the server is not up.
@@ -27,8 +27,8 @@ from typing import Any
 
 import zenoh
 
-from protocol import arguments, keys
-from protocol.runtime import (
+from process import arguments
+from process.runtime import (
     EXIT_NO_LEARNER,
     EXIT_NO_SERVER,
     Context,
@@ -36,7 +36,8 @@ from protocol.runtime import (
     add_report_arguments,
     run_process,
 )
-from protocol.session import add_zenoh_arguments
+from process.session import add_zenoh_arguments
+from protocol import keys
 
 __all__ = [
     "ScanWatch",
@@ -85,7 +86,7 @@ def wait_for_server(ctx: Context, timeout: float | None = None,
     ``ring``: the caller's own ``client.player.ScanChannel``: the wait takes the first scan
     from it and returns it, for the caller to answer (a lock-step sender waits for that answer
     before it sends another scan). A channel of another robot than an rhbl server's (a
-    ``client.ros2.Ros2ScanChannel``) names its ``key`` and what it ``needs``, said instead.
+    ``client.ros2.nodes.Ros2ScanChannel``) names its ``key`` and what it ``needs``, said instead.
     Logs what it is waiting for every few seconds, so a process never waits silently.
     """
     timeout = ctx.args.wait_server if timeout is None else timeout
@@ -233,7 +234,7 @@ class ScanWatch:
 def run_role(role: str, args: argparse.Namespace, body: Callable[[Context], int | None],
              early_token: bool = True, check: Callable[[], None] | None = None,
              wait_router: float | None = None) -> int:
-    """``protocol.runtime.run_process`` for a process of one robot (``--robot``): the token is
+    """``process.runtime.run_process`` for a process of one robot (``--robot``): the token is
     ``rhbl/alive/<role>/<robot>-<pid>``, declared before ``body`` runs (or by the body with
     ``ctx.declare_token()`` if not ``early_token``); ``check`` (the process's own) runs after
     the robot's, before any connection."""

@@ -25,7 +25,7 @@ decisions (``Decision``, for viewers) say when the guard stepped in lately on a 
 (``looping``) and what it commanded instead of the tree's (``executed``): ``rhbl console``
 then asks the person to show the robot the way out.
 
-With ``--ros2`` it drives a ROS 2 robot instead (``client.ros2.Ros2Robot``, docs/ros2.md): its
+With ``--ros2`` it drives a ROS 2 robot instead (``client.ros2.nodes.Ros2Robot``, docs/ros2.md): its
 ``LaserScan`` (any beam count and span, resampled to the tree's features, or refused with exit 2
 when they cannot be had from that laser) and ``Odometry`` in, a ``Twist`` on ``cmd_vel`` out.
 """
@@ -46,11 +46,12 @@ from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, che
 from client.decision import Decider
 from client.player import PlayerClient
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
-from client.ros2 import Ros2Options, Ros2Robot, add_ros2_arguments
-from protocol import arguments, keys
+from client.ros2.nodes import Ros2Options, Ros2Robot, add_ros2_arguments
+from process import arguments
+from process.runtime import EXIT_NO_SERVER, EXIT_USAGE, Context, ProcessError
+from protocol import keys
 from protocol.decoding import Decoder
 from protocol.messages import Scan, TreeNotice
-from protocol.runtime import EXIT_NO_SERVER, EXIT_USAGE, Context, ProcessError
 
 __all__ = ["ControllerProcess", "add_arguments", "fetch_snapshot", "load_tree", "main"]
 

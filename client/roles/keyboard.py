@@ -61,7 +61,7 @@ class KeyboardPolicy:
             if not os.isatty(fd):
                 raise OSError("not a terminal")
         except (OSError, ValueError, AttributeError) as exc:
-            from protocol.runtime import EXIT_USAGE, ProcessError
+            from process.runtime import EXIT_USAGE, ProcessError
 
             raise ProcessError(f"teacher: keyboard teleop needs an interactive terminal ({exc})",
                                EXIT_USAGE) from exc

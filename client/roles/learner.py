@@ -81,10 +81,11 @@ from client.journal import (
 )
 from client.labels import MAX_BACKLOG, Acknowledgements, Pairing, by_person
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
-from protocol import arguments, files, keys
+from process import arguments, files
+from process.runtime import EXIT_USAGE, Context, ProcessError, on_stop_signal
+from protocol import keys
 from protocol.decoding import Decoder
 from protocol.messages import Scan, TeacherAction, TreeNotice, Withdrawal
-from protocol.runtime import EXIT_USAGE, Context, ProcessError, on_stop_signal
 
 __all__ = ["LearnerCore", "LearnerProcess", "Pairing", "add_arguments", "main"]
 

@@ -61,9 +61,9 @@ from client.roles.common import (
     wait_for_learner,
     wait_for_server,
 )
-from protocol import arguments
+from process import arguments
+from process.runtime import EXIT_USAGE, Context, ProcessError, uninterrupted
 from protocol.messages import Scan
-from protocol.runtime import EXIT_USAGE, Context, ProcessError, uninterrupted
 
 __all__ = ["TeacherProcess", "add_arguments", "main"]
 

@@ -1,6 +1,7 @@
 """ROS 2 over zenoh, the rmw_zenoh way, without ROS 2 installed (docs/ros2.md).
 
-The pure wire layer of the bridge between rhbl and ROS 2 (no zenoh session here):
+The pure wire layer of the bridge between rhbl and ROS 2 (no zenoh session here; the session,
+the bridge process and the ROS 2 recordings are ``client.ros2``):
 
 - :mod:`protocol.ros2.names`: ROS 2 names, the DDS type names and the ``/`` -> ``%`` mangling.
 - :mod:`protocol.ros2.qos`: QoS profiles (ROS 2's default and sensor-data ones) and the compact
@@ -11,7 +12,6 @@ The pure wire layer of the bridge between rhbl and ROS 2 (no zenoh session here)
 - :mod:`protocol.ros2.cdr`: the messages (``rosbags``' Jazzy typestore), CDR, type hashes.
 - :mod:`protocol.ros2.convert`: rhbl ``Scan``/``State``/``VelCmd`` <-> ``LaserScan``,
   ``Odometry``, ``TFMessage``, ``Twist``.
-- :mod:`protocol.ros2.recording`: MCAP files in the ROS 2 profile.
 
 Followed: rmw_zenoh 0.2.4+ (Jazzy), 0.6.0+ (Kilted, Rolling); docs/ros2.md says where older
 releases differ.

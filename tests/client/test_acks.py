@@ -217,8 +217,8 @@ def test_labels_unacknowledged_at_exit_are_not_called_lost(free_port, caplog):
     import zenoh
 
     from client.labels import LabelPublisher
+    from process.session import make_config
     from protocol import keys
-    from protocol.session import make_config
 
     with zenoh.open(make_config(mode="peer", listen=[f"tcp/127.0.0.1:{free_port()}"])) as s:
         pub = LabelPublisher(s, "r0", outbox=8, resend_after=60.0)

@@ -9,7 +9,7 @@ import pytest
 pytest.importorskip("aiohttp")
 
 from client.roles.console.app import MAX_ERRORS, MAX_KINDS, _Page  # noqa: E402
-from client.roles.console.teaching import UNDO_MAX, Teaching, Trouble  # noqa: E402
+from client.roles.console.lesson import UNDO_MAX, Teaching, Trouble  # noqa: E402
 from client.roles.console.web import MAX_DEPTH, Refusals, read_message  # noqa: E402
 
 

@@ -20,9 +20,9 @@ zenoh = pytest.importorskip("zenoh")
 from campaigns import full_disk  # noqa: E402
 from client.journal import Journal, journal_path  # noqa: E402
 from lab.children import Child  # noqa: E402
+from process.session import make_config  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, TeacherAction  # noqa: E402
-from protocol.session import make_config  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 ROOT = Path(__file__).resolve().parents[2]

@@ -11,8 +11,8 @@ from client.behaviour.learning import load_snapshot
 from client.behaviour.teaching import PersonLearner
 from client.labels import Pairing
 from client.roles.learner import LearnerCore
+from process.runtime import ProcessError
 from protocol.messages import LabeledScan, Scan, TeacherAction
-from protocol.runtime import ProcessError
 
 LABELS = ["fwd", "fwd-left", "rot-left", "fwd-right", "rot-right"]
 

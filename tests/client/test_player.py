@@ -92,7 +92,7 @@ def test_simulation_proxy_sets_and_gets_the_pose(server, client_config):
 
 
 def test_read_times_out_without_server():
-    from protocol.session import make_config
+    from process.session import make_config
 
     with PlayerClient(make_config(mode="peer")) as c, c.laser:
         assert c.read(timeout=0.2) is False

@@ -16,7 +16,7 @@ import pytest
 zenoh = pytest.importorskip("zenoh")
 
 from lab.children import Child, rhbl_argv  # noqa: E402
-from protocol import runtime  # noqa: E402
+from process import runtime  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(180)]
 ROOT = Path(__file__).resolve().parents[2]

@@ -17,8 +17,8 @@ import pytest
 zenoh = pytest.importorskip("zenoh")
 
 from lab.children import Child, rhbl_argv  # noqa: E402
-from protocol.runtime import EXIT_NO_SERVER, EXIT_UNREACHABLE, EXIT_USAGE  # noqa: E402
-from protocol.session import make_config  # noqa: E402
+from process.runtime import EXIT_NO_SERVER, EXIT_UNREACHABLE, EXIT_USAGE  # noqa: E402
+from process.session import make_config  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 ROOT = Path(__file__).resolve().parents[2]

@@ -14,8 +14,8 @@ from client.behaviour.learning import load_snapshot
 from client.journal import Journal, journal_path
 from client.labels import Pairing
 from client.roles.learner import LearnerCore
+from process.runtime import ProcessError
 from protocol.messages import Scan, TeacherAction
-from protocol.runtime import ProcessError
 
 LABELS = ["fwd", "fwd-left", "rot-left", "fwd-right", "rot-right"]
 

@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def _parse(command: str, argv: list[str]):
     """A service's command line, parsed as ``rhbl`` does (SystemExit(2) when it is bad); its
     paths exist in the containers, not here: checked as text (``syntax_only``)."""
-    from protocol.arguments import syntax_only
+    from process.arguments import syntax_only
 
     with syntax_only():
         return build_parser(command).parse_args(argv)

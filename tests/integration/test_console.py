@@ -33,9 +33,9 @@ from browser import ConsoleProcess  # noqa: E402
 from client.journal import Journal, journal_path  # noqa: E402
 from client.player import PlayerClient  # noqa: E402
 from lab.children import Child, rhbl_argv  # noqa: E402
+from process.session import make_config  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Decision, State, TeacherAction, TreeNotice  # noqa: E402
-from protocol.session import make_config  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 

@@ -21,8 +21,8 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
+from process.session import make_config  # noqa: E402
 from protocol.messages import DriverState, State  # noqa: E402
-from protocol.session import make_config  # noqa: E402
 from server.node import hosted_robots  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]

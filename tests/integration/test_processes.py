@@ -25,9 +25,9 @@ from client.behaviour.learning import DemonstrationLearner, load_snapshot  # noq
 from client.journal import Journal, journal_path  # noqa: E402
 from client.player import PlayerClient  # noqa: E402
 from lab.children import Child, rhbl_argv  # noqa: E402
+from process.session import make_config  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import DriverState, State, TeacherAction, VelCmd  # noqa: E402
-from protocol.session import make_config  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(180)]
 

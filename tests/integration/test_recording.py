@@ -37,9 +37,9 @@ pytest.importorskip("google.protobuf")
 
 from client.recording.mcap_file import RecordingError, read_recording  # noqa: E402
 from lab.children import Child, rhbl_argv  # noqa: E402
+from process.session import make_config  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import Scan, VelCmd  # noqa: E402
-from protocol.session import make_config  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 

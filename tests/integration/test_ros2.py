@@ -39,9 +39,9 @@ from lab.evaluate import evaluate, success  # noqa: E402
 from lab.harness import make_learner, resolve_world  # noqa: E402
 from lab.recipe import RECIPES  # noqa: E402
 from lab.train import train  # noqa: E402
+from process.session import make_config  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import MAX_VX, Scan, State  # noqa: E402
-from protocol.session import make_config  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ros2_robot import (  # noqa: E402

@@ -586,7 +586,7 @@ def test_ros2_samples_flow_between_the_bridge_and_the_controller_only(sessions, 
 def test_ros2_graph_tokens_are_declared_by_the_bridge_and_the_controller_only(sessions):
     """rmw_zenoh's liveliness tokens (``@ros2_lv/0/...``): the bridge's node and publisher are
     seen by the controller and the controller's by the bridge; a learner's are dropped."""
-    from client.ros2 import Ros2Graph
+    from client.ros2.nodes import Ros2Graph
 
     topics = _ros2_topics()
     graphs = {who: Ros2Graph(sessions[who], 0) for who in ("ros2", "controller", "learner")}

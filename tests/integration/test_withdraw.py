@@ -21,9 +21,9 @@ from client.journal import Journal, JournalWithdrawal, journal_path  # noqa: E40
 from client.labels import LabelPublisher  # noqa: E402
 from client.player import PlayerClient  # noqa: E402
 from lab.children import Child, rhbl_argv  # noqa: E402
+from process.session import make_config  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import TreeNotice  # noqa: E402
-from protocol.session import make_config  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(180)]
 

@@ -9,6 +9,7 @@ import zenoh
 from hypothesis import given
 from hypothesis import strategies as st
 
+from process.session import make_config
 from protocol import DecodeError
 from protocol.ros2 import cdr
 from protocol.ros2.attachment import Attachment
@@ -35,7 +36,6 @@ from protocol.ros2.qos import (
     qos_from_keyexpr,
     qos_to_keyexpr,
 )
-from protocol.session import make_config
 
 # Data: the examples of rmw_zenoh's docs/design.md (the demo_nodes_cpp talker, listener and
 # add_two_ints nodes, rmw_zenoh 0.2.x+), copied verbatim.

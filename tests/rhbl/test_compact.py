@@ -1,4 +1,4 @@
-"""Compaction (rhbl.compact): exact compaction never changes a prediction on its data (hypothesis),
+"""Compaction (rhbl.compaction): exact compaction never changes a prediction on its data (hypothesis),
 pruning keeps its error budget, and a compacted tree is an ordinary tree (partial_fit, snapshots)."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rhbl import HypersphereClassifier, loads
-from rhbl.compact import compact, removal_curve, without
+from rhbl.compaction import compact, removal_curve, without
 
 SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 FEW = settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -146,7 +146,7 @@ def test_snapshots_store_every_parameter_but_the_search():
 
 
 def test_modules_import_one_way():
-    """_reference <- tree <- snapshot, compact <- classifier: no import circle, and no import
+    """_reference <- tree <- snapshot, compaction <- classifier: no import circle, and no import
     hidden in a function; the kernels (numba) are the one module loaded on first use."""
     root = Path(rhbl.__file__).parent
     assert _imports(root / "_layout.py") == (set(), [])
@@ -155,5 +155,5 @@ def test_modules_import_one_way():
     assert _imports(root / "tree.py") == ({"_layout", "_reference"}, [])
     assert 'importlib.import_module("._kernels", __package__)' in (root / "tree.py").read_text()
     assert _imports(root / "snapshot.py") == ({"_errors"}, [])
-    assert _imports(root / "compact.py") == ({"tree"}, [])
-    assert _imports(root / "classifier.py") == ({"snapshot", "_errors", "tree", "compact"}, [])
+    assert _imports(root / "compaction.py") == ({"tree"}, [])
+    assert _imports(root / "classifier.py") == ({"snapshot", "_errors", "tree", "compaction"}, [])

@@ -365,7 +365,7 @@ def test_bad_flags_exit_2_before_any_network(free_port):
 
 
 def test_unreachable_endpoint_exits_3_as_the_clients_do(free_port):
-    from protocol.runtime import EXIT_UNREACHABLE
+    from process.runtime import EXIT_UNREACHABLE
 
     ep = f"tcp/127.0.0.1:{free_port()}"
     proc = _server("--mode", "client", "--connect", ep)

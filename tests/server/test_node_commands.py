@@ -10,9 +10,9 @@ import pytest
 import zenoh
 
 import server
+from process.session import make_config
 from protocol import keys
 from protocol.messages import VelCmd
-from protocol.session import make_config
 from server.node import ServerNode, keep_freed_memory
 from server.world import World, load_world
 

@@ -25,7 +25,7 @@ import argparse
 import sys
 
 from client.roles.common import add_process_arguments, run_role
-from protocol import arguments
+from process import arguments
 
 HEADER_TIMEOUT = arguments.Number(float, 0, 3600, low_open=True, name="seconds")
 

@@ -31,7 +31,7 @@ are refused while another page holds it.
 
 Messages to the page: ``hello``, ``world``, ``state``, ``scan``, ``cmd`` (the action being
 executed), ``notice``, ``decision``, ``control`` (who holds each robot), ``robots``, ``teach``
-(the learner, the labels, episodes, agreement, markers, stuck: ``client.roles.console.teaching``),
+(the learner, the labels, episodes, agreement, markers, stuck: ``client.roles.console.lesson``),
 ``placed``, ``info``, ``error``.
 """
 
@@ -60,7 +60,7 @@ from client.behaviour.features import FeatureSpec
 from client.behaviour.learning import TreePolicy, check_compatible
 from client.labels import DRAIN, Hold, LabelPublisher, Learners
 from client.player import PlayerClient, RequestError
-from client.roles.console.teaching import Teaching, Trouble
+from client.roles.console.lesson import Teaching, Trouble
 from client.roles.console.web import (
     HEADER_TIMEOUT,
     Assets,
@@ -69,10 +69,10 @@ from client.roles.console.web import (
     guard,
     read_message,
 )
+from process.runtime import EXIT_USAGE, Context, ProcessError
 from protocol import keys
 from protocol.decoding import Decoder
 from protocol.messages import Decision, Scan, State, TreeNotice, VelCmd, WorldInfo
-from protocol.runtime import EXIT_USAGE, Context, ProcessError
 
 __all__ = ["SEND_TIMEOUT", "STALE", "Console", "access_token", "body", "host_name", "parse_http"]
 

@@ -15,9 +15,9 @@ import pytest
 import zenoh
 
 from client.recording.mcap_file import RecordingWriter
+from process.session import make_config
 from protocol import keys
 from protocol import messages as m
-from protocol.session import make_config
 
 ROOT = Path(__file__).resolve().parents[3]
 R = np.full(36, 2.0, dtype=np.float32)

@@ -11,9 +11,9 @@ zenoh = pytest.importorskip("zenoh")
 
 from client.recording.mcap_file import RecordingError  # noqa: E402
 from client.recording.tap import BusTap  # noqa: E402
+from process.session import make_config  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import TreeNotice  # noqa: E402
-from protocol.session import make_config  # noqa: E402
 
 
 class ListSink:

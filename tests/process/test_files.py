@@ -1,4 +1,4 @@
-"""``protocol.files``: the one rule for the files a person names. Written: only a regular file
+"""``process.files``: the one rule for the files a person names. Written: only a regular file
 or a new one (a symlink followed to its file), never a device, FIFO, socket or folder, which
 are left as they are; read: only a regular file, a FIFO refused without blocking."""
 
@@ -10,7 +10,7 @@ import stat
 
 import pytest
 
-from protocol import files
+from process import files
 
 
 @pytest.fixture

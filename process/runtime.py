@@ -43,8 +43,9 @@ from typing import Any
 
 import zenoh
 
-from protocol import arguments, files, keys
-from protocol.session import config_from_args
+from process import arguments, files
+from process.session import config_from_args
+from protocol import keys
 
 __all__ = [
     "EXIT_FAILURE",
@@ -151,7 +152,7 @@ def add_report_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def check_stats_path(path: str | None) -> None:
-    """``--stats FILE`` must be writable under ``protocol.files``' rule (FileRuleError, a
+    """``--stats FILE`` must be writable under ``process.files``' rule (FileRuleError, a
     ValueError)."""
     if path is not None:
         files.check_output(path, "--stats")
@@ -159,7 +160,7 @@ def check_stats_path(path: str | None) -> None:
 
 def write_stats(path: str, role: str, code: int, counters: dict) -> None:
     """``--stats FILE``: the counters as JSON, written atomically (a reader never sees half),
-    to a regular file only (``protocol.files``)."""
+    to a regular file only (``process.files``)."""
     files.write_text(path, json.dumps({"role": role, "exit": code, **counters}, indent=1,
                                       default=str) + "\n", "--stats")
 

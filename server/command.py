@@ -1,6 +1,6 @@
 """``rhbl server``: serve a world over zenoh (Player-like position2d + laser per robot).
 
-It runs through ``protocol.runtime.run_process``, as the client processes do: the same log lines and exit
+It runs through ``process.runtime.run_process``, as the client processes do: the same log lines and exit
 codes (0 ok, also after SIGINT/SIGTERM once the session is closed; 2 bad world or flags; 3 a
 connect endpoint unreachable, the session refused or a listen endpoint taken).
 """
@@ -10,8 +10,8 @@ from __future__ import annotations
 import argparse
 import logging
 
-from protocol import arguments, keys
-from protocol.runtime import (
+from process import arguments
+from process.runtime import (
     EXIT_OK,
     EXIT_USAGE,
     Context,
@@ -20,7 +20,8 @@ from protocol.runtime import (
     on_stop_signal,
     run_process,
 )
-from protocol.session import DEFAULT_ENDPOINT, add_zenoh_arguments
+from process.session import DEFAULT_ENDPOINT, add_zenoh_arguments
+from protocol import keys
 
 __all__ = ["add_arguments", "main"]
 

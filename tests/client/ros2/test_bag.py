@@ -1,4 +1,4 @@
-"""protocol.ros2.recording: an MCAP file in the ROS 2 profile, read back by readers nobody here
+"""client.ros2.bag (Ros2McapWriter): an MCAP file in the ROS 2 profile, read back by readers nobody here
 wrote: mcap-ros2-support (decodes with the file's own schemas) and rosbags' rosbag2 reader (the
 checks rosbag2's MCAP storage makes: profile, schemas, QoS metadata, type hashes)."""
 
@@ -10,6 +10,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.rosbag2 import Reader
 
+from client.ros2.bag import Ros2McapWriter
 from protocol.messages import Scan, State
 from protocol.ros2 import cdr
 from protocol.ros2.convert import (
@@ -20,7 +21,6 @@ from protocol.ros2.convert import (
 )
 from protocol.ros2.graph import RobotTopics, Topic
 from protocol.ros2.qos import DEFAULT_QOS, adapt
-from protocol.ros2.recording import Ros2McapWriter
 
 FRAMES = Frames.for_robot("r0")
 _R0 = RobotTopics.of("r0")

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import zenoh
 
-from protocol import arguments, files
+from process import arguments, files
 
 __all__ = [
     "DEFAULT_ENDPOINT",

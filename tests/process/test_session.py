@@ -1,4 +1,4 @@
-"""protocol.session: zenoh configs, and the topology the server relies on."""
+"""process.session: zenoh configs, and the topology the server relies on."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import time
 import pytest
 import zenoh
 
-from protocol.session import (
+from process.session import (
     DEFAULT_ENDPOINT,
     add_zenoh_arguments,
     config_from_args,

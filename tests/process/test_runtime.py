@@ -1,4 +1,4 @@
-"""Stop signals of every rhbl process (``protocol.runtime``), with a real process and real
+"""Stop signals of every rhbl process (``process.runtime``), with a real process and real
 signals: a SIGTERM that lands where code swallows the ``SystemExit`` it raises (a signal during
 numpy's first lazy import of ``numpy.random`` was lost that way) is delivered again until the
 process stops."""
@@ -23,7 +23,7 @@ def _program(name: str, code: str, tmp_path: Path) -> Child:
 # the first SystemExit is swallowed, as library code can; only a second one ends the program
 PROGRAM = """
 import sys, time
-from protocol.runtime import install_signal_handlers
+from process.runtime import install_signal_handlers
 install_signal_handlers()
 try:
     print("ready", flush=True)  # inside: a signal right after it must land in this block
@@ -78,7 +78,7 @@ def test_counters_are_written_at_exit_whatever_the_path(tmp_path, free_port):
     when the body fails (the exit code says so)."""
     import json
 
-    from protocol.runtime import EXIT_NO_SERVER, ProcessError, run_process
+    from process.runtime import EXIT_NO_SERVER, ProcessError, run_process
 
     def body(ctx):
         ctx.report(lambda: {"labels": 7, "dropped": {"scan": 1}})
@@ -101,7 +101,7 @@ def test_counters_are_written_at_exit_whatever_the_path(tmp_path, free_port):
 
 
 def test_a_stats_file_that_cannot_be_written_is_bad_input_before_any_session(tmp_path):
-    from protocol.runtime import EXIT_USAGE, run_process
+    from process.runtime import EXIT_USAGE, run_process
 
     opened = []
     (tmp_path / "file").write_text("")  # its folder cannot be made: a file is in its place
@@ -119,7 +119,7 @@ def test_a_stats_file_that_cannot_be_written_is_bad_input_before_any_session(tmp
 # and swallow it
 IN_DEL = """
 import signal, time
-from protocol.runtime import install_signal_handlers
+from process.runtime import install_signal_handlers
 install_signal_handlers()
 
 class Finaliser:
@@ -153,7 +153,7 @@ def test_a_stop_signal_in_a_finaliser_stops_without_a_traceback(tmp_path):
 # a stop signal inside ``uninterrupted()``: every statement of the block runs, then it stops
 IN_BLOCK = """
 import signal, time
-from protocol.runtime import install_signal_handlers, uninterrupted
+from process.runtime import install_signal_handlers, uninterrupted
 install_signal_handlers()
 done = 0
 try:

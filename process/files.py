@@ -1,7 +1,7 @@
 """The files a person names on a command line: the one rule for reading and for writing them.
 
 Every rhbl process checks the files it is given with these, before any work or connection
-(``protocol.arguments`` calls them as argparse types), and writes and opens through them, so the
+(``process.arguments`` calls them as argparse types), and writes and opens through them, so the
 rule also holds when the file changed in between:
 
 - **written** (``--out``, ``--json``, ``--plot``, ``--stats``, ``--record``, a journal): only to a

@@ -28,21 +28,21 @@ import threading
 
 from client.player import PlayerClient, RequestError
 from client.roles.common import wait_for_server
-from client.ros2 import Cdr, Ros2Graph, Ros2Options, add_ros2_arguments
-from protocol import arguments
-from protocol.codec import DecodeError
-from protocol.decoding import Decoder
-from protocol.messages import MAX_VA, MAX_VX
-from protocol.ros2 import cdr
-from protocol.ros2.convert import Frames, RobotFeed, velcmd_from_twist
-from protocol.runtime import (
+from client.ros2.nodes import Cdr, Ros2Graph, Ros2Options, add_ros2_arguments
+from process import arguments
+from process.runtime import (
     EXIT_NO_SERVER,
     Context,
     ProcessError,
     add_report_arguments,
     run_process,
 )
-from protocol.session import add_zenoh_arguments
+from process.session import add_zenoh_arguments
+from protocol.codec import DecodeError
+from protocol.decoding import Decoder
+from protocol.messages import MAX_VA, MAX_VX
+from protocol.ros2 import cdr
+from protocol.ros2.convert import Frames, RobotFeed, velcmd_from_twist
 
 __all__ = ["NODE", "SOURCE", "BridgeProcess", "RobotBridge", "add_arguments", "main"]
 

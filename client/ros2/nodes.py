@@ -39,7 +39,8 @@ import zenoh
 
 from client.behaviour.features import FeatureSpec
 from client.behaviour.resample import TAUGHT_BEAMS, CoverageError, LaserResampler
-from protocol import arguments
+from process import arguments
+from process.runtime import EXIT_USAGE, ProcessError
 from protocol.codec import DecodeError
 from protocol.decoding import Decoder
 from protocol.messages import Scan, VelCmd
@@ -49,7 +50,6 @@ from protocol.ros2.convert import pose_from_odometry, scan_from_laserscan, twist
 from protocol.ros2.graph import EntityKind, LivelinessToken, Node, RobotTopics, Topic
 from protocol.ros2.names import check_namespace, fully_qualified
 from protocol.ros2.qos import QosHistory, QosReliability
-from protocol.runtime import EXIT_USAGE, ProcessError
 
 __all__ = [
     "Cdr",

@@ -8,7 +8,7 @@ prints no usage block). Give every option that takes a value one of these (or ``
     parser.add_argument("--wait", type=seconds_or_zero, ...)        # 0 means "for ever" / "off"
     parser.add_argument("--episodes", type=positive_int, ...)
     parser.add_argument("--perturb", type=fraction, ...)            # 0 .. 1
-    parser.add_argument("--out", type=output_file, ...)             # protocol.files' rule
+    parser.add_argument("--out", type=output_file, ...)             # process.files' rule
     parser.add_argument("--tree", type=input_file, ...)             # an existing regular file
     parser.add_argument("--robot", type=key_chunk, ...)             # protocol.keys.check_chunk
     parser.add_argument("--gain", type=Number(float, low=0.5, high=2.0), ...)  # your own range
@@ -34,7 +34,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from protocol import files, keys
+from process import files
+from protocol import keys
 
 __all__ = [
     "MAX_SECONDS",
@@ -171,7 +172,7 @@ def files_checked() -> bool:
 
 
 class PathArg(Checked):
-    """A path under ``protocol.files``' rule: ``kind`` ``input`` (an existing regular file),
+    """A path under ``process.files``' rule: ``kind`` ``input`` (an existing regular file),
     ``output`` (a regular file or a new one; its folder is made) or ``folder`` (a folder, or a
     new one: made by the command)."""
 
