@@ -126,17 +126,6 @@ def timed_controller(out: str, argv: list[str]) -> int:
     return rhbl_main(argv)
 
 
-def _train_tree(path: Path) -> None:
-    from lab.harness import make_learner, resolve_world
-    from lab.recipe import RECIPES
-    from lab.train import train
-
-    spec = resolve_world("room")
-    learner = make_learner(spec.task)
-    train(spec, learner, RECIPES[spec.task].replace(seconds=120.0), seed=0)
-    learner.save(path)
-
-
 def _pct(a) -> tuple[float, float]:
     a = np.asarray(a) * 1e6
     return float(np.percentile(a, 50)), float(np.percentile(a, 99))
@@ -178,7 +167,9 @@ def main() -> int:
             ap.error(f"--fleet {args.fleet}: robot counts must be >= 1")
     tmp = Path(tempfile.mkdtemp(prefix="rhbl-bench-"))
     tree = tmp / "tree.rhbl"
-    _train_tree(tree)
+    from bench_sim import train_room_tree
+
+    train_room_tree(tree)
     if fleet:
         return fleet_ticks(tree, fleet)
     probe = _Probe(World(resolve_world("room")).scan(0))

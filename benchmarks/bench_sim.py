@@ -322,6 +322,19 @@ class _TimedPub:
         self.sent[self.name] = time.time()  # the clock of zenoh's timestamps
 
 
+def train_room_tree(path: Path) -> None:
+    """A small tree of the room (120 s of the recipe, seed 0) at ``path``: what the latency
+    benchmarks' controllers drive."""
+    from lab.harness import make_learner, resolve_world
+    from lab.recipe import RECIPES
+    from lab.train import train
+
+    spec = resolve_world("room")
+    learner = make_learner(spec.task)
+    train(spec, learner, RECIPES[spec.task].replace(seconds=120.0), seed=0)
+    learner.save(path)
+
+
 def fleet_run(spec, n: int, tiles: int, seconds: float, tree: str | None = None) -> dict:
     """n robots at 10 Hz real time, driven by one controller process: missed ticks and
     sense-to-act latency (a robot's scan out -> its answer in at the server). ``tree``:
@@ -331,10 +344,8 @@ def fleet_run(spec, n: int, tiles: int, seconds: float, tree: str | None = None)
 
     argv = [sys.executable, __file__]
     if tree is not None:
-        from bench_latency import _train_tree
-
         path = Path(tempfile.mkdtemp(prefix="rhbl-bench-")) / "tree.rhbl"
-        _train_tree(path)
+        train_room_tree(path)
         argv += ["--tree", str(path), *(["--batch"] if tree == "batch" else [])]
     session, node, endpoint = _fleet_node(spec, n, tiles)
     probe = _Latency(node)

@@ -30,7 +30,7 @@ import subprocess
 import sys
 import time
 
-from lab.demo import Child, Demo, DemoError
+from lab.demo_run import Child, Demo, DemoError
 
 __all__ = ["ByHand", "NOT_BY_HAND", "check_args"]
 

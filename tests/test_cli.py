@@ -132,7 +132,7 @@ def _demo_defaults(helps: dict[str, str], flag: str) -> tuple[float, float]:
 
 
 def test_demo_help_says_the_values_the_demo_uses(tmp_path):
-    from lab.demo import Demo
+    from lab.demo_run import Demo
 
     helps = _helps("demo")
     shown = {flag: _demo_defaults(helps, flag) for flag in

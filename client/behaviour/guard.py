@@ -1,7 +1,8 @@
 """The controller's guard against rot-left/rot-right loops (the paper's section 7.3).
 
 A learned tree can bounce between a rotate-left and a rotate-right sphere forever: each
-rotation brings the robot into the other sphere. ``RotationGuard`` wraps any policy with a
+rotation brings the robot into the other sphere (a loop as ``client.behaviour.loops`` defines
+it, the one definition; the guard overrules the switch, ``loops.reverses``, as it comes). ``RotationGuard`` wraps any policy with a
 hysteresis on the direction of rotation, as a person or the scripted teacher would: once the
 robot rotates one way, an order to rotate the other way is overruled (the robot keeps turning
 as it was) until the policy asks for anything but that reversal, for at most ``hold`` scans in a
@@ -48,7 +49,8 @@ import numpy as np
 
 from process import arguments
 
-_OPPOSITE = {"rot-left": "rot-right", "rot-right": "rot-left"}
+from .loops import ROTATIONS, reverses
+
 _FORWARD = ("fwd", "fwd-left", "fwd-right")
 CLEARANCE = 0.3  # m either side of the centre line: the robot's radius (0.25 m) and a margin
 LOOKAHEAD = 0.5  # m ahead: two scans' travel at full speed and a margin
@@ -199,8 +201,8 @@ class RotationGuard:
                 self._held, self._turn, self._since = 0, want, 0
                 return want
         self._last_overruled += 1
-        if (self._turn is not None and want == _OPPOSITE.get(self._turn)
-                and self._since <= self.memory and self._held < self.hold):
+        if (reverses(self._turn, want) and self._since <= self.memory
+                and self._held < self.hold):
             self._held += 1
             self.overruled += 1
             self._last_overruled = 0
@@ -210,7 +212,7 @@ class RotationGuard:
                 return "fwd"  # torn between the two rotations: the action between them
             return self._turn
         self._held = 0
-        if want in _OPPOSITE:
+        if want in ROTATIONS:
             self._turn, self._since = want, 0
         else:
             self._since += 1

@@ -6,7 +6,8 @@ directly by a run of the other (``a`` then ``b``, or ``b`` then ``a``; another a
 between breaks the pair but not the loop); a *loop* is a group of at least ``min_alternations``
 switches, each within ``window_s`` of the one before. The same definition serves the batch
 metric ``lab.metrics.oscillation_loops`` (an evaluated episode), the console's live "the robot
-is stuck here" and a controller's loop guard:
+is stuck here" and the controller's guard (``client.behaviour.guard.RotationGuard``), which
+overrules the switch defined here (``reverses``) before it can happen:
 
     detector = LoopDetector()                  # min_alternations=4, window_s=6.0
     for t, action in commands:                 # sim time of the scan, the action driven
@@ -21,9 +22,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["Loop", "LoopDetector"]
+__all__ = ["ROTATIONS", "Loop", "LoopDetector", "reverses"]
 
+ROTATIONS = ("rot-left", "rot-right")  # the pair whose alternation is a loop
 _EPS = 1e-6  # s: times that are k * dt apart compare as equal
+
+
+def reverses(current: str | None, action: str, pair=ROTATIONS) -> bool:
+    """True when ``action`` after a run of ``current`` is a switch: the other of the pair."""
+    return current is not None and action != current and {current, action} == set(pair)
 
 
 @dataclass
@@ -42,12 +49,12 @@ class LoopDetector:
     """Online detection of ``a``/``b`` alternation loops (see the module)."""
 
     def __init__(self, min_alternations: int = 4, window_s: float = 6.0,
-                 a: str = "rot-left", b: str = "rot-right"):
+                 a: str = ROTATIONS[0], b: str = ROTATIONS[1]):
         if min_alternations < 1 or not window_s > 0:
             raise ValueError(f"min_alternations must be >= 1 and window_s > 0, got "
                              f"{min_alternations} and {window_s}")
         self.min_alternations, self.window_s = int(min_alternations), float(window_s)
-        self.pair = {a, b}
+        self.pair = (a, b)
         self.loops: list[Loop] = []  # the loops that ended (group closed, long enough)
         self.reset()
 
@@ -63,7 +70,7 @@ class LoopDetector:
         t = float(t)
         if self.current is not None and t - self.current.last > self.window_s + _EPS:
             self._close()
-        if self._run is not None and action != self._run and {self._run, action} == self.pair:
+        if reverses(self._run, action, self.pair):
             if self.current is None:
                 start = self._prev_t if self._prev_t is not None else t
                 self.current = Loop(first=t, last=t, start=start, alternations=1)

@@ -15,7 +15,7 @@ from lab.train import train
 
 
 def test_the_maze_demo_snapshot_records_task_maze():
-    from lab.demo import SCENARIOS
+    from lab.demo_run import SCENARIOS
 
     for task, sc in SCENARIOS.items():
         args = build_parser("learner").parse_args([*sc.learner_args(), "--out", "x.rhbl"])
