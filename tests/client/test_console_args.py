@@ -6,7 +6,8 @@ import pytest
 
 pytest.importorskip("aiohttp")
 
-from client.roles.console.app import _action_of, access_token, parse_http  # noqa: E402
+from client.access import access_token  # noqa: E402
+from client.roles.console.app import _action_of, parse_http  # noqa: E402
 from lab.cli import build_parser  # noqa: E402
 
 
@@ -19,7 +20,7 @@ def test_parse_http():
 
 
 def test_host_name():
-    from client.roles.console.app import host_name
+    from client.access import host_name
 
     assert host_name("[::1]:8080") == "::1" and host_name("[::1]") == "::1"
     assert host_name("localhost:80") == "localhost" and host_name("127.0.0.1") == "127.0.0.1"

@@ -16,7 +16,8 @@ kept and resent until a learner acknowledges it (once a learner of the robot was
     rhbl console --http 0.0.0.0:8443 --tls-cert c.pem --tls-key k.pem   # token in the URL
     rhbl console --view-only                       # watch: publishes nothing at all
 
-docs/console.md describes the page; ``client.roles.console.app`` the server side.
+docs/console.md describes the page; ``client.roles.console.app`` the server side (the
+teaching session: ``client.roles.console.tutor``; who may open the page: ``client.access``).
 """
 
 from __future__ import annotations
