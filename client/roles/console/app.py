@@ -49,12 +49,21 @@ import logging
 import math
 import signal
 import ssl
+import threading
 import time
 from pathlib import Path
 
+import zenoh
 from aiohttp import WSMsgType, web
 
-from client.access import access_token, check_host, check_origin, check_token, is_loopback
+from client.access import (
+    Throttle,
+    access_token,
+    check_host,
+    check_origin,
+    check_token,
+    is_loopback,
+)
 from client.behaviour.actions import DEFAULT_ACTIONS
 from client.labels import DRAIN, Learners
 from client.roles.console.tutor import SCAN_MEMORY, Robot, Tutor
@@ -83,6 +92,10 @@ MODES = ("demonstrate", "watch", "correct")
 SEND_TIMEOUT = 5.0  # s a send to a page may wait: a page that does not read is closed
 MAX_ERRORS = 8  # error replies waiting for a page at most (the rest counted in one)
 MAX_KINDS = 64  # kinds of message waiting for a page at most
+MAX_ROBOTS = 256  # robots served at once the console lists at most (the rest are refused)
+ROBOTS_EVERY = 0.5  # s at least between two ``robots`` lists sent to the pages
+MAX_PAGES = 32  # pages served at once (--max-pages); one more is refused with the reason
+PAGES_FULL = 1013  # the WebSocket close code of a refused page: try again later
 _REFUSALS = {400: web.HTTPBadRequest, 401: web.HTTPUnauthorized, 403: web.HTTPForbidden}
 
 
@@ -143,19 +156,31 @@ class Console(Tutor):
         self.ctx, self.session, self.loop = ctx, ctx.session, loop
         self.view_only = bool(ctx.args.view_only)
         self.token = token
+        self.throttle = Throttle()
         self.robots: dict[str, Robot] = {}
         self.pages: dict[int, _Page] = {}
         self._next_page = 1
         self._tasks: set[asyncio.Task] = set()  # kept referenced until done
         self.refusals = Refusals(log)
         self.assets = Assets(STATIC)
-        self.stats = {"withdrawals": 0, "withdrawn": 0, "placed": 0, "closed_unread": 0}
+        self.stats = {"withdrawals": 0, "withdrawn": 0, "placed": 0, "closed_unread": 0,
+                      "unserved": 0, "robots_refused": 0, "pages_refused": 0}
+        self.max_pages = int(getattr(ctx.args, "max_pages", MAX_PAGES))
         self.default_robot = ctx.robot
+        # robot -> the liveliness tokens of the servers serving it (rhbl/alive/server/<id>/<robot>),
+        # written by zenoh's liveliness thread under the lock, read anywhere: only these robots'
+        # messages are taken (a name on the bus no server serves costs a counter, nothing more)
+        self.served: dict[str, set[str]] = {}
+        self._served_lock = threading.Lock()
+        self._robots_dirty = False  # the robot list changed: said to the pages, coalesced
+        self._robots_said = 0.0
         self._robot(self.default_robot)
         self.subs = []
         # a malformed message never stops the console: dropped, counted
         self.decoder = Decoder(log, level=logging.DEBUG)
         s = self.session
+        self.subs.append(s.liveliness().declare_subscriber(
+            keys.alive_key("server", "**"), self._on_server, history=True))
         for key_of, fn in ((keys.state_key, self._on_state), (keys.scan_key, self._on_scan),
                            (keys.learner_notice_key, self._on_notice),
                            (keys.controller_decision_key, self._on_decision),
@@ -163,9 +188,41 @@ class Console(Tutor):
             self.subs.append(s.declare_subscriber(key_of(keys.EVERY), fn))
 
     def _decode(self, cls, sample):
-        """(the message, its robot) of a sample, or (None, robot): dropped, counted."""
-        return (self.decoder.decode(cls, sample.payload.to_bytes()),
-                keys.parse(sample.key_expr).robot)
+        """(the message, its robot) of a sample, or (None, robot): dropped, counted (a robot
+        no live server serves: ``unserved``; a malformed message: the decoder's counts)."""
+        robot = keys.parse(sample.key_expr).robot
+        if robot not in self.served:
+            self.stats["unserved"] += 1
+            return None, robot
+        return self.decoder.decode(cls, sample.payload.to_bytes()), robot
+
+    def _on_server(self, sample) -> None:
+        """A server's liveliness token of a robot it serves came or went."""
+        k = keys.parse(sample.key_expr)
+        if k.role != "server" or not k.name:
+            return
+        key, gone = str(sample.key_expr), sample.kind == zenoh.SampleKind.DELETE
+        with self._served_lock:
+            tokens = self.served.get(k.name)
+            if gone:
+                if tokens is None:
+                    return
+                tokens.discard(key)
+                if not tokens:
+                    del self.served[k.name]
+            elif tokens is not None:
+                tokens.add(key)
+                return
+            elif len(self.served) >= MAX_ROBOTS:
+                self.stats["robots_refused"] += 1
+                if self.stats["robots_refused"] == 1:
+                    log.warning("more than %d robots served at once: robot %s (and any more) "
+                                "not listed", MAX_ROBOTS, k.name)
+                return
+            else:
+                self.served[k.name] = {key}
+        with contextlib.suppress(RuntimeError):  # the loop is closing
+            self.loop.call_soon_threadsafe(self._served_changed, k.name, gone)
 
     # ---- zenoh side (zenoh threads): decode, make JSON, hand over to the loop ----------------
     def _hand(self, robot: str, kind: str, text: str, msg=None) -> None:
@@ -230,8 +287,33 @@ class Console(Tutor):
         if r is None:
             r = self.robots[name] = Robot(name)
             self._ask_world(r)
-            self._broadcast(json.dumps({"t": "robots", "robots": sorted(self.robots)}))
+            self._robots_dirty = True
         return r
+
+    def robot_names(self) -> list[str]:
+        """The robots a page may watch: those a live server serves, and the console's own."""
+        return sorted(n for n in self.robots if n in self.served or n == self.default_robot)
+
+    def _served_changed(self, name: str, gone: bool) -> None:
+        """A robot's server came (its Robot made) or went (forgotten unless a page watches it,
+        or labels of it wait for a learner)."""
+        r = self.robots.get(name)
+        if not gone:
+            self._robot(name)
+        elif (r is not None and name not in self.served and name != self.default_robot
+              and r.pubs is None and not any(p.robot == name for p in self.pages.values())):
+            del self.robots[name]
+        self._robots_dirty = True
+
+    def _say_robots(self, now: float) -> None:
+        """The robot list to every page, at most every ``ROBOTS_EVERY`` s (changes coalesced)."""
+        if self._robots_dirty and now - self._robots_said >= ROBOTS_EVERY:
+            self._robots_dirty, self._robots_said = False, now
+            self._broadcast(json.dumps({"t": "robots", "robots": self.robot_names()}))
+
+    def _broadcast(self, text: str, kind: str = "robots") -> None:
+        for p in self.pages.values():
+            p.push(kind, text)
 
     def _ask_world(self, r: Robot) -> None:
         now = time.monotonic()
@@ -262,6 +344,8 @@ class Console(Tutor):
         self._spawn(get())
 
     def _deliver(self, robot: str, kind: str, text: str, msg) -> None:
+        if robot not in self.served:  # its server went meanwhile
+            return
         r = self._robot(robot)
         if r.world is None:  # the server came up after the console (asked at most every 5 s)
             self._ask_world(r)
@@ -297,6 +381,7 @@ class Console(Tutor):
             for r in self.robots.values():
                 if r.action is not None and now - r.last_drive > STALE:
                     self._stop(r, f"no key from the page for {STALE:g} s")
+            self._say_robots(now)
             self._say_teaching()
 
     def handle(self, page: _Page, raw) -> None:
@@ -338,8 +423,8 @@ class Console(Tutor):
                         self._announce(r)
         elif t == "view":
             name = msg.get("robot")
-            if not isinstance(name, str) or name not in self.robots:
-                err = f"unknown robot {name!r}; known: {', '.join(sorted(self.robots))}"
+            if not isinstance(name, str) or name not in self.robot_names():
+                err = f"unknown robot {name!r:.80}; known: {', '.join(self.robot_names())}"
             else:
                 if r is not None and r.holder is page:
                     self._unhold(r, "the page watches another robot")
@@ -377,7 +462,7 @@ class Console(Tutor):
         """Raise the refusal when ``request`` may not have the page, its files or its
         WebSocket (``client.access``): a request without a Host header (400), without a token
         a Host that is no loopback name (403: DNS rebinding), with a token a missing or wrong
-        one (401)."""
+        one (401), or any from an address that gave too many wrong ones lately (429)."""
         if self.token is None:
             # no token (loopback only): the page must be asked for by a loopback name, so a
             # site whose name an attacker points at 127.0.0.1 (DNS rebinding) gets nothing
@@ -385,7 +470,16 @@ class Console(Tutor):
         elif not request.headers.get("Host"):
             said = check_host(None)
         else:
+            # a wrong token costs its address a try: BURST at once, then one a second
+            address = request.remote or "?"
+            wait = self.throttle.wait(address)
+            if wait > 0:
+                raise web.HTTPTooManyRequests(
+                    text=f"rhbl console: too many wrong tokens from {address}: try again in "
+                         f"{math.ceil(wait)} s\n", headers={"Retry-After": str(math.ceil(wait))})
             said = check_token(request.query.get("token", ""), self.token)
+            if said is not None:
+                self.throttle.failed(address)
         if said is not None:
             raise _REFUSALS[said[0]](text=f"rhbl console: {said[1]}\n")
 
@@ -410,6 +504,8 @@ class Console(Tutor):
             raise web.HTTPForbidden(text=f"rhbl console: {said[1]}\n")
         ws = web.WebSocketResponse(heartbeat=5.0, max_msg_size=MAX_MESSAGE)
         await ws.prepare(request)
+        if len(self.pages) >= self.max_pages:
+            return await self._refuse_page(ws, request)
         page = _Page(self._next_page, ws, self.default_robot, request)
         self._next_page += 1
         self.pages[page.id] = page
@@ -417,7 +513,7 @@ class Console(Tutor):
         page.push("hello", json.dumps({
             "t": "hello", "page": page.id, "robot": page.robot, "view_only": self.view_only,
             "modes": list(MODES), "actions": list(DEFAULT_ACTIONS.names), "stale": STALE,
-            "robots": sorted(self.robots)}))
+            "robots": self.robot_names()}))
         self._send_robot(page)
         sender = asyncio.create_task(self._sender(page))
         try:
@@ -446,6 +542,20 @@ class Console(Tutor):
             log.info("page #%d disconnected", page.id)
         return ws
 
+    async def _refuse_page(self, ws: web.WebSocketResponse,
+                           request: web.Request) -> web.WebSocketResponse:
+        """A page over ``--max-pages``: told why (an ``error``, then the close code 1013, try
+        again later, with the reason), counted, closed."""
+        self.stats["pages_refused"] += 1
+        why = (f"this console serves at most {self.max_pages} pages at once (--max-pages): "
+               f"close another page, then reload")
+        self.refusals.say(f"a page from {request.remote}: {why}")
+        with contextlib.suppress(Exception):  # a page gone meanwhile
+            await asyncio.wait_for(ws.send_str(error_message(why)), SEND_TIMEOUT)
+            await asyncio.wait_for(ws.close(code=PAGES_FULL, message=why[:120].encode()),
+                                   SEND_TIMEOUT)
+        return ws
+
     async def _sender(self, page: _Page) -> None:
         with contextlib.suppress(asyncio.CancelledError, ConnectionError, RuntimeError):
             while not page.ws.closed:
@@ -470,10 +580,11 @@ class Console(Tutor):
 
     def counters(self) -> dict:
         """What the console did (``--stats``): pages served, robots seen, labels per robot."""
-        return {"pages": self._next_page - 1, "robots": sorted(self.robots),
+        return {"pages": self._next_page - 1, "robots": self.robot_names(),
                 "labelled": {n: r.pubs.published for n, r in self.robots.items()
                              if r.pubs is not None},
                 **self.stats, "refused": self.refusals.total,
+                "throttled": self.throttle.throttled,
                 "dropped": dict(self.decoder.counts)}
 
     def close(self) -> None:

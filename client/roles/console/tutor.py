@@ -119,10 +119,6 @@ class Tutor:
             if p.robot == r.name:
                 p.push(kind, text)
 
-    def _broadcast(self, text: str, kind: str = "robots") -> None:
-        for p in self.pages.values():
-            p.push(kind, text)
-
     def _control_text(self, r: Robot) -> str:
         h = r.holder
         return json.dumps({"t": "control", "robot": r.name, "holder": h.id if h else None,
