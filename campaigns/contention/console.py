@@ -1,5 +1,5 @@
 """Contention probes: the console (see campaigns/contention/__init__.py and docs/reliability.md,
-"The console under contention").
+"Contention: the console").
 
 - ``console-robot-names``: stand-still commands for ``N`` robot names no server serves, on
   ``rhbl/fake<i>/position2d/0/cmd/vel/x`` from one session (the shipped router lets the

@@ -1,5 +1,5 @@
-"""The console's promises under contention (issue 36; docs/reliability.md, "The console under
-contention"), against a real ``rhbl server`` and real ``rhbl console`` processes on loopback:
+"""The console's promises under contention (issue 36; docs/reliability.md, "Contention:
+the console"), against a real ``rhbl server`` and real ``rhbl console`` processes on loopback:
 
 - robot names no live server serves (stand-still commands for ``fake<i>``) are neither kept
   nor listed: a page's robot lists name only the served robots, the console counts them
@@ -7,7 +7,8 @@ contention"), against a real ``rhbl server`` and real ``rhbl console`` processes
 - ``--max-pages``: one page more is refused with the reason (an ``error``, close code 1013);
   a page closing makes room;
 - a weak ``--token`` is refused in one line (exit 2); wrong tokens are throttled per address
-  (429 with ``Retry-After``), another address is still served.
+  (429 with ``Retry-After``), another address is still served;
+- the three probes of ``campaigns/contention/console.py`` at their CI size (slow).
 
 Waits on events (a message, a reply, a process's exit), never on fixed sleeps.
 """
@@ -175,3 +176,17 @@ def test_wrong_tokens_are_throttled_per_address(srv):
     assert "too many wrong tokens from 127.0.0.1" in said and retry and int(retry) >= 1
     assert same == 429
     assert elsewhere == 200
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["console-robot-names", "console-pages", "console-tokens"])
+def test_the_contention_probe_holds_at_ci_size(name, tmp_path):
+    """``python -m campaigns.contention --size ci --only NAME``: the attack at a small size,
+    the figures docs/reliability.md names measured, the promise held."""
+    import random
+
+    from campaigns.contention import Probe
+    from campaigns.contention.console import PROBES
+
+    outcome = PROBES[name](Probe(name, random.Random(0), tmp_path, "ci"))
+    assert outcome.ok, (outcome.said, outcome.figures)
