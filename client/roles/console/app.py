@@ -8,6 +8,13 @@ a slow page skips frames, it never builds a backlog and never slows the bus down
 does not read at all (a send waits ``SEND_TIMEOUT`` s) is closed; at most ``MAX_ERRORS`` of its
 error replies wait to be sent, the rest are counted in one.
 
+The robots are those a live server serves: the servers' liveliness tokens
+(``rhbl/alive/server/<ident>/<robot>``, at most ``MAX_ROBOTS``) say which; a sample for any other
+name is dropped in zenoh's thread before it is decoded (counted: ``unserved``), and the robot
+list goes to the pages at most every ``ROBOTS_EVERY`` s. At most ``--max-pages`` pages are
+served at once (one more is told why and closed, code ``PAGES_FULL``); with a token, an
+address that gave too many wrong ones waits (``client.access.Throttle``: 429).
+
 The page's messages (JSON objects, at most 4 KiB, nested at most a few levels; anything else
 is answered with an ``error`` and the connection stays up):
 

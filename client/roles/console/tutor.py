@@ -13,8 +13,9 @@ what the page is told about it (the transport, zenoh and the WebSocket, is
   s).
 
 ``Tutor`` is the console's base: the console (``client.roles.console.app.Console``) gives it
-``session``, ``loop``, ``view_only``, ``robots`` (name -> ``Robot``), ``pages`` (id -> a page
-with ``id``, ``mode``, ``robot`` and ``push(kind, text)``) and ``stats``.
+``session``, ``loop``, ``view_only``, ``robots`` (name -> ``Robot``), ``pages`` (id -> a
+``Page``: ``id``, ``mode``, ``robot`` and ``push(kind, text)``), ``stats`` and ``_tasks`` (the
+tasks ``_spawn`` keeps referenced until done).
 """
 
 from __future__ import annotations
