@@ -1,4 +1,5 @@
-"""The Foxglove bridge's front door: the console's rules for who may open its WebSocket.
+"""The Foxglove bridge's front door: the console's rules (``client.access``) for who may open its
+WebSocket.
 
 foxglove-sdk's WebSocket server checks only the subprotocol of an upgrade (it has no hook for
 the request's Origin, Host or a token), so ``rhbl foxglove`` runs it on a free loopback port
@@ -31,7 +32,7 @@ import threading
 import time
 from urllib.parse import parse_qs, urlsplit
 
-from client.roles.console.app import access_token, host_name, is_loopback
+from client.access import access_token, host_name, is_loopback
 from process.arguments import Checked
 
 __all__ = ["HEADER_TIMEOUT", "MAX_HEADER", "Gate", "access_token", "is_loopback", "origin"]

@@ -178,8 +178,12 @@ class ReplayProcess:
         self.pubs: dict[str, zenoh.Publisher] = {
             key: ctx.publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
             for key in sorted(plan.keys)}
-        ctx.keep(self.session.liveliness().declare_token(
-            keys.alive_key("server", f"replay-{os.getpid()}")))
+        # a server's token per robot it serves (rhbl/alive/server/replay-<pid>/<robot>), as
+        # rhbl server declares them: a console lists the robots a live server serves
+        ident = keys.alive_key("server", f"replay-{os.getpid()}")
+        for robot in plan.robots or [None]:
+            ctx.keep(self.session.liveliness().declare_token(
+                ident if robot is None else f"{ident}/{robot}"))
         self.robots = plan.robots
         self.answers = _Answers(self.session, self.robots) if self.args.lockstep else None
         self.sent = self.unanswered = 0

@@ -1,4 +1,5 @@
-"""``rhbl console``'s pure parts: the --http address, when a token is required, key helpers."""
+"""``rhbl console``'s pure parts: the --http address, when a token is required, how strong it
+must be, how wrong ones are throttled, key helpers."""
 
 from __future__ import annotations
 
@@ -6,7 +7,8 @@ import pytest
 
 pytest.importorskip("aiohttp")
 
-from client.roles.console.app import _action_of, access_token, parse_http  # noqa: E402
+from client.access import access_token  # noqa: E402
+from client.roles.console.app import _action_of, parse_http  # noqa: E402
 from lab.cli import build_parser  # noqa: E402
 
 
@@ -19,7 +21,7 @@ def test_parse_http():
 
 
 def test_host_name():
-    from client.roles.console.app import host_name
+    from client.access import host_name
 
     assert host_name("[::1]:8080") == "::1" and host_name("[::1]") == "::1"
     assert host_name("localhost:80") == "localhost" and host_name("127.0.0.1") == "127.0.0.1"
@@ -33,6 +35,40 @@ def test_a_token_is_required_beyond_loopback():
     assert a and b and a != b and len(a) >= 20  # random, unguessable
     assert access_token("127.0.0.1", "given") == "given"
     assert access_token("0.0.0.0", "") != ""  # an empty --token (compose's default) is none
+
+
+def test_weak_tokens_are_refused_with_the_rule_not_the_token():
+    from client.access import check_strength
+
+    for weak in ("a", "s3cret", "short-token-15ch", "aaaaaaaaaaaaaaaaaaaaaaaa", "abababababababab"):
+        if len(weak) >= 16 and len(set(weak)) >= 8:
+            continue
+        with pytest.raises(ValueError, match="at least 16 characters, 8 of them different") as e:
+            check_strength(weak)
+        assert weak not in str(e.value) or len(weak) == 1
+    for _ in range(200):  # the random tokens pass, always
+        check_strength(access_token("0.0.0.0", None))
+    check_strength("0123456789abcdef")
+
+
+def test_wrong_tokens_are_throttled_per_address():
+    from client.access import BURST, Throttle
+
+    now = [0.0]
+    t = Throttle(clock=lambda: now[0])
+    for _ in range(BURST):
+        assert t.wait("10.0.0.1") == 0
+        t.failed("10.0.0.1")
+    assert t.wait("10.0.0.1") == pytest.approx(1.0)  # then one a second
+    assert t.wait("10.0.0.2") == 0  # another address is not concerned
+    now[0] += 0.5
+    assert t.wait("10.0.0.1") == pytest.approx(0.5)
+    now[0] += 0.5
+    assert t.wait("10.0.0.1") == 0
+    t.failed("10.0.0.1")
+    assert t.wait("10.0.0.1") > 0
+    now[0] += 3600
+    assert t.wait("10.0.0.1") == 0 and t.throttled == 3
 
 
 def test_action_names():

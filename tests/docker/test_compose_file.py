@@ -153,7 +153,8 @@ def test_console_is_published_on_the_hosts_loopback_only(compose):
     assert args.http == "0.0.0.0:8080" and not args.view_only
     # inside the container it listens on every address, so it requires a token (random
     # unless RHBL_CONSOLE_TOKEN is set)
-    from client.roles.console.app import access_token, parse_http
+    from client.access import access_token
+    from client.roles.console.app import parse_http
 
     assert access_token(parse_http(args.http)[0], args.token or None)
 

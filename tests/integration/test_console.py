@@ -433,13 +433,13 @@ async def _get(url: str) -> int:
 
 
 def test_foreign_origin_and_wrong_token_are_refused(env):
-    console = ConsoleProcess(env["srv"].endpoint, "--token", "s3cret")
+    console = ConsoleProcess(env["srv"].endpoint, "--token", "s3cret-console-t0ken")
     try:
         url = console.wait_url()
-        assert url.endswith("/?token=s3cret")
+        assert url.endswith("/?token=s3cret-console-t0ken")
         base = console.base
         own = base.rstrip("/")
-        ok = f"{base}ws?token=s3cret"
+        ok = f"{base}ws?token=s3cret-console-t0ken"
         assert asyncio.run(_handshake(ok, origin=own)) == 101
         assert asyncio.run(_handshake(ok, origin="http://evil.example")) == 403
         assert asyncio.run(_handshake(f"{base}ws?token=wrong", origin=own)) == 401
@@ -574,10 +574,10 @@ def test_tls_with_a_token(env, tmp_path):
                     "-subj", "/CN=localhost", "-addext", "subjectAltName=IP:127.0.0.1",
                     "-keyout", str(key), "-out", str(cert)], check=True, capture_output=True)
     console = ConsoleProcess(env["srv"].endpoint, "--tls-cert", str(cert), "--tls-key", str(key),
-                             "--token", "t0k")
+                             "--token", "t0k-tls-console-26")
     try:
         url = console.wait_url()
-        assert url.startswith("https://127.0.0.1:") and url.endswith("/?token=t0k")
+        assert url.startswith("https://127.0.0.1:") and url.endswith("/?token=t0k-tls-console-26")
         trust = ssl.create_default_context(cafile=str(cert))
 
         async def check() -> tuple[int, int, int]:

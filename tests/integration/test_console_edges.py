@@ -36,7 +36,7 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(180)]
 def consoles(start_module_server):
     srv = start_module_server("room")
     open_ = ConsoleProcess(srv.endpoint, "--header-timeout", "1")
-    secured = ConsoleProcess(srv.endpoint, "--token", "s3cret-token")
+    secured = ConsoleProcess(srv.endpoint, "--token", "s3cret-token-edges")
     for c in (open_, secured):
         c.wait_url()
     yield {"open": open_, "secured": secured}
@@ -110,9 +110,9 @@ def test_static_files_answer_to_the_token_and_the_host_like_the_page(consoles):
     assert _get(sec, "/static/index.html") == 401  # no token
     assert _get(sec, "/static/console.js") == 401
     assert _get(sec, "/static/console.js?token=wrong") == 401
-    assert _get(sec, "/static/console.js?token=s3cret-token") == 200
-    assert _get(sec, "/static/index.html?token=s3cret-token") == 404  # the page is /
-    assert _get(sec, "/?token=s3cret-token") == 200
+    assert _get(sec, "/static/console.js?token=s3cret-token-edges") == 200
+    assert _get(sec, "/static/index.html?token=s3cret-token-edges") == 404  # the page is /
+    assert _get(sec, "/?token=s3cret-token-edges") == 200
     assert _get(opn, "/static/console.js", host="attacker.example") == 403
     assert _get(opn, "/static/index.html", host="attacker.example") == 403
     assert _get(opn, "/", host="attacker.example:8080") == 403

@@ -447,12 +447,12 @@ def test_a_remote_teacher_over_tls_with_a_token_teaches_the_same(env, tmp_path):
                     "-subj", "/CN=localhost", "-addext", "subjectAltName=IP:127.0.0.1",
                     "-keyout", str(key), "-out", str(cert)], check=True, capture_output=True)
     console = ConsoleProcess(env["srv"].endpoint, "--tls-cert", str(cert), "--tls-key", str(key),
-                             "--token", "rem0te")
+                             "--token", "rem0te-teacher-t0ken")
     b = chromium("--ignore-certificate-errors")
     w, starts = env["watch"], env["starts"]
     try:
         url = console.wait_url()
-        assert url.startswith("https://") and url.endswith("?token=rem0te")
+        assert url.startswith("https://") and url.endswith("?token=rem0te-teacher-t0ken")
         _open(b, url)
         _until(b, lambda d: _attr(d, "learner", "up") in ("0", "1"), 20, "the learner status")
         _press(b, "2")

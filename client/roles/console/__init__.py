@@ -16,7 +16,8 @@ kept and resent until a learner acknowledges it (once a learner of the robot was
     rhbl console --http 0.0.0.0:8443 --tls-cert c.pem --tls-key k.pem   # token in the URL
     rhbl console --view-only                       # watch: publishes nothing at all
 
-docs/console.md describes the page; ``client.roles.console.app`` the server side.
+docs/console.md describes the page; ``client.roles.console.app`` the server side (the
+teaching session: ``client.roles.console.tutor``; who may open the page: ``client.access``).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from client.roles.common import add_process_arguments, run_role
 from process import arguments
 
 HEADER_TIMEOUT = arguments.Number(float, 0, 3600, low_open=True, name="seconds")
+MAX_PAGES = arguments.Number(int, 1, 10_000, name="pages")
 
 __all__ = ["add_arguments", "main"]
 
@@ -43,14 +45,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "free port). Any address but loopback requires an access token")
     parser.add_argument("--token", default=None, type=arguments.token,
                         help="access token the URL must carry (default: none on loopback, a "
-                             "random one on any other address; printed in the URL). A token "
-                             "beginning with '-' is given as --token=VALUE")
+                             "random one on any other address; printed in the URL): at least 16 "
+                             "characters, 8 of them different. A token beginning with '-' is "
+                             "given as --token=VALUE")
     parser.add_argument("--tls-cert", metavar="PEM", type=arguments.input_file,
                         help="serve HTTPS/WSS with this certificate")
     parser.add_argument("--tls-key", metavar="PEM", type=arguments.input_file,
                         help="the certificate's private key")
     parser.add_argument("--view-only", action="store_true",
                         help="watch only: no commands, no labels, no liveliness token")
+    parser.add_argument("--max-pages", type=MAX_PAGES, default=32, metavar="N",
+                        help="pages served at once (default 32); one more is refused with the "
+                             "reason on the page (close code 1013)")
     parser.add_argument("--header-timeout", type=HEADER_TIMEOUT, default=10.0, metavar="SECONDS",
                         help="close a connection whose request headers have not all arrived "
                              "within this (or that is idle this long between requests; "
@@ -58,11 +64,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from client.access import check_strength
     from client.roles.console.app import body, parse_http
 
     # bad flags are said before any session is opened (exit status 2, like argparse)
     try:
         parse_http(args.http)
+        if args.token:
+            check_strength(args.token)
         if bool(args.tls_cert) != bool(args.tls_key):
             raise ValueError("--tls-cert and --tls-key go together")
     except ValueError as exc:

@@ -8,6 +8,13 @@ a slow page skips frames, it never builds a backlog and never slows the bus down
 does not read at all (a send waits ``SEND_TIMEOUT`` s) is closed; at most ``MAX_ERRORS`` of its
 error replies wait to be sent, the rest are counted in one.
 
+The robots are those a live server serves: the servers' liveliness tokens
+(``rhbl/alive/server/<ident>/<robot>``, at most ``MAX_ROBOTS``) say which; a sample for any other
+name is dropped in zenoh's thread before it is decoded (counted: ``unserved``), and the robot
+list goes to the pages at most every ``ROBOTS_EVERY`` s. At most ``--max-pages`` pages are
+served at once (one more is told why and closed, code ``PAGES_FULL``); with a token, an
+address that gave too many wrong ones waits (``client.access.Throttle``: 429).
+
 The page's messages (JSON objects, at most 4 KiB, nested at most a few levels; anything else
 is answered with an ``error`` and the connection stays up):
 
@@ -33,39 +40,46 @@ Messages to the page: ``hello``, ``world``, ``state``, ``scan``, ``cmd`` (the ac
 executed), ``notice``, ``decision``, ``control`` (who holds each robot), ``robots``, ``teach``
 (the learner, the labels, episodes, agreement, markers, stuck: ``client.roles.console.lesson``),
 ``placed``, ``info``, ``error``.
+
+Here: the transport (the zenoh side, the pages' HTTP and WebSocket, each page's queue); what a
+page's teaching messages do (drive, episodes, undo, placing, the ``teach`` prompts) is the
+teaching session, ``client.roles.console.tutor.Tutor``, this console's base; who may open a
+page, ``client.access``.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import hmac
-import ipaddress
 import json
 import logging
 import math
-import os
-import re
-import secrets
 import signal
 import ssl
+import threading
 import time
-from collections import OrderedDict
 from pathlib import Path
 
+import zenoh
 from aiohttp import WSMsgType, web
 
-from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
-from client.behaviour.features import FeatureSpec
-from client.behaviour.learning import TreePolicy, check_compatible
-from client.labels import DRAIN, Hold, LabelPublisher, Learners
-from client.player import PlayerClient, RequestError
-from client.roles.console.lesson import Teaching, Trouble
+from client.access import (
+    Throttle,
+    access_token,
+    check_host,
+    check_origin,
+    check_token,
+    is_loopback,
+)
+from client.behaviour.actions import DEFAULT_ACTIONS
+from client.labels import DRAIN, Learners
+from client.roles.console.tutor import SCAN_MEMORY, Robot, Tutor
 from client.roles.console.web import (
     HEADER_TIMEOUT,
     Assets,
     Refusals,
     ServerLog,
+    error_message,
     guard,
     read_message,
 )
@@ -74,7 +88,7 @@ from protocol import keys
 from protocol.decoding import Decoder
 from protocol.messages import Decision, Scan, State, TreeNotice, VelCmd, WorldInfo
 
-__all__ = ["SEND_TIMEOUT", "STALE", "Console", "access_token", "body", "host_name", "parse_http"]
+__all__ = ["SEND_TIMEOUT", "STALE", "Console", "body", "parse_http"]
 
 log = logging.getLogger(__name__)
 
@@ -82,13 +96,14 @@ STATIC = Path(__file__).with_name("static")
 STALE = 0.5  # s of wall time without a ``drive`` from the page: its key is stale, stop
 MAX_MESSAGE = 4096  # bytes of a page's message
 MODES = ("demonstrate", "watch", "correct")
-SCAN_MEMORY = 128  # scan ids remembered per robot (a page's label must name one of these)
 SEND_TIMEOUT = 5.0  # s a send to a page may wait: a page that does not read is closed
 MAX_ERRORS = 8  # error replies waiting for a page at most (the rest counted in one)
 MAX_KINDS = 64  # kinds of message waiting for a page at most
-TEACH_EVERY = 0.5  # s between two ``teach`` messages of a robot
-TREE_EVERY = 2.0  # s at least between two fetches of the learner's tree (for the agreement)
-_ROBOT_NUMBER = re.compile(r"^r(\d+)$")
+MAX_ROBOTS = 256  # robots served at once the console lists at most (the rest are refused)
+ROBOTS_EVERY = 0.5  # s at least between two ``robots`` lists sent to the pages
+MAX_PAGES = 32  # pages served at once (--max-pages); one more is refused with the reason
+PAGES_FULL = 1013  # the WebSocket close code of a refused page: try again later
+_REFUSALS = {400: web.HTTPBadRequest, 401: web.HTTPUnauthorized, 403: web.HTTPForbidden}
 
 
 def parse_http(value: str) -> tuple[str, int]:
@@ -100,39 +115,11 @@ def parse_http(value: str) -> tuple[str, int]:
     return host, int(port)
 
 
-def is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
-
-def host_name(host: str) -> str:
-    """The name in a Host header: ``[::1]:8080`` -> ``::1``, ``localhost:80`` -> ``localhost``."""
-    if host.startswith("["):
-        return host[1:].split("]", 1)[0]
-    return host.rsplit(":", 1)[0] if host.count(":") == 1 else host
-
-
-def access_token(host: str, token: str | None) -> str | None:
-    """The token the page's URL must carry: the given one, else a random one on any address
-    other than loopback, else none."""
-    if token:
-        return token
-    return None if is_loopback(host) else secrets.token_urlsafe(18)
-
-
 def _action_of(vx: float, va: float) -> str:
     for name, (ax, aa) in DEFAULT_ACTIONS.items():
         if math.isclose(vx, ax, abs_tol=1e-6) and math.isclose(va, aa, abs_tol=1e-6):
             return name
     return "stop" if vx == 0 and va == 0 else f"vx {vx:.2f} va {va:.2f}"
-
-
-def _error(text: str) -> str:
-    return json.dumps({"t": "error", "error": text})
 
 
 class _Page:
@@ -151,7 +138,7 @@ class _Page:
         if kind == "error":
             if self.errors >= MAX_ERRORS:
                 self.errors_dropped += 1
-                self.pending["error-more"] = _error(
+                self.pending["error-more"] = error_message(
                     f"{self.errors_dropped} more errors (messages refused; not each said)")
                 self.wake.set()
                 return
@@ -168,60 +155,39 @@ class _Page:
         return list(batch.values())
 
 
-class _Robot:
-    def __init__(self, name: str):
-        self.name = name
-        self.world: str | None = None  # JSON of the WorldInfo
-        self.starts: tuple = ()  # the world's start poses
-        self.world_asked = 0.0
-        self.latest: dict[str, str] = {}  # kind -> JSON (for a page that starts watching)
-        self.scans: OrderedDict[int, Scan] = OrderedDict()  # id -> the scan (labels carry it)
-        self.last_scan: Scan | None = None
-        self.state: State | None = None
-        self.holder: _Page | None = None
-        self.action: str | None = None  # what the person commands now
-        self.last_drive = 0.0
-        self.labelled = -1  # the last scan id labelled
-        self.client: PlayerClient | None = None  # the person's commands, as the teacher's
-        self.pubs: LabelPublisher | None = None
-        self.hold: Hold | None = None
-        self.learners: Learners | None = None  # view-only: which learners are up
-        self.teaching = Teaching()
-        self.trouble = Trouble()
-        self.policy: TreePolicy | None = None  # the learner's tree, for the agreement
-        self.policy_id = ""
-        self.tree_wanted: str | None = None  # a notice's snapshot id not fetched yet
-        self.tree_asked = 0.0
-        self.tree_busy = False
-        self.teach_said = 0.0
-        self.teach_dirty = True
-        self.teach_seq = 0  # teach messages composed (a page sees the one after an event)
+class Console(Tutor):
+    """The console: the zenoh side (subscriptions, handed to the loop) and the pages' side
+    (HTTP, WebSocket, each page's queue); the teaching session is ``Tutor``'s."""
 
-    @property
-    def start_index(self) -> int:
-        """Robot ``r<i>`` starts at start pose ``i`` (cycling), as the server places it."""
-        m = _ROBOT_NUMBER.match(self.name)
-        return int(m.group(1)) % len(self.starts) if m and self.starts else 0
-
-
-class Console:
     def __init__(self, ctx: Context, loop: asyncio.AbstractEventLoop, token: str | None):
         self.ctx, self.session, self.loop = ctx, ctx.session, loop
         self.view_only = bool(ctx.args.view_only)
         self.token = token
-        self.robots: dict[str, _Robot] = {}
+        self.throttle = Throttle()
+        self.robots: dict[str, Robot] = {}
         self.pages: dict[int, _Page] = {}
         self._next_page = 1
         self._tasks: set[asyncio.Task] = set()  # kept referenced until done
         self.refusals = Refusals(log)
         self.assets = Assets(STATIC)
-        self.stats = {"withdrawals": 0, "withdrawn": 0, "placed": 0, "closed_unread": 0}
+        self.stats = {"withdrawals": 0, "withdrawn": 0, "placed": 0, "closed_unread": 0,
+                      "unserved": 0, "robots_refused": 0, "pages_refused": 0}
+        self.max_pages = int(getattr(ctx.args, "max_pages", MAX_PAGES))
         self.default_robot = ctx.robot
+        # robot -> the liveliness tokens of the servers serving it (rhbl/alive/server/<id>/<robot>),
+        # written by zenoh's liveliness thread under the lock, read anywhere: only these robots'
+        # messages are taken (a name on the bus no server serves costs a counter, nothing more)
+        self.served: dict[str, set[str]] = {}
+        self._served_lock = threading.Lock()
+        self._robots_dirty = False  # the robot list changed: said to the pages, coalesced
+        self._robots_said = 0.0
         self._robot(self.default_robot)
         self.subs = []
         # a malformed message never stops the console: dropped, counted
         self.decoder = Decoder(log, level=logging.DEBUG)
         s = self.session
+        self.subs.append(s.liveliness().declare_subscriber(
+            keys.alive_key("server", "**"), self._on_server, history=True))
         for key_of, fn in ((keys.state_key, self._on_state), (keys.scan_key, self._on_scan),
                            (keys.learner_notice_key, self._on_notice),
                            (keys.controller_decision_key, self._on_decision),
@@ -229,9 +195,41 @@ class Console:
             self.subs.append(s.declare_subscriber(key_of(keys.EVERY), fn))
 
     def _decode(self, cls, sample):
-        """(the message, its robot) of a sample, or (None, robot): dropped, counted."""
-        return (self.decoder.decode(cls, sample.payload.to_bytes()),
-                keys.parse(sample.key_expr).robot)
+        """(the message, its robot) of a sample, or (None, robot): dropped, counted (a robot
+        no live server serves: ``unserved``; a malformed message: the decoder's counts)."""
+        robot = keys.parse(sample.key_expr).robot
+        if robot not in self.served:
+            self.stats["unserved"] += 1
+            return None, robot
+        return self.decoder.decode(cls, sample.payload.to_bytes()), robot
+
+    def _on_server(self, sample) -> None:
+        """A server's liveliness token of a robot it serves came or went."""
+        k = keys.parse(sample.key_expr)
+        if k.role != "server" or not k.name:
+            return
+        key, gone = str(sample.key_expr), sample.kind == zenoh.SampleKind.DELETE
+        with self._served_lock:
+            tokens = self.served.get(k.name)
+            if gone:
+                if tokens is None:
+                    return
+                tokens.discard(key)
+                if not tokens:
+                    del self.served[k.name]
+            elif tokens is not None:
+                tokens.add(key)
+                return
+            elif len(self.served) >= MAX_ROBOTS:
+                self.stats["robots_refused"] += 1
+                if self.stats["robots_refused"] == 1:
+                    log.warning("more than %d robots served at once: robot %s (and any more) "
+                                "not listed", MAX_ROBOTS, k.name)
+                return
+            else:
+                self.served[k.name] = {key}
+        with contextlib.suppress(RuntimeError):  # the loop is closing
+            self.loop.call_soon_threadsafe(self._served_changed, k.name, gone)
 
     # ---- zenoh side (zenoh threads): decode, make JSON, hand over to the loop ----------------
     def _hand(self, robot: str, kind: str, text: str, msg=None) -> None:
@@ -291,20 +289,40 @@ class Console:
             "scan_id": c.scan_id}), (source, action, c))
 
     # ---- loop side ------------------------------------------------------------------------
-    def _robot(self, name: str) -> _Robot:
+    def _robot(self, name: str) -> Robot:
         r = self.robots.get(name)
         if r is None:
-            r = self.robots[name] = _Robot(name)
+            r = self.robots[name] = Robot(name)
             self._ask_world(r)
-            self._broadcast(json.dumps({"t": "robots", "robots": sorted(self.robots)}))
+            self._robots_dirty = True
         return r
 
-    def _spawn(self, coro) -> None:
-        task = self.loop.create_task(coro)
-        self._tasks.add(task)
-        task.add_done_callback(self._tasks.discard)
+    def robot_names(self) -> list[str]:
+        """The robots a page may watch: those a live server serves, and the console's own."""
+        return sorted(n for n in self.robots if n in self.served or n == self.default_robot)
 
-    def _ask_world(self, r: _Robot) -> None:
+    def _served_changed(self, name: str, gone: bool) -> None:
+        """A robot's server came (its Robot made) or went (forgotten unless a page watches it,
+        or labels of it wait for a learner)."""
+        r = self.robots.get(name)
+        if not gone:
+            self._robot(name)
+        elif (r is not None and name not in self.served and name != self.default_robot
+              and r.pubs is None and not any(p.robot == name for p in self.pages.values())):
+            del self.robots[name]
+        self._robots_dirty = True
+
+    def _say_robots(self, now: float) -> None:
+        """The robot list to every page, at most every ``ROBOTS_EVERY`` s (changes coalesced)."""
+        if self._robots_dirty and now - self._robots_said >= ROBOTS_EVERY:
+            self._robots_dirty, self._robots_said = False, now
+            self._broadcast(json.dumps({"t": "robots", "robots": self.robot_names()}))
+
+    def _broadcast(self, text: str, kind: str = "robots") -> None:
+        for p in self.pages.values():
+            p.push(kind, text)
+
+    def _ask_world(self, r: Robot) -> None:
         now = time.monotonic()
         if r.world is not None or now - r.world_asked < 5.0:
             return
@@ -333,6 +351,8 @@ class Console:
         self._spawn(get())
 
     def _deliver(self, robot: str, kind: str, text: str, msg) -> None:
+        if robot not in self.served:  # its server went meanwhile
+            return
         r = self._robot(robot)
         if r.world is None:  # the server came up after the console (asked at most every 5 s)
             self._ask_world(r)
@@ -361,317 +381,6 @@ class Console:
             r.trouble.changed = False
             r.teach_dirty = True
 
-    def _on_robot_state(self, r: _Robot, st: State) -> None:
-        r.state = st
-        pose = st.truth if st.truth is not None else st.pos
-        r.trouble.state(st.ts, pose, st.stall, st.driver.startswith("controller"))
-
-    def _to_pages(self, r: _Robot, kind: str, text: str) -> None:
-        for p in self.pages.values():
-            if p.robot == r.name:
-                p.push(kind, text)
-
-    def _broadcast(self, text: str, kind: str = "robots") -> None:
-        for p in self.pages.values():
-            p.push(kind, text)
-
-    def _control_text(self, r: _Robot) -> str:
-        h = r.holder
-        return json.dumps({"t": "control", "robot": r.name, "holder": h.id if h else None,
-                           "holder_mode": h.mode if h else None, "action": r.action})
-
-    def _announce(self, r: _Robot) -> None:
-        self._to_pages(r, "control", self._control_text(r))
-
-    # -- the learner's tree, for the agreement --
-    def _fetch_tree(self, r: _Robot) -> None:
-        """Fetch the learner's latest tree (at most every ``TREE_EVERY`` s, one at a time)."""
-        now = time.monotonic()
-        if r.tree_busy or r.tree_wanted in (None, r.policy_id) or now - r.tree_asked < TREE_EVERY:
-            return
-        r.tree_busy, r.tree_asked, wanted = True, now, r.tree_wanted
-
-        def fetch() -> TreePolicy | None:
-            from rhbl import loads
-
-            try:
-                for reply in self.session.get(keys.learner_snapshot_key(r.name), timeout=5.0):
-                    if reply.ok is None:
-                        continue
-                    clf = loads(reply.ok.payload.to_bytes(), source="learner snapshot")
-                    meta = dict(clf.metadata or {})
-                    check_compatible(meta)
-                    policy = TreePolicy(clf, FeatureSpec.from_dict(meta["features"]),
-                                        ActionSet.from_dict(meta["actions"]), meta)
-                    if r.last_scan is not None:  # compiled here, not in the page's loop
-                        policy.act(r.last_scan.ranges, r.last_scan.pose)
-                    return policy
-            except Exception as exc:  # noqa: BLE001 - no agreement until a tree loads
-                log.info("the learner's tree of robot %s did not load: %s", r.name, exc)
-            return None
-
-        async def get() -> None:
-            try:
-                policy = await self.loop.run_in_executor(None, fetch)
-            finally:
-                r.tree_busy = False
-            if policy is not None:
-                r.policy, r.policy_id = policy, wanted
-                r.teach_dirty = True
-            if r.tree_wanted != r.policy_id:  # a newer notice came meanwhile
-                self.loop.call_later(TREE_EVERY, self._fetch_tree, r)
-
-        self._spawn(get())
-
-    # -- what the page says about teaching --
-    def _teach_text(self, r: _Robot) -> str:
-        box = r.pubs.outbox if r.pubs is not None else None
-        learners = r.pubs.learners if r.pubs is not None else r.learners
-        now = r.state.ts if r.state is not None else None
-        labels = None if box is None else {
-            "given": box.stats["published"], "held": box.stats["acked"],
-            "waiting": len(box), "cap": box.cap, "withdrawn": box.stats["withdrawn"],
-            "withdrawals_waiting": box.unacknowledged_withdrawals}
-        r.teach_seq += 1
-        return json.dumps({
-            "t": "teach", "robot": r.name, "seq": r.teach_seq,
-            "learner": None if learners is None else {"up": bool(learners)},
-            "labels": labels, "tree": r.policy_id or None,
-            **r.teaching.summary(now), **r.trouble.summary()})
-
-    def _say_teaching(self, force: bool = False) -> None:
-        now = time.monotonic()
-        for r in self.robots.values():
-            if not any(p.robot == r.name for p in self.pages.values()):
-                continue
-            if force or r.teach_dirty or now - r.teach_said >= TEACH_EVERY:
-                r.teach_said, r.teach_dirty = now, False
-                text = self._teach_text(r)
-                r.latest["teach"] = text
-                self._to_pages(r, "teach", text)
-
-    # -- the person's commands --
-    def _publishers(self, r: _Robot) -> None:
-        """The robot's teacher keys: commands, labels (kept until a learner acknowledges
-        them, also before any learner is up), the hold token."""
-        if r.pubs is None:
-            r.client = PlayerClient(session=self.session, robot=r.name, source="teacher",
-                                    express=True, block=True)
-            # labels marked as a person's: a learner's --teacher auto takes the person rule
-            r.pubs = LabelPublisher(self.session, r.name, source="console")
-            # the teacher's hold token, one per robot driven (its ident names that robot)
-            r.hold = Hold(self.session, f"{r.name}-{os.getpid()}")
-
-    def _may_act(self, page: _Page, r: _Robot | None, what: str) -> str | None:
-        """Why ``page`` may not ``what`` (drive, place, undo...) the robot now, or None."""
-        if self.view_only:
-            return "this console is view-only (--view-only): it publishes nothing"
-        if page.mode == "watch":
-            return f"watch mode: switch to demonstrate or correct to {what}"
-        if r is None:
-            return "no robot"
-        if r.holder is not None and r.holder is not page:
-            return (f"page #{r.holder.id} holds robot {r.name}: watch, or take over "
-                    f"explicitly")
-        return None
-
-    def _drive(self, page: _Page, action, scan_id) -> str | None:
-        """Publish the page's command and label; an error text when refused."""
-        r = self.robots.get(page.robot)
-        why = self._may_act(page, r, "drive")
-        if why:
-            return why
-        if action not in DEFAULT_ACTIONS.names:
-            return f"unknown action {action!r}; one of {', '.join(DEFAULT_ACTIONS.names)}"
-        if isinstance(scan_id, bool) or not isinstance(scan_id, int):
-            return f"'scan_id' must be the integer id of the scan displayed, got {scan_id!r}"
-        scan = r.scans.get(scan_id)
-        if scan is None:
-            return (f"scan {scan_id} is not among the last {SCAN_MEMORY} scans of robot "
-                    f"{r.name}: the page is behind, not driving on a stale view")
-        self._publishers(r)
-        box = r.pubs.outbox
-        if box.full:
-            who = ("no learner is up" if not r.pubs.learners
-                   else "the learner acknowledges nothing")
-            return (f"{len(box)} labels wait for a learner's acknowledgement (at most "
-                    f"{box.cap}; {who}): not driving until one acknowledges them (they are kept "
-                    f"and sent once a learner is up)")
-        changed = r.holder is not page or r.action != action
-        r.holder = page
-        vx, va = DEFAULT_ACTIONS[action]
-        r.hold.acquire()  # before the command: the server may release the teacher at once
-        r.client.answer(scan, vx, va)
-        if scan_id > r.labelled:  # one label per scan (the learner learns it like any other)
-            self._label(r, scan, action)
-        r.action, r.last_drive = action, time.monotonic()
-        if changed:
-            log.info("page #%d drives robot %s: %s (%s)", page.id, r.name, action, page.mode)
-            self._announce(r)
-        return None
-
-    def _label(self, r: _Robot, scan: Scan, action: str) -> None:
-        pose = scan.truth if scan.truth is not None else scan.pose
-        if r.policy is not None:  # what the tree would have done on this very scan
-            try:
-                r.teaching.scored(scan.ts, r.policy.act(scan.ranges, scan.pose) == action)
-            except Exception as exc:  # noqa: BLE001 - a tree of other features: no score
-                log.debug("agreement not scored: %s", exc)
-        seq = r.pubs.label(scan, action, action)
-        was = r.teaching.current
-        r.teaching.labelled(seq, scan.ts, pose)
-        r.labelled = scan.id
-        if r.teaching.current is not was:
-            r.teach_dirty = True
-
-    def _stop(self, r: _Robot, why: str) -> None:
-        """End the person's commands on ``r`` now: a zero command, then the hold is withdrawn."""
-        if r.action is None:
-            return
-        r.action = None
-        if r.client is not None and r.last_scan is not None:
-            with contextlib.suppress(Exception):
-                r.client.answer(r.last_scan, 0.0, 0.0)
-        if r.hold is not None:
-            r.hold.release()
-        log.info("robot %s: the person's commands stopped (%s)", r.name, why)
-        self._announce(r)
-
-    def _unhold(self, r: _Robot, why: str) -> None:
-        self._stop(r, why)
-        if r.holder is not None:
-            r.holder = None
-            self._announce(r)
-
-    # -- episodes, undo, placing the robot --
-    def _withdraw(self, r: _Robot, first: int, upto: int, reason: str) -> int:
-        """Withdraw the labels ``first <= seq < upto``; how many stood."""
-        r.pubs.withdraw(first, upto, reason)
-        n = r.teaching.withdrawn_range(first, upto)
-        self.stats["withdrawals"] += 1
-        self.stats["withdrawn"] += n
-        r.teach_dirty = True
-        return n
-
-    def _episode(self, page: _Page, do) -> str | None:
-        r = self.robots.get(page.robot)
-        why = self._may_act(page, r, "record episodes")
-        if why:
-            return why
-        t = r.teaching
-        ts = r.state.ts if r.state is not None else None
-        pose = self._pose(r)
-        if do == "start":
-            self._stop(r, "a new episode")
-            e = t.start(pose, ts)
-            self._info(page, f"episode {e.n} records: drive to teach")
-        elif do == "stop":
-            self._stop(r, "the episode stopped")
-            e = t.stop(ts)
-            if e is None:
-                return "no episode records now"
-            self._info(page, f"episode {e.n} stopped: {e.labels} labels kept")
-        elif do in ("discard", "rerecord"):
-            self._stop(r, f"the episode is {'discarded' if do == 'discard' else 're-recorded'}")
-            found = t.discard()
-            if found is None:
-                return "no episode with labels to discard"
-            e, first, upto = found
-            n = self._withdraw(r, first, upto, f"discard episode {e.n}") if r.pubs else 0
-            t.discarded(e)
-            if do == "rerecord":
-                if e.start_pose is not None:
-                    self._place(page, r, e.start_pose, f"the start of episode {e.n}")
-                t.start(e.start_pose, ts)
-            self._info(page, f"episode {e.n} discarded: {n} labels withdrawn"
-                       + ("; recording it again" if do == "rerecord" else ""))
-        else:
-            return f"unknown episode action {do!r}; one of start, stop, discard, rerecord"
-        r.teach_dirty = True
-        return None
-
-    def _undo(self, page: _Page, seconds) -> str | None:
-        r = self.robots.get(page.robot)
-        why = self._may_act(page, r, "undo")
-        if why:
-            return why
-        try:
-            found = r.teaching.undo(seconds)
-        except ValueError as exc:
-            return str(exc)
-        if found is None or r.pubs is None:
-            return "nothing to undo: no label given yet (or all withdrawn)"
-        self._stop(r, "undo")
-        n = self._withdraw(r, *found, f"undo {seconds:g} s")
-        self._info(page, f"undone: the last {seconds:g} s of teaching, {n} labels withdrawn")
-        return None
-
-    def _pose(self, r: _Robot):
-        st = r.state
-        if st is None:
-            return None
-        return st.truth if st.truth is not None else st.pos
-
-    def _place_msg(self, page: _Page, msg: dict) -> str | None:
-        r = self.robots.get(page.robot)
-        why = self._may_act(page, r, "move the robot")
-        if why:
-            return why
-        if "start" in msg:
-            i = msg["start"]
-            if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < len(r.starts):
-                return (f"'start' must be the number of a start pose of the world, 0.."
-                        f"{len(r.starts) - 1}, got {i!r}" if r.starts
-                        else "the world gives no start poses (no simulator?)")
-            self._place(page, r, r.starts[i], f"start pose {i + 1}")
-            return None
-        pose = msg.get("pose")
-        if (not isinstance(pose, list) or len(pose) != 3
-                or not all(isinstance(v, int | float) and not isinstance(v, bool)
-                           and math.isfinite(v) for v in pose)):
-            return f"'pose' must be [x, y, yaw], three finite numbers, got {pose!r:.80}"
-        self._place(page, r, tuple(float(v) for v in pose), "where it was dropped")
-        return None
-
-    def _reset(self, page: _Page) -> str | None:
-        r = self.robots.get(page.robot)
-        why = self._may_act(page, r, "reset the scene")
-        if why:
-            return why
-        if not r.starts:
-            return "the world gives no start poses (no simulator?)"
-        self._stop(r, "the scene is reset")
-        r.teaching.stop()
-        r.trouble.clear()
-        r.teach_dirty = True
-        self._place(page, r, r.starts[r.start_index], "its start pose (reset)", reset=True)
-        return None
-
-    def _place(self, page: _Page, r: _Robot, pose, where: str, reset: bool = False) -> None:
-        """Teleport the robot (``set_pose``, in a thread); the result said to the page."""
-        self._publishers(r)
-        x, y, yaw = (float(v) for v in pose)
-
-        async def go() -> None:
-            try:
-                ack = await self.loop.run_in_executor(
-                    None, lambda: r.client.simulation.set_pose2d(x, y, yaw))
-            except RequestError as exc:
-                page.push("error", _error(f"cannot put the robot {where}: {exc}"))
-                return
-            self.stats["placed"] += 1
-            got = ack.extra.get("pose", [x, y, yaw])
-            log.info("page #%d put robot %s at (%.2f, %.2f, %.2f): %s", page.id, r.name,
-                     *got, where)
-            self._to_pages(r, "placed", json.dumps({"t": "placed", "robot": r.name,
-                                                     "pose": got, "reset": reset,
-                                                     "where": where}))
-
-        self._spawn(go())
-
-    def _info(self, page: _Page, text: str) -> None:
-        page.push("info", json.dumps({"t": "info", "info": text}))
-
     async def watchdog(self) -> None:
         while True:
             await asyncio.sleep(0.05)
@@ -679,6 +388,7 @@ class Console:
             for r in self.robots.values():
                 if r.action is not None and now - r.last_drive > STALE:
                     self._stop(r, f"no key from the page for {STALE:g} s")
+            self._say_robots(now)
             self._say_teaching()
 
     def handle(self, page: _Page, raw) -> None:
@@ -687,7 +397,7 @@ class Console:
         try:
             msg = read_message(raw)
         except (ValueError, RecursionError) as exc:
-            page.push("error", _error(f"bad message: {exc}"))
+            page.push("error", error_message(f"bad message: {exc}"))
             return
         t = msg.get("t")
         r = self.robots.get(page.robot)
@@ -720,8 +430,8 @@ class Console:
                         self._announce(r)
         elif t == "view":
             name = msg.get("robot")
-            if not isinstance(name, str) or name not in self.robots:
-                err = f"unknown robot {name!r}; known: {', '.join(sorted(self.robots))}"
+            if not isinstance(name, str) or name not in self.robot_names():
+                err = f"unknown robot {name!r:.80}; known: {', '.join(self.robot_names())}"
             else:
                 if r is not None and r.holder is page:
                     self._unhold(r, "the page watches another robot")
@@ -738,7 +448,7 @@ class Console:
         else:
             err = f"unknown message type {t!r}"
         if err:
-            page.push("error", _error(err))
+            page.push("error", error_message(err))
 
     def _send_robot(self, page: _Page) -> None:
         r = self._robot(page.robot)
@@ -757,22 +467,28 @@ class Console:
     # ---- HTTP ------------------------------------------------------------------------------
     def _authorised(self, request: web.Request) -> None:
         """Raise the refusal when ``request`` may not have the page, its files or its
-        WebSocket: a request without a Host header (400), without a token a Host that is no
-        loopback name (403: DNS rebinding), with a token a missing or wrong one (401)."""
-        host = request.headers.get("Host")
-        if not host:
-            raise web.HTTPBadRequest(text="rhbl console: a Host header is required\n")
+        WebSocket (``client.access``): a request without a Host header (400), without a token
+        a Host that is no loopback name (403: DNS rebinding), with a token a missing or wrong
+        one (401), or any from an address that gave too many wrong ones lately (429)."""
         if self.token is None:
             # no token (loopback only): the page must be asked for by a loopback name, so a
             # site whose name an attacker points at 127.0.0.1 (DNS rebinding) gets nothing
-            if not is_loopback(host_name(host)):
-                raise web.HTTPForbidden(text=f"rhbl console: Host {host[:80]!r} refused: "
-                                             f"open it as http://127.0.0.1:<port>/\n")
-            return
-        given = request.query.get("token", "")
-        if not hmac.compare_digest(given.encode(), self.token.encode()):
-            raise web.HTTPUnauthorized(text="rhbl console: a valid ?token= is required "
-                                            "(printed in the console's URL)\n")
+            said = check_host(request.headers.get("Host"))
+        elif not request.headers.get("Host"):
+            said = check_host(None)
+        else:
+            # a wrong token costs its address a try: BURST at once, then one a second
+            address = request.remote or "?"
+            wait = self.throttle.wait(address)
+            if wait > 0:
+                raise web.HTTPTooManyRequests(
+                    text=f"rhbl console: too many wrong tokens from {address}: try again in "
+                         f"{math.ceil(wait)} s\n", headers={"Retry-After": str(math.ceil(wait))})
+            said = check_token(request.query.get("token", ""), self.token)
+            if said is not None:
+                self.throttle.failed(address)
+        if said is not None:
+            raise _REFUSALS[said[0]](text=f"rhbl console: {said[1]}\n")
 
     async def index(self, request: web.Request) -> web.StreamResponse:
         self._authorised(request)
@@ -789,12 +505,14 @@ class Console:
 
     async def websocket(self, request: web.Request) -> web.StreamResponse:
         self._authorised(request)
-        origin = request.headers.get("Origin")
-        own = f"{request.scheme}://{request.headers['Host']}"
-        if origin is not None and origin != own:
-            raise web.HTTPForbidden(text=f"rhbl console: foreign origin {origin[:80]} refused\n")
+        said = check_origin(request.headers.get("Origin"),
+                            f"{request.scheme}://{request.headers['Host']}")
+        if said is not None:
+            raise web.HTTPForbidden(text=f"rhbl console: {said[1]}\n")
         ws = web.WebSocketResponse(heartbeat=5.0, max_msg_size=MAX_MESSAGE)
         await ws.prepare(request)
+        if len(self.pages) >= self.max_pages:
+            return await self._refuse_page(ws, request)
         page = _Page(self._next_page, ws, self.default_robot, request)
         self._next_page += 1
         self.pages[page.id] = page
@@ -802,7 +520,7 @@ class Console:
         page.push("hello", json.dumps({
             "t": "hello", "page": page.id, "robot": page.robot, "view_only": self.view_only,
             "modes": list(MODES), "actions": list(DEFAULT_ACTIONS.names), "stale": STALE,
-            "robots": sorted(self.robots)}))
+            "robots": self.robot_names()}))
         self._send_robot(page)
         sender = asyncio.create_task(self._sender(page))
         try:
@@ -813,9 +531,9 @@ class Console:
                     except Exception as exc:  # noqa: BLE001 - a page never kills the console
                         log.warning("page #%d: message not handled: %s: %s", page.id,
                                     type(exc).__name__, exc)
-                        page.push("error", _error(f"message not handled: {exc}"))
+                        page.push("error", error_message(f"message not handled: {exc}"))
                 elif msg.type == WSMsgType.BINARY:
-                    page.push("error", _error("binary messages are not understood"))
+                    page.push("error", error_message("binary messages are not understood"))
                 else:
                     break
                 # messages already read return without a pause: yield, so that a page that
@@ -829,6 +547,20 @@ class Console:
                     self._unhold(r, f"page #{page.id} disconnected")
             sender.cancel()
             log.info("page #%d disconnected", page.id)
+        return ws
+
+    async def _refuse_page(self, ws: web.WebSocketResponse,
+                           request: web.Request) -> web.WebSocketResponse:
+        """A page over ``--max-pages``: told why (an ``error``, then the close code 1013, try
+        again later, with the reason), counted, closed."""
+        self.stats["pages_refused"] += 1
+        why = (f"this console serves at most {self.max_pages} pages at once (--max-pages): "
+               f"close another page, then reload")
+        self.refusals.say(f"a page from {request.remote}: {why}")
+        with contextlib.suppress(Exception):  # a page gone meanwhile
+            await asyncio.wait_for(ws.send_str(error_message(why)), SEND_TIMEOUT)
+            await asyncio.wait_for(ws.close(code=PAGES_FULL, message=why[:120].encode()),
+                                   SEND_TIMEOUT)
         return ws
 
     async def _sender(self, page: _Page) -> None:
@@ -855,10 +587,11 @@ class Console:
 
     def counters(self) -> dict:
         """What the console did (``--stats``): pages served, robots seen, labels per robot."""
-        return {"pages": self._next_page - 1, "robots": sorted(self.robots),
+        return {"pages": self._next_page - 1, "robots": self.robot_names(),
                 "labelled": {n: r.pubs.published for n, r in self.robots.items()
                              if r.pubs is not None},
                 **self.stats, "refused": self.refusals.total,
+                "throttled": self.throttle.throttled,
                 "dropped": dict(self.decoder.counts)}
 
     def close(self) -> None:

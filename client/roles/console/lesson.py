@@ -1,6 +1,6 @@
 """What a person teaches at the console, per robot: episodes, undo, the tree's agreement with
 the person's keys, and where the learned robot got into trouble (pure: no zenoh, no web; the
-console's server side, ``client.roles.console.app``, feeds it and says it to the pages).
+console's teaching session, ``client.roles.console.tutor``, feeds it and says it to the pages).
 
 - **Episodes** (``Episode``): a stretch of teaching the person starts and stops, like a
   LeRobot recording episode. The first key with no episode recording opens one; ``stop``

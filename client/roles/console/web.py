@@ -13,7 +13,8 @@
   just an unknown name); ``page(token)``: the HTML with its assets' URLs carrying the token,
   so the page, its assets and its WebSocket all answer to the same access check.
 - ``read_message``: a page's WebSocket message as a JSON object (nested at most ``MAX_DEPTH``
-  levels; ``ValueError`` naming what was wrong).
+  levels; ``ValueError`` naming what was wrong); ``error_message``: the one the page is sent
+  when something it asked for is refused.
 
 The header timeout is aiohttp's keep-alive timeout (``--header-timeout``): a connection whose
 request headers have not all arrived within it (or that sits idle that long between requests)
@@ -30,8 +31,8 @@ from pathlib import Path
 
 from aiohttp import web
 
-__all__ = ["HEADER_TIMEOUT", "MAX_DEPTH", "Assets", "Refusals", "ServerLog", "guard",
-           "read_message"]
+__all__ = ["HEADER_TIMEOUT", "MAX_DEPTH", "Assets", "Refusals", "ServerLog", "error_message",
+           "guard", "read_message"]
 
 HEADER_TIMEOUT = 10.0  # s for a request's headers to arrive (and for an idle connection)
 MAX_DEPTH = 8  # levels of nesting in a page's message (they are flat objects)
@@ -173,3 +174,8 @@ def read_message(raw: str) -> dict:
     if not isinstance(msg, dict):
         raise ValueError("expected a JSON object")
     return msg
+
+
+def error_message(text: str) -> str:
+    """The JSON text of an ``error`` message to a page: ``{"t": "error", "error": text}``."""
+    return json.dumps({"t": "error", "error": text})

@@ -30,9 +30,14 @@ function connect() {
   S.ws = ws;
   ws.onopen = () => { setLink(true); send({ t: "mode", mode: S.mode }); };
   ws.onmessage = (ev) => { try { receive(JSON.parse(ev.data)); } catch (e) { showError(String(e)); } };
-  ws.onclose = () => {
+  ws.onclose = (ev) => {
     setLink(false);
     S.keys.clear(); S.pad = null; S.sent = null; // nothing is sent on a dead link anyway
+    if (ev.code === 1013) { // refused (too many pages): say why, try again less often
+      $("link").textContent = `refused: ${ev.reason || "the console is busy"}`;
+      setTimeout(connect, 5000);
+      return;
+    }
     setTimeout(connect, 1000);
   };
   ws.onerror = () => {}; // onclose follows
