@@ -25,6 +25,7 @@ import ssl
 import threading
 import time
 
+from client.access import check_strength
 from client.recording import gate
 from client.recording.foxglove_schemas import ViewerFeed, ViewerMessage
 from client.recording.mcap_file import KINDS, classify
@@ -141,6 +142,8 @@ def check(args: argparse.Namespace) -> ssl.SSLContext | None:
     """The options together (ValueError: exit 2, before any connection); the TLS context."""
     if bool(args.tls_cert) != bool(args.tls_key):
         raise ValueError("--tls-cert and --tls-key go together")
+    if args.token:
+        check_strength(args.token)  # the console's rule: a weak token is refused
     if not gate.is_loopback(args.host) and not args.tls_cert:
         raise ValueError(f"--host {args.host} is not a loopback address: give --tls-cert and "
                          f"--tls-key (the token and the live data would travel in clear "
@@ -214,4 +217,4 @@ class BridgeProcess:
     def counters(self) -> dict:
         return {"messages": self.sink.messages, "topics": len(self.sink.channels),
                 "dropped": dict(self.sink.decoder.counts), "connections": self.gate.allowed,
-                "refused": self.gate.refused}
+                "refused": self.gate.refused, "throttled": self.gate.throttle.throttled}

@@ -11,7 +11,9 @@ with an HTTP error or relays the connection, bytes unchanged, to the SDK's serve
   (``Host: 127.0.0.1:8765``, ``localhost``, ``[::1]``): a site whose name an attacker points at
   127.0.0.1 (DNS rebinding) is refused;
 - with a token (``--token``, or a random one on any other address, printed in the URL) the
-  request's ``?token=`` must carry it;
+  request's ``?token=`` must carry it; a weak ``--token`` is refused as the console refuses it
+  (``client.access.check_strength``), and an address that gave too many wrong tokens waits
+  (``client.access.Throttle``: 429 with Retry-After, counted ``throttled``);
 - a request with an ``Origin`` (one a web page's script makes) is refused unless that origin
   is one the person allowed (``--allow-origin https://app.foxglove.dev``); apps and programs
   that send none (the desktop apps, ``websockets``) are not asked for one;
@@ -25,14 +27,14 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import hmac
 import logging
+import math
 import ssl
 import threading
 import time
 from urllib.parse import parse_qs, urlsplit
 
-from client.access import access_token, host_name, is_loopback
+from client.access import Throttle, access_token, check_token, host_name, is_loopback
 from process.arguments import Checked
 
 __all__ = ["HEADER_TIMEOUT", "MAX_HEADER", "Gate", "access_token", "is_loopback", "origin"]
@@ -66,6 +68,7 @@ class Gate:
         self.host, self.port, self.inner_port = host, port, inner_port
         self.token, self.origins, self.tls = token, set(origins), tls
         self.allowed = self.refused = 0
+        self.throttle = Throttle()  # wrong tokens per address: a few at once, then one a second
         self._unlogged = 0
         self._last_log = 0.0
         self._loop = asyncio.new_event_loop()
@@ -75,8 +78,10 @@ class Gate:
         self._stop: asyncio.Event | None = None
 
     # -- the decision --
-    def verdict(self, head: bytes) -> tuple[int, str] | None:
-        """None to relay a request with this header, else (HTTP status, why)."""
+    def verdict(self, head: bytes, address: str = "?") -> tuple[int, str] | None:
+        """None to relay a request with this header from ``address``, else (HTTP status, why).
+        A wrong token costs ``address`` a try (``client.access.Throttle``); one that must wait
+        is answered 429 before its token is looked at."""
         try:
             text = head.decode("latin-1")
             line, *rest = text.split("\r\n")
@@ -100,8 +105,12 @@ class Gate:
                 return 403, (f"Host {hosts[0] if hosts else None!r} refused: open it as "
                              f"ws://127.0.0.1:<port>")
         else:
+            wait = self.throttle.wait(address)
+            if wait > 0:
+                return 429, f"too many wrong tokens from {address}: try again in {math.ceil(wait)} s"
             given = parse_qs(urlsplit(target).query).get("token", [""])[0]
-            if not hmac.compare_digest(given.encode(), self.token.encode()):
+            if check_token(given, self.token) is not None:
+                self.throttle.failed(address)
                 return 401, "a valid ?token= is required (printed in the bridge's URL)"
         origins = fields.get("origin", [])
         if origins and origins[0].rstrip("/") not in self.origins:
@@ -133,7 +142,7 @@ class Gate:
                                                              f"{HEADER_TIMEOUT:g} s")
             except (asyncio.IncompleteReadError, ConnectionError, ssl.SSLError):
                 return None
-            said = self.verdict(head)
+            said = self.verdict(head, peer[0] if isinstance(peer, tuple) else "?")
             if said is not None:
                 return await self._answer(writer, peer, *said)
             self.allowed += 1
@@ -149,8 +158,10 @@ class Gate:
         self._refuse_log(peer, status, why)
         body = f"rhbl foxglove: {why}\n".encode()
         reason = {400: "Bad Request", 401: "Unauthorized", 403: "Forbidden",
-                  408: "Request Timeout", 431: "Request Header Fields Too Large"}[status]
-        writer.write(f"HTTP/1.1 {status} {reason}\r\nContent-Type: text/plain\r\n"
+                  408: "Request Timeout", 429: "Too Many Requests",
+                  431: "Request Header Fields Too Large"}[status]
+        retry = f"Retry-After: {why.rsplit(' in ', 1)[1].split()[0]}\r\n" if status == 429 else ""
+        writer.write(f"HTTP/1.1 {status} {reason}\r\nContent-Type: text/plain\r\n{retry}"
                      f"Content-Length: {len(body)}\r\nConnection: close\r\n\r\n".encode()
                      + body)
         with contextlib.suppress(asyncio.TimeoutError, ConnectionError, OSError):

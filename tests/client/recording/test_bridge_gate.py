@@ -41,14 +41,14 @@ def bridge(free_port, tmp_path):
 
 
 def upgrade(port: int, path: str = "/", host: str | None = None, origin: str | None = None,
-            extra: str = "") -> str:
+            extra: str = "", source: str = "127.0.0.1") -> str:
     """The status line of a WebSocket upgrade sent to the bridge."""
     key = base64.b64encode(os.urandom(16)).decode()
     lines = [f"GET {path} HTTP/1.1", *([f"Host: {host}"] if host is not None else []),
              "Upgrade: websocket", "Connection: Upgrade", f"Sec-WebSocket-Key: {key}",
              "Sec-WebSocket-Version: 13", "Sec-WebSocket-Protocol: foxglove.sdk.v1",
              *([f"Origin: {origin}"] if origin is not None else [])]
-    with socket.create_connection(("127.0.0.1", port), timeout=30) as s:
+    with socket.create_connection(("127.0.0.1", port), timeout=30, source_address=(source, 0)) as s:
         s.sendall(("\r\n".join(lines) + "\r\n" + extra + "\r\n").encode())
         got = b""
         while b"\r\n" not in got:
@@ -79,12 +79,36 @@ def test_foreign_origins_and_hosts_are_refused_loopback_apps_served(bridge):
     assert child.wait_for_line("refused a request from", 10), child.output()
 
 
+TOKEN = "k3y-0f-the-f0xglove-test"
+
+
 def test_a_token_is_required_when_set(bridge):
-    child, port = bridge("--token", "s3cret")
-    assert child.wait_for_line(f"ws://127.0.0.1:{port}/?token=s3cret", 10), child.output()
+    child, port = bridge("--token", TOKEN)
+    assert child.wait_for_line(f"ws://127.0.0.1:{port}/?token={TOKEN}", 10), child.output()
     assert " 401 " in upgrade(port, host=f"127.0.0.1:{port}")
     assert " 401 " in upgrade(port, path="/?token=wrong", host=f"127.0.0.1:{port}")
-    assert " 101 " in upgrade(port, path="/?token=s3cret", host=f"any.name:{port}")
+    assert " 101 " in upgrade(port, path=f"/?token={TOKEN}", host=f"any.name:{port}")
+
+
+def test_wrong_tokens_are_throttled_per_address(bridge):
+    """A burst of wrong tokens from one address: the first few are checked (401), then that
+    address waits (429 with Retry-After), even with the right token; another address is not
+    held up."""
+    _child, port = bridge("--token", TOKEN)
+    said = [upgrade(port, path="/?token=wrong", host=f"127.0.0.1:{port}") for _ in range(30)]
+    assert said[0].startswith("HTTP/1.1 401") and said[-1].startswith("HTTP/1.1 429"), said
+    assert " 429 " in upgrade(port, path=f"/?token={TOKEN}", host=f"127.0.0.1:{port}")
+    assert " 101 " in upgrade(port, path=f"/?token={TOKEN}", host=f"127.0.0.1:{port}",
+                              source="127.0.0.2")
+
+
+@pytest.mark.parametrize("token", ["a", "s3cret", "aaaaaaaaaaaaaaaaaaaaaaaa"])
+def test_a_weak_token_is_refused_before_any_connection(token):
+    r = subprocess.run([sys.executable, "-m", "lab.cli", "foxglove", f"--token={token}",
+                        "--connect", "tcp/127.0.0.1:9"], cwd=ROOT, capture_output=True,
+                       text=True, timeout=60)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and "weak" in lines[0], r.stderr
 
 
 def test_another_address_without_tls_is_refused_before_any_connection():
