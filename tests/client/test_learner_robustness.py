@@ -108,12 +108,12 @@ def test_disk_full_keeps_labels_in_memory_and_journals_them_later(free_port, tmp
 # runs the learner with every learning step slowed down (a learner that falls behind)
 _SLOW = """
 import sys, time
-import client.roles.learner as L
-_learn = L.LearnerCore.learn
+import client.lineage as L
+_learn = L.Lineage.learn
 def slow(self, *args, **kwargs):
     time.sleep(0.02)
     return _learn(self, *args, **kwargs)
-L.LearnerCore.learn = slow
+L.Lineage.learn = slow
 from lab.cli import main
 sys.exit(main(sys.argv[1:]))
 """

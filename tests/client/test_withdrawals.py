@@ -13,7 +13,7 @@ import pytest
 
 from client.journal import Journal, JournalWithdrawal, LabelSet, Withdrawals, journal_path
 from client.labels import Acknowledgements, Outbox
-from client.roles.learner import LearnerCore
+from client.lineage import Lineage
 from protocol.messages import LearnerAck, Scan, Withdrawal
 
 LABELS = ["fwd", "fwd-left", "rot-left", "fwd-right", "rot-right"]
@@ -27,14 +27,14 @@ def _label(k: int) -> str:
     return LABELS[k % 5]
 
 
-def _teach(core: LearnerCore, origin: str, seqs, base: int = 0) -> list:
+def _teach(core: Lineage, origin: str, seqs, base: int = 0) -> list:
     return [core.learn(base + q, 0.1 * q, _ranges(base + q), 0.0, _label(base + q), origin, q)
             for q in seqs]
 
 
-def _reference(path, items) -> LearnerCore:
+def _reference(path, items) -> Lineage:
     """A tree learned from ``items`` ((origin, seq, base)) only, in that order."""
-    ref = LearnerCore(path, features="wall")
+    ref = Lineage(path, features="wall")
     for origin, q, base in items:
         ref.learn(base + q, 0.1 * q, _ranges(base + q), 0.0, _label(base + q), origin, q)
     return ref
@@ -45,8 +45,8 @@ def _expected():
             + [("s2", q, 1000) for q in range(10)])
 
 
-def _taught(out) -> LearnerCore:
-    core = LearnerCore(out, features="wall")
+def _taught(out) -> Lineage:
+    core = Lineage(out, features="wall")
     _teach(core, "s1", range(30))
     _teach(core, "s2", range(10), base=1000)
     return core
@@ -146,13 +146,13 @@ def test_withdrawn_labels_leave_the_tree_and_never_come_back(tmp_path):
     assert standing == [(o, q) for o, q, _ in _expected()]
     core.journal.sync()
     # "crash" before any snapshot: recovery from the journal alone rebuilds without them
-    again = LearnerCore(out, features="wall")
+    again = Lineage(out, features="wall")
     assert again.learner.classifier.tree_equal(ref.learner.classifier)
     assert again.holds("s1", 15) and again.withdrawals.holds("s1", 0) and again.standing == 30
     again.snapshot()
     again.close()
     # from the snapshot written after the withdrawal
-    third = LearnerCore(out, features="wall")
+    third = Lineage(out, features="wall")
     assert third.learner.classifier.tree_equal(ref.learner.classifier)
     assert third.withdrawals.acked("s1") == 1 and third.holds("s1", 19) and third.standing == 30
     for c in (core, third, ref):
@@ -165,7 +165,7 @@ def test_a_withdrawal_after_the_last_snapshot_is_applied_on_recovery(tmp_path):
     core.snapshot()  # holds s1 10..19
     assert core.withdraw(W)
     core.journal.sync()  # killed before rebuilding or snapshotting
-    again = LearnerCore(out, features="wall")
+    again = Lineage(out, features="wall")
     ref = _reference(tmp_path / "ref.rhbl", _expected())
     assert again.learner.classifier.tree_equal(ref.learner.classifier)
     assert again.rebuilds == 1 and again.replayed == 1
@@ -184,7 +184,7 @@ def test_withdrawing_labels_the_learner_never_journaled_needs_no_rebuild(tmp_pat
 
 def test_a_folded_journal_cannot_take_withdrawn_labels_out_of_the_tree(tmp_path, caplog):
     out = tmp_path / "t.rhbl"
-    core = LearnerCore(out, features="wall", fold_journal=True)
+    core = Lineage(out, features="wall", fold_journal=True)
     _teach(core, "s1", range(30))
     core.snapshot()  # folds records 0..29
     assert core.withdraw(W)
