@@ -12,6 +12,8 @@ around it (session, pairing, publishing, stats) is ``client.roles.learner``.
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import logging
 import os
 import time
@@ -41,9 +43,69 @@ from client.labels import by_person
 from process.runtime import EXIT_USAGE, ProcessError
 from protocol.messages import Withdrawal
 
-__all__ = ["Lineage"]
+__all__ = ["Lineage", "LineageLock", "lock_path"]
 
 log = logging.getLogger(__name__)
+
+
+def lock_path(snapshot: str | os.PathLike) -> Path:
+    """The lock file of the lineage at ``snapshot``: ``<snapshot>.lock``."""
+    return Path(f"{os.fspath(snapshot)}.lock")
+
+
+class LineageLock:
+    """One learner per lineage: an exclusive OS lock on ``<snapshot>.lock`` for as long as the
+    learner runs (as SQLite and rosbag2 lock what they write). Two learners journaling the same
+    lineage interleave their records and leave a journal no learner can open again.
+
+    The lock is ``fcntl.lockf`` (POSIX record locks): the kernel drops it when the process
+    ends however it ends (SIGKILL, a crash), so a dead learner never leaves a stale lock; the
+    file stays, holding the last holder's pid for the message a refused learner gives. It is
+    held per process, so one process that opens a lineage twice (a test that "restarts" a
+    learner in-process) is not refused. ``wait`` s: how long to wait for a learner that still
+    holds it (one draining after SIGTERM) before refusing; ProcessError (exit 1) naming the
+    holder's pid when it is still held."""
+
+    def __init__(self, snapshot: str | os.PathLike, wait: float = 0.0):
+        self.path = lock_path(snapshot)
+        self.fd: int | None = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        deadline = time.monotonic() + max(0.0, float(wait))
+        said = False
+        while True:
+            try:
+                fcntl.lockf(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except OSError as exc:
+                if exc.errno not in (errno.EACCES, errno.EAGAIN):
+                    self.close()
+                    raise ProcessError(f"learner: cannot lock {self.path}: {exc}") from exc
+            holder = self._holder()
+            if time.monotonic() >= deadline:
+                self.close()
+                raise ProcessError(
+                    f"learner: the lineage {snapshot} is held by another learner (pid "
+                    f"{holder}, lock {self.path}): one learner per lineage. Stop it first (a "
+                    f"stopping learner drains for up to its --drain s), or wait for it with "
+                    f"--lock-wait SECONDS")
+            if not said:
+                log.info("the lineage %s is held by another learner (pid %s): waiting up to "
+                         "%.0f s for it to finish", snapshot, holder, wait)
+                said = True
+            time.sleep(0.1)
+        os.ftruncate(self.fd, 0)
+        os.pwrite(self.fd, f"{os.getpid()}\n".encode(), 0)
+
+    def _holder(self) -> str:
+        try:
+            return os.pread(self.fd, 32, 0).decode(errors="replace").strip() or "unknown"
+        except OSError:
+            return "unknown"
+
+    def close(self) -> None:
+        """Release the lock (closing the file releases it). Idempotent."""
+        if self.fd is not None:
+            fd, self.fd = self.fd, None
+            os.close(fd)
 
 
 def _replay(learner: DemonstrationLearner, rec) -> None:
@@ -62,7 +124,7 @@ class Lineage:
                  tree_params: dict | None = None, stride: int = 1, min_delta: float = 0.0,
                  fsync_interval: float = 1.0, actions: ActionSet = DEFAULT_ACTIONS,
                  fold_journal: bool = False, journal_write=os.write, teacher: str = "script",
-                 lag: int | None = None, vote: str | None = None):
+                 lag: int | None = None, vote: str | None = None, lock_wait: float = 0.0):
         if lag is not None and not (isinstance(lag, int) and 0 <= lag <= MAX_LAG):
             raise ProcessError(f"learner: --lag must be 0..{MAX_LAG} scans, got {lag!r}",
                                EXIT_USAGE)
@@ -76,6 +138,17 @@ class Lineage:
         self.fold_journal = bool(fold_journal)
         self.jpath = journal_path(self.out)
         self.out.parent.mkdir(parents=True, exist_ok=True)
+        self.lock = LineageLock(self.out, lock_wait)  # before anything of the lineage is read
+        try:
+            self._open(features, resume, task, tree_params, stride, min_delta, fsync_interval,
+                       actions, fold_journal, journal_write, teacher, lag, vote)
+        except BaseException:
+            self.close()
+            raise
+
+    def _open(self, features, resume, task, tree_params, stride, min_delta, fsync_interval,
+              actions, fold_journal, journal_write, teacher, lag, vote) -> None:
+        """Recover the lineage at ``out`` or start a new one (``__init__``'s arguments)."""
         spec = FEATURES[features] if features else None
         self.replayed = 0
         self.labels = LabelSet()  # the labels (origin, seq) journaled: deduplication and acks
@@ -468,8 +541,12 @@ class Lineage:
         return self.out.read_bytes()
 
     def close(self) -> None:
-        if self.journal is not None:
-            self.journal.close()
+        """Close (fsync) the journal, then release the lineage's lock. Idempotent."""
+        try:
+            if getattr(self, "journal", None) is not None:
+                self.journal.close()
+        finally:
+            self.lock.close()
 
 
 def _resume(path, spec: FeatureSpec | None) -> DemonstrationLearner:

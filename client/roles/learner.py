@@ -56,7 +56,7 @@ from client.behaviour.features import FEATURES, FeatureError
 from client.behaviour.teaching import MAX_LAG, add_person_arguments
 from client.journal import JournalError, journal_path
 from client.labels import MAX_BACKLOG, Acknowledgements, Pairing
-from client.lineage import Lineage
+from client.lineage import Lineage, lock_path
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
 from process import arguments, files
 from process.runtime import Context, ProcessError, on_stop_signal
@@ -109,6 +109,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="SECONDS",
                         help="on SIGINT/SIGTERM, keep learning what already arrived for at most "
                              "this long before the final snapshot (default 5)")
+    parser.add_argument("--lock-wait", type=arguments.seconds_or_zero, default=0.0,
+                        metavar="SECONDS",
+                        help="when another learner holds the lineage (one still draining "
+                             "after a stop), wait this long for it before refusing (default 0: "
+                             "refuse at once, naming its pid)")
     parser.add_argument("--scan-buffer", type=arguments.positive_int, default=512,
                         help="how many recent unlabeled scans are kept for pairing")
     parser.add_argument("--teacher", choices=["auto", "script", "person"], default="auto",
@@ -133,6 +138,7 @@ def main(args: argparse.Namespace, *, journal_write=os.write) -> int:
     def check() -> None:  # the snapshot and journal, opened before any connection: bad ones
         files.check_output(args.out, "--out", make=True)  # exit 2 at once (its folder made)
         files.check_output(journal_path(args.out), "--out's journal")
+        files.check_output(lock_path(args.out), "--out's lock")
         lineage.append(LearnerProcess.open_lineage(args, journal_write))
 
     # the token is declared once the label subscription is in place: a teacher that waits for
@@ -196,7 +202,7 @@ class LearnerProcess:
                 stride=args.stride, min_delta=args.min_delta,
                 fsync_interval=args.fsync_interval, fold_journal=args.fold_journal,
                 journal_write=journal_write, teacher=args.teacher, lag=args.lag,
-                vote=args.vote)
+                vote=args.vote, lock_wait=args.lock_wait)
         except JournalError as exc:
             raise ProcessError(f"learner: {exc}") from exc
 
