@@ -39,13 +39,28 @@ from client.journal import (
     Withdrawals,
     journal_path,
 )
-from client.labels import by_person
+from client.labels import OUTBOX, by_person
 from process.runtime import EXIT_USAGE, ProcessError
 from protocol.messages import Withdrawal
 
-__all__ = ["Lineage", "LineageLock", "lock_path"]
+__all__ = ["AHEAD", "Lineage", "LineageLock", "Refused", "lock_path"]
 
 log = logging.getLogger(__name__)
+
+
+AHEAD = OUTBOX
+"""How far past the highest label a learner holds of a teacher session a withdrawal may reach:
+a teacher keeps at most ``client.labels.OUTBOX`` labels unacknowledged, so it has given none
+further than that beyond what the learner holds (acknowledged labels are journaled)."""
+
+
+class Refused(ValueError):
+    """Bad input refused for good (nothing journaled, nothing acknowledged); ``kind`` names
+    what was wrong, for the learner's counters (``--stats``: ``refused``)."""
+
+    def __init__(self, kind: str, message: str):
+        super().__init__(message)
+        self.kind = kind
 
 
 def lock_path(snapshot: str | os.PathLike) -> Path:
@@ -431,10 +446,18 @@ class Lineage:
         """Journal a teacher's withdrawal (a tombstone, flushed) and hold it: its labels are
         never learned from now on. True when the tree holds some of them (``rebuild``), False
         when none, None when the withdrawal was held already. Raises JournalError (nothing
-        written: call again later)."""
+        written: call again later) or ``Refused`` (``withdrawal_ahead``: it reaches more than
+        ``AHEAD`` labels past the highest of the session held; nothing written, not held: a
+        teacher that gave those labels resends it once they are journaled)."""
         if self.withdrawals.holds(w.origin, w.id):
             self._hold_withdrawal(w.origin, w.id, w.first, w.upto)
             return None
+        top = self.highest(w.origin)
+        if w.upto > top + 1 + AHEAD:
+            raise Refused("withdrawal_ahead", (
+                f"withdrawal {w.id} of teacher session {w.origin} names labels {w.first}.."
+                f"{w.upto - 1}, but the highest label of that session held is {top} "
+                f"(allowed: up to {top + AHEAD}): refused"))
         if self.undecided:  # no label journaled yet: journaled with the lineage (``choose``)
             self._early.append(w)
             self._hold_withdrawal(w.origin, w.id, w.first, w.upto)
@@ -493,6 +516,13 @@ class Lineage:
         self.applied += 1
         self.standing += 1
         return learned
+
+    def highest(self, origin: str) -> int:
+        """The highest label number of teacher session ``origin`` held (journaled, or taken back
+        by a withdrawal held); -1 when none."""
+        top = self.spans.get(origin, (0, -1))[1]
+        upto, above = self.labels.ack(origin)
+        return max(top, upto - 1, max(above, default=-1))
 
     def holds(self, origin: str | None, seq: int | None) -> bool:
         """True when the label (origin, seq) is journaled already (or was refused)."""

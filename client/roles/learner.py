@@ -56,7 +56,7 @@ from client.behaviour.features import FEATURES, FeatureError
 from client.behaviour.teaching import MAX_LAG, add_person_arguments
 from client.journal import JournalError, journal_path
 from client.labels import MAX_BACKLOG, Acknowledgements, Pairing
-from client.lineage import Lineage, lock_path
+from client.lineage import Lineage, Refused, lock_path
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
 from process import arguments, files
 from process.runtime import Context, ProcessError, on_stop_signal
@@ -174,6 +174,7 @@ class LearnerProcess:
                       "withdrawals": 0, "withdrawn_skipped": 0}
         # teachers' withdrawals as they arrive (decoded in zenoh's thread), applied by the loop
         self.taken_back: deque[Withdrawal] = deque()
+        self.refused: dict[str, int] = {}  # bad input refused for good, by kind (``refuse``)
         self.withdraw_decoder = Decoder(log)
         ctx.report(self.counters)
         # labeled scans waiting to be journaled (in order): empty unless the journal cannot be
@@ -334,6 +335,10 @@ class LearnerProcess:
             w = self.taken_back[0]
             try:
                 held = self.lineage.withdraw(w)
+            except Refused as exc:
+                self.taken_back.popleft()
+                self.refuse(exc)
+                continue
             except (JournalError, OSError) as exc:
                 self._journal_failed(exc)
                 break
@@ -346,6 +351,15 @@ class LearnerProcess:
                 rebuild = rebuild or held
         if rebuild and self.lineage.rebuild():
             self.publish()
+
+    def refuse(self, exc: Refused) -> None:
+        """Count bad input refused for good (``--stats``: ``refused``, by kind); logged the
+        first time of each kind, then every 1000th."""
+        n = self.refused[exc.kind] = self.refused.get(exc.kind, 0) + 1
+        if n == 1 or n % 1000 == 0:
+            log.warning("%s (%d %s refused so far%s)", exc, n, exc.kind,
+                        "; the next ones of this kind are counted, logged every 1000th"
+                        if n == 1 else "")
 
     def _pop(self) -> None:
         """Take the oldest labeled scan off the backlog."""
@@ -514,6 +528,7 @@ class LearnerProcess:
                 "standing": lineage.standing, "rebuilds": lineage.rebuilds,
                 "withdrawn_labels": lineage.withdrawals.labels(),
                 "nodes": lineage.learner.nodes, "height": lineage.learner.height,
+                "refused": dict(self.refused),
                 "pairing": dict(self.pairing.stats), "backlog": len(self.backlog),
                 "dropped": {**self.pairing.decoder.counts, **self.withdraw_decoder.counts}}
 

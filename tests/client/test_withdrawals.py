@@ -215,3 +215,28 @@ def test_a_tombstone_record_reads_back(tmp_path):
         recs = list(j.records())
         assert recs[1] == JournalWithdrawal(1, "s1", 0, 0, 1, 2.5, "discard episode 1")
         assert list(j.standing()) == [] and len(list(j.standing(stop=1))) == 1
+
+
+def test_a_withdrawal_far_past_the_labels_held_is_refused_and_the_later_labels_learned(
+        tmp_path):
+    """Issue 36.4: a withdrawal with ``first`` = 10^9 from a session that gave labels 0-9 made
+    the learner give up on seqs 10..999999999: every later label was acknowledged, never
+    learned. It is refused (nothing journaled, not held), and labels 10-19 are journaled."""
+    from client.lineage import AHEAD, Refused
+
+    out = tmp_path / "t.rhbl"
+    core = Lineage(out, features="wall")
+    _teach(core, "s1", range(10))
+    far = Withdrawal(origin="s1", id=0, first=10**9, upto=10**9 + 5000)
+    with pytest.raises(Refused, match="s1 names labels 1000000000..1000004999") as refused:
+        core.withdraw(far)
+    assert refused.value.kind == "withdrawal_ahead"
+    assert not core.withdrawals.holds("s1", 0) and core.labels.ack("s1") == (10, ())
+    assert all(_teach(core, "s1", range(10, 20)))  # learned, not taken as held
+    # a withdrawal of labels still on their way (within the teacher's outbox) is held
+    assert core.withdraw(Withdrawal(origin="s1", id=1, first=25, upto=20 + AHEAD)) is False
+    core.close()
+    recs = list(Journal.open(journal_path(out)).records())
+    assert sum(not isinstance(r, JournalWithdrawal) for r in recs) == 20
+    assert [(r.first, r.upto) for r in recs if isinstance(r, JournalWithdrawal)] == [
+        (25, 20 + AHEAD)]
