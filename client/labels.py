@@ -740,7 +740,7 @@ class Acknowledgements:
         if act.origin is None:
             return
         if not journaled:
-            self.labels.add(act.origin, act.seq)
+            self.labels.add(act.origin, act.seq, kept=False)
         self.pending.add(act.origin)
         self.count += 1
 

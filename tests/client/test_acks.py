@@ -39,8 +39,23 @@ def test_label_set_is_bounded():
     upto, above = ls.ack("a")
     assert len(above) <= 10 and upto > 1 and ("a", 13) in ls
     for o in "bcd":
-        ls.add(o, 0)
-    assert ls.origins() == ["b", "c", "d"]  # the least recently seen origin forgotten
+        ls.add(o, 0, kept=False)  # refused labels only: at most 3 such origins kept
+    assert ls.origins() == ["a", "b", "c", "d"]
+    ls.add("e", 0, kept=False)
+    assert ls.origins() == ["a", "c", "d", "e"]  # the least recently seen of them forgotten
+    ls.add("c", 1)  # journaled: kept for good
+    for o in "fgh":
+        ls.add(o, 0, kept=False)
+    assert ls.origins() == ["a", "c", "f", "g", "h"]
+
+
+def test_label_set_keeps_every_session_with_a_journaled_label():
+    """Issue 36.5: past 256 sessions the learner forgot the least recent one and journaled its
+    resent labels again."""
+    ls = LabelSet()
+    for i in range(1000):
+        assert ls.add(f"s{i}", 0)
+    assert all(not ls.add(f"s{i}", 0) for i in range(1000))  # resends: held, every one
 
 
 @pytest.mark.parametrize("bad", ["x", {"a": 3}, {"a": [1]}, {"a": [1, "x"]}, {"a": [1, [2.5]]},
