@@ -170,6 +170,7 @@ class Lineage:
         self.withdrawals = Withdrawals()  # what teachers took back (tombstones, provenance)
         self.spans: dict[str, tuple[int, int]] = {}  # origin -> lowest, highest seq journaled
         self.standing = 0  # labelled vectors journaled and not withdrawn
+        self.beams: int | None = None  # the laser's beam count of the journal's labels
         self.rebuilds = 0
         self._early: list[Withdrawal] = []  # withdrawals before the lineage's first label
         if self.jpath.exists():
@@ -378,6 +379,8 @@ class Lineage:
         for rec in self.journal.records(self.journal.base):  # what deduplication needs
             if not isinstance(rec, JournalWithdrawal):
                 self._journaled(rec.origin, rec.seq)
+                if self.beams is None:
+                    self.beams = len(rec.ranges)
             elif rec.index >= start:
                 self._hold_withdrawal(rec.origin, rec.id, rec.first, rec.upto)
                 withdrawn_later = True
@@ -494,10 +497,19 @@ class Lineage:
         held already (a resend) is neither journaled nor learned again: None. Raises
         FeatureError (a scan the features cannot use: nothing written) or JournalError (the
         journal cannot be written, e.g. disk full: nothing written, nothing learned; call again
-        later with the same vector). The first label of a lineage whose rule is not chosen
-        yet chooses it by its ``source`` (``choose``)."""
+        later with the same vector) or ``Refused`` (nothing written: ranges that are negative
+        or not finite, or of another beam count than the journal's labels, ``beams``: a
+        lineage learns from one laser, client.laser). The first label of a lineage whose rule
+        is not chosen yet chooses it by its ``source`` (``choose``)."""
         if self.holds(origin, seq):
             return None
+        ranges = np.asarray(ranges)
+        if self.beams is not None and len(ranges) != self.beams:
+            raise Refused("beams", f"the scan of label {seq} of teacher session {origin} has "
+                                   f"{len(ranges)} beams, the lineage's laser {self.beams}")
+        if ranges.size and not (np.isfinite(ranges).all() and ranges.min() >= 0):
+            raise Refused("ranges", f"the scan of label {seq} of teacher session {origin} has "
+                                    "ranges that are negative or not finite")
         if self.undecided:
             self.choose(source)
         elif self._early:
@@ -511,6 +523,8 @@ class Lineage:
         self.journal.append(scan_id, ts, label, ranges, yaw, x.astype(np.float32), origin, seq,
                             back)
         self._journaled(origin, seq)
+        if self.beams is None:
+            self.beams = len(ranges)
         learned = (self.learner.observe(ranges, yaw, label, earlier=back) if self.estimates
                    else self.learner.observe(ranges, yaw, label))
         self.applied += 1

@@ -55,7 +55,8 @@ from collections import deque
 from client.behaviour.features import FEATURES, FeatureError
 from client.behaviour.teaching import MAX_LAG, add_person_arguments
 from client.journal import JournalError, journal_path
-from client.labels import MAX_BACKLOG, Acknowledgements, Pairing
+from client.labels import MAX_BACKLOG, MAX_BACKLOG_BYTES, Acknowledgements, Pairing, scan_bytes
+from client.laser import Laser
 from client.lineage import Lineage, Refused, lock_path
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
 from process import arguments, files
@@ -165,8 +166,11 @@ class LearnerProcess:
         self.watch = ScanWatch("learner", keys.scan_key(ctx.robot), stale=3.0)
         # labels are paired with their scans as they arrive: nothing but labeled scans is queued
         # (a lineage whose rule is not chosen yet shifts a person's labels only: ``lag_for``)
+        # the robot's laser: scans and resent labels that do not fit it are refused on arrival
+        # (client.laser), before they take memory, the journal or the tree
+        self.laser = Laser(beams=self.lineage.beams)
         self.pairing = Pairing(self.args.scan_buffer, self.args.match_timeout,
-                               on_scan_seen=self.watch.seen,
+                               on_scan_seen=self.watch.seen, laser=self.laser,
                                **({"lag_of": self._lag_of} if self.lineage.undecided else
                                   {"lag": self.lineage.lag or 0,
                                    "window": MAX_LAG if self.lineage.estimates else 0}))
@@ -180,6 +184,7 @@ class LearnerProcess:
         # labeled scans waiting to be journaled (in order): empty unless the journal cannot be
         # written (disk full); nothing is learned before it is journaled
         self.backlog: deque[tuple[Scan, TeacherAction]] = deque()
+        self.backlog_bytes = 0  # the ranges the backlog holds (``scan_bytes``)
         self.waiting: set[tuple[str, int]] = set()  # (origin, seq) of the backlog's labels
         self.retry_at = 0.0
         self.failures = 0  # journal writes failed in a row
@@ -228,13 +233,15 @@ class LearnerProcess:
         ctx.declare_token()  # after the subscriptions: the token means "ready to receive labels"
 
     def on_scan(self, sample) -> None:
-        self.pairing.on_scan(sample.payload.to_bytes())
+        if not self.laser.too_big(len(sample.payload), "a scan"):
+            self.pairing.on_scan(sample.payload.to_bytes())
 
     def on_label(self, sample) -> None:
         self.pairing.on_label(sample.payload.to_bytes())
 
     def on_labeled(self, sample) -> None:
-        self.pairing.on_labeled(sample.payload.to_bytes())
+        if not self.laser.too_big(len(sample.payload), "a label resent with its scan"):
+            self.pairing.on_labeled(sample.payload.to_bytes())
 
     def on_withdraw(self, sample) -> None:
         w = self.withdraw_decoder.decode(Withdrawal, sample.payload.to_bytes())
@@ -291,6 +298,7 @@ class LearnerProcess:
             return
         self.stats["paired"] += 1
         self.backlog.append((scan, act))
+        self.backlog_bytes += scan_bytes(scan)
         if act.origin is not None:
             self.waiting.add(key)
         if len(self.backlog) == 1 or time.monotonic() >= self.retry_at:
@@ -306,6 +314,10 @@ class LearnerProcess:
                     scan.id, scan.ts, scan.ranges, float(scan.pose[2]), act.action, act.origin,
                     act.seq, [(s.ranges, float(s.pose[2])) for s in getattr(scan, "earlier", ())],
                     act.source)
+            except Refused as exc:  # not this lineage's laser: not journaled, not acknowledged
+                self._pop()
+                self.refuse(exc)
+                continue
             except FeatureError as exc:  # a scan the features cannot use (bad input)
                 self._pop()
                 self.stats["rejected"] += 1
@@ -363,7 +375,8 @@ class LearnerProcess:
 
     def _pop(self) -> None:
         """Take the oldest labeled scan off the backlog."""
-        _, act = self.backlog.popleft()
+        scan, act = self.backlog.popleft()
+        self.backlog_bytes -= scan_bytes(scan)
         self.waiting.discard((act.origin, act.seq))
 
     def _journal_failed(self, exc: Exception) -> None:
@@ -374,7 +387,7 @@ class LearnerProcess:
             log.error("cannot write the journal (%s): %d labeled vectors kept in memory "
                       "(at most %d), retrying every %.0f s; nothing is learned before "
                       "it is journaled", exc, len(self.backlog), MAX_BACKLOG, _RETRY)
-        while len(self.backlog) > MAX_BACKLOG:
+        while len(self.backlog) > MAX_BACKLOG or self.backlog_bytes > MAX_BACKLOG_BYTES:
             self._pop()
             self.stats["lost"] += 1
             if self.stats["lost"] <= 3 or self.stats["lost"] % 1000 == 0:
@@ -528,7 +541,8 @@ class LearnerProcess:
                 "standing": lineage.standing, "rebuilds": lineage.rebuilds,
                 "withdrawn_labels": lineage.withdrawals.labels(),
                 "nodes": lineage.learner.nodes, "height": lineage.learner.height,
-                "refused": dict(self.refused),
+                "refused": {k: self.refused.get(k, 0) + self.laser.refused.get(k, 0)
+                            for k in {**self.refused, **self.laser.refused}},
                 "pairing": dict(self.pairing.stats), "backlog": len(self.backlog),
                 "dropped": {**self.pairing.decoder.counts, **self.withdraw_decoder.counts}}
 

@@ -204,7 +204,7 @@ def test_resends_to_a_learner_that_cannot_journal_are_kept_once(tmp_path):
     p = LearnerProcess.__new__(LearnerProcess)
     p.lineage, p.backlog, p.waiting = core, deque(), set()
     p.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0, "duplicates": 0}
-    p.retry_at, p.failures = 0.0, 0
+    p.retry_at, p.failures, p.backlog_bytes = 0.0, 0, 0
     p.acks = Acknowledgements(lambda _data: None, core.labels)
     for _ in range(10):  # seq 1, resent ten times while the journal fails
         p.learn(_scan(1), TeacherAction(scan_id=1, action="fwd", origin="s1", seq=1))
