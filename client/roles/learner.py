@@ -26,6 +26,11 @@ out. A journal folded with ``--fold-journal`` no longer holds the records a rebu
 withdrawal of labels folded into a snapshot is journaled but cannot take them out of the tree
 (logged as an error).
 
+One learner per lineage (``client.lineage.LineageLock`` on ``<out>.lock``: a second one is
+refused, or waits ``--lock-wait`` s). Scans and resent labels that do not fit the robot's laser
+(``client.laser.Laser``) and withdrawals far past what their session gave are refused, counted
+in ``--stats`` ``refused`` by kind.
+
     rhbl learner --features wall --out tree.rhbl                 # new tree (or continue tree.rhbl)
     rhbl learner --resume tree.rhbl --out tree2.rhbl             # extend a tree: a new lineage
     rhbl learner --features wall --teacher person --out tree.rhbl  # force the person rule
