@@ -4,7 +4,9 @@ labels paired with their scans under a flood of scans, in bounded memory."""
 from __future__ import annotations
 
 import logging
+import os
 import threading
+import time
 import tracemalloc
 
 import numpy as np
@@ -237,3 +239,47 @@ def test_a_resumed_learner_says_the_vectors_its_tree_holds(tmp_path):
     assert "0 vectors so far (0 journaled" in fresh.describe() and fresh.describe().endswith(
         "1 nodes")
     fresh.close()
+
+
+def test_one_learner_per_lineage_and_no_stale_lock_after_a_kill(tmp_path):
+    """Issue 36.1: two learners on one lineage both journaled every label and left a journal
+    no learner could open. The lineage's lock refuses a second holder, naming the first's pid;
+    a SIGKILLed holder leaves no stale lock; ``wait`` waits for a holder that ends."""
+    import subprocess
+    import sys
+
+    from client.lineage import LineageLock, lock_path
+
+    def holder(path) -> str:
+        return path.read_text().strip() if path.exists() else ""
+
+    out = tmp_path / "t.rhbl"
+    hold = ("import sys, time\nfrom client.lineage import LineageLock\n"
+            "lock = LineageLock(sys.argv[1])\ntime.sleep(120)\n")
+    holders = []
+    try:
+        for _ in range(2):
+            proc = subprocess.Popen([sys.executable, "-c", hold, str(out)])
+            holders.append(proc)
+            end = time.monotonic() + 30
+            while holder(lock_path(out)) != str(proc.pid):
+                assert time.monotonic() < end and proc.poll() is None, "the holder never locked"
+                time.sleep(0.02)
+            with pytest.raises(ProcessError, match=f"held by another learner \\(pid {proc.pid}"):
+                Lineage(out, features="wall")
+            assert not journal_path(out).exists()  # refused before anything was written
+            if len(holders) == 1:
+                proc.kill()  # SIGKILL: the OS drops its lock
+                proc.wait(10)
+                lock = LineageLock(out)  # not stale
+                lock.close()
+        # a holder that ends while we wait (a learner draining after SIGTERM)
+        threading.Timer(0.5, holders[1].terminate).start()
+        t0 = time.monotonic()
+        core = Lineage(out, features="wall", lock_wait=30)
+        assert time.monotonic() - t0 < 30 and holder(lock_path(out)) == str(os.getpid())
+        core.close()
+    finally:
+        for proc in holders:
+            proc.kill()
+            proc.wait(10)
