@@ -75,6 +75,7 @@ __all__ = ["LearnerProcess", "Pairing", "add_arguments", "main"]
 log = logging.getLogger(__name__)
 
 _RETRY = 1.0  # s between attempts to write the journal again
+_MAX_TAKEN_BACK = 4096  # withdrawals waiting to be journaled (each under 1 KB decoded)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -250,8 +251,15 @@ class LearnerProcess:
 
     def on_withdraw(self, sample) -> None:
         w = self.withdraw_decoder.decode(Withdrawal, sample.payload.to_bytes())
-        if w is not None:
-            self.taken_back.append(w)
+        if w is None:
+            return
+        if len(self.taken_back) >= _MAX_TAKEN_BACK:  # a flood: its teacher resends it later
+            self.refuse(Refused("withdrawal_flood", (
+                f"withdrawal {w.id} of teacher session {w.origin}: {_MAX_TAKEN_BACK} "
+                "withdrawals wait already; not held (a teacher resends what is not "
+                "acknowledged)")))
+            return
+        self.taken_back.append(w)
 
     def on_query(self, query) -> None:
         data = self.latest
@@ -370,7 +378,7 @@ class LearnerProcess:
             self.publish()
 
     def refuse(self, exc: Refused) -> None:
-        """Count bad input refused for good (``--stats``: ``refused``, by kind); logged the
+        """Count input refused (``--stats``: ``refused``, by kind; not acknowledged); logged the
         first time of each kind, then every 1000th."""
         n = self.refused[exc.kind] = self.refused.get(exc.kind, 0) + 1
         if n == 1 or n % 1000 == 0:
