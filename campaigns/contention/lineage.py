@@ -379,12 +379,13 @@ def many_sessions(probe: Probe) -> Outcome:
                 pub.put(_labeled(scan, name, seq))
         acked = acks.wait(lambda a: sum(1 for x in a.values() if x.upto >= per) >= sessions,
                           120.0)
+        with acks.cond:
+            acks.last.clear()
         for name in names:  # resent (their acknowledgements were lost, say)
             for seq in range(per):
                 pub.put(_labeled(scan, name, seq))
         # the resends are handled: every session acknowledged again after them
-        acks.last.clear()
-        acks.wait(lambda a: len(a) >= sessions, 60.0)
+        reacked = acks.wait(lambda a: len(a) >= sessions, 60.0)
         rc = learner.stop()
     labels, _w, broken = _journaled(out)
     want = sessions * per
@@ -393,6 +394,7 @@ def many_sessions(probe: Probe) -> Outcome:
     stats = _stats(learner)
     figures = {"sessions": sessions, "labels": want, "journaled": sum(labels.values()),
                "twice": twice, "missing": missing, "duplicates": stats.get("duplicates"),
+               "reacknowledged": reacked,
                "exit": rc}
     ok = acked and twice == 0 and missing == 0 and not broken and rc == 0
     said = (f"{sessions} sessions x {per} labels, each resent: {twice} journaled twice, "
