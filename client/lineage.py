@@ -83,7 +83,12 @@ class LineageLock:
 
     def __init__(self, snapshot: str | os.PathLike, wait: float = 0.0):
         self.path = lock_path(snapshot)
-        self.fd: int | None = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        self.fd: int | None = None
+        try:
+            self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise ProcessError(f"learner: cannot open the lineage's lock {self.path}: "
+                               f"{exc.strerror or exc}") from exc
         deadline = time.monotonic() + max(0.0, float(wait))
         said = False
         while True:
@@ -132,7 +137,11 @@ def _replay(learner: DemonstrationLearner, rec) -> None:
 
 
 class Lineage:
-    """Snapshot + journal + DemonstrationLearner: ``learn`` a labeled scan, ``snapshot``."""
+    """Snapshot + journal + DemonstrationLearner: ``learn`` a labeled scan, ``snapshot``.
+
+    Held by one process at a time (``LineageLock`` on ``<out>.lock``, taken before anything of
+    the lineage is read, released by ``close``; ``lock_wait`` s to wait for another holder).
+    A lineage learns from one laser: ``beams``, the beam count of its journal's labels."""
 
     def __init__(self, out: str | os.PathLike, features: str | None = None,
                  resume: str | None = None, task: str | None = None,
