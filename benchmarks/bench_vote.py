@@ -44,7 +44,7 @@ from people import PEOPLE  # noqa: E402
 from client.behaviour.guard import CLEARANCE, RotationGuard  # noqa: E402
 from client.behaviour.learning import TreePolicy  # noqa: E402
 from client.journal import journal_path  # noqa: E402
-from client.roles.learner import LearnerCore  # noqa: E402
+from client.lineage import Lineage  # noqa: E402
 from lab.evaluate import evaluate  # noqa: E402
 from lab.harness import resolve_world  # noqa: E402
 from lab.retrain import retrain  # noqa: E402
@@ -82,7 +82,7 @@ def journaled(tree: Path):
         for src in (tree, journal_path(tree)):
             if src.exists():
                 shutil.copy(src, Path(tmp) / src.name)
-        core = LearnerCore(copy)
+        core = Lineage(copy)
         try:
             if not core.person:
                 raise SystemExit(f"--sessions: {tree} is not a person's lineage")

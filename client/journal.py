@@ -179,33 +179,39 @@ class LabelSet:
     label is on its way, except after a teacher died, a label refused as bad input before a
     restart (not journaled), or a learner that joined a teacher's session midway; a gap that
     stays makes every later label a seq above it, and after ``max_above`` of them a label of
-    the gap still on its way would be taken as held) and ``max_origins`` origins (the least
-    recently seen is forgotten: logged)."""
+    the gap still on its way would be taken as held). Every session with a label in the journal
+    is kept, however many there are (deduplication survives any number of sessions: each costs
+    a few hundred bytes of memory against at least one journal record, so the journal bounds
+    it); at most ``max_origins`` sessions that hold only labels refused as bad input
+    (``add(..., kept=False)``: not journaled) are kept beside them, the least recently seen
+    forgotten (logged)."""
 
     def __init__(self, max_above: int = 4096, max_origins: int = 256):
         self.max_above, self.max_origins = int(max_above), int(max_origins)
         self._o: dict[str, tuple[int, set[int]]] = {}  # insertion order = least recent first
+        self._loose: dict[str, None] = {}  # origins of refused labels only, least recent first
 
     def __contains__(self, label: tuple[str, int]) -> bool:
         origin, seq = label
         st = self._o.get(origin)
         return st is not None and (seq < st[0] or seq in st[1])
 
-    def add(self, origin: str, seq: int) -> bool:
-        """Record a label; False when it was held already."""
+    def add(self, origin: str, seq: int, kept: bool = True) -> bool:
+        """Record a label (``kept``: journaled; else refused as bad input, not journaled);
+        False when it was held already."""
         if (origin, seq) in self:
-            self._touch(origin)
+            self._touch(origin, kept)
             return False
-        self._put(origin, seq, seq + 1)
+        self._put(origin, seq, seq + 1, kept)
         return True
 
     def add_range(self, origin: str, first: int, upto: int) -> None:
-        """Record the labels ``first <= seq < upto`` as held (withdrawn ones: never to be
-        learned, so never resent)."""
+        """Record the labels ``first <= seq < upto`` as held (withdrawn ones, by a withdrawal
+        journaled: never to be learned, so never resent)."""
         if upto > first:
             self._put(origin, int(first), int(upto))
 
-    def _put(self, origin: str, first: int, stop: int) -> None:
+    def _put(self, origin: str, first: int, stop: int, kept: bool = True) -> None:
         upto, above = self._o.pop(origin, (0, set()))
         if first <= upto:
             if stop > upto + 1 and above:  # a range past seqs held above: now below
@@ -225,15 +231,27 @@ class LabelSet:
             while upto in above:
                 above.discard(upto)
                 upto += 1
+        loose = origin not in self._o or origin in self._loose
         self._o[origin] = (upto, above)
-        while len(self._o) > self.max_origins:
-            old = next(iter(self._o))
-            log.warning("forgetting the labels of teacher session %s (more than %d sessions)",
-                        old, self.max_origins)
+        self._keep(origin, kept, loose)
+
+    def _keep(self, origin: str, kept: bool, loose: bool) -> None:
+        """``origin`` was just seen: a session with a journaled label is kept for good; one
+        with refused labels only is among the ``max_origins`` most recent such, or forgotten."""
+        self._loose.pop(origin, None)
+        if kept or not loose:
+            return
+        self._loose[origin] = None
+        while len(self._loose) > self.max_origins:
+            old = next(iter(self._loose))
+            log.warning("forgetting the refused labels of teacher session %s (more than %d "
+                        "sessions with refused labels only)", old, self.max_origins)
+            del self._loose[old]
             del self._o[old]
 
-    def _touch(self, origin: str) -> None:
+    def _touch(self, origin: str, kept: bool = True) -> None:
         self._o[origin] = self._o.pop(origin)
+        self._keep(origin, kept, origin in self._loose)
 
     def ack(self, origin: str) -> tuple[int, tuple[int, ...]]:
         """(upto, sorted seqs held above it) of an origin."""

@@ -42,6 +42,8 @@ __all__ = [
     "BEHIND",
     "DRAIN",
     "MAX_BACKLOG",
+    "MAX_BACKLOG_BYTES",
+    "MAX_PENDING",
     "OUTBOX",
     "PERSON_SOURCES",
     "RESEND_AFTER",
@@ -54,6 +56,7 @@ __all__ = [
     "LabelPublisher",
     "SOURCE",
     "by_person",
+    "scan_bytes",
 ]
 
 log = logging.getLogger(__name__)
@@ -83,6 +86,8 @@ DRAIN = 10.0  # s a stopping teacher waits for the acknowledgements of its last 
 # labeled scans kept in memory while the journal cannot be written (disk full): about an hour
 # of demonstration at 10 Hz (~2 KB each); beyond that the oldest are dropped, counted and logged
 MAX_BACKLOG = 36_000
+MAX_BACKLOG_BYTES = 96 << 20  # and at most this much of their scans (``scan_bytes``)
+MAX_PENDING = 4096  # labels waiting for their scan (a flood of labels naming scans never sent)
 
 
 # labeled scans waiting to be learned beyond which the learner says (error) it falls behind
@@ -481,6 +486,11 @@ class AnsweredScan(Scan):
     earlier: tuple = ()
 
 
+def scan_bytes(scan) -> int:
+    """The bytes a labeled scan holds: its ranges and those of the scans kept with it."""
+    return scan.ranges.nbytes + sum(e.ranges.nbytes for e in getattr(scan, "earlier", ()))
+
+
 class Pairing:
     """Pairs every label with exactly the scan it answers (by scan id, whichever arrives first),
     at arrival: ``on_scan`` and ``on_label`` are the subscribers' callbacks (any thread); the
@@ -517,7 +527,8 @@ class Pairing:
 
     def __init__(self, scan_buffer: int = 512, match_timeout: float = 2.0,
                  max_ready: int = MAX_BACKLOG, behind: int = BEHIND, on_scan_seen=None,
-                 clock=time.monotonic, lag: int = 0, window: int = 0, lag_of=None):
+                 clock=time.monotonic, lag: int = 0, window: int = 0, lag_of=None,
+                 laser=None, max_ready_bytes: int = MAX_BACKLOG_BYTES):
         if not (isinstance(lag, int) and lag >= 0):
             raise ValueError(f"lag must be an integer >= 0 scans, got {lag!r}")
         if not (isinstance(window, int) and window >= 0) or (window and lag):
@@ -528,7 +539,9 @@ class Pairing:
         self.recent: OrderedDict[int, Scan] = OrderedDict()  # every scan (lag > 0 only)
         self.scan_buffer = max(1, int(scan_buffer))
         self.match_timeout = match_timeout
-        self.max_ready = max_ready
+        self.max_ready, self.max_ready_bytes = max_ready, max_ready_bytes
+        self.ready_bytes = 0  # the ranges held in ``ready`` (``scan_bytes``)
+        self.laser = laser  # a client.laser.Laser: scans and resent labels that do not fit it
         self.behind = behind
         self._seen = on_scan_seen
         self._clock = clock
@@ -548,7 +561,7 @@ class Pairing:
         if self._seen is not None:
             self._seen()
         scan = self.decoder.decode(Scan, data)
-        if scan is None:
+        if scan is None or (self.laser is not None and not self.laser.fits(scan)):
             return
         with self._cond:
             self.stats["scans"] += 1
@@ -594,12 +607,16 @@ class Pairing:
                 self.pending[act.scan_id] = (act, self._clock())
                 if len(self.pending) > 64:
                     self._expire(self._clock())
+                if len(self.pending) > MAX_PENDING:  # a flood of labels for scans never sent
+                    del self.pending[next(iter(self.pending))]
+                    self.stats["unmatched"] += 1
 
     def on_labeled(self, data: bytes) -> None:
         """A label the teacher resent with its scan (``LabeledScan``: the learner had not
         acknowledged it): ready at once, no pairing."""
         lab = self.decoder.decode(LabeledScan, data)
-        if lab is None:
+        if lab is None or (self.laser is not None and not self.laser.fits_ranges(
+                lab.ranges, f"label {lab.seq} of teacher session {lab.origin}")):
             return
         act = lab.action_message()
         scan = Scan(ts=lab.ts, id=lab.scan_id, ranges=lab.ranges, pose=(0.0, 0.0, lab.yaw))
@@ -654,10 +671,11 @@ class Pairing:
         elif window:
             scan = self._windowed(scan, window)
         self.ready.append((scan, act))
+        self.ready_bytes += scan_bytes(scan)
         n = len(self.ready)
         self.stats["max_ready"] = max(self.stats["max_ready"], n)
-        if n > self.max_ready:
-            self.ready.popleft()
+        if n > self.max_ready or self.ready_bytes > self.max_ready_bytes:
+            self.ready_bytes -= scan_bytes(self.ready.popleft()[0])
             self.stats["lost"] += 1
             lost = self.stats["lost"]
             if lost <= 3 or lost % 1000 == 0:
@@ -677,7 +695,11 @@ class Pairing:
         with self._cond:
             if not self.ready:
                 self._cond.wait(timeout)
-            return self.ready.popleft() if self.ready else None
+            if not self.ready:
+                return None
+            item = self.ready.popleft()
+            self.ready_bytes -= scan_bytes(item[0])
+            return item
 
     def expire(self) -> list[int]:
         """Drop (count, log) the labels that waited longer than ``match_timeout``."""
@@ -714,6 +736,7 @@ class Pairing:
         with self._cond:
             n = len(self.ready)
             self.ready.clear()
+            self.ready_bytes = 0
             return n
 
 
@@ -740,7 +763,7 @@ class Acknowledgements:
         if act.origin is None:
             return
         if not journaled:
-            self.labels.add(act.origin, act.seq)
+            self.labels.add(act.origin, act.seq, kept=False)
         self.pending.add(act.origin)
         self.count += 1
 

@@ -55,11 +55,11 @@ def test_it_refuses_an_unknown_method_or_person_before_teaching(bench):
 
 
 def test_a_learners_journal_gives_the_labels_it_holds_and_is_left_as_it_was(bench, tmp_path):
-    from client.roles.learner import LearnerCore
+    from client.lineage import Lineage
     from protocol.messages import Withdrawal
 
     out = tmp_path / "tree.rhbl"
-    core = LearnerCore(out, features="wall", teacher="person")
+    core = Lineage(out, features="wall", teacher="person")
     rng = np.random.default_rng(2)
     scans = [(rng.uniform(0.2, 3.0, 360).astype(np.float32), float(rng.uniform(-3, 3)))
              for _ in range(60)]

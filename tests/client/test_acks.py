@@ -10,7 +10,7 @@ import pytest
 
 from client.journal import Journal, LabelSet, _frame, journal_path
 from client.labels import Acknowledgements, Outbox, Pairing
-from client.roles.learner import LearnerCore
+from client.lineage import Lineage
 from protocol.messages import LabeledScan, Scan, TeacherAction
 
 
@@ -39,8 +39,23 @@ def test_label_set_is_bounded():
     upto, above = ls.ack("a")
     assert len(above) <= 10 and upto > 1 and ("a", 13) in ls
     for o in "bcd":
-        ls.add(o, 0)
-    assert ls.origins() == ["b", "c", "d"]  # the least recently seen origin forgotten
+        ls.add(o, 0, kept=False)  # refused labels only: at most 3 such origins kept
+    assert ls.origins() == ["a", "b", "c", "d"]
+    ls.add("e", 0, kept=False)
+    assert ls.origins() == ["a", "c", "d", "e"]  # the least recently seen of them forgotten
+    ls.add("c", 1)  # journaled: kept for good
+    for o in "fgh":
+        ls.add(o, 0, kept=False)
+    assert ls.origins() == ["a", "c", "f", "g", "h"]
+
+
+def test_label_set_keeps_every_session_with_a_journaled_label():
+    """Issue 36.5: past 256 sessions the learner forgot the least recent one and journaled its
+    resent labels again."""
+    ls = LabelSet()
+    for i in range(1000):
+        assert ls.add(f"s{i}", 0)
+    assert all(not ls.add(f"s{i}", 0) for i in range(1000))  # resends: held, every one
 
 
 @pytest.mark.parametrize("bad", ["x", {"a": 3}, {"a": [1]}, {"a": [1, "x"]}, {"a": [1, [2.5]]},
@@ -67,18 +82,18 @@ def test_journal_records_carry_the_label_identity_and_old_records_still_load(tmp
 
 
 # ---- the learner's deduplication ----------------------------------------------------------
-def _learn(core: LearnerCore, origin: str, seqs) -> list:
+def _learn(core: Lineage, origin: str, seqs) -> list:
     return [core.learn(100 + q, 0.1 * q, _ranges(q), 0.0, "fwd", origin, q) for q in seqs]
 
 
 def test_a_label_learned_twice_is_journaled_once_also_after_recovery(tmp_path):
     out = tmp_path / "t.rhbl"
-    core = LearnerCore(out, features="wall")
+    core = Lineage(out, features="wall")
     assert None not in _learn(core, "s1", range(5))
     assert _learn(core, "s1", [3]) == [None]  # resent: not journaled, not learned
     assert core.applied == 5 and len(core.journal) == 5
     core.journal.sync()  # "crash" before any snapshot: recovery from the journal alone
-    again = LearnerCore(out, features="wall")
+    again = Lineage(out, features="wall")
     assert again.labels.ack("s1") == (5, ())
     got = _learn(again, "s1", [0, 4, 5])
     assert got[:2] == [None, None] and got[2] is not None  # held twice; seq 5 is new
@@ -93,14 +108,14 @@ def test_a_label_learned_twice_is_journaled_once_also_after_recovery(tmp_path):
 
 def test_folding_keeps_what_deduplication_needs(tmp_path):
     out = tmp_path / "t.rhbl"
-    core = LearnerCore(out, features="wall", fold_journal=True)
+    core = Lineage(out, features="wall", fold_journal=True)
     _learn(core, "s1", [0, 1, 2, 4])
     _learn(core, "s2", [0])
     core.snapshot()  # folds every record into the snapshot
     assert core.journal.base == 5 and list(core.journal.records(5)) == []
     _learn(core, "s1", [5])  # only in the journal
     core.journal.sync()
-    again = LearnerCore(out, features="wall", fold_journal=True)  # killed, restarted
+    again = Lineage(out, features="wall", fold_journal=True)  # killed, restarted
     assert again.labels.ack("s1") == (3, (4, 5)) and again.labels.ack("s2") == (1, ())
     assert _learn(again, "s1", [1, 4, 5]) == [None, None, None]
     assert _learn(again, "s1", [3])[0] is not None  # the missing one is learned
@@ -183,13 +198,13 @@ def test_resends_to_a_learner_that_cannot_journal_are_kept_once(tmp_path):
 
     from client.roles.learner import LearnerProcess
 
-    core = LearnerCore(tmp_path / "t.rhbl", features="wall")
+    core = Lineage(tmp_path / "t.rhbl", features="wall")
     assert None not in _learn(core, "s1", [0])
     core.journal.close()  # every append now raises JournalError
     p = LearnerProcess.__new__(LearnerProcess)
-    p.core, p.backlog, p.waiting = core, deque(), set()
+    p.lineage, p.backlog, p.waiting = core, deque(), set()
     p.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0, "duplicates": 0}
-    p.retry_at, p.failures = 0.0, 0
+    p.retry_at, p.failures, p.backlog_bytes = 0.0, 0, 0
     p.acks = Acknowledgements(lambda _data: None, core.labels)
     for _ in range(10):  # seq 1, resent ten times while the journal fails
         p.learn(_scan(1), TeacherAction(scan_id=1, action="fwd", origin="s1", seq=1))

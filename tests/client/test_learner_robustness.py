@@ -83,7 +83,7 @@ def test_disk_full_keeps_labels_in_memory_and_journals_them_later(free_port, tmp
             first = teach(5)
             _wait(lambda: _records(out) == first, 20, "the first records", proc)
             flag.write_text("")  # the disk is full
-            bad = teach(1, beams=1)  # a scan the features cannot use: dropped, no crash
+            bad = teach(1, beams=1)  # a scan not of this laser: refused, no crash
             held = teach(20)
             assert proc.wait_for_line("cannot write the journal", 20), (
                 f"timed out waiting for the journal error:\n{proc.output()}")
@@ -100,7 +100,7 @@ def test_disk_full_keeps_labels_in_memory_and_journals_them_later(free_port, tmp
         finally:
             proc.kill()  # nothing if it ended
     text = proc.output()
-    assert f"scan {bad[0]} dropped" in text, text
+    assert f"scan {bad[0]} claims 1 beams" in text and "refused" in text, text
     assert "the journal is writable again" in text, text
     assert "Traceback" not in text, text
 
@@ -108,12 +108,12 @@ def test_disk_full_keeps_labels_in_memory_and_journals_them_later(free_port, tmp
 # runs the learner with every learning step slowed down (a learner that falls behind)
 _SLOW = """
 import sys, time
-import client.roles.learner as L
-_learn = L.LearnerCore.learn
+import client.lineage as L
+_learn = L.Lineage.learn
 def slow(self, *args, **kwargs):
     time.sleep(0.02)
     return _learn(self, *args, **kwargs)
-L.LearnerCore.learn = slow
+L.Lineage.learn = slow
 from lab.cli import main
 sys.exit(main(sys.argv[1:]))
 """

@@ -1,5 +1,5 @@
 """A person's labels in the learner: paired with the scan ``lag`` scans before the one they
-name (``Pairing(lag=...)``), learned by the majority of their neighbours (``LearnerCore``
+name (``Pairing(lag=...)``), learned by the majority of their neighbours (``Lineage``
 with ``teacher="person"``), and rebuilt from the whole journal after a crash."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 from client.behaviour.learning import load_snapshot
 from client.behaviour.teaching import PersonLearner
 from client.labels import Pairing
-from client.roles.learner import LearnerCore
+from client.lineage import Lineage
 from process.runtime import ProcessError
 from protocol.messages import LabeledScan, Scan, TeacherAction
 
@@ -102,7 +102,7 @@ def test_a_window_pairs_each_label_with_its_own_scan_and_the_scans_before():
 
 def test_an_estimated_lag_is_journaled_and_a_restart_rebuilds_the_same_tree(tmp_path):
     out = tmp_path / "t.rhbl"
-    core = LearnerCore(out, features="wall", teacher="person", lag=None)  # --lag auto
+    core = Lineage(out, features="wall", teacher="person", lag=None)  # --lag auto
     assert core.person and core.estimates and core.lag is None
     rng = np.random.default_rng(5)
     scans = [(rng.uniform(0.2, 3.0, 360).astype(np.float32), float(rng.uniform(-3, 3)))
@@ -119,17 +119,17 @@ def test_an_estimated_lag_is_journaled_and_a_restart_rebuilds_the_same_tree(tmp_
     core.close()
     _clf, _f, _a, meta = load_snapshot(out)
     assert meta["learning"]["lag"] is None and meta["learning"]["estimated_lag"] == lag
-    again = LearnerCore(out, features="wall")
+    again = Lineage(out, features="wall")
     assert again.estimates and again.learner.estimated_lag == lag
     assert again.learner.lag_agreement == agree
     assert again.learner.classifier.tree_equal(core.learner.classifier)
     assert "the lag estimated" in again.describe()
     again.close()
     with pytest.raises(ProcessError, match="--lag must be 0..6"):
-        LearnerCore(tmp_path / "n.rhbl", features="wall", teacher="person", lag=7)
+        Lineage(tmp_path / "n.rhbl", features="wall", teacher="person", lag=7)
 
 
-def _feed(core: LearnerCore, n: int, seed: int, start_id: int = 0) -> None:
+def _feed(core: Lineage, n: int, seed: int, start_id: int = 0) -> None:
     rng = np.random.default_rng(seed)
     for k in range(n):
         ranges = rng.uniform(0.2, 3.0, 360).astype(np.float32)
@@ -139,7 +139,7 @@ def _feed(core: LearnerCore, n: int, seed: int, start_id: int = 0) -> None:
 
 def test_a_persons_lineage_is_rebuilt_from_its_whole_journal(tmp_path):
     out = tmp_path / "t.rhbl"
-    core = LearnerCore(out, features="wall", teacher="person", lag=2)
+    core = Lineage(out, features="wall", teacher="person", lag=2)
     assert core.person and core.lag == 2 and isinstance(core.learner, PersonLearner)
     _feed(core, 60, seed=0)
     core.snapshot()
@@ -148,10 +148,10 @@ def test_a_persons_lineage_is_rebuilt_from_its_whole_journal(tmp_path):
     _clf, _f, _a, meta = load_snapshot(out)
     assert meta["learning"]["rule"] == "person" and meta["learning"]["lag"] == 2
     # "crash": the lineage keeps its rule (the default teacher is the script) and its lag
-    again = LearnerCore(out, features="wall")
+    again = Lineage(out, features="wall")
     assert again.person and again.lag == 2
     assert again.replayed == 90 and again.applied == 90 and len(again.labels) == 90
-    ref = LearnerCore(tmp_path / "ref.rhbl", features="wall", teacher="person", lag=2)
+    ref = Lineage(tmp_path / "ref.rhbl", features="wall", teacher="person", lag=2)
     _feed(ref, 60, seed=0)
     _feed(ref, 30, seed=1, start_id=60)
     assert again.learner.classifier.tree_equal(ref.learner.classifier)
@@ -160,27 +160,27 @@ def test_a_persons_lineage_is_rebuilt_from_its_whole_journal(tmp_path):
     for c in (core, again, ref):
         c.close()
     with pytest.raises(ProcessError, match="fold-journal"):
-        LearnerCore(out, fold_journal=True)
+        Lineage(out, fold_journal=True)
     with pytest.raises(ProcessError, match="cannot --resume"):
-        LearnerCore(tmp_path / "r.rhbl", resume=str(out), teacher="person")
+        Lineage(tmp_path / "r.rhbl", resume=str(out), teacher="person")
     with pytest.raises(ProcessError, match="fold-journal"):
-        LearnerCore(tmp_path / "f.rhbl", features="wall", teacher="person", fold_journal=True)
+        Lineage(tmp_path / "f.rhbl", features="wall", teacher="person", fold_journal=True)
     assert not (tmp_path / "f.rhbl.journal").exists()  # refused before anything was written
     with pytest.raises(ProcessError, match="--lag"):
-        LearnerCore(tmp_path / "n.rhbl", features="wall", teacher="person", lag=-1)
+        Lineage(tmp_path / "n.rhbl", features="wall", teacher="person", lag=-1)
 
 
 def test_a_new_persons_lineage_takes_the_vote_asked_for_and_keeps_it(tmp_path):
     out = tmp_path / "t.rhbl"
-    core = LearnerCore(out, features="wall", teacher="person", vote="median-turn")
+    core = Lineage(out, features="wall", teacher="person", vote="median-turn")
     assert core.learner.vote == "median-turn"
     _feed(core, 60, seed=0)
     core.snapshot()
     core.close()
     assert load_snapshot(out)[3]["learning"]["vote"] == "median-turn"
-    again = LearnerCore(out, features="wall")  # the journal's header keeps it
+    again = Lineage(out, features="wall")  # the journal's header keeps it
     assert again.learner.vote == "median-turn" and "median-turn vote" in again.describe()
-    ref = LearnerCore(tmp_path / "ref.rhbl", features="wall", teacher="person",
+    ref = Lineage(tmp_path / "ref.rhbl", features="wall", teacher="person",
                       vote="median-turn")
     _feed(ref, 60, seed=0)
     assert again.learner.classifier.tree_equal(ref.learner.classifier)
@@ -188,13 +188,13 @@ def test_a_new_persons_lineage_takes_the_vote_asked_for_and_keeps_it(tmp_path):
         c.close()
     for kw in ({"teacher": "script"}, {"teacher": "auto", "fold_journal": True}):
         with pytest.raises(ProcessError, match="--vote is the person rule's"):
-            LearnerCore(tmp_path / "s.rhbl", features="wall", vote="mean", **kw)
+            Lineage(tmp_path / "s.rhbl", features="wall", vote="mean", **kw)
     with pytest.raises(ProcessError, match="--vote must be one of"):
-        LearnerCore(tmp_path / "b.rhbl", features="wall", teacher="person", vote="loudest")
+        Lineage(tmp_path / "b.rhbl", features="wall", teacher="person", vote="loudest")
 
 
 def test_the_majority_outvotes_a_wrong_key(tmp_path):
-    cores = {"person": LearnerCore(tmp_path / "t.rhbl", features="wall", teacher="person")}
+    cores = {"person": Lineage(tmp_path / "t.rhbl", features="wall", teacher="person")}
     rng = np.random.default_rng(3)
     base = rng.uniform(1.0, 2.0, 360).astype(np.float32)
     for k in range(40):

@@ -4,7 +4,9 @@ labels paired with their scans under a flood of scans, in bounded memory."""
 from __future__ import annotations
 
 import logging
+import os
 import threading
+import time
 import tracemalloc
 
 import numpy as np
@@ -13,14 +15,14 @@ import pytest
 from client.behaviour.learning import load_snapshot
 from client.journal import Journal, journal_path
 from client.labels import Pairing
-from client.roles.learner import LearnerCore
+from client.lineage import Lineage
 from process.runtime import ProcessError
 from protocol.messages import Scan, TeacherAction
 
 LABELS = ["fwd", "fwd-left", "rot-left", "fwd-right", "rot-right"]
 
 
-def _feed(core: LearnerCore, n: int, seed: int, start_id: int = 0) -> None:
+def _feed(core: Lineage, n: int, seed: int, start_id: int = 0) -> None:
     rng = np.random.default_rng(seed)
     for k in range(n):
         ranges = rng.uniform(0.2, 3.0, 360).astype(np.float32)
@@ -30,15 +32,15 @@ def _feed(core: LearnerCore, n: int, seed: int, start_id: int = 0) -> None:
 
 def test_snapshot_provenance_and_recovery_after_a_crash(tmp_path):
     out = tmp_path / "t.rhbl"
-    core = LearnerCore(out, features="wall")
+    core = Lineage(out, features="wall")
     _feed(core, 40, seed=0)
     core.snapshot()
     _feed(core, 25, seed=1, start_id=40)  # not in any snapshot: only in the journal
     core.journal.sync()
     # "crash": no close, no final snapshot; a new core rebuilds from snapshot + journal
-    again = LearnerCore(out, features="wall")
+    again = Lineage(out, features="wall")
     assert again.replayed == 25 and again.applied == 65
-    ref = LearnerCore(tmp_path / "ref.rhbl", features="wall")
+    ref = Lineage(tmp_path / "ref.rhbl", features="wall")
     _feed(ref, 40, seed=0)
     _feed(ref, 25, seed=1, start_id=40)
     assert again.learner.classifier.tree_equal(ref.learner.classifier)
@@ -53,43 +55,43 @@ def test_snapshot_provenance_and_recovery_after_a_crash(tmp_path):
 
 def test_crash_before_the_first_snapshot_replays_everything(tmp_path):
     out = tmp_path / "t.rhbl"
-    core = LearnerCore(out, features="maze")
+    core = Lineage(out, features="maze")
     _feed(core, 30, seed=2)
     core.close()
     assert not out.exists()
-    again = LearnerCore(out)  # features come from the journal's header
+    again = Lineage(out)  # features come from the journal's header
     assert again.replayed == 30 and again.features.heading == "lr"
     again.close()
 
 
 def test_resume_starts_a_new_lineage_and_guards_paths(tmp_path):
     base = tmp_path / "base.rhbl"
-    core = LearnerCore(base, features="wall")
+    core = Lineage(base, features="wall")
     _feed(core, 30, seed=3)
     core.snapshot()
     core.close()
-    ext = LearnerCore(tmp_path / "ext.rhbl", resume=str(base))
+    ext = Lineage(tmp_path / "ext.rhbl", resume=str(base))
     _feed(ext, 10, seed=4)
     ext.snapshot()
     meta = load_snapshot(ext.out)[3]
     assert meta["provenance"]["parent"] == str(base.resolve())
     assert meta["provenance"]["vectors"] == 40 and meta["provenance"]["labeled"] == 10
-    assert ext.journal.lineage != LearnerCore(base).journal.lineage
+    assert ext.journal.lineage != Lineage(base).journal.lineage
     ext.close()
     with pytest.raises(ProcessError, match="other features"):
-        LearnerCore(tmp_path / "x.rhbl", resume=str(base), features="maze")
+        Lineage(tmp_path / "x.rhbl", resume=str(base), features="maze")
     with pytest.raises(ProcessError, match="choose another --out"):
-        LearnerCore(base, resume=str(tmp_path / "ext.rhbl"))
+        Lineage(base, resume=str(tmp_path / "ext.rhbl"))
     with pytest.raises(ProcessError, match="cannot continue"):
-        LearnerCore(base, features="maze")
+        Lineage(base, features="maze")
     (tmp_path / "plain.rhbl").write_bytes(base.read_bytes())
     with pytest.raises(ProcessError, match="has no journal"):
-        LearnerCore(tmp_path / "plain.rhbl", features="wall")
+        Lineage(tmp_path / "plain.rhbl", features="wall")
 
 
 def test_snapshot_ahead_of_its_journal_is_an_error(tmp_path):
     out = tmp_path / "t.rhbl"
-    core = LearnerCore(out, features="wall")
+    core = Lineage(out, features="wall")
     _feed(core, 20, seed=5)
     core.snapshot()
     core.close()
@@ -97,12 +99,12 @@ def test_snapshot_ahead_of_its_journal_is_an_error(tmp_path):
     data = jp.read_bytes()
     jp.write_bytes(data[: len(data) // 2])  # lose records (more than a torn tail)
     with pytest.raises(ProcessError, match="lost records"):
-        LearnerCore(out)
+        Lineage(out)
 
 
 def test_a_new_tree_needs_features(tmp_path):
     with pytest.raises(ProcessError, match="needs --features"):
-        LearnerCore(tmp_path / "t.rhbl")
+        Lineage(tmp_path / "t.rhbl")
 
 
 # ---- pairing under a flood of scans -----------------------------------------------------------
@@ -179,7 +181,7 @@ def test_a_scan_flood_stays_bounded_and_every_label_whose_scan_arrived_is_learne
     assert peak < (buffer + len(labeled)) * one * 2 + 2_000_000, peak
 
     out = tmp_path / "flood.rhbl"
-    core = LearnerCore(out, features="wall")
+    core = Lineage(out, features="wall")
     while (item := pairing.get(0.0)) is not None:
         scan, act = item
         core.learn(scan.id, scan.ts, scan.ranges, float(scan.pose[2]), act.action)
@@ -223,17 +225,61 @@ def test_a_resumed_learner_says_the_vectors_its_tree_holds(tmp_path):
     """A new lineage extending a tree starts with that tree's vectors, not with "0 vectors"
     (its own journal is empty: the first line said "0 vectors so far, 776 nodes")."""
     base = tmp_path / "base.rhbl"
-    core = LearnerCore(base, features="wall")
+    core = Lineage(base, features="wall")
     _feed(core, 30, seed=4)
     core.snapshot()
     nodes = core.learner.nodes
     core.close()
-    ext = LearnerCore(tmp_path / "ext.rhbl", resume=str(base))
+    ext = Lineage(tmp_path / "ext.rhbl", resume=str(base))
     said = ext.describe()
     assert f"30 vectors so far (0 journaled in lineage {ext.journal.lineage}), {nodes} nodes" in said
     assert ext.journal.header["fork"] == {"lineage": core.journal.lineage, "records": 30}
     ext.close()
-    fresh = LearnerCore(tmp_path / "fresh.rhbl", features="wall")
+    fresh = Lineage(tmp_path / "fresh.rhbl", features="wall")
     assert "0 vectors so far (0 journaled" in fresh.describe() and fresh.describe().endswith(
         "1 nodes")
     fresh.close()
+
+
+def test_one_learner_per_lineage_and_no_stale_lock_after_a_kill(tmp_path):
+    """Issue 36.1: two learners on one lineage both journaled every label and left a journal
+    no learner could open. The lineage's lock refuses a second holder, naming the first's pid;
+    a SIGKILLed holder leaves no stale lock; ``wait`` waits for a holder that ends."""
+    import subprocess
+    import sys
+
+    from client.lineage import LineageLock, lock_path
+
+    def holder(path) -> str:
+        return path.read_text().strip() if path.exists() else ""
+
+    out = tmp_path / "t.rhbl"
+    hold = ("import sys, time\nfrom client.lineage import LineageLock\n"
+            "lock = LineageLock(sys.argv[1])\ntime.sleep(120)\n")
+    holders = []
+    try:
+        for _ in range(2):
+            proc = subprocess.Popen([sys.executable, "-c", hold, str(out)])
+            holders.append(proc)
+            end = time.monotonic() + 30
+            while holder(lock_path(out)) != str(proc.pid):
+                assert time.monotonic() < end and proc.poll() is None, "the holder never locked"
+                time.sleep(0.02)
+            with pytest.raises(ProcessError, match=f"held by another learner \\(pid {proc.pid}"):
+                Lineage(out, features="wall")
+            assert not journal_path(out).exists()  # refused before anything was written
+            if len(holders) == 1:
+                proc.kill()  # SIGKILL: the OS drops its lock
+                proc.wait(10)
+                lock = LineageLock(out)  # not stale
+                lock.close()
+        # a holder that ends while we wait (a learner draining after SIGTERM)
+        threading.Timer(0.5, holders[1].terminate).start()
+        t0 = time.monotonic()
+        core = Lineage(out, features="wall", lock_wait=30)
+        assert time.monotonic() - t0 < 30 and holder(lock_path(out)) == str(os.getpid())
+        core.close()
+    finally:
+        for proc in holders:
+            proc.kill()
+            proc.wait(10)

@@ -13,8 +13,8 @@ from client.behaviour.learning import load_snapshot
 from client.behaviour.teaching import MAX_LAG, PersonLearner
 from client.journal import Journal, journal_path
 from client.labels import PERSON_SOURCES, SOURCE, Pairing, by_person
+from client.lineage import Lineage
 from client.recording.mcap_file import RecordingWriter
-from client.roles.learner import LearnerCore
 from lab.retrain import first_label_source, retrain
 from protocol import keys
 from protocol.messages import Scan, TeacherAction, Withdrawal
@@ -48,8 +48,8 @@ def test_the_pairing_shifts_a_persons_labels_only():
     assert p.get(0.0)[0].id == 10 and p.recent == {}
 
 
-def _core(tmp_path, name: str = "t", **kw) -> LearnerCore:
-    return LearnerCore(tmp_path / f"{name}.rhbl", features="wall", teacher="auto", **kw)
+def _core(tmp_path, name: str = "t", **kw) -> Lineage:
+    return Lineage(tmp_path / f"{name}.rhbl", features="wall", teacher="auto", **kw)
 
 
 @pytest.mark.parametrize(("source", "person"), [("console", True), ("keyboard", True),
@@ -74,7 +74,7 @@ def test_the_first_label_chooses_the_rule_and_the_journal_keeps_it(tmp_path, sou
     assert ((load_snapshot(core.out)[3].get("learning") or {}).get("rule") == "person") is person
     # a restart keeps the lineage's rule, whatever --teacher says now
     for teacher in ("auto", "script"):
-        again = LearnerCore(core.out, features="wall", teacher=teacher)
+        again = Lineage(core.out, features="wall", teacher=teacher)
         assert again.person is person and len(again.journal) == 30
         again.close()
 
@@ -88,10 +88,10 @@ def test_a_fixed_lag_shifts_a_persons_first_label(tmp_path):
 
 
 def test_forced_rules_and_the_cases_auto_cannot_choose_the_person_rule(tmp_path):
-    forced = LearnerCore(tmp_path / "p.rhbl", features="wall", teacher="person")
+    forced = Lineage(tmp_path / "p.rhbl", features="wall", teacher="person")
     assert not forced.undecided and forced.person and journal_path(forced.out).exists()
     forced.close()
-    script = LearnerCore(tmp_path / "s.rhbl", features="wall", teacher="script")
+    script = Lineage(tmp_path / "s.rhbl", features="wall", teacher="script")
     assert not script.undecided and not script.person
     rng = np.random.default_rng(1)
     script.learn(0, 0.0, _ranges(rng), 0.0, "fwd", source="console")  # forced: stays script
@@ -101,7 +101,7 @@ def test_forced_rules_and_the_cases_auto_cannot_choose_the_person_rule(tmp_path)
     # auto cannot take the person rule with --fold-journal or --resume: the scripted one
     for kw in ({"fold_journal": True}, {"resume": str(tmp_path / "s.rhbl")}):
         name = "f" if "fold_journal" in kw else "r"
-        core = LearnerCore(tmp_path / f"{name}.rhbl", features="wall", teacher="auto", **kw)
+        core = Lineage(tmp_path / f"{name}.rhbl", features="wall", teacher="auto", **kw)
         assert not core.undecided and not core.person
         core.learn(0, 0.0, _ranges(rng), 0.0, "fwd", source="console")
         assert not core.person

@@ -13,7 +13,7 @@ import pytest
 
 from client.journal import Journal, JournalWithdrawal, LabelSet, Withdrawals, journal_path
 from client.labels import Acknowledgements, Outbox
-from client.roles.learner import LearnerCore
+from client.lineage import Lineage
 from protocol.messages import LearnerAck, Scan, Withdrawal
 
 LABELS = ["fwd", "fwd-left", "rot-left", "fwd-right", "rot-right"]
@@ -27,14 +27,14 @@ def _label(k: int) -> str:
     return LABELS[k % 5]
 
 
-def _teach(core: LearnerCore, origin: str, seqs, base: int = 0) -> list:
+def _teach(core: Lineage, origin: str, seqs, base: int = 0) -> list:
     return [core.learn(base + q, 0.1 * q, _ranges(base + q), 0.0, _label(base + q), origin, q)
             for q in seqs]
 
 
-def _reference(path, items) -> LearnerCore:
+def _reference(path, items) -> Lineage:
     """A tree learned from ``items`` ((origin, seq, base)) only, in that order."""
-    ref = LearnerCore(path, features="wall")
+    ref = Lineage(path, features="wall")
     for origin, q, base in items:
         ref.learn(base + q, 0.1 * q, _ranges(base + q), 0.0, _label(base + q), origin, q)
     return ref
@@ -45,8 +45,8 @@ def _expected():
             + [("s2", q, 1000) for q in range(10)])
 
 
-def _taught(out) -> LearnerCore:
-    core = LearnerCore(out, features="wall")
+def _taught(out) -> Lineage:
+    core = Lineage(out, features="wall")
     _teach(core, "s1", range(30))
     _teach(core, "s2", range(10), base=1000)
     return core
@@ -146,13 +146,13 @@ def test_withdrawn_labels_leave_the_tree_and_never_come_back(tmp_path):
     assert standing == [(o, q) for o, q, _ in _expected()]
     core.journal.sync()
     # "crash" before any snapshot: recovery from the journal alone rebuilds without them
-    again = LearnerCore(out, features="wall")
+    again = Lineage(out, features="wall")
     assert again.learner.classifier.tree_equal(ref.learner.classifier)
     assert again.holds("s1", 15) and again.withdrawals.holds("s1", 0) and again.standing == 30
     again.snapshot()
     again.close()
     # from the snapshot written after the withdrawal
-    third = LearnerCore(out, features="wall")
+    third = Lineage(out, features="wall")
     assert third.learner.classifier.tree_equal(ref.learner.classifier)
     assert third.withdrawals.acked("s1") == 1 and third.holds("s1", 19) and third.standing == 30
     for c in (core, third, ref):
@@ -165,7 +165,7 @@ def test_a_withdrawal_after_the_last_snapshot_is_applied_on_recovery(tmp_path):
     core.snapshot()  # holds s1 10..19
     assert core.withdraw(W)
     core.journal.sync()  # killed before rebuilding or snapshotting
-    again = LearnerCore(out, features="wall")
+    again = Lineage(out, features="wall")
     ref = _reference(tmp_path / "ref.rhbl", _expected())
     assert again.learner.classifier.tree_equal(ref.learner.classifier)
     assert again.rebuilds == 1 and again.replayed == 1
@@ -184,7 +184,7 @@ def test_withdrawing_labels_the_learner_never_journaled_needs_no_rebuild(tmp_pat
 
 def test_a_folded_journal_cannot_take_withdrawn_labels_out_of_the_tree(tmp_path, caplog):
     out = tmp_path / "t.rhbl"
-    core = LearnerCore(out, features="wall", fold_journal=True)
+    core = Lineage(out, features="wall", fold_journal=True)
     _teach(core, "s1", range(30))
     core.snapshot()  # folds records 0..29
     assert core.withdraw(W)
@@ -215,3 +215,28 @@ def test_a_tombstone_record_reads_back(tmp_path):
         recs = list(j.records())
         assert recs[1] == JournalWithdrawal(1, "s1", 0, 0, 1, 2.5, "discard episode 1")
         assert list(j.standing()) == [] and len(list(j.standing(stop=1))) == 1
+
+
+def test_a_withdrawal_far_past_the_labels_held_is_refused_and_the_later_labels_learned(
+        tmp_path):
+    """Issue 36.4: a withdrawal with ``first`` = 10^9 from a session that gave labels 0-9 made
+    the learner give up on seqs 10..999999999: every later label was acknowledged, never
+    learned. It is refused (nothing journaled, not held), and labels 10-19 are journaled."""
+    from client.lineage import AHEAD, Refused
+
+    out = tmp_path / "t.rhbl"
+    core = Lineage(out, features="wall")
+    _teach(core, "s1", range(10))
+    far = Withdrawal(origin="s1", id=0, first=10**9, upto=10**9 + 5000)
+    with pytest.raises(Refused, match="s1 names labels 1000000000..1000004999") as refused:
+        core.withdraw(far)
+    assert refused.value.kind == "withdrawal_ahead"
+    assert not core.withdrawals.holds("s1", 0) and core.labels.ack("s1") == (10, ())
+    assert all(_teach(core, "s1", range(10, 20)))  # learned, not taken as held
+    # a withdrawal of labels still on their way (within the teacher's outbox) is held
+    assert core.withdraw(Withdrawal(origin="s1", id=1, first=25, upto=20 + AHEAD)) is False
+    core.close()
+    recs = list(Journal.open(journal_path(out)).records())
+    assert sum(not isinstance(r, JournalWithdrawal) for r in recs) == 20
+    assert [(r.first, r.upto) for r in recs if isinstance(r, JournalWithdrawal)] == [
+        (25, 20 + AHEAD)]

@@ -80,17 +80,17 @@ def test_bad_data_is_named(tmp_path, capsys):
 def _lineage(tmp_path, rows=200):
     """A learner's tree (journaled), then a tree extending it (rhbl learner --resume) that
     learned nothing more: its own journal is empty."""
-    from client.roles.learner import LearnerCore
+    from client.lineage import Lineage
 
     rng = np.random.default_rng(5)
     teacher = ReactiveFollower()
-    base = LearnerCore(tmp_path / "base.rhbl", features="wall")
+    base = Lineage(tmp_path / "base.rhbl", features="wall")
     for i in range(rows):
         ranges = np.repeat(rng.uniform(0.2, 2.5, 24), 15).astype(np.float32)
         base.learn(i, 0.1 * i, ranges, 0.0, teacher.act(ranges))
     base.snapshot()
     base.close()
-    ext = LearnerCore(tmp_path / "resumed.rhbl", resume=str(tmp_path / "base.rhbl"))
+    ext = Lineage(tmp_path / "resumed.rhbl", resume=str(tmp_path / "base.rhbl"))
     ext.snapshot()
     ext.close()
     return tmp_path / "base.rhbl", tmp_path / "resumed.rhbl"
