@@ -112,24 +112,30 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _policy_from(clf_bytes_or_path, features: str | None) -> TreePolicy:
-    from rhbl import load, loads
+    """The policy of a snapshot (bytes from the learner, or a file); a ``ProcessError`` in one
+    line naming the file (or "learner snapshot") for anything wrong with it."""
+    from rhbl import SnapshotError, load, loads
 
+    source = ("learner snapshot" if isinstance(clf_bytes_or_path, bytes | bytearray)
+              else str(clf_bytes_or_path))
     try:
         if isinstance(clf_bytes_or_path, bytes | bytearray):
-            clf = loads(bytes(clf_bytes_or_path), source="learner snapshot")
+            clf = loads(bytes(clf_bytes_or_path), source=source)
         else:
             clf = load(clf_bytes_or_path)
         meta = dict(clf.metadata or {})
         check_compatible(meta, FEATURES[features] if features else None)
+        spec, actions = FeatureSpec.from_dict(meta["features"]), ActionSet.from_dict(meta["actions"])
     except IncompatibleSnapshotError as exc:
-        raise ProcessError(f"controller: {exc}", EXIT_USAGE) from exc
+        raise ProcessError(f"controller: {source}: {exc}", EXIT_USAGE) from exc
     except FileNotFoundError as exc:
-        raise ProcessError(f"controller: snapshot {clf_bytes_or_path} does not exist",
-                           EXIT_USAGE) from exc
-    except Exception as exc:  # rhbl.SnapshotError
+        raise ProcessError(f"controller: snapshot {source} does not exist", EXIT_USAGE) from exc
+    except SnapshotError as exc:  # names the file
         raise ProcessError(f"controller: cannot load the tree: {exc}", EXIT_USAGE) from exc
-    return TreePolicy(clf, FeatureSpec.from_dict(meta["features"]),
-                      ActionSet.from_dict(meta["actions"]), meta)
+    except Exception as exc:  # noqa: BLE001 - its metadata: features or actions malformed
+        raise ProcessError(f"controller: cannot load the tree: {source}: invalid metadata: "
+                           f"{exc}", EXIT_USAGE) from exc
+    return TreePolicy(clf, spec, actions, meta)
 
 
 def load_tree(path: str, features: str | None = None) -> TreePolicy:

@@ -86,6 +86,7 @@ from process.runtime import EXIT_USAGE, Context, ProcessError, on_stop_signal
 from protocol import keys
 from protocol.decoding import Decoder
 from protocol.messages import Scan, TeacherAction, TreeNotice, Withdrawal
+from rhbl import SnapshotError
 
 __all__ = ["LearnerCore", "LearnerProcess", "Pairing", "add_arguments", "main"]
 
@@ -577,11 +578,13 @@ class LearnerCore:
 def _resume(path, spec: FeatureSpec | None) -> DemonstrationLearner:
     try:
         return DemonstrationLearner.resume(path, spec)
-    except IncompatibleSnapshotError as exc:
-        raise ProcessError(f"cannot extend {path}: {exc}", EXIT_USAGE) from exc
+    except IncompatibleSnapshotError as exc:  # names the file
+        raise ProcessError(f"cannot extend {exc}", EXIT_USAGE) from exc
     except FileNotFoundError as exc:
         raise ProcessError(f"snapshot {path} does not exist", EXIT_USAGE) from exc
-    except Exception as exc:  # rhbl.SnapshotError and friends
+    except SnapshotError as exc:  # names the file
+        raise ProcessError(f"cannot load snapshot {exc}", EXIT_USAGE) from exc
+    except Exception as exc:  # anything else a hostile snapshot makes fail
         raise ProcessError(f"cannot load snapshot {path}: {exc}", EXIT_USAGE) from exc
 
 
