@@ -239,6 +239,7 @@ class ControllerProcess:
                 "avoided": 0 if self.guard is None else self.guard.avoided,
                 "straight_on": 0 if self.guard is None else self.guard.straight_on,
                 "swaps": 0 if self.follower is None else self.follower.swaps,
+                "refused_trees": 0 if self.follower is None else self.follower.refused,
                 "dropped": {**self.client.decoder.counts,
                             **({} if self.follower is None else self.follower.decoder.counts)}}
 
@@ -367,6 +368,7 @@ class _Follower:
         self._want = threading.Event()
         self._stop = threading.Event()
         self.swaps = 0
+        self.refused = 0  # snapshots the learner gave that could not be loaded
         self.decoder = Decoder(log)
         ctx.subscriber(keys.learner_notice_key(ctx.robot), self._on_notice)
         self._thread = threading.Thread(target=self._loop, name="controller-follow", daemon=True)
@@ -402,13 +404,18 @@ class _Follower:
     def _fetch(self) -> None:
         try:
             data = fetch_snapshot(self.ctx.session, self.ctx.robot, self.args.query_timeout)
-            policy = _policy_from(data, self.args.features)
         except ProcessError as exc:
             log.warning("could not swap the tree: %s", exc)
             return
         except Exception as exc:  # noqa: BLE001 - the session closing under us
             if not self._stop.is_set():
                 log.warning("could not swap the tree: %s", exc)
+            return
+        try:
+            policy = _policy_from(data, self.args.features)
+        except ProcessError as exc:  # a malformed or unfit tree: this one keeps driving
+            self.refused += 1
+            log.warning("could not swap the tree: %s", exc)
             return
         self._swap(policy)
         self.swaps += 1
