@@ -9,16 +9,16 @@ A message states each field once, as a dataclass field made by :func:`wire` with
 :class:`Kind` (``Number()``, ``Integer(minimum=0)``, ``String(max_len=64)``, ``Vector(3)``,
 ...)::
 
-    @dataclass
-    class Pose(Message):
+    @message                                     # protocol.messages: dataclass + Layout
+    class Pose(_Message):
         ts: float = wire(Number())               # required: no default
         pose: tuple = wire(Vector(3))
         note: str = wire(String(), default="")   # optional on the wire, "" when absent
 
 and :class:`Layout` derives the rest from those fields: the JSON-schema fragments (``FIELDS``),
-``REQUIRED``, the map ``to_map`` writes (in the fields' order; a field whose value is None is
-left out) and ``from_map``'s checks (a missing required field, a field of the wrong kind: each a
-``DecodeError`` naming it).
+``REQUIRED``, the map ``to_map`` writes (in the fields' order; a field whose default is None is
+left out when None) and ``from_map``'s checks (a missing required field, a field of the wrong
+kind: each a ``DecodeError`` naming it).
 """
 
 from __future__ import annotations

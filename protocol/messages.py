@@ -151,7 +151,9 @@ RANGES = Ranges()
 
 def message(cls):
     """``cls`` as a dataclass with ``FIELDS``, ``REQUIRED`` and its map derived from its
-    fields (``protocol.codec.Layout``)."""
+    fields (``protocol.codec.Layout``). The map is written in the fields' order: where that
+    differs from the constructor's (``Scan``, ``LabeledScan``, ``Decision``, ``WorldInfo``),
+    the fields out of place are keyword-only."""
     cls = dataclass(cls)
     cls._layout = layout = Layout(cls)
     cls.FIELDS, cls.REQUIRED = layout.fields, layout.required
