@@ -42,6 +42,7 @@ from client.journal import (
 from client.labels import OUTBOX, by_person
 from process.runtime import EXIT_USAGE, ProcessError
 from protocol.messages import Withdrawal
+from rhbl import SnapshotError
 
 __all__ = ["AHEAD", "Lineage", "LineageLock", "Refused", "lock_path"]
 
@@ -605,9 +606,11 @@ class Lineage:
 def _resume(path, spec: FeatureSpec | None) -> DemonstrationLearner:
     try:
         return DemonstrationLearner.resume(path, spec)
-    except IncompatibleSnapshotError as exc:
-        raise ProcessError(f"cannot extend {path}: {exc}", EXIT_USAGE) from exc
+    except IncompatibleSnapshotError as exc:  # names the file
+        raise ProcessError(f"cannot extend {exc}", EXIT_USAGE) from exc
     except FileNotFoundError as exc:
         raise ProcessError(f"snapshot {path} does not exist", EXIT_USAGE) from exc
-    except Exception as exc:  # rhbl.SnapshotError and friends
+    except SnapshotError as exc:  # names the file
+        raise ProcessError(f"cannot load snapshot {exc}", EXIT_USAGE) from exc
+    except Exception as exc:  # anything else a hostile snapshot makes fail
         raise ProcessError(f"cannot load snapshot {path}: {exc}", EXIT_USAGE) from exc

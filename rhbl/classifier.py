@@ -597,7 +597,7 @@ def loads(data: bytes, *, source: str = "<bytes>") -> HypersphereClassifier:
     try:
         clf = HypersphereClassifier(**snap.params)
         clf._check_params()
-    except ValueError as exc:
+    except (ValueError, TypeError, OverflowError) as exc:
         raise SnapshotError(source, f"invalid parameters: {exc}") from None
     try:
         tree = SphereTree.from_arrays(**snap.arrays, distance=clf.distance, eps=clf.eps)
@@ -610,5 +610,6 @@ def loads(data: bytes, *, source: str = "<bytes>") -> HypersphereClassifier:
             metadata=snap.metadata,
             **snap.params,
         )
-    except ValueError as exc:
-        raise SnapshotError(source, str(exc)) from None
+    except (ValueError, TypeError, OverflowError, IndexError, MemoryError) as exc:
+        # whatever a hostile tree makes the checks raise: named, with the file
+        raise SnapshotError(source, str(exc) or type(exc).__name__) from None

@@ -30,6 +30,7 @@ parameters is checked there, by :meth:`rhbl.SphereTree.from_arrays` and
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import stat
 import tempfile
@@ -53,6 +54,9 @@ PARAMS = ("default_label", "distance", "spawn", "min_radius", "max_nodes", "max_
 # the tree's arrays a snapshot stores: field name -> (SphereTree.to_arrays name, dtype)
 _ARRAYS = {"centers": ("centers", "<f8"), "radii": ("radii", "<f8"), "parent": ("parent", "<i8"),
            "label_index": ("label", "<i8")}
+# the most features a snapshot may declare (a tree of laser features has tens; a declared size
+# beyond it is refused before any size is computed from it)
+MAX_FEATURES = 1 << 20
 
 
 @dataclass
@@ -199,23 +203,31 @@ def _get(doc: dict, key: str, types: type | tuple, source: str) -> Any:
     if key not in doc:
         raise SnapshotError(source, f"missing field {key!r}")
     value = doc[key]
-    if not isinstance(value, types):
+    if not isinstance(value, types) or types is int and isinstance(value, bool):
         raise SnapshotError(source, f"field {key!r} has type {type(value).__name__}")
     return value
+
+
+def _is_count(x: Any) -> bool:
+    """An integer >= 0 (a boolean is not one)."""
+    return isinstance(x, int) and not isinstance(x, bool) and x >= 0
 
 
 def _read_array(doc: dict, key: str, dtype: str, shape: tuple, source: str) -> np.ndarray:
     spec = _get(doc, key, dict, source)
     if spec.get("dtype") != dtype:
         raise SnapshotError(source, f"array {key!r} has dtype {spec.get('dtype')!r}, expected {dtype!r}")
-    if list(spec.get("shape", [])) != list(shape):
-        raise SnapshotError(source, f"array {key!r} has shape {spec.get('shape')}, expected {list(shape)}")
+    declared = spec.get("shape", [])
+    if not (isinstance(declared, list) and all(_is_count(d) for d in declared)
+            and declared == list(shape)):
+        raise SnapshotError(source, f"array {key!r} has shape {declared!r:.80}, expected {list(shape)}")
     raw = spec.get("data")
     if not isinstance(raw, bytes):
         raise SnapshotError(source, f"array {key!r} has no byte data")
-    want = int(np.prod(shape)) * np.dtype(dtype).itemsize
+    want = math.prod(shape) * np.dtype(dtype).itemsize  # Python ints: no wrap-around
     if len(raw) != want:
-        raise SnapshotError(source, f"array {key!r} has {len(raw)} bytes, expected {want}")
+        raise SnapshotError(source, f"array {key!r} has {len(raw)} bytes, expected {want} "
+                                    f"(shape {list(shape)} of {dtype})")
     return np.frombuffer(raw, dtype=np.dtype(dtype)).reshape(shape).astype(dtype[1:], copy=True)
 
 
@@ -241,19 +253,19 @@ def _from_dict(doc: Any, *, source: str = "<dict>") -> Snapshot:
     labels = _get(doc, "labels", list, source)
     radii_spec = _get(doc, "radii", dict, source)
     shape = radii_spec.get("shape")
-    if not (isinstance(shape, list) and len(shape) == 1 and isinstance(shape[0], int) and shape[0] >= 1):
-        raise SnapshotError(source, f"array 'radii' has an invalid shape {shape!r}")
+    if not (isinstance(shape, list) and len(shape) == 1 and _is_count(shape[0]) and shape[0] >= 1):
+        raise SnapshotError(source, f"array 'radii' has an invalid shape {shape!r:.80}")
     n = shape[0]
-    if n_features < 1:
-        raise SnapshotError(source, f"invalid n_features {n_features}")
+    if not 1 <= n_features <= MAX_FEATURES:
+        raise SnapshotError(source, f"invalid n_features {n_features}: expected 1..{MAX_FEATURES}")
     arrays = {
         name: _read_array(doc, field, dtype, (n, n_features) if field == "centers" else (n,), source)
         for field, (name, dtype) in _ARRAYS.items()
     }
     counters = _get(doc, "counters", dict, source)
     metadata = _get(doc, "metadata", dict, source)
-    try:
-        seen, skipped, relabelled = (int(counters[k]) for k in ("n_seen", "n_skipped", "n_relabelled"))
-    except (KeyError, TypeError, ValueError):
-        raise SnapshotError(source, "invalid counters") from None
+    seen, skipped, relabelled = (counters.get(k) for k in ("n_seen", "n_skipped", "n_relabelled"))
+    if not all(_is_count(c) for c in (seen, skipped, relabelled)):
+        raise SnapshotError(source, f"invalid counters {counters!r:.120}: expected n_seen, "
+                                    f"n_skipped and n_relabelled, integers >= 0")
     return Snapshot(params, labels, arrays, seen, skipped, relabelled, metadata)

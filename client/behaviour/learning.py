@@ -19,6 +19,7 @@ the tree itself spawns only on a label conflict (the paper's rule).
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import logging
 from collections.abc import Mapping
@@ -78,13 +79,29 @@ def check_compatible(meta: Mapping | None, features: FeatureSpec | Mapping | Non
 
 
 def load_snapshot(path: str | Path):
-    """(classifier, features, actions, metadata) of a snapshot written by this module."""
-    from rhbl import load
+    """(classifier, features, actions, metadata) of a snapshot written by this module. Every
+    error names the file: ``rhbl.SnapshotError`` (a malformed file, or metadata that names no
+    valid features or actions) or ``IncompatibleSnapshotError`` (no features or actions)."""
+    from rhbl import SnapshotError, load
 
     clf = load(path)
     meta = dict(clf.metadata or {})
-    check_compatible(meta)
-    return clf, FeatureSpec.from_dict(meta["features"]), ActionSet.from_dict(meta["actions"]), meta
+    with naming(path):
+        check_compatible(meta)
+    try:
+        features, actions = FeatureSpec.from_dict(meta["features"]), ActionSet.from_dict(meta["actions"])
+    except (ValueError, TypeError, KeyError, AttributeError) as exc:
+        raise SnapshotError(str(path), f"invalid metadata: {exc}") from None
+    return clf, features, actions, meta
+
+
+@contextlib.contextmanager
+def naming(path: str | Path):
+    """An ``IncompatibleSnapshotError`` raised inside names the file ``path``."""
+    try:
+        yield
+    except IncompatibleSnapshotError as exc:
+        raise IncompatibleSnapshotError(f"{path}: {exc}") from None
 
 
 class DemonstrationLearner:
@@ -286,13 +303,19 @@ class DemonstrationLearner:
         """Continue training a snapshot (features/actions come from its metadata; if given they
         must match it)."""
         clf, feats, acts, meta = load_snapshot(path)
-        check_compatible(meta, features, actions)
-        learning = meta.get("learning", {}) or {}
-        tree_params = meta.get("tree_params", {}) or {}
-        learner = cls(feats, acts, task=meta.get("task"), classifier=clf,
-                      stride=int(learning.get("stride", 1)),
-                      min_delta=float(learning.get("min_delta", 0.0)),
-                      parent=str(path), provenance=meta.get("provenance"), **tree_params)
+        with naming(path):
+            check_compatible(meta, features, actions)
+        try:
+            learning = meta.get("learning", {}) or {}
+            tree_params = meta.get("tree_params", {}) or {}
+            learner = cls(feats, acts, task=meta.get("task"), classifier=clf,
+                          stride=int(learning.get("stride", 1)),
+                          min_delta=float(learning.get("min_delta", 0.0)),
+                          parent=str(path), provenance=meta.get("provenance"), **tree_params)
+        except (ValueError, TypeError, AttributeError) as exc:
+            from rhbl import SnapshotError
+
+            raise SnapshotError(str(path), f"invalid metadata: {exc}") from None
         learner.parent = str(path)
         return learner
 
@@ -320,7 +343,8 @@ class TreePolicy:
     def load(cls, path: str | Path, features: FeatureSpec | None = None,
              actions: ActionSet | None = None) -> TreePolicy:
         clf, feats, acts, meta = load_snapshot(path)
-        check_compatible(meta, features, actions)
+        with naming(path):
+            check_compatible(meta, features, actions)
         return cls(clf, feats, acts, meta)
 
     @classmethod

@@ -112,24 +112,30 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _policy_from(clf_bytes_or_path, features: str | None) -> TreePolicy:
-    from rhbl import load, loads
+    """The policy of a snapshot (bytes from the learner, or a file); a ``ProcessError`` in one
+    line naming the file (or "learner snapshot") for anything wrong with it."""
+    from rhbl import SnapshotError, load, loads
 
+    source = ("learner snapshot" if isinstance(clf_bytes_or_path, bytes | bytearray)
+              else str(clf_bytes_or_path))
     try:
         if isinstance(clf_bytes_or_path, bytes | bytearray):
-            clf = loads(bytes(clf_bytes_or_path), source="learner snapshot")
+            clf = loads(bytes(clf_bytes_or_path), source=source)
         else:
             clf = load(clf_bytes_or_path)
         meta = dict(clf.metadata or {})
         check_compatible(meta, FEATURES[features] if features else None)
+        spec, actions = FeatureSpec.from_dict(meta["features"]), ActionSet.from_dict(meta["actions"])
     except IncompatibleSnapshotError as exc:
-        raise ProcessError(f"controller: {exc}", EXIT_USAGE) from exc
+        raise ProcessError(f"controller: {source}: {exc}", EXIT_USAGE) from exc
     except FileNotFoundError as exc:
-        raise ProcessError(f"controller: snapshot {clf_bytes_or_path} does not exist",
-                           EXIT_USAGE) from exc
-    except Exception as exc:  # rhbl.SnapshotError
+        raise ProcessError(f"controller: snapshot {source} does not exist", EXIT_USAGE) from exc
+    except SnapshotError as exc:  # names the file
         raise ProcessError(f"controller: cannot load the tree: {exc}", EXIT_USAGE) from exc
-    return TreePolicy(clf, FeatureSpec.from_dict(meta["features"]),
-                      ActionSet.from_dict(meta["actions"]), meta)
+    except Exception as exc:  # noqa: BLE001 - its metadata: features or actions malformed
+        raise ProcessError(f"controller: cannot load the tree: {source}: invalid metadata: "
+                           f"{exc}", EXIT_USAGE) from exc
+    return TreePolicy(clf, spec, actions, meta)
 
 
 def load_tree(path: str, features: str | None = None) -> TreePolicy:
@@ -233,6 +239,7 @@ class ControllerProcess:
                 "avoided": 0 if self.guard is None else self.guard.avoided,
                 "straight_on": 0 if self.guard is None else self.guard.straight_on,
                 "swaps": 0 if self.follower is None else self.follower.swaps,
+                "refused_trees": 0 if self.follower is None else self.follower.refused,
                 "dropped": {**self.client.decoder.counts,
                             **({} if self.follower is None else self.follower.decoder.counts)}}
 
@@ -361,6 +368,7 @@ class _Follower:
         self._want = threading.Event()
         self._stop = threading.Event()
         self.swaps = 0
+        self.refused = 0  # snapshots the learner gave that could not be loaded
         self.decoder = Decoder(log)
         ctx.subscriber(keys.learner_notice_key(ctx.robot), self._on_notice)
         self._thread = threading.Thread(target=self._loop, name="controller-follow", daemon=True)
@@ -396,13 +404,18 @@ class _Follower:
     def _fetch(self) -> None:
         try:
             data = fetch_snapshot(self.ctx.session, self.ctx.robot, self.args.query_timeout)
-            policy = _policy_from(data, self.args.features)
         except ProcessError as exc:
             log.warning("could not swap the tree: %s", exc)
             return
         except Exception as exc:  # noqa: BLE001 - the session closing under us
             if not self._stop.is_set():
                 log.warning("could not swap the tree: %s", exc)
+            return
+        try:
+            policy = _policy_from(data, self.args.features)
+        except ProcessError as exc:  # a malformed or unfit tree: this one keeps driving
+            self.refused += 1
+            log.warning("could not swap the tree: %s", exc)
             return
         self._swap(policy)
         self.swaps += 1
