@@ -190,6 +190,7 @@ class LabelSet:
         self.max_above, self.max_origins = int(max_above), int(max_origins)
         self._o: dict[str, tuple[int, set[int]]] = {}  # insertion order = least recent first
         self._loose: dict[str, None] = {}  # origins of refused labels only, least recent first
+        self.refused: dict[str, int] = {}  # origin -> its labels refused as bad input (held)
 
     def __contains__(self, label: tuple[str, int]) -> bool:
         origin, seq = label
@@ -202,6 +203,8 @@ class LabelSet:
         if (origin, seq) in self:
             self._touch(origin, kept)
             return False
+        if not kept:
+            self.refused[origin] = self.refused.get(origin, 0) + 1
         self._put(origin, seq, seq + 1, kept)
         return True
 
@@ -248,6 +251,7 @@ class LabelSet:
                         "sessions with refused labels only)", old, self.max_origins)
             del self._loose[old]
             del self._o[old]
+            self.refused.pop(old, None)
 
     def _touch(self, origin: str, kept: bool = True) -> None:
         self._o[origin] = self._o.pop(origin)

@@ -133,7 +133,7 @@ class Outbox:
         self._withdrawals: dict[int, list] = {}  # id -> [the Withdrawal, due at, resends]
         self._next_wid = 0
         self.stats = {"published": 0, "acked": 0, "resent": 0, "max": 0, "withdrawals": 0,
-                      "withdrawn": 0, "withdrawals_acked": 0}
+                      "withdrawn": 0, "withdrawals_acked": 0, "refused": 0}
 
     def label(self, scan: Scan, action: str, executed: str | None,
               source: str = "teacher") -> LabeledScan:
@@ -168,10 +168,15 @@ class Outbox:
             self.stats["withdrawn"] += upto - first
         return w
 
-    def ack(self, upto: int, seqs=(), withdrawn: int | None = None) -> int:
+    def ack(self, upto: int, seqs=(), withdrawn: int | None = None,
+            refused: int | None = None) -> int:
         """Forget the labels with ``seq < upto`` and those in ``seqs`` (and the withdrawals with
-        ``id < withdrawn``); how many labels were held."""
+        ``id < withdrawn``); how many labels were held. ``refused``: how many of this
+        session's labels the learner refused as bad input (``stats["refused"]``: acknowledged,
+        never journaled, so not held)."""
         with self._lock:
+            if refused is not None:
+                self.stats["refused"] = max(self.stats["refused"], int(refused))
             if withdrawn is not None:
                 for wid in [k for k in self._withdrawals if k < withdrawn]:
                     del self._withdrawals[wid]
@@ -343,7 +348,7 @@ class LabelPublisher:
     def _on_ack(self, sample) -> None:
         ack = self.decoder.decode(LearnerAck, sample.payload.to_bytes())
         if ack is not None and ack.origin == self.outbox.origin:
-            self.outbox.ack(ack.upto, ack.seqs, ack.withdrawn)
+            self.outbox.ack(ack.upto, ack.seqs, ack.withdrawn, ack.refused)
 
     def _resender(self) -> None:
         said = 0.0
@@ -785,7 +790,8 @@ class Acknowledgements:
             wd = None if self.withdrawals is None else self.withdrawals.acked(origin)
             try:
                 self._put(LearnerAck(origin=origin, upto=upto, seqs=seqs[:LearnerAck.MAX_SEQS],
-                                     ts=time.time(), withdrawn=wd).encode())
+                                     ts=time.time(), withdrawn=wd,
+                                     refused=self.labels.refused.get(origin)).encode())
             except Exception as exc:  # noqa: BLE001 - the session is closing; resent anyway
                 log.debug("ack not published: %s", exc)
         self.pending = set()

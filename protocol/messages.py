@@ -457,8 +457,9 @@ class LearnerAck(_Message):
     """A learner's acknowledgement of a teacher session's labels (``rhbl/<robot>/learner/ack``):
     the labels of ``origin`` with ``seq < upto`` and those in ``seqs`` (all above ``upto``) are
     in its journal (written to the kernel, so a killed learner keeps them; fsync'd within a
-    second) or were refused as bad input (logged: never to be resent). The whole state of that
-    origin each time, so a later ack makes up for a lost one."""
+    second) or were refused as bad input (logged: never to be resent; ``refused`` says how many
+    of them the learner refused, so what a teacher shows as held agrees with the journal). The
+    whole state of that origin each time, so a later ack makes up for a lost one."""
 
     WHAT: ClassVar[str] = "learner/ack"
     MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
@@ -469,6 +470,8 @@ class LearnerAck(_Message):
     ts: float = wire(NUM, default=0.0)
     # the withdrawals of origin with ``id < withdrawn`` are held
     withdrawn: int | None = wire(UINT, default=None)
+    # how many of the labels acknowledged were refused as bad input, not journaled
+    refused: int | None = wire(UINT, default=None)
 
     @classmethod
     def _read_own(cls, m, values):

@@ -214,6 +214,30 @@ def test_resends_to_a_learner_that_cannot_journal_are_kept_once(tmp_path):
     assert p.stats["duplicates"] == 10 and p.acks.pending == {"s1"} and len(p.backlog) == 1
 
 
+def test_labels_refused_as_bad_input_are_acknowledged_as_refused_not_held():
+    """A label the learner refuses for good is acknowledged (never resent) and the ack says how
+    many were refused, so the teacher's count of labels held agrees with the journal."""
+    from protocol.messages import LearnerAck
+
+    sent = []
+    labels = LabelSet()
+    acks = Acknowledgements(sent.append, labels)
+    for seq in range(3):
+        labels.add("o", seq)  # journaled
+        acks.handled(TeacherAction(action="fwd", scan_id=seq, origin="o", seq=seq), True)
+    acks.handled(TeacherAction(action="nope", scan_id=3, origin="o", seq=3), False)
+    acks.handled(TeacherAction(action="nope", scan_id=3, origin="o", seq=3), False)  # resent
+    acks.publish()
+    ack = LearnerAck.decode(sent[-1])
+    assert (ack.upto, ack.refused) == (4, 1)
+    box = Outbox(origin="o")
+    for seq in range(4):
+        box.label(_scan(seq), "fwd", None)
+    assert box.ack(ack.upto, ack.seqs, ack.withdrawn, ack.refused) == 4
+    assert (box.stats["acked"], box.stats["refused"]) == (4, 1)
+    assert LearnerAck.decode(LearnerAck(origin="o", upto=2).encode()).refused is None
+
+
 def test_an_ack_naming_a_seq_twice_is_taken_once():
     """A hostile or buggy ack (the decoder lets repeated seqs through): no KeyError in the
     teacher's subscription callback, the label forgotten once."""

@@ -24,7 +24,7 @@ FULL = [
     m.TeacherAction(scan_id=3, action="fwd", ts=1.0, executed="rot-left", origin="o1", seq=4),
     m.LabeledScan(scan_id=3, action="fwd", origin="o1", seq=4, ranges=R, yaw=0.1, ts=1.0,
                   executed="fwd"),
-    m.LearnerAck(origin="o1", upto=4, seqs=(6, 7), ts=1.0, withdrawn=2),
+    m.LearnerAck(origin="o1", upto=4, seqs=(6, 7), ts=1.0, withdrawn=2, refused=1),
     m.Withdrawal(origin="o1", id=0, first=10, upto=60, ts=1.0, reason="undo 5 s"),
     m.TreeNotice(seq=1, nodes=7, height=3, vectors=12, snapshot_id="l:12", ts=1.0),
     m.Decision(scan_id=3, action="fwd", path=((0, 0, 1.5, "fwd"),), ts=1.0, snapshot_id="l:1",

@@ -174,7 +174,8 @@ class Tutor:
         learners = r.pubs.learners if r.pubs is not None else r.learners
         now = r.state.ts if r.state is not None else None
         labels = None if box is None else {
-            "given": box.stats["published"], "held": box.stats["acked"],
+            "given": box.stats["published"],
+            "held": box.stats["acked"] - box.stats["refused"], "refused": box.stats["refused"],
             "waiting": len(box), "cap": box.cap, "withdrawn": box.stats["withdrawn"],
             "withdrawals_waiting": box.unacknowledged_withdrawals}
         r.teach_seq += 1

@@ -143,9 +143,10 @@ function showTeach() {
   L.className = up ? "ok" : up === null ? "" : "warn";
   if (b) {
     lab.dataset.given = b.given; lab.dataset.held = b.held; lab.dataset.waiting = b.waiting;
-    lab.dataset.withdrawn = b.withdrawn;
+    lab.dataset.withdrawn = b.withdrawn; lab.dataset.refused = b.refused || 0;
     lab.textContent = `labels: ${b.given} given, ${b.held} held by the learner, ${b.waiting} waiting`
       + (b.withdrawn ? `, ${b.withdrawn} withdrawn` : "")
+      + (b.refused ? `, ${b.refused} refused by the learner as bad input` : "")
       + (b.withdrawals_waiting ? ` (${plural(b.withdrawals_waiting, "withdrawal")} not yet acknowledged)` : "");
     lab.className = b.waiting >= b.cap ? "bad" : b.waiting > 50 && !up ? "warn" : "";
   } else {
