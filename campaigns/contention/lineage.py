@@ -4,13 +4,13 @@ Each probe starts a real ``rhbl server`` (world ``room``) and real ``rhbl learne
 127.0.0.1 (a free port, multicast scouting off), talks to them over a zenoh session of its own,
 stops them by PID and reads what they wrote (the journal, ``--stats``, /proc/PID/status):
 
-- ``second_learner``: a second learner on the lineage of a running one, and a restart that
+- ``second-learner``: a second learner on the lineage of a running one, and a restart that
   overlaps the first one's drain; the first keeps learning, the lineage opens afterwards.
-- ``oversized_labels``: a flood of labels carrying 100,000 beams, some ranges negative (the
+- ``oversized-labels``: a flood of labels carrying 100,000 beams, some ranges negative (the
   laser has 360): the journal's growth and the learner's memory.
-- ``far_withdrawal``: a withdrawal of labels far beyond what the session gave; the session's
+- ``far-withdrawal``: a withdrawal of labels far beyond what the session gave; the session's
   later labels must still be journaled.
-- ``many_sessions``: 1,000 teacher sessions, each label resent after the others: each label
+- ``many-sessions``: 1,000 teacher sessions, each label resent after the others: each label
   journaled once.
 """
 
@@ -403,8 +403,8 @@ def many_sessions(probe: Probe) -> Outcome:
 
 
 PROBES: dict[str, ProbeFunction] = {
-    "second_learner": second_learner,
-    "oversized_labels": oversized_labels,
-    "far_withdrawal": far_withdrawal,
-    "many_sessions": many_sessions,
+    "second-learner": second_learner,
+    "oversized-labels": oversized_labels,
+    "far-withdrawal": far_withdrawal,
+    "many-sessions": many_sessions,
 }
