@@ -9,12 +9,13 @@ import json
 
 import pytest
 
-from client.behaviour.spec import RULES, shipped
+from client.behaviour.spec import RULES, BehaviourError, shipped
 from lab import metrics
 from lab.behaviours import behaviour_for_world, get, recipe_of, teaching_world, world_of
 from lab.cli import main
 from lab.harness import resolve_world
 from lab.recipe import RECIPES
+from server.world import parse_world
 
 
 def rules(**given) -> dict:
@@ -70,6 +71,13 @@ def test_the_measures_the_rules_need():
 def test_a_worlds_behaviour():
     assert behaviour_for_world(resolve_world("room")).name == "wall-following"
     assert behaviour_for_world(resolve_world("maze")).name == "maze"
+    world = {"name": "eval-room-l", "robot": {"pose": [2.0, 0.7, 0.0]},
+             "walls": [{"points": [[0, 0], [4, 0], [4, 4], [0, 4]], "closed": True}]}
+    untasked = parse_world(dict(world))
+    assert untasked.task is None
+    assert behaviour_for_world(untasked).name == "wall-following"  # a behaviour names it
+    with pytest.raises(BehaviourError, match="names no task and no shipped behaviour names it"):
+        behaviour_for_world(parse_world(dict(world, name="nowhere")))
 
 
 def test_the_recipe_of_a_behaviour():
