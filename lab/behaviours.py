@@ -12,16 +12,18 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 from pathlib import Path
 
 from client.behaviour.spec import Behaviour, BehaviourError, behaviour, shipped
 from lab.recipe import RECIPES, Recipe
+from process import arguments, files
 from process.arguments import Checked
 from server import world_path
 from server.world import WorldSpec, load_world
 
-__all__ = ["add_arguments", "behaviour_arg", "behaviour_for_world", "get", "main",
-           "recipe_of", "teaching_world", "world_of"]
+__all__ = ["add_arguments", "behaviour_arg", "behaviour_for_world", "describe", "get", "main",
+           "recipe_of", "teaching_world", "to_dict", "world_of"]
 
 
 def get(name_or_path: str | Path | Behaviour) -> Behaviour:
@@ -36,7 +38,8 @@ def _check(text: str) -> str:
 
 # ``--behaviour NAME|FILE`` (argparse type: a shipped behaviour's name or a behaviour file)
 behaviour_arg = Checked("behaviour", _check)
-behaviour_arg.kind, behaviour_arg.example = "behaviour", "wall-following"
+# (a shipped name or a regular file, as a world is: the CLI walk tries the same hostile values)
+behaviour_arg.kind, behaviour_arg.example = "world", "wall-following"
 
 
 def world_of(b: Behaviour, world: str) -> WorldSpec:
@@ -108,6 +111,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("behaviour", nargs="?", default=None, type=behaviour_arg,
                         help="show this behaviour in full (a shipped behaviour's name or a "
                              "behaviour file); default: list the shipped ones")
+    parser.add_argument("--json", default=None, type=arguments.output_file,
+                        help="also write them (or it) in full as JSON: name, summary, "
+                             "perception (the feature spec), expert, worlds, starts, success "
+                             "rule, instructions")
+
+
+def to_dict(b: Behaviour) -> dict:
+    """A behaviour as plain data (``--json``): what its file says, its perception as the
+    feature spec it makes."""
+    return {"name": b.name, "summary": b.summary, "file": str(b.path) if b.path else None,
+            "perception": b.perception, "features": b.features.to_dict(),
+            "expert": {"name": b.expert_name, **b.expert_params},
+            "worlds": {"teach": list(b.teach), "held_out": list(b.held_out)},
+            "starts": {w: [list(p) for p in poses] for w, poses in b.starts.items()},
+            "success": b.rules, "instructions": b.instructions}
 
 
 def describe(b: Behaviour) -> str:
@@ -130,10 +148,13 @@ def describe(b: Behaviour) -> str:
 
 def main(args) -> int:
     if args.behaviour is not None:
-        print(describe(get(args.behaviour)))
-        return 0
-    known = shipped()
-    width = max(map(len, known), default=0)
-    for name, b in known.items():
-        print(f"{name:<{width}}  {b.summary}")
+        chosen = [get(args.behaviour)]
+        print(describe(chosen[0]))
+    else:
+        chosen = list(shipped().values())
+        width = max((len(b.name) for b in chosen), default=0)
+        for b in chosen:
+            print(f"{b.name:<{width}}  {b.summary}")
+    if args.json:
+        files.write_text(args.json, json.dumps([to_dict(b) for b in chosen], indent=1), "--json")
     return 0

@@ -154,7 +154,7 @@ def _check_task(text: str) -> str:
 
 
 _task = arguments.Checked("behaviour", _check_task)
-_task.kind, _task.example = "behaviour", "wall-following"
+_task.kind, _task.example = "world", "wall-following"  # a shipped name or a file, as a world
 
 
 def _check_eval_world(text: str) -> str:

@@ -419,7 +419,11 @@ def behaviour(name_or_path: str | Path) -> Behaviour:
     if text in known:
         return known[text]
     p = Path(text)
-    if p.is_file():
+    try:
+        is_file = bool(text) and "\x00" not in text and p.is_file()
+    except OSError:  # a name too long for a path, ...: not a file
+        is_file = False
+    if is_file:
         return load_behaviour(p)
     raise BehaviourError(f"behaviour {text!r} is neither a shipped behaviour ({', '.join(known)}) "
                          "nor a behaviour file")

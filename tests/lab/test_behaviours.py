@@ -97,6 +97,17 @@ def test_rhbl_behaviours_lists_them_one_line_each(capsys):
     assert "held out: eval-maze-3tier" in out and "goal" in out
 
 
+def test_rhbl_behaviours_json_is_what_the_files_say(tmp_path):
+    out = tmp_path / "b.json"
+    assert main(["behaviours", "--json", str(out)]) == 0
+    data = {d["name"]: d for d in json.loads(out.read_text())}
+    assert list(data) == list(shipped())
+    wall = data["wall-following"]
+    assert wall["expert"] == {"name": "wall-follower", "side": "right"}
+    assert wall["worlds"]["teach"] == ["room"] and wall["success"]["wall-band"]["fraction"] == 0.8
+    assert wall["features"] == shipped()["wall-following"].features.to_dict()
+
+
 def test_a_malformed_behaviour_file_is_one_line_and_exit_2(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     bad.write_text((shipped()["maze"].path).read_text().replace("goal = {}", "dance = {}"))
