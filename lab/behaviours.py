@@ -89,17 +89,21 @@ def _same_world(named: str, spec: WorldSpec) -> bool:
 
 def behaviour_for_world(spec: WorldSpec) -> Behaviour:
     """The behaviour of a world: the one its ``task`` names (a world file may still name one),
-    else the shipped behaviour that names the world among its teaching or held-out worlds
-    (the first by name); BehaviourError when none does."""
+    else the shipped behaviour that names the world among its teaching or held-out worlds;
+    BehaviourError when none does, or more than one (then ``--behaviour`` says which)."""
     known = shipped()
     if spec.task is not None:
         if spec.task not in known:
             raise BehaviourError(f"world {spec.name!r} names task {spec.task!r}, which is no "
                                  f"shipped behaviour ({', '.join(known)})")
         return known[spec.task]
-    for b in known.values():
-        if any(_same_world(w, spec) for w in b.worlds):
-            return b
+    naming = [b for b in known.values() if any(_same_world(w, spec) for w in b.worlds)]
+    if len(naming) == 1:
+        return naming[0]
+    if naming:
+        raise BehaviourError(f"world {spec.name!r} names no task and the behaviours "
+                             f"{', '.join(b.name for b in naming)} name it: say which with "
+                             "--behaviour NAME|FILE")
     raise BehaviourError(f"world {spec.name!r} names no task and no shipped behaviour names it: "
                          "say which behaviour with --behaviour NAME|FILE")
 

@@ -106,8 +106,16 @@ def run_experiment(task: str | Behaviour, trials: int = 5, seed0: int = 0,
                    for w in worlds},
     }
     params = {k: v for k, v in kw.items() if isinstance(v, str | int | float | type(None))}
-    return {"task": b.name, "trials": trials, "recipe": dataclasses.asdict(recipe),
+    return {"task": b.name, "trials": trials, "recipe": _plain(recipe),
             "params": params, "rows": rows, "summary": summary}
+
+
+def _plain(recipe: Recipe) -> dict:
+    """The recipe's fields as JSON data (an inline perception as its feature spec's dict)."""
+    out = {f.name: getattr(recipe, f.name) for f in dataclasses.fields(recipe)}
+    if not isinstance(out["features"], str):
+        out["features"] = out["features"].to_dict()
+    return out
 
 
 def table_i(results: dict[str, dict]) -> str:

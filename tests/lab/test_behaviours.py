@@ -73,9 +73,12 @@ def test_a_worlds_behaviour():
     assert behaviour_for_world(resolve_world("maze")).name == "maze"
     world = {"name": "eval-room-l", "robot": {"pose": [2.0, 0.7, 0.0]},
              "walls": [{"points": [[0, 0], [4, 0], [4, 4], [0, 4]], "closed": True}]}
-    untasked = parse_world(dict(world))
+    untasked = parse_world(dict(world, name="eval-maze-3tier"))
     assert untasked.task is None
-    assert behaviour_for_world(untasked).name == "wall-following"  # a behaviour names it
+    assert behaviour_for_world(untasked).name == "maze"  # one behaviour names it
+    with pytest.raises(BehaviourError, match="the behaviours left-wall, wall-following name it: "
+                                             "say which with --behaviour"):
+        behaviour_for_world(parse_world(world))
     with pytest.raises(BehaviourError, match="names no task and no shipped behaviour names it"):
         behaviour_for_world(parse_world(dict(world, name="nowhere")))
 
@@ -173,3 +176,20 @@ def test_a_behaviour_written_as_a_file_is_taught_and_evaluated_with_no_code_chan
     assert rep["success_rate"] == sum(rep["success"]) / 2
     assert main(["evaluate", "--behaviour", str(path), "--tree", str(tree), "--world",
                  "eval-room-l", "--episodes", "1"]) == 0
+
+
+def test_left_wall_following_is_a_file_its_expert_succeeds_from_every_start():
+    """The first behaviour shipped as a file only: its expert (the wall follower, side left)
+    keeps the wall on its left from every start pose it gives, in every world it names, by its
+    own rule (its trees' figures: docs/behaviours.md)."""
+    from lab.harness import drive
+
+    b = get("left-wall")
+    assert b.expert().side == "left" and b.band_side == "left" and b.features.beams[-1] == 180.0
+    for world in b.worlds:
+        spec = world_of(b, world)
+        assert spec.start_poses == list(b.starts[world])
+        for start in spec.start_poses:
+            m = drive(spec, b.expert(), start, b.seconds, behaviour=b).metrics(spec.goal, b.rules)
+            assert metrics.judge(b.rules, m), (world, start, m["wall_band_fraction"],
+                                               m["collisions"])
