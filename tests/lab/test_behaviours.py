@@ -193,3 +193,10 @@ def test_left_wall_following_is_a_file_its_expert_succeeds_from_every_start():
             m = drive(spec, b.expert(), start, b.seconds, behaviour=b).metrics(spec.goal, b.rules)
             assert metrics.judge(b.rules, m), (world, start, m["wall_band_fraction"],
                                                m["collisions"])
+
+
+def test_the_demo_drives_as_long_as_the_behaviours_time_limit():
+    from lab.recipe import EVAL_SECONDS
+
+    for task, seconds in EVAL_SECONDS.items():
+        assert shipped()[task].seconds == seconds, task
