@@ -176,11 +176,28 @@ class Behaviour:
         if style not in STYLES:
             raise ValueError(f"teacher style must be one of {STYLES}, got {style!r}")
         params = {**self.expert_params, **kw}
-        return _expert_task(self.expert_name).expert(style)(actions=actions, **params)
+        cls = _expert_task(self.expert_name).expert(style)
+        extra = sorted(set(self.expert_params) - _parameters(cls))
+        if extra:
+            raise ValueError(f"behaviour {self.name!r}: the {style} {self.expert_name} expert "
+                             f"takes no {', '.join(extra)} (the file's [expert] parameters are "
+                             "the reactive expert's)")
+        return cls(actions=actions, **params)
 
 
 def _expert_task(name: str):
     return next(t for t in TASKS.values() if t.teacher == name)
+
+
+def _parameters(cls: type) -> set[str]:
+    """The keyword parameters an expert's constructor takes (a maze expert's and its base's:
+    it passes ``**kw`` on), but ``actions`` and ``features``, which are not the file's."""
+    out: set[str] = set()
+    for c in cls.__mro__[:2]:
+        if c is not Policy and c is not object:
+            out |= {p for p in inspect.signature(c.__init__).parameters
+                    if p not in ("self", "actions", "features", "kw")}
+    return out
 
 
 def _perception(src: str, v: Any) -> tuple[FeatureSpec, str | None]:
@@ -230,7 +247,7 @@ def _perception(src: str, v: Any) -> tuple[FeatureSpec, str | None]:
     return spec, None
 
 
-def _expert(src: str, v: Any, features: FeatureSpec) -> tuple[str, dict]:
+def _expert(src: str, v: Any) -> tuple[str, dict]:
     """The expert's name and parameters, checked against its classes' constructors (an
     unknown parameter or a value the expert refuses is named)."""
     t = _table(src, "expert", v)
@@ -240,15 +257,7 @@ def _expert(src: str, v: Any, features: FeatureSpec) -> tuple[str, dict]:
         raise _err(src, "expert.name", f"one of {', '.join(names)}", name)
     params = {k: p for k, p in t.items() if k != "name"}
     task = _expert_task(name)
-    allowed = set()
-    for cls in (task.reactive, task.smooth):
-        allowed |= {p for p in inspect.signature(cls.__init__).parameters
-                    if p not in ("self", "actions", "features", "kw")}
-    for cls in (task.reactive.__mro__[1], task.smooth.__mro__[1]):  # the maze experts' bases
-        if cls is not Policy:
-            allowed |= {p for p in inspect.signature(cls.__init__).parameters
-                        if p not in ("self", "actions", "features", "kw")}
-    _unknown(src, "expert", params, allowed | {"name"})
+    _unknown(src, "expert", params, _parameters(task.reactive) | {"name"})
     for k, p in params.items():
         if k == "side":
             if p not in SIDES:
@@ -360,7 +369,7 @@ def parse_behaviour(data: Any, source: str = "<behaviour>", path: Path | None = 
         raise _err(src, "instructions", "a string", instructions)
     folder = path.parent if path is not None else None
     features, perception = _perception(src, data["perception"])
-    expert, params = _expert(src, data["expert"], features)
+    expert, params = _expert(src, data["expert"])
     teach, held_out = _worlds(src, data["worlds"], folder)
     starts = _starts(src, data.get("starts", {}), folder)
     named = set(teach) | set(held_out)

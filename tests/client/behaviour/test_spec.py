@@ -73,6 +73,11 @@ def test_a_users_file_anywhere(tmp_path):
     assert b.starts == {"room": ((1.9, 2.5, 1.5708),)}
     assert b.rules["wall-band"] == dict(RULES["wall-band"], side="left", fraction=0.5)
     assert b.seconds == 60.0 and b.instructions == "drive about"
+    assert b.expert("smooth").side == "left"  # both styles take side and target
+    band = behaviour(write(tmp_path, GOOD.replace("target = 0.7", "band = 0.1"), "band.toml"))
+    assert band.expert().band == 0.1
+    with pytest.raises(ValueError, match="the smooth wall-follower expert takes no band"):
+        band.expert("smooth")
 
 
 def test_inline_perception_beams_or_sectors_reuses_the_feature_spec(tmp_path):
