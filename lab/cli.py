@@ -28,6 +28,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "learner": ("client.roles.learner", "learn a hypersphere tree from the teacher's demonstrations"),
     "controller": ("client.roles.controller", "drive the robot with a learned tree"),
     "console": ("client.roles.console", "a web page to watch, teach and correct the robot from a browser"),
+    "behaviours": ("lab.behaviours", "list the behaviours a robot can be taught (or show one in full)"),
     "train": ("lab.train", "in-process: a scripted teacher demonstrates on a world, write a tree"),
     "evaluate": ("lab.evaluate", "in-process: run a tree (and the teacher) from a world's start poses"),
     "compact": ("lab.compact", "make an existing tree smaller, keeping its behaviour on its data"),

@@ -17,6 +17,7 @@ import numpy as np
 
 from client.behaviour.tasks import TASKS
 from lab import children
+from lab.behaviours import behaviour_for_world
 from lab.children import free_port
 from lab.children import rhbl_argv as _rhbl
 from lab.episode import Episode, EpisodeCollector
@@ -290,7 +291,8 @@ class Demo:
             self.session = session
             self.sim = PlayerClient(session=session, robot="r0", source="demo").simulation
             # the learner's actions (``rhbl learner`` has no other set)
-            self.rec = EpisodeCollector("r0", DEFAULT_ACTIONS, TASKS[self.spec.task].side)
+            self.rec = EpisodeCollector("r0", DEFAULT_ACTIONS,
+                                        behaviour_for_world(self.spec).band_side)
             writer = demo_recording(args.record, self.out, self.say)  # None without --record
             self.recording = None if writer is None else Path(writer.path)
             self.tap = BusTap(session, [self.rec, *([writer] if writer else [])],

@@ -37,6 +37,7 @@ class Episode:
     stalls: list = field(default_factory=list)  # the step pushed into a wall
     actions: list = field(default_factory=list)  # the executed action's name
     side: list = field(default_factory=list)  # followed-side wall distance (a side-following task)
+    gaps: list = field(default_factory=list)  # left minus right wall distance (a centring task)
     teacher_actions: list = field(default_factory=list)  # the teacher's choice on these states
     drivers: list = field(default_factory=list)  # who drove ("teacher", "controller"), if known
     ts: list = field(default_factory=list)  # sim time of each step, if known (a recording)
@@ -59,12 +60,14 @@ class Episode:
         """Steps the teacher drove (in a corrective round: took over)."""
         return sum(1 for d in self.drivers if d == "teacher")
 
-    def metrics(self, goal=None) -> dict:
-        """Every per-episode metric (``lab.metrics.episode_metrics``)."""
+    def metrics(self, goal=None, rules: dict | None = None) -> dict:
+        """Every per-episode metric (``lab.metrics.episode_metrics``; ``rules``: a behaviour's
+        success rule, whose parameters some metrics take)."""
         return metrics.episode_metrics(
             self.poses, self.stalls, self.actions, self.dt,
             side=self.side if self.side else None, goal=goal,
-            teacher_actions=self.teacher_actions or None, start=self.start)
+            teacher_actions=self.teacher_actions or None, start=self.start, rules=rules,
+            gaps=self.gaps)
 
 
 @dataclass

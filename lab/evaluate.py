@@ -7,8 +7,11 @@ pose of a world and measure how well it behaves (metrics in ``lab.metrics``).
         teacher_agreement, stuck, success)
     report["success_rate"], report["teacher_success_rate"], report["tree"] = {"nodes", "height"}
 
-Success: wall following = no collision, wall band fraction >= 0.8 and distance >= 70% of the
-teacher's from the same start; maze = goal reached with no collision within S.
+Success is the behaviour's rule (``--behaviour NAME|FILE``, default the world's: the shipped
+behaviour its ``task`` names or that names it; ``client.behaviour.spec``), judged by
+``lab.metrics.judge``, the same code whatever the behaviour: wall following = no collision, wall
+band fraction >= 0.8 and distance >= 70% of the teacher's from the same start; maze = goal
+reached with no collision within S.
 
 ``rhbl evaluate`` drives a tree taught by hand through the controller's guard, as ``rhbl
 controller`` drives it (``client.behaviour.guard``: the loop hysteresis and the path check);
@@ -23,9 +26,10 @@ import json
 
 from client.behaviour import guard
 from client.behaviour.learning import TreePolicy
-from client.behaviour.tasks import make_policy
+from client.behaviour.spec import Behaviour
 from lab import metrics
-from lab.harness import DT, OnStep, drive, resolve_world
+from lab.behaviours import behaviour_arg, behaviour_for_world, get, teaching_world, world_of
+from lab.harness import DT, OnStep, drive, recorded, resolve_world
 from lab.recipe import EVAL_SECONDS, per_task
 from lab.report import episode_table
 from lab.sim_tap import record_run
@@ -36,32 +40,33 @@ from server.world import WorldSpec
 __all__ = ["add_arguments", "evaluate", "format_table", "main", "success"]
 
 
-def success(task: str, m: dict, teacher_m: dict | None) -> bool:
-    """The success rule of an episode's metrics ``m`` (``teacher_m``: the teacher's from the
-    same start, for wall following's distance; None: not compared), see the module's doc."""
-    if task == "maze":
-        return metrics.maze_success(m)
-    return metrics.wall_success(m, teacher_m["distance"] if teacher_m else None)
+def success(task: str | Behaviour, m: dict, teacher_m: dict | None) -> bool:
+    """The success rule of behaviour ``task`` (a name, a file or a Behaviour) on an episode's
+    metrics ``m`` (``teacher_m``: the teacher's from the same start, for a distance compared
+    with the teacher's; None: not compared): ``lab.metrics.judge``."""
+    return metrics.judge(get(task).rules, m, teacher_m)
 
 
 _TEACHER_CACHE: dict = {}
 
 
-def _teacher_episode(spec: WorldSpec, actions, start, seconds: float, seed: int,
+def _teacher_episode(spec: WorldSpec, b: Behaviour, actions, start, seconds: float, seed: int,
                      range_noise: float, odom_noise: float, dt: float,
                      on_step: OnStep | None = None):
-    """The scripted teacher's episode from ``start``. Without noise it does not depend on the
-    seed (and not on the tree), so it is computed once per world, start and length."""
+    """The behaviour's scripted expert's episode from ``start``. Without noise it does not
+    depend on the seed (and not on the tree), so it is computed once per world, expert, start
+    and length."""
     key = None
     if range_noise == 0.0 and odom_noise == 0.0:
         key = (spec.name, str(spec.path), spec.walls, spec.goal, tuple(start), seconds, dt,
-               tuple(actions.names))
+               tuple(actions.names), b.expert_name, repr(sorted(b.expert_params.items())),
+               tuple(recorded(b).items()))
         hit = _TEACHER_CACHE.get(key)
         if hit is not None:
             return hit
-    tt = drive(spec, make_policy(spec.task, actions=actions), start, seconds, seed=seed,
+    tt = drive(spec, b.expert(actions=actions), start, seconds, seed=seed,
                range_noise=range_noise, odom_noise=odom_noise, dt=dt, kind="teacher",
-               on_step=on_step)
+               on_step=on_step, behaviour=b)
     if key is not None:
         if len(_TEACHER_CACHE) > 256:
             _TEACHER_CACHE.clear()
@@ -72,26 +77,32 @@ def _teacher_episode(spec: WorldSpec, actions, start, seconds: float, seed: int,
 def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
              seconds: float | None = None, seed: int = 0, range_noise: float = 0.0,
              odom_noise: float = 0.0, keep_paths: bool = False, dt: float = DT,
-             on_step: OnStep | None = None) -> dict:
-    """Run ``policy`` and the world's teacher from the start poses (cycled over ``episodes``);
+             on_step: OnStep | None = None, behaviour: Behaviour | str | None = None) -> dict:
+    """Run ``policy`` and the behaviour's scripted expert from the start poses (cycled over
+    ``episodes``) and judge each episode by the behaviour's success rule (``behaviour``: a
+    Behaviour, a shipped one's name or a file; default: the world's, ``lab.behaviours``);
     ``on_step`` sees every step (``lab.harness.step_world``)."""
-    task = spec.task
+    b = behaviour_for_world(spec) if behaviour is None else get(behaviour)
+    if "goal" in b.rules and spec.goal is None:
+        raise ValueError(f"behaviour {b.name!r} is judged by a goal, but world {spec.name!r} "
+                         "has no [goal]")
+    task = b.name
     starts = spec.start_poses
     episodes = len(starts) if episodes is None else int(episodes)
-    seconds = EVAL_SECONDS[task] if seconds is None else float(seconds)
+    seconds = b.seconds if seconds is None else float(seconds)
     learner_eps, teacher_eps, paths = [], [], {"teacher": [], "learner": []}
     for k in range(episodes):
         start = starts[k % len(starts)]
         ep_seed = seed * 1000 + k
-        tt = _teacher_episode(spec, policy.actions, start, seconds, ep_seed, range_noise,
+        tt = _teacher_episode(spec, b, policy.actions, start, seconds, ep_seed, range_noise,
                               odom_noise, dt, on_step)
-        tm = tt.metrics(spec.goal)
-        tm["success"] = success(task, tm, None)
+        tm = tt.metrics(spec.goal, b.rules)
+        tm["success"] = metrics.judge(b.rules, tm, None)
         lt = drive(spec, policy, start, seconds, seed=ep_seed,
-                   teacher=make_policy(task, actions=policy.actions), range_noise=range_noise,
-                   odom_noise=odom_noise, dt=dt, kind="learner", on_step=on_step)
-        lm = lt.metrics(spec.goal)
-        lm["success"] = success(task, lm, tm)
+                   teacher=b.expert(actions=policy.actions), range_noise=range_noise,
+                   odom_noise=odom_noise, dt=dt, kind="learner", on_step=on_step, behaviour=b)
+        lm = lt.metrics(spec.goal, b.rules)
+        lm["success"] = metrics.judge(b.rules, lm, tm)
         learner_eps.append(lm)
         teacher_eps.append(tm)
         if keep_paths:
@@ -103,6 +114,7 @@ def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
         "world": spec.name,
         "world_path": str(spec.path) if spec.path else None,
         "task": task,
+        "behaviour_file": str(b.path) if b.path else None,
         "episodes": episodes,
         "seconds": seconds,
         "seed": seed,
@@ -152,14 +164,20 @@ def _feature_pair(text: str) -> tuple[int, int]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--world", required=True, type=world_arg,
-                        help="world file (or a shipped world's name)")
+    parser.add_argument("--world", default=None, type=world_arg,
+                        help="world file (or a shipped world's name); default: the first world "
+                             "--behaviour is taught in")
+    parser.add_argument("--behaviour", default=None, type=behaviour_arg,
+                        help="judge by this behaviour's success rule, with its scripted expert "
+                             "as the baseline (a shipped behaviour's name, 'rhbl behaviours' "
+                             "lists them, or a behaviour file); default: the world's")
     parser.add_argument("--tree", required=True, type=arguments.input_file,
                         help="snapshot written by 'rhbl train'")
     parser.add_argument("--episodes", type=arguments.positive_int, default=None,
                         help="episodes, cycling over the world's start poses (default: one per pose)")
     parser.add_argument("--seconds", type=arguments.seconds, default=None,
-                        help=f"sim seconds per episode (default: {per_task(EVAL_SECONDS)})")
+                        help=f"sim seconds per episode (default: the behaviour's time limit: "
+                             f"{per_task(EVAL_SECONDS)})")
     parser.add_argument("--seed", type=arguments.seed, default=0)
     parser.add_argument("--range-noise", type=arguments.non_negative_float, default=0.0,
                         help="laser noise (server option)")
@@ -184,7 +202,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main(args) -> int:
     if args.spheres and not args.plot:
         raise ValueError("--spheres goes with --plot (it draws the spheres in the picture)")
-    spec = resolve_world(args.world)
+    if args.world is None and args.behaviour is None:
+        raise ValueError("give --world W or --behaviour B (or both)")
+    b = get(args.behaviour) if args.behaviour else None
+    if args.world is None:
+        spec = teaching_world(b)
+    else:
+        spec = resolve_world(args.world) if b is None else world_of(b, args.world)
     policy = TreePolicy.load(args.tree)
     dims = args.spheres or (0, 1)
     if args.spheres and max(dims) >= policy.classifier.n_features_in_:
@@ -196,7 +220,7 @@ def main(args) -> int:
         report = evaluate(spec, guarded or policy, episodes=args.episodes, seconds=args.seconds,
                           seed=args.seed, range_noise=args.range_noise,
                           odom_noise=args.odom_noise, keep_paths=bool(args.plot),
-                          on_step=None if tap is None else tap.step)
+                          on_step=None if tap is None else tap.step, behaviour=b)
     paths = report.pop("_paths", None)
     report["guard"] = None if guarded is None else {
         "hold": guarded.hold, "clearance": guarded.clearance, "straight": guarded.straight,

@@ -1,30 +1,32 @@
-"""``rhbl experiment wall-following|maze``: repeat train-then-evaluate over N seeds and print the
+"""``rhbl experiment BEHAVIOUR|both``: repeat train-then-evaluate over N seeds and print the
 paper's Table I beside ours, with success rates and their spread.
 
     result = run_experiment("wall-following", trials=5, ...)   # dict, see --json
     rows = tradeoff(task, variants, trials)                      # tree size vs success
 
-Each trial: the task's scripted teacher demonstrates on the recipe's shipped world (``room`` for
-wall following, ``maze`` for the maze) as the task's recipe says (``lab.recipe``; the recipe
-flags change it) with seed ``i`` (perturbations differ), then the tree is evaluated from every start pose of the training world and of each
-``--eval-world`` (generalisation), optionally with range/odometry noise.
+Each trial: the behaviour's scripted expert demonstrates in its first teaching world (``room``
+for wall following, ``maze`` for the maze) as its recipe says (``lab.behaviours.recipe_of``; the
+recipe flags change it) with seed ``i`` (perturbations differ), then the tree is evaluated, by
+the behaviour's success rule, from every start pose of the training world and of each of its
+held-out worlds or ``--eval-world`` (generalisation), optionally with range/odometry noise.
+BEHAVIOUR is a shipped behaviour's name or a behaviour file; ``both`` is wall following and the
+maze, the paper's two.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import glob
 import json
 import time
-from pathlib import Path
 
 from client.behaviour.learning import TreePolicy
-from client.behaviour.tasks import TASKS, make_policy
+from client.behaviour.spec import Behaviour
 from lab import metrics
+from lab.behaviours import behaviour_arg, get, recipe_of, world_of
 from lab.evaluate import evaluate
-from lab.harness import make_learner, resolve_world
-from lab.recipe import Recipe, add_recipe_arguments, recipe_for, recipe_from_args
+from lab.harness import make_learner
+from lab.recipe import Recipe, add_recipe_arguments, recipe_from_args
 from lab.report import table
 from lab.train import train
 from process import arguments, files
@@ -38,27 +40,26 @@ TEACHERS = {"reactive": {"style": "reactive"}, "smooth": {"style": "smooth"},
             "bangbang": {"style": "smooth", "dwell": 1, "off": 0.45}}
 
 
-def _worlds_dir() -> Path:
-    return Path(__file__).resolve().parent.parent / "server" / "worlds"
+def default_eval_worlds(task: str | Behaviour) -> list[str]:
+    """The held-out worlds of behaviour ``task`` (a name, a file or a Behaviour)."""
+    return list(get(task).held_out)
 
 
-def default_eval_worlds(task: str) -> list[str]:
-    return sorted(glob.glob(str(_worlds_dir() / TASKS[task].eval_worlds)))
-
-
-def run_trial(task: str, seed: int, recipe: Recipe | None = None, world: str | None = None,
+def run_trial(task: str | Behaviour, seed: int, recipe: Recipe | None = None, world: str | None = None,
               eval_seconds: float | None = None, episodes: int | None = None,
               eval_worlds: list[str] = (), teacher: str = "reactive", range_noise: float = 0.0,
               odom_noise: float = 0.0, train_noise: bool = False,
               teacher_params: dict | None = None) -> dict:
-    """Train ``recipe`` (default: the task's) on ``world`` (default: the recipe's) with
-    ``seed``, then evaluate the tree there and on each of ``eval_worlds``."""
-    recipe = recipe_for(task) if recipe is None else recipe
-    spec = resolve_world(world or recipe.world)
+    """Train ``recipe`` (default: the behaviour's) on ``world`` (default: the recipe's) with
+    ``seed``, then evaluate the tree there and on each of ``eval_worlds``, all by the
+    behaviour ``task``'s success rule."""
+    b = get(task)
+    recipe = recipe_of(b) if recipe is None else recipe
+    spec = world_of(b, world or recipe.world)
     learner = make_learner(recipe)
-    policy = make_policy(task, actions=learner.actions, **TEACHERS[teacher], **(teacher_params or {}))
+    policy = b.expert(actions=learner.actions, **TEACHERS[teacher], **(teacher_params or {}))
     t0 = time.perf_counter()
-    train(spec, learner, recipe, seed=seed, policy=policy,
+    train(spec, learner, recipe, seed=seed, policy=policy, behaviour=b,
           range_noise=range_noise if train_noise else 0.0,
           odom_noise=odom_noise if train_noise else 0.0)
     t_train = time.perf_counter() - t0
@@ -69,10 +70,10 @@ def run_trial(task: str, seed: int, recipe: Recipe | None = None, world: str | N
            "height_before": rec.get("height_before", learner.height),
            "compaction": rec.get("method"),
            "vectors": learner.vectors, "train_wall_s": round(t_train, 2), "worlds": {}}
-    for w in [spec.path or spec.name, *eval_worlds]:
-        wspec = resolve_world(str(w))
+    for w in [world or recipe.world, *eval_worlds]:
+        wspec = world_of(b, str(w))
         rep = evaluate(wspec, tree, episodes=episodes, seconds=eval_seconds, seed=seed,
-                       range_noise=range_noise, odom_noise=odom_noise)
+                       range_noise=range_noise, odom_noise=odom_noise, behaviour=b)
         out["worlds"][wspec.name] = {
             "success_rate": rep["success_rate"],
             "teacher_success_rate": rep["teacher_success_rate"],
@@ -85,11 +86,12 @@ def run_trial(task: str, seed: int, recipe: Recipe | None = None, world: str | N
     return out
 
 
-def run_experiment(task: str, trials: int = 5, seed0: int = 0, recipe: Recipe | None = None,
-                   **kw) -> dict:
+def run_experiment(task: str | Behaviour, trials: int = 5, seed0: int = 0,
+                   recipe: Recipe | None = None, **kw) -> dict:
     """``trials`` runs of ``run_trial`` (seeds ``seed0``, ``seed0 + 1``, ...) and their summary."""
-    recipe = recipe_for(task) if recipe is None else recipe
-    rows = [run_trial(task, seed0 + i, recipe, **kw) for i in range(trials)]
+    b = get(task)
+    recipe = recipe_of(b) if recipe is None else recipe
+    rows = [run_trial(b, seed0 + i, recipe, **kw) for i in range(trials)]
     worlds = list(rows[0]["worlds"]) if rows else []
     summary = {
         "nodes": metrics.summarize([r["nodes"] for r in rows]),
@@ -104,8 +106,16 @@ def run_experiment(task: str, trials: int = 5, seed0: int = 0, recipe: Recipe | 
                    for w in worlds},
     }
     params = {k: v for k, v in kw.items() if isinstance(v, str | int | float | type(None))}
-    return {"task": task, "trials": trials, "recipe": dataclasses.asdict(recipe),
+    return {"task": b.name, "trials": trials, "recipe": _plain(recipe),
             "params": params, "rows": rows, "summary": summary}
+
+
+def _plain(recipe: Recipe) -> dict:
+    """The recipe's fields as JSON data (an inline perception as its feature spec's dict)."""
+    out = {f.name: getattr(recipe, f.name) for f in dataclasses.fields(recipe)}
+    if not isinstance(out["features"], str):
+        out["features"] = out["features"].to_dict()
+    return out
 
 
 def table_i(results: dict[str, dict]) -> str:
@@ -115,11 +125,12 @@ def table_i(results: dict[str, dict]) -> str:
     rows = []
     for task, res in results.items():
         s = res["summary"]
-        pn, ph = PAPER[task]
+        pn, ph = PAPER.get(task, (None, None))
         sr = next(iter(s["worlds"].values()))["success_rate"]
         before = [f"{s['nodes_before']['mean']:.1f}", f"{s['height_before']['mean']:.1f}"] \
             if compacted else []
-        rows.append([task, f"{pn:.1f}", f"{ph:.0f}", *before,
+        rows.append([task, "-" if pn is None else f"{pn:.1f}", "-" if ph is None else f"{ph:.0f}",
+                     *before,
                      f"{s['nodes']['mean']:.1f} +/- {s['nodes']['std']:.0f}",
                      f"{s['height']['mean']:.1f} +/- {s['height']['std']:.1f}",
                      f"{sr['mean']:.1%} (min {sr['min']:.0%}, max {sr['max']:.0%})"])
@@ -143,6 +154,17 @@ def format_worlds(res: dict) -> str:
     return table(["world", "success mean", "min", "max", "teacher", "collisions", "loops"], rows)
 
 
+BOTH = ("wall-following", "maze")  # the paper's two
+
+
+def _check_task(text: str) -> str:
+    return text if text == "both" else behaviour_arg.parse(text)
+
+
+_task = arguments.Checked("behaviour", _check_task)
+_task.kind, _task.example = "world", "wall-following"  # a shipped name or a file, as a world
+
+
 def _check_eval_world(text: str) -> str:
     return text if text == "none" else world_arg.parse(text)
 
@@ -152,17 +174,19 @@ _eval_world.kind, _eval_world.example = "world", "room"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("task", choices=[*TASKS, "both"])
+    parser.add_argument("task", metavar="BEHAVIOUR", type=_task,
+                        help="a shipped behaviour's name ('rhbl behaviours' lists them), a "
+                             "behaviour file, or 'both' (wall-following and maze)")
     parser.add_argument("--trials", type=arguments.positive_int, default=5)
     parser.add_argument("--seed", type=arguments.seed, default=0, help="first trial's seed")
     parser.add_argument("--world", default=None, type=world_arg,
-                        help="training world (default: the recipe's, room / maze)")
+                        help="training world (default: the behaviour's first teaching world)")
     parser.add_argument("--seconds", type=arguments.seconds, default=None,
                         help="evaluation seconds per episode")
     parser.add_argument("--episodes", type=arguments.positive_int, default=None)
     parser.add_argument("--eval-world", action="append", default=None, type=_eval_world,
-                        help="extra evaluation world (repeatable); default: server/worlds/eval-room*"
-                             " or eval-maze*; 'none' for none")
+                        help="extra evaluation world (repeatable); default: the behaviour's "
+                             "held-out worlds; 'none' for none")
     parser.add_argument("--teacher", choices=sorted(TEACHERS), default="reactive")
     add_recipe_arguments(parser, seconds="--train-seconds")
     parser.add_argument("--range-noise", type=arguments.non_negative_float, default=0.0)
@@ -174,7 +198,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args) -> int:
-    tasks = list(TASKS) if args.task == "both" else [args.task]
+    tasks = [get(t) for t in (BOTH if args.task == "both" else [args.task])]
     results = {}
     t0 = time.perf_counter()
     for task in tasks:
@@ -183,12 +207,12 @@ def main(args) -> int:
         else:
             ev = args.eval_world if args.eval_world is not None else default_eval_worlds(task)
         res = run_experiment(task, trials=args.trials, seed0=args.seed,
-                             recipe=recipe_from_args(task, args), world=args.world,
+                             recipe=recipe_from_args(recipe_of(task), args), world=args.world,
                              eval_seconds=args.seconds, episodes=args.episodes, eval_worlds=ev,
                              teacher=args.teacher, range_noise=args.range_noise,
                              odom_noise=args.odom_noise, train_noise=args.train_noise)
-        results[task] = res
-        print(f"\n{task}: {args.trials} trials")
+        results[task.name] = res
+        print(f"\n{task.name}: {args.trials} trials")
         print(format_worlds(res))
     print()
     print(table_i(results))

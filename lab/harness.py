@@ -7,9 +7,10 @@ world.step(dt). ``on_step`` (optional: ``lab.sim_tap.SimTap.step`` for ``--recor
 step before the world moves; it is passed explicitly, down to every step that should be seen.
 
     spec = resolve_world("room")
-    learner = make_learner(RECIPES[spec.task])                       # lab.recipe: the defaults
-    ep = drive(spec, TreePolicy.from_learner(learner), pose, seconds=120,
-               teacher=make_policy(spec.task))
+    b = behaviour_for_world(spec)                                    # lab.behaviours
+    learner = make_learner(recipe_of(b))                             # lab.recipe: the defaults
+    ep = drive(spec, TreePolicy.from_learner(learner), pose, seconds=b.seconds,
+               teacher=b.expert(), behaviour=b)
     ep.poses, ep.stalls, ep.actions, ep.side, ep.teacher_actions, ep.dt   (a lab.episode.Episode)
 """
 
@@ -23,8 +24,9 @@ from pathlib import Path
 
 from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
 from client.behaviour.learning import DemonstrationLearner, TreePolicy
-from client.behaviour.tasks import TASKS
+from client.behaviour.spec import Behaviour
 from lab import metrics
+from lab.behaviours import behaviour_for_world
 from lab.episode import DT, Episode
 from lab.recipe import Recipe, parse_floats, recipe_for
 from process.arguments import checked_list
@@ -37,6 +39,7 @@ __all__ = [
     "drive",
     "make_learner",
     "parse_pose",
+    "recorded",
     "resolve_world",
     "step_world",
 ]
@@ -83,9 +86,10 @@ def make_learner(recipe: Recipe | str, actions: ActionSet = DEFAULT_ACTIONS, *,
 
 def step_world(world: World, ep: Episode, actions: ActionSet, name: str, side: str | None,
                ranges, label: str | None = None, source: str = "teacher",
-               on_step: OnStep | None = None) -> None:
+               on_step: OnStep | None = None, gaps: bool = False) -> None:
     """One step: ``on_step`` (if any) sees it first, then the action ``name`` drives the world
-    ``ep.dt`` seconds and ``ep`` records the pose, the stall and the followed side's distance."""
+    ``ep.dt`` seconds and ``ep`` records the pose, the stall, the followed side's distance
+    (``side`` not None) and the left wall's distance minus the right's (``gaps``)."""
     if on_step is not None:  # rhbl train/evaluate --record: lab.sim_tap.SimTap.step
         on_step(world, name, ranges, actions, label=label, source=source)
     vx, va = actions[name]
@@ -96,6 +100,13 @@ def step_world(world: World, ep: Episode, actions: ActionSet, name: str, side: s
     ep.stalls.append(world.stall(0))
     if side is not None:
         ep.side.append(metrics.side_distance(ranges, side))
+    if gaps:
+        ep.gaps.append(metrics.side_distance(ranges, "left") - metrics.side_distance(ranges, "right"))
+
+
+def recorded(behaviour: Behaviour) -> dict:
+    """What ``step_world`` records for ``behaviour``'s success rule: ``side`` and ``gaps``."""
+    return {"side": behaviour.band_side, "gaps": "centred" in behaviour.rules}
 
 
 def demonstration_starts(spec: WorldSpec, starts: str = "world") -> list[tuple[float, float, float]]:
@@ -110,10 +121,12 @@ def demonstration_starts(spec: WorldSpec, starts: str = "world") -> list[tuple[f
 
 def drive(spec: WorldSpec, driver, start, seconds: float, seed: int = 0, teacher=None,
           range_noise: float = 0.0, odom_noise: float = 0.0, dt: float = DT,
-          stop_at_goal: bool = True, kind: str = "", on_step: OnStep | None = None) -> Episode:
+          stop_at_goal: bool = True, kind: str = "", on_step: OnStep | None = None,
+          behaviour: Behaviour | None = None) -> Episode:
     """Drive ``driver`` (anything with ``act(ranges, pose)``: a TreePolicy or a scripted policy)
     from ``start`` for ``seconds``; ``teacher`` (optional) is asked what it would do on each
-    state (teacher agreement). Stops at the goal, when the world has one."""
+    state (teacher agreement). Stops at the goal, when the world has one. The episode records
+    what ``behaviour``'s success rule measures (default: the world's behaviour)."""
     actions = getattr(driver, "actions", DEFAULT_ACTIONS)
     world = World(spec, robots=1, seed=seed, range_noise=range_noise, odom_noise=odom_noise)
     start = tuple(float(v) for v in start)
@@ -122,7 +135,7 @@ def drive(spec: WorldSpec, driver, start, seconds: float, seed: int = 0, teacher
     if teacher is not None:
         teacher.reset()
     ep = Episode(start=start, dt=dt, kind=kind)
-    side = TASKS[spec.task].side
+    record = recorded(behaviour_for_world(spec) if behaviour is None else behaviour)
     t0 = time.perf_counter()
     for _ in range(int(round(seconds / dt))):
         ranges = world.scan(0)
@@ -130,9 +143,9 @@ def drive(spec: WorldSpec, driver, start, seconds: float, seed: int = 0, teacher
         name = driver.act(ranges, odom)
         if teacher is not None:
             ep.teacher_actions.append(teacher.act(ranges, odom))
-        step_world(world, ep, actions, name, side, ranges,
+        step_world(world, ep, actions, name, record["side"], ranges,
                    source="controller" if isinstance(driver, TreePolicy) else "teacher",
-                   on_step=on_step)
+                   on_step=on_step, gaps=record["gaps"])
         if stop_at_goal and spec.goal is not None and world.at_goal(0):
             break
     ep.wall_time = time.perf_counter() - t0

@@ -20,10 +20,14 @@ the robot to the nearest wall on the followed side at each step, ``dt`` the step
                                                       #  "pose": [x, y, yaw], "alternations"}
     teacher_agreement(actions, teacher_actions) -> float | None
     progress_stuck(poses, dt, window_s=30.0, min_progress=0.5) -> bool
+    covered_area(poses, cell=0.5) -> float            # m^2 of the cells of ``cell`` m entered
+    centred_fraction(gaps, tolerance=0.3) -> float    # fraction of steps with |left - right| <= it
     wall_success(m, teacher_distance, band=0.8, ratio=0.7) -> bool
     maze_success(m) -> bool
+    judge(rules, m, teacher_m=None) -> bool           # a behaviour's success rule (every rule holds)
     episode_metrics(poses, stalls, actions, dt, side=None, goal=None, teacher_actions=None,
-                    start=None) -> dict               # every per-episode field of evaluate's JSON
+                    start=None, rules=None, gaps=None) -> dict
+                                                      # every per-episode field of evaluate's JSON
     summarize(values) -> {"mean", "std", "min", "max", "n"}
 """
 
@@ -38,10 +42,13 @@ from client.behaviour.loops import LoopDetector
 
 __all__ = [
     "BAND",
+    "centred_fraction",
     "collisions",
+    "covered_area",
     "distance",
     "episode_metrics",
     "goal_reached",
+    "judge",
     "maze_success",
     "oscillation_loops",
     "oscillations",
@@ -188,9 +195,68 @@ def maze_success(m: dict) -> bool:
     return bool(m["goal_reached"]) and m["collisions"] == 0
 
 
+def covered_area(poses, cell: float = 0.5) -> float:
+    """Ground covered: square metres of the distinct ``cell`` x ``cell`` m grid cells the robot
+    was in at some step."""
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3) if len(poses) else np.zeros((0, 3))
+    if len(p) == 0:
+        return 0.0
+    cells = np.unique(np.floor(p[:, :2] / cell).astype(np.int64), axis=0)
+    return float(len(cells) * cell * cell)
+
+
+def centred_fraction(gaps: Sequence[float], tolerance: float = 0.3) -> float:
+    """Fraction of steps whose ``gaps`` (the nearest wall on the left minus the nearest on the
+    right, metres) lie within +/- ``tolerance``: the robot centred between the walls."""
+    g = np.asarray(gaps, dtype=np.float64)
+    if g.size == 0:
+        return 0.0
+    return float(np.count_nonzero(np.abs(g) <= tolerance) / g.size)
+
+
+def judge(rules: dict, m: dict, teacher_m: dict | None = None) -> bool:
+    """A behaviour's success rule (``client.behaviour.spec.RULES``: rule -> its parameters) on
+    an episode's metrics ``m`` (``episode_metrics`` given the same ``rules``): True when every
+    rule holds. ``teacher_m``: the scripted expert's metrics from the same start, for
+    ``distance``'s ``of_teacher`` (None: not compared). The one success rule of every
+    behaviour; ``time-limit`` is the episode's length, which the driver keeps."""
+    for rule, p in rules.items():
+        if rule == "time-limit":
+            continue
+        if rule == "no-collision":
+            ok = m["collisions"] == 0
+        elif rule == "distance":
+            ok = m["distance"] >= p["metres"]
+            if teacher_m is not None and p["of_teacher"] > 0:
+                ok = ok and m["distance"] >= p["of_teacher"] * teacher_m["distance"]
+        elif rule == "progress":
+            ok = not m["stuck"]
+        elif rule == "wall-band":
+            ok = m["wall_band_fraction"] is not None and m["wall_band_fraction"] >= p["fraction"]
+        elif rule == "centred":
+            ok = m.get("centred_fraction") is not None and m["centred_fraction"] >= p["fraction"]
+        elif rule == "goal":
+            ok = bool(m["goal_reached"])
+        elif rule == "coverage":
+            ok = m.get("covered_area") is not None and m["covered_area"] >= p["area"]
+        else:
+            raise ValueError(f"no success rule {rule!r}")
+        if not ok:
+            return False
+    return True
+
+
 def episode_metrics(poses, stalls, actions, dt: float, side=None, goal=None,
-                    teacher_actions=None, start=None, band=BAND) -> dict:
-    """Every per-episode field of ``rhbl evaluate --json`` (except ``success``)."""
+                    teacher_actions=None, start=None, band=BAND, rules: dict | None = None,
+                    gaps=None) -> dict:
+    """Every per-episode field of ``rhbl evaluate --json`` (except ``success``). ``rules`` (a
+    behaviour's success rule) sets the band of ``wall-band``, the window of ``progress`` and
+    adds ``centred_fraction`` (from ``gaps``, per step: left minus right wall distance) and
+    ``covered_area`` when it has ``centred`` or ``coverage``."""
+    rules = rules or {}
+    if "wall-band" in rules:
+        band = (rules["wall-band"]["near"], rules["wall-band"]["far"])
+    progress = rules.get("progress", {"window": 30.0, "metres": 0.5})
     reached, t_goal = goal_reached(poses, goal, dt)
     if reached:
         # the episode is judged up to the goal: count stalls before it only
@@ -209,8 +275,11 @@ def episode_metrics(poses, stalls, actions, dt: float, side=None, goal=None,
         "oscillation_loops": oscillation_loops(actions, poses, dt),
         "teacher_agreement": (round(v, 4) if (v := teacher_agreement(
             actions, None if teacher_actions is None else list(teacher_actions)[:n])) is not None else None),
-        "stuck": progress_stuck(poses, dt),
-    }
+        "stuck": progress_stuck(poses, dt, progress["window"], progress["metres"]),
+    } | ({"centred_fraction": round(centred_fraction(gaps or (), rules["centred"]["tolerance"]), 4)}
+         if "centred" in rules else {}) | (
+        {"covered_area": round(covered_area(poses, rules["coverage"]["cell"]), 4)}
+        if "coverage" in rules else {})
 
 
 def summarize(values: Sequence[float]) -> dict:

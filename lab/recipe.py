@@ -24,7 +24,6 @@ import math
 from dataclasses import dataclass
 
 from client.behaviour.features import FEATURES, FeatureSpec
-from client.behaviour.tasks import TASKS
 from process import arguments
 from process.arguments import checked_list
 
@@ -107,8 +106,8 @@ class Recipe:
         def bad(name: str, expected: str) -> ValueError:
             return ValueError(f"recipe {name} must be {expected}, got {getattr(self, name)!r}")
 
-        if self.task not in TASKS:
-            raise bad("task", f"one of {', '.join(TASKS)}")
+        if not isinstance(self.task, str) or not self.task:
+            raise bad("task", "a behaviour's name (client.behaviour.spec)")
         if not isinstance(self.features, FeatureSpec) and self.features not in FEATURES:
             raise bad("features", f"one of {', '.join(sorted(FEATURES))} or a FeatureSpec")
         if self.starts not in STARTS:
@@ -343,8 +342,9 @@ def add_recipe_arguments(parser: argparse.ArgumentParser, seconds: str = "--seco
                             help=f"{text} ({recipe_default(name)})".replace("%", "%%"))
 
 
-def recipe_from_args(task: str, args: argparse.Namespace) -> Recipe:
-    """The task's recipe with the flags of ``add_recipe_arguments`` that were given."""
+def recipe_from_args(task: str | Recipe, args: argparse.Namespace) -> Recipe:
+    """The task's recipe (or the recipe ``task``) with the flags of ``add_recipe_arguments``
+    that were given."""
     changes = {f.name: getattr(args, f.name) for f in dataclasses.fields(Recipe)
                if f.name not in ("task", "world", "seconds") and getattr(args, f.name, None)
                is not None}
@@ -358,4 +358,4 @@ def recipe_from_args(task: str, args: argparse.Namespace) -> Recipe:
         if compact == "none":
             changes.setdefault("compact_rounds", False)
             changes.setdefault("compact_visits", 0)
-    return recipe_for(task).replace(**changes)
+    return (task if isinstance(task, Recipe) else recipe_for(task)).replace(**changes)

@@ -1,14 +1,17 @@
 """``rhbl train``: a scripted teacher demonstrates on a world in-process (``lab.harness``, no zenoh)
 and a tree learns; the snapshot is written with its metadata.
 
-    spec = load_world(path)
-    recipe = RECIPES[spec.task].replace(seconds=300)                # lab.recipe: the defaults
+    b = get("wall-following")                                        # lab.behaviours: a behaviour
+    spec = teaching_world(b)                                         # its first teaching world
+    recipe = recipe_of(b).replace(seconds=300)                       # lab.recipe: the defaults
     learner = make_learner(recipe)                                   # or DemonstrationLearner(...)
-    ep = train(spec, learner, recipe, seed=0)                        # the scripted teacher demonstrates
+    ep = train(spec, learner, recipe, seed=0, behaviour=b)           # its scripted expert demonstrates
 
-``rhbl train --world PATH --out SNAPSHOT [--resume SNAPSHOT] [--start x,y,yaw] [--seed N]
-[recipe flags: --seconds S --perturb P --spawn all|winner ...]`` writes the snapshot with its
-metadata; every flag left out takes the task's recipe value (``lab.recipe.RECIPES``).
+``rhbl train --behaviour NAME|FILE | --world PATH --out SNAPSHOT [--resume SNAPSHOT] [--start
+x,y,yaw] [--seed N] [recipe flags: --seconds S --perturb P --spawn all|winner ...]`` writes the
+snapshot with its metadata; every flag left out takes the behaviour's recipe value
+(``lab.behaviours.recipe_of``: ``lab.recipe.RECIPES``). ``--behaviour`` alone teaches in its
+first teaching world; ``--world`` alone teaches the world's behaviour.
 ``rhbl train --from-recording FILE ...`` learns recorded labels instead (``lab.retrain``).
 """
 
@@ -24,18 +27,27 @@ import numpy as np
 
 from client.behaviour.learning import DemonstrationLearner, TreePolicy
 from client.behaviour.policies import Demonstrator, takes_over
-from client.behaviour.tasks import TASKS, make_policy
+from client.behaviour.spec import Behaviour
 from client.behaviour.teaching import add_person_arguments
+from lab.behaviours import (
+    behaviour_arg,
+    behaviour_for_world,
+    get,
+    recipe_of,
+    teaching_world,
+    world_of,
+)
 from lab.episode import DT, Episode
 from lab.harness import (
     OnStep,
     demonstration_starts,
     make_learner,
     parse_pose,
+    recorded,
     resolve_world,
     step_world,
 )
-from lab.recipe import Recipe, add_recipe_arguments, recipe_for, recipe_from_args
+from lab.recipe import Recipe, add_recipe_arguments, recipe_from_args
 from process import arguments
 from server import world_arg
 from server.world import World, WorldSpec, free_pose, sample_pose
@@ -48,10 +60,12 @@ log = logging.getLogger(__name__)
 def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None = None, *,
           seed: int = 0, start: tuple[float, float, float] | None = None,
           range_noise: float = 0.0, odom_noise: float = 0.0, dt: float = DT,
-          policy=None, on_step: OnStep | None = None) -> Episode:
-    """One training run of ``recipe`` (default: the world's task's, ``lab.recipe``): the world's
-    scripted teacher demonstrates for ``recipe.seconds`` (sim time, in total) while ``learner``
-    observes every step.
+          policy=None, on_step: OnStep | None = None,
+          behaviour: Behaviour | None = None) -> Episode:
+    """One training run of ``recipe`` (default: the behaviour's, ``lab.behaviours.recipe_of``)
+    of ``behaviour`` (default: the world's, ``lab.behaviours.behaviour_for_world``): its
+    scripted expert (or ``policy``) demonstrates for ``recipe.seconds`` (sim time, in total)
+    while ``learner`` observes every step.
 
     The run is a sequence of demonstrations (the teacher restarts; the tree keeps growing):
     first one from each pose of ``recipe.starts`` ("world": every start pose of the world,
@@ -75,8 +89,9 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
     and corrects, the compacted tree. With ``recipe.compact_visits`` the last compaction is
     redone against the learned vectors plus held-out states the compacted tree reaches
     (``visited_states``)."""
-    recipe, compact = _checked(spec, learner, recipe)
-    policy = policy or make_policy(spec.task, actions=learner.actions)
+    b = behaviour_for_world(spec) if behaviour is None else behaviour
+    recipe, compact = _checked(spec, b, learner, recipe)
+    policy = policy or b.expert(actions=learner.actions)
     rng = np.random.default_rng(seed)
     aug = (_Augmenter(policy, recipe.augment, recipe.augment_scale, seed)
            if recipe.augment > 0 else None)
@@ -86,12 +101,13 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
     t0 = time.perf_counter()
     noise = (range_noise, odom_noise)
     _demonstrations(spec, learner, recipe, policy, fixed, segment, ep, rng=rng, aug=aug,
-                    seed=seed, noise=noise, on_step=on_step)
+                    seed=seed, noise=noise, on_step=on_step, record=recorded(b))
     demo_vectors = ep.learned
     rounds = 0 if start is not None else recipe.rounds  # a corrective demonstration: no rounds
     round_stats, between = _rounds(spec, learner, policy, fixed, recipe, rounds, compact, ep,
-                                   rng=rng, aug=aug, seed=seed, noise=noise, on_step=on_step)
-    compaction = _last_compaction(spec, learner, recipe, compact, seed, policy, on_step)
+                                   rng=rng, aug=aug, seed=seed, noise=noise, on_step=on_step,
+                                   record=recorded(b))
+    compaction = _last_compaction(spec, learner, recipe, compact, seed, policy, on_step, b)
     ep.wall_time = time.perf_counter() - t0
     learner.session = _session_record(
         spec, recipe, ep, seed=seed, given=start is not None, segment=segment,
@@ -100,14 +116,15 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
     return ep
 
 
-def _checked(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None
-             ) -> tuple[Recipe, dict | None]:
-    """The recipe (default: the world's task's) and its compaction step's settings; ValueError
-    when the recipe is another task's, or compacts with a learner that keeps no vectors."""
-    recipe = recipe_for(spec.task) if recipe is None else recipe
-    if recipe.task != spec.task:
-        raise ValueError(f"the recipe is for task {recipe.task!r} but world {spec.name!r} is a "
-                         f"{spec.task!r} world")
+def _checked(spec: WorldSpec, b: Behaviour, learner: DemonstrationLearner,
+             recipe: Recipe | None) -> tuple[Recipe, dict | None]:
+    """The recipe (default: the behaviour's) and its compaction step's settings; ValueError
+    when the recipe is another behaviour's, or compacts with a learner that keeps no
+    vectors."""
+    recipe = recipe_of(b) if recipe is None else recipe
+    if recipe.task != b.name:
+        raise ValueError(f"the recipe is for task {recipe.task!r} but world {spec.name!r} is "
+                         f"taught the behaviour {b.name!r}")
     compact = recipe.compact_params()
     if compact is not None and not learner.recording:
         raise ValueError(f"recipe compact {recipe.compact!r} needs a learner that kept its "
@@ -117,13 +134,14 @@ def _checked(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | No
 
 def _demonstrations(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe, policy,
                     fixed: list, segment: float, ep: Episode, *, rng, aug, seed: int,
-                    noise: tuple[float, float], on_step: OnStep | None = None) -> None:
+                    noise: tuple[float, float], on_step: OnStep | None = None,
+                    record: dict | None = None) -> None:
     """The demonstrations of ``train`` until ``recipe.seconds`` of sim time are used: the teacher
     restarts from each pose of ``fixed``, then (``recipe.random_segment`` > 0) from sampled
     poses; ``learner`` observes every step; ``ep`` records them."""
     demo = Demonstrator(policy, perturb=recipe.perturb, rng=rng, dt=ep.dt)
     world = World(spec, robots=1, seed=seed, range_noise=noise[0], odom_noise=noise[1])
-    side = TASKS[spec.task].side
+    record = record or {}
     total = int(round(recipe.seconds / ep.dt))
     done = 0
     k = 0
@@ -144,8 +162,8 @@ def _demonstrations(spec: WorldSpec, learner: DemonstrationLearner, recipe: Reci
                 ep.learned += 1
             if aug is not None:
                 ep.learned += aug.offer(learner, ranges, odom)
-            step_world(world, ep, learner.actions, executed, side, ranges, label=label,
-                       on_step=on_step)
+            step_world(world, ep, learner.actions, executed, record.get("side"), ranges,
+                       label=label, on_step=on_step, gaps=record.get("gaps", False))
             done += 1
             if spec.goal is not None and world.at_goal(0):
                 break
@@ -168,8 +186,8 @@ def _demonstration_start(spec: WorldSpec, recipe: Recipe, fixed: list, segment: 
 
 def _rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, fixed: list, recipe: Recipe,
             rounds: int, compact: dict | None, ep: Episode, *, rng, aug, seed: int,
-            noise: tuple[float, float], on_step: OnStep | None = None
-            ) -> tuple[list[dict], list[dict]]:
+            noise: tuple[float, float], on_step: OnStep | None = None,
+            record: dict | None = None) -> tuple[list[dict], list[dict]]:
     """The corrective rounds of ``train``: in each copy scaled by ``recipe.round_scales``, then
     in the training world (its corrections are the latest); with ``recipe.compact_rounds`` the
     tree is compacted after the demonstrations and after every round but the last. Returns the
@@ -193,17 +211,18 @@ def _rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, fixed: list,
         scaled = spec.scaled(f)
         for st in _corrective_rounds(scaled, learner, policy, scaled.start_poses, recipe,
                                      seed, range_noise, odom_noise, ep, rng=rng, aug=aug,
-                                     after_round=after_round, scale=f, on_step=on_step):
+                                     after_round=after_round, scale=f, on_step=on_step,
+                                     record=record):
             round_stats.append(dict(st, scale=f))
     round_stats += _corrective_rounds(spec, learner, policy, fixed, recipe, seed,
                                       range_noise, odom_noise, ep, rng=rng, aug=aug,
-                                      after_round=after_round, on_step=on_step)
+                                      after_round=after_round, on_step=on_step, record=record)
     return round_stats, between
 
 
 def _last_compaction(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe,
                      compact: dict | None, seed: int, policy,
-                     on_step: OnStep | None = None) -> dict | None:
+                     on_step: OnStep | None = None, b: Behaviour | None = None) -> dict | None:
     """The last step of ``train``: the tree compacted on every vector it learned, redone against
     held-out visited states with ``recipe.compact_visits``. Returns its record (None: no
     compaction)."""
@@ -213,7 +232,7 @@ def _last_compaction(spec: WorldSpec, learner: DemonstrationLearner, recipe: Rec
     compaction = learner.compact(**compact, data="the last step")
     if recipe.compact_visits > 0:
         compaction = _compact_visits(spec, learner, before, compact, recipe, seed, policy,
-                                     on_step)
+                                     on_step, b)
     return compaction
 
 
@@ -247,7 +266,8 @@ def _session_record(spec: WorldSpec, recipe: Recipe, ep: Episode, *, seed: int, 
 
 
 def _compact_visits(spec: WorldSpec, learner: DemonstrationLearner, before, compact: dict,
-                    recipe: Recipe, seed: int, policy, on_step: OnStep | None = None) -> dict:
+                    recipe: Recipe, seed: int, policy, on_step: OnStep | None = None,
+                    b: Behaviour | None = None) -> dict:
     """``recipe.compact_visits`` (see ``Recipe``): the last compaction redone against every
     learned vector plus the states the compacted tree reaches (``visited_states``, poses drawn
     with ``seed + 100 + 1000 k`` for the k-th visit); ``before``: the tree before the last
@@ -257,7 +277,8 @@ def _compact_visits(spec: WorldSpec, learner: DemonstrationLearner, before, comp
     visit = recipe.replace(round_free=recipe.visit_free)
     for k in range(recipe.compact_visits):
         vx, vy = visited_states(spec, learner, visit, seed=seed + 100 + 1000 * k,
-                                scales=recipe.visit_scales, policy=policy, on_step=on_step)
+                                scales=recipe.visit_scales, policy=policy, on_step=on_step,
+                                behaviour=b)
         xs.append(vx)
         ys.append(vy)
         learner.classifier = before.compact(
@@ -294,7 +315,7 @@ def _corrective_rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, p
                        recipe: Recipe, seed: int, range_noise: float, odom_noise: float,
                        ep: Episode, rng=None, aug=None, after_round=None,
                        scale: float | None = None, collect: tuple[list, list] | None = None,
-                       on_step: OnStep | None = None) -> list[dict]:
+                       on_step: OnStep | None = None, record: dict | None = None) -> list[dict]:
     """DAgger rounds (see ``train``): the tree drives, the teacher labels; per round the number
     of steps, disagreements (learned labels that differed from the tree's choice) and takeovers.
     ``recipe.round_free`` > 0: each round also drives from that many fresh poses anywhere in the
@@ -308,7 +329,7 @@ def _corrective_rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, p
                                        recipe.round_free)
     dt = ep.dt
     world = World(spec, robots=1, seed=seed, range_noise=range_noise, odom_noise=odom_noise)
-    side = TASKS[spec.task].side
+    record = record or {}
     stats = []
     for r in range(rounds):
         tree = TreePolicy.from_learner(learner)
@@ -336,8 +357,9 @@ def _corrective_rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, p
                 if took_now:
                     drive = label
                     took += 1
-                step_world(world, ep, learner.actions, drive, side, ranges, label=label,
-                           source="teacher" if took_now else "controller", on_step=on_step)
+                step_world(world, ep, learner.actions, drive, record.get("side"), ranges,
+                           label=label, source="teacher" if took_now else "controller",
+                           on_step=on_step, gaps=record.get("gaps", False))
                 ep.labels.append(label)
                 steps += 1
                 if spec.goal is not None and world.at_goal(0):
@@ -353,7 +375,8 @@ def _corrective_rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, p
 
 def visited_states(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None = None,
                    *, seed: int = 0, scales: tuple[float, ...] | None = None, rounds: int = 1,
-                   policy=None, on_step: OnStep | None = None) -> tuple[np.ndarray, np.ndarray]:
+                   policy=None, on_step: OnStep | None = None,
+                   behaviour: Behaviour | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Held-out states for pruning (``rhbl.compaction``): the states ``learner``'s tree reaches when
     it drives, labelled by the teacher, ``(X, y)``. The drives are ``rounds`` corrective rounds
     as ``recipe`` runs them (from every start pose and ``recipe.round_free`` free-space poses,
@@ -361,9 +384,10 @@ def visited_states(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recip
     scaled by each of ``scales`` (default: ``recipe.round_scales``), then in ``spec``, but the
     tree learns nothing. ``seed`` draws the poses (use one other than the training run's for
     held-out states)."""
-    recipe = recipe_for(spec.task) if recipe is None else recipe
+    b = behaviour_for_world(spec) if behaviour is None else behaviour
+    recipe = recipe_of(b) if recipe is None else recipe
     recipe = recipe.replace(rounds=rounds)
-    policy = policy or make_policy(spec.task, actions=learner.actions)
+    policy = policy or b.expert(actions=learner.actions)
     rng = np.random.default_rng(seed)
     ep = Episode(start=tuple(spec.pose), kind="round")
     xs: list = []
@@ -380,8 +404,13 @@ def visited_states(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recip
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--world", type=world_arg,
-                        help="world file (or a shipped world's name); required unless "
-                             "--from-recording")
+                        help="world file (or a shipped world's name); default: the first world "
+                             "--behaviour is taught in (one of the two is required unless "
+                             "--from-recording)")
+    parser.add_argument("--behaviour", default=None, type=behaviour_arg,
+                        help="the behaviour to teach, with its scripted expert, perception and "
+                             "recipe (a shipped behaviour's name, 'rhbl behaviours' lists them, "
+                             "or a behaviour file); default: the world's")
     parser.add_argument("--out", required=True, type=arguments.output_file,
                         help="snapshot to write")
     parser.add_argument("--resume", default=None, type=arguments.input_file,
@@ -414,13 +443,18 @@ def main(args) -> int:
         from lab.retrain import train_main
 
         return train_main(args)  # every flag that cannot apply is a named error there
-    if not args.world:
-        raise ValueError("--world is required (or --from-recording FILE)")
+    if not args.world and not args.behaviour:
+        raise ValueError("--world or --behaviour is required (or --from-recording FILE)")
     if args.teacher not in ("auto", "script") or args.lag is not None or args.vote is not None:
         raise ValueError("--teacher, --lag and --vote go with --from-recording (a simulated "
                          "run's teacher is the scripted expert)")
-    spec = resolve_world(args.world)
-    recipe = recipe_from_args(spec.task, args)
+    b = get(args.behaviour) if args.behaviour else None
+    if args.world is None:
+        spec = teaching_world(b)
+    else:
+        spec = resolve_world(args.world) if b is None else world_of(b, args.world)
+    b = behaviour_for_world(spec) if b is None else b
+    recipe = recipe_from_args(recipe_of(b), args)
     if args.resume:
         if recipe.compact != "none":
             raise ValueError(f"--compact {recipe.compact} needs a fresh tree: a resumed learner "
@@ -438,10 +472,10 @@ def main(args) -> int:
     with recording as tap:  # None without --record
         ep = train(spec, learner, recipe, seed=args.seed, start=args.start,
                    range_noise=args.range_noise, odom_noise=args.odom_noise,
-                   on_step=None if tap is None else tap.step)
+                   on_step=None if tap is None else tap.step, behaviour=b)
     out = learner.save(args.out)
     m = ep.metrics()
-    print(f"trained on {spec.name} ({spec.task}) for {recipe.seconds:g} s from {list(ep.start)}: "
+    print(f"trained on {spec.name} ({b.name}) for {recipe.seconds:g} s from {list(ep.start)}: "
           f"{len(ep.segments)} demonstrations + {learner.session.get('rounds', 0)} corrective "
           f"rounds{_scales_note(learner.session.get('round_scales'))}, {ep.learned} vectors "
           f"learned, tree {_size_note(learner.session.get('compaction'))}{learner.nodes} nodes, "

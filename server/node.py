@@ -75,7 +75,7 @@ _CMD_QUEUE = 1024  # commands queued per robot between two ticks (zenoh waits wh
 def world_info(spec: WorldSpec) -> WorldInfo:
     """The ``get_world`` reply of a world: its walls as segments, goal and start poses."""
     goal = None if spec.goal is None else (*spec.goal.center, spec.goal.radius)
-    return WorldInfo(name=spec.name, task=spec.task,
+    return WorldInfo(name=spec.name, task=spec.task or "",  # "": the world names no task
                      walls=tuple(tuple(s) for s in spec.segments().tolist()),
                      goal=goal, starts=tuple(tuple(p) for p in spec.start_poses))
 

@@ -139,7 +139,7 @@ class WorldSpec:
     """A parsed world file. ``pose`` is the default start; ``starts`` extra start poses."""
 
     name: str
-    task: str
+    task: str | None  # the behaviour the world was made for, if it names one (most do not need to)
     pose: tuple[float, float, float]
     starts: tuple[tuple[float, float, float], ...] = ()
     walls: tuple[Wall, ...] = ()
@@ -315,9 +315,9 @@ def parse_world(
     name = data.get("name", Path(source).stem)
     if not isinstance(name, str) or not name:
         raise _err(src, "name", "a non-empty string", name)
-    task = data.get("task", "wall-following")
-    if task not in TASKS:
-        raise _err(src, "task", f"one of {list(TASKS)}", task)
+    task = data.get("task")  # optional: a behaviour names its worlds (client.behaviour.spec)
+    if task is not None and task not in TASKS:
+        raise _err(src, "task", f"one of {list(TASKS)} or no task at all", task)
     robot = data.get("robot")
     if not isinstance(robot, dict):
         raise _err(src, "robot", "a [robot] table with pose = [x, y, yaw]", robot)

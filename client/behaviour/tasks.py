@@ -6,8 +6,11 @@
     task.side                         # the wall it keeps beside the robot ("right"), or None
     make_policy("wall-following")     # the task's scripted expert (style "reactive" or "smooth")
 
-A world file names its task (``server.world.TASKS``, the world format's list, holds the same
-names: the server cannot import this package; a test keeps the two equal).
+What a robot is taught is a behaviour file (``client.behaviour.spec``, docs/behaviours.md): it
+names its scripted expert by ``teacher`` ("wall-follower", "maze") and gives its parameters (the
+side, ...); this table is where the experts' classes are found. A world file may still name its
+task (``server.world.TASKS``, the world format's list, holds the same names: the server cannot
+import this package; a test keeps the two equal); a task's name is its shipped behaviour's.
 """
 
 from __future__ import annotations

@@ -36,7 +36,7 @@ def test_replace_validates_and_names_the_field():
     with pytest.raises(TypeError, match="not a recipe field: roundz"):
         r.replace(roundz=1)
     for field, bad in [("rounds", -1), ("seconds", 0.0), ("perturb", 1.5), ("stride", 0),
-                       ("starts", "anywhere"), ("features", "sonar"), ("task", "dance"),
+                       ("starts", "anywhere"), ("features", "sonar"), ("task", ""),
                        ("round_scales", (0.9, -1.0)), ("segment", math.nan), ("rounds", 1.5)]:
         with pytest.raises(ValueError, match=f"recipe {field} must be"):
             r.replace(**{field: bad})

@@ -253,7 +253,7 @@ def test_parse_world_mapping():
             "walls": [{"points": [[0, 0], [4, 0], [4, 3]], "closed": True}],
         }
     )
-    assert len(spec.segments()) == 3 and spec.task == "wall-following"
+    assert len(spec.segments()) == 3 and spec.task is None  # a world need not name a task
 
 
 def test_set_pose_teleports_and_refuses_walls(corridor):

@@ -59,5 +59,7 @@ def test_the_commands_offer_the_tables_tasks():
     choices = next(a.choices for a in teacher._actions if a.dest == "policy")
     assert list(choices) == ["wall-follower", "maze", "keyboard"]
     experiment = build_parser("experiment")
-    choices = next(a.choices for a in experiment._actions if a.dest == "task")
-    assert list(choices) == ["wall-following", "maze", "both"]
+    for task in ("wall-following", "maze", "both"):  # a behaviour (client.behaviour.spec)
+        assert experiment.parse_args([task]).task == task
+    with pytest.raises(SystemExit):
+        experiment.parse_args(["soccer"])

@@ -1,0 +1,164 @@
+"""``rhbl behaviours``: the shipped behaviours, one line each; and the lab's side of behaviour
+files (``client.behaviour.spec``): their worlds, their recipe, a world's behaviour.
+
+    b = get("wall-following")              # a shipped behaviour's name or a behaviour file's path
+    spec = world_of(b, "room")             # the world, with the behaviour's own start poses
+    spec = teaching_world(b)               # its first teaching world
+    recipe = recipe_of(b)                  # its training recipe (lab.recipe)
+    b = behaviour_for_world(spec)          # the behaviour a world is taught or evaluated for
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+from pathlib import Path
+
+from client.behaviour.spec import Behaviour, BehaviourError, behaviour, shipped
+from lab.recipe import RECIPES, Recipe
+from process import arguments, files
+from process.arguments import Checked
+from server import world_path
+from server.world import WorldSpec, load_world
+
+__all__ = ["add_arguments", "behaviour_arg", "behaviour_for_world", "describe", "get", "main",
+           "recipe_of", "teaching_world", "to_dict", "world_of"]
+
+
+def get(name_or_path: str | Path | Behaviour) -> Behaviour:
+    """A shipped behaviour by name, a behaviour file by path (a Behaviour: itself)."""
+    return name_or_path if isinstance(name_or_path, Behaviour) else behaviour(name_or_path)
+
+
+def _check(text: str) -> str:
+    get(text)  # BehaviourError (a ValueError): one line naming the file, the field, what is allowed
+    return text
+
+
+# ``--behaviour NAME|FILE`` (argparse type: a shipped behaviour's name or a behaviour file)
+behaviour_arg = Checked("behaviour", _check)
+# (a shipped name or a regular file, as a world is: the CLI walk tries the same hostile values)
+behaviour_arg.kind, behaviour_arg.example = "world", "wall-following"
+
+
+def world_of(b: Behaviour, world: str) -> WorldSpec:
+    """The world ``world`` (a name or path, as the behaviour names it or not) with the
+    behaviour's own start poses for it, when it gives some (the first is the default pose)."""
+    try:
+        spec = load_world(world_path(world))
+    except FileNotFoundError as exc:
+        where = b.path or b.name
+        raise BehaviourError(f"{where}: field 'worlds': {exc}") from None
+    starts = b.starts.get(world) or b.starts.get(spec.name)
+    if starts:
+        spec = dataclasses.replace(spec, pose=starts[0], starts=tuple(starts[1:]))
+    return spec
+
+
+def teaching_world(b: Behaviour) -> WorldSpec:
+    """The first world the behaviour is taught in."""
+    return world_of(b, b.teach[0])
+
+
+def recipe_of(b: Behaviour) -> Recipe:
+    """The behaviour's training recipe: the recipe of the same name (``lab.recipe.RECIPES``, the
+    published figures'), else wall following's; with the behaviour's perception, its first
+    teaching world and the fields its ``[recipe]`` table changes."""
+    base = RECIPES.get(b.name) or RECIPES["wall-following"]
+    changes = dict(b.recipe)
+    fields = {f.name for f in dataclasses.fields(Recipe)} - {"task", "world", "features"}
+    for key, value in changes.items():
+        if key not in fields:
+            raise BehaviourError(f"{b.path or b.name}: field 'recipe.{key}': unknown; allowed: "
+                                 f"{', '.join(sorted(fields))}")
+        if isinstance(value, list):
+            changes[key] = tuple(value)
+    try:
+        return base.replace(task=b.name, world=b.teach[0],
+                            features=b.perception or b.features, **changes)
+    except (TypeError, ValueError) as exc:
+        raise BehaviourError(f"{b.path or b.name}: field 'recipe': {exc}") from None
+
+
+def _same_world(named: str, spec: WorldSpec) -> bool:
+    if named == spec.name:
+        return True
+    return spec.path is not None and "/" in named and Path(named).resolve() == spec.path.resolve()
+
+
+def behaviour_for_world(spec: WorldSpec) -> Behaviour:
+    """The behaviour of a world: the one its ``task`` names (a world file may still name one),
+    else the shipped behaviour that names the world among its teaching or held-out worlds;
+    BehaviourError when none does, or more than one (then ``--behaviour`` says which)."""
+    known = shipped()
+    if spec.task is not None:
+        if spec.task not in known:
+            raise BehaviourError(f"world {spec.name!r} names task {spec.task!r}, which is no "
+                                 f"shipped behaviour ({', '.join(known)})")
+        return known[spec.task]
+    naming = [b for b in known.values() if any(_same_world(w, spec) for w in b.worlds)]
+    if len(naming) == 1:
+        return naming[0]
+    if naming:
+        raise BehaviourError(f"world {spec.name!r} names no task and the behaviours "
+                             f"{', '.join(b.name for b in naming)} name it: say which with "
+                             "--behaviour NAME|FILE")
+    raise BehaviourError(f"world {spec.name!r} names no task and no shipped behaviour names it: "
+                         "say which behaviour with --behaviour NAME|FILE")
+
+
+# ------------------------------------------------------------------------------ the command
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("behaviour", nargs="?", default=None, type=behaviour_arg,
+                        help="show this behaviour in full (a shipped behaviour's name or a "
+                             "behaviour file); default: list the shipped ones")
+    parser.add_argument("--json", default=None, type=arguments.output_file,
+                        help="also write them (or it) in full as JSON: name, summary, "
+                             "perception (the feature spec), expert, worlds, starts, success "
+                             "rule, instructions")
+
+
+def to_dict(b: Behaviour) -> dict:
+    """A behaviour as plain data (``--json``): what its file says, its perception as the
+    feature spec it makes."""
+    return {"name": b.name, "summary": b.summary, "file": str(b.path) if b.path else None,
+            "perception": b.perception, "features": b.features.to_dict(),
+            "expert": {"name": b.expert_name, **b.expert_params},
+            "worlds": {"teach": list(b.teach), "held_out": list(b.held_out)},
+            "starts": {w: [list(p) for p in poses] for w, poses in b.starts.items()},
+            "success": b.rules, "instructions": b.instructions}
+
+
+def describe(b: Behaviour) -> str:
+    """A behaviour in full: its line, perception, expert, worlds, success rule, instructions."""
+    rules = "; ".join(rule + (" " + ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"
+                                               for k, v in p.items()) if p else "")
+                      for rule, p in b.rules.items())
+    expert = ", ".join(f"{k} {v}" for k, v in b.expert_params.items())
+    lines = [f"{b.name}: {b.summary}",
+             f"  file: {b.path}" if b.path else "",
+             f"  perception: {b.perception or 'inline'} ({b.features.dim} inputs)",
+             f"  expert: {b.expert_name}" + (f" ({expert})" if expert else ""),
+             f"  taught in: {', '.join(b.teach)}",
+             f"  held out: {', '.join(b.held_out) or 'none'}",
+             f"  success: {rules}"]
+    if b.instructions:
+        lines += ["  instructions:", *("    " + line for line in b.instructions.splitlines())]
+    return "\n".join(line for line in lines if line)
+
+
+def main(args) -> int:
+    if args.behaviour is not None:
+        chosen = [get(args.behaviour)]
+        print(describe(chosen[0]))
+    else:
+        chosen = list(shipped().values())
+        width = max((len(b.name) for b in chosen), default=0)
+        for b in chosen:
+            print(f"{b.name:<{width}}  {b.summary}")
+    if args.json:
+        files.write_text(args.json, json.dumps([to_dict(b) for b in chosen], indent=1), "--json")
+    return 0
