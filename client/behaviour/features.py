@@ -211,6 +211,10 @@ FEATURES: dict[str, FeatureSpec] = {
     "wall-ping": FeatureSpec(beams=(0.0, 22.5, 45.0, 67.5, 90.0)),
     "maze": FeatureSpec(beams=(0.0, 45.0, 90.0, 135.0, 180.0), heading="lr"),
     "maze-right": FeatureSpec(beams=(0.0, 30.0, 60.0, 90.0, 120.0), window=10.0),
+    # all round: the whole scan condensed into nine sector minima of 22.5 degrees, from the
+    # robot's right through straight ahead to its left (a polar histogram, as in VFH): one spec
+    # that sees a wall on either side, the way between two walls and what lies ahead
+    "around": FeatureSpec(beams=tuple(22.5 * i for i in range(9)), window=11.25),
 }
 
 
