@@ -31,7 +31,7 @@ tree copies the noise. These pieces cope with it (docs/teaching.md has the study
 
     shown = 812                                         # the scan the page displayed
     answered = answered_scan(shown, scans, lag=LAG)     # scans: id -> scan (with .pose)
-    learner = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, task="wall-following")
+    learner = PersonLearner(FEATURES["around"], DEFAULT_ACTIONS)
     learner.observe(ranges, yaw, "fwd-left")            # the label, tied to the answered scan
     learner.classifier                                  # the tree of every label so far (rebuilt
                                                         # when labels came since it was last asked)
