@@ -14,7 +14,7 @@ argument type, so a behaviour is named the same way everywhere.
 
 from __future__ import annotations
 
-from process.arguments import Checked
+from process.arguments import Checked, files_checked
 
 from .spec import RULES, Behaviour, behaviour, shipped
 
@@ -22,6 +22,8 @@ __all__ = ["as_argument", "behaviour_arg", "behaviour_of_world", "rule_words", "
 
 
 def _check(text: str) -> str:
+    if not files_checked() and text not in shipped() and ("/" in text or text.endswith(".toml")):
+        return text  # a path on another machine (a compose file's): checked there
     behaviour(text)  # BehaviourError (a ValueError): one line naming the file, field, allowed
     return text
 
@@ -33,9 +35,12 @@ behaviour_arg.kind, behaviour_arg.example = "world", "wall-following"
 
 
 def as_argument(b: Behaviour) -> str:
-    """What names ``b`` to a child process's ``--behaviour``: its file's path when it has one
-    (a shipped behaviour's too: the same file), else its name."""
-    return str(b.path) if b.path is not None else b.name
+    """What names ``b`` to a child process's ``--behaviour``: a shipped behaviour's name, else
+    its file's path (a behaviour made in code has none: its name)."""
+    known = shipped().get(b.name)
+    if b.path is None or (known is not None and known.path == b.path):
+        return b.name
+    return str(b.path)
 
 
 def _num(v) -> str:
