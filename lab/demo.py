@@ -29,6 +29,7 @@ import logging
 import signal
 import sys
 
+from client.behaviour.given import behaviour_arg
 from lab.by_hand import ByHand
 from lab.children import free_port
 from lab.demo_run import SCENARIOS, Demo, DemoError
@@ -44,9 +45,18 @@ def _defaults(value) -> str:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--scenario", choices=list(SCENARIOS), default="wall-following")
+    parser.add_argument("--scenario", choices=list(SCENARIOS), default=None,
+                        help="a task's demo: the shipped behaviour of its name (default: "
+                             "wall-following); or --behaviour")
+    parser.add_argument("--behaviour", default=None, type=behaviour_arg, metavar="NAME|FILE",
+                        help="demo this behaviour (a shipped behaviour's name or a behaviour "
+                             "file; docs/behaviours.md): its expert teaches, its perception is "
+                             "the learner's, its first teaching world and start poses are the "
+                             "run's, and its success rule judges the final tree; with --by-hand "
+                             "the page and the terminal tell you its instructions")
     parser.add_argument("--out", metavar="DIR", default=None, type=arguments.output_folder,
-                        help="output folder (default: rhbl-out/<timestamp>-<scenario>)")
+                        help="output folder (default: rhbl-out/<timestamp>-<scenario or "
+                             "behaviour>)")
     parser.add_argument("--world", default=None, type=world_arg,
                         help=f"world file or name (default: the scenario's, "
                              f"{_defaults(lambda sc: sc.world)})")
