@@ -37,6 +37,9 @@ side = "left"
 [worlds]
 teach = ["room"]
 
+[starts]
+room = [[8.0, 0.7, 3.14159], [3.0, 0.7, 3.14159]]
+
 [success]
 time-limit = { seconds = 90 }
 no-collision = {}
@@ -73,6 +76,29 @@ def test_the_page_shows_the_instructions_and_rule_of_a_behaviour_given_by_file(
     # the rule in words, as the file says it (not the room's own behaviour's)
     assert shown["rule"] == f"success: {rule_words(behaviour(path))}"
     assert "the wall on the left within 0.4-1 m for 75% of the time" in shown["rule"]
+
+
+def test_home_puts_the_robot_at_the_behaviours_own_start_pose(start_module_server, browser,
+                                                              tmp_path):
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    path = tmp_path / "hug-left.toml"
+    path.write_text(BEHAVIOUR)
+    srv = start_module_server("room")
+    console = ConsoleProcess(srv.endpoint, "--behaviour", str(path))
+    try:
+        _shown(browser, console.wait_url())
+        WebDriverWait(browser, 20).until(
+            lambda d: d.find_element("id", "pose").get_attribute("data-x"))
+        browser.find_element("id", "reset").click()  # Home: its first start pose, not the room's
+        WebDriverWait(browser, 20).until(lambda d: abs(
+            float(d.find_element("id", "pose").get_attribute("data-x") or 0) - 8.0) < 0.05 and abs(
+            float(d.find_element("id", "pose").get_attribute("data-yaw") or 0)) > 3.0)
+        # the start pose list is the behaviour's too
+        assert len(browser.find_elements("css selector", "#starts option")) == 2
+    finally:
+        rc = console.stop()
+    assert rc == 0, console.output()
 
 
 def test_without_behaviour_the_page_shows_the_worlds(start_module_server, browser):
