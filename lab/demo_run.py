@@ -123,6 +123,14 @@ def demo_behaviour(args: argparse.Namespace) -> Behaviour:
     return get(args.behaviour or args.scenario or "wall-following")
 
 
+def _over(teacher_m: dict, m: dict) -> dict | None:
+    """The teacher's metrics with its distance over the length of the episode ``m`` (at the
+    pace of its demonstration), for ``distance``'s ``of_teacher``; None when it has no length."""
+    if not teacher_m.get("seconds"):
+        return None
+    return {**teacher_m, "distance": teacher_m["distance"] * m["seconds"] / teacher_m["seconds"]}
+
+
 # ---- children ------------------------------------------------------------------------------
 class DemoError(Exception):
     pass
@@ -429,8 +437,9 @@ class Demo:
         goal, rules = self.spec.goal, self.behaviour.rules
         tms = [ep.metrics(goal, rules) for ep in demos]
         lms = [ep.metrics(goal, rules) for ep in learned]
-        # each final drive by the behaviour's rule, beside the teacher from the same start
-        self.success = [bool(judge(rules, m, tms[k] if k < len(tms) else None))
+        # each final drive by the behaviour's rule, beside the teacher from the same start (its
+        # demonstration's distance over the drive's length: the two last different times)
+        self.success = [bool(judge(rules, m, _over(tms[k], m) if k < len(tms) else None))
                         for k, m in enumerate(lms)]
         per_round = self.round_rows(rounds)
         wall_time = time.monotonic() - self.t0
