@@ -3,9 +3,9 @@
 The same rendezvous as ``rhbl demo`` (a zenoh router on a free loopback port; every child a
 client), and the processes a person needs to teach by hand, each a separate OS process:
 
-1. ``rhbl learner --behaviour B`` (the behaviour's perception; its default ``--teacher auto``: the page's labels are a
-   person's, so the new tree learns by the person rule; the tree and its journal go into the
-   output folder), ``rhbl server`` (the world, ``room`` by default, in real time) and
+1. ``rhbl learner --behaviour B`` (the behaviour's perception; its default ``--teacher
+   auto``: the page's labels are a person's, so the new tree learns by the person rule; the
+   tree and its journal go into the output folder), ``rhbl server`` (the world, in real time) and
    ``rhbl console --behaviour B`` (the page that drives and teaches, showing the behaviour's
    instructions and success rule; its URL printed; the terminal prints the instructions too).
    ``B`` is ``--behaviour`` (default wall following), its first teaching world the default
@@ -50,8 +50,7 @@ def check_args(args) -> None:
     if bad:
         raise ValueError(f"--by-hand: {', '.join(bad)} drive the scripted teacher's demo and do "
                          f"not apply (you teach; --behaviour, --world, --out, --console, "
-                         f"--demonstrate, "
-                         f"--correct, --starts, --drive-seconds and --record do)")
+                         f"--demonstrate, --correct, --starts, --drive-seconds and --record do)")
 
 
 class ByHand(Demo):

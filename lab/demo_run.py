@@ -78,8 +78,8 @@ class Scenario:
         r = self.recipe
         if (self.behaviour is None and not isinstance(r.features, str)) or any(
                 getattr(r, k) is not None for k in ("distance", "min_radius", "max_depth")):
-            raise ValueError("rhbl learner takes a named feature spec and no distance, "
-                             "min_radius or max_depth option")
+            raise ValueError(f"{r.task}'s recipe: rhbl learner takes a named feature spec (or "
+                             "a behaviour's) and no distance, min_radius or max_depth option")
         perception = (["--behaviour", as_argument(self.behaviour)] if self.behaviour is not None
                       else ["--task", r.task, "--features", r.features])
         args = [*perception, "--spawn", r.spawn,
@@ -153,6 +153,7 @@ class Demo:
         self.scenario = scenario_of(self.behaviour).replace(
             teach=args.teach_seconds, rounds=args.rounds, round_seconds=args.round_seconds,
             drive=args.drive_seconds)
+        self.scenario.learner_args()  # a recipe the learner process cannot run: refused now
         # the world with the behaviour's own start poses for it
         self.spec = world_of(self.behaviour, args.world or self.scenario.world)
         stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
