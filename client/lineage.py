@@ -144,7 +144,7 @@ class Lineage:
     the lineage is read, released by ``close``; ``lock_wait`` s to wait for another holder).
     A lineage learns from one laser: ``beams``, the beam count of its journal's labels."""
 
-    def __init__(self, out: str | os.PathLike, features: str | None = None,
+    def __init__(self, out: str | os.PathLike, features: str | FeatureSpec | None = None,
                  resume: str | None = None, task: str | None = None,
                  tree_params: dict | None = None, stride: int = 1, min_delta: float = 0.0,
                  fsync_interval: float = 1.0, actions: ActionSet = DEFAULT_ACTIONS,
@@ -174,7 +174,9 @@ class Lineage:
     def _open(self, features, resume, task, tree_params, stride, min_delta, fsync_interval,
               actions, fold_journal, journal_write, teacher, lag, vote) -> None:
         """Recover the lineage at ``out`` or start a new one (``__init__``'s arguments)."""
-        spec = FEATURES[features] if features else None
+        # a shipped spec's name, or a spec itself (a behaviour's inline perception)
+        spec = features if isinstance(features, FeatureSpec) else (
+            FEATURES[features] if features else None)
         self.replayed = 0
         self.labels = LabelSet()  # the labels (origin, seq) journaled: deduplication and acks
         self.withdrawals = Withdrawals()  # what teachers took back (tombstones, provenance)

@@ -15,10 +15,10 @@ import dataclasses
 import json
 from pathlib import Path
 
+from client.behaviour.given import behaviour_arg  # --behaviour NAME|FILE: the processes' too
 from client.behaviour.spec import Behaviour, BehaviourError, behaviour, shipped
 from lab.recipe import RECIPES, Recipe
 from process import arguments, files
-from process.arguments import Checked
 from server import world_path
 from server.world import WorldSpec, load_world
 
@@ -29,17 +29,6 @@ __all__ = ["add_arguments", "behaviour_arg", "behaviour_for_world", "describe", 
 def get(name_or_path: str | Path | Behaviour) -> Behaviour:
     """A shipped behaviour by name, a behaviour file by path (a Behaviour: itself)."""
     return name_or_path if isinstance(name_or_path, Behaviour) else behaviour(name_or_path)
-
-
-def _check(text: str) -> str:
-    get(text)  # BehaviourError (a ValueError): one line naming the file, the field, what is allowed
-    return text
-
-
-# ``--behaviour NAME|FILE`` (argparse type: a shipped behaviour's name or a behaviour file)
-behaviour_arg = Checked("behaviour", _check)
-# (a shipped name or a regular file, as a world is: the CLI walk tries the same hostile values)
-behaviour_arg.kind, behaviour_arg.example = "world", "wall-following"
 
 
 def world_of(b: Behaviour, world: str) -> WorldSpec:

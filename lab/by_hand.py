@@ -3,10 +3,13 @@
 The same rendezvous as ``rhbl demo`` (a zenoh router on a free loopback port; every child a
 client), and the processes a person needs to teach by hand, each a separate OS process:
 
-1. ``rhbl learner --features wall`` (its default ``--teacher auto``: the page's labels are a
-   person's, so the new tree learns by the person rule; the tree and its journal go into the
-   output folder), ``rhbl server`` (the world, ``room`` by default, in real time) and
-   ``rhbl console`` (the page that drives and teaches; its URL printed). You **demonstrate**
+1. ``rhbl learner --behaviour B`` (the behaviour's perception; its default ``--teacher
+   auto``: the page's labels are a person's, so the new tree learns by the person rule; the
+   tree and its journal go into the output folder), ``rhbl server`` (the world, in real time) and
+   ``rhbl console --behaviour B`` (the page that drives and teaches, showing the behaviour's
+   instructions and success rule; its URL printed; the terminal prints the instructions too).
+   ``B`` is ``--behaviour`` (default wall following), its first teaching world the default
+   ``--world``. You **demonstrate**
    for ``--demonstrate`` seconds (wall time; Enter at the terminal ends it sooner);
 2. ``rhbl controller --from-learner --follow`` then drives the learner's newest tree (its loop
    guard on), and you **correct** in the page's correct mode (C) for ``--correct`` seconds
@@ -30,12 +33,13 @@ import subprocess
 import sys
 import time
 
+from client.behaviour.given import as_argument
 from lab.demo_run import Child, Demo, DemoError
 
 __all__ = ["ByHand", "NOT_BY_HAND", "check_args"]
 
 # the demo's options that drive its scripted teacher: refused with --by-hand, by name
-NOT_BY_HAND = {"scenario": "wall-following", "teach_seconds": None, "rounds": None,
+NOT_BY_HAND = {"scenario": None, "teach_seconds": None, "rounds": None,
                "round_seconds": None, "style": "reactive", "speedup": None, "seed": 0}
 
 
@@ -45,8 +49,8 @@ def check_args(args) -> None:
            if getattr(args, k) != default]
     if bad:
         raise ValueError(f"--by-hand: {', '.join(bad)} drive the scripted teacher's demo and do "
-                         f"not apply (you teach; --world, --out, --console, --demonstrate, "
-                         f"--correct, --starts, --drive-seconds and --record do)")
+                         f"not apply (you teach; --behaviour, --world, --out, --console, "
+                         f"--demonstrate, --correct, --starts, --drive-seconds and --record do)")
 
 
 class ByHand(Demo):
@@ -54,8 +58,8 @@ class ByHand(Demo):
 
     def __init__(self, args):
         check_args(args)
-        if args.world is None:
-            args.world = "room"  # the room the person models of docs/teaching.md taught in
+        # the world: --world, else the behaviour's first teaching world (wall following's:
+        # the room the person models of docs/teaching.md taught in)
         if args.out is None:
             import datetime as _dt
             from pathlib import Path
@@ -64,6 +68,11 @@ class ByHand(Demo):
             args.out = str(Path("rhbl-out") / f"{stamp}-by-hand")
         super().__init__(args)
         self.address = args.console or "127.0.0.1:8080"
+
+    def instructions(self) -> str:
+        """What the person teaches: the behaviour's instructions (else its summary), indented."""
+        text = self.behaviour.instructions or self.behaviour.summary
+        return "\n".join("   " + line for line in text.splitlines())
 
     def wait(self, seconds: float, what: str, *cs: Child) -> str:
         """``seconds`` of wall time, or Enter at a terminal; the processes watched meanwhile.
@@ -110,12 +119,13 @@ class ByHand(Demo):
 
     def phases(self, args) -> int:
         """The phases (see the module); the exit status."""
-        learner = self.child("learner", "learner", "--features", "wall", "--out",
+        b = as_argument(self.behaviour)  # its perception for the learner, its words on the page
+        learner = self.child("learner", "learner", "--behaviour", b, "--out",
                              str(self.tree), "--snapshot-every", "1", "--wait-server", "60")
         self.wait_token("learner", learner)  # no label before the learner listens
         server = self.child("server", "server", "--mode", "client", "--world",
                             str(self.spec.path))
-        console = self.child("console", "console", "--http", self.address)
+        console = self.child("console", "console", "--http", self.address, "--behaviour", b)
         if not console.wait_for_line("console: ", timeout=30.0):
             self.check_alive(console)
             raise DemoError(f"the console did not start within 30 s:\n{console.tail()}")
@@ -123,9 +133,9 @@ class ByHand(Demo):
                    if ln.startswith("console: "))
         print(f"console: {url}", flush=True)
         print(f"1. demonstrate ({args.demonstrate:g} s; Enter here ends it sooner): open the "
-              "URL, press Home (the robot at its start pose) and hold the arrow keys to "
-              "follow the wall on the robot's right; letting go stops the robot.",
-              flush=True)
+              "URL, press Home (the robot at its start pose) and hold the arrow keys; letting "
+              f"go stops the robot. What to teach ({self.name}, also on the page):\n"
+              f"{self.instructions()}", flush=True)
         how = self.wait(args.demonstrate, "demonstrating", learner, server, console)
         self.say(f"demonstration over ({'Enter' if how == 'enter' else 'time'})")
         controller = self.child("controller", "controller", "--from-learner", "--follow",
@@ -159,14 +169,18 @@ class ByHand(Demo):
             rule = (j.header["meta"].get("learning") or {}).get("rule") or "script"
             labels = len(list(j.standing()))
         self.say(f"the tree: {self.tree} ({labels} labels standing, the {rule} rule)")
-        argv = [*_evaluate_argv(self), "--world", str(self.spec.path), "--tree", str(self.tree)]
+        argv = [*_evaluate_argv(self), "--behaviour", as_argument(self.behaviour), "--world",
+                str(self.spec.path), "--tree", str(self.tree)]
         self.say(f"3. the tree from the world's start poses: rhbl {' '.join(argv[3:])}")
         done = subprocess.run(argv, capture_output=True, text=True, timeout=3600)
         print(done.stdout, end="", flush=True)
         if done.returncode != 0:
             raise DemoError(f"rhbl evaluate exited {done.returncode}: {done.stderr[-1000:]}")
-        print(f"evaluate it in rooms it never saw: rhbl evaluate --world eval-room-l --tree "
-              f"{self.tree}   (docs/teaching.md)", flush=True)
+        held = self.behaviour.held_out
+        if held:
+            print(f"evaluate it in rooms it never saw: rhbl evaluate --behaviour "
+                  f"{as_argument(self.behaviour)} --world {held[0]} --tree {self.tree}   "
+                  "(docs/teaching.md)", flush=True)
         print(f"output: {self.out}  (tree.rhbl, tree.rhbl.journal, logs/)", flush=True)
         return 0
 

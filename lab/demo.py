@@ -3,8 +3,11 @@
 The demo is the rendezvous (a zenoh session in router mode on a free loopback port, the role a
 zenohd plays in compose); every child connects to it as a client:
 
-It runs the training recipe of ``rhbl train`` (``lab.recipe``: ``RECIPES[task].for_demo()``,
-docs/experiments.md) over zenoh, with one server for the whole run; the demo teleports the robot to each of the world's start poses with the
+It runs a behaviour (``--behaviour NAME|FILE``; ``--scenario TASK`` is the shipped behaviour of
+that name; default wall following): its expert teaches (``rhbl teacher --behaviour``), its
+perception is the learner's (``rhbl learner --behaviour``), its start poses are the run's and its
+success rule judges the final tree (``lab.metrics.judge``). It runs the training recipe of
+``rhbl train`` (``lab.behaviours.recipe_of(b).for_demo()``, docs/experiments.md) over zenoh, with one server for the whole run; the demo teleports the robot to each of the world's start poses with the
 sim-only ``set_pose`` request (``rhbl/r0/sim/req/set_pose``, odometry reset too):
 
 1. ``rhbl learner`` (the tree and its journal go into the output folder), ``rhbl server
@@ -29,6 +32,7 @@ import logging
 import signal
 import sys
 
+from client.behaviour.given import behaviour_arg
 from lab.by_hand import ByHand
 from lab.children import free_port
 from lab.demo_run import SCENARIOS, Demo, DemoError
@@ -44,12 +48,21 @@ def _defaults(value) -> str:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--scenario", choices=list(SCENARIOS), default="wall-following")
+    parser.add_argument("--scenario", choices=list(SCENARIOS), default=None,
+                        help="a task's demo: the shipped behaviour of its name (default: "
+                             "wall-following); or --behaviour")
+    parser.add_argument("--behaviour", default=None, type=behaviour_arg, metavar="NAME|FILE",
+                        help="demo this behaviour (a shipped behaviour's name or a behaviour "
+                             "file; docs/behaviours.md): its expert teaches, its perception is "
+                             "the learner's, its first teaching world and start poses are the "
+                             "run's, and its success rule judges the final tree; with --by-hand "
+                             "the page and the terminal tell you its instructions")
     parser.add_argument("--out", metavar="DIR", default=None, type=arguments.output_folder,
-                        help="output folder (default: rhbl-out/<timestamp>-<scenario>)")
+                        help="output folder (default: rhbl-out/<timestamp>-<scenario or "
+                             "behaviour>)")
     parser.add_argument("--world", default=None, type=world_arg,
-                        help=f"world file or name (default: the scenario's, "
-                             f"{_defaults(lambda sc: sc.world)})")
+                        help=f"world file or name (default: the behaviour's first teaching "
+                             f"world, {_defaults(lambda sc: sc.world)})")
     parser.add_argument("--teach-seconds", type=arguments.seconds, default=None, metavar="S",
                         help="sim seconds the teacher demonstrates from each start pose (or until "
                              f"the goal; default: {_defaults(lambda sc: sc.recipe.segment)})")
@@ -90,9 +103,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default: OUT/run.mcap; docs/recording.md)")
     parser.add_argument("--by-hand", action="store_true",
                         help="teach it yourself instead of the scripted teacher: a server "
-                             "(--world, default room, real time), a learner (its --teacher auto "
+                             "(--world, default the behaviour's first teaching world: room, "
+                             "real time), a learner (the behaviour's perception; its --teacher auto "
                              "takes the person rule), the console (at --console, default "
-                             "127.0.0.1:8080; its URL printed) and, after --demonstrate, a "
+                             "127.0.0.1:8080; its URL printed; the behaviour's instructions "
+                             "on the page and in the terminal) and, after --demonstrate, a "
                              "following controller for correct mode; then the tree is evaluated "
                              "(lab.by_hand, docs/teaching.md)")
     parser.add_argument("--demonstrate", type=arguments.seconds, default=240.0, metavar="S",

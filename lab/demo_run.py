@@ -15,16 +15,20 @@ from pathlib import Path
 
 import numpy as np
 
+from client.behaviour.given import as_argument, rule_words
+from client.behaviour.spec import Behaviour
 from client.behaviour.tasks import TASKS
 from lab import children
-from lab.behaviours import behaviour_for_world
+from lab.behaviours import get, recipe_of, world_of
 from lab.children import free_port
 from lab.children import rhbl_argv as _rhbl
 from lab.episode import Episode, EpisodeCollector
+from lab.metrics import judge
 from lab.recipe import EVAL_SECONDS, RECIPES, Recipe
 from process import files
 
-__all__ = ["SCENARIOS", "Child", "Demo", "DemoError", "Scenario"]
+__all__ = ["SCENARIOS", "Child", "Demo", "DemoError", "Scenario", "demo_behaviour",
+           "scenario_of"]
 
 log = logging.getLogger(__name__)
 
@@ -39,6 +43,7 @@ class Scenario:
 
     recipe: Recipe
     drive: float
+    behaviour: Behaviour | None = None  # its expert, perception and rule (None: the task's)
 
     @property
     def task(self) -> str:
@@ -50,34 +55,45 @@ class Scenario:
 
     @property
     def policy(self) -> str:
+        if self.behaviour is not None:
+            return self.behaviour.expert_name
         return TASKS[self.recipe.task].teacher
+
+    def _expert(self) -> list[str]:
+        """The teacher's expert: the behaviour's (its file's parameters), else the task's."""
+        if self.behaviour is not None:
+            return ["--behaviour", as_argument(self.behaviour)]
+        return ["--policy", self.policy]
 
     def replace(self, teach: float | None = None, rounds: int | None = None,
                 round_seconds: float | None = None, drive: float | None = None) -> Scenario:
         """This scenario with the phase lengths given (None: unchanged)."""
         changes = {k: v for k, v in (("segment", teach), ("rounds", rounds),
                                      ("round_seconds", round_seconds)) if v is not None}
-        return Scenario(self.recipe.replace(**changes), self.drive if drive is None else drive)
+        return Scenario(self.recipe.replace(**changes), self.drive if drive is None else drive,
+                        self.behaviour)
 
     def learner_args(self) -> list[str]:
         """``rhbl learner`` options that make its tree the recipe's (task, features, tree)."""
         r = self.recipe
-        if not isinstance(r.features, str) or any(
+        if (self.behaviour is None and not isinstance(r.features, str)) or any(
                 getattr(r, k) is not None for k in ("distance", "min_radius", "max_depth")):
-            raise ValueError("rhbl learner takes a named feature spec and no distance, "
-                             "min_radius or max_depth option")
-        args = ["--task", r.task, "--features", r.features, "--spawn", r.spawn,
+            raise ValueError(f"{r.task}'s recipe: rhbl learner takes a named feature spec (or "
+                             "a behaviour's) and no distance, min_radius or max_depth option")
+        perception = (["--behaviour", as_argument(self.behaviour)] if self.behaviour is not None
+                      else ["--task", r.task, "--features", r.features])
+        args = [*perception, "--spawn", r.spawn,
                 "--stride", str(r.stride), "--min-delta", f"{r.min_delta:g}"]
         return args + (["--max-nodes", str(r.max_nodes)] if r.max_nodes is not None else [])
 
     def teacher_args(self, style: str, seed: int) -> list[str]:
         """``rhbl teacher`` options of the demonstrations."""
-        return ["--policy", self.policy, "--style", style, "--seed", str(seed),
+        return [*self._expert(), "--style", style, "--seed", str(seed),
                 "--perturb", f"{self.recipe.perturb:g}"]
 
     def corrector_args(self, style: str) -> list[str]:
         """``rhbl teacher --correct`` options of the corrective rounds."""
-        return ["--policy", self.policy, "--style", style, "--correct",
+        return [*self._expert(), "--style", style, "--correct",
                 "--takeover", f"{self.recipe.takeover:g}"]
 
 
@@ -88,6 +104,31 @@ class Scenario:
 SCENARIOS: dict[str, Scenario] = {
     task: Scenario(recipe.for_demo(), EVAL_SECONDS[task]) for task, recipe in RECIPES.items()}
 
+
+def scenario_of(b: Behaviour) -> Scenario:
+    """What ``rhbl demo --behaviour B`` runs: the behaviour's recipe (``lab.behaviours.
+    recipe_of``) with the demo's changes, its final drives as long as its ``time-limit``; its
+    expert teaches, its perception is the learner's, its rule judges the final tree. A shipped
+    behaviour of a task runs what ``--scenario TASK`` ran (the same recipe, the same lengths)."""
+    return Scenario(recipe_of(b).for_demo(), b.seconds, b)
+
+
+
+def demo_behaviour(args: argparse.Namespace) -> Behaviour:
+    """The behaviour a demo runs: ``--behaviour`` (a name or a file), else ``--scenario``'s (a
+    task is the shipped behaviour of its name), else wall following; ValueError for both."""
+    if args.behaviour is not None and args.scenario is not None:
+        raise ValueError(f"--scenario {args.scenario} and --behaviour {args.behaviour}: give "
+                         "one (a scenario is the shipped behaviour of its name)")
+    return get(args.behaviour or args.scenario or "wall-following")
+
+
+def _over(teacher_m: dict, m: dict) -> dict | None:
+    """The teacher's metrics with its distance over the length of the episode ``m`` (at the
+    pace of its demonstration), for ``distance``'s ``of_teacher``; None when it has no length."""
+    if not teacher_m.get("seconds"):
+        return None
+    return {**teacher_m, "distance": teacher_m["distance"] * m["seconds"] / teacher_m["seconds"]}
 
 
 # ---- children ------------------------------------------------------------------------------
@@ -106,15 +147,17 @@ class Child(children.Child):
 # ---- the demo ------------------------------------------------------------------------------
 class Demo:
     def __init__(self, args: argparse.Namespace):
-        from lab.harness import resolve_world
-
         self.args = args
-        self.scenario = SCENARIOS[args.scenario].replace(
+        self.behaviour = demo_behaviour(args)
+        self.name = self.behaviour.name  # the scenario's name: a task's, or the behaviour's
+        self.scenario = scenario_of(self.behaviour).replace(
             teach=args.teach_seconds, rounds=args.rounds, round_seconds=args.round_seconds,
             drive=args.drive_seconds)
-        self.spec = resolve_world(args.world or self.scenario.world)
+        self.scenario.learner_args()  # a recipe the learner process cannot run: refused now
+        # the world with the behaviour's own start poses for it
+        self.spec = world_of(self.behaviour, args.world or self.scenario.world)
         stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-        self.out = Path(args.out or Path("rhbl-out") / f"{stamp}-{args.scenario}")
+        self.out = Path(args.out or Path("rhbl-out") / f"{stamp}-{self.name}")
         self.out.mkdir(parents=True, exist_ok=True)
         (self.out / "logs").mkdir(exist_ok=True)
         self.port = free_port()
@@ -279,7 +322,7 @@ class Demo:
         from process.session import make_config
 
         args = self.args
-        self.say(f"rhbl demo: scenario {args.scenario}, world {self.spec.name}, output "
+        self.say(f"rhbl demo: scenario {self.name}, world {self.spec.name}, output "
                  f"{self.out}")
         self.say(f"rendezvous (router) on {self.endpoint}; children log into {self.out / 'logs'}")
         from client.behaviour.actions import DEFAULT_ACTIONS
@@ -291,8 +334,7 @@ class Demo:
             self.session = session
             self.sim = PlayerClient(session=session, robot="r0", source="demo").simulation
             # the learner's actions (``rhbl learner`` has no other set)
-            self.rec = EpisodeCollector("r0", DEFAULT_ACTIONS,
-                                        behaviour_for_world(self.spec).band_side)
+            self.rec = EpisodeCollector("r0", DEFAULT_ACTIONS, self.behaviour.band_side)
             writer = demo_recording(args.record, self.out, self.say)  # None without --record
             self.recording = None if writer is None else Path(writer.path)
             self.tap = BusTap(session, [self.rec, *([writer] if writer else [])],
@@ -393,9 +435,13 @@ class Demo:
     def report(self, clf, actions, meta, demos: list[Episode], rounds: list[Episode],
                learned: list[Episode]) -> int:
         """4. The output folder (summary.json, trajectories.npz, paths.png) and the tables."""
-        goal = self.spec.goal
-        tms = [ep.metrics(goal) for ep in demos]
-        lms = [ep.metrics(goal) for ep in learned]
+        goal, rules = self.spec.goal, self.behaviour.rules
+        tms = [ep.metrics(goal, rules) for ep in demos]
+        lms = [ep.metrics(goal, rules) for ep in learned]
+        # each final drive by the behaviour's rule, beside the teacher from the same start (its
+        # demonstration's distance over the drive's length: the two last different times)
+        self.success = [bool(judge(rules, m, _over(tms[k], m) if k < len(tms) else None))
+                        for k, m in enumerate(lms)]
         per_round = self.round_rows(rounds)
         wall_time = time.monotonic() - self.t0
         picture = self.write_outputs(clf, meta, demos, rounds, learned, tms, lms, per_round,
@@ -405,6 +451,9 @@ class Demo:
         print()
         print(f"learned robot: {ok}/{len(lms)} starts without collision"
               f"{'' if goal is None else ' and reaching the goal'}")
+        good = sum(self.success)
+        print(f"success by {self.name}'s rule ({rule_words(self.behaviour)}): "
+              f"{good}/{len(lms)} starts")
         made = ["tree.rhbl", "tree.rhbl.journal", "paths.png", "summary.json",
                 "trajectories.npz", "logs/"]
         if self.recording is not None:  # --record: in the folder, or where it was asked for
@@ -444,13 +493,16 @@ class Demo:
         paths["learner"] = [np.asarray(ep.poses).reshape(-1, 3) for ep in learned]
         picture = plot_paths(
             self.spec, paths, self.out / "paths.png",
-            title=f"{self.args.scenario}: teacher, corrective rounds and the final tree")
+            title=f"{self.name}: teacher, corrective rounds and the final tree")
         summary = {
-            "scenario": self.args.scenario, "task": self.scenario.task, "world": self.spec.name,
+            "scenario": self.name, "task": self.scenario.task, "world": self.spec.name,
+            "behaviour": self.behaviour.name,
+            "behaviour_file": None if self.behaviour.path is None else str(self.behaviour.path),
             "tree": {"nodes": int(clf.node_count_), "height": int(clf.height_),
                      "task": meta.get("task"), "vectors": prov.get("vectors"),
                      "labeled": prov.get("labeled"), "path": str(self.tree)},
             "teacher": tms, "rounds": per_round, "learned": lms,
+            "success": self.success, "rule": rule_words(self.behaviour),
             "demonstration_labels": sum(len(ep.labels) for ep in demos),
             "wall_time": round(wall_time, 1), "teach_seconds": self.teach,
             "rounds_count": self.rounds, "round_seconds": self.round_seconds,
@@ -477,14 +529,18 @@ class Demo:
     def print_tables(self, clf, meta, demos, tms, lms, per_round) -> None:
         """Table I, the corrective rounds and what the robots did."""
         from lab.metrics import BAND
+
+        band = self.behaviour.rules.get("wall-band") or {}
+        side = band.get("side", "right")
+        near, far = band.get("near", BAND[0]), band.get("far", BAND[1])
         from lab.report import episode_table, table
 
         prov = meta.get("provenance") or {}
         demo_labels = sum(len(ep.labels) for ep in demos)
         print()
         print(table(["scenario", "nodes", "tree height", "demonstration vectors"],
-                    [[self.args.scenario, clf.node_count_, clf.height_, prov.get("vectors")]],
-                    title=f"Table I (paper) -- {self.args.scenario}, learned over zenoh by "
+                    [[self.name, clf.node_count_, clf.height_, prov.get("vectors")]],
+                    title=f"Table I (paper) -- {self.name}, learned over zenoh by "
                           "separate processes",
                     notes=[f"(labeled vectors: {demo_labels} demonstrated from {len(demos)} start "
                            f"poses + {prov.get('vectors', 0) - demo_labels} labeled in "
@@ -503,7 +559,7 @@ class Demo:
         print()
         print(episode_table([("teacher", m) for m in tms] + [("learned", m) for m in lms],
                             title="What the robots did (sim seconds per episode; band = time "
-                                  f"with the right-hand wall within {BAND[0]:g}-{BAND[1]:g} m)"))
+                                  f"with the {side}-hand wall within {near:g}-{far:g} m)"))
 
     def cleanup(self) -> None:
         for c in reversed(self.children):

@@ -58,6 +58,8 @@ import time
 from collections import deque
 
 from client.behaviour.features import FEATURES, FeatureError
+from client.behaviour.given import behaviour_arg
+from client.behaviour.spec import behaviour
 from client.behaviour.teaching import MAX_LAG, add_person_arguments
 from client.journal import JournalError, journal_path
 from client.labels import MAX_BACKLOG, MAX_BACKLOG_BYTES, Acknowledgements, Pairing, scan_bytes
@@ -134,6 +136,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "nearest labels). A lineage keeps the rule it was made with (its "
                              "journal's header)")
     add_person_arguments(parser)
+    parser.add_argument("--behaviour", default=None, type=behaviour_arg, metavar="NAME|FILE",
+                        help="learn this behaviour: its perception is the feature spec (a "
+                             "file's inline one too) and its name the task in the metadata (a "
+                             "shipped behaviour's name or a behaviour file; docs/behaviours.md); "
+                             "not with --features or --task")
+
+
+def features_of(args: argparse.Namespace) -> tuple:
+    """The feature spec (a name or a spec) and the task the options give: ``--features`` and
+    ``--task``, or ``--behaviour``'s perception and name (ValueError: not both)."""
+    if args.behaviour is None:
+        return args.features, args.task
+    if args.features is not None or args.task is not None:
+        raise ValueError("--behaviour gives the features and the task: not with --features "
+                         "or --task")
+    b = behaviour(args.behaviour)
+    return b.perception or b.features, b.name
 
 
 # ---- the process --------------------------------------------------------------------------
@@ -143,6 +162,8 @@ def main(args: argparse.Namespace, *, journal_write=os.write) -> int:
     lineage: list[Lineage] = []
 
     def check() -> None:  # the snapshot and journal, opened before any connection: bad ones
+        if args.behaviour is not None:
+            features_of(args)
         files.check_output(args.out, "--out", make=True)  # exit 2 at once (its folder made)
         files.check_output(journal_path(args.out), "--out's journal")
         files.check_output(lock_path(args.out), "--out's lock")
@@ -207,8 +228,9 @@ class LearnerProcess:
         """The learner's snapshot and journal of ``args`` (``--out``, ``--resume``, ...);
         ProcessError when they cannot be used."""
         try:
+            features, task = features_of(args)
             return Lineage(
-                args.out, features=args.features, resume=args.resume, task=args.task,
+                args.out, features=features, resume=args.resume, task=task,
                 tree_params={"spawn": args.spawn,
                              **({"max_nodes": args.max_nodes} if args.max_nodes else {})},
                 stride=args.stride, min_delta=args.min_delta,

@@ -49,7 +49,9 @@ import time
 import numpy as np
 
 from client.behaviour.actions import DEFAULT_ACTIONS
+from client.behaviour.given import behaviour_arg
 from client.behaviour.policies import STYLES, TAKEOVER, Demonstrator, takes_over
+from client.behaviour.spec import behaviour
 from client.behaviour.tasks import TASKS, make_policy, task_of_teacher
 from client.labels import DRAIN, OUTBOX, RESEND_AFTER, Hold, LabelPublisher
 from client.labels import SOURCE as LABEL_SOURCE
@@ -80,8 +82,13 @@ POLICIES = (*(t.teacher for t in TASKS.values()), "keyboard")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_process_arguments(parser)
-    parser.add_argument("--policy", choices=POLICIES, default="wall-follower",
-                        help="scripted expert of a task, or keyboard teleop")
+    parser.add_argument("--policy", choices=POLICIES, default=None,
+                        help="scripted expert of a task, or keyboard teleop (default: "
+                             "wall-follower, or the expert of --behaviour)")
+    parser.add_argument("--behaviour", default=None, type=behaviour_arg, metavar="NAME|FILE",
+                        help="demonstrate this behaviour: its scripted expert with the "
+                             "parameters of its file (a shipped behaviour's name or a "
+                             "behaviour file; docs/behaviours.md); not with --policy")
     parser.add_argument("--seconds", type=arguments.seconds, default=None, metavar="S",
                         help="stop after demonstrating S seconds of sim time (default: until "
                              "stopped)")
@@ -128,6 +135,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def check(args: argparse.Namespace) -> None:
     """What the options say together, before any connection (ValueError: exit 2)."""
+    if args.behaviour is not None and args.policy is not None:
+        raise ValueError("--behaviour names the expert: give it or --policy, not both")
+    if args.policy is None:
+        args.policy = "wall-follower" if args.behaviour is None else \
+            behaviour(args.behaviour).expert_name
     if args.correct and args.policy == "keyboard":
         raise ValueError("--correct needs a scripted expert (--policy wall-follower or maze), "
                          "not the keyboard")
@@ -153,7 +165,9 @@ def _demonstrator(args: argparse.Namespace):
 
         return KeyboardPolicy(DEFAULT_ACTIONS)
     try:
-        policy = make_policy(task_of_teacher(args.policy), DEFAULT_ACTIONS, style=args.style)
+        policy = (behaviour(args.behaviour).expert(args.style, DEFAULT_ACTIONS)
+                  if args.behaviour is not None else
+                  make_policy(task_of_teacher(args.policy), DEFAULT_ACTIONS, style=args.style))
     except ValueError as exc:
         raise ProcessError(f"teacher: {exc}", EXIT_USAGE) from exc
     return Demonstrator(policy, perturb=args.perturb, rng=np.random.default_rng(args.seed))

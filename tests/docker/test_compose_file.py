@@ -112,12 +112,13 @@ def test_scenario_flags(compose):
     assert teacher.seconds and teacher.seconds > 0  # stops by itself: the controller takes over
     # the training recipe: demonstrate, then correct while the controller drives
     assert teacher.correct and 0 < teacher.demonstrate < teacher.seconds
-    assert teacher.style == "reactive" and teacher.policy == "wall-follower"
+    assert teacher.style == "reactive" and teacher.policy is None  # the behaviour's expert
     learner = _parse("learner", services["learner"][1:])
     assert learner.out.startswith("/data/")
     controller = _parse("controller", services["controller"][1:])
     assert controller.from_learner and controller.follow
-    assert learner.features == controller.features
+    # the tree's features are the behaviour's (the learner's); the controller reads them from it
+    assert learner.features is None and controller.features is None
     # the controller exits until the learner has a tree: compose restarts it
     assert compose["services"]["controller"]["restart"] == "on-failure"
 
@@ -418,3 +419,24 @@ def test_healthcheck_reads_every_argument_of_the_process():
                                                "--connect", "x"]
     finally:
         proc.communicate(timeout=30)
+
+
+@pytest.mark.parametrize("given", [None, "left-wall", "/data/behaviours/mine.toml"])
+def test_the_behaviour_is_a_variable_the_teacher_learner_and_console_take(given):
+    """RHBL_BEHAVIOUR (default wall-following) reaches every service that needs it: the teacher
+    (its expert), the learner (its perception) and the console (its words on the page)."""
+    env = {} if given is None else {"RHBL_BEHAVIOUR": given}
+    services = _rhbl_services(compose_local.load_compose(COMPOSE, env=env))
+    want = given or "wall-following"
+    taking = {name for name, argv in services.items() if "--behaviour" in argv}
+    assert taking == {"teacher", "learner", "console"}
+    for name in taking:
+        argv = services[name]
+        assert argv[argv.index("--behaviour") + 1] == want, name
+        assert _parse(name, argv[1:]).behaviour == want, name
+    # with the default, the same teacher and learner as the published recipe's
+    if given is None:
+        from client.behaviour.spec import behaviour
+
+        b = behaviour(want)
+        assert b.expert_name == "wall-follower" and b.perception == "wall"

@@ -15,6 +15,7 @@ kept and resent until a learner acknowledges it (once a learner of the robot was
     rhbl console                                   # http://127.0.0.1:8080/
     rhbl console --http 0.0.0.0:8443 --tls-cert c.pem --tls-key k.pem   # token in the URL
     rhbl console --view-only                       # watch: publishes nothing at all
+    rhbl console --behaviour left-wall             # the page shows what to teach and its rule
 
 docs/console.md describes the page; ``client.roles.console.app`` the server side (the
 teaching session: ``client.roles.console.tutor``; who may open the page: ``client.access``).
@@ -25,6 +26,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from client.behaviour.given import behaviour_arg
 from client.roles.common import add_process_arguments, run_role
 from process import arguments
 
@@ -61,6 +63,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="close a connection whose request headers have not all arrived "
                              "within this (or that is idle this long between requests; "
                              "default 10)")
+    parser.add_argument("--behaviour", default=None, type=behaviour_arg, metavar="NAME|FILE",
+                        help="the behaviour taught: the page shows its instructions and its "
+                             "success rule (a shipped behaviour's name or a behaviour file; "
+                             "default: the world's behaviour when one shipped behaviour is "
+                             "the world's, else none)")
 
 
 def main(args: argparse.Namespace) -> int:

@@ -72,6 +72,8 @@ from client.access import (
     is_loopback,
 )
 from client.behaviour.actions import DEFAULT_ACTIONS
+from client.behaviour.given import behaviour_of_world, to_page
+from client.behaviour.spec import Behaviour, behaviour
 from client.labels import DRAIN, Learners
 from client.roles.console.tutor import SCAN_MEMORY, Robot, Tutor
 from client.roles.console.web import (
@@ -162,6 +164,9 @@ class Console(Tutor):
     def __init__(self, ctx: Context, loop: asyncio.AbstractEventLoop, token: str | None):
         self.ctx, self.session, self.loop = ctx, ctx.session, loop
         self.view_only = bool(ctx.args.view_only)
+        # the behaviour taught (--behaviour), shown on the page; None: each world's, if any
+        given = getattr(ctx.args, "behaviour", None)
+        self.behaviour = None if given is None else behaviour(given)
         self.token = token
         self.throttle = Throttle()
         self.robots: dict[str, Robot] = {}
@@ -341,14 +346,25 @@ class Console(Tutor):
         async def get() -> None:
             w = await self.loop.run_in_executor(None, fetch)
             if w is not None:
-                r.starts = w.starts
+                b = self._behaviour_of(w)
+                # the behaviour's own start poses of the world, when it gives some (Home and
+                # the keys 1-9 put the robot there), else the world's
+                own = () if b is None else b.starts.get(w.name, ())
+                r.starts = tuple(tuple(p) for p in own) or w.starts
                 r.world = json.dumps({
                     "t": "world", "robot": r.name, "name": w.name, "task": w.task,
-                    "walls": w.walls, "goal": w.goal, "starts": w.starts,
-                    "start": r.start_index})
+                    "walls": w.walls, "goal": w.goal, "starts": r.starts,
+                    "start": r.start_index, "behaviour": None if b is None else to_page(b)})
                 self._to_pages(r, "world", r.world)
 
         self._spawn(get())
+
+    def _behaviour_of(self, w: WorldInfo) -> Behaviour | None:
+        """The behaviour taught in world ``w``: --behaviour's, else the world's shipped behaviour
+        (``client.behaviour.given.behaviour_of_world``), else None."""
+        if self.behaviour is not None:
+            return self.behaviour
+        return behaviour_of_world(w.name, w.task or None)
 
     def _deliver(self, robot: str, kind: str, text: str, msg) -> None:
         if robot not in self.served:  # its server went meanwhile
@@ -520,7 +536,8 @@ class Console(Tutor):
         page.push("hello", json.dumps({
             "t": "hello", "page": page.id, "robot": page.robot, "view_only": self.view_only,
             "modes": list(MODES), "actions": list(DEFAULT_ACTIONS.names), "stale": STALE,
-            "robots": self.robot_names()}))
+            "robots": self.robot_names(),
+            "behaviour": None if self.behaviour is None else to_page(self.behaviour)}))
         self._send_robot(page)
         sender = asyncio.create_task(self._sender(page))
         try:

@@ -67,6 +67,7 @@ function receive(m) {
       S.page = m.page; S.robot = m.robot; S.viewOnly = m.view_only;
       setRobots(m.robots.length ? m.robots : [m.robot]);
       if (want && want !== m.robot) { S.robot = want; $("robot").value = want; send({ t: "view", robot: want }); }
+      if (m.behaviour) showBehaviour(m.behaviour);
       if (m.view_only) {
         for (const el of document.querySelectorAll("#pad button, #modes input, #take, #episodes button, #episodes input, #place button, #place select")) el.disabled = true;
         $("hold").textContent = "view-only console: watching";
@@ -74,7 +75,10 @@ function receive(m) {
       break;
     }
     case "robots": setRobots(m.robots); break;
-    case "world": S.world = m; S.view.fitted = false; canvas.dataset.walls = m.walls.length; setStarts(); break;
+    case "world":
+      S.world = m; S.view.fitted = false; canvas.dataset.walls = m.walls.length; setStarts();
+      if (m.behaviour) showBehaviour(m.behaviour);
+      break;
     case "state":
       S.state = m;
       { // a jump (a teleport) starts a new piece of trail
@@ -102,6 +106,17 @@ function receive(m) {
     case "info": showInfo(m.info); break;
     case "error": showError(m.error); break;
   }
+}
+
+// the behaviour taught (rhbl console --behaviour, else the world's): what to teach, and
+// the rule the learned robot is judged by
+function showBehaviour(b) {
+  $("behaviour").hidden = false;
+  $("behaviour").dataset.name = b.name;
+  $("behaviour-name").textContent = b.name;
+  $("behaviour-summary").textContent = b.summary;
+  $("instructions").textContent = b.instructions || b.summary;
+  $("rule").textContent = `success: ${b.rule}`;
 }
 
 function showInfo(text) {
