@@ -41,6 +41,8 @@ __all__ = [
     "side_wall_distance",
     "TAKEOVER",
     "takes_over",
+    "ReactiveDoorwayFollower",
+    "DoorwayTeacher",
 ]
 
 def _bearings(count: int, fov_deg: float = 180.0) -> np.ndarray:
@@ -410,3 +412,37 @@ class ReactiveMazeTeacher(ReactiveFollower):
 
     def __init__(self, target: float = 0.55, **kw):
         super().__init__(target=target, **kw)
+
+
+class ReactiveDoorwayFollower(ReactiveFollower):
+    """Room to room through doorways, by the right-hand rule (scan only, no heading, no map).
+
+    In a suite of rooms whose walls are all joined to the outer one (rooms in a row, or round a
+    ring), keeping the wall on the robot's right leads from the first room through every
+    doorway in turn: along a room's wall to the wall that parts it from the next room, along
+    that to the doorway, round the door jamb's end (nothing beside: arc towards the right) and
+    through, then along the next room's wall to its next doorway. A doorway at the foot of a
+    wall is passed straight through. It is the reactive right-wall follower held a little
+    closer to its wall (``target`` 0.55 m, as in the maze), so that in a doorway as narrow as
+    1.2 m it keeps clear of the far jamb; every label is a pure function of the scan's sectors.
+    It does not look for a wall: from the middle of a room, with every wall out of its reach
+    (``search``), it arcs round where it is, so its start poses are within reach of a wall.
+    """
+
+    task = "doorways"
+
+    def __init__(self, target: float = 0.55, **kw):
+        super().__init__(target=target, **kw)
+
+
+class DoorwayTeacher(WallFollower):
+    """Room to room through doorways, the smooth style (``rhbl teacher --policy doorway
+    --style smooth``): the history-dependent right-wall follower at 0.55 m (see
+    :class:`ReactiveDoorwayFollower` for why keeping the right-hand wall leads through every
+    doorway)."""
+
+    task = "doorways"
+
+    def __init__(self, target: float = 0.55, actions: ActionSet = DEFAULT_ACTIONS, **kw):
+        kw.setdefault("side", "right")
+        super().__init__(target=target, actions=actions, **kw)

@@ -20,8 +20,10 @@ from dataclasses import dataclass
 from .actions import DEFAULT_ACTIONS, ActionSet
 from .policies import (
     STYLES,
+    DoorwayTeacher,
     MazeTeacher,
     Policy,
+    ReactiveDoorwayFollower,
     ReactiveFollower,
     ReactiveMazeTeacher,
     WallFollower,
@@ -57,6 +59,11 @@ TASKS: dict[str, Task] = {t.name: t for t in (
          reactive=ReactiveFollower, smooth=WallFollower, eval_worlds="eval-room*.toml"),
     Task("maze", features="maze", teacher="maze", side=None,
          reactive=ReactiveMazeTeacher, smooth=MazeTeacher, eval_worlds="eval-maze*.toml"),
+    # room to room through doorways: the right-hand rule in a suite of rooms (shipped behaviour
+    # "doorways"); its own worlds are the behaviour file's
+    Task("doorways", features="wall", teacher="doorway", side=None,
+         reactive=ReactiveDoorwayFollower, smooth=DoorwayTeacher,
+         eval_worlds="eval-doorways*.toml"),
 )}
 
 
