@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from .actions import DEFAULT_ACTIONS, ActionSet
 from .policies import (
     STYLES,
+    DeadEndEscaper,
     DoorwayTeacher,
     MazeTeacher,
     Policy,
@@ -64,6 +65,10 @@ TASKS: dict[str, Task] = {t.name: t for t in (
     Task("doorways", features="wall", teacher="doorway", side=None,
          reactive=ReactiveDoorwayFollower, smooth=DoorwayTeacher,
          eval_worlds="eval-doorways*.toml"),
+    # out of a dead end: straight on, a U-turn on the spot where the way is blocked (shipped
+    # behaviour "dead-end"); a reactive expert only, so both styles are the same one
+    Task("dead-end", features="around", teacher="dead-end", side=None,
+         reactive=DeadEndEscaper, smooth=DeadEndEscaper, eval_worlds="eval-dead-end*.toml"),
 )}
 
 
