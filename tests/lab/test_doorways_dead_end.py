@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from client.behaviour.features import FEATURES
-from client.behaviour.policies import DeadEndEscaper, ReactiveDoorwayFollower
+from client.behaviour.policies import DeadEndEscaper, DoorwayTeacher, ReactiveDoorwayFollower
 from client.behaviour.spec import shipped
 from client.behaviour.tasks import make_policy, task_of_teacher
 from lab import metrics
@@ -22,6 +22,7 @@ def test_the_files_say_what_they_are():
     assert doorways.expert_name == "doorway" and task_of_teacher("doorway") == "doorways"
     assert type(doorways.expert()) is ReactiveDoorwayFollower and doorways.expert().target == 0.55
     assert doorways.features == FEATURES["wall"]
+    assert type(make_policy("doorways", style="smooth")) is DoorwayTeacher  # rhbl teacher's
     assert doorways.teach == ("doorways",) and len(doorways.held_out) == 3
     assert set(doorways.rules) == {"time-limit", "no-collision", "goal"}
     assert doorways.seconds == 240.0
