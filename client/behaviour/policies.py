@@ -41,6 +41,9 @@ __all__ = [
     "side_wall_distance",
     "TAKEOVER",
     "takes_over",
+    "ReactiveDoorwayFollower",
+    "DoorwayTeacher",
+    "DeadEndEscaper",
 ]
 
 def _bearings(count: int, fov_deg: float = 180.0) -> np.ndarray:
@@ -410,3 +413,113 @@ class ReactiveMazeTeacher(ReactiveFollower):
 
     def __init__(self, target: float = 0.55, **kw):
         super().__init__(target=target, **kw)
+
+
+class ReactiveDoorwayFollower(ReactiveFollower):
+    """Room to room through doorways, by the right-hand rule (scan only, no heading, no map).
+
+    In a suite of rooms whose walls are all joined to the outer one (rooms in a row, or round a
+    ring), keeping the wall on the robot's right leads from the first room through every
+    doorway in turn: along a room's wall to the wall that parts it from the next room, along
+    that to the doorway, round the door jamb's end (nothing beside: arc towards the right) and
+    through, then along the next room's wall to its next doorway. A doorway at the foot of a
+    wall is passed straight through. It is the reactive right-wall follower held a little
+    closer to its wall (``target`` 0.55 m, as in the maze), so that in a doorway as narrow as
+    1.2 m it keeps clear of the far jamb; every label is a pure function of the scan's sectors.
+    It does not look for a wall: from the middle of a room, with every wall out of its reach
+    (``search``), it arcs round where it is, so its start poses are within reach of a wall.
+    """
+
+    task = "doorways"
+
+    def __init__(self, target: float = 0.55, **kw):
+        super().__init__(target=target, **kw)
+
+
+class DoorwayTeacher(WallFollower):
+    """Room to room through doorways, the smooth style (``rhbl teacher --policy doorway
+    --style smooth``): the history-dependent right-wall follower at 0.55 m (see
+    :class:`ReactiveDoorwayFollower` for why keeping the right-hand wall leads through every
+    doorway)."""
+
+    task = "doorways"
+
+    def __init__(self, target: float = 0.55, actions: ActionSet = DEFAULT_ACTIONS, **kw):
+        kw.setdefault("side", "right")
+        super().__init__(target=target, actions=actions, **kw)
+
+
+class DeadEndEscaper(Policy):
+    """Out of a dead end: drive on straight ahead, keeping off the walls on either side, and
+    where the way ahead is blocked (a blind corridor's end) turn round on the spot, to the left,
+    until it is open again; then drive back out the way it came.
+
+    Its labels are a pure function of a feature spec's nine sector minima from the robot's right
+    to its left (default ``around``; metres): ``F`` the sector straight ahead, ``FR``/``FL`` the
+    two beside it, ``R`` the two rightmost, ``L`` the two leftmost. A fixed partition:
+
+      F < stop or min(FR, FL) < stop_diag      -> rot-left  (blocked: turn round on the spot)
+      min(R) < near and min(R) <= min(L)       -> fwd-left  (too close on the right: steer off)
+      min(L) < near                            -> fwd-right (too close on the left: steer off)
+      FR, FL both within ``align`` and FR - FL > tol  -> fwd-right (turn to the corridor's line:
+      ... and FL - FR > tol                          -> fwd-left   the diagonals read alike when
+                                                                   it heads along a corridor)
+      otherwise                                -> fwd       (straight on: it holds its heading,
+                                                             it does not centre itself)
+
+    A wall follower never faces a blind end: it turns along the wall long before. This expert
+    is for a robot that has driven into one and must come back out, in a corridor too narrow
+    to turn round in an arc (``rot-left`` turns on the spot).
+    """
+
+    task = "dead-end"
+
+    def __init__(self, features=None, stop: float = 1.0, stop_diag: float = 0.45,
+                 near: float = 0.35, align: float = 1.8, tol: float = 0.2,
+                 actions: ActionSet = DEFAULT_ACTIONS):
+        super().__init__(actions)
+        from .features import FEATURES
+
+        self.features = features if features is not None else FEATURES["around"]
+        if self.features.dim - (1 if self.features.heading else 0) < 9:
+            raise ValueError(f"DeadEndEscaper needs a feature spec with >= 9 sectors (right to "
+                             f"left, e.g. 'around'), got {self.features.dim} inputs")
+        for name, v in (("stop", stop), ("stop_diag", stop_diag), ("near", near),
+                        ("align", align), ("tol", tol)):
+            if isinstance(v, bool) or not isinstance(v, int | float) or not 0 < v < math.inf:
+                raise ValueError(f"{name} must be a number of metres > 0, got {v!r}")
+        self.stop, self.stop_diag, self.near = float(stop), float(stop_diag), float(near)
+        self.align, self.tol = float(align), float(tol)
+
+    def sectors(self, ranges) -> np.ndarray:
+        """The nine sector minima in metres, from the robot's right to its left."""
+        f = self.features
+        return f.extract(np.asarray(ranges), 0.0)[:9] * f.scale
+
+    def decide(self, s) -> str:
+        """The label of nine sector minima ``s`` (metres, right to left)."""
+        v = s.tolist() if isinstance(s, np.ndarray) else [float(x) for x in s]
+        if v[4] < self.stop or min(v[3], v[5]) < self.stop_diag:
+            return "rot-left"
+        right, left = min(v[0], v[1]), min(v[7], v[8])
+        if right < self.near and right <= left:
+            return "fwd-left"
+        if left < self.near:
+            return "fwd-right"
+        fr, fl = v[3], v[5]
+        if max(fr, fl) < self.align:
+            if fr - fl > self.tol:
+                return "fwd-right"
+            if fl - fr > self.tol:
+                return "fwd-left"
+        return "fwd"
+
+    def label(self, ranges) -> str:
+        return self.decide(self.sectors(ranges))
+
+    reactive = label
+
+    def act(self, ranges, pose=None) -> str:
+        return self.label(ranges)
+
+    acts_reactively = True

@@ -20,8 +20,11 @@ from dataclasses import dataclass
 from .actions import DEFAULT_ACTIONS, ActionSet
 from .policies import (
     STYLES,
+    DeadEndEscaper,
+    DoorwayTeacher,
     MazeTeacher,
     Policy,
+    ReactiveDoorwayFollower,
     ReactiveFollower,
     ReactiveMazeTeacher,
     WallFollower,
@@ -57,6 +60,15 @@ TASKS: dict[str, Task] = {t.name: t for t in (
          reactive=ReactiveFollower, smooth=WallFollower, eval_worlds="eval-room*.toml"),
     Task("maze", features="maze", teacher="maze", side=None,
          reactive=ReactiveMazeTeacher, smooth=MazeTeacher, eval_worlds="eval-maze*.toml"),
+    # room to room through doorways: the right-hand rule in a suite of rooms (shipped behaviour
+    # "doorways"); its own worlds are the behaviour file's
+    Task("doorways", features="wall", teacher="doorway", side=None,
+         reactive=ReactiveDoorwayFollower, smooth=DoorwayTeacher,
+         eval_worlds="eval-doorways*.toml"),
+    # out of a dead end: straight on, a U-turn on the spot where the way is blocked (shipped
+    # behaviour "dead-end"); a reactive expert only, so both styles are the same one
+    Task("dead-end", features="around", teacher="dead-end", side=None,
+         reactive=DeadEndEscaper, smooth=DeadEndEscaper, eval_worlds="eval-dead-end*.toml"),
 )}
 
 
