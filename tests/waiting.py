@@ -7,6 +7,7 @@ answer is what the test waits for, within a deadline that a slow machine can str
     eventually(lambda: len(got) >= 3, timeout=20, what="3 scans", alive=[srv])
     eventually(lambda: n_records(out), what="the journal's records",
                until=lambda n: n >= 40)                                     # a test on the value
+    wait_token(session, keys.alive_key("learner", f"r0-{learner.pid}"), alive=[learner])
 
 A loaded machine (several suites at once, two cores) slows a test down but must not fail it:
 every deadline is multiplied by ``$RHBL_TEST_PATIENCE`` (default 1; ``RHBL_TEST_PATIENCE=3``
@@ -26,7 +27,7 @@ import time
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
-__all__ = ["PATIENCE", "Timeout", "eventually", "patience"]
+__all__ = ["PATIENCE", "Timeout", "eventually", "patience", "wait_token"]
 
 T = TypeVar("T")
 
@@ -114,3 +115,11 @@ def eventually(predicate: Callable[[], T], timeout: float = 30.0, what: str = ""
 def _short(value: Any, limit: int = 600) -> str:
     text = repr(value)
     return text if len(text) <= limit else text[:limit] + f"... ({len(text)} characters)"
+
+
+def wait_token(session: Any, key: str, timeout: float = 30.0, alive: Iterable[Any] = ()) -> None:
+    """Until the liveliness token ``key`` is seen on ``session`` (a zenoh session): a process
+    is up, as it says itself on the bus (``rhbl/alive/<role>/<id>``: the learner's once it
+    receives labels, the others' once their session is open)."""
+    eventually(lambda: any(r.ok is not None for r in session.liveliness().get(key, timeout=1.0)),
+               timeout, f"the liveliness token {key}", alive=alive)

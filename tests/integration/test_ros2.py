@@ -32,6 +32,7 @@ from mcap.reader import make_reader  # noqa: E402
 from mcap.records import Schema  # noqa: E402
 from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 from rosbags.rosbag2 import Reader as BagReader  # noqa: E402
+from waiting import eventually, patience  # noqa: E402
 
 from client.behaviour.learning import TreePolicy  # noqa: E402
 from lab.children import Child, free_port, rhbl_argv  # noqa: E402
@@ -134,7 +135,7 @@ class Bus:
 
     def wait(self, what, timeout: float = 30.0, why: str = ""):
         with self.cond:
-            assert self.cond.wait_for(what, timeout), why or "timed out"
+            assert self.cond.wait_for(what, patience(timeout)), why or "timed out"
 
     def close(self) -> None:
         for s in self.subs:
@@ -146,6 +147,14 @@ def _bridge(endpoint: str, tmp: Path, name: str = "ros2", *extra: str) -> Child:
                               *extra), cwd=ROOT, stop_signal=signal.SIGINT, escalate=False)
     c.stats = tmp / f"{name}.json"
     return c.start()
+
+
+def _bridging(bus, bridge: Child) -> None:
+    """Until the bridge's first LaserScan is on the bus: it bridges (its cmd_vel subscriptions
+    were declared before it publishes)."""
+    key = ros2_key(0, "/r0/scan", LASER_SCAN)
+    eventually(lambda: bus.samples.get(key), 60, f"the bridge's first LaserScan on {key}",
+               alive=[bridge])
 
 
 def _stop(child: Child) -> dict:
@@ -165,7 +174,7 @@ def bridged(server, tmp_path_factory):
     with zenoh.open(make_config(mode="client", connect=[server.endpoint])) as session:
         bus = Bus(session)
         bridge = _bridge(server.endpoint, tmp)
-        assert bridge.wait_for_line("bridging 1 robot", 60), bridge.output()
+        _bridging(bus, bridge)
         yield bus, bridge
         bus.close()
         bridge.stop()
@@ -347,7 +356,7 @@ def test_malformed_cdr_on_cmd_vel_is_rejected_counted_and_moves_nothing(server, 
     with zenoh.open(make_config(mode="client", connect=[server.endpoint])) as session:
         bus = Bus(session)
         bridge = _bridge(server.endpoint, tmp_path, "ros2-bad")
-        assert bridge.wait_for_line("bridging 1 robot", 60), bridge.output()
+        _bridging(bus, bridge)
         key = ros2_key(0, "/r0/cmd_vel", TWIST)
         pub = session.declare_publisher(key)
         bus.wait(lambda: bus.states and bus.states[-1].driver == "")  # nobody drives now
@@ -508,10 +517,9 @@ def test_a_laser_that_cannot_give_the_trees_features_is_refused_with_exit_2(wall
         robot = Ros2StyleRobot(session, spec, spec.pose, TreePolicy.load(wall_tree).actions,
                                laser=OtherLaser(spec, count=341, fov_deg=170.0))
         try:
-            deadline = time.monotonic() + 120
-            while ctl.poll() is None and time.monotonic() < deadline:
-                robot.publish()  # until the controller has read one and given up
-                ctl.wait(0.2)
+            # published until the controller has read one and given up
+            eventually(lambda: robot.publish() or ctl.wait(0.2) is not None, 120,
+                       "the controller's exit on a laser it cannot use")
         finally:
             robot.close()
     assert ctl.wait(30) == 2, ctl.output()
