@@ -11,10 +11,13 @@ def test_something(start_server, client_config):
 from __future__ import annotations
 
 import os
+import re
+import socket
 import sys
 from collections.abc import Callable
 
 import pytest
+from waiting import Timeout, eventually
 
 from lab.children import Child
 from lab.children import free_port as find_free_port
@@ -37,12 +40,35 @@ class ServerProcess(Child):
         self.endpoint = endpoint
         self.start()
 
+    def ident(self) -> str:
+        """Its id in its liveliness tokens: ``--ident``, else ``<host>-<pid>`` (the server's
+        default, ``server.node.default_ident``)."""
+        if "--ident" in self.args:
+            return self.args[self.args.index("--ident") + 1]
+        host = re.sub(r"[^A-Za-z0-9_.\-]", "-", socket.gethostname()) or "host"
+        return f"{host}-{self.pid}"
+
     def wait_ready(self, timeout: float = 30.0) -> None:
-        """Until the server says it listens; stops it and raises if it ends or takes too long."""
-        if not self.wait_for_line("listening on", timeout):
+        """Until its liveliness token ``rhbl/alive/server/<ident>/<robot>`` is seen on its
+        endpoint (declared once its subscribers and queryables are: it serves); stops it and
+        raises if it ends or takes too long."""
+        import zenoh
+
+        from process.session import make_config
+        from protocol import keys
+
+        prefix = keys.alive_key("server", self.ident()) + "/"
+        config = make_config(mode="client", connect=[self.endpoint])
+        try:
+            # refused until it listens
+            with eventually(lambda: zenoh.open(config), timeout, f"{self.endpoint} listening",
+                            ignore=(zenoh.ZError,), alive=[self], every=0.02) as session:
+                eventually(lambda: [str(r.ok.key_expr) for r in session.liveliness().get(
+                    prefix + "*", timeout=1.0) if r.ok is not None], timeout,
+                    f"the server's token {prefix}<robot>", alive=[self], every=0.02)
+        except Timeout as exc:
             self.stop()
-            raise RuntimeError(f"rhbl server did not start (exit {self.poll()}):\n"
-                               + self.output())
+            raise RuntimeError(f"rhbl server did not start (exit {self.poll()}): {exc}") from None
 
 
 def _server_factory(started: list[ServerProcess]):

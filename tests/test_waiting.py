@@ -9,7 +9,7 @@ import sys
 import time
 
 import pytest
-from waiting import Timeout, eventually, patience
+from waiting import Timeout, eventually, listening, patience
 
 from lab.children import Child
 
@@ -73,3 +73,15 @@ def test_patience_stretches_deadlines():
                        timeout=60)
     assert r.stdout.strip() == "10.0", r.stderr
     assert patience(4) >= 4
+
+
+def test_listening_sees_a_listening_port_without_connecting():
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+        assert not listening(port)  # bound, not listening
+        s.listen()
+        assert listening(port)
+    assert not listening(port)
