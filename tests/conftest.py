@@ -23,6 +23,23 @@ from lab.children import Child
 from lab.children import free_port as find_free_port
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TESTS = os.path.join(ROOT, "tests")
+
+# The fast tier, ``make check`` (``pytest -m "not slow"``), leaves out every test marked slow:
+# those so marked in their module, and every test of these folders and modules (a whole
+# system of processes, a browser, containers, a campaign: seconds to minutes each), so that the
+# edit-test loop keeps the unit tests and the quick integration tests (one real server or
+# process, a few seconds) and ends within 3 minutes on a busy 2-core machine
+SLOW_FOLDERS = ("integration", "fuzz")
+SLOW_MODULES = ("benchmarks/test_bench_latency.py",)
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """Marks slow every test of ``SLOW_FOLDERS`` and ``SLOW_MODULES``."""
+    for item in items:
+        rel = os.path.relpath(str(item.path), TESTS).replace(os.sep, "/")
+        if rel.split("/", 1)[0] in SLOW_FOLDERS or rel in SLOW_MODULES:
+            item.add_marker(pytest.mark.slow)
 
 
 @pytest.fixture
