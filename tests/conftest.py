@@ -17,7 +17,7 @@ import sys
 from collections.abc import Callable
 
 import pytest
-from waiting import Timeout, eventually
+from waiting import PATIENCE, Timeout, eventually
 
 from lab.children import Child
 from lab.children import free_port as find_free_port
@@ -35,11 +35,19 @@ SLOW_MODULES = ("benchmarks/test_bench_latency.py",)
 
 
 def pytest_collection_modifyitems(config, items) -> None:
-    """Marks slow every test of ``SLOW_FOLDERS`` and ``SLOW_MODULES``."""
+    """Marks slow every test of ``SLOW_FOLDERS`` and ``SLOW_MODULES``; with
+    ``$RHBL_TEST_PATIENCE`` above 1, stretches each test's timeout (pytest-timeout's marker or
+    the ini's) as every wait's deadline is."""
+    default = float(config.getini("timeout") or 0)
     for item in items:
         rel = os.path.relpath(str(item.path), TESTS).replace(os.sep, "/")
         if rel.split("/", 1)[0] in SLOW_FOLDERS or rel in SLOW_MODULES:
             item.add_marker(pytest.mark.slow)
+        if PATIENCE > 1:
+            marker = item.get_closest_marker("timeout")
+            seconds = float(marker.args[0]) if marker is not None and marker.args else default
+            if seconds > 0:
+                item.add_marker(pytest.mark.timeout(seconds * PATIENCE), append=False)
 
 
 @pytest.fixture
