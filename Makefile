@@ -1,7 +1,7 @@
 # The two quick-start commands: `make demo` (the main job) and `make test` (the whole suite).
 # For the edit-test loop, `make check`: the fast tier (every test not marked slow: the unit
 # tests and the quick integration tests; tests/conftest.py says which are slow).
-# Both first install rhbl and its dependencies into a virtual environment of its own, $(VENV),
+# Each first installs rhbl and its dependencies into a virtual environment of its own, $(VENV),
 # made from $(PYTHON): the interpreter itself is never installed into, so a system python3 that
 # is "externally managed" (PEP 668, Debian 12, Ubuntu 24.04) works as well as any other.
 #   make PYTHON=python3.12 demo      build the environment from another interpreter

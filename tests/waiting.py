@@ -12,9 +12,10 @@ answer is what the test waits for, within a deadline that a slow machine can str
 A loaded machine (several suites at once, two cores) slows a test down but must not fail it:
 every deadline is multiplied by ``$RHBL_TEST_PATIENCE`` (default 1; ``RHBL_TEST_PATIENCE=3``
 on a machine three times slower; tests/conftest.py stretches each test's timeout by as much)
-and the default deadlines are generous, well above what a quiet machine takes. What fails a wait is the fact never coming, said in the message with
-the last answer seen; a process the test started that ends while the test waits for it
-(``alive=``) fails the wait at once, with its last lines, instead of at the deadline.
+and the default deadlines are generous, well above what a quiet machine takes. What fails a
+wait is the fact never coming, said in the message with the last answer seen; a process the
+test started that ends while the test waits for it (``alive=``) fails the wait at once, with
+its last lines, instead of at the deadline.
 
 ``tests/`` is on ``sys.path`` (its conftest.py is not in a package), so every test imports
 this module as ``waiting``.
