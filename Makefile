@@ -15,7 +15,11 @@
 # worker (--dist loadfile: a module's server, browser and ordered steps stay together). Most of
 # the suite's time is spent waiting on real processes (a lock-step server, a teacher's
 # demonstration in sim time, a container build), not computing in the test process, so two
-# workers cut it even on the 2-core machine (README's Development lines give the times).
+# workers cut it even on the 2-core machine. Measured here, 2026-12-06, the machine shared with
+# five other suites (mean 1-minute load 13.5): the whole suite on 2 workers 17 min 53 s; in
+# one process it took 14 min 48 s at a lighter load before (1057 tests then). `make check` on
+# 2 workers: 2 min 14 s (load 3-4). Its two slowest tests (quick start 283 s, containers
+# 273 s) run beside the rest; TEST_WORKERS=1 gives back the one-process run.
 PYTHON ?= python3
 VENV ?= .venv
 DEMO_ARGS ?=
