@@ -420,8 +420,10 @@ def test_sim_set_pose_teleports_and_resets_odometry(start_server, client_config)
         ack = Ack.decode(r.ok.payload.to_bytes())
         assert ack.extra["pose"] == pytest.approx([7.0, 1.5, math.pi / 2])
         sid = ack.extra["scan_id"]
-        # the fresh scan at the new pose, before any tick
-        lis.wait(lambda: lis.scan is not None and lis.scan.id >= sid)
+        # the fresh scan at the new pose, before any tick, and the state said with it (on its
+        # own key: it may come after the scan)
+        lis.wait(lambda: lis.scan is not None and lis.scan.id >= sid and lis.state is not None
+                 and lis.state.truth == pytest.approx((7.0, 1.5, math.pi / 2)))
         with lis.cond:
             scan, state = lis.scan, lis.state
         assert scan.id == sid and scan.truth == pytest.approx((7.0, 1.5, math.pi / 2))
