@@ -1,11 +1,25 @@
 # The two quick-start commands: `make demo` (the main job) and `make test` (the whole suite).
-# Both first install rhbl and its dependencies into a virtual environment of its own, $(VENV),
+# For the edit-test loop, `make check`: the fast tier (every test not marked slow: the unit
+# tests and the quick integration tests; tests/conftest.py says which are slow).
+# Each first installs rhbl and its dependencies into a virtual environment of its own, $(VENV),
 # made from $(PYTHON): the interpreter itself is never installed into, so a system python3 that
 # is "externally managed" (PEP 668, Debian 12, Ubuntu 24.04) works as well as any other.
 #   make PYTHON=python3.12 demo      build the environment from another interpreter
 #   make VENV=$VIRTUAL_ENV test       install into (and use) an environment you already have
 #   make demo DEMO_ARGS='--scenario maze'
 #   make compose-test                 docker/compose.yaml in real containers (podman or Docker)
+#   make test TEST_WORKERS=1          the suite in one process (TEST_WORKERS=auto: one per core)
+#   RHBL_TEST_PATIENCE=3 make test    every wait's deadline three times longer (a slow machine)
+#
+# The tests run on TEST_WORKERS processes (pytest-xdist, default 2), a test module on one
+# worker (--dist loadfile: a module's server, browser and ordered steps stay together). Most of
+# the suite's time is spent waiting on real processes (a lock-step server, a teacher's
+# demonstration in sim time, a container build), not computing in the test process, so two
+# workers cut it even on the 2-core machine. Measured here, 2026-12-06, the machine shared with
+# five other suites (mean 1-minute load 13.5): the whole suite on 2 workers 17 min 53 s; in
+# one process it took 14 min 48 s at a lighter load before (1057 tests then). `make check` on
+# 2 workers: 2 min 14 s (load 3-4). Its two slowest tests (quick start 283 s, containers
+# 273 s) run beside the rest; TEST_WORKERS=1 gives back the one-process run.
 PYTHON ?= python3
 VENV ?= .venv
 DEMO_ARGS ?=
@@ -32,8 +46,14 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(RUN) $(BIN)/rhbl demo $(DEMO_ARGS)
 
+TEST_WORKERS ?= 2
+PYTEST := $(RUN) $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile
+
 test: $(STAMP)
-	$(RUN) $(BIN)/python -m pytest -q tests
+	$(PYTEST) tests
+
+check: $(STAMP)
+	$(PYTEST) -m "not slow" tests
 
 lint: $(STAMP)
 	$(RUN) $(BIN)/ruff check .
@@ -44,4 +64,4 @@ compose-test: $(STAMP)
 	@bash scripts/ci-containers.sh
 	$(RUN) $(BIN)/python docker/compose_test.py $(COMPOSE_TEST_ARGS)
 
-.PHONY: install demo test lint compose-test
+.PHONY: install demo test check lint compose-test

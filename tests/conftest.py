@@ -11,15 +11,43 @@ def test_something(start_server, client_config):
 from __future__ import annotations
 
 import os
+import re
+import socket
 import sys
 from collections.abc import Callable
 
 import pytest
+from waiting import PATIENCE, Timeout, eventually
 
 from lab.children import Child
 from lab.children import free_port as find_free_port
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TESTS = os.path.join(ROOT, "tests")
+
+# The fast tier, ``make check`` (``pytest -m "not slow"``), leaves out every test marked slow:
+# those so marked in their module, and every test of these folders and modules (a whole
+# system of processes, a browser, containers, a campaign: seconds to minutes each), so that the
+# edit-test loop keeps the unit tests and the quick integration tests (one real server or
+# process, a few seconds) and ends within 3 minutes on a busy 2-core machine
+SLOW_FOLDERS = ("integration", "fuzz")
+SLOW_MODULES = ("benchmarks/test_bench_latency.py",)
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """Marks slow every test of ``SLOW_FOLDERS`` and ``SLOW_MODULES``; with
+    ``$RHBL_TEST_PATIENCE`` above 1, stretches each test's timeout (pytest-timeout's marker or
+    the ini's) as every wait's deadline is."""
+    default = float(config.getini("timeout") or 0)
+    for item in items:
+        rel = os.path.relpath(str(item.path), TESTS).replace(os.sep, "/")
+        if rel.split("/", 1)[0] in SLOW_FOLDERS or rel in SLOW_MODULES:
+            item.add_marker(pytest.mark.slow)
+        if PATIENCE > 1:
+            marker = item.get_closest_marker("timeout")
+            seconds = float(marker.args[0]) if marker is not None and marker.args else default
+            if seconds > 0:
+                item.add_marker(pytest.mark.timeout(seconds * PATIENCE), append=False)
 
 
 @pytest.fixture
@@ -37,12 +65,35 @@ class ServerProcess(Child):
         self.endpoint = endpoint
         self.start()
 
+    def ident(self) -> str:
+        """Its id in its liveliness tokens: ``--ident``, else ``<host>-<pid>`` (the server's
+        default, ``server.node.default_ident``)."""
+        if "--ident" in self.args:
+            return self.args[self.args.index("--ident") + 1]
+        host = re.sub(r"[^A-Za-z0-9_.\-]", "-", socket.gethostname()) or "host"
+        return f"{host}-{self.pid}"
+
     def wait_ready(self, timeout: float = 30.0) -> None:
-        """Until the server says it listens; stops it and raises if it ends or takes too long."""
-        if not self.wait_for_line("listening on", timeout):
+        """Until its liveliness token ``rhbl/alive/server/<ident>/<robot>`` is seen on its
+        endpoint (declared once its subscribers and queryables are: it serves); stops it and
+        raises if it ends or takes too long."""
+        import zenoh
+
+        from process.session import make_config
+        from protocol import keys
+
+        prefix = keys.alive_key("server", self.ident()) + "/"
+        config = make_config(mode="client", connect=[self.endpoint])
+        try:
+            # refused until it listens
+            with eventually(lambda: zenoh.open(config), timeout, f"{self.endpoint} listening",
+                            ignore=(zenoh.ZError,), alive=[self], every=0.02) as session:
+                eventually(lambda: [str(r.ok.key_expr) for r in session.liveliness().get(
+                    prefix + "*", timeout=1.0) if r.ok is not None], timeout,
+                    f"the server's token {prefix}<robot>", alive=[self], every=0.02)
+        except Timeout as exc:
             self.stop()
-            raise RuntimeError(f"rhbl server did not start (exit {self.poll()}):\n"
-                               + self.output())
+            raise RuntimeError(f"rhbl server did not start (exit {self.poll()}): {exc}") from None
 
 
 def _server_factory(started: list[ServerProcess]):

@@ -5,17 +5,11 @@ from __future__ import annotations
 
 import os
 import pty
-import time
+
+from waiting import eventually
 
 from client.behaviour.actions import DEFAULT_ACTIONS
 from client.roles.keyboard import KeyboardPolicy, parse_keys
-
-
-def _until(cond, timeout=5.0):
-    end = time.monotonic() + timeout
-    while not cond() and time.monotonic() < end:
-        time.sleep(0.01)
-    return cond()
 
 
 def test_parse_keys_keeps_arrow_sequences_whole():
@@ -29,11 +23,12 @@ def test_keys_drive_and_a_closed_terminal_pauses():
     try:
         assert kb.step(None, None) == (None, None)
         os.write(master, b"w")
-        assert _until(lambda: kb.current == "fwd")
+        eventually(lambda: kb.current, 10, "the key w read", until=lambda a: a == "fwd")
         assert kb.step(None, None) == ("fwd", "fwd")
         os.close(master)  # the terminal hangs up
-        assert _until(lambda: kb.current is None), "the held key keeps driving"
-        assert _until(lambda: not kb._thread.is_alive())
+        eventually(lambda: kb.current, 10, "a pause once the terminal is gone (the held key "
+                   "keeps driving)", until=lambda a: a is None)
+        eventually(lambda: not kb._thread.is_alive(), 10, "the reader thread ended")
     finally:
         kb.close()  # restoring a hung-up terminal must not raise
         stream.close()

@@ -17,6 +17,8 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
+from waiting import eventually, wait_token  # noqa: E402
+
 from campaigns import full_disk  # noqa: E402
 from client.journal import Journal, journal_path  # noqa: E402
 from lab.children import Child  # noqa: E402
@@ -27,17 +29,6 @@ from protocol.messages import Scan, TeacherAction  # noqa: E402
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 ROOT = Path(__file__).resolve().parents[2]
 
-
-
-def _wait(cond, timeout: float, what: str, proc: Child | None = None) -> None:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if cond():
-            return
-        if proc is not None and proc.poll() is not None:
-            break
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}:\n{proc.output() if proc else ''}")
 
 
 def _records(out: Path) -> list[int]:
@@ -63,9 +54,7 @@ def test_disk_full_keeps_labels_in_memory_and_journals_them_later(free_port, tmp
                      env={**os.environ, "FULL_FLAG": str(flag)}).start()
         try:
             token = keys.alive_key("learner", f"r0-{proc.pid}")
-            _wait(lambda: any(r.ok is not None
-                              for r in session.liveliness().get(token, timeout=0.5)),
-                  30, "the learner's token", proc)
+            wait_token(session, token, alive=[proc])
             sid = 0
 
             def teach(n: int, beams: int = 360) -> list[int]:
@@ -81,7 +70,8 @@ def test_disk_full_keeps_labels_in_memory_and_journals_them_later(free_port, tmp
                 return ids
 
             first = teach(5)
-            _wait(lambda: _records(out) == first, 20, "the first records", proc)
+            eventually(lambda: _records(out), 20, "the first records", alive=[proc],
+                       until=lambda got: got == first)
             flag.write_text("")  # the disk is full
             bad = teach(1, beams=1)  # a scan not of this laser: refused, no crash
             held = teach(20)
@@ -94,7 +84,8 @@ def test_disk_full_keeps_labels_in_memory_and_journals_them_later(free_port, tmp
             assert _records(out) == first
             flag.unlink()  # space is back
             later = teach(5)
-            _wait(lambda: _records(out) == first + held + later, 20, "all the records", proc)
+            eventually(lambda: _records(out), 20, "all the records", alive=[proc],
+                       until=lambda got: got == first + held + later)
             proc.send_signal(signal.SIGINT)
             assert proc.wait(30) == 0, proc.output()
         finally:
@@ -155,12 +146,11 @@ def test_a_flood_of_scans_keeps_a_slow_learner_bounded_and_every_label_learned(f
             tmp_path, cwd=ROOT).start()
         try:
             token = keys.alive_key("learner", f"r0-{proc.pid}")
-            _wait(lambda: any(r.ok is not None
-                              for r in session.liveliness().get(token, timeout=0.5)),
-                  30, "the learner's token", proc)
+            wait_token(session, token, alive=[proc])
             scan_pub.put(Scan(ts=0.0, id=0, ranges=ranges[0]).encode())  # the server is up
             act_pub.put(TeacherAction(scan_id=0, action="fwd").encode())  # and learning is
-            _wait(lambda: _records(out) == [0], 30, "the first label learned", proc)
+            eventually(lambda: _records(out), 30, "the first label learned", alive=[proc],
+                       until=lambda got: got == [0])
             before = _rss_mb(proc.pid)
             rss = []  # every 1000 scans
             for sid in range(1, n + 1):
@@ -170,7 +160,8 @@ def test_a_flood_of_scans_keeps_a_slow_learner_bounded_and_every_label_learned(f
                 if sid % 1000 == 0:
                     rss.append(_rss_mb(proc.pid))
             labeled = [0, *range(every, n + 1, every)]
-            _wait(lambda: _records(out) == labeled, 60, "every label learned", proc)
+            eventually(lambda: _records(out), 60, "every label learned", alive=[proc],
+                       until=lambda got: got == labeled)
             after = _rss_mb(proc.pid)
             # flat, not growing with the flood: the buffers fill in the first few thousand
             # scans, then the middle of the flood and its end hold the same (a queue growing

@@ -16,6 +16,8 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
+from waiting import eventually, patience, wait_token  # noqa: E402
+
 from lab.children import Child, rhbl_argv  # noqa: E402
 from process.runtime import EXIT_NO_SERVER, EXIT_UNREACHABLE, EXIT_USAGE  # noqa: E402
 from process.session import make_config  # noqa: E402
@@ -85,11 +87,19 @@ def test_controller_refuses_a_tree_with_other_features(start_server, tmp_path):
 
 
 def test_controller_reports_when_scans_stop(start_server, tmp_path):
+    from protocol import keys
+
     srv = start_server("room", speedup=1)
     p = Child("controller", rhbl_argv("controller", "--connect", srv.endpoint, "--tree",
                                       str(_tree(tmp_path))), tmp_path, cwd=ROOT).start()
     try:
-        p.wait_for_line("server is up", 30)
+        with zenoh.open(make_config(mode="client", connect=[srv.endpoint])) as session:
+            commands: list[bytes] = []
+            sub = session.declare_subscriber(keys.cmd_vel_key("r0", source="controller"),
+                                             lambda s: commands.append(s.payload.to_bytes()))
+            eventually(lambda: commands, 30, "the controller's first command (it drives)",
+                       alive=[p])
+            sub.undeclare()
         srv.stop()
         p.wait_for_line("not commanding", 10)
         assert "no scan on rhbl/r0/laser/0/data/scan" in p.output()
@@ -114,22 +124,23 @@ def _answering_controller(free_port, tmp_path):
                                        VelCmd.decode(s.payload.to_bytes()).scan_id))
         pub = session.declare_publisher(keys.scan_key("r0"))
         p = Child("controller", rhbl_argv("controller", "--connect", ep, "--tree",
-                                          str(_tree(tmp_path))), tmp_path, cwd=ROOT).start()
+                                          str(_tree(tmp_path)), "--stats",
+                                          str(tmp_path / "controller.json")),
+                  tmp_path, cwd=ROOT).start()
+        p.stats_file = tmp_path / "controller.json"
         try:
             def until(cond, what):
-                end = time.monotonic() + 30
-                while not cond() and time.monotonic() < end:
-                    assert p.poll() is None, p.output()
-                    time.sleep(0.05)
-                assert cond(), f"{what}:\n{p.output()}"
+                eventually(cond, 30, what, alive=[p])
 
             sid = 0
-            while not answered:  # the first scans also tell it the server is up
+
+            def warm_up() -> list[int]:  # the first scans also tell it the server is up
+                nonlocal sid
                 sid += 1
                 pub.put(Scan(ts=0.1 * sid, id=sid, ranges=GOOD).encode())
-                assert p.poll() is None, p.output()
-                time.sleep(0.1)
-                assert sid < 300, p.output()
+                return answered
+
+            eventually(warm_up, 30, "a command answering a warm-up scan", every=0.1, alive=[p])
             yield pub.put, answered, p, until
             assert p.stop(signal.SIGTERM, 20) == 0, p.output()  # then SIGKILL (-9) after 20 s
         finally:
@@ -147,10 +158,13 @@ def test_controller_survives_a_scan_its_tree_cannot_use(free_port, tmp_path):
 
     with _answering_controller(free_port, tmp_path) as (put, answered, p, until):
         put(Scan(ts=0.1 * FIRST, id=FIRST, ranges=np.ones(1, np.float32)).encode())
-        assert p.wait_for_line("not answered", 30), f"the warning:\n{p.output()}"
+        # the controller keeps only the latest scan and answers nothing for this one: its
+        # warning is the one sign that it was read before the next is sent
+        assert p.wait_for_line("not answered", patience(30)), f"the warning:\n{p.output()}"
         put(Scan(ts=0.1 * (FIRST + 1), id=FIRST + 1, ranges=GOOD).encode())
         until(lambda: FIRST + 1 in answered, "the next scan answered")
         assert FIRST not in answered and p.poll() is None
+    assert json.loads(p.stats_file.read_text())["unanswered"] == 1  # counted (--stats)
 
 
 def test_controller_answers_a_scan_in_any_valid_layout_and_drops_a_malformed_one(free_port,
@@ -173,13 +187,16 @@ def test_controller_answers_a_scan_in_any_valid_layout_and_drops_a_malformed_one
         fields = {"v": 1, **scan(FIRST + 1).to_map()}
         put(msgpack.packb(fields, use_bin_type=True, use_single_float=True))
         until(lambda: FIRST + 1 in answered, "a scan of float32 numbers answered")
+        # the controller keeps only the latest scan and answers nothing for a malformed one:
+        # its warning is the one sign that it was read before the next is sent
         put(scan(FIRST + 2, np.r_[GOOD[:-1], np.nan].astype(np.float32)).encode())
-        assert p.wait_for_line("dropped a malformed scan (1 so far)", 30), p.output()
+        assert p.wait_for_line("dropped a malformed scan (1 so far)", patience(30)), p.output()
         put(scan(FIRST + 3).encode()[:-5])
-        assert p.wait_for_line("dropped a malformed scan (2 so far)", 30), p.output()
+        assert p.wait_for_line("dropped a malformed scan (2 so far)", patience(30)), p.output()
         put(scan(FIRST + 4).encode())
         until(lambda: FIRST + 4 in answered, "the next good scan answered")
         assert FIRST + 2 not in answered and FIRST + 3 not in answered and p.poll() is None
+    assert json.loads(p.stats_file.read_text())["dropped"] == {"scan": 2}  # counted (--stats)
 
 
 def test_a_robot_name_that_is_not_a_key_chunk_is_bad_input():
@@ -222,11 +239,7 @@ def test_a_learner_waiting_for_the_server_stops_on_sigterm(free_port, tmp_path):
                                        str(tmp_path / "t.rhbl"), "--wait-server", "0"),
                   tmp_path, cwd=ROOT).start()
         try:
-            key = keys.alive_key("learner", f"r0-{p.pid}")
-            end = time.monotonic() + 30
-            while not any(r.ok is not None for r in session.liveliness().get(key, timeout=1.0)):
-                assert p.poll() is None and time.monotonic() < end, p.output()
-                time.sleep(0.05)
+            wait_token(session, keys.alive_key("learner", f"r0-{p.pid}"), alive=[p])
             assert p.stop(signal.SIGTERM, 10) == 0, p.output()  # then SIGKILL (-9) after 10 s
         finally:
             p.kill()  # nothing if it ended

@@ -31,6 +31,7 @@ import time
 import numpy as np
 import zenoh
 from rosbags.typesys import Stores, get_typestore
+from waiting import Timeout, eventually
 
 from client.behaviour.tasks import TASKS
 from lab import metrics
@@ -170,13 +171,19 @@ class Ros2StyleRobot:
         until one comes (the driver's Twist may be dropped under congestion: rmw_zenoh's
         reliable keep-last publishers drop rather than block, and a real robot keeps
         publishing); None after ``timeout`` s."""
-        deadline = time.monotonic() + timeout
         twist = self.next_twist(min(2.0, timeout))
-        while twist is None and time.monotonic() < deadline:
+        if twist is not None:
+            return twist
+
+        def again():
             self.resent += 1
             self.publish()
-            twist = self.next_twist(min(2.0, max(0.0, deadline - time.monotonic())))
-        return twist
+            return self.next_twist(2.0)
+
+        try:
+            return eventually(again, timeout, "a Twist answering the scan", every=0.001)
+        except Timeout:
+            return None
 
     def run(self, steps: int, first_timeout: float = 60.0, timeout: float = 30.0) -> Episode:
         """``steps`` lock-step steps of 0.1 s; the episode recorded. The first scan is sent
@@ -185,14 +192,16 @@ class Ros2StyleRobot:
         (``resent`` counts them; AssertionError if none comes)."""
         ep = Episode(start=self.start, dt=DT, kind="ros2")
         side = TASKS[self.spec.task].side
-        deadline = time.monotonic() + first_timeout
         self.publish()
         twist = self.next_twist(1.0)
-        while twist is None:
-            assert time.monotonic() < deadline, "no Twist answered the first scan"
-            self.resent += 1
-            self.publish()
-            twist = self.next_twist(1.0)
+        if twist is None:
+            def again():
+                self.resent += 1
+                self.publish()
+                return self.next_twist(1.0)
+
+            twist = eventually(again, first_timeout, "a Twist answering the first scan",
+                               every=0.001)
         with self._cond:
             self._twists.clear()  # answers to the scans sent again, if any
         for k in range(steps):

@@ -29,6 +29,7 @@ zenoh = pytest.importorskip("zenoh")
 aiohttp = pytest.importorskip("aiohttp")
 
 from browser import ConsoleProcess  # noqa: E402
+from waiting import wait_token  # noqa: E402
 
 from client.journal import Journal, journal_path  # noqa: E402
 from client.player import PlayerClient  # noqa: E402
@@ -167,10 +168,7 @@ def test_holding_arrow_up_teaches_the_learner_fwd_and_releasing_stops(env, brows
     out = tmp_path / "tree.rhbl"
     learner = _learner(out, env["srv"].endpoint, tmp_path)
     try:
-        key = keys.alive_key("learner", f"r0-{learner.pid}")
-        end = time.monotonic() + 30
-        while not any(r.ok is not None for r in session.liveliness().get(key, timeout=1.0)):
-            assert learner.poll() is None and time.monotonic() < end, learner.output()
+        wait_token(session, keys.alive_key("learner", f"r0-{learner.pid}"), alive=[learner])
         _home(env)
         _open(browser, env["console"].url)
         before = len(w.labels)
@@ -218,10 +216,7 @@ def test_holding_arrow_up_teaches_the_learner_fwd_and_releasing_stops(env, brows
 
 
 def _wait_learner(env, learner: Child) -> None:
-    key = keys.alive_key("learner", f"r0-{learner.pid}")
-    end = time.monotonic() + 30
-    while not any(r.ok is not None for r in env["session"].liveliness().get(key, timeout=1.0)):
-        assert learner.poll() is None and time.monotonic() < end, learner.output()
+    wait_token(env["session"], keys.alive_key("learner", f"r0-{learner.pid}"), alive=[learner])
 
 
 def _mode(browser, mode: str) -> None:

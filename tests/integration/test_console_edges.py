@@ -28,6 +28,7 @@ pytest.importorskip("zenoh")
 pytest.importorskip("aiohttp")
 
 from browser import ConsoleProcess  # noqa: E402
+from waiting import eventually  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(180)]
 
@@ -149,9 +150,11 @@ def _frame(text: str) -> bytes:
 def _messages(s: socket.socket, until, timeout: float = 20.0) -> list[dict]:
     """Read text frames until ``until(messages)``."""
     buf, out = b"", []
-    end = time.monotonic() + timeout
-    while not until(out):
-        assert time.monotonic() < end, f"not within {timeout:g} s: {out[-3:]}"
+
+    def read() -> list[dict]:
+        nonlocal buf
+        if until(out):
+            return out
         buf += s.recv(65536)
         while len(buf) >= 2:
             n, off = buf[1] & 0x7F, 2
@@ -164,7 +167,9 @@ def _messages(s: socket.socket, until, timeout: float = 20.0) -> list[dict]:
             if buf[0] & 0x0F == 1:
                 out.append(json.loads(buf[off:off + n]))
             buf = buf[off + n:]
-    return out
+        return out
+
+    return eventually(read, timeout, "the console's messages", until=until, every=0.001)
 
 
 def test_deeply_nested_json_is_refused_clearly(consoles):
@@ -188,17 +193,16 @@ def test_a_page_that_sends_without_reading_is_closed(consoles):
     c = consoles["open"]
     s = _ws(c, rcvbuf=4096)
     junk = _frame("not json") * 200
-    t0 = time.monotonic()
-    closed = False
+    def closed() -> bool:
+        try:
+            s.sendall(junk)  # every one an error reply the page never reads
+        except (BrokenPipeError, ConnectionResetError, TimeoutError):
+            return True
+        return False
+
     try:
-        while time.monotonic() - t0 < 90:
-            try:
-                s.sendall(junk)  # every one an error reply the page never reads
-            except (BrokenPipeError, ConnectionResetError, TimeoutError):
-                closed = True
-                break
+        eventually(closed, 90, "the console closing a page that reads nothing", every=0.001)
     finally:
         s.close()
-    assert closed, "the console kept a page that reads nothing"
     assert c.wait_for_line("reads nothing", 10), c.output()[-2000:]
     assert _get(c, "/") == 200

@@ -32,6 +32,7 @@ pytest.importorskip("aiohttp")
 from browser import ConsoleProcess, chromium, close_chromium, find_chromium  # noqa: E402
 from test_console import Watch, _errors, _keys, _open, _rhbl, _wait_learner  # noqa: E402
 from test_withdraw import _Notices  # noqa: E402
+from waiting import Timeout, eventually  # noqa: E402
 
 from client.journal import Journal, journal_path  # noqa: E402
 from client.player import PlayerClient  # noqa: E402
@@ -57,15 +58,17 @@ def env(start_module_server):
 
 
 def _until(browser, pred, timeout: float = 20.0, what: str = ""):
-    from selenium.common.exceptions import TimeoutException
-    from selenium.webdriver.support.ui import WebDriverWait
+    """``pred(browser)`` once it is true (an element not there yet: not yet); a failure says
+    what the page shows."""
+    from selenium.common.exceptions import NoSuchElementException, StaleElementReferenceException
 
     try:
-        return WebDriverWait(browser, timeout, poll_frequency=0.05).until(lambda d: pred(d))
-    except TimeoutException:
+        return eventually(lambda: pred(browser), timeout, what,
+                          ignore=(NoSuchElementException, StaleElementReferenceException))
+    except Timeout as exc:
         seen = {k: _text(browser, k) for k in ("learner", "labels", "episode", "hold", "info",
                                                 "error", "stuck")}
-        raise AssertionError(f"not within {timeout:g} s: {what}; the page says {seen}") from None
+        raise Timeout(f"{exc}; the page says {seen}") from None
 
 
 def _attr(browser, el: str, name: str) -> str:

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import signal
-import time
 from pathlib import Path
 
 import numpy as np
@@ -21,13 +20,15 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
+from waiting import eventually, patience, wait_token  # noqa: E402
+
 from client.behaviour.learning import DemonstrationLearner, load_snapshot  # noqa: E402
 from client.journal import Journal, journal_path  # noqa: E402
 from client.player import PlayerClient  # noqa: E402
 from lab.children import Child, rhbl_argv  # noqa: E402
 from process.session import make_config  # noqa: E402
 from protocol import keys  # noqa: E402
-from protocol.messages import DriverState, State, TeacherAction, VelCmd  # noqa: E402
+from protocol.messages import Decision, DriverState, State, TeacherAction, VelCmd  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(180)]
 
@@ -68,14 +69,7 @@ def _no_leftovers(env):
 
 
 def _wait_token(session, role: str, proc: Child, timeout: float = 30.0) -> None:
-    key = keys.alive_key(role, f"r0-{proc.pid}")
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        assert proc.poll() is None, f"{proc.name} exited:\n{proc.output()}"
-        if any(r.ok is not None for r in session.liveliness().get(key, timeout=1.0)):
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"no liveliness token {key}:\n{proc.output()}")
+    wait_token(session, keys.alive_key(role, f"r0-{proc.pid}"), timeout, alive=[proc])
 
 
 def _stats(p: Child) -> dict:
@@ -98,24 +92,15 @@ def _journal_len(out: Path) -> int:
 
 def _wait_snapshot_file(out: Path, labeled: int, timeout: float = 20.0) -> dict:
     """The metadata of the snapshot at ``out`` once it includes ``labeled`` journal records."""
-    end = time.monotonic() + timeout
-    meta: dict = {}
-    while time.monotonic() < end:
-        if out.exists():
-            meta = load_snapshot(out)[3]
-            if meta["provenance"]["labeled"] >= labeled:
-                return meta
-        time.sleep(0.05)
-    raise AssertionError(f"snapshot {out} holds {meta.get('provenance')}, expected {labeled}")
+    return eventually(lambda: load_snapshot(out)[3] if out.exists() else {}, timeout,
+                      f"a snapshot {out} of {labeled} labeled vectors",
+                      until=lambda meta: meta and meta["provenance"]["labeled"] >= labeled)
 
 
-def _wait_journal(out: Path, n: int, timeout: float = 20.0) -> None:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if journal_path(out).exists() and _journal_len(out) >= n:
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"journal has {_journal_len(out)} records, expected {n}")
+def _wait_journal(out: Path, n: int, timeout: float = 20.0, alive: list[Child] = ()) -> None:
+    eventually(lambda: _journal_len(out) if journal_path(out).exists() else 0, timeout,
+               f"{n} records in the journal of {out}", until=lambda have: have >= n,
+               alive=alive)
 
 
 def test_teacher_waits_for_a_learner_and_no_label_is_lost(env):
@@ -132,10 +117,12 @@ def test_teacher_waits_for_a_learner_and_no_label_is_lost(env):
     out = env["tmp"] / "first.rhbl"
     t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--seconds", "5",
                      "--wait-learner-timeout", "60")
-    assert t.wait_for_line("waiting for a learner", 30), t.output()
+    # its token comes before it looks for a learner (and waits for the server first): its
+    # saying so is the one sign that it waits, and the learner must come after that
+    assert t.wait_for_line("waiting for a learner", patience(30)), t.output()
     assert t.poll() is None and "first label" not in t.output(), t.output()
     learner = env["start"]("learner", "learner", "--features", "wall", "--out", str(out))
-    assert t.wait(60) == 0, t.output()
+    assert t.wait(patience(60)) == 0, t.output()
     first, n = _stats(t)["first_label_scan"], _stats(t)["labels"]
     _wait_journal(out, n)
     assert learner.stop() == 0, learner.output()
@@ -168,11 +155,11 @@ def test_learner_grows_a_tree_and_survives_sigkill(env):
     learner.kill()
     assert _journal_len(out) == n1
     learner = env["start"]("learner", *args)
-    _wait_token(env["session"], "learner", learner)
-    assert learner.wait_for_line("recovered lineage", 10), learner.output()
+    _wait_token(env["session"], "learner", learner)  # after its recovery
     n2 = _teach(env, 15, seed=1)
     _wait_journal(out, n1 + n2)
     assert learner.stop() == 0, learner.output()
+    assert "recovered lineage" in learner.output(), learner.output()
 
     clf, _f, _a, meta = load_snapshot(out)
     prov = meta["provenance"]
@@ -215,8 +202,8 @@ def test_controller_drives_without_collision(env):
             assert t.wait(120) == 0, t.output()
             labels += _stats(t)["labels"]
     _wait_journal(out, n0 + labels)
-    assert follow.wait_for_line("swapped in a newer tree", 5), follow.output()  # 5 s: the pipe
     assert follow.stop() == 0, follow.output()
+    assert _stats(follow)["swaps"] >= 1, follow.output()  # it drove the newer trees
     assert learner.stop() == 0, learner.output()
     # the corrected tree drives from the world's start pose, as the recipe is measured (the
     # correcting run may have ended anywhere, mid-takeover next to a wall)
@@ -246,12 +233,22 @@ def test_controller_follows_the_learner(env):
     _wait_token(env["session"], "learner", learner)
     _teach(env, 5)
     _wait_journal(out, 40)
-    c = env["start"]("controller", "controller", "--from-learner", "--follow")
-    _wait_token(env["session"], "controller", c)
-    _teach(env, 20, seed=2)  # the teacher outranks the controller while it demonstrates
-    assert c.wait_for_line("swapped in a newer tree", 20), c.output()
-    assert c.stop() == 0
-    assert learner.stop() == 0
+    trees: list[str] = []  # the trees the controller decided with, as it publishes them
+    sub = env["session"].declare_subscriber(keys.controller_decision_key("r0"), lambda s: (
+        trees.append(Decision.decode(s.payload.to_bytes()).snapshot_id)))
+    try:
+        c = env["start"]("controller", "controller", "--from-learner", "--follow")
+        _wait_token(env["session"], "controller", c)
+        first = eventually(lambda: trees[:1], 30, "a decision of the controller",
+                           alive=[c])[0]
+        _teach(env, 20, seed=2)  # the teacher outranks the controller while it demonstrates
+        eventually(lambda: trees[-1], 20, f"a decision with a newer tree than {first}",
+                   until=lambda tree: tree != first, alive=[c])
+    finally:
+        sub.undeclare()
+    assert c.stop() == 0, c.output()
+    assert _stats(c)["swaps"] >= 1, c.output()
+    assert learner.stop() == 0, learner.output()
 
 
 def test_resume_extends_a_tree(env):
@@ -290,32 +287,34 @@ def test_teacher_pauses_while_no_learner_is_up(env):
     _wait_token(env["session"], "learner", learner)
     t = env["start"]("teacher", "teacher", "--policy", "wall-follower", "--wait-learner-timeout",
                      "60")
-    assert t.wait_for_line("first label", 30), t.output()
-    _wait_journal(out, 5)  # demonstrating
-    assert learner.stop(signal.SIGTERM) == 0, learner.output()
-    assert t.wait_for_line("pausing", 10) and t.poll() is None, t.output()
-    paused = _journal_len(out)
-    # nobody records: nothing may be demonstrated now, while the server goes on (two scans)
-    seen = {"scans": 0, "labels": 0}
-    subs = [env["session"].declare_subscriber(keys.scan_key("r0"), lambda _s: seen.update(
-                scans=seen["scans"] + 1)),
-            env["session"].declare_subscriber(keys.teacher_action_key("r0"), lambda _s: seen.update(
-                labels=seen["labels"] + 1))]
-    end = time.monotonic() + 30
-    while seen["scans"] < 2 and time.monotonic() < end:
-        time.sleep(0.05)
-    for sub in subs:
-        sub.undeclare()
-    assert seen == {"scans": seen["scans"], "labels": 0} and seen["scans"] >= 2, seen
+    _wait_journal(out, 5, alive=[t])  # demonstrating
+    # what the bus carries from now on: scans, and the teacher's labels (the order kept)
+    bus: list[str] = []
+    subs = [env["session"].declare_subscriber(keys.scan_key("r0"), lambda _s: bus.append("scan")),
+            env["session"].declare_subscriber(keys.teacher_action_key("r0"),
+                                              lambda _s: bus.append("label"))]
+    try:
+        assert learner.stop(signal.SIGTERM) == 0, learner.output()
+        # nobody records: the teacher pauses, nothing is demonstrated while the server goes
+        # on (three scans in a row and no label: within a few scans of the learner's token
+        # gone)
+        eventually(lambda: bus[-3:], 30, "three scans in a row without a label (a pause)",
+                   until=lambda last: last == ["scan"] * 3, alive=[t])
+        paused = _journal_len(out)
+        mark = len(bus)
+        eventually(lambda: bus[mark:].count("scan"), 30, "two more scans",
+                   until=lambda n: n >= 2, alive=[t])
+        assert "label" not in bus[mark:], bus[mark:]
+    finally:
+        for sub in subs:
+            sub.undeclare()
     learner = env["start"]("learner", *args)
     _wait_token(env["session"], "learner", learner)
-    end = time.monotonic() + 10
-    ups = "INFO learner is up: "  # not "a learner is up: sending the labels ..." (a resend)
-    while t.output().count(ups) < 2 and time.monotonic() < end:
-        time.sleep(0.05)
-    assert t.output().count(ups) == 2, t.output()
-    _wait_journal(out, paused + 20)  # demonstrating again
+    _wait_journal(out, paused + 20, alive=[t])  # demonstrating again
     assert t.stop() == 0, t.output()
+    assert "pausing" in t.output(), t.output()  # it said why it stopped demonstrating
+    ups = "INFO learner is up: "  # not "a learner is up: sending the labels ..." (a resend)
+    assert t.output().count(ups) == 2, t.output()
     n = _stats(t)["labels"]
     _wait_journal(out, n)
     assert learner.stop() == 0, learner.output()
@@ -324,12 +323,9 @@ def test_teacher_pauses_while_no_learner_is_up(env):
 
 
 def _wait_snapshot(session, timeout: float = 20.0) -> None:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if any(r.ok is not None for r in session.get(keys.learner_snapshot_key("r0"), timeout=2.0)):
-            return
-        time.sleep(0.1)
-    raise AssertionError("the learner has no snapshot to give")
+    eventually(lambda: any(r.ok is not None for r in session.get(
+        keys.learner_snapshot_key("r0"), timeout=2.0)), timeout,
+        "the learner's snapshot (an answer to a query)", every=0.1)
 
 
 def test_correcting_teacher_labels_while_the_controller_drives(env):
@@ -391,12 +387,6 @@ def test_correcting_teacher_labels_while_the_controller_drives(env):
     assert "teacher" in ticks and "teacher" in drivers and "controller" in drivers
 
 
-def _wait_text(proc: Child, text: str, timeout: float = 30.0) -> None:
-    assert proc.wait_for_line(text, timeout), (
-        f"{proc.name}: no {text!r} within {timeout:g} s (exit status {proc.poll()}):\n"
-        f"{proc.output()}")
-
-
 def test_starting_order_does_not_matter_for_a_following_controller(env):
     """``rhbl controller --from-learner --follow`` started before the learner waits for its
     first tree (saying so), then drives; it never exits for want of a tree."""
@@ -410,17 +400,19 @@ def test_starting_order_does_not_matter_for_a_following_controller(env):
                                      lambda _s: commanded.set())
     try:
         c = env["start"]("controller", "controller", "--from-learner", "--follow")
-        _wait_text(c, "waiting for the learner's first tree")
+        # its token comes before it asks for a tree: its saying so is the one sign that it
+        # waits, and the learner must come after that
+        assert c.wait_for_line("waiting for the learner's first tree", patience(30)), c.output()
         assert not commanded.is_set(), c.output()
         out = env["tmp"] / "order.rhbl"
         learner = env["start"]("learner", "learner", "--features", "wall", "--out", str(out),
                                "--snapshot-every", "0.3")
         _wait_token(session, "learner", learner)
         _teach(env, 5, seed=4)
-        assert commanded.wait(60), c.output()
-        _wait_text(c, "tree loaded")
+        assert commanded.wait(patience(60)), c.output()
         assert c.poll() is None, c.output()
         assert c.stop() == 0, c.output()
+        assert "tree loaded" in c.output(), c.output()  # it never exited for want of one
         assert learner.stop() == 0, learner.output()
     finally:
         sub.undeclare()

@@ -35,6 +35,8 @@ zenoh = pytest.importorskip("zenoh")
 mcap_reader = pytest.importorskip("mcap.reader")
 pytest.importorskip("google.protobuf")
 
+from waiting import eventually  # noqa: E402
+
 from client.recording.mcap_file import RecordingError, read_recording  # noqa: E402
 from lab.children import Child, rhbl_argv  # noqa: E402
 from process.session import make_config  # noqa: E402
@@ -87,15 +89,9 @@ class Tap:
 
 def wait_recorded(path: Path, kind: str = "scan", timeout: float = 30.0) -> None:
     """Until the (unfinished) file holds a chunk with a message of ``kind``."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        try:
-            if path.exists() and any(m.kind == kind for m in read_recording(path)):
-                return
-        except RecordingError:  # created a moment ago: not even its header yet
-            pass
-        time.sleep(0.1)
-    raise AssertionError(f"{path}: no {kind} recorded within {timeout} s")
+    # RecordingError: created a moment ago, not even its header yet
+    eventually(lambda: path.exists() and any(m.kind == kind for m in read_recording(path)),
+               timeout, f"a {kind} recorded in {path}", every=0.1, ignore=(RecordingError,))
 
 
 def is_slice(part: list[bytes], whole: list[bytes]) -> bool:
@@ -142,9 +138,9 @@ def test_record_keeps_every_message_and_viewer_channels_decode(start_server, pro
         labels = teach(procs, srv.endpoint, 8.0, "--no-wait-learner",
                        stats=tmp_path / "teacher.json")
         teacher_key = keys.teacher_action_key("r0")
-        end = time.monotonic() + 10  # the tap and the recorder both got the last label
-        while tap.count(teacher_key) < labels and time.monotonic() < end:
-            time.sleep(0.05)
+        # the tap and the recorder both got the last label
+        eventually(lambda: tap.count(teacher_key), 10, f"the tap's {labels} labels",
+                   until=lambda n: n >= labels, alive=[rec])
         assert rec.stop() == 0, rec.output()
         tap.sub.undeclare()
     assert "recorder stopped" in rec.output()
@@ -217,9 +213,9 @@ def test_sigkilled_recorder_file_reads_up_to_its_last_chunk(start_server, procs,
                     "--robot", "r0")
         wait_recorded(out)
         n0 = len(list(read_recording(out)))
-        end = time.monotonic() + 20  # a few more chunks (one per second)
-        while len(list(read_recording(out))) <= n0 + 20 and time.monotonic() < end:
-            time.sleep(0.2)
+        eventually(lambda: len(list(read_recording(out))), 20,  # a few more chunks (1 a second)
+                   f"more than {n0 + 20} messages recorded", until=lambda n: n > n0 + 20,
+                   every=0.2, alive=[rec])
         rec.kill()
         tap.sub.undeclare()
     # the mcap package's stream reader, up to where the file stops
@@ -381,12 +377,13 @@ def test_replay_makes_a_controller_send_the_same_commands(live_run, procs, tmp_p
         assert rp.wait(180) == 0, rp.output()
         assert rp.output().count("replay up") == 1, rp.output()  # it said so twice
         last = max(live)
-        end = time.monotonic() + 10
-        while time.monotonic() < end:
+
+        def newest() -> int:
             with cmds.lock:
-                if any(VelCmd.decode(d).scan_id >= last for d in cmds.got[cmds_key()]):
-                    break
-            time.sleep(0.05)
+                return max((VelCmd.decode(d).scan_id for d in cmds.got[cmds_key()]), default=-1)
+
+        eventually(newest, 10, f"the command answering scan {last}",
+                   until=lambda scan: scan >= last, alive=[ctl2])
         assert ctl2.stop() == 0, ctl2.output()
         cmds.sub.undeclare()
     replayed = {}
@@ -412,32 +409,40 @@ def test_foxglove_bridge_serves_decodable_viewer_channels(start_server, procs, f
     srv = start_server("room")
     port = free_port()
     fx = procs("foxglove", "foxglove", "--connect", srv.endpoint, "--port", str(port))
-    assert fx.wait_for_line(f"listening on ws://127.0.0.1:{port}", 30), fx.output()
     # the SDK's server speaks the Foxglove WebSocket protocol under the subprotocol name
-    # foxglove.sdk.v1 (the same protocol as foxglove.websocket.v1)
-    with connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"],
-                 open_timeout=10) as ws:
+    # foxglove.sdk.v1 (the same protocol as foxglove.websocket.v1); connected to once it
+    # listens (refused before)
+    ws = eventually(lambda: connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"],
+                                    open_timeout=10), 30, f"the WebSocket server on port {port}",
+                    ignore=(OSError,), alive=[fx], every=0.1)
+    with ws:
         chans: dict[str, dict] = {}
-        end = time.monotonic() + 20
         want = {"/world", "/tf", "/r0/laser", "/r0/pose", "/r0/path", "/r0/status"}
-        while not want <= set(chans) and time.monotonic() < end:
+
+        def advertised() -> set[str]:
             m = ws.recv(timeout=10)
             if isinstance(m, str):
                 d = json.loads(m)
                 if d["op"] == "advertise":
                     chans.update({c["topic"]: c for c in d["channels"]})
-        assert want <= set(chans), sorted(chans)
+            return set(chans)
+
+        eventually(advertised, 20, f"the channels {sorted(want)} advertised",
+                   until=lambda have: want <= have, every=0.001)
         subs = {i: chans[t] for i, t in enumerate(sorted(want))}
         ws.send(json.dumps({"op": "subscribe", "subscriptions": [
             {"id": i, "channelId": c["id"]} for i, c in subs.items()]}))
         got: dict[str, list[bytes]] = defaultdict(list)
-        end = time.monotonic() + 20
-        while time.monotonic() < end and not all(got.get(t) for t in want):
+
+        def received() -> dict[str, int]:
             m = ws.recv(timeout=10)
             if isinstance(m, bytes) and m[0] == 0x01:  # messageData
                 sid, _ts = struct.unpack_from("<IQ", m, 1)
                 got[subs[sid]["topic"]].append(m[13:])
-    assert all(got.get(t) for t in want), {t: len(v) for t, v in got.items()}
+            return {t: len(v) for t, v in got.items()}
+
+        eventually(received, 20, f"a message on each of {sorted(want)}",
+                   until=lambda counts: all(counts.get(t) for t in want), every=0.001)
     for topic in want:
         c = chans[topic]
         if c["encoding"] == "protobuf":

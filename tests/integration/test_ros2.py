@@ -32,6 +32,7 @@ from mcap.reader import make_reader  # noqa: E402
 from mcap.records import Schema  # noqa: E402
 from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 from rosbags.rosbag2 import Reader as BagReader  # noqa: E402
+from waiting import eventually, patience  # noqa: E402
 
 from client.behaviour.learning import TreePolicy  # noqa: E402
 from lab.children import Child, free_port, rhbl_argv  # noqa: E402
@@ -134,7 +135,7 @@ class Bus:
 
     def wait(self, what, timeout: float = 30.0, why: str = ""):
         with self.cond:
-            assert self.cond.wait_for(what, timeout), why or "timed out"
+            assert self.cond.wait_for(what, patience(timeout)), why or "timed out"
 
     def close(self) -> None:
         for s in self.subs:
@@ -146,6 +147,45 @@ def _bridge(endpoint: str, tmp: Path, name: str = "ros2", *extra: str) -> Child:
                               *extra), cwd=ROOT, stop_signal=signal.SIGINT, escalate=False)
     c.stats = tmp / f"{name}.json"
     return c.start()
+
+
+def _graph(session) -> set[str]:
+    """The ROS 2 graph's liveliness tokens now (rmw_zenoh's, domain 0)."""
+    return {str(r.ok.key_expr) for r in session.liveliness().get("@ros2_lv/0/**", timeout=1.0)
+            if r.ok is not None}
+
+
+def _bridging(session, bus, *args) -> Child:
+    """``_bridge(*args)``, once it bridges: its two cmd_vel subscriptions are in the graph and
+    a LaserScan of its own /r0/scan publisher (the GID in the sample's attachment: XXH3-128 of
+    that publisher's token) is on the bus, told apart from another bridge's of the same server
+    by the tokens that were there before it started."""
+    # a session opened a moment ago may answer a liveliness query with nothing yet: the
+    # server's token seen first, then the graph as it is
+    eventually(lambda: [r for r in session.liveliness().get(keys.alive_key("server", "**"),
+                                                            timeout=1.0) if r.ok is not None],
+               30, "the server's token seen by the test's session")
+    before = _graph(session)
+    bridge = _bridge(*args)
+
+    def new_tokens() -> list[str]:
+        return sorted(_graph(session) - before)
+
+    tokens = eventually(new_tokens, 60, "the new bridge's cmd_vel subscriptions and /r0/scan "
+                        "publisher in the ROS 2 graph", alive=[bridge],
+                        until=lambda new: sum("/MS/" in k and "cmd_vel" in k for k in new) >= 2
+                        and any("/MP/" in k and "%r0%scan/" in k for k in new))
+    scan_token = next(k for k in tokens if "/MP/" in k and "%r0%scan/" in k)
+    gid = xxhash.xxh3_128_intdigest(scan_token.encode()).to_bytes(16, "little")
+    key = ros2_key(0, "/r0/scan", LASER_SCAN)
+
+    def from_it() -> bool:
+        with bus.cond:
+            return any(att is not None and att[17:33] == gid for _, att in bus.samples.get(key, []))
+
+    eventually(from_it, 60, f"a LaserScan from the new bridge's publisher {scan_token}",
+               alive=[bridge])
+    return bridge
 
 
 def _stop(child: Child) -> dict:
@@ -164,8 +204,7 @@ def bridged(server, tmp_path_factory):
     tmp = tmp_path_factory.mktemp("ros2")
     with zenoh.open(make_config(mode="client", connect=[server.endpoint])) as session:
         bus = Bus(session)
-        bridge = _bridge(server.endpoint, tmp)
-        assert bridge.wait_for_line("bridging 1 robot", 60), bridge.output()
+        bridge = _bridging(session, bus, server.endpoint, tmp)
         yield bus, bridge
         bus.close()
         bridge.stop()
@@ -346,8 +385,7 @@ def test_malformed_cdr_on_cmd_vel_is_rejected_counted_and_moves_nothing(server, 
                sec=1, nanosec=2)), CLOCK))]
     with zenoh.open(make_config(mode="client", connect=[server.endpoint])) as session:
         bus = Bus(session)
-        bridge = _bridge(server.endpoint, tmp_path, "ros2-bad")
-        assert bridge.wait_for_line("bridging 1 robot", 60), bridge.output()
+        bridge = _bridging(session, bus, server.endpoint, tmp_path, "ros2-bad")
         key = ros2_key(0, "/r0/cmd_vel", TWIST)
         pub = session.declare_publisher(key)
         bus.wait(lambda: bus.states and bus.states[-1].driver == "")  # nobody drives now
@@ -508,10 +546,9 @@ def test_a_laser_that_cannot_give_the_trees_features_is_refused_with_exit_2(wall
         robot = Ros2StyleRobot(session, spec, spec.pose, TreePolicy.load(wall_tree).actions,
                                laser=OtherLaser(spec, count=341, fov_deg=170.0))
         try:
-            deadline = time.monotonic() + 120
-            while ctl.poll() is None and time.monotonic() < deadline:
-                robot.publish()  # until the controller has read one and given up
-                ctl.wait(0.2)
+            # published until the controller has read one and given up
+            eventually(lambda: robot.publish() or ctl.wait(0.2) is not None, 120,
+                       "the controller's exit on a laser it cannot use")
         finally:
             robot.close()
     assert ctl.wait(30) == 2, ctl.output()

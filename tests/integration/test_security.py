@@ -15,12 +15,13 @@ import os
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
 import pytest
 
 zenoh = pytest.importorskip("zenoh")
+from waiting import eventually, patience  # noqa: E402
+
 from lab.children import free_port  # noqa: E402
 from protocol import keys  # noqa: E402
 
@@ -121,14 +122,9 @@ class Inbox:
         return on_sample
 
     def wait_for(self, item, timeout: float = 3.0) -> bool:
-        deadline = time.monotonic() + timeout
+        """Whether ``item`` arrived within ``timeout`` s (times ``$RHBL_TEST_PATIENCE``)."""
         with self.cond:
-            while item not in self.items:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return False
-                self.cond.wait(left)
-            return True
+            return self.cond.wait_for(lambda: item in self.items, patience(timeout))
 
 
 def _subscribe(sessions, inbox, who, key):
@@ -170,10 +166,14 @@ def _flush(sessions, flush, who: str, timeout: float = 10.0) -> None:
     the router had queued for ``who`` before. Sent again every 0.1 s until it arrives (the
     first ones may go out before the router knows the flush subscription)."""
     payload = f"flush-{next(_FLUSHES)}".encode()
-    end = time.monotonic() + timeout
-    while not flush.wait_for((who, _flush_key(who), payload), timeout=0.1):
-        assert time.monotonic() < end, f"no flush reached {who}"
+
+    def arrived() -> bool:
+        if flush.wait_for((who, _flush_key(who), payload), timeout=0.1):
+            return True
         sessions[_flusher(who)].put(_flush_key(who), payload)
+        return False
+
+    eventually(arrived, timeout, f"a flush reaching {who}", every=0.001)
 
 
 def _passed(sessions, flush, senders=(), receivers=(), timeout: float = 10.0) -> None:
@@ -431,15 +431,9 @@ def test_console_reads_notices_and_decisions_with_the_teachers_credentials(sessi
 def test_liveliness_is_shared_between_authorised_roles(sessions):
     token = sessions["teacher"].liveliness().declare_token(keys.alive_key("teacher", "t1"))
     try:
-        deadline = time.monotonic() + 3.0
-        seen: list[str] = []
-        while time.monotonic() < deadline and keys.alive_key("teacher", "t1") not in seen:
-            seen = [
-                str(r.ok.key_expr)
-                for r in sessions["server"].liveliness().get("rhbl/alive/**", timeout=1.0)
-                if r.ok
-            ]
-        assert keys.alive_key("teacher", "t1") in seen
+        eventually(lambda: _alive_tokens(sessions["server"]), 10,
+                   "the teacher's token seen by the server",
+                   until=lambda seen: keys.alive_key("teacher", "t1") in seen)
     finally:
         token.undeclare()
 
@@ -485,12 +479,9 @@ def test_each_role_declares_liveliness_tokens_only_under_its_own_key(secrets, ro
         mine = {role: keys.alive_key(role, f"acl-{role}-{tag}") for role in roles}
         for role in roles:
             tokens.append(declarers[role].liveliness().declare_token(mine[role]))
-        deadline = time.monotonic() + 10.0
-        seen: set[str] = set()
-        while time.monotonic() < deadline and not set(mine.values()) <= seen:
-            seen = _alive_tokens(observer)
-        assert set(mine.values()) <= seen, sorted(seen)
-        return seen
+        return eventually(lambda: _alive_tokens(observer), 10,
+                          f"every role's own token {sorted(mine.values())} seen",
+                          until=lambda seen: set(mine.values()) <= seen)
 
     try:
         for who, key in sorted(forged):
@@ -603,10 +594,8 @@ def test_ros2_graph_tokens_are_declared_by_the_bridge_and_the_controller_only(se
         marker = sessions["learner"].liveliness().declare_token(learner_alive)
         bridge_keys = announce("ros2", "rhbl_bridge", topics.scan)
         driver_keys = announce("controller", "rhbl_controller", topics.cmd_vel)
-        deadline = time.monotonic() + 10.0
-        seen: dict[str, set[str]] = {}
-        while time.monotonic() < deadline:
-            seen = {
+        def graph_seen() -> dict[str, set[str]]:
+            return {
                 who: {
                     str(r.ok.key_expr)
                     for r in sessions[who].liveliness().get("@ros2_lv/0/**", timeout=1.0)
@@ -614,12 +603,12 @@ def test_ros2_graph_tokens_are_declared_by_the_bridge_and_the_controller_only(se
                 }
                 for who in ("ros2", "controller")
             }
-            if (
-                driver_keys <= seen["ros2"]
-                and bridge_keys <= seen["controller"]
-                and learner_alive in _alive_tokens(sessions["controller"])
-            ):
-                break
+
+        seen = eventually(graph_seen, 10, "the driver's and the bridge's graph tokens and the "
+                          "learner's own token seen across",
+                          until=lambda seen: driver_keys <= seen["ros2"]
+                          and bridge_keys <= seen["controller"]
+                          and learner_alive in _alive_tokens(sessions["controller"]))
         assert driver_keys <= seen["ros2"], sorted(seen["ros2"])
         assert bridge_keys <= seen["controller"], sorted(seen["controller"])
         assert learner_alive in _alive_tokens(sessions["controller"])
@@ -677,10 +666,8 @@ def test_console_runs_with_the_teachers_credentials(secrets, router, sessions):
     try:
         console.wait_url()
         key = keys.alive_key("console", f"{ROBOT}-{console.pid}")
-        deadline = time.monotonic() + 10.0
-        seen: set[str] = set()
-        while key not in seen and time.monotonic() < deadline:
-            seen = _alive_tokens(sessions["server"])
-        assert key in seen, console.output()
+        eventually(lambda: _alive_tokens(sessions["server"]), 10,
+                   f"the console's token {key} seen by the server",
+                   until=lambda seen: key in seen, alive=[console])
     finally:
         assert console.stop() == 0, console.output()

@@ -10,10 +10,10 @@ from __future__ import annotations
 import json
 import signal
 import threading
-import time
 from pathlib import Path
 
 import pytest
+from waiting import eventually, patience
 
 zenoh = pytest.importorskip("zenoh")
 
@@ -30,11 +30,10 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(180)]
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _until(pred, timeout: float, what: str) -> None:
-    end = time.monotonic() + timeout
-    while not pred():
-        assert time.monotonic() < end, f"not within {timeout:g} s: {what}"
-        time.sleep(0.02)
+def _scan(scans):
+    """The next scan of the server (a deadline: a server that stopped publishing fails the
+    test instead of hanging it)."""
+    return eventually(scans.try_recv, 20, "a scan from the server", every=0.01)
 
 
 class _Notices:
@@ -51,7 +50,7 @@ class _Notices:
     def wait(self, pred, timeout: float, what: str) -> TreeNotice:
         with self.cond:
             assert self.cond.wait_for(lambda: self.last is not None and pred(self.last),
-                                      timeout), f"{what}: last notice {self.last}"
+                                      patience(timeout)), f"{what}: last notice {self.last}"
             return self.last
 
 
@@ -77,24 +76,27 @@ def test_labels_before_any_learner_are_kept_and_a_withdrawal_survives_a_restart(
         try:
             # 31 labels while no learner is up (the console's bug: 0 of them arrived)
             for _ in range(31):
-                pubs.label(scans.recv(), "fwd", "fwd")
+                pubs.label(_scan(scans), "fwd", "fwd")
             assert len(pubs.outbox) == 31 and not pubs.learners
             learner = _learner(srv, out, tmp_path, 1)
-            _until(lambda: len(pubs.outbox) == 0, 30, "the learner acknowledges all 31")
+            eventually(lambda: len(pubs.outbox), 30, "the learner acknowledges all 31 (unacknowledged)",
+                       until=lambda n: n == 0, alive=[learner])
             for k in range(29):  # then 29 more with it up: seqs 31..59
-                pubs.label(scans.recv(), "rot-left" if k % 2 else "fwd-left", None)
-            _until(lambda: len(pubs.outbox) == 0, 30, "all 60 acknowledged")
+                pubs.label(_scan(scans), "rot-left" if k % 2 else "fwd-left", None)
+            eventually(lambda: len(pubs.outbox), 30, "all 60 acknowledged (unacknowledged)",
+                       until=lambda n: n == 0, alive=[learner])
             notices.wait(lambda n: n.vectors == 60, 20, "a notice of 60 vectors")
             pubs.withdraw(40, 55, "undo 1.5 s")
-            _until(lambda: pubs.outbox.unacknowledged_withdrawals == 0, 20,
+            eventually(lambda: pubs.outbox.unacknowledged_withdrawals == 0, 20,
                    "the withdrawal acknowledged")
             notices.wait(lambda n: n.vectors == 45, 20, "the rebuilt tree: 45 vectors")
             learner.send_signal(signal.SIGKILL)
             assert learner.wait(10) is not None
             again = _learner(srv, out, tmp_path, 2)
             notices.last = None
-            pubs.label(scans.recv(), "fwd", "fwd")  # seq 60, to a learner that restarted
-            _until(lambda: len(pubs.outbox) == 0, 30, "the restarted learner acknowledges")
+            pubs.label(_scan(scans), "fwd", "fwd")  # seq 60, to a learner that restarted
+            eventually(lambda: len(pubs.outbox), 30, "the restarted learner acknowledges",
+                       until=lambda n: n == 0, alive=[again])
             notices.wait(lambda n: n.vectors == 46, 20, "45 + 1 vectors after the restart")
             assert again.stop() == 0, again.output()
         finally:
@@ -123,20 +125,23 @@ def test_a_persons_learner_keeps_withdrawn_labels_out_after_a_restart(start_serv
         pubs = LabelPublisher(session, "r0", resend_after=0.5)
         learner = _learner(srv, out, tmp_path, 1, "--teacher", "person")
         try:
-            _until(lambda: bool(pubs.learners), 30, "the learner is up")
+            eventually(lambda: bool(pubs.learners), 30, "the learner is up (its token)",
+                       alive=[learner])
             for k in range(40):
-                pubs.label(scans.recv(), "fwd" if k < 30 else "rot-left", "fwd")
-            _until(lambda: len(pubs.outbox) == 0, 30, "all 40 acknowledged")
+                pubs.label(_scan(scans), "fwd" if k < 30 else "rot-left", "fwd")
+            eventually(lambda: len(pubs.outbox), 30, "all 40 acknowledged (unacknowledged)",
+                       until=lambda n: n == 0, alive=[learner])
             notices.wait(lambda n: n.vectors == 40, 20, "a notice of 40 vectors")
             pubs.withdraw(30, 40, "undo 1 s")
-            _until(lambda: pubs.outbox.unacknowledged_withdrawals == 0, 20, "acknowledged")
+            eventually(lambda: pubs.outbox.unacknowledged_withdrawals == 0, 20, "acknowledged")
             notices.wait(lambda n: n.vectors == 30, 20, "the rebuilt tree: 30 vectors")
             learner.send_signal(signal.SIGKILL)
             assert learner.wait(10) is not None
             notices.last = None
             again = _learner(srv, out, tmp_path, 2, "--teacher", "person")
-            pubs.label(scans.recv(), "fwd", "fwd")
-            _until(lambda: len(pubs.outbox) == 0, 30, "the restarted learner acknowledges")
+            pubs.label(_scan(scans), "fwd", "fwd")
+            eventually(lambda: len(pubs.outbox), 30, "the restarted learner acknowledges",
+                       until=lambda n: n == 0, alive=[again])
             notices.wait(lambda n: n.vectors == 31, 20, "30 + 1 vectors after the restart")
             assert again.stop() == 0, again.output()
         finally:

@@ -8,6 +8,7 @@ import sys
 import time
 
 import pytest
+from waiting import eventually, patience
 
 from lab.children import Child, free_port, rhbl_argv
 
@@ -146,10 +147,10 @@ def test_pause_resume_and_lines_since_a_mark(tmp_path):
         assert child.wait_for_line("tick 3", timeout=30)
         child.pause()
         assert child.paused
-        deadline = time.monotonic() + 30  # the kernel says it is stopped ...
-        while _state(child.pid) != "T":
-            assert time.monotonic() < deadline, _state(child.pid)
-            time.sleep(0.01)
+        # the kernel says it is stopped ...
+        eventually(lambda: _state(child.pid), 30, "the stopped state (T) of the paused child",
+                   until=lambda state: state == "T", every=0.01)
+        deadline = time.monotonic() + patience(30)
         mark = child.mark()  # ... and what it printed before has been read: quiet for 0.2 s
         while child.wait_for_line("tick", timeout=0.2, since=mark):
             assert time.monotonic() < deadline

@@ -29,9 +29,12 @@ from rhbl import HypersphereClassifier, SphereTree
 DATA = Path(__file__).parent / "data"
 SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
+# the kernels numba compiles when first used: the same checks, after tens of seconds of
+# compiling; only in the whole suite (`make test`), not the fast tier (`make check`)
+NUMBA = pytest.param("numba", marks=pytest.mark.slow)
 
 
-@pytest.fixture(autouse=True, scope="module", params=["ahead-of-time", "numba"])
+@pytest.fixture(autouse=True, scope="module", params=["ahead-of-time", NUMBA])
 def kernels(request):
     """The kernels every tree of the module is grown and searched with."""
     if request.param == "ahead-of-time":

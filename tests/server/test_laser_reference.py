@@ -15,8 +15,12 @@ import server
 from server import laser
 from server.world import LASER, World, load_world
 
+# the kernels numba compiles when first used: the same checks, after tens of seconds of
+# compiling; only in the whole suite (`make test`), not the fast tier (`make check`)
+NUMBA = pytest.param("numba", marks=pytest.mark.slow)
 
-@pytest.fixture(autouse=True, scope="module", params=["ahead-of-time", "numba"])
+
+@pytest.fixture(autouse=True, scope="module", params=["ahead-of-time", NUMBA])
 def kernels(request):
     """The cast every laser of the module uses."""
     cast, origin = laser._kernels()

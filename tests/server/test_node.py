@@ -11,6 +11,7 @@ import msgpack
 import numpy as np
 import pytest
 import zenoh
+from waiting import eventually, patience
 
 from protocol import keys
 from protocol.messages import (
@@ -66,12 +67,14 @@ class Listener:
 
     def wait(self, pred, timeout=5.0):
         with self.cond:
-            assert self.cond.wait_for(pred, timeout), "condition not met in time"
+            assert self.cond.wait_for(pred, patience(timeout)), \
+                f"condition not met in time (last state {self.state})"
 
     def next_scan(self, timeout=5.0) -> Scan:
         with self.cond:
             last = self.scan.id if self.scan else -1
-            assert self.cond.wait_for(lambda: self.scan and self.scan.id > last, timeout)
+            assert self.cond.wait_for(lambda: self.scan and self.scan.id > last,
+                                      patience(timeout)), f"no scan after {last}"
             return self.scan
 
 
@@ -389,9 +392,10 @@ def test_several_robots_each_under_their_own_prefix(start_server, client_config)
         assert l0.state.truth != l1.state.truth
         p0 = l0.state.truth
         t0 = l1.state.ts
-        while l1.state.ts < t0 + 1.0:
-            drive(s, robot="r1", va=0.5)
-            time.sleep(0.02)
+        # driven for a second of sim time (commanded again and again: the watchdog)
+        eventually(lambda: drive(s, robot="r1", va=0.5) or l1.state.ts, 20,
+                   f"r1 driven until sim time {t0 + 1.0:.1f} s", until=lambda ts: ts >= t0 + 1.0,
+                   every=0.02)
         assert l1.state.vel[2] == pytest.approx(0.5, abs=1e-6)
         assert l0.state.truth == pytest.approx(p0)
         assert l0.state.driver == "" and l1.state.driver == "controller"
@@ -416,8 +420,10 @@ def test_sim_set_pose_teleports_and_resets_odometry(start_server, client_config)
         ack = Ack.decode(r.ok.payload.to_bytes())
         assert ack.extra["pose"] == pytest.approx([7.0, 1.5, math.pi / 2])
         sid = ack.extra["scan_id"]
-        # the fresh scan at the new pose, before any tick
-        lis.wait(lambda: lis.scan is not None and lis.scan.id >= sid)
+        # the fresh scan at the new pose, before any tick, and the state said with it (on its
+        # own key: it may come after the scan)
+        lis.wait(lambda: lis.scan is not None and lis.scan.id >= sid and lis.state is not None
+                 and lis.state.truth == pytest.approx((7.0, 1.5, math.pi / 2)))
         with lis.cond:
             scan, state = lis.scan, lis.state
         assert scan.id == sid and scan.truth == pytest.approx((7.0, 1.5, math.pi / 2))

@@ -4,10 +4,9 @@ the sim time the command arrived at. Real zenoh sessions on loopback, the node t
 
 from __future__ import annotations
 
-import time
-
 import pytest
 import zenoh
+from waiting import eventually
 
 import server
 from process.session import make_config
@@ -35,11 +34,17 @@ def node_and_client(free_port):
 def tick_until(node: ServerNode, done, timeout: float = 10.0) -> int:
     """Tick until ``done()`` (commands arrive in zenoh's queue in their own time)."""
     ticks = 0
-    deadline = time.monotonic() + timeout
-    while not done():
-        assert time.monotonic() < deadline, f"not done after {ticks} ticks: {node.counters}"
+
+    def ticked():
+        nonlocal ticks
+        if done():
+            return True
         node.tick()
         ticks += 1
+        return {"ticks": ticks, **node.counters}
+
+    eventually(ticked, timeout, "the commands handled", until=lambda r: r is True,
+               every=1e-4)
     return ticks
 
 

@@ -19,8 +19,12 @@ from client.behaviour.features import FEATURES, FeatureSpec, PayloadReader
 from protocol.codec import PROTOCOL_VERSION, DecodeError
 from protocol.messages import MAX_BEAMS, Scan
 
+# the kernels numba compiles when first used: the same checks, after tens of seconds of
+# compiling; only in the whole suite (`make test`), not the fast tier (`make check`)
+NUMBA = pytest.param("numba", marks=pytest.mark.slow)
 
-@pytest.fixture(autouse=True, scope="module", params=["ahead-of-time", "numba"])
+
+@pytest.fixture(autouse=True, scope="module", params=["ahead-of-time", NUMBA])
 def kernel(request):
     """The kernel every reader of the module uses."""
     if request.param == "numba":

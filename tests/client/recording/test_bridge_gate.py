@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from waiting import eventually, listening
 
 from lab.children import Child
 
@@ -31,8 +32,8 @@ def bridge(free_port, tmp_path):
                                    str(port), *extra], cwd=ROOT)
         child.start()
         started.append(child)
-        assert child.wait_for_line("Foxglove WebSocket server listening on", 60), \
-            child.output()
+        eventually(lambda: listening(port), 60, f"the bridge listening on port {port}",
+                   alive=[child])
         return child, port
 
     yield start

@@ -9,6 +9,8 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
+from waiting import patience  # noqa: E402
+
 from client.recording.mcap_file import RecordingError  # noqa: E402
 from client.recording.tap import BusTap  # noqa: E402
 from process.session import make_config  # noqa: E402
@@ -38,7 +40,8 @@ class ListSink:
         (puts reach the session's own subscribers on zenoh's threads, after ``put`` returns)."""
         with self._changed:
             return self._changed.wait_for(
-                lambda: len(self.got) >= messages and len(self.alive) >= alive, timeout)
+                lambda: len(self.got) >= messages and len(self.alive) >= alive,
+                patience(timeout))
 
     def maybe_flush(self, now=None):
         pass
