@@ -56,7 +56,7 @@ __all__ = [
     "wrap_angle",
 ]
 
-TASKS = ("wall-following", "maze")
+TASKS = ("wall-following", "maze", "corridor")
 
 
 def wrap_angle(a: float) -> float:

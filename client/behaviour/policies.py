@@ -41,6 +41,7 @@ __all__ = [
     "side_wall_distance",
     "TAKEOVER",
     "takes_over",
+    "CorridorCentrer",
 ]
 
 def _bearings(count: int, fov_deg: float = 180.0) -> np.ndarray:
@@ -410,3 +411,55 @@ class ReactiveMazeTeacher(ReactiveFollower):
 
     def __init__(self, target: float = 0.55, **kw):
         super().__init__(target=target, **kw)
+
+
+class CorridorCentrer(Policy):
+    """Centring along a winding corridor: keep midway between the walls, reactively (every label
+    a pure function of the scan, through the sector minima of a feature spec, by default the
+    all-round ``around``: nine sectors of 22.5 degrees, right ``s[0]`` .. ahead ``s[4]`` ..
+    left ``s[8]``, metres, so a tree with that perception can represent it exactly).
+
+    ``right`` = min(s[0], s[1], s[2]) and ``left`` = min(s[6], s[7], s[8]) are the nearest walls on
+    each side (the 60 degrees from each side's edge, as the ``centred`` rule measures them):
+      blocked ahead (s[4] < stop)        -> rot towards the more open ahead-diagonal (s[5] vs s[3])
+      otherwise u = (left - right) + k_a * clip(s[5] - s[3], +/- cap)
+      (the sides' difference, plus the ahead-diagonals' difference: the corridor bending)
+                                  u > band -> fwd-left, u < -band -> fwd-right, else fwd
+    """
+
+    task = "corridor"
+
+    def __init__(self, features=None, band: float = 0.1, k_a: float = 0.5, cap: float = 1.0,
+                 stop: float = 0.45, actions: ActionSet = DEFAULT_ACTIONS):
+        super().__init__(actions)
+        from .features import FEATURES
+
+        self.features = features if features is not None else FEATURES["around"]
+        if len(self.features.beams) != 9:
+            raise ValueError(f"CorridorCentrer needs a feature spec of 9 sectors, got "
+                             f"{len(self.features.beams)}")
+        self.band, self.k_a, self.cap, self.stop = band, k_a, cap, stop
+
+    def sectors(self, ranges) -> np.ndarray:
+        """The nine sector minima in metres, right to left."""
+        f = self.features
+        return f.extract(np.asarray(ranges), 0.0)[:9] * f.scale
+
+    def decide(self, s) -> str:
+        """The label of sector minima ``s`` (nine, metres, right to left)."""
+        s = [float(v) for v in s[:9]]
+        if s[4] < self.stop:
+            return "rot-left" if s[5] >= s[3] else "rot-right"
+        right, left = min(s[0], s[1], s[2]), min(s[6], s[7], s[8])
+        u = (left - right) + self.k_a * min(max(s[5] - s[3], -self.cap), self.cap)
+        if u > self.band:
+            return "fwd-left"
+        if u < -self.band:
+            return "fwd-right"
+        return "fwd"
+
+    def act(self, ranges, pose=None) -> str:
+        return self.decide(self.sectors(ranges))
+
+    reactive = act
+    acts_reactively = True

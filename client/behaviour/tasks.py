@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from .actions import DEFAULT_ACTIONS, ActionSet
 from .policies import (
     STYLES,
+    CorridorCentrer,
     MazeTeacher,
     Policy,
     ReactiveFollower,
@@ -95,3 +96,9 @@ def make_policy(task: str, actions: ActionSet = DEFAULT_ACTIONS, style: str = "r
     if task not in TASKS:
         raise ValueError(f"no scripted teacher for task {task!r}; known: {', '.join(TASKS)}")
     return TASKS[task].expert(style)(actions=actions, **kw)
+
+
+# centring along a winding corridor (the shipped behaviour corridor-centring)
+TASKS["corridor"] = Task("corridor", features="around", teacher="corridor-centrer", side=None,
+                         reactive=CorridorCentrer, smooth=CorridorCentrer,
+                         eval_worlds="eval-corridor*.toml")
