@@ -56,7 +56,7 @@ __all__ = [
     "wrap_angle",
 ]
 
-TASKS = ("wall-following", "maze", "corridor")
+TASKS = ("wall-following", "maze", "corridor", "wander")
 
 
 def wrap_angle(a: float) -> float:

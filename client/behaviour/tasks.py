@@ -26,6 +26,7 @@ from .policies import (
     ReactiveFollower,
     ReactiveMazeTeacher,
     WallFollower,
+    Wanderer,
 )
 
 __all__ = ["TASKS", "Task", "make_policy", "task_named", "task_of_features", "task_of_teacher"]
@@ -102,3 +103,8 @@ def make_policy(task: str, actions: ActionSet = DEFAULT_ACTIONS, style: str = "r
 TASKS["corridor"] = Task("corridor", features="around", teacher="corridor-centrer", side=None,
                          reactive=CorridorCentrer, smooth=CorridorCentrer,
                          eval_worlds="eval-corridor*.toml")
+
+# wandering a cluttered room without touching anything, covering ground (the shipped behaviour
+# wandering)
+TASKS["wander"] = Task("wander", features="around", teacher="wanderer", side=None,
+                       reactive=Wanderer, smooth=Wanderer, eval_worlds="eval-clutter*.toml")

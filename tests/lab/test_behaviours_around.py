@@ -1,6 +1,6 @@
 """The all-round perception and the behaviours taught with it: the default perception of a new
-tree sees ahead and both sides; corridor centring's files parse and its expert succeeds from
-every start of every world it names, by its own rule."""
+tree sees ahead and both sides; corridor centring's and wandering's files parse and each one's
+expert succeeds from every start of every world it names, by its own rule."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from client.behaviour.features import DEFAULT_FEATURES, FEATURES
-from client.behaviour.policies import CorridorCentrer
+from client.behaviour.policies import CorridorCentrer, Wanderer
 from client.behaviour.spec import shipped
 from lab import metrics
 from lab.behaviours import get, world_of
@@ -60,3 +60,28 @@ def test_the_corridor_centrer_steers_towards_the_middle_from_its_sectors_alone()
         assert expert.act(r) == expert.decide(FEATURES["around"].extract(r) * 2.0)
     with pytest.raises(ValueError, match="9 sectors, got 5"):
         CorridorCentrer(features=FEATURES["wall"])
+
+
+def test_wandering_is_a_file_and_its_expert_succeeds_from_every_start():
+    b = shipped()["wandering"]
+    assert b.features == FEATURES["around"] and b.expert_name == "wanderer"
+    assert len(b.held_out) >= 3 and set(b.rules) >= {"coverage", "no-collision", "time-limit"}
+    _expert_succeeds_everywhere("wandering")
+
+
+def test_the_wanderer_drives_on_when_clear_and_turns_away_when_blocked():
+    expert = Wanderer()
+    ranges = np.full(360, 3.0, dtype=np.float32)
+    assert expert.act(ranges) == "fwd"
+    near_right = ranges.copy()
+    near_right[120:175] = 0.9  # something close ahead, on the right: away from it
+    assert expert.act(near_right) == "fwd-left"
+    assert expert.act(near_right[::-1].copy()) == "fwd-right"
+    ranges[150:210] = 0.4  # in the way: rotate, always the preferred way
+    assert expert.act(ranges) == "rot-left" and Wanderer(prefer="right").act(ranges) == "rot-right"
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        r = rng.uniform(0.3, 3.0, 360).astype(np.float32)
+        assert expert.act(r) == expert.decide(FEATURES["around"].extract(r) * 2.0)
+    with pytest.raises(ValueError, match="prefer must be 'left' or 'right', got 'up'"):
+        Wanderer(prefer="up")
