@@ -71,8 +71,11 @@ def task_named(name: str) -> Task:
 
 
 def task_of_features(features: str | None) -> str | None:
-    """The task whose default feature spec is ``features`` (None: none)."""
-    return next((t.name for t in TASKS.values() if t.features == features), None)
+    """The task whose default feature spec is ``features`` (None: none, or several: the
+    all-round ``around`` is the perception of more than one behaviour, so a tree of it names no
+    task unless told)."""
+    names = [t.name for t in TASKS.values() if t.features == features]
+    return names[0] if len(names) == 1 else None
 
 
 def task_of_teacher(teacher: str) -> str:

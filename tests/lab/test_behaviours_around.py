@@ -10,6 +10,7 @@ import pytest
 from client.behaviour.features import DEFAULT_FEATURES, FEATURES
 from client.behaviour.policies import CorridorCentrer, Wanderer
 from client.behaviour.spec import shipped
+from client.behaviour.tasks import task_of_features
 from lab import metrics
 from lab.behaviours import get, world_of
 from lab.harness import drive
@@ -29,6 +30,7 @@ def test_the_default_perception_sees_ahead_and_both_sides():
     spec = FEATURES[DEFAULT_FEATURES]
     assert DEFAULT_FEATURES == "around" and spec.dim == 9 and spec.heading is None
     assert spec.beams[0] == 0.0 and spec.beams[4] == 90.0 and spec.beams[-1] == 180.0
+    assert task_of_features("around") is None  # several behaviours' perception: no task implied
     # the sectors tile the field of view: every beam of a scan is in one of them
     ranges = np.full(360, 5.0, dtype=np.float32)
     for i in (0, 90, 180, 270, 359):
