@@ -56,7 +56,7 @@ __all__ = [
     "wrap_angle",
 ]
 
-TASKS = ("wall-following", "maze", "corridor", "wander")
+TASKS = ("wall-following", "maze", "corridor-centring", "wandering")
 
 
 def wrap_angle(a: float) -> float:

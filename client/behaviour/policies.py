@@ -428,7 +428,7 @@ class CorridorCentrer(Policy):
                                   u > band -> fwd-left, u < -band -> fwd-right, else fwd
     """
 
-    task = "corridor"
+    task = "corridor-centring"
 
     def __init__(self, features=None, band: float = 0.1, k_a: float = 0.5, cap: float = 1.0,
                  stop: float = 0.45, actions: ActionSet = DEFAULT_ACTIONS):
@@ -484,7 +484,7 @@ class Wanderer(Policy):
       otherwise                                            -> fwd
     """
 
-    task = "wander"
+    task = "wandering"
 
     def __init__(self, features=None, stop: float = 0.6, slow: float = 1.1, side: float = 0.35,
                  prefer: str = "left", actions: ActionSet = DEFAULT_ACTIONS):

@@ -103,11 +103,12 @@ def make_policy(task: str, actions: ActionSet = DEFAULT_ACTIONS, style: str = "r
 
 
 # centring along a winding corridor (the shipped behaviour corridor-centring)
-TASKS["corridor"] = Task("corridor", features="around", teacher="corridor-centrer", side=None,
-                         reactive=CorridorCentrer, smooth=CorridorCentrer,
-                         eval_worlds="eval-corridor*.toml")
+TASKS["corridor-centring"] = Task("corridor-centring", features="around",
+                                  teacher="corridor-centrer", side=None,
+                                  reactive=CorridorCentrer, smooth=CorridorCentrer,
+                                  eval_worlds="eval-corridor*.toml")
 
 # wandering a cluttered room without touching anything, covering ground (the shipped behaviour
 # wandering)
-TASKS["wander"] = Task("wander", features="around", teacher="wanderer", side=None,
-                       reactive=Wanderer, smooth=Wanderer, eval_worlds="eval-clutter*.toml")
+TASKS["wandering"] = Task("wandering", features="around", teacher="wanderer", side=None,
+                          reactive=Wanderer, smooth=Wanderer, eval_worlds="eval-clutter*.toml")
