@@ -93,7 +93,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="extend an existing tree: start a new lineage at --out from it "
                              "(its path is recorded as the parent in the provenance)")
     parser.add_argument("--task", default=None, type=arguments.key_chunk,
-                        help="task stored in the metadata (default: from --features)")
+                        help="task stored in the metadata (default: the one task whose spec --features "
+                             "is, if one is; none for around)")
     parser.add_argument("--spawn", choices=["winner", "all"], default="winner",
                         help="tree growth rule: 'all' = the paper's literal rule, 'winner' = "
                              "spawn under the winning sphere only (smaller trees; default)")
