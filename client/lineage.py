@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
-from client.behaviour.features import FEATURES, FeatureSpec
+from client.behaviour.features import DEFAULT_FEATURES, FEATURES, FeatureSpec
 from client.behaviour.learning import (
     DemonstrationLearner,
     IncompatibleSnapshotError,
@@ -142,7 +142,8 @@ class Lineage:
 
     Held by one process at a time (``LineageLock`` on ``<out>.lock``, taken before anything of
     the lineage is read, released by ``close``; ``lock_wait`` s to wait for another holder).
-    A lineage learns from one laser: ``beams``, the beam count of its journal's labels."""
+    A lineage learns from one laser: ``beams``, the beam count of its journal's labels. A new
+    tree told no ``features`` (and no ``resume``) sees all round: ``DEFAULT_FEATURES``."""
 
     def __init__(self, out: str | os.PathLike, features: str | FeatureSpec | None = None,
                  resume: str | None = None, task: str | None = None,
@@ -200,8 +201,9 @@ class Lineage:
             if resume is not None and teacher == "person":
                 raise ProcessError("--teacher person builds its tree from its own labels: "
                                    "it cannot --resume another tree", EXIT_USAGE)
-            if resume is None and spec is None:
-                raise ProcessError("a new tree needs --features (wall or maze)", EXIT_USAGE)
+            if resume is None and spec is None:  # a new tree told no perception: all round
+                features, spec = DEFAULT_FEATURES, FEATURES[DEFAULT_FEATURES]
+                log.info("new tree with the default perception --features %s", features)
             self._new = {"spec": spec, "resume": resume, "features": features, "task": task,
                          "params": {"spawn": "winner", **(tree_params or {})},
                          "stride": stride, "min_delta": min_delta, "lag": lag, "vote": vote,

@@ -56,7 +56,7 @@ __all__ = [
     "wrap_angle",
 ]
 
-TASKS = ("wall-following", "maze", "doorways", "dead-end")
+TASKS = ("wall-following", "maze", "doorways", "dead-end", "corridor-centring", "wandering")
 
 
 def wrap_angle(a: float) -> float:

@@ -36,8 +36,8 @@ from rhbl.tree import KERNELS_ENV
 
 from . import _payload_layout as _layout
 
-__all__ = ["FeatureSpec", "FeatureError", "FEATURES", "HEADING_LEFT", "HEADING_RIGHT",
-           "PayloadReader"]
+__all__ = ["DEFAULT_FEATURES", "FeatureSpec", "FeatureError", "FEATURES", "HEADING_LEFT",
+           "HEADING_RIGHT", "PayloadReader"]
 
 HEADING_LEFT = 0.33
 HEADING_RIGHT = 0.66
@@ -216,6 +216,11 @@ FEATURES: dict[str, FeatureSpec] = {
     # that sees a wall on either side, the way between two walls and what lies ahead
     "around": FeatureSpec(beams=tuple(22.5 * i for i in range(9)), window=11.25),
 }
+
+# The perception of a new tree when none is named (``rhbl learner`` without ``--features``): it
+# sees ahead and both sides, so that every shipped behaviour is learnable with it
+# (docs/behaviours.md, "The default perception"); the paper's specs stay for its figures.
+DEFAULT_FEATURES = "around"
 
 
 class PayloadReader:

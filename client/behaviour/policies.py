@@ -44,6 +44,8 @@ __all__ = [
     "ReactiveDoorwayFollower",
     "DoorwayTeacher",
     "DeadEndEscaper",
+    "CorridorCentrer",
+    "Wanderer",
 ]
 
 def _bearings(count: int, fov_deg: float = 180.0) -> np.ndarray:
@@ -522,4 +524,114 @@ class DeadEndEscaper(Policy):
     def act(self, ranges, pose=None) -> str:
         return self.label(ranges)
 
+    acts_reactively = True
+
+
+class CorridorCentrer(Policy):
+    """Centring along a winding corridor: keep midway between the walls, reactively (every label
+    a pure function of the scan, through the sector minima of a feature spec, by default the
+    all-round ``around``: nine sectors of 22.5 degrees, right ``s[0]`` .. ahead ``s[4]`` ..
+    left ``s[8]``, metres, so a tree with that perception can represent it exactly).
+
+    ``right`` = min(s[0], s[1], s[2]) and ``left`` = min(s[6], s[7], s[8]) are the nearest walls on
+    each side (the 60 degrees from each side's edge, as the ``centred`` rule measures them):
+      blocked ahead (s[4] < stop)        -> rot towards the more open ahead-diagonal (s[5] vs s[3])
+      otherwise u = (left - right) + k_a * clip(s[5] - s[3], +/- cap)
+      (the sides' difference, plus the ahead-diagonals' difference: the corridor bending)
+                                  u > band -> fwd-left, u < -band -> fwd-right, else fwd
+    """
+
+    task = "corridor-centring"
+
+    def __init__(self, features=None, band: float = 0.1, k_a: float = 0.5, cap: float = 1.0,
+                 stop: float = 0.45, actions: ActionSet = DEFAULT_ACTIONS):
+        super().__init__(actions)
+        from .features import FEATURES
+
+        self.features = features if features is not None else FEATURES["around"]
+        if len(self.features.beams) != 9:
+            raise ValueError(f"CorridorCentrer needs a feature spec of 9 sectors, got "
+                             f"{len(self.features.beams)}")
+        self.band, self.k_a, self.cap, self.stop = band, k_a, cap, stop
+
+    def sectors(self, ranges) -> np.ndarray:
+        """The nine sector minima in metres, right to left."""
+        f = self.features
+        return f.extract(np.asarray(ranges), 0.0)[:9] * f.scale
+
+    def decide(self, s) -> str:
+        """The label of sector minima ``s`` (nine, metres, right to left)."""
+        s = [float(v) for v in s[:9]]
+        if s[4] < self.stop:
+            return "rot-left" if s[5] >= s[3] else "rot-right"
+        right, left = min(s[0], s[1], s[2]), min(s[6], s[7], s[8])
+        u = (left - right) + self.k_a * min(max(s[5] - s[3], -self.cap), self.cap)
+        if u > self.band:
+            return "fwd-left"
+        if u < -self.band:
+            return "fwd-right"
+        return "fwd"
+
+    def act(self, ranges, pose=None) -> str:
+        return self.decide(self.sectors(ranges))
+
+    reactive = act
+    acts_reactively = True
+
+
+class Wanderer(Policy):
+    """Wandering a cluttered room without touching anything: drive straight while the way ahead
+    is clear, turn away from the nearer side when something is close ahead, reactively (every
+    label a pure function of the scan, through the sector minima of a feature spec, by default
+    the all-round ``around``: nine sectors of 22.5 degrees, right ``s[0]`` .. ahead ``s[4]`` ..
+    left ``s[8]``, metres, so a tree with that perception can represent it exactly). It covers
+    ground the way a ball on a table does: each obstacle sends it off at another angle.
+
+      something in the way (min(s[3], s[4], s[5]) < stop)   -> rotate towards ``prefer``
+                                                               (left or right; one way always:
+                                                               a tree cannot then dither
+                                                               between the two rotations)
+      something close ahead (min(s[3], s[4], s[5]) < slow) -> fwd-left / fwd-right, away from
+                                                               the nearer ahead-diagonal
+      something close beside (s[0] or s[8] < side)         -> fwd-left / fwd-right, away from it
+      otherwise                                            -> fwd
+    """
+
+    task = "wandering"
+
+    def __init__(self, features=None, stop: float = 0.6, slow: float = 1.1, side: float = 0.35,
+                 prefer: str = "left", actions: ActionSet = DEFAULT_ACTIONS):
+        super().__init__(actions)
+        from .features import FEATURES
+
+        self.features = features if features is not None else FEATURES["around"]
+        if len(self.features.beams) != 9:
+            raise ValueError(f"Wanderer needs a feature spec of 9 sectors, got "
+                             f"{len(self.features.beams)}")
+        if prefer not in ("left", "right"):
+            raise ValueError(f"prefer must be 'left' or 'right', got {prefer!r}")
+        self.stop, self.slow, self.side = stop, slow, side
+        self.rotate = f"rot-{prefer}"
+
+    def sectors(self, ranges) -> np.ndarray:
+        """The nine sector minima in metres, right to left."""
+        f = self.features
+        return f.extract(np.asarray(ranges), 0.0)[:9] * f.scale
+
+    def decide(self, s) -> str:
+        """The label of sector minima ``s`` (nine, metres, right to left)."""
+        s = [float(v) for v in s[:9]]
+        ahead = min(s[3], s[4], s[5])
+        if ahead < self.stop:
+            return self.rotate
+        if ahead < self.slow:
+            return "fwd-left" if s[3] <= s[5] else "fwd-right"
+        if min(s[0], s[8]) < self.side:
+            return "fwd-left" if s[0] <= s[8] else "fwd-right"
+        return "fwd"
+
+    def act(self, ranges, pose=None) -> str:
+        return self.decide(self.sectors(ranges))
+
+    reactive = act
     acts_reactively = True

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from .actions import DEFAULT_ACTIONS, ActionSet
 from .policies import (
     STYLES,
+    CorridorCentrer,
     DeadEndEscaper,
     DoorwayTeacher,
     MazeTeacher,
@@ -28,6 +29,7 @@ from .policies import (
     ReactiveFollower,
     ReactiveMazeTeacher,
     WallFollower,
+    Wanderer,
 )
 
 __all__ = ["TASKS", "Task", "make_policy", "task_named", "task_of_features", "task_of_teacher"]
@@ -81,8 +83,10 @@ def task_named(name: str) -> Task:
 
 
 def task_of_features(features: str | None) -> str | None:
-    """The task whose default feature spec is ``features`` (None: none)."""
-    return next((t.name for t in TASKS.values() if t.features == features), None)
+    """The paper's task whose spec is ``features`` (``wall`` -> wall-following, ``maze`` ->
+    maze: what a tree of one that names no task meant); None for any other spec (``around``,
+    say, is the perception of several behaviours: a tree of it names its task itself, or none)."""
+    return next((t.name for t in list(TASKS.values())[:2] if t.features == features), None)
 
 
 def task_of_teacher(teacher: str) -> str:
@@ -107,3 +111,15 @@ def make_policy(task: str, actions: ActionSet = DEFAULT_ACTIONS, style: str = "r
     if task not in TASKS:
         raise ValueError(f"no scripted teacher for task {task!r}; known: {', '.join(TASKS)}")
     return TASKS[task].expert(style)(actions=actions, **kw)
+
+
+# centring along a winding corridor (the shipped behaviour corridor-centring)
+TASKS["corridor-centring"] = Task("corridor-centring", features="around",
+                                  teacher="corridor-centrer", side=None,
+                                  reactive=CorridorCentrer, smooth=CorridorCentrer,
+                                  eval_worlds="eval-corridor*.toml")
+
+# wandering a cluttered room without touching anything, covering ground (the shipped behaviour
+# wandering)
+TASKS["wandering"] = Task("wandering", features="around", teacher="wanderer", side=None,
+                          reactive=Wanderer, smooth=Wanderer, eval_worlds="eval-clutter*.toml")

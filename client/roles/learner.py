@@ -31,7 +31,8 @@ refused, or waits ``--lock-wait`` s). Scans and resent labels that do not fit th
 (``client.laser.Laser``) and withdrawals far past what their session gave are refused, counted
 in ``--stats`` ``refused`` by kind.
 
-    rhbl learner --features wall --out tree.rhbl                 # new tree (or continue tree.rhbl)
+    rhbl learner --out tree.rhbl                                 # new tree, all round (or continue)
+    rhbl learner --features wall --out tree.rhbl                 # new tree with the paper's spec
     rhbl learner --resume tree.rhbl --out tree2.rhbl             # extend a tree: a new lineage
     rhbl learner --features wall --teacher person --out tree.rhbl  # force the person rule
 
@@ -57,7 +58,7 @@ import os
 import time
 from collections import deque
 
-from client.behaviour.features import FEATURES, FeatureError
+from client.behaviour.features import DEFAULT_FEATURES, FEATURES, FeatureError
 from client.behaviour.given import behaviour_arg
 from client.behaviour.spec import behaviour
 from client.behaviour.teaching import MAX_LAG, add_person_arguments
@@ -83,8 +84,10 @@ _MAX_TAKEN_BACK = 4096  # withdrawals waiting to be journaled (each under 1 KB d
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_process_arguments(parser)
     parser.add_argument("--features", choices=sorted(FEATURES),
-                        help="feature specification (required for a new tree; checked against "
-                             "the tree when continuing or resuming)")
+                        help=f"feature specification of a new tree (default: {DEFAULT_FEATURES}, "
+                             "nine sector minima over the whole field of view; wall and maze are "
+                             "the paper's five pings); checked against the tree when continuing "
+                             "or resuming, which otherwise keep the tree's")
     parser.add_argument("--out", required=True, metavar="PATH", type=arguments.output_file,
                         help="snapshot path; the journal is PATH.journal. If they exist the "
                              "learner continues them (after a crash: snapshot + journal)")
@@ -92,7 +95,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="extend an existing tree: start a new lineage at --out from it "
                              "(its path is recorded as the parent in the provenance)")
     parser.add_argument("--task", default=None, type=arguments.key_chunk,
-                        help="task stored in the metadata (default: from --features)")
+                        help="task stored in the metadata (default: the one task whose spec --features "
+                             "is, if one is; none for around)")
     parser.add_argument("--spawn", choices=["winner", "all"], default="winner",
                         help="tree growth rule: 'all' = the paper's literal rule, 'winner' = "
                              "spawn under the winning sphere only (smaller trees; default)")

@@ -12,6 +12,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
+from client.behaviour.features import DEFAULT_FEATURES, FEATURES
 from client.behaviour.learning import load_snapshot
 from client.journal import Journal, journal_path
 from client.labels import Pairing
@@ -102,9 +103,20 @@ def test_snapshot_ahead_of_its_journal_is_an_error(tmp_path):
         Lineage(out)
 
 
-def test_a_new_tree_needs_features(tmp_path):
-    with pytest.raises(ProcessError, match="needs --features"):
-        Lineage(tmp_path / "t.rhbl")
+def test_a_new_tree_without_features_sees_all_round_and_its_snapshot_says_so(tmp_path):
+    out = tmp_path / "t.rhbl"
+    core = Lineage(out)
+    assert core.features == FEATURES[DEFAULT_FEATURES] == FEATURES["around"]
+    _feed(core, 20, seed=5)
+    core.snapshot()
+    core.close()
+    assert load_snapshot(out)[1] == FEATURES["around"]
+    again = Lineage(out)  # continued: the tree's spec, not the default asked again
+    assert again.features == FEATURES["around"]
+    again.close()
+    walled = Lineage(tmp_path / "w.rhbl", features="wall")
+    assert walled.features == FEATURES["wall"]
+    walled.close()
 
 
 # ---- pairing under a flood of scans -----------------------------------------------------------

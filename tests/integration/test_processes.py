@@ -499,3 +499,30 @@ def test_a_persons_learner_with_lag_auto_journals_the_scans_before_each_label(en
         assert load_snapshot(out)[0].tree_equal(tree)
     finally:
         sim.set_pose2d(*start)
+
+
+def test_a_learner_told_no_features_grows_a_tree_that_sees_all_round(env):
+    """``rhbl learner --out PATH`` with no ``--features``: a new tree with the default perception
+    (``around``: nine sector minima over the whole field of view), which its snapshot names; a
+    restart continues it with the tree's own spec."""
+    from client.behaviour.features import FEATURES
+
+    session = env["session"]
+    sim = PlayerClient(session=session, source="test").simulation
+    start = sim.get_pose2d()
+    out = env["tmp"] / "around.rhbl"
+    try:
+        learner = env["start"]("learner", "learner", "--out", str(out), "--snapshot-every", "0.3")
+        _wait_token(session, "learner", learner)
+        n = _teach(env, 4, seed=3)
+        _wait_journal(out, n)
+        assert learner.stop() == 0, learner.output()
+        clf, features, _a, meta = load_snapshot(out)
+        assert features == FEATURES["around"] and features.dim == 9
+        assert meta["provenance"]["labeled"] == n and clf.node_count_ > 1
+        again = env["start"]("learner", "learner", "--out", str(out))
+        _wait_token(session, "learner", again)
+        assert again.stop() == 0, again.output()
+        assert load_snapshot(out)[1] == FEATURES["around"]
+    finally:
+        sim.set_pose2d(*start)
