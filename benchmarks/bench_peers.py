@@ -281,23 +281,38 @@ def _names(known: list[str], what: str):
     return check
 
 
+def _write(path: str, results: dict, args, wall: float) -> None:
+    """The measurements so far as JSON (``--json``)."""
+    seeds = sorted({r["seed"] for runs in results.values() for r in runs})
+    Path(path).write_text(json.dumps({"seeds": seeds, "quick": args.quick,
+                                      "learners": LEARNERS, "results": results,
+                                      "wall_s": wall}, indent=1))
+
+
 def merged(paths: list[str]) -> tuple[dict, list[int], bool, list[str]]:
-    """The results of several ``--json`` files as one run's: ``(results, seeds, quick,
-    learners)``; ValueError when they differ in seeds, size or learners."""
+    """The results of several ``--json`` files as one run's (a behaviour's seeds from several
+    files together): ``(results, seeds, quick, learners)``; ValueError when they differ in
+    size or learners, or measure a behaviour's seed twice."""
     results: dict = {}
     seen = None
     for path in paths:
         data = json.loads(Path(path).read_text())
-        runs = data["results"]
-        learners = list(next(iter(runs.values()))[0]["learners"]) if runs else []
-        key = (data["seeds"], data["quick"], learners)
-        if seen is not None and key != seen:
-            raise ValueError(f"{path}: seeds, --quick or learners differ from the first file's")
-        seen = key
-        results.update(runs)
+        for bname, runs in data["results"].items():
+            for run in runs:
+                key = (data["quick"], list(run["learners"]))
+                if seen is not None and key != seen:
+                    raise ValueError(f"{path}: --quick or learners differ from the first file's")
+                seen = key
+                have = results.setdefault(bname, [])
+                if any(r["seed"] == run["seed"] for r in have):
+                    raise ValueError(f"{path}: {bname} seed {run['seed']} measured twice")
+                have.append(run)
     if seen is None:
-        raise ValueError("no file given")
-    return results, seen[0], seen[1], seen[2]
+        raise ValueError(f"{', '.join(paths)}: no measurement")
+    for runs in results.values():
+        runs.sort(key=lambda r: r["seed"])
+    seeds = sorted({r["seed"] for runs in results.values() for r in runs})
+    return results, seeds, seen[0], seen[1]
 
 
 def main(argv=None) -> int:
@@ -325,7 +340,11 @@ def main(argv=None) -> int:
             return 2
     for bname in [] if args.from_json else args.behaviour:
         b = get(bname)
-        results[bname] = [run_seed(b, seed, args.learners, args.quick) for seed in args.seeds]
+        results[bname] = []
+        for seed in args.seeds:
+            results[bname].append(run_seed(b, seed, args.learners, args.quick))
+            if args.json:  # after every seed: a run stopped part-way keeps what it measured
+                _write(args.json, results, args, time.perf_counter() - t0)
     wall = time.perf_counter() - t0
     vectors = {k: round(statistics.fmean(r["vectors"] for r in runs)) for k, runs in results.items()}
     print(table(HEADER, summary_rows(results, args.learners),
@@ -340,10 +359,8 @@ def main(argv=None) -> int:
     if same is not None:
         print(f"rhbl refitted on the vectors = the tree rhbl train grew: {'yes' if same else 'NO'}")
     print(f"wall time {wall:.0f} s")
-    if args.json:
-        Path(args.json).write_text(json.dumps({"seeds": args.seeds, "quick": args.quick,
-                                               "learners": LEARNERS, "results": results,
-                                               "wall_s": wall}, indent=1))
+    if args.json and not args.from_json:
+        _write(args.json, results, args, wall)
         print(f"wrote {args.json}")
     return 0
 

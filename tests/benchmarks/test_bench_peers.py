@@ -41,6 +41,10 @@ def test_a_quick_run_drives_every_learner_and_prints_one_row_each(bench, tmp_pat
     assert bench.main(["--from-json", str(out)]) == 0
     again = capsys.readouterr().out
     assert [r for r in again.splitlines() if r.startswith("| wall-following |")] == rows
+    # seeds of a behaviour from several files go together; the same seed twice is refused
+    assert bench.main(["--from-json", str(out), str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "wall-following seed 0 measured twice" in err[0]
 
 
 def test_a_peer_drives_with_the_features_and_actions_of_the_tree(bench):
