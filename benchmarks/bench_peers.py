@@ -76,11 +76,15 @@ class PeerPolicy:
     """A scikit-learn model driving as a tree does (``TreePolicy``'s ``act``): the scan's
     features by the same ``FeatureSpec``, one query per step, an action of the same set.
     ``classifier`` is what ``lab.evaluate.evaluate`` reports as the tree's size (``node_count_``:
-    the model's size; ``height_``: its depth, 0 when it has none)."""
+    the model's size; ``height_``: its depth, 0 when it has none). ``decide``: the model's
+    answer for one feature vector (default: its ``predict`` of one row; ``exact_decider``: the
+    same answers without the per-call checks, so that closed-loop runs take minutes, not
+    hours)."""
 
-    def __init__(self, model, features, actions, size: int, depth: int = 0):
+    def __init__(self, model, features, actions, size: int, depth: int = 0, decide=None):
         self.model, self.features, self.actions = model, features, actions
         self.classifier = SimpleNamespace(node_count_=int(size), height_=int(depth))
+        self.decide = decide or (lambda x: model.predict(x.reshape(1, -1))[0])
         self.queries = 0
 
     def reset(self) -> None:
@@ -89,7 +93,53 @@ class PeerPolicy:
     def act(self, ranges, pose) -> str:
         yaw = float(pose[2]) if pose is not None else 0.0
         self.queries += 1
-        return str(self.model.predict(self.features.extract(ranges, yaw).reshape(1, -1))[0])
+        return str(self.decide(self.features.extract(ranges, yaw)))
+
+
+def exact_decider(name: str, model, X: np.ndarray):
+    """The answer of fitted model ``name`` for one vector, computed from its fitted state as its
+    ``predict`` computes it (a decision tree's walk with the features as float32, the MLP's
+    forward pass to the largest output, the kNN's search tree and the neighbours' most frequent
+    class, the lowest on a tie), checked against ``predict`` on 2,000 rows of ``X``: None when
+    any differs (or the model is another kind), so the caller drives with ``predict``."""
+    if name == "tree":
+        t = model.tree_
+        left, right, feat, thr = (t.children_left.tolist(), t.children_right.tolist(),
+                                  t.feature.tolist(), t.threshold.tolist())
+        best = model.classes_[np.argmax(t.value[:, 0, :], axis=1)]
+
+        def decide(x):
+            v = x.astype(np.float32).tolist()
+            node = 0
+            while left[node] != -1:
+                node = left[node] if v[feat[node]] <= thr[node] else right[node]
+            return best[node]
+    elif name == "mlp" and model.out_activation_ in ("softmax", "logistic"):
+        layers = list(zip(model.coefs_, model.intercepts_, strict=True))
+        binary = model.out_activation_ == "logistic"
+
+        def decide(x):
+            a = x
+            for i, (w, b) in enumerate(layers):
+                a = a @ w + b
+                if i < len(layers) - 1:
+                    a = np.maximum(a, 0.0)  # relu, the default activation
+            return model.classes_[int(a[0] > 0.0) if binary else int(np.argmax(a))]
+        if model.activation != "relu":
+            return None
+    elif name in ("1-nn", "5-nn") and getattr(model, "_fit_method", "") in ("kd_tree",
+                                                                              "ball_tree"):
+        tree, ys, k, n = model._tree, model._y, model.n_neighbors, len(model.classes_)
+
+        def decide(x):
+            ind = tree.query(x.reshape(1, -1), k=k, return_distance=False)[0]
+            return model.classes_[int(np.argmax(np.bincount(ys[ind], minlength=n)))]
+    else:
+        return None
+    rows = X[np.random.default_rng(0).integers(0, len(X), size=min(2000, len(X)))]
+    if any(decide(x) != p for x, p in zip(rows, model.predict(rows), strict=True)):
+        return None
+    return decide
 
 
 def demonstrations(b, seed: int, quick: bool = False):
@@ -146,7 +196,10 @@ def fit(name: str, X: np.ndarray, y: np.ndarray, recipe, seed: int, learner):
         size = sum(w.size for w in model.coefs_) + sum(v.size for v in model.intercepts_)
     else:
         size = model.n_samples_fit_
-    return PeerPolicy(model, learner.features, learner.actions, size, depth), seconds, size, model
+    decide = exact_decider(name, model, X)
+    policy = PeerPolicy(model, learner.features, learner.actions, size, depth, decide)
+    policy.exact = decide is not None
+    return policy, seconds, size, model
 
 
 def prediction_times(name: str, model, X: np.ndarray, seed: int) -> tuple[float, float]:
@@ -193,7 +246,8 @@ def run_seed(b, seed: int, learners: list[str], quick: bool = False) -> dict:
                     "teacher_success_rate": rep["teacher_success_rate"]}
         out["learners"][name] = {"size": int(size), "fit_s": fit_s, "single_us": single,
                                  "batch_us": batch, "worlds": worlds,
-                                 "queries": getattr(policy, "queries", None)}
+                                 "queries": getattr(policy, "queries", None),
+                                 "exact_decider": getattr(policy, "exact", None)}
         print(f"  {b.name} seed {seed} {name}: size {size}, fit {fit_s:.2f} s, "
               + ", ".join(f"{w} {r['successes']}/{r['episodes']}" for w, r in worlds.items()),
               file=sys.stderr, flush=True)
@@ -262,7 +316,8 @@ def run_person(model: str, seed: int, learners: list[str], quick: bool = False) 
                     "teacher_success_rate": rep["teacher_success_rate"]}
         out["learners"][name] = {"size": int(size), "fit_s": fit_s, "single_us": single,
                                  "batch_us": batch, "worlds": worlds,
-                                 "queries": getattr(policy, "queries", None)}
+                                 "queries": getattr(policy, "queries", None),
+                                 "exact_decider": getattr(policy, "exact", None)}
         print(f"  person {model} seed {seed} {name}: size {size}, fit {fit_s:.2f} s, "
               + ", ".join(f"{w} {r['successes']}/{r['episodes']}" for w, r in worlds.items()),
               file=sys.stderr, flush=True)
@@ -415,6 +470,8 @@ def main(argv=None) -> int:
                     help="measure nothing: print the tables of these --json files together "
                          "(runs of other behaviours, made side by side)")
     args = ap.parse_args(argv)
+    if not args.from_json and not args.behaviour and not args.people:
+        ap.error("nothing to measure: --behaviour is empty and no --people given")
     t0 = time.perf_counter()
     results: dict[str, list[dict]] = {}
     if args.from_json:
