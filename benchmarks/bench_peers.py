@@ -358,6 +358,9 @@ def summary_rows(results: dict[str, list[dict]], learners: list[str]) -> list[li
     rows = []
     for bname, runs in results.items():
         for name in learners:
+            if any(name not in run["learners"] for run in runs):
+                rows.append([bname, name, *["not measured"] * (len(HEADER) - 2)])
+                continue
             per = [run["learners"][name] for run in runs]
             ok_t, n_t = _rate(runs, name, "taught")
             ok_h, n_h = _rate(runs, name, "held_out")
@@ -381,6 +384,9 @@ def world_rows(results: dict[str, list[dict]], learners: list[str]) -> list[list
         for w, first in runs[0]["learners"][learners[0]]["worlds"].items():
             cells = []
             for name in learners:
+                if any(name not in run["learners"] for run in runs):
+                    cells.append("-")
+                    continue
                 ok = sum(run["learners"][name]["worlds"][w]["successes"] for run in runs)
                 n = sum(run["learners"][name]["worlds"][w]["episodes"] for run in runs)
                 cells.append(f"{ok / n:.0%}")
@@ -427,18 +433,19 @@ def _write(path: str, results: dict, args, wall: float) -> None:
 
 def merged(paths: list[str]) -> tuple[dict, list[int], bool, list[str]]:
     """The results of several ``--json`` files as one run's (a behaviour's seeds from several
-    files together): ``(results, seeds, quick, learners)``; ValueError when they differ in
-    size or learners, or measure a behaviour's seed twice."""
+    files together): ``(results, seeds, quick, learners)``, the learners any file measured;
+    ValueError when they differ in size (``--quick``) or measure a behaviour's seed twice."""
     results: dict = {}
     seen = None
+    learners: set[str] = set()
     for path in paths:
         data = json.loads(Path(path).read_text())
         for bname, runs in data["results"].items():
             for run in runs:
-                key = (data["quick"], list(run["learners"]))
-                if seen is not None and key != seen:
-                    raise ValueError(f"{path}: --quick or learners differ from the first file's")
-                seen = key
+                if seen is not None and data["quick"] != seen:
+                    raise ValueError(f"{path}: --quick differs from the first file's")
+                seen = data["quick"]
+                learners |= set(run["learners"])
                 have = results.setdefault(bname, [])
                 if any(r["seed"] == run["seed"] for r in have):
                     raise ValueError(f"{path}: {bname} seed {run['seed']} measured twice")
@@ -448,7 +455,7 @@ def merged(paths: list[str]) -> tuple[dict, list[int], bool, list[str]]:
     for runs in results.values():
         runs.sort(key=lambda r: r["seed"])
     seeds = sorted({r["seed"] for runs in results.values() for r in runs})
-    return results, seeds, seen[0], seen[1]
+    return results, seeds, seen, [n for n in LEARNERS if n in learners]
 
 
 def main(argv=None) -> int:
@@ -504,7 +511,8 @@ def main(argv=None) -> int:
     print(table(["behaviour", "world", *args.learners, "expert"], world_rows(results, args.learners),
                 title="Success per world (all seeds' episodes)"))
     same = all(r["learners"]["rhbl"]["size"] == r["trained_nodes"]
-               for runs in results.values() for r in runs) if "rhbl" in args.learners else None
+               for runs in results.values() for r in runs
+               if "rhbl" in r["learners"]) if "rhbl" in args.learners else None
     if same is not None:
         print(f"rhbl refitted on the vectors = the tree rhbl train grew: {'yes' if same else 'NO'}")
     print(f"wall time {wall:.0f} s")
