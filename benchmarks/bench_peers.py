@@ -433,8 +433,9 @@ def _write(path: str, results: dict, args, wall: float) -> None:
 
 def merged(paths: list[str]) -> tuple[dict, list[int], bool, list[str]]:
     """The results of several ``--json`` files as one run's (a behaviour's seeds from several
-    files together): ``(results, seeds, quick, learners)``, the learners any file measured;
-    ValueError when they differ in size (``--quick``) or measure a behaviour's seed twice."""
+    files together, and other learners of the same seed's demonstrations): ``(results, seeds,
+    quick, learners)``, the learners any file measured; ValueError when they differ in size
+    (``--quick``), measure a learner of a behaviour's seed twice or learn other vectors."""
     results: dict = {}
     seen = None
     learners: set[str] = set()
@@ -447,9 +448,16 @@ def merged(paths: list[str]) -> tuple[dict, list[int], bool, list[str]]:
                 seen = data["quick"]
                 learners |= set(run["learners"])
                 have = results.setdefault(bname, [])
-                if any(r["seed"] == run["seed"] for r in have):
+                same = next((r for r in have if r["seed"] == run["seed"]), None)
+                if same is None:
+                    have.append(run)
+                elif set(same["learners"]) & set(run["learners"]):
                     raise ValueError(f"{path}: {bname} seed {run['seed']} measured twice")
-                have.append(run)
+                elif same["vectors"] != run["vectors"]:
+                    raise ValueError(f"{path}: {bname} seed {run['seed']}: {run['vectors']} "
+                                     f"vectors, another file's {same['vectors']}")
+                else:  # other learners on the same demonstrations
+                    same["learners"].update(run["learners"])
     if seen is None:
         raise ValueError(f"{', '.join(paths)}: no measurement")
     for runs in results.values():
