@@ -523,7 +523,8 @@ def main(argv=None) -> int:
                if "rhbl" in r["learners"]) if "rhbl" in args.learners else None
     if same is not None:
         print(f"rhbl refitted on the vectors = the tree rhbl train grew: {'yes' if same else 'NO'}")
-    print(f"wall time {wall:.0f} s")
+    if not args.from_json:
+        print(f"wall time {wall:.0f} s")
     if args.json and not args.from_json:
         _write(args.json, results, args, wall)
         print(f"wrote {args.json}")
