@@ -1,0 +1,82 @@
+"""``benchmarks/bench_peers.py``: RHBL beside scikit-learn's learners on the same demonstrations,
+each driven in closed loop."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope="module")
+def bench(request):
+    return request.getfixturevalue("load_benchmark")("bench_peers")
+
+
+def test_a_quick_run_drives_every_learner_and_prints_one_row_each(bench, tmp_path, capsys):
+    out = tmp_path / "peers.json"
+    assert bench.main(["--behaviour", "wall-following", "--seeds", "0", "--quick",
+                       "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    rows = [line for line in text.splitlines() if line.startswith("| wall-following |")]
+    peer = [r for r in rows if r.count("|") == len(bench.HEADER) + 1]
+    assert [r.split("|")[2].strip() for r in peer] == list(bench.LEARNERS)
+    # the world table: the teaching world and the first held-out one, a column per learner
+    worlds = [r for r in rows if r.count("|") == len(bench.LEARNERS) + 4]
+    assert [r.split("|")[2].strip() for r in worlds] == ["room (taught)",
+                                                        "eval-room-jagged (held out)"]
+    assert "rhbl refitted on the vectors = the tree rhbl train grew: yes" in text
+    data = json.loads(out.read_text())
+    run = data["results"]["wall-following"][0]
+    assert run["vectors"] > 100
+    for name, r in run["learners"].items():
+        assert r["size"] > 0 and r["fit_s"] > 0 and r["single_us"] > 0 and r["batch_us"] > 0
+        assert {w: v["episodes"] for w, v in r["worlds"].items()} == {
+            "room": 1, "eval-room-jagged": 1}, name
+        if name != "rhbl":  # a scikit-learn model answered every step it drove (20 s at 10 Hz)
+            assert r["queries"] >= 2 * 200, name
+    assert run["learners"]["1-nn"]["size"] == run["vectors"]  # kNN keeps every vector
+    # the tables print again from the file, measuring nothing
+    assert bench.main(["--from-json", str(out)]) == 0
+    again = capsys.readouterr().out
+    assert [r for r in again.splitlines() if r.startswith("| wall-following |")] == rows
+    # seeds of a behaviour from several files go together; the same seed twice is refused
+    assert bench.main(["--from-json", str(out), str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "wall-following seed 0 measured twice" in err[0]
+
+
+def test_a_peer_drives_with_the_features_and_actions_of_the_tree(bench):
+    from sklearn.tree import DecisionTreeClassifier
+
+    from client.behaviour.actions import DEFAULT_ACTIONS
+    from client.behaviour.features import FEATURES
+
+    spec = FEATURES["wall"]
+    ranges = np.full(360, 2.0, dtype=np.float32)
+    x = spec.extract(ranges, 0.0)
+    model = DecisionTreeClassifier().fit(np.stack([x, 1 - x]), ["rot-left", "fwd"])
+    policy = bench.PeerPolicy(model, spec, DEFAULT_ACTIONS, size=3, depth=1)
+    assert policy.act(ranges, (0.0, 0.0, 0.0)) == "rot-left" and policy.queries == 1
+    assert policy.classifier.node_count_ == 3
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--behaviour", "no-such"], "unknown 'no-such'"),
+    (["--learners", "svm"], "unknown 'svm'"),
+    (["--seeds", "a,b"], "--seeds must be integers"),
+    (["--people", "nobody"], "unknown 'nobody'"),
+    (["--behaviour", ""], "nothing to measure"),
+])
+def test_bad_input_is_one_line_naming_it(bench, capsys, argv, says):
+    with pytest.raises(SystemExit) as exc:
+        bench.main(argv)
+    assert exc.value.code == 2
+    assert says in capsys.readouterr().err
+
+
+def test_a_missing_json_file_is_one_line(bench, tmp_path, capsys):
+    assert bench.main(["--from-json", str(tmp_path / "none.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "none.json" in err[0]
