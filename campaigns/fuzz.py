@@ -495,7 +495,11 @@ def _client_verdicts(results: list[KeyResult], procs: dict[str, Child], learning
     dropped = {}
     for n, p in procs.items():
         stats = Path(p.logfile).with_name(f"{n}.json")
-        dropped[n] = json.loads(stats.read_text()).get("dropped", {}) if stats.exists() else {}
+        said = json.loads(stats.read_text()) if stats.exists() else {}
+        dropped[n] = dict(said.get("dropped", {}))
+        # the learner refuses what does not fit the robot's laser, some before decoding it
+        for kind, k in said.get("refused_messages", {}).items():
+            dropped[n][kind] = dropped[n].get(kind, 0) + k
     for res in results:
         part = next(p for p in _LISTENERS if p in res.key)
         for n in _LISTENERS[part]:

@@ -54,38 +54,41 @@ class Laser:
             raise ValueError(f"beams must be a positive integer or None, got {beams!r}")
         self.beams = beams
         self.max_range = max_range
-        self.refused: dict[str, int] = {}
+        self.refused: dict[str, int] = {}  # by kind of misfit ("beams", "ranges", ...)
+        self.by_key: dict[str, int] = {}  # by the message's kind ("scan", "teacher/labeled")
 
-    def too_big(self, size: int, what: str) -> bool:
+    def too_big(self, size: int, what: str, key: str = "scan") -> bool:
         """True (counted "beams", logged) when a message of ``size`` bytes is larger than one
         carrying a scan of this laser can be: refused before it is even copied or decoded (a
         flood of 400 KB labels otherwise grows the learner's heap for good)."""
         if self.beams is None or size <= 4 * self.beams + _FIELDS:
             return False
         self.refuse(LaserMismatch("beams", f"{what} of {size} bytes, more than a scan of the "
-                                           f"laser's {self.beams} beams holds"))
+                                           f"laser's {self.beams} beams holds"), key)
         return True
 
-    def fits(self, scan) -> bool:
+    def fits(self, scan, key: str = "scan") -> bool:
         """``check_scan``, True or False (counted, logged)."""
         try:
             self.check_scan(scan)
         except LaserMismatch as exc:
-            self.refuse(exc)
+            self.refuse(exc, key)
             return False
         return True
 
-    def fits_ranges(self, ranges, what: str) -> bool:
+    def fits_ranges(self, ranges, what: str, key: str = "teacher/labeled") -> bool:
         """``check_ranges``, True or False (counted, logged)."""
         try:
             self.check_ranges(ranges, what)
         except LaserMismatch as exc:
-            self.refuse(exc)
+            self.refuse(exc, key)
             return False
         return True
 
-    def refuse(self, exc: LaserMismatch) -> None:
-        """Count a refusal; log the first of its kind, then every 1000th."""
+    def refuse(self, exc: LaserMismatch, key: str = "scan") -> None:
+        """Count a refusal of a message of kind ``key`` (as ``protocol.decoding`` names
+        kinds); log the first of its kind of misfit, then every 1000th."""
+        self.by_key[key] = self.by_key.get(key, 0) + 1
         n = self.refused[exc.kind] = self.refused.get(exc.kind, 0) + 1
         if n == 1 or n % 1000 == 0:
             log.warning("%s: refused (%d %s so far%s)", exc, n, exc.kind,

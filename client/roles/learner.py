@@ -272,7 +272,8 @@ class LearnerProcess:
         self.pairing.on_label(sample.payload.to_bytes())
 
     def on_labeled(self, sample) -> None:
-        if not self.laser.too_big(len(sample.payload), "a label resent with its scan"):
+        if not self.laser.too_big(len(sample.payload), "a label resent with its scan",
+                                  "teacher/labeled"):
             self.pairing.on_labeled(sample.payload.to_bytes())
 
     def on_withdraw(self, sample) -> None:
@@ -582,6 +583,8 @@ class LearnerProcess:
                 "nodes": lineage.learner.nodes, "height": lineage.learner.height,
                 "refused": {k: self.refused.get(k, 0) + self.laser.refused.get(k, 0)
                             for k in {**self.refused, **self.laser.refused}},
+                # the same misfits by the kind of message that carried them
+                "refused_messages": dict(self.laser.by_key),
                 "pairing": dict(self.pairing.stats), "backlog": len(self.backlog),
                 "dropped": {**self.pairing.decoder.counts, **self.withdraw_decoder.counts}}
 

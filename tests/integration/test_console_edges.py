@@ -28,7 +28,7 @@ pytest.importorskip("zenoh")
 pytest.importorskip("aiohttp")
 
 from browser import ConsoleProcess  # noqa: E402
-from waiting import eventually  # noqa: E402
+from waiting import PATIENCE, eventually  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(180)]
 
@@ -197,12 +197,14 @@ def test_a_page_that_sends_without_reading_is_closed(consoles):
         try:
             s.sendall(junk)  # every one an error reply the page never reads
         except (BrokenPipeError, ConnectionResetError, TimeoutError):
-            return True
-        return False
+            return True  # closed, or (a timeout) no longer read: its close is queued behind
+        return False     # the replies it never read, so no FIN comes until they are
 
     try:
         eventually(closed, 90, "the console closing a page that reads nothing", every=0.001)
     finally:
         s.close()
-    assert c.wait_for_line("reads nothing", 10), c.output()[-2000:]
+    # what the console did is said in its log (no counter says it); on a loaded machine the
+    # console may notice a while after the page stopped being read
+    assert c.wait_for_line("reads nothing", 60 * PATIENCE), c.output()[-2000:]
     assert _get(c, "/") == 200

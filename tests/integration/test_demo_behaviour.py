@@ -76,7 +76,10 @@ def test_a_behaviour_file_is_demonstrated_learned_and_judged_by_its_own_parts(tm
     assert s["behaviour"] == "hug-left" and s["behaviour_file"] == str(hug_left.resolve())
     # its own start poses (turned round), its own time limit for the final drives
     assert [m["start"][:2] for m in s["learned"]] == [[3.0, 0.7], [8.0, 0.7]]
-    assert all(25 <= m["seconds"] < 30 for m in s["learned"])
+    # (not the 120 s of wall following's rule; the demo stops a drive at the first scan past
+    # the limit, which a loaded machine may see a few scans late)
+    seconds = [m["seconds"] for m in s["learned"]]
+    assert all(25 <= x < 60 for x in seconds), seconds
     # judged by its rule, which the output says in words
     assert len(s["success"]) == 2 and s["rule"].startswith("each start is driven 25 s")
     line = f"success by hug-left's rule ({s['rule']}): {sum(s['success'])}/2 starts"

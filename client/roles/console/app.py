@@ -55,6 +55,7 @@ import json
 import logging
 import math
 import signal
+import socket
 import ssl
 import threading
 import time
@@ -100,6 +101,10 @@ MAX_MESSAGE = 4096  # bytes of a page's message
 MODES = ("demonstrate", "watch", "correct")
 SEND_TIMEOUT = 5.0  # s a send to a page may wait: a page that does not read is closed
 MAX_ERRORS = 8  # error replies waiting for a page at most (the rest counted in one)
+# bytes the kernel may hold for a page's connection (its send buffer): on loopback it grows to
+# megabytes by itself, so a page that reads nothing would be found out only after minutes, and
+# every page could hold that much of the machine's memory; 128 KiB is a second of scans at 10 Hz
+PAGE_SEND_BUFFER = 128 * 1024
 MAX_KINDS = 64  # kinds of message waiting for a page at most
 MAX_ROBOTS = 256  # robots served at once the console lists at most (the rest are refused)
 ROBOTS_EVERY = 0.5  # s at least between two ``robots`` lists sent to the pages
@@ -527,6 +532,10 @@ class Console(Tutor):
             raise web.HTTPForbidden(text=f"rhbl console: {said[1]}\n")
         ws = web.WebSocketResponse(heartbeat=5.0, max_msg_size=MAX_MESSAGE)
         await ws.prepare(request)
+        sock = request.transport.get_extra_info("socket") if request.transport else None
+        if sock is not None:  # what waits in the kernel for a page, bounded: a page that reads
+            with contextlib.suppress(OSError):  # nothing is found out within SEND_TIMEOUT s
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, PAGE_SEND_BUFFER)
         if len(self.pages) >= self.max_pages:
             return await self._refuse_page(ws, request)
         page = _Page(self._next_page, ws, self.default_robot, request)
