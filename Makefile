@@ -11,15 +11,15 @@
 #   make test TEST_WORKERS=1          the suite in one process (TEST_WORKERS=auto: one per core)
 #   RHBL_TEST_PATIENCE=3 make test    every wait's deadline three times longer (a slow machine)
 #
-# The tests run on TEST_WORKERS processes (pytest-xdist, default 2), a test module on one
+# The tests run on TEST_WORKERS processes (pytest-xdist, default 3), a test module on one
 # worker (--dist loadfile: a module's server, browser and ordered steps stay together). Most of
 # the suite's time is spent waiting on real processes (a lock-step server, a teacher's
-# demonstration in sim time, a container build), not computing in the test process, so two
-# workers cut it even on the 2-core machine. Measured here, 2026-12-06, the machine shared with
-# five other suites (mean 1-minute load 13.5): the whole suite on 2 workers 17 min 53 s; in
-# one process it took 14 min 48 s at a lighter load before (1057 tests then). `make check` on
-# 2 workers: 2 min 14 s (load 3-4). Its two slowest tests (quick start 283 s, containers
-# 273 s) run beside the rest; TEST_WORKERS=1 gives back the one-process run.
+# demonstration in sim time, a container build), not computing in the test process, so three
+# workers cut it even on the 2-core machine. Measured here, 2026-12-06, nothing else running:
+# the whole suite (1479 tests) on 3 workers 9 min 28 s, on 2 workers 11 min 27 s (one more
+# agent's experiments running); `make check` (1192 tests) on 2 workers 1 min 58 s. The two
+# slowest tests (containers 212 s, quick start 123 s) run beside the rest; TEST_WORKERS=1
+# gives back the one-process run.
 PYTHON ?= python3
 VENV ?= .venv
 DEMO_ARGS ?=
@@ -46,7 +46,7 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(RUN) $(BIN)/rhbl demo $(DEMO_ARGS)
 
-TEST_WORKERS ?= 2
+TEST_WORKERS ?= 3
 PYTEST := $(RUN) $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 test: $(STAMP)

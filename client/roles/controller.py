@@ -48,7 +48,7 @@ from client.player import PlayerClient
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
 from client.ros2.nodes import Ros2Options, Ros2Robot, add_ros2_arguments
 from process import arguments
-from process.runtime import EXIT_NO_SERVER, EXIT_USAGE, Context, ProcessError
+from process.runtime import EXIT_NO_SERVER, EXIT_USAGE, Context, ProcessError, uninterrupted
 from protocol import keys
 from protocol.decoding import Decoder
 from protocol.messages import Scan, TreeNotice
@@ -299,8 +299,9 @@ class ControllerProcess:
         answered = self.answer(scan)
         if answered is not None:
             (vx, va), policy, x = answered
-            self.client.answer(scan, vx, va)
-            self.n += 1
+            with uninterrupted():  # a stop does not leave a command sent and uncounted
+                self.client.answer(scan, vx, va)
+                self.n += 1
             if self.n % 1000 == 0:
                 log.info("%d commands, %.0f s sim", self.n, scan.ts - self.t0)
             self.publish_decision(policy, x, scan)  # after the command: for viewers only
