@@ -19,6 +19,7 @@ from process.runtime import (
     add_report_arguments,
     on_stop_signal,
     run_process,
+    uninterrupted,
 )
 from process.session import DEFAULT_ENDPOINT, add_zenoh_arguments
 from protocol import keys
@@ -140,12 +141,15 @@ class ServerProcess:
                         n, self.spec.name, len(self.spec.start_poses))
 
     def serve(self, ctx: Context) -> int:
-        node = self._node(ctx)
-        ctx.report(lambda: {"ticks": node.ticks, "sim_time": round(self.world.time, 3),
-                            "counters": dict(node.counters)})
-        ctx.scope.callback(self._report, node)  # after the node is closed (the scope is LIFO)
-        ctx.scope.callback(node.close)
-        on_stop_signal(node.stop)
+        # the node's liveliness tokens say "up" as it is made: a stop signal that follows them at
+        # once waits until its closing and its last report are in place
+        with uninterrupted():
+            node = self._node(ctx)
+            ctx.report(lambda: {"ticks": node.ticks, "sim_time": round(self.world.time, 3),
+                                "counters": dict(node.counters)})
+            ctx.scope.callback(self._report, node)  # after the node is closed (LIFO scope)
+            ctx.scope.callback(node.close)
+            on_stop_signal(node.stop)
         args = self.args
         pace = ("lock-step" if args.lockstep else
                 "as fast as possible" if args.speedup == 0 else f"{args.speedup:g}x real time")
