@@ -222,6 +222,30 @@ def prediction_times(name: str, model, X: np.ndarray, seed: int) -> tuple[float,
     return single * 1e6, batch * 1e6
 
 
+def measured(b, name: str, policy, fit_s: float, size, model, X, seed: int, worlds_of,
+             quick: bool, what: str) -> dict:
+    """One fitted learner's entry: its prediction times, and ``policy`` driven in the
+    teaching and held-out worlds ``worlds_of`` (two lists of names) by ``b``'s rule."""
+    single, batch = prediction_times(name, model, X, seed)
+    worlds = {}
+    for kind, names in zip(("taught", "held_out"), worlds_of, strict=True):
+        for w in names:
+            spec = world_of(b, w)
+            rep = evaluate(spec, policy, episodes=1 if quick else None,
+                           seconds=20.0 if quick else None, seed=seed, behaviour=b)
+            worlds[spec.name] = {
+                "kind": kind, "episodes": rep["episodes"],
+                "successes": sum(rep["success"]),
+                "collisions": sum(e["collisions"] for e in rep["learner"]),
+                "teacher_success_rate": rep["teacher_success_rate"]}
+    print(f"  {what} {name}: size {size}, fit {fit_s:.2f} s, "
+          + ", ".join(f"{w} {r['successes']}/{r['episodes']}" for w, r in worlds.items()),
+          file=sys.stderr, flush=True)
+    return {"size": int(size), "fit_s": fit_s, "single_us": single, "batch_us": batch,
+            "worlds": worlds, "queries": getattr(policy, "queries", None),
+            "exact_decider": getattr(policy, "exact", None)}
+
+
 def run_seed(b, seed: int, learners: list[str], quick: bool = False) -> dict:
     """One seed of behaviour ``b``: the demonstrations, every learner fitted on them and driven
     in the teaching and held-out worlds. Returns ``{"vectors", "trained_nodes", "learners":
@@ -232,25 +256,8 @@ def run_seed(b, seed: int, learners: list[str], quick: bool = False) -> dict:
     held = list(b.held_out)[:1] if quick else list(b.held_out)
     for name in learners:
         policy, fit_s, size, model = fit(name, X, y, recipe, seed, learner)
-        single, batch = prediction_times(name, model, X, seed)
-        worlds = {}
-        for kind, names in (("taught", teach), ("held_out", held)):
-            for w in names:
-                spec = world_of(b, w)
-                rep = evaluate(spec, policy, episodes=1 if quick else None,
-                               seconds=20.0 if quick else None, seed=seed, behaviour=b)
-                worlds[spec.name] = {
-                    "kind": kind, "episodes": rep["episodes"],
-                    "successes": sum(rep["success"]),
-                    "collisions": sum(e["collisions"] for e in rep["learner"]),
-                    "teacher_success_rate": rep["teacher_success_rate"]}
-        out["learners"][name] = {"size": int(size), "fit_s": fit_s, "single_us": single,
-                                 "batch_us": batch, "worlds": worlds,
-                                 "queries": getattr(policy, "queries", None),
-                                 "exact_decider": getattr(policy, "exact", None)}
-        print(f"  {b.name} seed {seed} {name}: size {size}, fit {fit_s:.2f} s, "
-              + ", ".join(f"{w} {r['successes']}/{r['episodes']}" for w, r in worlds.items()),
-              file=sys.stderr, flush=True)
+        out["learners"][name] = measured(b, name, policy, fit_s, size, model, X, seed,
+                                         (teach, held), quick, f"{b.name} seed {seed}")
     return out
 
 
@@ -302,25 +309,9 @@ def run_person(model: str, seed: int, learners: list[str], quick: bool = False) 
             policy, size, model_ = TreePolicy(clf, again.features, again.actions), again.nodes, clf
         else:
             policy, fit_s, size, model_ = fit(name, X, y, None, seed, learner)
-        single, batch = prediction_times(name, model_, X, seed)
-        worlds = {}
-        for kind, names in (("taught", list(b.teach)), ("held_out", held)):
-            for w in names:
-                spec = world_of(b, w)
-                rep = evaluate(spec, policy, episodes=1 if quick else None,
-                               seconds=20.0 if quick else None, seed=seed, behaviour=b)
-                worlds[spec.name] = {
-                    "kind": kind, "episodes": rep["episodes"],
-                    "successes": sum(rep["success"]),
-                    "collisions": sum(e["collisions"] for e in rep["learner"]),
-                    "teacher_success_rate": rep["teacher_success_rate"]}
-        out["learners"][name] = {"size": int(size), "fit_s": fit_s, "single_us": single,
-                                 "batch_us": batch, "worlds": worlds,
-                                 "queries": getattr(policy, "queries", None),
-                                 "exact_decider": getattr(policy, "exact", None)}
-        print(f"  person {model} seed {seed} {name}: size {size}, fit {fit_s:.2f} s, "
-              + ", ".join(f"{w} {r['successes']}/{r['episodes']}" for w, r in worlds.items()),
-              file=sys.stderr, flush=True)
+        out["learners"][name] = measured(b, name, policy, fit_s, size, model_, X, seed,
+                                         (list(b.teach), held), quick,
+                                         f"person {model} seed {seed}")
     return out
 
 

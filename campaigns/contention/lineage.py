@@ -225,6 +225,7 @@ def second_learner(probe: Probe) -> Outcome:
             return Outcome(False, f"the first learner did not come up:\n{first.tail()}")
         scan = bus.scan()
         pubs = LabelPublisher(bus.session, ROBOT, resend_after=0.5)
+        held = _Acks(bus.session)  # before the labels: an ack may come before the last is sent
         try:
             for _ in range(n // 2):
                 pubs.label(scan, "fwd", "fwd")
@@ -237,7 +238,6 @@ def second_learner(probe: Probe) -> Outcome:
             for _ in range(n // 2, n):
                 pubs.label(scan, "fwd", "fwd")
                 scan = bus.scan()
-            held = _Acks(bus.session)
             acked = held.wait(lambda last: any(a.upto >= n for a in last.values()), 30.0)
             # a restart that overlaps the first one's drain
             first.send_signal(signal.SIGINT)
@@ -255,7 +255,8 @@ def second_learner(probe: Probe) -> Outcome:
     figures = {"labels": n, "second_exit": second_rc, "refused_after_s": refused_s,
                "restart": "up" if restart_up else f"exit {restart_rc}", "first_exit": first_rc,
                "first_learned": _stats(first).get("learned"), "journaled": len(labels),
-               "twice": twice, "lineage_opens": opens and not broken}
+               "twice": twice, "lineage_opens": opens and not broken, "all_acked": acked,
+               "second_said_lock": bool(refused_line)}
     ok = (second_rc not in (None, 0) and bool(refused_line) and acked and first_rc == 0
           and len(labels) == n and twice == 0 and opens and not broken)
     said = (f"second learner exit {second_rc}, {len(labels)}/{n} labels journaled, {twice} twice;"
