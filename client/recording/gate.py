@@ -105,9 +105,9 @@ class Gate:
                 return 403, (f"Host {hosts[0] if hosts else None!r} refused: open it as "
                              f"ws://127.0.0.1:<port>")
         else:
-            wait = self.throttle.wait(address)
+            wait = math.ceil(self.throttle.wait(address))
             if wait > 0:
-                return 429, f"too many wrong tokens from {address}: try again in {math.ceil(wait)} s"
+                return 429, f"too many wrong tokens from {address}: try again in {wait} s"
             given = parse_qs(urlsplit(target).query).get("token", [""])[0]
             if check_token(given, self.token) is not None:
                 self.throttle.failed(address)
@@ -160,7 +160,8 @@ class Gate:
         reason = {400: "Bad Request", 401: "Unauthorized", 403: "Forbidden",
                   408: "Request Timeout", 429: "Too Many Requests",
                   431: "Request Header Fields Too Large"}[status]
-        retry = f"Retry-After: {why.rsplit(' in ', 1)[1].split()[0]}\r\n" if status == 429 else ""
+        # a 429's seconds are the last number of its reason (verdict says "try again in N s")
+        retry = f"Retry-After: {why.split()[-2]}\r\n" if status == 429 else ""
         writer.write(f"HTTP/1.1 {status} {reason}\r\nContent-Type: text/plain\r\n{retry}"
                      f"Content-Length: {len(body)}\r\nConnection: close\r\n\r\n".encode()
                      + body)
