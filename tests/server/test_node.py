@@ -77,6 +77,14 @@ class Listener:
                                       patience(timeout)), f"no scan after {last}"
             return self.scan
 
+    def state_at(self, scan: Scan, timeout=5.0) -> State:
+        """The state published in the same tick as ``scan`` (the two arrive on separate
+        subscribers, so the scan's callback can run before its tick's state has)."""
+        with self.cond:
+            assert self.cond.wait_for(lambda: self.state and self.state.ts >= scan.ts,
+                                      patience(timeout)), f"no state of the tick at {scan.ts}"
+            return self.state
+
 
 def drive(session, robot="r0", source="controller", vx=0.0, va=0.0, scan_id=None, state=True):
     session.put(
@@ -280,8 +288,7 @@ def test_lockstep_drive_into_wall_sets_stall_and_stops(start_server, client_conf
             drive(s, vx=0.5, scan_id=scan.id)
             scan = lis.next_scan()
             ticks += 1
-            with lis.cond:
-                st = lis.state
+            st = lis.state_at(scan)
             if st.stall:
                 stalled_x = st.truth[0]
                 break
@@ -293,11 +300,13 @@ def test_lockstep_drive_into_wall_sets_stall_and_stops(start_server, client_conf
         for _ in range(20):  # keep pushing: stays stalled, does not pass through
             drive(s, vx=0.5, scan_id=scan.id)
             scan = lis.next_scan()
-        assert lis.state.stall and lis.state.truth[0] < 10.0 - 0.24
+        st = lis.state_at(scan)
+        assert st.stall and st.truth[0] < 10.0 - 0.24
         for _ in range(5):  # backing away works
             drive(s, vx=-0.3, scan_id=scan.id)
             scan = lis.next_scan()
-        assert not lis.state.stall and lis.state.truth[0] < stalled_x - 0.05
+        st = lis.state_at(scan)
+        assert not st.stall and st.truth[0] < stalled_x - 0.05
 
 
 def test_lockstep_keeps_ticking_when_nobody_commands(start_server, client_config):
