@@ -110,3 +110,22 @@ def test_the_world_names_its_beacons(session):
     info = WorldInfo.decode(reply.ok.payload.to_bytes())
     assert [(b.id, b.pos, b.colour) for b in info.beacons] == [
         (1, (0.3, 3.5), "#dc2828"), (2, (9.7, 3.5), "#28aa3c")]
+
+
+def test_the_player_clients_fiducial_proxy(session):
+    from client.player import FiducialProxy, PlayerClient
+
+    with PlayerClient(session=session, robot="r0", source="probe") as client:
+        fid, laser = client.fiducial, client.laser
+        assert isinstance(fid, FiducialProxy) and fid.count == 0 and fid.find(2) is None
+        first = place(session, (6.5, 3.0, 0.0))
+        while True:
+            assert client.read(timeout=patience(5.0))
+            if laser.id >= first:
+                break
+        assert fid.seq == laser.id  # the beacons of the scan's own tick
+        assert [i.id for i in fid.items] == [2] and len(fid) == 1
+        item = fid.find(2)
+        assert item is fid[0]
+        assert (item.x, item.y) == (pytest.approx(3.2, abs=1e-6), pytest.approx(0.5, abs=1e-6))
+        assert fid.get_geom().fov == pytest.approx(math.pi)
