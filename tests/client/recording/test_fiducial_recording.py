@@ -53,3 +53,14 @@ def test_the_bridge_draws_fiducials_and_names_the_topic():
     assert "fiducial" in DRAWN and "/r0/fiducials" in viewer_topics("r0")
     vms = ViewerFeed().update("fiducial", "r0", SEEN, 5)
     assert [vm.topic for vm in vms] == ["/r0/fiducials"]
+
+
+def test_a_replay_plays_the_fiducial_channel_too(tmp_path):
+    from client.recording.replay import plan_replay
+
+    out = tmp_path / "r.mcap"
+    with RecordingWriter(out, viewer=False) as w:
+        w.write(keys.fiducial_key("r0"), SEEN.encode(), 1_000_000_000)
+        w.write(keys.scan_key("r0"), m.Scan(ts=1.0, id=1, ranges=R).encode(), 1_000_000_001)
+    plan = plan_replay(out, None, 5.0)
+    assert plan.keys == {keys.fiducial_key("r0"), keys.scan_key("r0")}
