@@ -484,9 +484,7 @@ class ServerNode:
             )
             if seen is not None:  # before the scan: a client holding scan k has its beacons
                 f = seen[k]
-                items = tuple(FiducialItem(int(b), float(d), float(a)) for b, d, a
-                              in zip(f.ids.tolist(), f.ranges.tolist(), f.bearings.tolist(),
-                                     strict=True))
+                items = tuple(map(FiducialItem, f.ids, f.ranges, f.bearings))
                 r.pubs["fiducial"].put(Fiducial(ts=ts, seq=r.scan_id, items=items, pose=pos,
                                                 truth=truth).encode())
             r.pubs["scan"].put(

@@ -189,3 +189,21 @@ def test_colour_by_name_or_rgb():
                                             {"id": 3, "pos": [3, 3]}]})
     assert [b.colour for b in spec.beacons][:2] == [(220, 40, 40), (1, 2, 3)]
     assert spec.beacon(3).size == 0.2 and spec.beacon(9) is None
+
+
+def test_the_python_loop_and_numpy_give_the_same_sightings():
+    from server.fiducial import FiducialFinder
+
+    spec = load_world(server.world_path("beacons-room"))
+    loop = FiducialFinder(spec.segments(), spec.beacons, FIDUCIAL, small=10**9)
+    vec = FiducialFinder(spec.segments(), spec.beacons, FIDUCIAL, small=0)
+    rng = np.random.default_rng(11)
+    x0, y0, x1, y1 = spec.bounds()
+    poses = np.column_stack([rng.uniform(x0, x1, 500), rng.uniform(y0, y1, 500),
+                             rng.uniform(-math.pi, math.pi, 500)])
+    a, b = loop.detect(poses), vec.detect(poses)
+    assert sum(len(s.ids) for s in a) > 100  # many sightings, some hidden
+    for sa, sb in zip(a, b, strict=True):
+        assert sa.ids == sb.ids and sa.index == sb.index
+        np.testing.assert_allclose(sa.ranges, sb.ranges, rtol=1e-12)
+        np.testing.assert_allclose(sa.bearings, sb.bearings, atol=1e-12)
