@@ -61,7 +61,7 @@ from protocol.messages import (
     WorldInfo,
 )
 
-__all__ = ["FiducialProxy", "LaserProxy", "PlayerClient", "Position2dProxy", "RequestError", "ScanChannel",
+__all__ = ["FiducialLog", "FiducialProxy", "LaserProxy", "PlayerClient", "Position2dProxy", "RequestError", "ScanChannel",
            "SimulationProxy"]
 
 log = logging.getLogger(__name__)
@@ -234,6 +234,14 @@ class PlayerClient:
         self._channels.append(channel)
         return channel
 
+    def fiducials(self, depth: int = 64) -> FiducialLog:
+        """The robot's fiducial messages of the last ``depth`` ticks by scan id (``at(scan.id)``:
+        what the fiducial finder saw at that scan), to pair with the scans of a ``ScanChannel``
+        (a behaviour's ``beacon`` features: ``PayloadReader.see``); undeclared by ``close``."""
+        log_ = FiducialLog(self, depth)
+        self._channels.append(log_)
+        return log_
+
     def send_command(
         self, vx: float, va: float, state: bool = True, scan_id: int | None = None,
         ts: float | None = None,
@@ -342,6 +350,58 @@ class ScanChannel:
         while (sample := self._try()) is not None:
             last = sample
         return None if last is None else self.decode(last.payload.to_bytes())
+
+    def close(self) -> None:
+        try:
+            self._sub.undeclare()
+        except Exception:  # the session may be closed already
+            log.debug("undeclare failed", exc_info=True)
+
+
+class FiducialLog:
+    """The fiducial messages of a client's robot, the last ``depth`` of them by ``seq`` (the id of
+    the scan of the same tick; ``PlayerClient.fiducials``): ``at(scan_id, timeout=0)`` the
+    message of that tick, waiting up to ``timeout`` s for it (None: not here: too old, not come,
+    or a world without beacons; the server sends it before its scan, but the two arrive on
+    separate subscribers), ``seen(scan_id, timeout=0)`` its items (``()`` when none),
+    ``latest``. Decoded on arrival (a malformed one dropped and
+    counted by the client's decoder); any thread."""
+
+    def __init__(self, client: PlayerClient, depth: int = 64) -> None:
+        if int(depth) < 1:
+            raise ValueError(f"a fiducial log holds at least one message, got depth {depth}")
+        from collections import OrderedDict
+
+        self.depth = int(depth)
+        self._decoder = client.decoder
+        self._lock = threading.Condition()
+        self._by_seq: OrderedDict[int, Fiducial] = OrderedDict()
+        self.latest: Fiducial | None = None
+        self.key = keys.fiducial_key(client.robot, client.index)
+        self._sub = client.session.declare_subscriber(self.key, self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        msg = self._decoder.decode(Fiducial, sample.payload.to_bytes())
+        if msg is None:
+            return
+        with self._lock:
+            self._by_seq[msg.seq] = msg
+            self._by_seq.move_to_end(msg.seq)
+            while len(self._by_seq) > self.depth:
+                self._by_seq.popitem(last=False)
+            self.latest = msg
+            self._lock.notify_all()
+
+    def at(self, scan_id: int, timeout: float = 0.0) -> Fiducial | None:
+        with self._lock:
+            if timeout > 0:  # waited for unless a later tick's came (then it never will)
+                self._lock.wait_for(lambda: scan_id in self._by_seq or (
+                    self.latest is not None and self.latest.seq > scan_id), timeout)
+            return self._by_seq.get(scan_id)
+
+    def seen(self, scan_id: int, timeout: float = 0.0) -> tuple[FiducialItem, ...]:
+        msg = self.at(scan_id, timeout)
+        return () if msg is None else msg.items
 
     def close(self) -> None:
         try:

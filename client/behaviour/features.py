@@ -28,6 +28,9 @@ names with each scan (``target=``; the current goal's, say; None: none, so none 
 
     spec = FeatureSpec(beams=(...), beacon="goal")
     x = spec.extract(ranges, yaw, seen=fiducial.items, target=2)
+
+A process reading scans pairs each with its tick's sightings through the client's fiducial log
+(``client.player.PlayerClient.fiducials``: ``log.seen(scan.id)``), then ``reader.see(...)``.
 """
 
 from __future__ import annotations

@@ -129,3 +129,26 @@ def test_the_player_clients_fiducial_proxy(session):
         assert item is fid[0]
         assert (item.x, item.y) == (pytest.approx(3.2, abs=1e-6), pytest.approx(0.5, abs=1e-6))
         assert fid.get_geom().fov == pytest.approx(math.pi)
+
+
+def test_a_fiducial_log_pairs_each_scan_with_its_ticks_beacons(session):
+    from client.behaviour.features import NO_BEACON, FeatureSpec
+    from client.player import PlayerClient
+
+    spec = FeatureSpec(beams=(0.0, 90.0, 180.0), beacon=2)
+    reader = spec.reader()
+    with PlayerClient(session=session, robot="r0", source="probe") as client:
+        log = client.fiducials(depth=8)
+        scans = client.scans(depth=4)
+        first = place(session, (6.5, 3.0, 0.0))
+        while True:  # scans of the new pose
+            data = scans.recv_payload()
+            assert reader.read(data)
+            if reader.id >= first:
+                break
+        assert tuple(reader.x[-3:]) == NO_BEACON  # until told what was seen
+        items = log.seen(reader.id, timeout=patience(5.0))
+        assert [i.id for i in items] == [2] and log.at(reader.id).seq == reader.id
+        reader.see(items)
+        assert reader.x[-3] == 1.0 and 0.5 < reader.x[-1] < 0.6  # ahead, a little left
+        assert log.at(10**9) is None and log.seen(10**9) == ()
