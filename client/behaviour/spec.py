@@ -47,6 +47,7 @@ from typing import Any
 
 from .actions import DEFAULT_ACTIONS, ActionSet
 from .features import FEATURES, FeatureError, FeatureSpec
+from .goals import Goals, parse_goals
 from .policies import STYLES, Policy
 from .tasks import TASKS
 
@@ -89,11 +90,14 @@ RULES: dict[str, dict[str, Any]] = {
     "goal": {},
     # at least ``area`` square metres covered: the cells of ``cell`` metres the robot entered
     "coverage": {"cell": 0.5, "area": 10.0},
+    # the behaviour's [goals] reached in their order (each within its distance of its beacon,
+    # plus ``slack`` metres), judged from the robot's true path
+    "goals": {"slack": 0.1},
 }
 SIDES = ("right", "left")
 INPUTS = {"heading": "lr"}  # extra perception inputs -> FeatureSpec.heading
 _TOP = {"name", "summary", "perception", "instructions", "expert", "worlds", "starts", "success",
-        "recipe"}
+        "recipe", "goals"}
 _PERCEPTION = {"beams", "sectors", "window", "clamp", "scale", "fov", "inputs"}
 _WORLDS = {"teach", "held_out"}
 
@@ -152,6 +156,7 @@ class Behaviour:
     perception: str | None = None  # the shipped feature spec's name, None when inline
     recipe: dict[str, Any] = field(default_factory=dict, compare=False)
     path: Path | None = None
+    goals: Goals | None = None  # its goals in order ([goals]; client.behaviour.goals), if any
 
     @property
     def seconds(self) -> float:
@@ -378,10 +383,20 @@ def parse_behaviour(data: Any, source: str = "<behaviour>", path: Path | None = 
             raise _err(src, f"starts.{world}", f"a world the behaviour names "
                                                f"({', '.join(sorted(named))})", world)
     recipe = _table(src, "recipe", data.get("recipe", {}))
+    goals = None
+    if "goals" in data:
+        try:
+            goals = parse_goals(data["goals"])
+        except ValueError as exc:
+            raise BehaviourError(f"{src}: {exc}") from None
+    rules = _rules(src, data["success"])
+    if ("goals" in rules) != (goals is not None):
+        raise BehaviourError(f"{_where(src, 'success.goals')}: a behaviour with [goals] is "
+                             "judged by the 'goals' rule, and only such a one")
     return Behaviour(name=name, summary=summary.strip(), features=features, expert_name=expert,
-                     teach=teach, held_out=held_out, rules=_rules(src, data["success"]),
+                     teach=teach, held_out=held_out, rules=rules,
                      expert_params=params, starts=starts, instructions=instructions.strip(),
-                     perception=perception, recipe=dict(recipe), path=path)
+                     perception=perception, recipe=dict(recipe), path=path, goals=goals)
 
 
 def load_behaviour(path: str | Path) -> Behaviour:
