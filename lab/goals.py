@@ -94,7 +94,8 @@ def train_goals(spec: WorldSpec, b: Behaviour, recipe: Recipe, *, seed: int = 0,
     would start from any goal). Then ``rounds`` corrective rounds: the goal learner's action
     tree drives (the teacher's state says which goal is current and the teacher takes over
     within ``takeover`` m of a wall) from every start pose and ``round_free`` free-space poses,
-    ``round_seconds`` each, while the teacher labels every step. The reactive learner learns
+    ``round_seconds`` each, while the teacher labels every step: first in copies of the world
+    scaled by each of ``round_scales``, then in the world. The reactive learner learns
     the same labelled steps."""
     _check(spec, b)
     actions = None
@@ -124,14 +125,19 @@ def train_goals(spec: WorldSpec, b: Behaviour, recipe: Recipe, *, seed: int = 0,
         done += _run(world, ep, expert, learner, reactive, steps, on_step=on_step,
                      demo=demo)
         k += 1
-    for r in range(recipe.rounds):
-        poses = [*fixed, *[p for p in (free_pose(spec, rng) for _ in range(recipe.round_free))
-                           if p is not None]]
-        for j, pose in enumerate(poses):
-            world.reset(poses=[pose], seed=seed * 1000 + 500 + r * 50 + j)
-            expert.reset(0 if j < len(fixed) else int(rng.integers(len(b.goals.visits))))
-            _run(world, ep, expert, learner, reactive, int(round(recipe.round_seconds / dt)),
-                 on_step=on_step, driver=learner.policy(), takeover=recipe.takeover)
+    for f in (*recipe.round_scales, None):  # the scaled copies first, then the world
+        where = spec if f is None else spec.scaled(f)
+        world = World(where, robots=1, seed=seed)
+        starts = demonstration_starts(where, "world")
+        for r in range(recipe.rounds):
+            poses = [*starts, *[p for p in (free_pose(where, rng)
+                                            for _ in range(recipe.round_free)) if p is not None]]
+            for j, pose in enumerate(poses):
+                world.reset(poses=[pose], seed=seed * 1000 + 500 + r * 50 + j)
+                expert.reset(0 if j < len(starts) else int(rng.integers(len(b.goals.visits))))
+                _run(world, ep, expert, learner, reactive,
+                     int(round(recipe.round_seconds / dt)), on_step=on_step,
+                     driver=learner.policy(), takeover=recipe.takeover)
     learner.flush()
     reactive.flush()
     ep.wall_time = time.perf_counter() - t0
@@ -148,8 +154,7 @@ def _run(world: World, ep: Episode, expert: GoalExpert, learner: GoalLearner,
     for n in range(1, steps + 1):  # noqa: B007
         ranges, odom = world.scan(0), world.odom(0)
         seen = sightings(world)
-        beacon = expert.tracker.beacon
-        c = learner.goals.inputs(seen, beacon)
+        c = learner.goals.completion_inputs(seen, expert.tracker.goal)
         reached = expert.see(seen, t=n * ep.dt) is not None
         learner.observe_completion(c, reached)
         if expert.tracker.finished:
@@ -293,3 +298,107 @@ def goal_notes(report: dict) -> list[str]:
 
 def is_goal_policy(policy) -> bool:
     return isinstance(policy, GoalPolicy)
+
+
+# ------------------------------------------------------------------ the commands' goal paths
+
+
+def train_main(args, b: Behaviour, spec: WorldSpec, recipe: Recipe, on_step=None) -> int:
+    """``rhbl train`` for a behaviour with goals: the goal learner's snapshot (both trees)."""
+    if args.resume or args.start or args.range_noise or args.odom_noise:
+        raise ValueError("--resume, --start and the noise flags are not for a behaviour with "
+                         "goals yet (docs/goals.md)")
+    learner, reactive, ep = train_goals(spec, b, recipe, seed=args.seed, on_step=on_step)
+    out = learner.save(args.out, {"provenance": {
+        "vectors": learner.vectors, "marks": learner.marks, "world": spec.name,
+        "seed": args.seed, "seconds": recipe.seconds, "rounds": recipe.rounds}})
+    m = ep.metrics()
+    print(f"trained on {spec.name} ({b.name}: goals {_goal_line(b)}) for {recipe.seconds:g} s "
+          f"+ {recipe.rounds} corrective rounds: {learner.vectors} vectors, {learner.marks} "
+          f"reached marks; action tree {learner.action_tree.node_count_} nodes, completion "
+          f"tree {learner.completion_tree.node_count_} nodes; teacher collisions "
+          f"{m['collisions']}; {ep.wall_time:.1f} s wall time")
+    print(f"wrote {out}")
+    return 0
+
+
+def _goal_line(b: Behaviour) -> str:
+    g = b.goals
+    order = " -> ".join(str(g.beacons[k]) for k in g.visits)
+    return f"beacons {order}" + (" (a cycle)" if g.cycle else "")
+
+
+def format_goal_table(report: dict) -> str:
+    """``rhbl evaluate``'s table for a goal behaviour, the goal changes in its notes."""
+    from lab.report import table
+
+    title = (f"world {report['world']} ({report['task']}), {report['episodes']} episodes of "
+             f"{report['seconds']:g} s, action tree {report['tree']['nodes']} nodes, "
+             f"completion tree {(report['completion_tree'] or {}).get('nodes', '-')} nodes")
+    rows = []
+    for k, (lm, tm) in enumerate(zip(report["learner"], report["teacher"], strict=True)):
+        for who, m in (("learner", lm), ("teacher", tm)):
+            rows.append([f"{k}: {who}", "(" + ", ".join(f"{v:.2f}" for v in m["start"]) + ")",
+                         f"{m['seconds']:.0f}", m["collisions"],
+                         f"{m['goals_reached']}/{m['goals_total']}",
+                         "yes" if m["success"] else "no"])
+    notes = [f"success rate: learner {report['success_rate']:.0%}, teacher "
+             f"{report['teacher_success_rate']:.0%}", *goal_notes(report)]
+    return table(["driver", "start (x, y, yaw)", "seconds", "collisions", "goals in order",
+                  "success"], rows, title=title, notes=notes)
+
+
+def run_goal_trial(b: Behaviour, seed: int, recipe: Recipe, worlds: list[str],
+                   episodes: int | None = None) -> dict:
+    """One trial of ``rhbl experiment`` for a goal behaviour: train both learners with
+    ``seed``, evaluate the goal learner and the reactive baseline in every world."""
+    from lab.behaviours import world_of
+
+    t0 = time.perf_counter()
+    learner, reactive, _ = train_goals(world_of(b, recipe.world), b, recipe, seed=seed)
+    policy = learner.policy()
+    out = {"seed": seed, "nodes": int(policy.classifier.node_count_),
+           "completion_nodes": int(policy.completion.node_count_),
+           "reactive_nodes": int(reactive.classifier.node_count_),
+           "vectors": learner.vectors, "marks": learner.marks,
+           "train_wall_s": round(time.perf_counter() - t0, 2), "worlds": {}}
+    for w in worlds:
+        spec = world_of(b, w)
+        rep = evaluate_goals(spec, policy, b, episodes=episodes, seed=seed)
+        base = evaluate_goals(spec, reactive, b, episodes=episodes, seed=seed)
+        out["worlds"][spec.name] = {
+            "success_rate": rep["success_rate"], "reactive_success_rate": base["success_rate"],
+            "teacher_success_rate": rep["teacher_success_rate"],
+            "goals_reached": [e["goals_reached"] for e in rep["learner"]],
+            "reactive_goals_reached": [e["goals_reached"] for e in base["learner"]],
+            "goals_total": rep["learner"][0]["goals_total"] if rep["learner"] else 0,
+            "collisions": sum(e["collisions"] for e in rep["learner"]),
+            "reactive_collisions": sum(e["collisions"] for e in base["learner"]),
+            "episodes": rep["episodes"]}
+    return out
+
+
+def goal_experiment_table(b: Behaviour, rows: list[dict]) -> str:
+    """Per world over the trials: the goal learner's success, the reactive baseline's and the
+    teacher's (markdown)."""
+    from lab.report import table
+
+    worlds = list(rows[0]["worlds"]) if rows else []
+    out = []
+    for w in worlds:
+        per = [r["worlds"][w] for r in rows]
+        kind = "taught" if w == worlds[0] else "held out"
+
+        def mean(key: str, per=per) -> str:
+            return f"{sum(p[key] for p in per) / len(per):.0%}"
+
+        out.append([w, kind, mean("success_rate"),
+                    " ".join(f"{p['success_rate']:.0%}" for p in per),
+                    mean("reactive_success_rate"), mean("teacher_success_rate"),
+                    sum(p["collisions"] for p in per), sum(p["reactive_collisions"] for p in per)])
+    return table(["world", "", "goal learner", "per trial", "reactive tree", "teacher",
+                  "collisions", "reactive collisions"], out,
+                 title=f"{b.name}: goals {_goal_line(b)}, {len(rows)} trials",
+                 notes=["trees per trial (action/completion/reactive nodes): " + ", ".join(
+                     f"s{r['seed']} {r['nodes']}/{r['completion_nodes']}/{r['reactive_nodes']}"
+                     for r in rows)])

@@ -61,6 +61,7 @@ __all__ = [
 
 DONE, NOT_DONE = "done", "not-done"
 BEACON_INPUTS = 3  # seen, range, bearing of one beacon
+NEAR = 4.0  # the completion tree sees a goal's beacon's range up to this many times its distance
 GOALS_FORMAT = 1  # metadata["goals"]["version"]: a reader refuses a newer one by name
 
 
@@ -114,14 +115,27 @@ class Goals:
 
     def inputs(self, sightings: Mapping[int, Sighting] | None, beacon: int) -> np.ndarray:
         """The inputs of ``beacon`` in [0, 1]: seen (1, or 0: none in view), range (clamped to
-        ``clamp`` and scaled; 1 when not seen) and bearing ((bearing / pi + 1) / 2; 0.5 when
-        not seen, straight ahead)."""
+        ``clamp`` and scaled; 1 when not seen) and bearing (clipped to +-90 degrees, a
+        fiducial finder's field of view, and mapped to [0, 1]: 0 on the right, 1 on the left;
+        0.5 when not seen, straight ahead)."""
         s = None if sightings is None else sightings.get(beacon)
         if s is None:
             return np.array([0.0, 1.0, 0.5])
         r = min(max(float(s.range), 0.0), self.clamp) / self.clamp
-        b = min(max(float(s.bearing) / math.pi, -1.0), 1.0)
+        b = min(max(float(s.bearing) / (math.pi / 2), -1.0), 1.0)
         return np.array([1.0, r, (b + 1.0) / 2.0])
+
+    def completion_inputs(self, sightings: Mapping[int, Sighting] | None, goal: int
+                          ) -> np.ndarray:
+        """The completion tree's inputs for goal ``goal`` (an index into ``beacons``): seen
+        (1, or 0: none in view) and the range of its beacon in units of ``NEAR`` times the
+        goal's distance, clamped to 1 (1 when not seen): the same value at every goal's own
+        distance, so what the tree learns at one goal holds at the others."""
+        beacon = self.beacons[goal]
+        s = None if sightings is None else sightings.get(beacon)
+        if s is None:
+            return np.array([0.0, 1.0])
+        return np.array([1.0, min(max(float(s.range), 0.0) / (NEAR * self.within[goal]), 1.0)])
 
     def all_inputs(self, sightings: Mapping[int, Sighting] | None) -> np.ndarray:
         """Every beacon's inputs, in ``distinct`` order (a reactive tree's: no current goal)."""
@@ -231,28 +245,34 @@ class GoalTracker:
 class BeaconSeeker(Policy):
     """The goal behaviours' scripted expert: to the current goal's beacon, keeping off the
     walls, from the laser's nine sector minima (``around``: right ``s[0]`` .. ahead ``s[4]`` ..
-    left ``s[8]``, metres) and what it sees of the beacon (``see``: a ``Sighting`` or None).
-    Every label is a pure function of those two (so a tree with the same inputs can represent
-    it):
+    left ``s[8]``, 22.5 degrees each, metres) and what it sees of the beacon (``see``: a
+    ``Sighting`` or None). Every label is a pure function of those two (so a tree with the
+    same inputs can represent it). As the Bug algorithms do, it heads for the beacon where the
+    way to it is open and follows a wall where it is not:
 
-      something in the way (s[4] < stop or min(s[3], s[5]) < stop_diag)
-                                     -> rotate away from the nearer ahead-diagonal
-      beacon seen, |bearing| > aim   -> rotate towards it
-      a wall close beside (min of a side's three sectors < near)
-                                     -> fwd-left / fwd-right, away from it
-      beacon seen, |bearing| > ahead -> fwd-left / fwd-right, towards it
-      beacon seen                    -> fwd
-      none in view                   -> follow the wall on the right (the reactive wall
-                                        follower on s[0..4]: round the obstacle that hides the
-                                        beacon, along the room's wall, until it comes into view);
-                                        nothing within ``lost`` on the right: straight on
+      the way to the beacon open (the sector of its bearing clear for ``clear`` m or up to it;
+      behind the robot: only with nothing within ``clear`` m in front):
+        |bearing| > aim                 -> rotate towards it
+        a wall close beside (< near)    -> fwd-left / fwd-right, away from it
+        |bearing| > ahead               -> fwd-left / fwd-right, towards it
+        otherwise                       -> fwd
+      none in view, or the way to it not open:
+        a wall close on the left        -> fwd-right
+        nothing within ``lost`` m on the right and the way ahead clear -> fwd (past the end of
+        a wall straight on, not round it; in open space straight on until a wall is near); with
+        ``arc`` > 0 only when nothing is within ``arc`` m ahead or on the left either, else
+        the follower arcs round the wall's end (into a doorway: a task that goes from room
+        to room; a follower also circles a lone obstacle or the open floor for ever, so the
+        rooms' worlds have neither where a beacon is out of sight)
+        otherwise the reactive right-wall follower on s[0..4] (round the obstacle that hides
+        the beacon, along the room's wall, until the way to it opens)
     """
 
     task = "red-green"
     acts_reactively = True
 
-    def __init__(self, features=None, stop: float = 0.5, stop_diag: float = 0.4,
-                 near: float = 0.35, aim: float = 0.7, ahead: float = 0.2, lost: float = 1.2,
+    def __init__(self, features=None, near: float = 0.45, aim: float = 0.7,
+                 ahead: float = 0.2, clear: float = 1.0, lost: float = 1.2, arc: float = 0.0,
                  actions: ActionSet = DEFAULT_ACTIONS):
         super().__init__(actions)
         from .policies import ReactiveFollower
@@ -261,12 +281,14 @@ class BeaconSeeker(Policy):
         if len(self.features.beams) != 9:
             raise ValueError(f"BeaconSeeker needs a feature spec of 9 sectors, got "
                              f"{len(self.features.beams)}")
-        for name, v in (("stop", stop), ("stop_diag", stop_diag), ("near", near), ("aim", aim),
-                        ("ahead", ahead), ("lost", lost)):
+        for name, v in (("near", near), ("aim", aim), ("ahead", ahead), ("clear", clear),
+                        ("lost", lost)):
             if isinstance(v, bool) or not isinstance(v, int | float) or not 0 < v < math.inf:
                 raise ValueError(f"{name} must be a number > 0, got {v!r}")
-        self.stop, self.stop_diag, self.near = float(stop), float(stop_diag), float(near)
-        self.aim, self.ahead, self.lost = float(aim), float(ahead), float(lost)
+        if isinstance(arc, bool) or not isinstance(arc, int | float) or not 0 <= arc < math.inf:
+            raise ValueError(f"arc must be a number >= 0, got {arc!r}")
+        self.near, self.aim, self.ahead = float(near), float(aim), float(ahead)
+        self.clear, self.lost, self.arc = float(clear), float(lost), float(arc)
         self._follow = ReactiveFollower(features=FeatureSpec(
             beams=self.features.beams[:5], window=self.features.window, fov=self.features.fov,
             clamp=self.features.clamp, scale=self.features.scale), actions=actions)
@@ -283,22 +305,34 @@ class BeaconSeeker(Policy):
         f = self.features
         return f.extract(np.asarray(ranges), 0.0)[:9] * f.scale
 
+    def open_towards(self, s, sighting: Sighting) -> bool:
+        """Whether the way to the beacon is open: the sector of its bearing clear for
+        ``clear`` metres (or up to the beacon); a beacon behind the robot: nothing within
+        ``clear`` metres in front (room to turn towards it)."""
+        k = round((sighting.bearing + math.pi / 2) / (math.pi / 8))
+        if not 0 <= k <= 8:
+            return min(s) > self.clear
+        return s[k] > min(self.clear, sighting.range)
+
     def decide(self, s, sighting: Sighting | None) -> str:
         s = [float(v) for v in s[:9]]
-        if s[4] < self.stop or min(s[3], s[5]) < self.stop_diag:
-            return "rot-left" if s[5] >= s[3] else "rot-right"
-        if sighting is not None and abs(sighting.bearing) > self.aim:
-            return "rot-left" if sighting.bearing > 0 else "rot-right"
         right, left = min(s[0], s[1], s[2]), min(s[6], s[7], s[8])
-        if min(right, left) < self.near:
-            return "fwd-left" if right <= left else "fwd-right"
-        if sighting is not None:
-            if abs(sighting.bearing) > self.ahead:
-                return "fwd-left" if sighting.bearing > 0 else "fwd-right"
+        if sighting is not None and self.open_towards(s, sighting):
+            b = sighting.bearing
+            if abs(b) > self.aim:
+                return "rot-left" if b > 0 else "rot-right"
+            if min(right, left) < self.near:
+                return "fwd-left" if right <= left else "fwd-right"
+            if abs(b) > self.ahead:
+                return "fwd-left" if b > 0 else "fwd-right"
             return "fwd"
-        if min(s[0], s[1], s[2]) > self.lost:
+        f = self._follow
+        if left < self.near and left < right and s[4] >= f.slow and s[3] >= f.slow_fr:
+            return "fwd-right"
+        if right > self.lost and (min(s[3:]) >= self.arc if self.arc > 0 else
+                                  s[4] >= f.slow and min(s[3], s[5]) >= f.slow_fr):
             return "fwd"
-        return self._follow.decide(s[:5])
+        return f.decide(s[:5])
 
     def act(self, ranges, pose=None) -> str:
         return self.decide(self.sectors(ranges), self.sighting)
@@ -362,7 +396,8 @@ def _metadata(features: FeatureSpec, actions: ActionSet, goals: Goals, completio
             **dict(extra or {}),
             "goals": {"version": GOALS_FORMAT, **goals.to_dict(),
                       "inputs": ["laser", "goal-beacon"],
-                      "completion_inputs": ["goal-beacon"],
+                      "completion_inputs": ["goal-beacon-seen", "goal-beacon-range/near"],
+                      "near": NEAR,
                       "completion": completion.to_bytes()}}
 
 
@@ -450,9 +485,9 @@ class GoalPolicy:
         self._sightings = {}
 
     def completion_inputs(self, sightings=None) -> np.ndarray | None:
-        b = self.tracker.beacon
-        return None if b is None else self.goals.inputs(
-            self._sightings if sightings is None else sightings, b)
+        g = self.tracker.goal
+        return None if g is None else self.goals.completion_inputs(
+            self._sightings if sightings is None else sightings, g)
 
     def see(self, sightings: Mapping[int, Sighting], t: float | None = None) -> dict | None:
         """Take this step's sightings; when the completion tree says the current goal is done,
