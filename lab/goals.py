@@ -47,8 +47,7 @@ def sightings(world: World, i: int = 0) -> dict[int, Sighting]:
     left out: a goal names its beacon by id)."""
     seen = world.fiducials([i])[0]
     return {int(b): Sighting(int(b), float(r), float(a))
-            for b, r, a in zip(seen.ids.tolist(), seen.ranges.tolist(), seen.bearings.tolist(),
-                               strict=True) if b}
+            for b, r, a in zip(seen.ids, seen.ranges, seen.bearings, strict=True) if b}
 
 
 def targets(spec: WorldSpec, b: Behaviour) -> list[tuple[float, float, float]]:

@@ -7,8 +7,9 @@ of goals and the learning stays RHBL's (docs/goals.md has the design and why):
 
 * the state is the current goal (an index into the behaviour's goals, ``GoalTracker``), as
   options pair a policy with a termination condition;
-* the action tree sees the laser's sectors and the current goal's beacon (``Goals.inputs``:
-  seen or "none in view", range, bearing): the state selects which beacon the inputs report,
+* the action tree sees the laser's sectors and the current goal's beacon (the perception's
+  ``beacon = "goal"``, ``client.behaviour.features``: in view or "none in view", range,
+  bearing): the state selects which beacon the inputs report,
   so one tree serves every goal (the paper put its maze mode into the vector as a value; here
   the mode points the perception at a beacon), and a goal's reflexes learned at one beacon
   serve at the others;
@@ -18,9 +19,9 @@ of goals and the learning stays RHBL's (docs/goals.md has the design and why):
 
     goals = Goals(beacons=(1, 2), within=(0.6, 0.6))          # or parse_goals(table) (a file's)
     tracker = GoalTracker(goals); tracker.beacon; tracker.advance("reached", t=3.2)
-    x = goals.inputs(sightings, tracker.beacon)                # 3 values in [0, 1]
+    c = goals.completion_inputs(sightings, tracker.goal)       # the completion tree's 2 inputs
     expert = BeaconSeeker(); expert.see(sightings.get(beacon)); expert.act(ranges, pose)
-    learner = GoalLearner(FEATURES["around"], goals)          # both trees
+    learner = GoalLearner(b.features, goals)                  # both trees (beacon = "goal")
     policy = learner.policy()  /  GoalPolicy.load(path)        # see(sightings), act(ranges, pose)
 
 A snapshot of a goal behaviour is the action tree's snapshot (``rhbl-tree``, msgpack) whose
@@ -31,6 +32,7 @@ and loads as before (``client.behaviour.learning.TreePolicy``).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -40,11 +42,10 @@ from typing import Any
 import numpy as np
 
 from .actions import DEFAULT_ACTIONS, ActionSet
-from .features import FEATURES, FeatureSpec
+from .features import BEACON_GOAL, FEATURES, FeatureSpec
 from .policies import Policy
 
 __all__ = [
-    "BEACON_INPUTS",
     "DONE",
     "NOT_DONE",
     "BeaconSeeker",
@@ -60,7 +61,6 @@ __all__ = [
 ]
 
 DONE, NOT_DONE = "done", "not-done"
-BEACON_INPUTS = 3  # seen, range, bearing of one beacon
 NEAR = 4.0  # the completion tree sees a goal's beacon's range up to this many times its distance
 GOALS_FORMAT = 1  # metadata["goals"]["version"]: a reader refuses a newer one by name
 
@@ -78,14 +78,12 @@ class Sighting:
 class Goals:
     """A behaviour's goals: ``beacons`` (their ids, in order), ``within`` (metres: a goal is
     reached within this distance of its beacon, one per goal), ``cycle`` (a patrol: after the
-    last goal the first again, ``laps`` times round and back to the first), ``clamp``
-    (metres: a beacon's range input is clamped to it and scaled to [0, 1])."""
+    last goal the first again, ``laps`` times round and back to the first)."""
 
     beacons: tuple[int, ...]
     within: tuple[float, ...]
     cycle: bool = False
     laps: int = 1
-    clamp: float = 6.0
 
     def __post_init__(self) -> None:
         if not self.beacons:
@@ -96,8 +94,6 @@ class Goals:
             raise ValueError(f"every goal's distance must be > 0 m, got {list(self.within)}")
         if self.laps < 1 or (self.laps > 1 and not self.cycle):
             raise ValueError(f"laps must be >= 1 (more than 1 only for a cycle), got {self.laps}")
-        if not self.clamp > 0:
-            raise ValueError(f"clamp must be > 0 m, got {self.clamp}")
 
     @property
     def visits(self) -> tuple[int, ...]:
@@ -113,21 +109,9 @@ class Goals:
         """The beacons the goals name, each once, in the order first named."""
         return tuple(dict.fromkeys(self.beacons))
 
-    def inputs(self, sightings: Mapping[int, Sighting] | None, beacon: int) -> np.ndarray:
-        """The inputs of ``beacon`` in [0, 1]: seen (1, or 0: none in view), range (clamped to
-        ``clamp`` and scaled; 1 when not seen) and bearing (clipped to +-90 degrees, a
-        fiducial finder's field of view, and mapped to [0, 1]: 0 on the right, 1 on the left;
-        0.5 when not seen, straight ahead)."""
-        s = None if sightings is None else sightings.get(beacon)
-        if s is None:
-            return np.array([0.0, 1.0, 0.5])
-        r = min(max(float(s.range), 0.0), self.clamp) / self.clamp
-        b = min(max(float(s.bearing) / (math.pi / 2), -1.0), 1.0)
-        return np.array([1.0, r, (b + 1.0) / 2.0])
-
     def completion_inputs(self, sightings: Mapping[int, Sighting] | None, goal: int
                           ) -> np.ndarray:
-        """The completion tree's inputs for goal ``goal`` (an index into ``beacons``): seen
+        """The completion tree's inputs for goal ``goal`` (an index into ``beacons``): in view
         (1, or 0: none in view) and the range of its beacon in units of ``NEAR`` times the
         goal's distance, clamped to 1 (1 when not seen): the same value at every goal's own
         distance, so what the tree learns at one goal holds at the others."""
@@ -137,36 +121,31 @@ class Goals:
             return np.array([0.0, 1.0])
         return np.array([1.0, min(max(float(s.range), 0.0) / (NEAR * self.within[goal]), 1.0)])
 
-    def all_inputs(self, sightings: Mapping[int, Sighting] | None) -> np.ndarray:
-        """Every beacon's inputs, in ``distinct`` order (a reactive tree's: no current goal)."""
-        return np.concatenate([self.inputs(sightings, b) for b in self.distinct])
-
     def reached(self, sighting: Sighting | None, goal: int) -> bool:
         """The scripted teacher's rule: goal ``goal``'s beacon seen within its distance."""
         return sighting is not None and sighting.range <= self.within[goal]
 
     def to_dict(self) -> dict:
         return {"beacons": list(self.beacons), "within": list(self.within),
-                "cycle": self.cycle, "laps": self.laps, "clamp": self.clamp}
+                "cycle": self.cycle, "laps": self.laps}
 
     @classmethod
     def from_dict(cls, data: Mapping) -> Goals:
         try:
             return cls(beacons=tuple(int(b) for b in data["beacons"]),
                        within=tuple(float(w) for w in data["within"]),
-                       cycle=bool(data.get("cycle", False)), laps=int(data.get("laps", 1)),
-                       clamp=float(data.get("clamp", 6.0)))
+                       cycle=bool(data.get("cycle", False)), laps=int(data.get("laps", 1)))
         except (KeyError, TypeError) as exc:
             raise ValueError(f"goals need 'beacons' and 'within', got {data!r}") from exc
 
 
-_GOAL_KEYS = {"beacons", "within", "cycle", "laps", "clamp"}
+_GOAL_KEYS = {"beacons", "within", "cycle", "laps"}
 
 
 def parse_goals(t: Any) -> Goals:
     """A behaviour file's ``[goals]`` table: ``beacons`` (beacon ids, in order), ``within``
     (metres, one number for every goal or a list, default 0.6), ``cycle`` (default false),
-    ``laps`` (a cycle's, default 1), ``clamp`` (default 6). ValueError naming the field."""
+    ``laps`` (a cycle's, default 1). ValueError naming the field."""
     if not isinstance(t, dict):
         raise ValueError(f"field 'goals': expected a table, got {t!r}")
     extra = sorted(set(t) - _GOAL_KEYS)
@@ -174,9 +153,9 @@ def parse_goals(t: Any) -> Goals:
         raise ValueError(f"field 'goals.{extra[0]}': unknown; allowed: {', '.join(sorted(_GOAL_KEYS))}")
     beacons = t.get("beacons")
     if (not isinstance(beacons, list) or not beacons
-            or any(isinstance(b, bool) or not isinstance(b, int) or b < 0 for b in beacons)):
+            or any(isinstance(b, bool) or not isinstance(b, int) or b < 1 for b in beacons)):
         raise ValueError(f"field 'goals.beacons': expected a non-empty list of beacon ids "
-                         f"(integers >= 0), got {beacons!r}")
+                         f"(integers >= 1), got {beacons!r}")
     within = t.get("within", 0.6)
     within = within if isinstance(within, list) else [within] * len(beacons)
     if len(within) != len(beacons) or any(
@@ -191,11 +170,8 @@ def parse_goals(t: Any) -> Goals:
     if isinstance(laps, bool) or not isinstance(laps, int) or laps < 1 or (laps > 1 and not cycle):
         raise ValueError(f"field 'goals.laps': expected an integer >= 1 (more than 1 with "
                          f"cycle = true), got {laps!r}")
-    clamp = t.get("clamp", 6.0)
-    if isinstance(clamp, bool) or not isinstance(clamp, int | float) or not 0 < clamp < math.inf:
-        raise ValueError(f"field 'goals.clamp': expected a distance > 0 (m), got {clamp!r}")
     return Goals(beacons=tuple(beacons), within=tuple(float(w) for w in within), cycle=cycle,
-                 laps=laps, clamp=float(clamp))
+                 laps=laps)
 
 
 @dataclass
@@ -384,6 +360,12 @@ class GoalExpert:
 # ------------------------------------------------------------------------------ the learner
 
 
+def _check_goal_features(features: FeatureSpec) -> None:
+    if features.beacon != BEACON_GOAL:
+        raise ValueError(f"a goal behaviour's perception sees the current goal's beacon "
+                         f"(beacon = {BEACON_GOAL!r}), got beacon = {features.beacon!r}")
+
+
 def _tree(default_label: str, params: Mapping):
     from rhbl import HypersphereClassifier
 
@@ -395,7 +377,6 @@ def _metadata(features: FeatureSpec, actions: ActionSet, goals: Goals, completio
     return {"features": features.to_dict(), "actions": actions.to_dict(), "task": task,
             **dict(extra or {}),
             "goals": {"version": GOALS_FORMAT, **goals.to_dict(),
-                      "inputs": ["laser", "goal-beacon"],
                       "completion_inputs": ["goal-beacon-seen", "goal-beacon-range/near"],
                       "near": NEAR,
                       "completion": completion.to_bytes()}}
@@ -411,6 +392,7 @@ class GoalLearner:
     def __init__(self, features: FeatureSpec, goals: Goals, actions: ActionSet = DEFAULT_ACTIONS,
                  *, task: str | None = None, **tree_params):
         tree_params.setdefault("spawn", "winner")
+        _check_goal_features(features)
         self.features, self.goals, self.actions, self.task = features, goals, actions, task
         self.tree_params = dict(tree_params)
         self.action_tree = _tree(actions.names[0], tree_params)
@@ -422,10 +404,11 @@ class GoalLearner:
         self.vectors = 0
         self.marks = 0  # "reached" marks learned
 
-    def vector(self, ranges, yaw: float, sightings, beacon: int) -> np.ndarray:
-        """The action tree's inputs: the laser's features, then the goal beacon's."""
-        return np.concatenate([self.features.extract(ranges, yaw),
-                               self.goals.inputs(sightings, beacon)])
+    def vector(self, ranges, yaw: float, sightings: Mapping[int, Sighting], beacon: int | None
+               ) -> np.ndarray:
+        """The action tree's inputs: the perception's (``beacon = "goal"``: the laser's, then
+        those of ``beacon``, the current goal's)."""
+        return self.features.extract(ranges, yaw, seen=list(sightings.values()), target=beacon)
 
     def observe(self, x: np.ndarray, label: str) -> None:
         if label not in self.actions:
@@ -507,9 +490,8 @@ class GoalPolicy:
             f"done at beacon {self.tracker.beacon} ({seen})", t)
 
     def vector(self, ranges, yaw: float) -> np.ndarray:
-        b = self.tracker.beacon
-        g = self.goals.inputs(self._sightings, b) if b is not None else np.array([0.0, 1.0, 0.5])
-        return np.concatenate([self.features.extract(ranges, yaw), g])
+        return self.features.extract(ranges, yaw, seen=list(self._sightings.values()),
+                                     target=self.tracker.beacon)
 
     def act(self, ranges, pose) -> str:
         yaw = float(pose[2]) if pose is not None else 0.0
@@ -574,12 +556,15 @@ def load_policy(path: str | Path):
 class ReactiveBeaconPolicy:
     """The purely reactive baseline: today's learner (one tree, no state) on the same
     demonstrations, seeing the laser and every beacon the goals name (``Goals.all_inputs``)
-    but not which goal is current. ``see(sightings)``, ``act(ranges, pose)``."""
+    but not which goal is current. ``see(sightings)``, ``act(ranges, pose)``. ``features`` is
+    the goal behaviour's perception (``beacon = "goal"``), each beacon's values as its."""
 
     def __init__(self, features: FeatureSpec, goals: Goals, actions: ActionSet = DEFAULT_ACTIONS,
                  **tree_params):
         tree_params.setdefault("spawn", "winner")
+        _check_goal_features(features)
         self.features, self.goals, self.actions = features, goals, actions
+        self._laser = dataclasses.replace(features, beacon=None)
         self.classifier = _tree(actions.names[0], tree_params)
         self._sightings: Mapping[int, Sighting] = {}
         self._x: list = []
@@ -592,8 +577,11 @@ class ReactiveBeaconPolicy:
         self._sightings = sightings
 
     def vector(self, ranges, yaw: float, sightings=None) -> np.ndarray:
-        return np.concatenate([self.features.extract(ranges, yaw), self.goals.all_inputs(
-            self._sightings if sightings is None else sightings)])
+        """The laser's features, then the three beacon values of every beacon the goals
+        name (``Goals.distinct`` order)."""
+        seen = list((self._sightings if sightings is None else sightings).values())
+        return np.concatenate([self._laser.extract(ranges, yaw), *[
+            self.features.beacon_values(seen, b) for b in self.goals.distinct]])
 
     def observe(self, x: np.ndarray, label: str) -> None:
         self._x.append(x)

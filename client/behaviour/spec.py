@@ -46,7 +46,7 @@ from pathlib import Path
 from typing import Any
 
 from .actions import DEFAULT_ACTIONS, ActionSet
-from .features import FEATURES, FeatureError, FeatureSpec
+from .features import BEACON_GOAL, FEATURES, FeatureError, FeatureSpec
 from .goals import Goals, parse_goals
 from .policies import STYLES, Policy
 from .tasks import TASKS
@@ -98,7 +98,8 @@ SIDES = ("right", "left")
 INPUTS = {"heading": "lr"}  # extra perception inputs -> FeatureSpec.heading
 _TOP = {"name", "summary", "perception", "instructions", "expert", "worlds", "starts", "success",
         "recipe", "goals"}
-_PERCEPTION = {"beams", "sectors", "window", "clamp", "scale", "fov", "inputs"}
+_PERCEPTION = {"beams", "sectors", "window", "clamp", "scale", "fov", "inputs", "beacon",
+               "beacon_range"}
 _WORLDS = {"teach", "held_out"}
 
 
@@ -207,7 +208,7 @@ def _parameters(cls: type) -> set[str]:
 
 def _perception(src: str, v: Any) -> tuple[FeatureSpec, str | None]:
     """A shipped spec's name, or an inline table (beams or sectors, window, clamp, scale, fov,
-    inputs) made into a FeatureSpec by its own checks."""
+    inputs, beacon, beacon_range) made into a FeatureSpec by its own checks."""
     if isinstance(v, str):
         if v not in FEATURES:
             raise _err(src, "perception", f"a shipped feature spec ({', '.join(FEATURES)}) or a "
@@ -242,11 +243,22 @@ def _perception(src: str, v: Any) -> tuple[FeatureSpec, str | None]:
             or len(set(inputs)) != len(inputs):
         raise _err(src, "perception.inputs", f"a list of distinct extra inputs from "
                                              f"{list(INPUTS)}", inputs)
+    # the fiducial finder's view of one beacon: its id, or "goal" (the current goal's beacon)
+    beacon = t.get("beacon")
+    if beacon is not None and beacon != BEACON_GOAL and (
+            isinstance(beacon, bool) or not isinstance(beacon, int) or beacon < 1):
+        raise _err(src, "perception.beacon", f"a beacon id (an integer >= 1) or "
+                                             f"{BEACON_GOAL!r}", beacon)
+    if "beacon_range" in t and beacon is None:
+        raise BehaviourError(f"{_where(src, 'perception.beacon_range')}: only with 'beacon'")
     try:
         spec = FeatureSpec(beams=beams, window=window, fov=fov,
                            clamp=_number(src, "perception.clamp", t.get("clamp", 2.0)),
                            scale=_number(src, "perception.scale", t.get("scale", 2.0)),
-                           heading=INPUTS[inputs[0]] if inputs else None)
+                           heading=INPUTS[inputs[0]] if inputs else None, beacon=beacon,
+                           beacon_range=_number(src, "perception.beacon_range",
+                                                t.get("beacon_range", 8.0), 1e-9,
+                                                "a number > 0 (m)"))
     except FeatureError as exc:
         raise BehaviourError(f"{_where(src, 'perception')}: {exc}") from None
     return spec, None
