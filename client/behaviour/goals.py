@@ -228,8 +228,9 @@ class BeaconSeeker(Policy):
 
       the way to the beacon open (the sector of its bearing clear for ``clear`` m or up to it;
       behind the robot: only with nothing within ``clear`` m in front):
+        a wall close beside (< near)    -> fwd-left / fwd-right, away from it (first: near a
+                                           wall the label hangs on the laser alone)
         |bearing| > aim                 -> rotate towards it
-        a wall close beside (< near)    -> fwd-left / fwd-right, away from it
         |bearing| > ahead               -> fwd-left / fwd-right, towards it
         otherwise                       -> fwd
       none in view, or the way to it not open:
@@ -295,10 +296,10 @@ class BeaconSeeker(Policy):
         right, left = min(s[0], s[1], s[2]), min(s[6], s[7], s[8])
         if sighting is not None and self.open_towards(s, sighting):
             b = sighting.bearing
-            if abs(b) > self.aim:
-                return "rot-left" if b > 0 else "rot-right"
             if min(right, left) < self.near:
                 return "fwd-left" if right <= left else "fwd-right"
+            if abs(b) > self.aim:
+                return "rot-left" if b > 0 else "rot-right"
             if abs(b) > self.ahead:
                 return "fwd-left" if b > 0 else "fwd-right"
             return "fwd"
