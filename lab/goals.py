@@ -261,6 +261,7 @@ def evaluate_goals(spec: WorldSpec, policy, b: Behaviour, episodes: int | None =
             paths["learner"].append(lt.poses)
     clf = policy.classifier
     completion = getattr(policy, "completion", None)
+    guard = policy if hasattr(policy, "overruled") else None
     report = {
         "world": spec.name, "world_path": str(spec.path) if spec.path else None,
         "task": b.name, "behaviour_file": str(b.path) if b.path else None,
@@ -276,6 +277,9 @@ def evaluate_goals(spec: WorldSpec, policy, b: Behaviour, episodes: int | None =
             "nodes": int(completion.node_count_), "height": int(completion.height_)},
         "loops": [dict(loop, episode=k) for k, e in enumerate(learner_eps)
                   for loop in e["oscillation_loops"]],
+        "guard": None if guard is None else {
+            "clearance": guard.clearance, "overruled": guard.overruled,
+            "avoided": guard.avoided, "straight_on": guard.straight_on},
     }
     if keep_paths:
         report["_paths"] = paths
@@ -347,10 +351,22 @@ def format_goal_table(report: dict) -> str:
                   "success"], rows, title=title, notes=notes)
 
 
+def guarded(policy, on: bool = True):
+    """``policy`` driven as ``rhbl controller --guard`` drives a tree: through the rotation
+    guard with the path check (``client.behaviour.guard``, ``CLEARANCE``); ``on`` False: as
+    it is. A goal behaviour's trees, and its reactive baseline's, are measured so by default
+    (docs/goals.md: without it, a tree that bounces between its rotations near a corner
+    stays there)."""
+    from client.behaviour.guard import CLEARANCE, RotationGuard
+
+    return RotationGuard(policy, clearance=CLEARANCE) if on else policy
+
+
 def run_goal_trial(b: Behaviour, seed: int, recipe: Recipe, worlds: list[str],
-                   episodes: int | None = None) -> dict:
+                   episodes: int | None = None, guard: bool = True) -> dict:
     """One trial of ``rhbl experiment`` for a goal behaviour: train both learners with
-    ``seed``, evaluate the goal learner and the reactive baseline in every world."""
+    ``seed``, evaluate the goal learner and the reactive baseline in every world (both through
+    the controller's guard, ``guard``)."""
     from lab.behaviours import world_of
 
     t0 = time.perf_counter()
@@ -363,8 +379,8 @@ def run_goal_trial(b: Behaviour, seed: int, recipe: Recipe, worlds: list[str],
            "train_wall_s": round(time.perf_counter() - t0, 2), "worlds": {}}
     for w in worlds:
         spec = world_of(b, w)
-        rep = evaluate_goals(spec, policy, b, episodes=episodes, seed=seed)
-        base = evaluate_goals(spec, reactive, b, episodes=episodes, seed=seed)
+        rep = evaluate_goals(spec, guarded(policy, guard), b, episodes=episodes, seed=seed)
+        base = evaluate_goals(spec, guarded(reactive, guard), b, episodes=episodes, seed=seed)
         out["worlds"][spec.name] = {
             "success_rate": rep["success_rate"], "reactive_success_rate": base["success_rate"],
             "teacher_success_rate": rep["teacher_success_rate"],
@@ -397,7 +413,8 @@ def goal_experiment_table(b: Behaviour, rows: list[dict]) -> str:
                     sum(p["collisions"] for p in per), sum(p["reactive_collisions"] for p in per)])
     return table(["world", "", "goal learner", "per trial", "reactive tree", "teacher",
                   "collisions", "reactive collisions"], out,
-                 title=f"{b.name}: goals {_goal_line(b)}, {len(rows)} trials",
+                 title=f"{b.name}: goals {_goal_line(b)}, {len(rows)} trials (success: the "
+                       f"goals reached in order, no collision, within {b.seconds:g} s)",
                  notes=["trees per trial (action/completion/reactive nodes): " + ", ".join(
                      f"s{r['seed']} {r['nodes']}/{r['completion_nodes']}/{r['reactive_nodes']}"
                      for r in rows)])
