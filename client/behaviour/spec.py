@@ -99,7 +99,7 @@ INPUTS = {"heading": "lr"}  # extra perception inputs -> FeatureSpec.heading
 _TOP = {"name", "summary", "perception", "instructions", "expert", "worlds", "starts", "success",
         "recipe", "goals"}
 _PERCEPTION = {"beams", "sectors", "window", "clamp", "scale", "fov", "inputs", "beacon",
-               "beacon_range"}
+               "beacon_range", "beacon_bearing"}
 _WORLDS = {"teach", "held_out"}
 
 
@@ -249,8 +249,9 @@ def _perception(src: str, v: Any) -> tuple[FeatureSpec, str | None]:
             isinstance(beacon, bool) or not isinstance(beacon, int) or beacon < 1):
         raise _err(src, "perception.beacon", f"a beacon id (an integer >= 1) or "
                                              f"{BEACON_GOAL!r}", beacon)
-    if "beacon_range" in t and beacon is None:
-        raise BehaviourError(f"{_where(src, 'perception.beacon_range')}: only with 'beacon'")
+    for key in ("beacon_range", "beacon_bearing"):
+        if key in t and beacon is None:
+            raise BehaviourError(f"{_where(src, f'perception.{key}')}: only with 'beacon'")
     try:
         spec = FeatureSpec(beams=beams, window=window, fov=fov,
                            clamp=_number(src, "perception.clamp", t.get("clamp", 2.0)),
@@ -258,7 +259,10 @@ def _perception(src: str, v: Any) -> tuple[FeatureSpec, str | None]:
                            heading=INPUTS[inputs[0]] if inputs else None, beacon=beacon,
                            beacon_range=_number(src, "perception.beacon_range",
                                                 t.get("beacon_range", 8.0), 1e-9,
-                                                "a number > 0 (m)"))
+                                                "a number > 0 (m)"),
+                           beacon_bearing=_number(src, "perception.beacon_bearing",
+                                                  t.get("beacon_bearing", 180.0), 1e-9,
+                                                  "a number of degrees in (0, 180]"))
     except FeatureError as exc:
         raise BehaviourError(f"{_where(src, 'perception')}: {exc}") from None
     return spec, None

@@ -135,6 +135,10 @@ def _policy_from(clf_bytes_or_path, features: str | None) -> TreePolicy:
     except Exception as exc:  # noqa: BLE001 - its metadata: features or actions malformed
         raise ProcessError(f"controller: cannot load the tree: {source}: invalid metadata: "
                            f"{exc}", EXIT_USAGE) from exc
+    if isinstance(meta.get("goals"), dict):  # two trees and a goal state (docs/goals.md)
+        raise ProcessError(f"controller: {source} holds goals in order (an action tree and a "
+                           "completion tree): the controller does not drive a behaviour with "
+                           "goals yet; rhbl evaluate does (docs/goals.md)", EXIT_USAGE)
     return TreePolicy(clf, spec, actions, meta)
 
 
