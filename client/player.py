@@ -190,9 +190,9 @@ class PlayerClient:
             if not fresh():
                 return False
             state, scan = self._latest.get("state"), self._latest.get("scan")
-            if "state" in self._subs and "scan" in self._subs:
-                if state is None or scan is None or state.ts < scan.ts:
-                    return False
+            if "state" in self._subs and "scan" in self._subs and (
+                    state is None or scan is None or state.ts < scan.ts):
+                return False
             # the tick's beacons, sent before its scan: waited for once any came (a world
             # without beacons sends none)
             fid = self._latest.get("fiducial")

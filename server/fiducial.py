@@ -64,8 +64,10 @@ class FiducialFinder:
         self.spec = spec
         self.small = self.SMALL if small is None else int(small)
         self._beacons = [(int(b.id), float(b.pos[0]), float(b.pos[1])) for b in beacons]
-        self._walls = [tuple(map(float, w)) for w in np.asarray(segments, dtype=np.float64
-                                                                  ).reshape(-1, 4).tolist()]
+        # each wall as its start, vector and bounding box, for the loop
+        self._walls = [(x0, y0, x1 - x0, y1 - y0, min(x0, x1), max(x0, x1), min(y0, y1),
+                        max(y0, y1)) for x0, y0, x1, y1
+                       in np.asarray(segments, dtype=np.float64).reshape(-1, 4).tolist()]
         self.ids = np.asarray([b.id for b in beacons], dtype=np.int64)
         self.pos = np.asarray([b.pos for b in beacons], dtype=np.float64).reshape(-1, 2)
         segs = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
@@ -123,18 +125,18 @@ class FiducialFinder:
             a = math.atan2(dy * c - dx * s, dx * c + dy * s)
             if r > spec.max_range or abs(a) > half_fov:
                 continue
-            lo_x, hi_x = min(ox, px), max(ox, px)
-            lo_y, hi_y = min(oy, py), max(oy, py)
+            lo_x, hi_x = (ox, px) if ox < px else (px, ox)
+            lo_y, hi_y = (oy, py) if oy < py else (py, oy)
             limit = 1.0 - _MARGIN / max(r, _MARGIN)
-            for x0, y0, x1, y1 in self._walls:
-                if (min(x0, x1) > hi_x or max(x0, x1) < lo_x or min(y0, y1) > hi_y
-                        or max(y0, y1) < lo_y):
+            for ax, ay, ex, ey, wlo_x, whi_x, wlo_y, whi_y in self._walls:
+                if wlo_x > hi_x or whi_x < lo_x or wlo_y > hi_y or whi_y < lo_y:
                     continue
-                ex, ey, wx, wy = x1 - x0, y1 - y0, x0 - ox, y0 - oy
                 den = dx * ey - dy * ex
-                sign = 1.0 if den > 0.0 else -1.0 if den < 0.0 else 0.0
-                tn, un, den = (wx * ey - wy * ex) * sign, (wx * dy - wy * dx) * sign, den * sign
-                if 0.0 < tn < limit * den and 0.0 <= un <= den:
+                if den == 0.0:
+                    continue
+                wx, wy = ax - ox, ay - oy
+                t, u = (wx * ey - wy * ex) / den, (wx * dy - wy * dx) / den
+                if 0.0 < t < limit and 0.0 <= u <= 1.0:
                     break  # hidden
             else:
                 items.append((bid if r < spec.max_range_id else 0, max(r, spec.min_range), a, j))

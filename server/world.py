@@ -35,7 +35,7 @@ import numpy as np
 import pymunk
 from pymunk import _chipmunk_cffi
 
-from protocol.messages import MAX_VA, MAX_VX
+from protocol.messages import MAX_BEACONS, MAX_VA, MAX_VX
 from server import fiducial, laser
 
 __all__ = [
@@ -141,7 +141,6 @@ BEACON_COLOURS: dict[str, tuple[int, int, int]] = {
     "black": (20, 20, 20), "grey": (128, 128, 128),
 }
 _DEFAULT_BEACON_SIZE = 0.2  # m
-_MAX_BEACONS = 256
 
 
 class WorldError(ValueError):
@@ -379,12 +378,12 @@ _PALETTE = ("orange", "blue", "purple", "cyan", "magenta", "yellow")
 
 def _parse_beacons(src: str, raw: Any, walls: list[Wall]) -> tuple[Beacon, ...]:
     """``[[beacons]]``: each ``id`` (an integer >= 1, unique), ``pos`` [x, y] within the walls'
-    bounding box (on a wall is fine: a beacon mounted there), optional ``colour`` (a name or [r, g, b])
-    and ``size`` (m, > 0, default 0.2)."""
+    bounding box (on a wall is fine: a beacon mounted there), optional ``colour`` (a name or
+    [r, g, b]) and ``size`` (m, > 0, default 0.2)."""
     if raw is None:
         return ()
-    if not isinstance(raw, list) or len(raw) > _MAX_BEACONS:
-        raise _err(src, "beacons", f"a list of at most {_MAX_BEACONS} [[beacons]] tables "
+    if not isinstance(raw, list) or len(raw) > MAX_BEACONS:
+        raise _err(src, "beacons", f"a list of at most {MAX_BEACONS} [[beacons]] tables "
                    f"with id and pos", raw if not isinstance(raw, list) else f"{len(raw)}")
     probe = WorldSpec(name="-", task=None, pose=(0.0, 0.0, 0.0), walls=tuple(walls))
     x0, y0, x1, y1 = probe.bounds()

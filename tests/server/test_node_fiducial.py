@@ -152,3 +152,15 @@ def test_a_fiducial_log_pairs_each_scan_with_its_ticks_beacons(session):
         reader.see(items)
         assert reader.x[-3] == 1.0 and 0.5 < reader.x[-1] < 0.6  # ahead, a little left
         assert log.at(10**9) is None and log.seen(10**9) == ()
+
+
+def test_a_world_without_beacons_answers_get_geom_and_publishes_no_fiducials(
+        start_module_server, client_config):
+    srv = start_module_server("corridor")
+    with zenoh.open(client_config(srv.endpoint)) as s:
+        seen = Seen(s)
+        (reply,) = list(s.get(keys.request_key("r0", "fiducial", "get_geom"), timeout=3.0))
+        assert FiducialGeometry.decode(reply.ok.payload.to_bytes()).max_range == 8.0
+        with seen.cond:
+            assert seen.cond.wait_for(lambda: len(seen.scans) >= 5, patience(5.0))
+            assert seen.fiducials == []  # five ticks, not one fiducial message
