@@ -381,8 +381,11 @@ def run_goal_trial(b: Behaviour, seed: int, recipe: Recipe, worlds: list[str],
         spec = world_of(b, w)
         rep = evaluate_goals(spec, guarded(policy, guard), b, episodes=episodes, seed=seed)
         base = evaluate_goals(spec, guarded(reactive, guard), b, episodes=episodes, seed=seed)
+        alone = (evaluate_goals(spec, policy, b, episodes=episodes, seed=seed)["success_rate"]
+                 if guard else None)
         out["worlds"][spec.name] = {
             "success_rate": rep["success_rate"], "reactive_success_rate": base["success_rate"],
+            "unguarded_success_rate": alone,
             "teacher_success_rate": rep["teacher_success_rate"],
             "goals_reached": [e["goals_reached"] for e in rep["learner"]],
             "reactive_goals_reached": [e["goals_reached"] for e in base["learner"]],
@@ -407,12 +410,14 @@ def goal_experiment_table(b: Behaviour, rows: list[dict]) -> str:
         def mean(key: str, per=per) -> str:
             return f"{sum(p[key] for p in per) / len(per):.0%}"
 
+        alone = ("-" if per[0]["unguarded_success_rate"] is None
+                 else mean("unguarded_success_rate"))
         out.append([w, kind, mean("success_rate"),
-                    " ".join(f"{p['success_rate']:.0%}" for p in per),
+                    " ".join(f"{p['success_rate']:.0%}" for p in per), alone,
                     mean("reactive_success_rate"), mean("teacher_success_rate"),
                     sum(p["collisions"] for p in per), sum(p["reactive_collisions"] for p in per)])
-    return table(["world", "", "goal learner", "per trial", "reactive tree", "teacher",
-                  "collisions", "reactive collisions"], out,
+    return table(["world", "", "goal learner", "per trial", "goal learner, no guard",
+                  "reactive tree", "teacher", "collisions", "reactive collisions"], out,
                  title=f"{b.name}: goals {_goal_line(b)}, {len(rows)} trials (success: the "
                        f"goals reached in order, no collision, within {b.seconds:g} s)",
                  notes=["trees per trial (action/completion/reactive nodes): " + ", ".join(
