@@ -539,19 +539,14 @@ class GoalPolicy:
 
 def load_policy(path: str | Path):
     """The policy of a snapshot: a ``GoalPolicy`` when its metadata holds goals, else the
-    single tree's ``TreePolicy`` (today's snapshots load as before)."""
-    from rhbl import load
+    single tree's ``TreePolicy`` (today's snapshots load as before, their errors naming the
+    file as ``TreePolicy.load``'s do)."""
+    from .learning import TreePolicy, load_snapshot
 
-    from .learning import TreePolicy, check_compatible, naming
-
-    clf = load(path)
-    if isinstance((clf.metadata or {}).get("goals"), dict):
+    clf, features, actions, meta = load_snapshot(path)
+    if isinstance(meta.get("goals"), dict):
         return GoalPolicy.from_classifier(clf, str(path))
-    meta = dict(clf.metadata or {})
-    with naming(path):
-        check_compatible(meta)
-    return TreePolicy(clf, FeatureSpec.from_dict(meta["features"]),
-                      ActionSet.from_dict(meta["actions"]), meta)
+    return TreePolicy(clf, features, actions, meta)
 
 
 class ReactiveBeaconPolicy:
