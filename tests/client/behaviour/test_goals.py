@@ -193,12 +193,3 @@ def test_goals_count_only_in_order():
     m["goals_reached"] = 2
     assert not metrics.judge({"goals": {"slack": 0.1}}, m)
     assert math.isfinite(m["distance"])
-
-
-def test_the_controller_refuses_a_goal_snapshot_by_name(tmp_path):
-    from client.roles.controller import load_tree
-    from process.runtime import ProcessError
-
-    path = _taught(parse_goals({"beacons": [1]})).save(tmp_path / "goals.msgpack")
-    with pytest.raises(ProcessError, match="holds goals in order"):
-        load_tree(str(path))
