@@ -12,7 +12,14 @@ from client.behaviour.goals import GoalPolicy, load_policy
 from lab import metrics
 from lab.behaviours import get, recipe_of, world_of
 from lab.cli import main as cli
-from lab.goals import drive_goals, episode_goal_metrics, evaluate_goals, expert_of, targets, train_goals
+from lab.goals import (
+    drive_goals,
+    episode_goal_metrics,
+    evaluate_goals,
+    expert_of,
+    targets,
+    train_goals,
+)
 
 
 def test_the_teacher_reaches_red_then_green_from_every_start_of_its_world():
