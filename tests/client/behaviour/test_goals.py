@@ -193,3 +193,18 @@ def test_goals_count_only_in_order():
     m["goals_reached"] = 2
     assert not metrics.judge({"goals": {"slack": 0.1}}, m)
     assert math.isfinite(m["distance"])
+
+
+def test_a_narrower_bearing_spreads_the_beacons_field_over_its_input():
+    wide = FeatureSpec(beams=(90.0,), beacon="goal")
+    narrow = FeatureSpec(beams=(90.0,), beacon="goal", beacon_bearing=90.0)
+    seen = [Sighting(1, 3.0, math.pi / 4)]
+    assert wide.beacon_values(seen, 1)[2] == pytest.approx(0.625)
+    assert narrow.beacon_values(seen, 1)[2] == pytest.approx(0.75)
+    assert narrow.beacon_values([Sighting(1, 3.0, 2.0)], 1)[2] == 1.0  # clipped
+    assert "beacon_bearing" not in wide.to_dict()  # the dicts of specs before: unchanged
+    assert FeatureSpec.from_dict(narrow.to_dict()) == narrow
+    base = {"name": "x", "summary": "s", "expert": {"name": "beacon-seeker"},
+            "worlds": {"teach": ["goals-red-green"]}, "success": {"no-collision": {}}}
+    with pytest.raises(BehaviourError, match="perception.beacon_bearing': only with 'beacon'"):
+        parse_behaviour({**base, "perception": {"sectors": 9, "beacon_bearing": 90}})
