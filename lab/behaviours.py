@@ -118,7 +118,8 @@ def to_dict(b: Behaviour) -> dict:
             "expert": {"name": b.expert_name, **b.expert_params},
             "worlds": {"teach": list(b.teach), "held_out": list(b.held_out)},
             "starts": {w: [list(p) for p in poses] for w, poses in b.starts.items()},
-            "success": b.rules, "instructions": b.instructions}
+            "success": b.rules, "instructions": b.instructions,
+            "goals": None if b.goals is None else b.goals.to_dict()}
 
 
 def describe(b: Behaviour) -> str:
@@ -134,6 +135,11 @@ def describe(b: Behaviour) -> str:
              f"  taught in: {', '.join(b.teach)}",
              f"  held out: {', '.join(b.held_out) or 'none'}",
              f"  success: {rules}"]
+    if b.goals is not None:
+        g = b.goals
+        order = " -> ".join(str(g.beacons[k]) for k in g.visits)
+        lines.insert(4, f"  goals: beacons {order}" + (" (a cycle)" if g.cycle else "")
+                     + f", each reached within {', '.join(f'{w:g}' for w in g.within)} m")
     if b.instructions:
         lines += ["  instructions:", *("    " + line for line in b.instructions.splitlines())]
     return "\n".join(line for line in lines if line)

@@ -192,11 +192,47 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --plot: also draw the tree's spheres projected on features I,J")
     guard.add_arguments(parser, default=None,
                         default_help="default: on for a tree taught by hand, as rhbl "
-                                     "controller drives it; off for the scripted teacher's, "
-                                     "whose figures are the tree's own")
+                                     "controller drives it, and for a behaviour with goals "
+                                     "(docs/goals.md); off for the scripted teacher's other "
+                                     "trees, whose figures are the tree's own")
     parser.add_argument("--record", metavar="FILE", default=None, type=arguments.output_file,
                         help="also write the episodes (tree and teacher runs) as an MCAP "
                              "recording (docs/recording.md)")
+
+
+def _goals_main(args, spec: WorldSpec, policy, b: Behaviour | None) -> int:
+    """``rhbl evaluate`` of a goal behaviour's snapshot: the goal changes in the table's
+    notes (when, which goal, the next one and why) and in the JSON report."""
+    from lab.goals import evaluate_goals, format_goal_table, guarded
+
+    if args.range_noise or args.odom_noise or args.spheres:
+        raise ValueError("--range-noise, --odom-noise and --spheres are not for a behaviour "
+                         "with goals yet (docs/goals.md)")
+    b = get(policy.metadata.get("task")) if b is None else b
+    on = args.guard is not False  # a goal behaviour's tree: through the guard unless --no-guard
+    with record_run(args.record, "rhbl evaluate") as tap:
+        report = evaluate_goals(spec, guarded(policy, on), b, episodes=args.episodes,
+                                seconds=args.seconds,
+                                seed=args.seed, on_step=None if tap is None else tap.step,
+                                keep_paths=bool(args.plot))
+    paths = report.pop("_paths", None)
+    print(format_goal_table(report))
+    g = report["guard"]
+    print("driven through the controller's guard (--no-guard: the trees alone): "
+          f"{g['overruled']} rotation reversals overruled, {g['avoided']} forward orders "
+          f"turned into a rotation (path check {g['clearance']:g} m)" if g else
+          "driven by the trees alone (--no-guard)")
+    if args.json:
+        files.write_text(args.json, json.dumps(report, indent=1), "--json")
+        print(f"wrote {args.json}")
+    if args.plot:
+        from lab.plot import plot_paths
+
+        plot_paths(spec, paths, args.plot,
+                   title=f"{spec.name}: teacher (blue) and learned robot (red), "
+                         f"success {report['success_rate']:.0%}")
+        print(f"wrote {args.plot}")
+    return 0
 
 
 def main(args) -> int:
@@ -209,7 +245,11 @@ def main(args) -> int:
         spec = teaching_world(b)
     else:
         spec = resolve_world(args.world) if b is None else world_of(b, args.world)
-    policy = TreePolicy.load(args.tree)
+    from client.behaviour.goals import GoalPolicy, load_policy
+
+    policy = load_policy(args.tree)
+    if isinstance(policy, GoalPolicy):  # goals in order (lab.goals)
+        return _goals_main(args, spec, policy, b)
     dims = args.spheres or (0, 1)
     if args.spheres and max(dims) >= policy.classifier.n_features_in_:
         raise ValueError(f"--spheres {dims[0]},{dims[1]}: the tree {args.tree} has "

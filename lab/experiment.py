@@ -197,6 +197,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write every trial's results here (JSON)")
 
 
+def _goal_experiment(b: Behaviour, args, ev: list[str]) -> dict:
+    from lab.goals import goal_experiment_table, run_goal_trial
+
+    recipe = recipe_from_args(recipe_of(b), args)
+    if args.world:
+        recipe = recipe.replace(world=args.world)
+    rows = [run_goal_trial(b, args.seed + i, recipe, [recipe.world, *ev], episodes=args.episodes)
+            for i in range(args.trials)]
+    print(f"\n{b.name}: {args.trials} trials")
+    print(goal_experiment_table(b, rows))
+    return {"task": b.name, "trials": args.trials, "recipe": _plain(recipe), "rows": rows}
+
+
 def main(args) -> int:
     tasks = [get(t) for t in (BOTH if args.task == "both" else [args.task])]
     results = {}
@@ -206,6 +219,9 @@ def main(args) -> int:
             ev: list[str] = []
         else:
             ev = args.eval_world if args.eval_world is not None else default_eval_worlds(task)
+        if task.goals is not None:  # goals in order: beside the reactive tree (lab.goals)
+            results[task.name] = _goal_experiment(task, args, ev)
+            continue
         res = run_experiment(task, trials=args.trials, seed0=args.seed,
                              recipe=recipe_from_args(recipe_of(task), args), world=args.world,
                              eval_seconds=args.seconds, episodes=args.episodes, eval_worlds=ev,
@@ -215,7 +231,9 @@ def main(args) -> int:
         print(f"\n{task.name}: {args.trials} trials")
         print(format_worlds(res))
     print()
-    print(table_i(results))
+    paper = {k: v for k, v in results.items() if "summary" in v}
+    if paper:
+        print(table_i(paper))
     print(f"({time.perf_counter() - t0:.0f} s)")
     if args.json:
         files.write_text(args.json, json.dumps(results, indent=1), "--json")

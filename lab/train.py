@@ -455,6 +455,10 @@ def main(args) -> int:
         spec = resolve_world(args.world) if b is None else world_of(b, args.world)
     b = behaviour_for_world(spec) if b is None else b
     recipe = recipe_from_args(recipe_of(b), args)
+    if b.goals is not None:  # goals in order: two trees, the goal learner (lab.goals)
+        from lab.goals import train_main
+
+        return train_main(args, b, spec, recipe)
     if args.resume:
         if recipe.compact != "none":
             raise ValueError(f"--compact {recipe.compact} needs a fresh tree: a resumed learner "

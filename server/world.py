@@ -60,7 +60,8 @@ __all__ = [
     "wrap_angle",
 ]
 
-TASKS = ("wall-following", "maze", "doorways", "dead-end", "corridor-centring", "wandering")
+TASKS = ("wall-following", "maze", "doorways", "dead-end", "corridor-centring", "wandering",
+         "red-green")
 
 
 def wrap_angle(a: float) -> float:

@@ -21,7 +21,8 @@ call each (``PayloadReader``: the controller's hot path; ``Scan.decode`` for any
 interface: ``protocol.messages.Fiducial``), three values after the beams and the heading:
 ``in view`` (1.0, or 0.0 when that beacon is not seen), its ``range`` clamped to and divided by
 ``beacon_range`` m, and its ``bearing`` as ``(bearing / pi + 1) / 2`` (0.5 straight ahead, more
-to the left). "None in view" is a value of its own: ``NO_BEACON`` (0.0, 1.0, 0.5: not seen, as
+to the left; ``beacon_bearing`` degrees less than 180: the bearing clipped to +- it and mapped
+so, a finer view of a narrower field). "None in view" is a value of its own: ``NO_BEACON`` (0.0, 1.0, 0.5: not seen, as
 far as can be, ahead), so a tree tells it apart from any sighting by the first value alone.
 ``beacon`` is an id (``beacon = 2``: that beacon always) or ``"goal"``: the beacon the caller
 names with each scan (``target=``; the current goal's, say; None: none, so none in view)::
@@ -94,6 +95,7 @@ class FeatureSpec:
     fov: float = 180.0
     beacon: int | str | None = None
     beacon_range: float = 8.0
+    beacon_bearing: float = 180.0  # degrees: the bearing is clipped to +- this, mapped on [0, 1]
     _cache: dict = field(default_factory=dict, compare=False, repr=False, hash=False)
 
     def __post_init__(self):
@@ -119,6 +121,9 @@ class FeatureSpec:
                                f"{BEACON_GOAL!r}, got {b!r}")
         if not (self.beacon_range > 0 and math.isfinite(self.beacon_range)):
             raise FeatureError(f"beacon_range must be > 0 m, got {self.beacon_range}")
+        if not 0 < self.beacon_bearing <= 180:
+            raise FeatureError(f"beacon_bearing must be in (0, 180] degrees, got "
+                               f"{self.beacon_bearing}")
 
     @property
     def dim(self) -> int:
@@ -138,7 +143,8 @@ class FeatureSpec:
                 b = float(item.bearing)
                 if not (math.isfinite(r) and math.isfinite(b)):
                     return NO_BEACON
-                return (1.0, r, min(max((b / math.pi + 1.0) / 2.0, 0.0), 1.0))
+                half = math.radians(self.beacon_bearing)
+                return (1.0, r, min(max((b / half + 1.0) / 2.0, 0.0), 1.0))
         return NO_BEACON
 
     def _slices(self, count: int) -> list[tuple[int, int]]:
@@ -245,6 +251,8 @@ class FeatureSpec:
             # only when used: the dicts of specs without (every snapshot before) are unchanged
             **({"beacon": self.beacon, "beacon_range": self.beacon_range}
                if self.beacon else {}),
+            **({"beacon_bearing": self.beacon_bearing}
+               if self.beacon and self.beacon_bearing != 180.0 else {}),
         }
 
     @classmethod
@@ -259,6 +267,7 @@ class FeatureSpec:
                 fov=float(data.get("fov", 180.0)),
                 beacon=data.get("beacon"),
                 beacon_range=float(data.get("beacon_range", 8.0)),
+                beacon_bearing=float(data.get("beacon_bearing", 180.0)),
             )
         except (KeyError, TypeError) as exc:
             raise FeatureError(f"a feature spec dict needs 'beams', got {data!r}") from exc

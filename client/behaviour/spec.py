@@ -47,6 +47,7 @@ from typing import Any
 
 from .actions import DEFAULT_ACTIONS, ActionSet
 from .features import BEACON_GOAL, FEATURES, FeatureError, FeatureSpec
+from .goals import Goals, parse_goals
 from .policies import STYLES, Policy
 from .tasks import TASKS
 
@@ -89,13 +90,16 @@ RULES: dict[str, dict[str, Any]] = {
     "goal": {},
     # at least ``area`` square metres covered: the cells of ``cell`` metres the robot entered
     "coverage": {"cell": 0.5, "area": 10.0},
+    # the behaviour's [goals] reached in their order (each within its distance of its beacon,
+    # plus ``slack`` metres), judged from the robot's true path
+    "goals": {"slack": 0.1},
 }
 SIDES = ("right", "left")
 INPUTS = {"heading": "lr"}  # extra perception inputs -> FeatureSpec.heading
 _TOP = {"name", "summary", "perception", "instructions", "expert", "worlds", "starts", "success",
-        "recipe"}
+        "recipe", "goals"}
 _PERCEPTION = {"beams", "sectors", "window", "clamp", "scale", "fov", "inputs", "beacon",
-               "beacon_range"}
+               "beacon_range", "beacon_bearing"}
 _WORLDS = {"teach", "held_out"}
 
 
@@ -153,6 +157,7 @@ class Behaviour:
     perception: str | None = None  # the shipped feature spec's name, None when inline
     recipe: dict[str, Any] = field(default_factory=dict, compare=False)
     path: Path | None = None
+    goals: Goals | None = None  # its goals in order ([goals]; client.behaviour.goals), if any
 
     @property
     def seconds(self) -> float:
@@ -244,8 +249,9 @@ def _perception(src: str, v: Any) -> tuple[FeatureSpec, str | None]:
             isinstance(beacon, bool) or not isinstance(beacon, int) or beacon < 1):
         raise _err(src, "perception.beacon", f"a beacon id (an integer >= 1) or "
                                              f"{BEACON_GOAL!r}", beacon)
-    if "beacon_range" in t and beacon is None:
-        raise BehaviourError(f"{_where(src, 'perception.beacon_range')}: only with 'beacon'")
+    for key in ("beacon_range", "beacon_bearing"):
+        if key in t and beacon is None:
+            raise BehaviourError(f"{_where(src, f'perception.{key}')}: only with 'beacon'")
     try:
         spec = FeatureSpec(beams=beams, window=window, fov=fov,
                            clamp=_number(src, "perception.clamp", t.get("clamp", 2.0)),
@@ -253,7 +259,10 @@ def _perception(src: str, v: Any) -> tuple[FeatureSpec, str | None]:
                            heading=INPUTS[inputs[0]] if inputs else None, beacon=beacon,
                            beacon_range=_number(src, "perception.beacon_range",
                                                 t.get("beacon_range", 8.0), 1e-9,
-                                                "a number > 0 (m)"))
+                                                "a number > 0 (m)"),
+                           beacon_bearing=_number(src, "perception.beacon_bearing",
+                                                  t.get("beacon_bearing", 180.0), 1e-9,
+                                                  "a number of degrees in (0, 180]"))
     except FeatureError as exc:
         raise BehaviourError(f"{_where(src, 'perception')}: {exc}") from None
     return spec, None
@@ -390,10 +399,20 @@ def parse_behaviour(data: Any, source: str = "<behaviour>", path: Path | None = 
             raise _err(src, f"starts.{world}", f"a world the behaviour names "
                                                f"({', '.join(sorted(named))})", world)
     recipe = _table(src, "recipe", data.get("recipe", {}))
+    goals = None
+    if "goals" in data:
+        try:
+            goals = parse_goals(data["goals"])
+        except ValueError as exc:
+            raise BehaviourError(f"{src}: {exc}") from None
+    rules = _rules(src, data["success"])
+    if ("goals" in rules) != (goals is not None):
+        raise BehaviourError(f"{_where(src, 'success.goals')}: a behaviour with [goals] is "
+                             "judged by the 'goals' rule, and only such a one")
     return Behaviour(name=name, summary=summary.strip(), features=features, expert_name=expert,
-                     teach=teach, held_out=held_out, rules=_rules(src, data["success"]),
+                     teach=teach, held_out=held_out, rules=rules,
                      expert_params=params, starts=starts, instructions=instructions.strip(),
-                     perception=perception, recipe=dict(recipe), path=path)
+                     perception=perception, recipe=dict(recipe), path=path, goals=goals)
 
 
 def load_behaviour(path: str | Path) -> Behaviour:
