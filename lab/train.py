@@ -63,7 +63,8 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
           policy=None, on_step: OnStep | None = None,
           behaviour: Behaviour | None = None) -> Episode:
     """One training run of ``recipe`` (default: the behaviour's, ``lab.behaviours.recipe_of``)
-    of ``behaviour`` (default: the world's, ``lab.behaviours.behaviour_for_world``): its
+    of ``behaviour`` (default: the world's, ``lab.behaviours.behaviour_for_world``; in a world
+    no shipped behaviour names, the recipe's task, else the learner's): its
     scripted expert (or ``policy``) demonstrates for ``recipe.seconds`` (sim time, in total)
     while ``learner`` observes every step.
 
@@ -89,7 +90,8 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
     and corrects, the compacted tree. With ``recipe.compact_visits`` the last compaction is
     redone against the learned vectors plus held-out states the compacted tree reaches
     (``visited_states``)."""
-    b = behaviour_for_world(spec) if behaviour is None else behaviour
+    b = behaviour if behaviour is not None else behaviour_for_world(
+        spec, recipe.task if recipe is not None else learner.task)
     recipe, compact = _checked(spec, b, learner, recipe)
     policy = policy or b.expert(actions=learner.actions)
     rng = np.random.default_rng(seed)
@@ -384,7 +386,8 @@ def visited_states(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recip
     scaled by each of ``scales`` (default: ``recipe.round_scales``), then in ``spec``, but the
     tree learns nothing. ``seed`` draws the poses (use one other than the training run's for
     held-out states)."""
-    b = behaviour_for_world(spec) if behaviour is None else behaviour
+    b = behaviour if behaviour is not None else behaviour_for_world(
+        spec, recipe.task if recipe is not None else learner.task)
     recipe = recipe_of(b) if recipe is None else recipe
     recipe = recipe.replace(rounds=rounds)
     policy = policy or b.expert(actions=learner.actions)

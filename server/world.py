@@ -139,7 +139,9 @@ class WorldSpec:
     """A parsed world file. ``pose`` is the default start; ``starts`` extra start poses."""
 
     name: str
-    task: str | None  # the behaviour the world was made for, if it names one (most do not need to)
+    # an older world file's ``task`` (a shipped behaviour's name), kept as a hint only: worlds
+    # name no task, a behaviour names its worlds (client.behaviour.spec.for_world); None mostly
+    task: str | None
     pose: tuple[float, float, float]
     starts: tuple[tuple[float, float, float], ...] = ()
     walls: tuple[Wall, ...] = ()
@@ -315,7 +317,7 @@ def parse_world(
     name = data.get("name", Path(source).stem)
     if not isinstance(name, str) or not name:
         raise _err(src, "name", "a non-empty string", name)
-    task = data.get("task")  # optional: a behaviour names its worlds (client.behaviour.spec)
+    task = data.get("task")  # an older file's: accepted as a hint (a behaviour names its worlds)
     if task is not None and task not in TASKS:
         raise _err(src, "task", f"one of {list(TASKS)} or no task at all", task)
     robot = data.get("robot")

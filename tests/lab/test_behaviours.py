@@ -4,12 +4,14 @@ taught and evaluated with no code change."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 
 import pytest
 
-from client.behaviour.spec import RULES, BehaviourError, shipped
+from client.behaviour.learning import TreePolicy
+from client.behaviour.spec import RULES, BehaviourError, for_world, shipped
 from lab import metrics
 from lab.behaviours import behaviour_for_world, get, recipe_of, teaching_world, world_of
 from lab.cli import main
@@ -69,18 +71,43 @@ def test_the_measures_the_rules_need():
 
 
 def test_a_worlds_behaviour():
-    assert behaviour_for_world(resolve_world("room")).name == "wall-following"
+    """Worlds name no task: a behaviour names its worlds. Of several naming one, the behaviour
+    that drives from the world's own start poses; an older file's task is a hint only."""
+    assert behaviour_for_world(resolve_world("room")).name == "wall-following"  # not left-wall
+    assert behaviour_for_world(resolve_world("eval-room-ring")).name == "wall-following"
     assert behaviour_for_world(resolve_world("maze")).name == "maze"
-    world = {"name": "eval-room-l", "robot": {"pose": [2.0, 0.7, 0.0]},
+    assert behaviour_for_world(resolve_world("clutter-room")).name == "wandering"
+    world = {"name": "eval-maze-3tier", "robot": {"pose": [2.0, 0.7, 0.0]},
              "walls": [{"points": [[0, 0], [4, 0], [4, 4], [0, 4]], "closed": True}]}
-    untasked = parse_world(dict(world, name="eval-maze-3tier"))
-    assert untasked.task is None
-    assert behaviour_for_world(untasked).name == "maze"  # one behaviour names it
-    with pytest.raises(BehaviourError, match="the behaviours left-wall, wall-following name it: "
+    assert behaviour_for_world(parse_world(world)).name == "maze"  # one behaviour names it
+    mine = parse_world(dict(world, name="my-room"))  # no behaviour names it
+    with pytest.raises(BehaviourError, match="no shipped behaviour names it: say which "
+                                             "behaviour with --behaviour"):
+        behaviour_for_world(mine)
+    assert behaviour_for_world(mine, "left-wall").name == "left-wall"  # a tree's task: a hint
+    old = parse_world(dict(world, name="my-room", task="wall-following"))  # an older file
+    assert behaviour_for_world(old, "left-wall").name == "wall-following"
+    both = {b: dataclasses.replace(shipped()[b], starts={}) for b in ("wall-following",
+                                                                        "left-wall")}
+    with pytest.raises(BehaviourError, match="the behaviours wall-following, left-wall name it: "
                                              "say which with --behaviour"):
-        behaviour_for_world(parse_world(world))
-    with pytest.raises(BehaviourError, match="names no task and no shipped behaviour names it"):
-        behaviour_for_world(parse_world(dict(world, name="nowhere")))
+        for_world("room", behaviours=both)
+    assert for_world("room", task="left-wall", behaviours=both).name == "left-wall"
+
+
+def test_a_tree_in_a_world_no_behaviour_names_is_judged_by_its_own_task(tmp_path):
+    """``rhbl train --world corridor`` and ``rhbl evaluate --world eval-holdout-room-oct`` name
+    no behaviour: the recipe's task teaches, the tree's own task judges."""
+    from lab.evaluate import evaluate
+    from lab.harness import make_learner
+    from lab.train import train
+
+    learner = make_learner(RECIPES["wall-following"])
+    train(resolve_world("corridor"), learner, RECIPES["wall-following"].replace(
+        seconds=5.0, rounds=0), seed=0)
+    rep = evaluate(resolve_world("eval-holdout-room-oct"), TreePolicy.from_learner(learner),
+                   episodes=1, seconds=2.0)
+    assert rep["task"] == "wall-following" and rep["learner"][0]["wall_band_fraction"] is not None
 
 
 def test_the_recipe_of_a_behaviour():

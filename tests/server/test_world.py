@@ -51,7 +51,7 @@ def test_worlds_are_closed():
 
 def test_maze_is_tiered_with_goal_in_last_tier():
     spec = load_world(server.world_path("maze"))
-    assert spec.task == "maze" and spec.goal is not None
+    assert spec.task is None and spec.goal is not None  # a behaviour names its worlds
     assert spec.goal.center[1] > 6.6 and spec.pose[1] < 2.2
 
 
@@ -340,3 +340,13 @@ def test_scaled_copy_of_a_world():
     for bad in (0.0, -1.0, math.nan):
         with pytest.raises(ValueError, match="scale factor"):
             maze.scaled(bad)
+
+
+def test_shipped_worlds_name_no_task_and_an_older_files_task_is_still_read():
+    """Worlds no longer name a task (a behaviour names its worlds); a user's older world file
+    with ``task = ...`` is still read, its task kept as a hint."""
+    for name in server.world_names():
+        assert load_world(server.world_path(name)).task is None, name
+    old = parse_world({"name": "mine", "task": "wall-following", "robot": {"pose": [2, 0.5, 0]},
+                       "walls": [{"points": [[0, 0], [4, 0], [4, 3]], "closed": True}]})
+    assert old.task == "wall-following" and old.scaled(1.2).task == "wall-following"
