@@ -205,6 +205,53 @@ def test_a_behaviour_written_as_a_file_is_taught_and_evaluated_with_no_code_chan
                  "eval-room-l", "--episodes", "1"]) == 0
 
 
+FAR_WALL = """
+name = "far-wall"
+summary = "follow the wall on the robot's right further out, at 0.5-1.4 m: a test's own behaviour"
+perception = "wall"
+
+[expert]
+name = "wall-follower"
+side = "right"
+target = 0.9
+
+[worlds]
+teach = ["room"]
+held_out = ["eval-room-l"]
+
+[recipe]
+seconds = 300
+rounds = 2
+round_seconds = 40
+
+[success]
+time-limit = { seconds = 60 }
+no-collision = {}
+wall-band = { side = "right", near = 0.5, far = 1.4, fraction = 0.7 }
+distance = { of_teacher = 0.7 }
+"""
+
+
+def test_a_new_behaviour_file_is_learned_to_its_own_rule_with_no_code_change(tmp_path):
+    """A behaviour nobody shipped (the right-hand wall at 0.9 m instead of 0.6, judged in a band
+    of 0.5-1.4 m), written as a file: ``rhbl experiment FILE`` teaches it with its expert and
+    recipe and judges the tree by its rule, in the room it is taught in and in a held-out
+    room, and the learned robot keeps that wall in that band (seed 0: 6 of 6 starts in the
+    room, 5 of 5 in eval-room-l; the test asks for all but one)."""
+    path = tmp_path / "far-wall.toml"
+    path.write_text(FAR_WALL)
+    out = tmp_path / "far.json"
+    assert main(["experiment", str(path), "--trials", "1", "--json", str(out)]) == 0
+    res = json.loads(out.read_text())["far-wall"]
+    worlds = res["rows"][0]["worlds"]
+    assert list(worlds) == ["room", "eval-room-l"]
+    for name, w in worlds.items():
+        assert w["teacher_success_rate"] == 1.0, name  # the file's expert keeps its own band
+        assert w["success_rate"] >= 1 - 1 / w["episodes"], (name, w)  # and so does the tree
+        assert w["collisions"] == 0, name
+    assert res["recipe"]["seconds"] == 300 and res["recipe"]["rounds"] == 2
+
+
 def test_left_wall_following_is_a_file_its_expert_succeeds_from_every_start():
     """The first behaviour shipped as a file only: its expert (the wall follower, side left)
     keeps the wall on its left from every start pose it gives, in every world it names, by its
