@@ -53,9 +53,10 @@ def teaching_world(b: Behaviour) -> WorldSpec:
 def recipe_of(b: Behaviour) -> Recipe:
     """The behaviour's training recipe: the recipe of the same name (``lab.recipe.RECIPES``, the
     published figures'), else wall following's; with the behaviour's perception, its first
-    teaching world and the fields its ``[recipe]`` table changes."""
+    teaching world (its demonstrations), its other teaching worlds (corrective rounds there
+    too: ``round_worlds``) and the fields its ``[recipe]`` table changes."""
     base = RECIPES.get(b.name) or RECIPES["wall-following"]
-    changes = dict(b.recipe)
+    changes = {"round_worlds": b.teach[1:], **b.recipe}
     fields = {f.name for f in dataclasses.fields(Recipe)} - {"task", "world", "features"}
     for key, value in changes.items():
         if key not in fields:

@@ -127,6 +127,30 @@ def test_rounds_in_scaled_copies_of_the_world():
     assert learner.session["round_scales"] == [0.9, 1.1]
 
 
+def test_rounds_in_the_other_teaching_worlds_come_first():
+    """``round_worlds``: corrective rounds also in other worlds (a behaviour's other teaching
+    worlds), each in its scaled copies then itself, before the training world's; a behaviour
+    with two teaching worlds gets them from ``recipe_of``."""
+    from lab.behaviours import get, recipe_of
+
+    spec = resolve_world("corridor")
+    learner = make_learner("wall-following")
+    recipe = RECIPES["wall-following"].replace(seconds=10, rounds=1, round_seconds=2,
+                                               round_scales=(0.9,), round_worlds=("room",))
+    train(spec, learner, recipe, seed=0)
+    stats = learner.session["round_stats"]
+    assert [(s.get("world"), s.get("scale")) for s in stats] == [
+        ("room", 0.9), ("room", None), (None, 0.9), (None, None)]
+    assert learner.session["round_worlds"] == ["room"]
+    assert stats[1]["steps"] == len(resolve_world("room").start_poses) * 20  # its own starts
+    for bad in ("room", ("room", ""), (3,)):
+        with pytest.raises(ValueError, match="round_worlds"):
+            RECIPES["wall-following"].replace(round_worlds=bad)
+    wandering = get("wandering")
+    assert recipe_of(wandering).round_worlds == wandering.teach[1:] != ()
+    assert recipe_of(get("wall-following")).round_worlds == ()
+
+
 def test_the_recipe_runs_rounds_in_scaled_copies_and_none_turns_them_off():
     spec = resolve_world("maze")
     learner = make_learner("maze")
