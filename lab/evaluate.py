@@ -80,9 +80,11 @@ def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
              on_step: OnStep | None = None, behaviour: Behaviour | str | None = None) -> dict:
     """Run ``policy`` and the behaviour's scripted expert from the start poses (cycled over
     ``episodes``) and judge each episode by the behaviour's success rule (``behaviour``: a
-    Behaviour, a shipped one's name or a file; default: the world's, ``lab.behaviours``);
+    Behaviour, a shipped one's name or a file; default: the world's, ``lab.behaviours``, and
+    in a world no shipped behaviour names, the one the tree was taught: its snapshot's task);
     ``on_step`` sees every step (``lab.harness.step_world``)."""
-    b = behaviour_for_world(spec) if behaviour is None else get(behaviour)
+    taught = (getattr(policy, "metadata", None) or {}).get("task")
+    b = behaviour_for_world(spec, taught) if behaviour is None else get(behaviour)
     if "goal" in b.rules and spec.goal is None:
         raise ValueError(f"behaviour {b.name!r} is judged by a goal, but world {spec.name!r} "
                          "has no [goal]")

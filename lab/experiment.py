@@ -52,7 +52,8 @@ def run_trial(task: str | Behaviour, seed: int, recipe: Recipe | None = None, wo
               teacher_params: dict | None = None) -> dict:
     """Train ``recipe`` (default: the behaviour's) on ``world`` (default: the recipe's) with
     ``seed``, then evaluate the tree there and on each of ``eval_worlds``, all by the
-    behaviour ``task``'s success rule."""
+    behaviour ``task``'s success rule (and, ``world`` not given, in its other teaching
+    worlds)."""
     b = get(task)
     recipe = recipe_of(b) if recipe is None else recipe
     spec = world_of(b, world or recipe.world)
@@ -70,7 +71,8 @@ def run_trial(task: str | Behaviour, seed: int, recipe: Recipe | None = None, wo
            "height_before": rec.get("height_before", learner.height),
            "compaction": rec.get("method"),
            "vectors": learner.vectors, "train_wall_s": round(t_train, 2), "worlds": {}}
-    for w in [world or recipe.world, *eval_worlds]:
+    taught = [] if world is not None else [w for w in b.teach[1:] if w != recipe.world]
+    for w in [world or recipe.world, *taught, *eval_worlds]:
         wspec = world_of(b, str(w))
         rep = evaluate(wspec, tree, episodes=episodes, seconds=eval_seconds, seed=seed,
                        range_noise=range_noise, odom_noise=odom_noise, behaviour=b)

@@ -182,7 +182,9 @@ class WorldSpec:
     """A parsed world file. ``pose`` is the default start; ``starts`` extra start poses."""
 
     name: str
-    task: str | None  # the behaviour the world was made for, if it names one (most do not need to)
+    # an older world file's ``task`` (a shipped behaviour's name), kept as a hint only: worlds
+    # name no task, a behaviour names its worlds (client.behaviour.spec.for_world); None mostly
+    task: str | None
     pose: tuple[float, float, float]
     starts: tuple[tuple[float, float, float], ...] = ()
     walls: tuple[Wall, ...] = ()
@@ -227,18 +229,19 @@ class WorldSpec:
         return float(_point_segment_distance(np.array([x, y]), segs).min())
 
     def inside(self, x: float, y: float) -> bool:
-        """True when (x, y) lies inside every closed wall polyline of the world (even-odd rule;
-        a world with no closed wall: everywhere)."""
-        for w in self.walls:
-            if not w.closed:
-                continue
+        """True when (x, y) lies in the free space the closed wall polylines bound: inside an
+        odd number of them (the even-odd rule over all of them: inside the outer wall and
+        outside every box, pillar or island drawn as a closed polyline within it; a world with
+        no closed wall: everywhere)."""
+        count = 0
+        closed = [w for w in self.walls if w.closed]
+        for w in closed:
             inside = False
             for x0, y0, x1, y1 in w.segments():
                 if (y0 > y) != (y1 > y) and x < x0 + (y - y0) * (x1 - x0) / (y1 - y0):
                     inside = not inside
-            if not inside:
-                return False
-        return True
+            count += inside
+        return not closed or count % 2 == 1
 
     def scaled(self, factor: float) -> WorldSpec:
         """A copy uniformly scaled about the origin by ``factor``: wall points, start poses
@@ -426,7 +429,7 @@ def parse_world(
     name = data.get("name", Path(source).stem)
     if not isinstance(name, str) or not name:
         raise _err(src, "name", "a non-empty string", name)
-    task = data.get("task")  # optional: a behaviour names its worlds (client.behaviour.spec)
+    task = data.get("task")  # an older file's: accepted as a hint (a behaviour names its worlds)
     if task is not None and task not in TASKS:
         raise _err(src, "task", f"one of {list(TASKS)} or no task at all", task)
     robot = data.get("robot")

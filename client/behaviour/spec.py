@@ -8,6 +8,7 @@
     b.starts                                # its own start poses per world (name -> poses), if any
     b.rules                                 # its success rule: {"no-collision": {}, "wall-band": {...}}
     shipped()                               # every shipped behaviour, by name
+    for_world("room")                       # the shipped behaviour of a world (worlds name none)
 
 A behaviour file (docs/behaviours.md is the format with an example):
 
@@ -57,6 +58,7 @@ __all__ = [
     "BehaviourError",
     "behaviour",
     "behaviour_names",
+    "for_world",
     "load_behaviour",
     "parse_behaviour",
     "shipped",
@@ -467,3 +469,38 @@ def behaviour(name_or_path: str | Path) -> Behaviour:
         return load_behaviour(p)
     raise BehaviourError(f"behaviour {text!r} is neither a shipped behaviour ({', '.join(known)}) "
                          "nor a behaviour file")
+
+
+def _names_world(named: str, name: str, path: Path | None) -> bool:
+    """Whether a world as a behaviour names it (a name, or a path) is the world ``name`` (its
+    file at ``path``, when known)."""
+    if named == name:
+        return True
+    return path is not None and "/" in named and Path(named).resolve() == Path(path).resolve()
+
+
+def for_world(name: str, path: str | Path | None = None, task: str | None = None,
+              behaviours: Mapping[str, Behaviour] | None = None) -> Behaviour:
+    """The shipped behaviour a world is taught or evaluated for. Worlds name no task: a
+    behaviour names its worlds. The behaviours (default: the shipped ones) that name the world
+    ``name`` (its file at ``path``) among their teaching or held-out worlds; when several do,
+    those that drive from the world's own start poses (give no ``[starts]`` of their own for
+    it: the world's poses were drawn for them; ``room``'s for ``wall-following``, not for
+    ``left-wall``); when still several, or none, the one an old world file's ``task`` names (a
+    hint only, so that such files keep working). BehaviourError when none or several remain
+    (then ``--behaviour`` says which)."""
+    known = shipped() if behaviours is None else behaviours
+    naming = [b for b in known.values() if any(_names_world(w, name, path) for w in b.worlds)]
+    if len(naming) > 1:
+        own = [b for b in naming if not any(_names_world(w, name, path) for w in b.starts)]
+        naming = own or naming
+    if len(naming) != 1 and task is not None and task in known \
+            and (not naming or known[task] in naming):
+        return known[task]
+    if len(naming) == 1:
+        return naming[0]
+    if naming:
+        raise BehaviourError(f"world {name!r}: the behaviours {', '.join(b.name for b in naming)}"
+                             " name it: say which with --behaviour NAME|FILE")
+    raise BehaviourError(f"world {name!r}: no shipped behaviour names it: say which behaviour "
+                         "with --behaviour NAME|FILE")
