@@ -23,6 +23,7 @@ A behaviour file (docs/behaviours.md is the format with an example):
     held_out = ["eval-room-jagged", "eval-room-l"]
     [starts]                                # optional: start poses of a world, instead of its own
     room = [[3.0, 0.7, 0.0]]
+    guard = false                           # optional: no controller's guard (default true)
     [success]                               # every rule given must hold
     time-limit = { seconds = 120 }
     no-collision = {}
@@ -93,7 +94,7 @@ RULES: dict[str, dict[str, Any]] = {
 SIDES = ("right", "left")
 INPUTS = {"heading": "lr"}  # extra perception inputs -> FeatureSpec.heading
 _TOP = {"name", "summary", "perception", "instructions", "expert", "worlds", "starts", "success",
-        "recipe"}
+        "recipe", "guard"}
 _PERCEPTION = {"beams", "sectors", "window", "clamp", "scale", "fov", "inputs"}
 _WORLDS = {"teach", "held_out"}
 
@@ -152,6 +153,7 @@ class Behaviour:
     perception: str | None = None  # the shipped feature spec's name, None when inline
     recipe: dict[str, Any] = field(default_factory=dict, compare=False)
     path: Path | None = None
+    guard: bool = True  # the controller's guard (a safety layer) on for its trees; false: off
 
     @property
     def seconds(self) -> float:
@@ -378,10 +380,13 @@ def parse_behaviour(data: Any, source: str = "<behaviour>", path: Path | None = 
             raise _err(src, f"starts.{world}", f"a world the behaviour names "
                                                f"({', '.join(sorted(named))})", world)
     recipe = _table(src, "recipe", data.get("recipe", {}))
+    guard = data.get("guard", True)
+    if not isinstance(guard, bool):
+        raise _err(src, "guard", "true or false", guard)
     return Behaviour(name=name, summary=summary.strip(), features=features, expert_name=expert,
                      teach=teach, held_out=held_out, rules=_rules(src, data["success"]),
                      expert_params=params, starts=starts, instructions=instructions.strip(),
-                     perception=perception, recipe=dict(recipe), path=path)
+                     perception=perception, recipe=dict(recipe), path=path, guard=guard)
 
 
 def load_behaviour(path: str | Path) -> Behaviour:

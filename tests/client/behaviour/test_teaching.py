@@ -8,25 +8,19 @@ import pytest
 from client.behaviour.actions import DEFAULT_ACTIONS
 from client.behaviour.features import FEATURES
 from client.behaviour.learning import DemonstrationLearner, TreePolicy
+from client.behaviour.rule import PERSON, LearningRule
 from client.behaviour.teaching import (
-    LAG,
-    MAX_LAG,
-    PERSON_DEFAULTS,
     PersonLearner,
     answered_scan,
     estimate_lag,
-    majority_labels,
-    mean_actions,
-    median_actions,
-    median_turn_actions,
     nearest_votes,
     parse_lag,
     sided_actions,
-    trimmed_actions,
 )
 from rhbl import load
 
 NAMES = DEFAULT_ACTIONS.names
+LAG, MAX_LAG = PERSON.alignment.default, PERSON.alignment.max_lag
 
 
 def _scans(ids, jump_at=None):
@@ -64,67 +58,6 @@ def test_nearest_votes_counts_the_labels_of_the_k_nearest():
     assert nearest_votes(np.array([[0.5]]), X, y, 99, 3).tolist() == [[2.0, 1.0, 2.0]]
 
 
-def test_majority_outvotes_a_lone_label_and_a_tie_keeps_the_own():
-    X = np.linspace(0.0, 1.0, 11).reshape(-1, 1)
-    y = np.zeros(11, dtype=np.int64)
-    y[5] = 3  # one wrong key in the middle of a run
-    assert majority_labels(X, y, 5, 5).tolist() == [0] * 11
-    two = np.array([[0.0], [1.0]])
-    assert majority_labels(two, np.array([1, 2]), 2, 5).tolist() == [1, 2]
-
-
-def test_mean_action_of_left_and_right_steering_is_forward():
-    votes = np.zeros((3, 5))
-    i = {n: k for k, n in enumerate(NAMES)}
-    votes[0, [i["fwd-left"], i["fwd-right"]]] = 5
-    votes[1, i["rot-left"]] = 4
-    votes[1, i["fwd-left"]] = 1
-    votes[2, i["fwd-right"]] = 1
-    assert [NAMES[a] for a in mean_actions(votes, DEFAULT_ACTIONS)] == [
-        "fwd", "rot-left", "fwd-right"]
-
-
-def test_median_action_keeps_a_turn_a_minority_of_confused_keys_pulls_to_forward():
-    votes = np.zeros((3, 5))
-    i = {n: k for k, n in enumerate(NAMES)}
-    votes[0, i["fwd-right"]], votes[0, i["rot-left"]] = 6, 4     # left and right confused
-    votes[1, [i["fwd-left"], i["fwd-right"]]] = 5                 # zig-zag: forward
-    votes[2, i["rot-right"]], votes[2, i["fwd-left"]] = 6, 4
-    assert [NAMES[a] for a in median_actions(votes, DEFAULT_ACTIONS)] == [
-        "fwd-right", "fwd", "rot-right"]
-    # the mean averages the minority in: forward, forward, an arc
-    assert [NAMES[a] for a in mean_actions(votes, DEFAULT_ACTIONS)] == [
-        "fwd", "fwd", "fwd-right"]
-
-
-
-def test_median_turn_keeps_the_turn_of_the_median_and_the_pace_of_the_mean():
-    votes = np.zeros((2, 5))
-    i = {n: k for k, n in enumerate(NAMES)}
-    votes[0, i["fwd-right"]], votes[0, i["rot-left"]] = 6, 4     # left and right confused
-    votes[1, i["rot-left"]], votes[1, i["fwd"]] = 6, 4            # turning, often going on
-    assert [NAMES[a] for a in median_turn_actions(votes, DEFAULT_ACTIONS)] == [
-        "fwd-right", "fwd-left"]
-    # the median stops to rotate once half the keys were a rotation; the mean goes straight
-    assert [NAMES[a] for a in median_actions(votes, DEFAULT_ACTIONS)] == [
-        "fwd-right", "rot-left"]
-    assert [NAMES[a] for a in mean_actions(votes, DEFAULT_ACTIONS)] == ["fwd", "fwd-left"]
-
-
-def test_the_interquartile_mean_averages_a_zig_zag_and_keeps_a_confused_turn():
-    votes = np.zeros((4, 5))
-    i = {n: k for k, n in enumerate(NAMES)}
-    votes[0, i["fwd-right"]], votes[0, i["fwd-left"]] = 55, 45    # over-steering: forward
-    votes[1, i["fwd-right"]], votes[1, i["rot-left"]] = 6, 4      # left and right confused
-    votes[2, i["rot-left"]], votes[2, i["fwd"]] = 6, 4
-    votes[3, i["rot-right"]] = 3                                  # all agree
-    assert [NAMES[a] for a in trimmed_actions(votes, DEFAULT_ACTIONS)] == [
-        "fwd", "fwd-right", "fwd-left", "rot-right"]
-    # the median keeps the zig-zag's larger side; the mean lets the confusion pull to forward
-    assert NAMES[median_actions(votes[:1], DEFAULT_ACTIONS)[0]] == "fwd-right"
-    assert NAMES[mean_actions(votes[1:2], DEFAULT_ACTIONS)[0]] == "fwd"
-
-
 def test_the_sided_vote_keeps_a_tapped_turn_and_drops_a_confused_side():
     votes = np.zeros((5, 5))
     i = {n: k for k, n in enumerate(NAMES)}
@@ -136,8 +69,6 @@ def test_the_sided_vote_keeps_a_tapped_turn_and_drops_a_confused_side():
     votes[4, i["fwd"]], votes[4, i["rot-left"]], votes[4, i["rot-right"]] = 80, 8, 7
     assert [NAMES[a] for a in sided_actions(votes, DEFAULT_ACTIONS)] == [
         "fwd", "fwd-right", "fwd-right", "rot-right", "fwd"]
-    # the interquartile mean hears the tapped turn as forward
-    assert NAMES[trimmed_actions(votes[2:3], DEFAULT_ACTIONS)[0]] == "fwd"
     # two thirds: a side at least that heavy is kept (a zig-zag), a lighter one dropped
     edge = np.zeros((2, 5))
     edge[0, i["fwd-left"]], edge[0, i["fwd-right"]] = 3, 2
@@ -205,13 +136,16 @@ def test_person_learner_copies_are_seeded_and_the_tree_saves(tmp_path):
     assert a.classifier.tree_.equal(b.classifier.tree_)
     path = a.save(tmp_path / "person.rhbl")
     meta = load(path).metadata
-    assert meta["learning"] == {"rule": "person", "lag": None, "estimated_lag": LAG,
-                                "k": PERSON_DEFAULTS["k"],
-                                "copies": 2,
-                                "sigma": PERSON_DEFAULTS["sigma"], "vote": PERSON_DEFAULTS["vote"],
-                                "passes": PERSON_DEFAULTS["passes"],
-                                "build": PERSON_DEFAULTS["build"], "seed": 4}
+    learning = meta["learning"]
+    assert {k: learning[k] for k in ("rule", "lag", "estimated_lag", "k", "copies", "sigma",
+                                     "vote", "seed")} == {
+        "rule": "person", "lag": None, "estimated_lag": LAG, "k": PERSON.editing.k,
+        "copies": 2, "sigma": PERSON.editing.sigma, "vote": "sided", "seed": 4}
     assert meta["tree_params"]["spawn"] == "winner"
+    # the whole rule is in the metadata: read back, it is the rule the learner learned by
+    assert LearningRule.of(meta) == a.rule and a.rule.editing.copies == 2
+    assert learning["editing"]["method"] == "wilson-edited-knn"
+    assert learning["guard"]["clearance"] == PERSON.guard.clearance > 0
     assert meta["provenance"]["vectors"] == 80
 
 
@@ -220,7 +154,7 @@ def test_person_learner_rejects_bad_settings_and_labels():
         PersonLearner(FEATURES["wall"], k=0)
     with pytest.raises(ValueError, match="copies must be"):
         PersonLearner(FEATURES["wall"], copies=-1)
-    with pytest.raises(ValueError, match="vote must be one of 'majority', 'mean', 'median', 'median-turn', 'trimmed', 'sided'"):
+    with pytest.raises(TypeError, match="vote"):  # one vote: the rule's (studies: benchmarks)
         PersonLearner(FEATURES["wall"], vote="mode")
     person = PersonLearner(FEATURES["wall"])
     with pytest.raises(ValueError, match="'jump' is not an action"):
