@@ -249,6 +249,8 @@ class _Edited:
         nearest (and the new ones) voted again; returns them (indices into ``rows()``)."""
         old, oldq = self.n, 0 if self.Q is None else len(self.Q)
         n = len(X)
+        if self.votes is not None and n == old and len(Q) == oldq:
+            return np.zeros(0, np.int64)  # no label came
         self.tree = _kdtree(X)
         if old <= self.k or self.votes is None:  # a row's vote held every label: all again
             again = np.arange(n + len(Q))
