@@ -1,5 +1,6 @@
 """Learning from a person: the reaction lag, the neighbours' vote, the PersonLearner."""
 
+import dataclasses
 import types
 
 import numpy as np
@@ -251,3 +252,25 @@ def test_labelled_gives_the_labels_as_given_with_their_earlier_scans():
     fixed = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, lag=2)
     fixed.observe_vector(x, "fwd")
     assert fixed.labelled()[0].shape == (1, 1, len(x))
+
+
+@pytest.mark.parametrize("lag", [2, None])
+def test_the_tree_kept_up_to_date_label_by_label_is_the_tree_built_at_once(lag):
+    """Live (the tree asked for after every few labels: only the votes a new label enters are
+    taken again) and at once (every vote): the same training set and the same tree."""
+    W, y = _delayed_labels(4, n=700)
+    rule = PERSON if lag is not None else PERSON.replace(
+        alignment=dataclasses.replace(PERSON.alignment, regrow=0.0))  # the lag: every build
+    live = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, rule=rule, lag=lag, k=10)
+    once = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, rule=rule, lag=lag, k=10)
+    for t, (w, label) in enumerate(zip(W, y, strict=True)):
+        for learner in (live, once):
+            if lag is None:
+                learner.observe_vector(w[0], NAMES[label], earlier=w[1:])
+            else:
+                learner.observe_vector(w[lag], NAMES[label])
+        if t % 7 == 0 or t in (9, 10, 11, 12):
+            _ = live.classifier
+    a, b = live.training_set(), once.training_set()
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    assert live.classifier.tree_.equal(once.classifier.tree_)
