@@ -12,7 +12,11 @@ the tree (docs/teaching.md has the study behind each part):
   ``k`` nearest labels vote for (``client.behaviour.teaching.sided_actions``), and for
   ``copies`` jittered copies of it the vote at their place. None: each label is learned as it
   arrives (the paper's rule).
-* ``tree``: the hypersphere tree's parameters (``rhbl.HypersphereClassifier``: spawn, ...).
+* ``tree``: the hypersphere tree's parameters (``rhbl.HypersphereClassifier``: spawn, ...),
+  learned from every edited vector in an order shuffled with ``seed``; past ``extend_above``
+  vectors (10,000 labels with their copies: 17 minutes of teaching) the tree is extended with
+  the vectors new or voted otherwise, and learned again at once when they grew by the
+  alignment's ``regrow`` (None: always learned again at once).
 * ``stride``, ``min_delta``: the paper's rule's sample selection (``DemonstrationLearner``).
 * ``guard`` (``GuardSettings``): the controller's safety layer (``client.behaviour.guard``):
   a hysteresis on the direction of rotation (no rotation reversed at once) and a path check
@@ -147,9 +151,14 @@ class LearningRule:
     min_delta: float = 0.0
     guard: GuardSettings = GuardSettings()
     seed: int = 0
+    extend_above: int | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "tree", dict(self.tree))
+        if self.extend_above is not None and not (isinstance(self.extend_above, int)
+                                                  and self.extend_above >= 0):
+            raise ValueError(f"extend_above must be None or an integer >= 0 (vectors), got "
+                             f"{self.extend_above!r}")
         if (self.editing is None) != (self.alignment is None):
             raise ValueError("a rule edits its labels by their neighbours and aligns them with "
                              "the reaction lag together, or neither")
@@ -159,7 +168,7 @@ class LearningRule:
 
     def __hash__(self):
         return hash((self.name, self.alignment, self.editing, tuple(sorted(self.tree.items())),
-                     self.stride, self.min_delta, self.guard, self.seed))
+                     self.stride, self.min_delta, self.guard, self.seed, self.extend_above))
 
     @property
     def person(self) -> bool:
@@ -186,7 +195,7 @@ class LearningRule:
             a, e = self.alignment, self.editing
             # the flat keys readers of the earlier metadata know (lag, k, copies, sigma, vote)
             out.update(lag=a.lag, k=e.k, copies=e.copies, sigma=e.sigma, vote="sided",
-                       alignment=dataclasses.asdict(a),
+                       extend_above=self.extend_above, alignment=dataclasses.asdict(a),
                        editing={"method": EDITING_METHOD, **dataclasses.asdict(e)})
         else:
             out.update(stride=self.stride, min_delta=self.min_delta)
@@ -226,13 +235,15 @@ class LearningRule:
         except TypeError as exc:  # a field this version does not know
             raise ValueError(f"the metadata's learning rule is not one this version reads: "
                              f"{exc}") from None
+        extend = learning.get("extend_above", base.extend_above)
         return dataclasses.replace(base, alignment=alignment, editing=editing,
-                                   tree=tree or base.tree, guard=guard, seed=seed)
+                                   tree=tree or base.tree, guard=guard, seed=seed,
+                                   extend_above=None if extend is None else int(extend))
 
 
 # The rules, chosen here (docs/teaching.md, "The learning rule", has the study behind them).
 PERSON = LearningRule("person", alignment=ReactionAlignment(), editing=NeighbourEditing(),
-                      guard=GuardSettings(clearance=0.3))
+                      guard=GuardSettings(clearance=0.3), extend_above=20000)
 SCRIPT = LearningRule("script")  # the paper's: each label learned as it arrives; the loop guard
 
 

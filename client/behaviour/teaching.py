@@ -250,10 +250,12 @@ class _Edited:
         old, oldq = self.n, 0 if self.Q is None else len(self.Q)
         n = len(X)
         if self.votes is not None and n == old and len(Q) == oldq:
-            return np.zeros(0, np.int64)  # no label came
+            self.changed, self.fresh = np.zeros(0, np.int64), False
+            return self.changed  # no label came
         self.tree = _kdtree(X)
         if old <= self.k or self.votes is None:  # a row's vote held every label: all again
             again = np.arange(n + len(Q))
+            self.fresh = True
         else:
             new = X[old:]
             rows = self.rows()
@@ -263,6 +265,7 @@ class _Edited:
                 d2 = (np.einsum("ij,ij->i", rows, rows)[:, None]
                       + np.einsum("ij,ij->i", part, part)[None, :] - 2.0 * rows @ part.T)
                 near |= (d2 <= (self.radius[:, None] ** 2) * (1 + 1e-9) + 1e-12).any(axis=1)
+            self.fresh = False
             again = np.concatenate([np.flatnonzero(near[:old]),
                                     np.arange(old, n),
                                     n + np.flatnonzero(near[old:old + oldq]),
@@ -284,7 +287,13 @@ class _Edited:
             d, nn = _neighbours(self.tree, rows[again], self.k, n)
             self.votes[again] = _counts(nn, y, self.n_actions)
             self.radius[again] = d[:, -1]
+            before = self.labels[again].copy()
+            before[(again >= old) & (again < n)] = -1  # new labels' rows
+            before[again >= n + oldq] = -1  # new copies' rows
             self.labels[again] = self.edit(self.votes[again])
+            self.changed = again[self.labels[again] != before]  # new, or voted otherwise
+        else:
+            self.changed = again
         return again
 
 
@@ -336,6 +345,9 @@ class PersonLearner(DemonstrationLearner):
         self._rng = np.random.default_rng(rule.seed)  # has drawn exactly ``_noise``
         self._estimate: tuple[int, int, list[float]] | None = None  # (labels, lag, agreement)
         self._edited: _Edited | None = None
+        self._whole: int | None = None  # the vectors the tree was last learned from at once
+        self._pending: list = []  # (labels, copies) new or voted otherwise since the last tree
+        self._stale = True  # every vote was taken again since the last tree
         self._clf = None
         self._built = -1
         super().__init__(features, actions, task=task, parent=parent, provenance=provenance,
@@ -453,6 +465,10 @@ class PersonLearner(DemonstrationLearner):
             self._edited = _Edited(lag, self.k, len(self.actions), self._edit)  # all again
         ed = self._edited
         ed.update(X, self._copies(X), y)
+        # what the tree has not learned yet, for ``_build`` (labels' and copies' own indices:
+        # a row's index in ``rows()`` moves as labels come)
+        self._stale |= ed.fresh
+        self._pending.append((ed.changed[ed.changed < ed.n], ed.changed[ed.changed >= ed.n] - ed.n))
         return ed.rows(), ed.labels
 
     def training_set(self) -> tuple[np.ndarray, np.ndarray]:
@@ -466,13 +482,32 @@ class PersonLearner(DemonstrationLearner):
         return rows[order], labels[order]
 
     def _build(self):
-        """The tree of ``training_set``, learned in its order."""
+        """The tree of ``training_set``, learned in its order; past the rule's
+        ``extend_above`` vectors, the tree so far (a copy) extended with the vectors new or
+        voted otherwise since (in an order shuffled with the seed), learned again from every
+        vector once they grew by the alignment's ``regrow`` since it last was (or every vote
+        was taken again)."""
         from rhbl import HypersphereClassifier
 
-        clf = HypersphereClassifier(**{"default_label": self.actions.names[0], **self.tree_params})
-        X, y = self.training_set()
-        if len(y):
-            clf.partial_fit(X, np.array(self.actions.names)[y])
+        names = np.array(self.actions.names)
+        if self._n == 0:
+            return HypersphereClassifier(**{"default_label": names[0], **self.tree_params})
+        rows, labels = self._update()
+        ext, n = self.rule.extend_above, self._edited.n
+        todo = np.unique(np.concatenate([np.concatenate([x, n + q]) for x, q in self._pending]))
+        stale, self._stale, self._pending = self._stale, False, []
+        if (ext is not None and self._clf is not None and self._whole is not None
+                and not stale and len(labels) >= ext
+                and len(labels) < self._whole * (1.0 + self.rule.alignment.regrow)):
+            clf = copy.deepcopy(self._clf)  # (a tree handed out before stays as it was)
+            todo = todo[copy.deepcopy(self._rng).permutation(len(todo))]
+            if len(todo):
+                clf.partial_fit(rows[todo], names[labels[todo]])
+            return clf
+        clf = HypersphereClassifier(**{"default_label": names[0], **self.tree_params})
+        order = copy.deepcopy(self._rng).permutation(len(labels))
+        clf.partial_fit(rows[order], names[labels[order]])
+        self._whole = len(labels)
         return clf
 
     def metadata(self) -> dict:

@@ -274,3 +274,24 @@ def test_the_tree_kept_up_to_date_label_by_label_is_the_tree_built_at_once(lag):
     a, b = live.training_set(), once.training_set()
     assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
     assert live.classifier.tree_.equal(once.classifier.tree_)
+
+
+def test_past_extend_above_the_tree_is_extended_and_learned_again_at_each_growth():
+    """A long session (``extend_above``: here from the first vector): the tree so far is
+    extended with what is new or voted otherwise (a tree handed out stays as it was), and it is
+    learned again at once when the vectors grew by the alignment's ``regrow``."""
+    rng = np.random.default_rng(2)
+    rule = PERSON.replace(extend_above=0, lag=0)
+    learner = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, rule=rule, k=5, copies=0)
+    learner.observe_vectors(rng.uniform(0.1, 0.4, (400, 5)), ["fwd"] * 400)
+    first = learner.classifier
+    assert learner._whole == 400  # the first tree: learned at once
+    corner = rng.uniform(0.8, 0.9, (20, 5))  # a place nobody showed before, one key
+    learner.observe_vectors(corner, ["rot-left"] * 20)
+    second = learner.classifier
+    assert second is not first and learner._whole == 400  # extended, not learned again
+    assert set(map(str, second.predict(corner))) == {"rot-left"}
+    assert set(map(str, first.predict(corner))) == {"fwd"}  # handed out before: as it was
+    learner.observe_vectors(rng.uniform(0.1, 0.4, (40, 5)), ["fwd"] * 40)  # 460 >= 400 * 1.125
+    _ = learner.classifier
+    assert learner._whole == 460  # grown by an eighth: learned again at once
