@@ -8,10 +8,12 @@ person rule (``client.behaviour.rule.PERSON``: the lag estimated, the sided vote
 neighbours, one jittered copy a label) is given the labels one by one, as ``rhbl learner``
 is; at each size it is brought up to date, then for each of ``--repeat`` new labels the time
 until ``learner.classifier`` is the tree with that label (what the next snapshot publishes:
-only the votes the new label enters, then the tree learned again), its median and worst;
-the same for ``--batch`` labels at once (a snapshot every 2 s at 10 Hz: 20); of it the tree's
-learning alone; the lag estimate (made again once the labels grew by an eighth); the whole
-rebuild with the kd-tree (a restart's recovery, or a new lag) and the rebuild of before
+only the votes the new label enters, then the tree extended with what changed, past the
+rule's ``extend_above`` vectors, else learned again at once), its median and worst, and its
+CPU time; the same for ``--batch`` labels at once (a snapshot every 2 s at 10 Hz: 20); the
+tree learned again at once from every vector and the lag estimate (both made again each time
+the labels grew by an eighth); the whole rebuild with the kd-tree (a restart's recovery, or a
+new lag) and the rebuild of before
 (every vote again by numpy's brute-force search, as the learner did at every snapshot:
 ``--old-max`` caps the sizes it runs at); the tree's nodes; the process's resident memory and
 the learner's own arrays.
@@ -143,7 +145,7 @@ def main(argv=None) -> int:
     print(f"a person's tree reflecting new labels (the person rule: k={PERSON.editing.k}, "
           f"sided vote, {PERSON.editing.copies} jittered copy a label, lag estimated over "
           f"0..{PERSON.alignment.max_lag}), seconds:")
-    print("| labels | a new label: median | worst | median CPU | of it the tree | "
+    print("| labels | a new label: median | worst | median CPU | tree learned at once | "
           f"{args.batch} new labels | lag estimate | whole rebuild (kd-tree) | "
           "rebuild of before (brute force) | before / now | tree nodes | RSS MB | learner MB |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
