@@ -193,6 +193,17 @@ def estimate_lag(W: np.ndarray, y: np.ndarray, k: int, n_labels: int, block: int
     smoothed over neighbouring lags (weights 1/4, 1/2, 1/4) and ties go to the shorter lag.
     More than ``decisions`` decisions: that many of them, evenly spread over the session, are
     answered. Deterministic: a function of ``W`` and ``y`` only."""
+    raw = [agreement_at(W, y, lag, k, n_labels, block, folds, decisions)
+           for lag in range(W.shape[1])]
+    return smoothed_lag(raw)
+
+
+def agreement_at(W: np.ndarray, y: np.ndarray, lag: int, k: int, n_labels: int,
+                  block: int = 50, folds: int = 5,
+                  decisions: int = PERSON.alignment.max_decisions) -> float:
+    """``estimate_lag``'s raw agreement at one ``lag``: the share of the decisions the
+    majority of their ``k`` nearest labels of the other folds answers (a kd-tree per fold, the
+    ``k`` nearest of the other folds' merged)."""
     n = len(y)
     fold = (np.arange(n) // block) % folds
     change = y[1:] != y[:-1]
@@ -200,27 +211,30 @@ def estimate_lag(W: np.ndarray, y: np.ndarray, k: int, n_labels: int, block: int
     if len(q) > decisions:
         q = q[np.linspace(0, len(q) - 1, decisions).round().astype(np.int64)]
     members = [np.flatnonzero(fold == f) for f in range(folds)]
-    raw = []
-    for lag in range(W.shape[1]):
-        X = np.ascontiguousarray(W[:, lag])
-        trees = [_kdtree(X[m]) if len(m) else None for m in members]
-        hit = 0
-        for f in range(folds):
-            qi = q[fold[q] == f]
-            others = [g for g in range(folds) if g != f and trees[g] is not None]
-            if not len(qi) or not others:
-                continue
-            d_all, i_all = [], []
-            for g in others:
-                d, i = _neighbours(trees[g], X[qi], k, len(members[g]))
-                d_all.append(d)
-                i_all.append(members[g][i])
-            d, i = np.concatenate(d_all, axis=1), np.concatenate(i_all, axis=1)
-            kk = min(k, d.shape[1])
-            nn = np.take_along_axis(i, np.argsort(d, axis=1, kind="stable")[:, :kk], axis=1)
-            hit += int((_counts(nn, y, n_labels).argmax(axis=1) == y[qi]).sum())
-        raw.append(hit / max(1, len(q)))
-    a = np.array(raw)
+    X = np.ascontiguousarray(W[:, lag])
+    trees = [_kdtree(X[m]) if len(m) else None for m in members]
+    hit = 0
+    for f in range(folds):
+        qi = q[fold[q] == f]
+        others = [g for g in range(folds) if g != f and trees[g] is not None]
+        if not len(qi) or not others:
+            continue
+        d_all, i_all = [], []
+        for g in others:
+            d, i = _neighbours(trees[g], X[qi], k, len(members[g]))
+            d_all.append(d)
+            i_all.append(members[g][i])
+        d, i = np.concatenate(d_all, axis=1), np.concatenate(i_all, axis=1)
+        kk = min(k, d.shape[1])
+        nn = np.take_along_axis(i, np.argsort(d, axis=1, kind="stable")[:, :kk], axis=1)
+        hit += int((_counts(nn, y, n_labels).argmax(axis=1) == y[qi]).sum())
+    return hit / max(1, len(q))
+
+
+def smoothed_lag(raw) -> tuple[int, list[float]]:
+    """The lag of the best agreement ``raw`` (one per lag 0..) smoothed over neighbouring
+    lags (1/4, 1/2, 1/4; ties to the shorter lag), and the smoothed agreement."""
+    a = np.array(raw, dtype=np.float64)
     smooth = 0.5 * a + 0.25 * np.r_[a[:1], a[:-1]] + 0.25 * np.r_[a[1:], a[-1:]]
     return int(np.argmax(smooth)), [float(v) for v in smooth]
 
@@ -344,6 +358,7 @@ class PersonLearner(DemonstrationLearner):
         self._noise = np.zeros((0, features.dim))  # the copies' noise, drawn as labels come
         self._rng = np.random.default_rng(rule.seed)  # has drawn exactly ``_noise``
         self._estimate: tuple[int, int, list[float]] | None = None  # (labels, lag, agreement)
+        self._work: tuple[int, list[float]] | None = None  # an estimate under way (labels, raw)
         self._edited: _Edited | None = None
         self._whole: int | None = None  # the vectors the tree was last learned from at once
         self._pending: list = []  # (labels, copies) new or voted otherwise since the last tree
@@ -409,20 +424,42 @@ class PersonLearner(DemonstrationLearner):
     def estimated_lag(self) -> int:
         """The lag the tree is built with: fixed, or estimated from the labels (``estimate_lag``
         over lags 0..max_lag; the rule's default below its ``min_labels`` labels; estimated
-        again once the labels grew by its ``regrow`` since the last estimate)."""
+        again once the labels grew by its ``regrow`` since the last estimate: past the rule's
+        ``extend_above`` vectors one lag's agreement at each build, the lag so far meanwhile,
+        so that no build waits for a whole estimate)."""
         if self.lag is not None:
             return self.lag
+        self._estimating(all_at_once=not self._long())
+        return self._estimate[1]
+
+    def _long(self) -> bool:
+        """Past the rule's ``extend_above`` vectors (labels and copies)."""
+        ext = self.rule.extend_above
+        return ext is not None and self._n * (1 + self.copies) >= ext
+
+    def _estimating(self, all_at_once: bool, step: bool = False) -> None:
+        """Bring the lag estimate up to date: all at once, or (``step``) one more lag's
+        agreement of an estimate begun at the labels there were then."""
         a, n = self.rule.alignment, self._n
         last = self._estimate
         if n < a.min_labels:
             if last is None or last[0] != n:
                 self._estimate = (n, a.default, [])
-        elif (last is None or last[0] < a.min_labels
-              or (n != last[0] and n >= last[0] * (1.0 + a.regrow))):
-            lag, agree = estimate_lag(self._W[:n], self._y[:n], self.k, len(self.actions),
-                                      block=a.block, folds=a.folds, decisions=a.max_decisions)
-            self._estimate = (n, lag, agree)
-        return self._estimate[1]
+            return
+        first = last is None or last[0] < a.min_labels
+        if self._work is None and (first or (n != last[0] and n >= last[0] * (1.0 + a.regrow))):
+            self._work = (n, [])  # an estimate begun at n labels
+        if self._work is None or not (all_at_once or first or step):
+            return
+        n0, raw = self._work
+        while len(raw) < self._lags:
+            raw.append(agreement_at(self._W[:n0], self._y[:n0], len(raw), self.k,
+                                     len(self.actions), a.block, a.folds, a.max_decisions))
+            if not (all_at_once or first):
+                break  # one lag a build
+        if len(raw) == self._lags:
+            self._estimate = (n0, *smoothed_lag(raw))
+            self._work = None
 
     @property
     def lag_agreement(self) -> list[float]:
@@ -458,6 +495,8 @@ class PersonLearner(DemonstrationLearner):
 
     def _update(self) -> tuple[np.ndarray, np.ndarray]:
         """The training set, votes brought up to date (``_Edited``): (rows, edited labels)."""
+        if self.lag is None:
+            self._estimating(all_at_once=not self._long(), step=True)
         X = self._vectors()
         y = self._y[:self._n]
         lag = self.estimated_lag

@@ -295,3 +295,25 @@ def test_past_extend_above_the_tree_is_extended_and_learned_again_at_each_growth
     learner.observe_vectors(rng.uniform(0.1, 0.4, (40, 5)), ["fwd"] * 40)  # 460 >= 400 * 1.125
     _ = learner.classifier
     assert learner._whole == 460  # grown by an eighth: learned again at once
+
+
+def test_a_long_sessions_lag_is_estimated_again_one_lag_a_build():
+    """Past ``extend_above`` no build waits for a whole estimate: each computes one lag's
+    agreement of the estimate begun when the labels had grown by ``regrow``; the lag so far
+    meanwhile, the estimate's lag once every lag is done (the same as at once)."""
+    W, y = _delayed_labels(4, n=1200)
+    rule = PERSON.replace(extend_above=0)
+    learner = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, rule=rule, k=5)
+    for w, label in zip(W[:1000], y[:1000], strict=True):
+        learner.observe_vector(w[0], NAMES[label], earlier=w[1:])
+    assert learner.estimated_lag == 4  # the first estimate: at once
+    for w, label in zip(W[1000:], y[1000:], strict=True):  # grown by a fifth
+        learner.observe_vector(w[0], NAMES[label], earlier=w[1:])
+    steps = 0
+    while learner._work is not None or steps == 0:
+        learner.observe_vector(W[-1, 0], NAMES[y[-1]], earlier=W[-1, 1:])  # a label, a build
+        _ = learner.classifier
+        steps += 1
+    assert steps == MAX_LAG + 1 and learner._estimate[0] == 1201  # begun at the first build
+    at_once = estimate_lag(np.concatenate([W, W[-1:]]), np.r_[y, y[-1]], k=5, n_labels=5)
+    assert (learner.estimated_lag, learner.lag_agreement) == at_once
