@@ -11,8 +11,10 @@ until ``learner.classifier`` is the tree with that label (what the next snapshot
 only the votes the new label enters, then the tree extended with what changed, past the
 rule's ``extend_above`` vectors, else learned again at once), its median and worst, and its
 CPU time; the same for ``--batch`` labels at once (a snapshot every 2 s at 10 Hz: 20); the
-tree learned again at once from every vector and the lag estimate (both made again each time
-the labels grew by an eighth); the whole rebuild with the kd-tree (a restart's recovery, or a
+tree learned again at once from every vector; a new label at a growth point (past
+``extend_above``, once the labels grew by an eighth: the tree learned again at once and one
+lag's agreement of the lag estimated again); the whole lag estimate (at once below
+``extend_above``); the whole rebuild with the kd-tree (a restart's recovery, or a
 new lag) and the rebuild of before
 (every vote again by numpy's brute-force search, as the learner did at every snapshot:
 ``--old-max`` caps the sizes it runs at); the tree's nodes; the process's resident memory and
@@ -146,9 +148,10 @@ def main(argv=None) -> int:
           f"sided vote, {PERSON.editing.copies} jittered copy a label, lag estimated over "
           f"0..{PERSON.alignment.max_lag}), seconds:")
     print("| labels | a new label: median | worst | median CPU | tree learned at once | "
-          f"{args.batch} new labels | lag estimate | whole rebuild (kd-tree) | "
+          f"{args.batch} new labels | a growth point's label | lag estimate | "
+          "whole rebuild (kd-tree) | "
           "rebuild of before (brute force) | before / now | tree nodes | RSS MB | learner MB |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     live = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS)
     have = 0
     for n in sizes:
@@ -165,6 +168,13 @@ def main(argv=None) -> int:
         feed(probe, W, y, have, have + args.batch)
         batch_s = timed(lambda p=probe: p.classifier)[0]
         del probe
+        growth = "-"
+        if live._long():  # a build at a growth point: the tree learned again at once, and
+            probe = copy.deepcopy(live)  # one lag's agreement of the estimate begun
+            probe._whole, probe._work = 1, (have, [])
+            feed(probe, W, y, have, have + 1)
+            growth = f"{timed(lambda p=probe: p.classifier)[0]:.3f}"
+            del probe
         Wn, yn = live._W[:have], live._y[:have]
         lag_s = timed(lambda Wn=Wn, yn=yn: estimate_lag(Wn, yn, PERSON.editing.k,
                                                         len(DEFAULT_ACTIONS)))[0]
@@ -175,7 +185,7 @@ def main(argv=None) -> int:
             old_s, _ = full_rebuild(W, y, n, brute=True)
             old, ratio = f"{old_s:.3f}", f"{old_s / np.median(one):.0f}x"
         print(f"| {n} | {np.median(one):.3f} | {max(one):.3f} | {np.median(cpu):.3f} | "
-              f"{tree_s:.3f} | {batch_s:.3f} | "
+              f"{tree_s:.3f} | {batch_s:.3f} | {growth} | "
               f"{lag_s:.3f} | {whole_s:.3f} | {old} | {ratio} | {nodes} | {rss_mb():.0f} | "
               f"{learner_mb(live):.1f} |", flush=True)
     return 0
