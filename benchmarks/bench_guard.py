@@ -9,7 +9,7 @@ seed ``i`` and evaluates the tree, then the same tree through the guard, from ev
 of the training world and of the task's eval worlds. Printed per world: success mean (min over
 trials), loops and collisions, without and with the guard, and how many rotation reversals the
 guard overruled. The guard's path check is ``rhbl controller``'s default for these trees
-(``clearance_for``: off for the scripted teacher's) unless ``--clearance M`` forces it.
+(``settings_for``: the tree's rule's, off for the scripted teacher's) unless ``--clearance M`` forces it.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import json
 import time
 from pathlib import Path
 
-from client.behaviour.guard import RotationGuard, clearance_for
+from client.behaviour.guard import RotationGuard, settings_for
 from client.behaviour.learning import TreePolicy
 from lab.evaluate import evaluate
 from lab.experiment import default_eval_worlds
@@ -37,7 +37,7 @@ def trial(task: str, seed: int, worlds, clearance: float | None = None) -> dict:
     for w in worlds:
         spec = resolve_world(w)
         row = {}
-        guard = RotationGuard(tree, clearance=(clearance_for(tree.metadata) if clearance is None
+        guard = RotationGuard(tree, clearance=(settings_for(tree.metadata).clearance if clearance is None
                                                else clearance))
         for name, policy in (("plain", tree), ("guard", guard)):
             rep = evaluate(spec, policy, seed=seed)

@@ -30,12 +30,10 @@ sys.path.insert(0, str(ROOT))
 
 from client.behaviour.actions import DEFAULT_ACTIONS  # noqa: E402
 from client.behaviour.features import FEATURES  # noqa: E402
-from client.behaviour.teaching import (  # noqa: E402
-    MAX_LAG,
-    PERSON_DEFAULTS,
-    PersonLearner,
-    estimate_lag,
-)
+from client.behaviour.rule import PERSON  # noqa: E402
+from client.behaviour.teaching import PersonLearner, estimate_lag  # noqa: E402
+
+MAX_LAG = PERSON.alignment.max_lag
 
 
 def demonstration(n: int, wrong: float = 0.12, seed: int = 0):
@@ -103,11 +101,11 @@ def main(argv=None) -> int:
         KNeighborsClassifier = None
     from rhbl import HypersphereClassifier
 
-    k, n_actions = PERSON_DEFAULTS["k"], len(DEFAULT_ACTIONS)
+    k, n_actions = PERSON.editing.k, len(DEFAULT_ACTIONS)
     names = np.array(DEFAULT_ACTIONS.names)
     W_all, y_all = demonstration(max(sizes))
-    print(f"the person rule's rebuild (k={k}, {PERSON_DEFAULTS['vote']} vote, jittered copies "
-          f"a label: {PERSON_DEFAULTS['copies']}, lag estimated over 0..{MAX_LAG}), best of "
+    print(f"the person rule's rebuild (k={k}, sided vote, jittered copies "
+          f"a label: {PERSON.editing.copies}, lag estimated over 0..{MAX_LAG}), best of "
           f"{args.repeat}, seconds:")
     print("| labels | decisions | lag estimate | ... every decision answered (once) | "
           "vote (rhbl) | neighbours (scikit-learn kd-tree) | tree | rebuild | tree nodes |")

@@ -57,9 +57,10 @@ from people import DEV, FRESH, HELD_OUT, PEOPLE, View  # noqa: E402
 
 from client.behaviour.actions import DEFAULT_ACTIONS  # noqa: E402
 from client.behaviour.features import FEATURES  # noqa: E402
-from client.behaviour.guard import CLEARANCE, RotationGuard  # noqa: E402
+from client.behaviour.guard import RotationGuard  # noqa: E402
 from client.behaviour.learning import DemonstrationLearner, TreePolicy  # noqa: E402
-from client.behaviour.teaching import MAX_LAG, PersonLearner, answered_scan  # noqa: E402
+from client.behaviour.rule import PERSON  # noqa: E402
+from client.behaviour.teaching import PersonLearner, answered_scan  # noqa: E402
 from lab import metrics  # noqa: E402
 from lab.episode import DT, Episode  # noqa: E402
 from lab.evaluate import evaluate, success  # noqa: E402
@@ -115,6 +116,11 @@ class Method:
     def learner(self, task: str = "wall-following") -> DemonstrationLearner:
         spec = FEATURES["wall"]  # the features of both tasks' recipes (lab.recipe.RECIPES)
         if self.name == "person":
+            if "vote" in self.options:  # a study's vote (benchmarks/study_votes.py)
+                from study_votes import StudyLearner
+
+                return StudyLearner(spec, DEFAULT_ACTIONS, task=task, lag=self.lag,
+                                    **self.options)
             return PersonLearner(spec, DEFAULT_ACTIONS, task=task, lag=self.lag, **self.options)
         spawn = "all" if self.name == "literal" else "winner"
         return DemonstrationLearner(spec, DEFAULT_ACTIONS, task=task, spawn=spawn,
@@ -152,7 +158,7 @@ def snapshot(learner: DemonstrationLearner) -> TreePolicy | None:
 def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float = 120.0,
           seed: int = 0, latency: float = 0.03, refresh: float = 2.0, guard: bool = False,
           restarts: tuple[float, float] = (0.0, 0.0), where: str = "starts",
-          clearance: float = CLEARANCE,
+          clearance: float = PERSON.guard.clearance,
           straight: bool = True) -> tuple[Session, DemonstrationLearner]:
     """One session (see the module's docstring). ``guard``: the controller drives through a
     ``RotationGuard`` (``clearance``: its path check, 0 off; ``straight``: an overruled
@@ -206,7 +212,7 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
             if method.lag is None:  # the label's own scan, and the scans before it
                 ranges, odom, _ = scans[shown]
                 earlier = []
-                for lag in range(1, MAX_LAG + 1):
+                for lag in range(1, PERSON.alignment.max_lag + 1):
                     sid = answered_scan(shown, scans, lag, pose=lambda s: s[2])
                     if sid == shown:
                         break
@@ -332,7 +338,7 @@ def _guard_name(clearance: float, straight: bool) -> str:
 def run_one(model: str, seed: int, method: str, worlds, *, demo: float = 240.0,
             correct: float = 120.0, latency: float = 0.03, guard: bool = False,
             restarts: tuple[float, float] = (0.0, 0.0), where: str = "starts",
-            clearance: float = CLEARANCE, straight: bool = True, bare: bool = False) -> dict:
+            clearance: float = PERSON.guard.clearance, straight: bool = True, bare: bool = False) -> dict:
     """One person model, one seed, one method: teach, then evaluate (``bare``, with ``guard``:
     also the tree alone, as ``rhbl evaluate`` and ``rhbl experiment`` judge it: ``"bare"``)."""
     t0 = time.perf_counter()
@@ -452,10 +458,10 @@ def main(argv=None) -> int:
     ap.add_argument("--guard", action="store_true",
                     help="the controller (and the evaluation) drive the tree through "
                          "client.behaviour.guard.RotationGuard")
-    ap.add_argument("--clearance", type=float, default=CLEARANCE, metavar="M",
+    ap.add_argument("--clearance", type=float, default=PERSON.guard.clearance, metavar="M",
                     help="with --guard: its path check (RotationGuard(clearance=M)): a forward "
                          "order with a laser return within 0.5 m ahead and M m of the centre "
-                         f"line becomes a rotation in place (default {CLEARANCE:g}, as rhbl "
+                         f"line becomes a rotation in place (default {PERSON.guard.clearance:g}, as rhbl "
                          "controller; 0: off)")
     ap.add_argument("--guard-straight", action=argparse.BooleanOptionalAction, default=True,
                     help="with --guard and a clearance: an overruled reversal drives straight "

@@ -8,9 +8,10 @@ of a session (``bench_teach.py``'s ``tree.rhbl``: the labels it holds, as a rest
 ``rhbl learner`` recovers them, withdrawn ones left out) or from an in-process session of the
 teaching study (``model:seed``: ``bench_teach_study.teach`` with the default learner and the
 guard, deterministic). Every method (``bench_teach_study.make_method``'s syntax:
-``person``, ``person:k=25``, ``person:vote=median``) learns each session's labels again, once per
-shuffle seed (``PersonLearner(seed=...)``: the order the tree learns its vectors in), and the
-tree is evaluated through the controller's guard (path check on) from every start pose of
+``person``, ``person:k=25``, ``person:vote=median``: ``study_votes.StudyLearner``) learns each
+session's labels again, once per shuffle seed (``PersonLearner(seed=...)``: the order the tree
+learns its vectors in), and the tree is evaluated through the controller's guard (the rule's:
+path check on) from every start pose of
 ``--worlds`` (the first: the taught room). Corrections were given while the session's own tree
 drove; here they are labels like the others.
 
@@ -41,7 +42,7 @@ from bench_teach import UNSEEN, parse_seeds  # noqa: E402
 from bench_teach_study import make_method, teach  # noqa: E402
 from people import PEOPLE  # noqa: E402
 
-from client.behaviour.guard import CLEARANCE, RotationGuard  # noqa: E402
+from client.behaviour.guard import RotationGuard, settings_for  # noqa: E402
 from client.behaviour.learning import TreePolicy  # noqa: E402
 from client.journal import journal_path  # noqa: E402
 from client.lineage import Lineage  # noqa: E402
@@ -130,7 +131,8 @@ def main(argv=None) -> int:
             for shuffle in shuffles:
                 t0 = time.perf_counter()
                 learner = learn_again(method, W, labels, shuffle)
-                policy = RotationGuard(TreePolicy.from_learner(learner), clearance=CLEARANCE)
+                tree = TreePolicy.from_learner(learner)  # through its rule's guard
+                policy = RotationGuard.of(settings_for(tree.metadata), tree)
                 res = {}
                 for w in worlds:
                     rep = evaluate(resolve_world(w), policy)

@@ -6,7 +6,9 @@ is learned (``client.journal``), the snapshot written atomically that records ho
 records it includes, the recovery of a killed learner (last snapshot + the journal records after
 it), the labels held (``LabelSet``: deduplication and acknowledgements), the teachers'
 withdrawals (tombstones; the tree rebuilt without their labels) and the rule checks of a new
-lineage (``--teacher``, ``--lag``, ``--vote``, ``--resume``, ``--fold-journal``). The process
+lineage (``--teacher``, ``--lag``, ``--resume``, ``--fold-journal``). The learning rule is
+``client.behaviour.rule``'s (``rule_for``), kept in the journal's header and every snapshot;
+a recovered lineage learns by the rule its header records (``LearningRule.of``). The process
 around it (session, pairing, publishing, stats) is ``client.roles.learner``.
 """
 
@@ -29,8 +31,9 @@ from client.behaviour.learning import (
     check_compatible,
     load_snapshot,
 )
+from client.behaviour.rule import PERSON, LearningRule, rule_for
 from client.behaviour.tasks import task_of_features
-from client.behaviour.teaching import MAX_LAG, PERSON_RULE, VOTES, PersonLearner
+from client.behaviour.teaching import PersonLearner
 from client.journal import (
     Journal,
     JournalError,
@@ -150,16 +153,11 @@ class Lineage:
                  tree_params: dict | None = None, stride: int = 1, min_delta: float = 0.0,
                  fsync_interval: float = 1.0, actions: ActionSet = DEFAULT_ACTIONS,
                  fold_journal: bool = False, journal_write=os.write, teacher: str = "script",
-                 lag: int | None = None, vote: str | None = None, lock_wait: float = 0.0):
-        if lag is not None and not (isinstance(lag, int) and 0 <= lag <= MAX_LAG):
-            raise ProcessError(f"learner: --lag must be 0..{MAX_LAG} scans, got {lag!r}",
+                 lag: int | None = None, lock_wait: float = 0.0, guard: bool | None = None):
+        max_lag = PERSON.alignment.max_lag
+        if lag is not None and not (isinstance(lag, int) and 0 <= lag <= max_lag):
+            raise ProcessError(f"learner: --lag must be 0..{max_lag} scans, got {lag!r}",
                                EXIT_USAGE)
-        if vote is not None and vote not in VOTES:
-            raise ProcessError(f"learner: --vote must be one of {', '.join(VOTES)}, got {vote!r}",
-                               EXIT_USAGE)
-        if vote is not None and (teacher == "script" or resume is not None or fold_journal):
-            raise ProcessError("learner: --vote is the person rule's, for a new tree (--teacher "
-                               "person or auto, no --resume or --fold-journal)", EXIT_USAGE)
         self.out = Path(out)
         self.fold_journal = bool(fold_journal)
         self.jpath = journal_path(self.out)
@@ -167,13 +165,13 @@ class Lineage:
         self.lock = LineageLock(self.out, lock_wait)  # before anything of the lineage is read
         try:
             self._open(features, resume, task, tree_params, stride, min_delta, fsync_interval,
-                       actions, fold_journal, journal_write, teacher, lag, vote)
+                       actions, fold_journal, journal_write, teacher, lag, guard)
         except BaseException:
             self.close()
             raise
 
     def _open(self, features, resume, task, tree_params, stride, min_delta, fsync_interval,
-              actions, fold_journal, journal_write, teacher, lag, vote) -> None:
+              actions, fold_journal, journal_write, teacher, lag, guard) -> None:
         """Recover the lineage at ``out`` or start a new one (``__init__``'s arguments)."""
         # a shipped spec's name, or a spec itself (a behaviour's inline perception)
         spec = features if isinstance(features, FeatureSpec) else (
@@ -206,7 +204,7 @@ class Lineage:
                 log.info("new tree with the default perception --features %s", features)
             self._new = {"spec": spec, "resume": resume, "features": features, "task": task,
                          "params": {"spawn": "winner", **(tree_params or {})},
-                         "stride": stride, "min_delta": min_delta, "lag": lag, "vote": vote,
+                         "stride": stride, "min_delta": min_delta, "lag": lag, "guard": guard,
                          "fsync_interval": fsync_interval, "write": journal_write,
                          "actions": actions}
             self.journal = None
@@ -231,16 +229,17 @@ class Lineage:
         self.seq = 0
 
     def _start_learner(self, rule: str) -> DemonstrationLearner:
-        """A new lineage's learner for ``rule`` (``script`` or ``person``), or its parent's
-        (``--resume``)."""
+        """A new lineage's learner for ``rule`` (``script`` or ``person``: ``rule_for``, with
+        ``--lag`` and the behaviour's guard), or its parent's (``--resume``)."""
         n = self._new
         if n["resume"] is not None:
             return _resume(n["resume"], n["spec"])
         task = n["task"] or task_of_features(n["features"])
-        if rule == "person":
-            return PersonLearner(n["spec"], n["actions"], task=task, lag=n["lag"],
-                                 vote=n["vote"], **n["params"])
-        return DemonstrationLearner(n["spec"], n["actions"], task=task,
+        chosen = rule_for(rule).replace(guard=n["guard"])
+        if chosen.person:
+            return PersonLearner(n["spec"], n["actions"], task=task,
+                                 rule=chosen.replace(lag=n["lag"]), **n["params"])
+        return DemonstrationLearner(n["spec"], n["actions"], task=task, rule=chosen,
                                     stride=n["stride"], min_delta=n["min_delta"], **n["params"])
 
     def _create(self, rule: str, why: str = "") -> None:
@@ -275,11 +274,11 @@ class Lineage:
         if not by_person(source):
             return 0, 0
         lag = self._new["lag"]
-        return (0, MAX_LAG) if lag is None else (lag, 0)
+        return (0, PERSON.alignment.max_lag) if lag is None else (lag, 0)
 
     def pairing(self) -> tuple[int, int]:
         """``(lag, window)`` of this lineage's pairing (``Pairing(lag=..., window=...)``)."""
-        return self.lag or 0, MAX_LAG if self.estimates else 0
+        return self.lag or 0, self.learner.rule.alignment.max_lag if self.estimates else 0
 
     def choose(self, source: str | None) -> None:
         """The first label came from ``source``: start the lineage by the person rule when a
@@ -304,7 +303,7 @@ class Lineage:
             self.applied += 1
 
     def describe_rule(self) -> str:
-        """How a person's lineage learns (its lag, its vote); "" for the script rule."""
+        """How a person's lineage learns (its lag, its editing); "" for the script rule."""
         if not self.person:
             return ""
         learner = self.learner
@@ -312,7 +311,7 @@ class Lineage:
                else f"shifted {learner.lag} scans back")
         copies = (f", {learner.copies} jittered cop{'y' if learner.copies == 1 else 'ies'} a label"
                   if learner.copies else "")
-        return f"{lag}, the {learner.vote} vote of {learner.k} nearest{copies}"
+        return f"{lag}, edited by the sided vote of {learner.k} nearest{copies}"
 
     def _started(self) -> None:
         self.learner.parent = self.journal.header.get("parent")
@@ -338,7 +337,7 @@ class Lineage:
     @property
     def estimates(self) -> bool:
         """A person's lineage whose lag is estimated from the data: each label is journaled
-        and learned with the scans displayed before it (``Pairing(window=MAX_LAG)``)."""
+        and learned with the scans displayed before it (``Pairing(window=max_lag)``)."""
         return self.person and self.learner.lag is None
 
     @property
@@ -415,25 +414,23 @@ class Lineage:
         return learner, len(self.journal)
 
     def _person_rule(self) -> bool:
-        meta = self.journal.header.get("meta") or {}
-        return (meta.get("learning") or {}).get("rule") == PERSON_RULE
+        return LearningRule.of(self.journal.header.get("meta")).person
 
     def _lineage_start(self) -> DemonstrationLearner:
         """The tree this lineage started from: a person's learner (rebuilt from the whole
         journal), its parent's (``--resume``) or a new one."""
         header = self.journal.header
-        if self._person_rule():
-            meta = header["meta"]
+        meta = header["meta"]
+        rule = LearningRule.of(meta)
+        if rule.person:
             return PersonLearner.from_metadata(meta, FeatureSpec.from_dict(meta["features"]),
                                                ActionSet.from_dict(meta["actions"]))
         if header.get("parent") is not None:
             return _resume(header["parent"], None)
-        meta = header["meta"]
-        learning = meta.get("learning") or {}
         return DemonstrationLearner(
             FeatureSpec.from_dict(meta["features"]), ActionSet.from_dict(meta["actions"]),
-            task=meta.get("task"), stride=int(learning.get("stride", 1)),
-            min_delta=float(learning.get("min_delta", 0.0)), **(meta.get("tree_params") or {}))
+            task=meta.get("task"), stride=rule.stride, min_delta=rule.min_delta, rule=rule,
+            **(meta.get("tree_params") or {}))
 
     def _journaled(self, origin: str | None, seq: int | None) -> None:
         """A label record of ``origin`` is in the journal: held, and within its span."""

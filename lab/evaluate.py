@@ -13,15 +13,20 @@ behaviour its ``task`` names or that names it; ``client.behaviour.spec``), judge
 band fraction >= 0.8 and distance >= 70% of the teacher's from the same start; maze = goal
 reached with no collision within S.
 
-``rhbl evaluate`` drives a tree taught by hand through the controller's guard, as ``rhbl
-controller`` drives it (``client.behaviour.guard``: the loop hysteresis and the path check);
-the scripted teacher's trees alone, as their published figures are (``--guard``/``--no-guard``
-force either; the report's ``guard`` says what was used and what it overruled).
+What was learned is judged by the tree alone: ``success_rate`` (and the table) are the tree's
+own answers driven as they are. Beside it, when the tree's learning rule has the controller's
+guard on (``client.behaviour.rule.GuardSettings``: the loop hysteresis, and for a tree taught
+by hand the path check), the same episodes are driven through that guard, as ``rhbl
+controller`` drives the tree: the report's ``guarded`` has that run's success and collisions,
+``guard`` the settings used and the guard's interventions (reversals overruled, of them driven
+straight on, forward orders turned into rotations). ``--no-guard``: the tree alone only; the
+other ``--guard-*`` options replace a part of the rule's guard.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 
 from client.behaviour import guard
@@ -192,11 +197,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--spheres", default=None, metavar="I,J",
                         type=arguments.checked_list("feature pair", _feature_pair, "0,1"),
                         help="with --plot: also draw the tree's spheres projected on features I,J")
-    guard.add_arguments(parser, default=None,
-                        default_help="default: on for a tree taught by hand, as rhbl "
-                                     "controller drives it, and for a behaviour with goals "
-                                     "(docs/goals.md); off for the scripted teacher's other "
-                                     "trees, whose figures are the tree's own")
+    guard.add_arguments(parser)
     parser.add_argument("--record", metavar="FILE", default=None, type=arguments.output_file,
                         help="also write the episodes (tree and teacher runs) as an MCAP "
                              "recording (docs/recording.md)")
@@ -257,23 +258,33 @@ def main(args) -> int:
         raise ValueError(f"--spheres {dims[0]},{dims[1]}: the tree {args.tree} has "
                          f"{policy.classifier.n_features_in_} features (0 .. "
                          f"{policy.classifier.n_features_in_ - 1})")
-    guarded = guard.from_arguments(args, policy)  # None: the tree's answers as they are
+    settings = guard.settings(args, policy.metadata)
+    run = {"episodes": args.episodes, "seconds": args.seconds, "seed": args.seed,
+           "range_noise": args.range_noise, "odom_noise": args.odom_noise, "behaviour": b}
     with record_run(args.record, "rhbl evaluate") as tap:  # None without --record
-        report = evaluate(spec, guarded or policy, episodes=args.episodes, seconds=args.seconds,
-                          seed=args.seed, range_noise=args.range_noise,
-                          odom_noise=args.odom_noise, keep_paths=bool(args.plot),
-                          on_step=None if tap is None else tap.step, behaviour=b)
+        report = evaluate(spec, policy, keep_paths=bool(args.plot),
+                          on_step=None if tap is None else tap.step, **run)
     paths = report.pop("_paths", None)
-    report["guard"] = None if guarded is None else {
-        "hold": guarded.hold, "clearance": guarded.clearance, "straight": guarded.straight,
-        "overruled": guarded.overruled, "avoided": guarded.avoided,
-        "straight_on": guarded.straight_on}
+    report["judged"] = "the tree alone"
+    report["guard"] = report["guarded"] = None
+    if settings.on:  # the same episodes as the controller drives them: through the guard
+        guarded = guard.RotationGuard.of(settings, policy)
+        g = evaluate(spec, guarded, **run)
+        report["guard"] = {**dataclasses.asdict(settings), **guarded.interventions}
+        report["guarded"] = {"success_rate": g["success_rate"], "success": g["success"],
+                             "collisions": sum(e["collisions"] for e in g["learner"]),
+                             "loops": len(g["loops"])}
     print(format_table(report))
-    if guarded is not None:
-        print(f"driven through the controller's guard (--no-guard: the tree alone): "
-              f"{guarded.overruled} rotation reversals overruled ({guarded.straight_on} of them "
-              f"driven straight on), {guarded.avoided} forward orders turned into a rotation "
-              f"(path check {guarded.clearance:g} m)")
+    if settings.on:
+        gd, gr = report["guarded"], report["guard"]
+        print(f"judged by the tree alone: {report['success_rate']:.0%} "
+              f"({sum(e['collisions'] for e in report['learner'])} collisions); driven through "
+              f"the controller's guard as its rule says (rhbl controller; a safety layer, "
+              f"--no-guard: the tree alone only): {gd['success_rate']:.0%} "
+              f"({gd['collisions']} collisions), the guard overruled {gr['overruled']} "
+              f"rotation reversals ({gr['straight_on']} of them driven straight on) and turned "
+              f"{gr['avoided']} forward orders into a rotation (path check "
+              f"{gr['clearance']:g} m)")
     if args.json:
         files.write_text(args.json, json.dumps(report, indent=1), "--json")
         print(f"wrote {args.json}")

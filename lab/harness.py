@@ -24,6 +24,7 @@ from pathlib import Path
 
 from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
 from client.behaviour.learning import DemonstrationLearner, TreePolicy
+from client.behaviour.rule import rule_for
 from client.behaviour.spec import Behaviour, BehaviourError, shipped
 from lab import metrics
 from lab.behaviours import behaviour_for_world
@@ -74,14 +75,16 @@ parse_pose = checked_list("pose", _parse_pose, "1,1,0")
 
 def make_learner(recipe: Recipe | str, actions: ActionSet = DEFAULT_ACTIONS, *,
                  record: bool | None = None) -> DemonstrationLearner:
-    """A learner as ``recipe`` says (features, stride, tree parameters); a task name: its
-    default recipe. ``record``: keep the vectors it learns (``learner.recorded()``); default:
-    when the recipe compacts (the step needs them)."""
+    """A learner as ``recipe`` says (features, stride, tree parameters) by the scripted
+    teacher's learning rule (``client.behaviour.rule.rule_for("script")``: the expert's labels
+    learned as they arrive; recorded in the snapshot); a task name: its default recipe.
+    ``record``: keep the vectors it learns (``learner.recorded()``); default: when the recipe
+    compacts (the step needs them)."""
     recipe = recipe_for(recipe) if isinstance(recipe, str) else recipe
     return DemonstrationLearner(recipe.feature_spec(), actions, task=recipe.task,
                                 stride=recipe.stride, min_delta=recipe.min_delta,
                                 record=recipe.compact != "none" if record is None else record,
-                                **recipe.tree_params())
+                                rule=rule_for("script"), **recipe.tree_params())
 
 
 def step_world(world: World, ep: Episode, actions: ActionSet, name: str, side: str | None,

@@ -27,8 +27,9 @@ from pathlib import Path
 from client.behaviour.actions import DEFAULT_ACTIONS
 from client.behaviour.features import FEATURES, FeatureError
 from client.behaviour.learning import DemonstrationLearner
+from client.behaviour.rule import rule_for
 from client.behaviour.tasks import task_of_features
-from client.behaviour.teaching import MAX_LAG, PersonLearner
+from client.behaviour.teaching import PersonLearner
 from client.labels import by_person
 from client.recording.mcap_file import RecordingError, read_recording
 from protocol.messages import Scan, TeacherAction
@@ -98,13 +99,12 @@ def first_label_source(paths, robots: list[str] | None = None) -> str | None:
 def retrain(paths, features: str = "wall", robots: list[str] | None = None,
             task: str | None = None, stride: int = 1, min_delta: float = 0.0,
             tree_params: dict | None = None, record: bool = False, teacher: str = "auto",
-            lag: int | None = None, vote: str | None = None
-            ) -> tuple[DemonstrationLearner, dict]:
+            lag: int | None = None) -> tuple[DemonstrationLearner, dict]:
     """A tree learned from the recordings' teacher labels (in order, files in the order
     given), as ``rhbl learner`` learns: labels that are no action of the tree and scans the
     features cannot use are skipped and counted. ``record``: the learner keeps its vectors
-    (to compact on them). ``teacher="person"``: as ``rhbl learner --teacher person --lag
-    --vote`` (``vote`` None: the default);
+    (to compact on them). ``teacher="person"``: as ``rhbl learner --teacher person --lag``
+    (the learning rule ``client.behaviour.rule.rule_for`` chooses, recorded in the snapshot);
     ``"auto"``: the person rule when the first label came from a person (``by_person``).
     Returns (learner, stats)."""
     spec = FEATURES[features]
@@ -120,15 +120,17 @@ def retrain(paths, features: str = "wall", robots: list[str] | None = None,
             raise ValueError(f"the person rule{chose} learns every label (no --stride) and its "
                              "tree is rebuilt from them (no --compact: compact the snapshot it "
                              "writes; or force --teacher script)")
-        learner = PersonLearner(spec, DEFAULT_ACTIONS, task=task, lag=lag, vote=vote, **params)
+        learner = PersonLearner(spec, DEFAULT_ACTIONS, task=task,
+                                rule=rule_for("person").replace(lag=lag), **params)
+        window = learner.rule.alignment.max_lag if lag is None else 0  # the scans before each
     else:
-        if vote is not None:
-            raise ValueError(f"--vote is the person rule's; the script rule{chose} learns each "
-                             "label as it arrives (force --teacher person)")
+        if lag is not None:
+            raise ValueError(f"--lag is the person rule's; the script rule{chose} ties each "
+                             "label to the scan it names (force --teacher person)")
         learner = DemonstrationLearner(spec, DEFAULT_ACTIONS, task=task, stride=stride,
-                                       min_delta=min_delta, record=record, **params)
-        lag = 0
-    window = MAX_LAG if lag is None else 0  # a person's lag estimated: the scans before each
+                                       min_delta=min_delta, record=record,
+                                       rule=rule_for("script"), **params)
+        lag, window = 0, 0
     stats = {"paired": 0, "learned": 0, "rejected": 0, "recordings": [],
              "rule": f"{teacher}{chose}"}
     t0 = time.perf_counter()
@@ -188,8 +190,7 @@ def save_retrained(learner: DemonstrationLearner, stats: dict, out: str | Path) 
 # the flags of ``rhbl train`` a retraining uses (the features, the tree, a compaction on the
 # recordings' vectors); every other one drives a simulation and is refused with its name
 USES = ("out", "from_recording", "features", "spawn", "distance", "min_radius", "max_nodes",
-        "stride", "compact", "compact_max_nodes", "compact_max_error", "teacher", "lag",
-        "vote")
+        "stride", "compact", "compact_max_nodes", "compact_max_error", "teacher", "lag")
 
 
 def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
@@ -202,7 +203,7 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
                          f"--from-recording (no simulation runs: it learns the recordings' "
                          f"labels; it takes --features, --spawn, --distance, --min-radius, "
                          f"--max-nodes, --stride, --compact with its --compact-max-*, --teacher "
-                         f", --lag and --vote)")
+                         f"and --lag)")
 
 
 def train_main(args) -> int:
@@ -217,8 +218,7 @@ def train_main(args) -> int:
     try:
         learner, stats = retrain(args.from_recording, features=args.features or "wall",
                                  stride=args.stride or 1, tree_params=tree,
-                                 record=compact is not None, teacher=args.teacher, lag=args.lag,
-                                 vote=args.vote)
+                                 record=compact is not None, teacher=args.teacher, lag=args.lag)
     except RecordingError as exc:
         raise ValueError(str(exc)) from None
     if stats["paired"] == 0:

@@ -462,8 +462,8 @@ def main(args) -> int:
         return train_main(args)  # every flag that cannot apply is a named error there
     if not args.world and not args.behaviour:
         raise ValueError("--world or --behaviour is required (or --from-recording FILE)")
-    if args.teacher not in ("auto", "script") or args.lag is not None or args.vote is not None:
-        raise ValueError("--teacher, --lag and --vote go with --from-recording (a simulated "
+    if args.teacher not in ("auto", "script") or args.lag is not None:
+        raise ValueError("--teacher and --lag go with --from-recording (a simulated "
                          "run's teacher is the scripted expert)")
     b = get(args.behaviour) if args.behaviour else None
     if args.world is None:

@@ -1,4 +1,11 @@
-"""The controller's guard against rot-left/rot-right loops (the paper's section 7.3).
+"""The controller's guard: a safety layer against rot-left/rot-right loops (the paper's
+section 7.3) and forward orders into a wall, between the tree and the robot.
+
+It is not the learning: its settings are part of a tree's learning rule
+(``client.behaviour.rule.GuardSettings``, stored in the snapshot: ``settings_for``), a rule or
+a behaviour can turn it off (``on``), ``rhbl controller --no-guard`` drives without it, and
+``rhbl evaluate`` judges the tree alone and reports, beside it, the guarded run and what the
+guard did (``interventions``).
 
 A learned tree can bounce between a rotate-left and a rotate-right sphere forever: each
 rotation brings the robot into the other sphere (a loop as ``client.behaviour.loops`` defines
@@ -11,8 +18,8 @@ row; then the policy's answer is taken as it is. Every overruled reversal is cou
 out (a loop is a state the teacher has not shown yet).
 
 Given the scan, the guard also keeps the robot from driving into what is straight ahead: a
-forward order while a laser return lies in the robot's path (within ``LOOKAHEAD`` m ahead and
-``CLEARANCE`` m of its centre line: ``in_path``) becomes a rotation in place, the way the robot
+forward order while a laser return lies in the robot's path (within ``lookahead`` m ahead and
+``clearance`` m of its centre line: ``in_path``) becomes a rotation in place, the way the robot
 rotated lately or else away from that return (counted ``avoided``). A tree taught in one room
 meets corners it never saw elsewhere (a convex corner approached at an angle); a person's
 demonstrations show how to follow a wall, not how close is too close.
@@ -26,7 +33,8 @@ the trees of a person who steers only by rotating in place (``bang`` in
 path check (``clearance`` 0, or no scan) the guard cannot know the way ahead is free and keeps
 turning.
 
-    policy = RotationGuard(TreePolicy.load("tree.rhbl"))
+    tree = TreePolicy.load("tree.rhbl")
+    policy = RotationGuard.of(settings_for(tree.metadata), tree)   # as the tree's rule says
     action = policy.act(ranges, pose)        # one call per scan
     policy.looping, policy.overruled         # for the console: "stuck here: show it the way"
     policy.avoided                           # forward orders turned into a rotation
@@ -40,76 +48,63 @@ Pure (no zenoh): the controller process and the in-process harness use this same
 
 from __future__ import annotations
 
-__all__ = ["CLEARANCE", "LOOKAHEAD", "RotationGuard", "add_arguments", "clearance_for",
-           "from_arguments", "in_path"]
+__all__ = ["RotationGuard", "add_arguments", "in_path", "settings", "settings_for"]
 
 import argparse
+import dataclasses
 
 import numpy as np
 
 from process import arguments
 
 from .loops import ROTATIONS, reverses
+from .rule import GuardSettings, LearningRule
 
 _FORWARD = ("fwd", "fwd-left", "fwd-right")
-CLEARANCE = 0.3  # m either side of the centre line: the robot's radius (0.25 m) and a margin
-LOOKAHEAD = 0.5  # m ahead: two scans' travel at full speed and a margin
 
 
-def _taught_by_hand(metadata) -> bool:
-    from .teaching import PERSON_RULE
-
-    return ((metadata or {}).get("learning") or {}).get("rule") == PERSON_RULE
-
-
-def clearance_for(metadata) -> float:
-    """The path check's clearance ``rhbl controller`` uses for a tree (its snapshot metadata):
-    ``CLEARANCE`` for a tree taught by hand (learning rule ``person``), 0 (off) for the scripted
-    teacher's, whose demonstrations keep their own distance (docs/teaching.md: with the check
-    its trees collided less but reached the 5-tier maze's goal less often)."""
-    return CLEARANCE if _taught_by_hand(metadata) else 0.0
+def settings_for(metadata) -> GuardSettings:
+    """The guard a tree is driven through: its learning rule's (``LearningRule.of`` its
+    snapshot metadata): for a tree taught by hand the loop hysteresis and the path check
+    (0.3 m), for the scripted teacher's the hysteresis alone (its demonstrations keep their
+    own distance; docs/teaching.md: with the check its trees collided less but reached the
+    5-tier maze's goal less often)."""
+    return LearningRule.of(metadata).guard
 
 
-def add_arguments(parser: argparse.ArgumentParser, default: bool | None = True,
-                  default_help: str = "default on") -> None:
-    """The guard's options (``--guard``/``--no-guard``, ``--guard-hold``, ``--guard-clearance``)
-    as ``rhbl controller`` (``default`` True) and ``rhbl evaluate`` (None: on for a tree taught
-    by hand) take them; ``from_arguments`` makes the guard they ask for."""
-    parser.add_argument("--guard", action=argparse.BooleanOptionalAction, default=default,
-                        help="the loop guard: never reverse a rotation at once (an order to "
-                             "rotate the other way within 5 scans of a rotation is overruled, "
-                             f"for at most --guard-hold scans in a row; {default_help})")
-    parser.add_argument("--guard-hold", type=arguments.non_negative_int, default=30,
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The guard's options as ``rhbl controller`` and ``rhbl evaluate`` take them, each
+    default the tree's learning rule's (``settings``)."""
+    parser.add_argument("--guard", action=argparse.BooleanOptionalAction, default=None,
+                        help="the controller's guard, a safety layer (client.behaviour.guard): "
+                             "never reverse a rotation at once, and (with a path check) no "
+                             "forward order into a return straight ahead; default: as the "
+                             "tree's learning rule says (on for the shipped rules)")
+    parser.add_argument("--guard-hold", type=arguments.non_negative_int, default=None,
                         metavar="SCANS",
-                        help="with --guard: at most this many overruled reversals in a row, "
-                             "then the tree's answer is taken (default 30: 3 s at 10 Hz)")
+                        help="with the guard: at most this many overruled reversals in a row, "
+                             "then the tree's answer is taken (default: the rule's, 30: 3 s)")
     parser.add_argument("--guard-straight", action=argparse.BooleanOptionalAction,
-                        default=True,
-                        help="with --guard and its path check: an overruled reversal drives "
+                        default=None,
+                        help="with the guard and its path check: an overruled reversal drives "
                              "straight on while the path ahead is clear (--no-guard-straight: "
-                             "the robot keeps turning as it was; default on)")
+                             "the robot keeps turning as it was; default: the rule's, on)")
     parser.add_argument("--guard-clearance", type=arguments.non_negative_float,
                         default=None, metavar="M",
-                        help="with --guard: a forward order while a laser return lies within "
-                             f"{LOOKAHEAD:g} m ahead and M m of the robot's centre line becomes "
-                             f"a rotation in place (0: off; default {CLEARANCE:g} for a tree "
-                             "taught by hand, 0 for the scripted teacher's)")
+                        help="with the guard: a forward order while a laser return lies within "
+                             "the rule's lookahead (0.5 m) ahead and M m of the robot's centre "
+                             "line becomes a rotation in place (0: off; default: the rule's, "
+                             "0.3 for a tree taught by hand, 0 for the scripted teacher's)")
 
 
-def from_arguments(args: argparse.Namespace, policy=None) -> RotationGuard | None:
-    """The guard ``add_arguments``' options ask for, None with ``--no-guard``. With
-    ``policy`` (a tree to evaluate) the guard wraps it, ``--guard`` unset means on for a tree
-    taught by hand, and the path check is set by who taught it unless ``--guard-clearance``
-    says; without (the controller, whose trees are swapped) the clearance is set per tree."""
-    metadata = getattr(policy, "metadata", None)
-    on = args.guard if args.guard is not None else _taught_by_hand(metadata)
-    if not on:
-        return None
-    clearance = args.guard_clearance
-    if clearance is None:
-        clearance = clearance_for(metadata) if policy is not None else 0.0
-    return RotationGuard(policy, hold=args.guard_hold, clearance=clearance,
-                         straight=args.guard_straight)
+def settings(args: argparse.Namespace, metadata=None) -> GuardSettings:
+    """The guard ``add_arguments``' options ask for a tree of ``metadata``: its rule's
+    (``settings_for``), each option given replacing its part (``--no-guard``: off)."""
+    base = settings_for(metadata)
+    changes = {name: value for name, value in (
+        ("on", args.guard), ("hold", args.guard_hold), ("straight", args.guard_straight),
+        ("clearance", args.guard_clearance)) if value is not None}
+    return dataclasses.replace(base, **changes) if changes else base
 
 
 def in_path(ranges, clearance: float, lookahead: float, bearings=None) -> float:
@@ -142,18 +137,37 @@ class RotationGuard:
     policy's. Without a policy, ``choose(action)`` filters the actions of any source (the
     controller, whose tree may be swapped while the guard's memory goes on)."""
 
-    def __init__(self, policy=None, hold: int = 30, memory: int = 5,
-                 clearance: float = 0.0, lookahead: float = LOOKAHEAD, straight: bool = True):
-        if hold < 0 or memory < 0:
-            raise ValueError(f"hold and memory must be >= 0 scans, got {hold}, {memory}")
+    def __init__(self, policy=None, hold: int = GuardSettings.hold,
+                 memory: int = GuardSettings.memory, clearance: float = GuardSettings.clearance,
+                 lookahead: float = GuardSettings.lookahead,
+                 straight: bool = GuardSettings.straight):
         self.policy = policy
-        self.hold, self.memory = int(hold), int(memory)
-        self.clearance, self.lookahead = float(clearance), float(lookahead)
-        self.straight = bool(straight)
+        self.apply(GuardSettings(hold=hold, memory=memory, clearance=clearance,
+                                 lookahead=lookahead, straight=straight))
         self.overruled = 0
         self.straight_on = 0  # overruled reversals driven straight on (the path ahead clear)
         self.avoided = 0  # forward orders turned into a rotation away from a return in the path
         self.reset()
+
+    @classmethod
+    def of(cls, settings: GuardSettings, policy=None) -> RotationGuard:
+        """The guard of ``settings`` (a rule's ``GuardSettings``), wrapping ``policy``."""
+        return cls(policy, hold=settings.hold, memory=settings.memory,
+                   clearance=settings.clearance, lookahead=settings.lookahead,
+                   straight=settings.straight)
+
+    def apply(self, settings: GuardSettings) -> None:
+        """Take ``settings`` (a swapped tree's rule's) and keep what the robot is doing."""
+        self.hold, self.memory = int(settings.hold), int(settings.memory)
+        self.clearance, self.lookahead = float(settings.clearance), float(settings.lookahead)
+        self.straight = bool(settings.straight)
+
+    @property
+    def interventions(self) -> dict:
+        """What the guard did instead of the tree: reversals overruled (and of them driven
+        straight on) and forward orders turned into a rotation."""
+        return {"overruled": self.overruled, "straight_on": self.straight_on,
+                "avoided": self.avoided}
 
     def __getattr__(self, name):  # classifier, features, actions, metadata: the policy's
         if name == "policy":

@@ -29,6 +29,7 @@ import numpy as np
 
 from .actions import DEFAULT_ACTIONS, ActionSet
 from .features import FeatureSpec
+from .rule import SCRIPT, LearningRule
 
 __all__ = [
     "DemonstrationLearner",
@@ -113,16 +114,24 @@ class DemonstrationLearner:
     ``record``: keep every vector offered to the tree (``recorded()`` returns them as ``(X, y)``),
     the data a compaction step (``compact``) needs to preserve what the tree learned.
     ``**tree_params`` go to ``rhbl.HypersphereClassifier`` (spawn, distance, min_radius, max_nodes...).
+    ``rule``: the learning rule (``client.behaviour.rule``) recorded in the metadata, default
+    ``SCRIPT`` (the paper's: each label learned as it arrives) with this stride, min_delta and
+    tree parameters; its guard is what the controller drives the tree through.
     """
 
     def __init__(self, features: FeatureSpec, actions: ActionSet = DEFAULT_ACTIONS, *,
                  task: str | None = None, stride: int = 1, min_delta: float = 0.0,
                  classifier=None, parent: str | None = None, provenance: Mapping | None = None,
-                 record: bool = False, **tree_params):
+                 record: bool = False, rule: LearningRule | None = None, **tree_params):
         from rhbl import HypersphereClassifier
 
         if stride < 1:
             raise ValueError(f"stride must be >= 1, got {stride}")
+        rule = SCRIPT if rule is None else rule
+        if not rule.person:  # (a person's rule sets its own: ``PersonLearner``)
+            rule = rule.replace(stride=int(stride), min_delta=float(min_delta),
+                                tree=dict(tree_params))
+        self.rule = rule
         self.features = features
         self.actions = actions
         self.task = task
@@ -287,7 +296,7 @@ class DemonstrationLearner:
             "provenance": prov,
             "tree_params": {k: v for k, v in self.tree_params.items()
                             if isinstance(v, str | int | float | bool | type(None))},
-            "learning": {"stride": self.stride, "min_delta": self.min_delta},
+            "learning": self.rule.to_dict(),
         }
 
     def save(self, path: str | Path) -> Path:
@@ -306,11 +315,11 @@ class DemonstrationLearner:
         with naming(path):
             check_compatible(meta, features, actions)
         try:
-            learning = meta.get("learning", {}) or {}
+            rule = LearningRule.of(meta)  # (a person's tree goes on by the script rule)
             tree_params = meta.get("tree_params", {}) or {}
             learner = cls(feats, acts, task=meta.get("task"), classifier=clf,
-                          stride=int(learning.get("stride", 1)),
-                          min_delta=float(learning.get("min_delta", 0.0)),
+                          stride=rule.stride, min_delta=rule.min_delta,
+                          rule=None if rule.person else rule,
                           parent=str(path), provenance=meta.get("provenance"), **tree_params)
         except (ValueError, TypeError, AttributeError) as exc:
             from rhbl import SnapshotError

@@ -24,6 +24,7 @@ A behaviour file (docs/behaviours.md is the format with an example):
     held_out = ["eval-room-jagged", "eval-room-l"]
     [starts]                                # optional: start poses of a world, instead of its own
     room = [[3.0, 0.7, 0.0]]
+    guard = false                           # optional: no controller's guard (default true)
     [success]                               # every rule given must hold
     time-limit = { seconds = 120 }
     no-collision = {}
@@ -99,7 +100,7 @@ RULES: dict[str, dict[str, Any]] = {
 SIDES = ("right", "left")
 INPUTS = {"heading": "lr"}  # extra perception inputs -> FeatureSpec.heading
 _TOP = {"name", "summary", "perception", "instructions", "expert", "worlds", "starts", "success",
-        "recipe", "goals"}
+        "recipe", "goals", "guard"}
 _PERCEPTION = {"beams", "sectors", "window", "clamp", "scale", "fov", "inputs", "beacon",
                "beacon_range", "beacon_bearing"}
 _WORLDS = {"teach", "held_out"}
@@ -160,6 +161,7 @@ class Behaviour:
     recipe: dict[str, Any] = field(default_factory=dict, compare=False)
     path: Path | None = None
     goals: Goals | None = None  # its goals in order ([goals]; client.behaviour.goals), if any
+    guard: bool = True  # the controller's guard (a safety layer) on for its trees; false: off
 
     @property
     def seconds(self) -> float:
@@ -411,10 +413,14 @@ def parse_behaviour(data: Any, source: str = "<behaviour>", path: Path | None = 
     if ("goals" in rules) != (goals is not None):
         raise BehaviourError(f"{_where(src, 'success.goals')}: a behaviour with [goals] is "
                              "judged by the 'goals' rule, and only such a one")
+    guard = data.get("guard", True)
+    if not isinstance(guard, bool):
+        raise _err(src, "guard", "true or false", guard)
     return Behaviour(name=name, summary=summary.strip(), features=features, expert_name=expert,
                      teach=teach, held_out=held_out, rules=rules,
                      expert_params=params, starts=starts, instructions=instructions.strip(),
-                     perception=perception, recipe=dict(recipe), path=path, goals=goals)
+                     perception=perception, recipe=dict(recipe), path=path, goals=goals,
+                     guard=guard)
 
 
 def load_behaviour(path: str | Path) -> Behaviour:

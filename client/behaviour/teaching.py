@@ -3,44 +3,42 @@
 People react 200-450 ms after what they see, press wrong keys, over-steer and correct
 themselves; the scripted teachers do none of that. Learning every label as it arrives (the
 paper's rule, ``DemonstrationLearner``) carves a sphere for every late or wrong key, and the
-tree copies the noise. These pieces cope with it (docs/teaching.md has the study behind them):
+tree copies the noise. The person rule (``client.behaviour.rule.PERSON``: its parts and their
+settings, one object) copes with it; this module is its code (docs/teaching.md has the study):
 
-* **the reaction lag** (``answered_scan``, on the console's side): a key held while scan ``n``
-  is displayed answers what the person saw ``lag`` scans earlier, so the label is tied to scan
-  ``n - lag`` (the scan displayed when the key went out, as today, if that one is unknown or the
-  robot was moved since).
-* **the lag estimated from the data** (``PersonLearner(lag=None)``, the default; ``rhbl learner
-  --lag auto``; ``estimate_lag``): each label also carries the scans shown up to ``MAX_LAG`` scans before its
-  own; the lag is the shift at which the labels agree best with the features of the scan that
-  many scans earlier, held out in blocks of time (a person's key is most predictable from what
-  they saw a reaction time ago), re-estimated from every label at each build.
-* **the vote** (``PersonLearner``, on the learner's side): every label is kept as given; the
-  tree is built from all of them at once, each labelled vector taking the action nearest to the
-  mean command of those of its ``k`` nearest labelled vectors that agree on the side
-  (``vote="sided"``, the default: ``sided_actions``), to their interquartile mean command
-  (``"trimmed"``), to their mean command (``"mean"``), to their
-  median forward and turning speeds (``"median"``), to their median turning and mean forward
-  speed (``"median-turn"``) or the label most of them carry
-  (``"majority"``): a wrong key or a late release is outvoted by the labels
-  around it.
-* **jittered copies** (``copies``, 1 by default): each labelled vector also gives the tree a
-  copy moved by normal noise of ``sigma`` (0.06: 12 cm of range), labelled by the same vote at
-  that place. A tree answers the states nobody showed with whichever sphere came first there;
-  the copies make it answer the states around the labels as their neighbours vote, whatever
-  the order it learned them in.
+* **reaction-time alignment** (``answered_scan``, on the console's side): a key held while
+  scan ``n`` is displayed answers what the person saw ``lag`` scans earlier, so the label is
+  tied to scan ``n - lag`` (the scan displayed when the key went out, if that one is unknown
+  or the robot was moved since).
+* **the lag estimated from the data** (the rule's ``alignment.lag`` None, the default;
+  ``rhbl learner --lag auto``; ``estimate_lag``): each label also carries the scans shown up to
+  ``max_lag`` scans before its own; the lag is the shift at which the changes of key are best
+  predicted from the features of the scan that many scans earlier, held out in blocks of time.
+* **editing by the neighbours' vote** (Wilson's edited nearest neighbour, as kNN smoothing;
+  ``PersonLearner``): every label is kept as given; the tree learns each labelled vector with
+  the action nearest to the mean command of those of its ``k`` nearest labelled vectors that
+  agree on the turning side (``sided_actions``), and ``copies`` jittered copies of it (normal
+  noise of ``sigma``) with the vote at their place: a wrong key or a late release is outvoted
+  by the labels around it, and the tree answers the states around the labels as their
+  neighbours vote, whatever the order it learned them in.
+
+The vote is kept up to date as labels come (``PersonLearner``: a kd-tree over the labels;
+only the labels and copies whose ``k`` nearest a new label enters are voted again; the tree
+is then learned again from the voted vectors in the rule's shuffled order, which costs a
+fraction of a second at an hour of teaching: ``benchmarks/bench_live.py``).
 
     shown = 812                                         # the scan the page displayed
-    answered = answered_scan(shown, scans, lag=LAG)     # scans: id -> scan (with .pose)
-    learner = PersonLearner(FEATURES["around"], DEFAULT_ACTIONS)
+    answered = answered_scan(shown, scans, lag=3)       # scans: id -> scan (with .pose)
+    learner = PersonLearner(FEATURES["around"], DEFAULT_ACTIONS)   # rule=PERSON
     learner.observe(ranges, yaw, "fwd-left")            # the label, tied to the answered scan
-    learner.classifier                                  # the tree of every label so far (rebuilt
-                                                        # when labels came since it was last asked)
+    learner.classifier                                  # the tree of every label so far
 
 Pure (no zenoh, no I/O): the processes and the in-process study run this same code.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable, Mapping
 
@@ -51,38 +49,24 @@ from process import arguments
 from .actions import DEFAULT_ACTIONS, ActionSet
 from .features import FeatureSpec
 from .learning import DemonstrationLearner
+from .rule import PERSON, LearningRule
 
 __all__ = [
-    "JUMP",
-    "PERSON_RULE",
-    "LAG",
-    "MAX_LAG",
-    "estimate_lag",
-    "parse_lag",
-    "PERSON_DEFAULTS",
     "PersonLearner",
-    "VOTES",
+    "add_person_arguments",
     "answered_scan",
-    "majority_labels",
-    "mean_actions",
-    "median_actions",
-    "median_turn_actions",
-    "trimmed_actions",
-    "sided_actions",
+    "estimate_lag",
     "nearest_votes",
+    "parse_lag",
+    "sided_actions",
 ]
 
-LAG = 3  # scans (0.3 s at 10 Hz) between what a person saw and the scan shown when the key went out
-MAX_LAG = 6  # scans: the longest lag estimated (0.6 s at 10 Hz)
-MIN_ESTIMATE = 200  # labels: fewer, and the lag is not estimated (LAG is used)
-MAX_DECISIONS = 2000  # the lag estimate answers at most this many changes of key
-JUMP = 0.5  # m: the robot moved farther than this between two scans: it was put there (set_pose)
-_CHUNK = 1 << 22  # distances computed per block (query rows x references)
+_KEEP = object()  # PersonLearner's lag: the rule's
 
 
-def answered_scan(shown: int, scans: Mapping[int, object], lag: int = LAG,
+def answered_scan(shown: int, scans: Mapping[int, object], lag: int = PERSON.alignment.default,
                   pose: Callable[[object], tuple] = lambda s: s.pose,
-                  jump: float = JUMP) -> int:
+                  jump: float = PERSON.alignment.jump) -> int:
     """The id of the scan a key answers: ``lag`` scans before ``shown`` (the scan displayed when
     the key was sent), or ``shown`` itself when that earlier scan is not in ``scans`` (id ->
     scan, ``pose(scan)`` its (x, y, ...)) or the robot jumped more than ``jump`` metres from one
@@ -99,34 +83,35 @@ def answered_scan(shown: int, scans: Mapping[int, object], lag: int = LAG,
     return shown - lag
 
 
+def _kdtree(X: np.ndarray):
+    from scipy.spatial import cKDTree
+
+    return cKDTree(X, balanced_tree=False, compact_nodes=False)
+
+
+def _neighbours(tree, Q: np.ndarray, k: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(distances, indices), each (len(Q), min(k, n)): the nearest rows of the ``n`` rows
+    ``tree`` holds, nearest first (Euclidean)."""
+    k = max(1, min(int(k), n))
+    d, i = tree.query(Q, k=k)
+    return d.reshape(len(Q), k), i.reshape(len(Q), k)
+
+
+def _counts(nn: np.ndarray, y: np.ndarray, n_labels: int) -> np.ndarray:
+    """(rows, n_labels): per row of neighbour indices ``nn`` the count of each label of ``y``."""
+    flat = np.repeat(np.arange(len(nn)) * n_labels, nn.shape[1]) + y[nn].ravel()
+    return np.bincount(flat, minlength=len(nn) * n_labels).reshape(len(nn), n_labels).astype(
+        np.float64)
+
+
 def nearest_votes(Q: np.ndarray, X: np.ndarray, y: np.ndarray, k: int,
                   n_labels: int) -> np.ndarray:
     """(len(Q), n_labels): for each row of ``Q`` the count of each label index of ``y`` among
-    its ``k`` nearest rows of ``X`` (squared Euclidean distance; ties broken by numpy's
-    partition)."""
-    n = len(X)
-    k = max(1, min(int(k), n))
-    out = np.zeros((len(Q), n_labels))
-    xx = np.einsum("ij,ij->i", X, X)
-    step = max(1, _CHUNK // max(1, n))
-    for s in range(0, len(Q), step):
-        q = Q[s:s + step]
-        d = np.einsum("ij,ij->i", q, q)[:, None] + xx[None, :] - 2.0 * q @ X.T
-        nn = (np.argpartition(d, k - 1, axis=1)[:, :k] if k < n
-              else np.broadcast_to(np.arange(n), (len(q), n)))
-        flat = np.repeat(np.arange(len(q)) * n_labels, nn.shape[1]) + y[nn].ravel()
-        out[s:s + step] = np.bincount(flat, minlength=len(q) * n_labels).reshape(len(q),
-                                                                                 n_labels)
-    return out
-
-
-def majority_labels(X: np.ndarray, y: np.ndarray, k: int, n_labels: int) -> np.ndarray:
-    """The label index most of each row's ``k`` nearest rows of ``X`` carry (the row itself
-    among them); a tie keeps the row's own label."""
-    votes = nearest_votes(X, X, y, k, n_labels)
-    rows = np.arange(len(y))
-    best = votes.argmax(axis=1)
-    return np.where(votes[rows, y] >= votes[rows, best], y, best)
+    its ``k`` nearest rows of ``X`` (Euclidean distance; a kd-tree: n log n, not n^2)."""
+    if not len(Q):
+        return np.zeros((0, n_labels))
+    _, nn = _neighbours(_kdtree(X), Q, k, len(X))
+    return _counts(nn, y, n_labels)
 
 
 def _commands(actions: ActionSet) -> np.ndarray:
@@ -140,115 +125,32 @@ def _nearest_action(points: np.ndarray, v: np.ndarray) -> np.ndarray:
     return ((points[:, None, :] - v[None, :, :]) ** 2).sum(axis=2).argmin(axis=1)
 
 
-def mean_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
-    """Per row of ``votes`` (counts per action index) the index of the action nearest to the
-    votes' mean command ((vx, va) averaged, each scaled by the largest of the set): a person
-    steering left, right, left along a wall means forward."""
-    v = _commands(actions)
-    return _nearest_action(_mean_commands(votes, v), v)
-
-
 def _mean_commands(votes: np.ndarray, v: np.ndarray) -> np.ndarray:
     """(len(votes), 2): per row the mean of the scaled commands ``v`` weighted by the counts."""
     return votes @ v / np.maximum(votes.sum(axis=1, keepdims=True), 1e-12)
 
 
-def _median_commands(votes: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(len(votes), 2): per row the median of each column of the scaled commands ``v``
-    weighted by the counts (a count split exactly in half takes the midpoint of the two middle
-    values)."""
-    half = votes.sum(axis=1, keepdims=True) / 2.0
-    med = np.empty((len(votes), v.shape[1]))
-    for c in range(v.shape[1]):
-        order = np.argsort(v[:, c], kind="stable")
-        cum = np.cumsum(votes[:, order], axis=1)
-        lo = v[order, c][np.argmax(cum >= half - 1e-9, axis=1)]
-        hi = v[order, c][np.argmax(cum > half + 1e-9, axis=1)]
-        med[:, c] = 0.5 * (lo + hi)
-    return med
-
-
-def median_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
+def sided_actions(votes: np.ndarray, actions: ActionSet,
+                  share: float = PERSON.editing.side_share) -> np.ndarray:
     """Per row of ``votes`` (counts per action index) the index of the action nearest to the
-    votes' median command: the median of the forward speeds and the median of the turning
-    speeds, each taken apart (scaled as in ``mean_actions``). Unlike the mean, a minority of
-    keys on the other side (left and right confused) does not pull a turn towards forward."""
+    mean command ((vx, va), each scaled by the largest of the set) of the keys that agree on
+    the side: turning keys to one side weighing less than ``share`` (two thirds) of those to
+    the other are taken for confusions (left and right, or a turn let go of late) and left
+    out, the rest averaged (forward keys always count). A zig-zag of left and right in like
+    numbers averages to forward; forward keys with a minority of turns to one side (a person
+    who steers by tapping a rotation between forward presses, never an arc) keep that turn's
+    weight; a minority on the other side does not pull a turn towards forward."""
     v = _commands(actions)
-    return _nearest_action(_median_commands(votes, v), v)
-
-
-def median_turn_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
-    """Per row of ``votes`` the index of the action nearest to the median turning speed and
-    the mean forward speed (scaled as in ``mean_actions``): the turn is kept from a minority
-    on the other side as by ``median_actions``, the pace is the mean's (a median of the
-    forward speeds drops to a rotation on the spot as soon as half the keys were one)."""
-    v = _commands(actions)
-    cmd = _median_commands(votes, v)
-    cmd[:, 0] = _mean_commands(votes, v)[:, 0]
-    return _nearest_action(cmd, v)
-
-
-def _trimmed_commands(votes: np.ndarray, v: np.ndarray, trim: float) -> np.ndarray:
-    """(len(votes), 2): per row the mean of each column of the scaled commands ``v`` weighted
-    by the counts, the lowest and the highest ``trim`` of the counts left out (0: the mean;
-    towards 0.5: the median)."""
-    total = votes.sum(axis=1, keepdims=True)
-    lo, hi = trim * total, (1.0 - trim) * total
-    out = np.empty((len(votes), v.shape[1]))
-    for c in range(v.shape[1]):
-        order = np.argsort(v[:, c], kind="stable")
-        cum = np.cumsum(votes[:, order], axis=1)
-        kept = np.clip(np.minimum(cum, hi) - np.maximum(cum - votes[:, order], lo), 0.0, None)
-        out[:, c] = kept @ v[order, c] / np.maximum(hi - lo, 1e-12)[:, 0]
-    return out
-
-
-def trimmed_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
-    """Per row of ``votes`` the index of the action nearest to the votes' interquartile mean
-    command: the forward and the turning speeds each taken apart, their lowest and highest
-    quarter left out, the middle half averaged (scaled as in ``mean_actions``). Between the
-    mean and the median: a zig-zag of left and right keys in like numbers still averages to
-    forward, and a quarter of keys on the other side (left and right confused) does not pull a
-    turn towards forward."""
-    v = _commands(actions)
-    return _nearest_action(_trimmed_commands(votes, v, 0.25), v)
-
-
-SIDED = 2 / 3  # "sided": a turning side with less than this share of the other's is dropped
-
-
-def _sided_commands(votes: np.ndarray, v: np.ndarray, share: float = SIDED) -> np.ndarray:
-    """(len(votes), 2): per row the mean of the scaled commands ``v`` weighted by the counts,
-    the keys turning to one side left out when they weigh less than ``share`` of those turning
-    to the other (forward keys always count)."""
     left, right = v[:, 1] > 0, v[:, 1] < 0
     wl, wr = votes[:, left].sum(axis=1), votes[:, right].sum(axis=1)
     keep = np.ones_like(votes)
     keep[:, right] = (wr >= share * wl)[:, None]
     keep[:, left] = (wl >= share * wr)[:, None]
-    return _mean_commands(votes * keep, v)
+    return _nearest_action(_mean_commands(votes * keep, v), v)
 
 
-def sided_actions(votes: np.ndarray, actions: ActionSet) -> np.ndarray:
-    """Per row of ``votes`` the index of the action nearest to the mean command of the keys
-    that agree on the side: turning keys to one side weighing less than two thirds of those
-    to the other are taken for confusions (left and right, or a turn let go of late) and left
-    out, the rest averaged (scaled as in ``mean_actions``). A zig-zag of left and right in like
-    numbers averages to forward, as with the mean; forward keys with a minority of turns to
-    one side (a person who steers by tapping a rotation between forward presses, never an
-    arc) keep that turn's weight, as with the mean and unlike the trimmed mean; a minority on
-    the other side does not pull a turn towards forward, as with the median."""
-    v = _commands(actions)
-    return _nearest_action(_sided_commands(votes, v), v)
-
-
-_VOTES = {"mean": mean_actions, "median": median_actions, "median-turn": median_turn_actions,
-          "trimmed": trimmed_actions, "sided": sided_actions}
-VOTES = ("majority", *_VOTES)  # PersonLearner's vote= and --vote
-
-
-def parse_lag(text: str) -> int | None:
-    """A ``--lag`` value: ``auto`` (None: estimated from the labels) or an integer 0..MAX_LAG
+def parse_lag(text: str, max_lag: int = PERSON.alignment.max_lag) -> int | None:
+    """A ``--lag`` value: ``auto`` (None: estimated from the labels) or an integer 0..max_lag
     (ValueError naming what is wrong otherwise)."""
     if text.strip() == "auto":
         return None
@@ -256,33 +158,26 @@ def parse_lag(text: str) -> int | None:
         lag = int(text.strip())
     except ValueError:
         lag = -1
-    if not 0 <= lag <= MAX_LAG:
-        raise ValueError(f"must be 'auto' or an integer 0..{MAX_LAG} (scans), got {text!r}")
+    if not 0 <= lag <= max_lag:
+        raise ValueError(f"must be 'auto' or an integer 0..{max_lag} (scans), got {text!r}")
     return lag
 
 
 def add_person_arguments(parser) -> None:
-    """``--lag SCANS|auto`` (``parse_lag``; None: estimated) and ``--vote`` (None: the
-    default, ``PERSON_DEFAULTS``) as ``rhbl learner`` and ``rhbl train --from-recording``
-    take them."""
+    """``--lag SCANS|auto`` (``parse_lag``; None: the person rule's, estimated) as ``rhbl
+    learner`` and ``rhbl train --from-recording`` take it."""
+    a = PERSON.alignment
     parser.add_argument("--lag", type=arguments.Checked("lag", parse_lag), default=None,
                         metavar="SCANS|auto",
                         help="with the person rule: a label answers the scan this many scans "
-                             f"(0..{MAX_LAG}) before the one it names; 'auto' (default): "
+                             f"(0..{a.max_lag}) before the one it names; 'auto' (default): "
                              "estimated from the labels, re-estimated as they accumulate "
-                             f"({LAG} until there are enough; docs/teaching.md)")
-    parser.add_argument("--vote", choices=VOTES, default=None,
-                        help="with the person rule, a new tree's vote of the nearest labels: "
-                             "the action nearest to the mean command of those that agree on the "
-                             "side (sided), their interquartile mean command (trimmed), their "
-                             "mean command, their median command, their median turning and mean "
-                             "forward speed (median-turn) or "
-                             f"the label most of them carry (default {PERSON_DEFAULTS['vote']}; "
-                             "docs/teaching.md)")
+                             f"({a.default} until there are {a.min_labels}; docs/teaching.md)")
 
 
 def estimate_lag(W: np.ndarray, y: np.ndarray, k: int, n_labels: int, block: int = 50,
-                 folds: int = 5, decisions: int = MAX_DECISIONS) -> tuple[int, list[float]]:
+                 folds: int = 5,
+                 decisions: int = PERSON.alignment.max_decisions) -> tuple[int, list[float]]:
     """The lag (0 .. ``W.shape[1] - 1`` scans) at which the person's decisions are best
     predicted from the features ``W[:, lag]`` of the scan that many scans before each label's
     own, and the agreement at every lag. ``W``: (labels, lags, dim) in the order given.
@@ -291,133 +186,224 @@ def estimate_lag(W: np.ndarray, y: np.ndarray, k: int, n_labels: int, block: int
     and the first of the next): while a key is held every lag sees nearly the same place, so
     only the changes tell when the person reacted; at the right lag the last label before a
     change still sees the old side of the person's boundary and the first after it the new
-    side (a shorter lag sees the new side already before the change, a longer one the old side
-    still after it). Each is answered by the majority of its ``k``
-    nearest labels held out by time (the labels cut in blocks of ``block`` consecutive ones,
-    dealt round-robin into ``folds`` folds; the references are the other folds: consecutive
-    labels are near copies of each other). The agreement is smoothed over neighbouring lags
-    (weights 1/4, 1/2, 1/4: a few hundred decisions are noisy) and ties go to the shorter lag.
-    More than ``decisions`` decisions (a session of tens of minutes): that many of them, evenly
-    spread over the session, are answered (each against every other fold's label as before),
-    so the estimate's cost grows with the labels, not with their square.
-    Deterministic: a function of ``W`` and ``y`` only."""
+    side. Each is answered by the majority of its ``k`` nearest labels held out by time (the
+    labels cut in blocks of ``block`` consecutive ones, dealt round-robin into ``folds`` folds;
+    the references are the other folds: consecutive labels are near copies of each other;
+    a kd-tree per fold, the ``k`` nearest of the other folds' merged). The agreement is
+    smoothed over neighbouring lags (weights 1/4, 1/2, 1/4) and ties go to the shorter lag.
+    More than ``decisions`` decisions: that many of them, evenly spread over the session, are
+    answered. Deterministic: a function of ``W`` and ``y`` only."""
+    raw = [agreement_at(W, y, lag, k, n_labels, block, folds, decisions)
+           for lag in range(W.shape[1])]
+    return smoothed_lag(raw)
+
+
+def agreement_at(W: np.ndarray, y: np.ndarray, lag: int, k: int, n_labels: int,
+                  block: int = 50, folds: int = 5,
+                  decisions: int = PERSON.alignment.max_decisions) -> float:
+    """``estimate_lag``'s raw agreement at one ``lag``: the share of the decisions the
+    majority of their ``k`` nearest labels of the other folds answers (a kd-tree per fold, the
+    ``k`` nearest of the other folds' merged)."""
     n = len(y)
     fold = (np.arange(n) // block) % folds
     change = y[1:] != y[:-1]
     q = np.flatnonzero(np.r_[True, change] | np.r_[change, False])
     if len(q) > decisions:
         q = q[np.linspace(0, len(q) - 1, decisions).round().astype(np.int64)]
-    raw = []
-    for lag in range(W.shape[1]):
-        X = W[:, lag]
-        hit = 0
-        for f in range(folds):
-            qi, ri = q[fold[q] == f], np.flatnonzero(fold != f)
-            if not len(qi) or not len(ri):
-                continue
-            votes = nearest_votes(X[qi], X[ri], y[ri], k, n_labels)
-            hit += int((votes.argmax(axis=1) == y[qi]).sum())
-        raw.append(hit / max(1, len(q)))
-    a = np.array(raw)
+    members = [np.flatnonzero(fold == f) for f in range(folds)]
+    X = np.ascontiguousarray(W[:, lag])
+    trees = [_kdtree(X[m]) if len(m) else None for m in members]
+    hit = 0
+    for f in range(folds):
+        qi = q[fold[q] == f]
+        others = [g for g in range(folds) if g != f and trees[g] is not None]
+        if not len(qi) or not others:
+            continue
+        d_all, i_all = [], []
+        for g in others:
+            d, i = _neighbours(trees[g], X[qi], k, len(members[g]))
+            d_all.append(d)
+            i_all.append(members[g][i])
+        d, i = np.concatenate(d_all, axis=1), np.concatenate(i_all, axis=1)
+        kk = min(k, d.shape[1])
+        nn = np.take_along_axis(i, np.argsort(d, axis=1, kind="stable")[:, :kk], axis=1)
+        hit += int((_counts(nn, y, n_labels).argmax(axis=1) == y[qi]).sum())
+    return hit / max(1, len(q))
+
+
+def smoothed_lag(raw) -> tuple[int, list[float]]:
+    """The lag of the best agreement ``raw`` (one per lag 0..) smoothed over neighbouring
+    lags (1/4, 1/2, 1/4; ties to the shorter lag), and the smoothed agreement."""
+    a = np.array(raw, dtype=np.float64)
     smooth = 0.5 * a + 0.25 * np.r_[a[:1], a[:-1]] + 0.25 * np.r_[a[1:], a[-1:]]
     return int(np.argmax(smooth)), [float(v) for v in smooth]
 
 
-PERSON_RULE = "person"  # the snapshot metadata's learning rule of a PersonLearner
+class _Edited:
+    """The edited training set of a person's labels at one lag, kept up to date as labels
+    come: the labelled vectors ``X`` and their jittered copies ``Q``, a kd-tree over ``X``,
+    for every row of both its vote (counts of each action among its ``k`` nearest labels) and
+    the distance of its ``k``-th nearest (a new label nearer than that enters its vote: only
+    those rows are voted again), and the edited label of each."""
 
-# the defaults docs/teaching.md chose on the teaching study
-PERSON_DEFAULTS = {"k": 50, "copies": 1, "sigma": 0.06, "vote": "sided", "passes": 1,
-                   "build": "batch"}
+    def __init__(self, lag: int, k: int, n_actions: int, edit: Callable[[np.ndarray], np.ndarray]):
+        self.lag, self.k, self.n_actions, self.edit = lag, k, n_actions, edit
+        self.n = 0
+        self.X = self.Q = None
+        # rows: the labels', then the copies': the vote, the k-th nearest's distance, the label
+        self.votes = self.radius = self.labels = None
+        self.tree = None
+
+    def rows(self) -> np.ndarray:
+        return np.concatenate([self.X, self.Q]) if self.Q is not None and len(self.Q) else self.X
+
+    def update(self, X: np.ndarray, Q: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Take the labels ``X`` (the first ``n`` as before), their copies ``Q`` (likewise)
+        and every label index ``y``: the rows a new label is nearer to than their ``k``-th
+        nearest (and the new ones) voted again; returns them (indices into ``rows()``)."""
+        old, oldq = self.n, 0 if self.Q is None else len(self.Q)
+        n = len(X)
+        if self.votes is not None and n == old and len(Q) == oldq:
+            self.changed, self.fresh = np.zeros(0, np.int64), False
+            return self.changed  # no label came
+        self.tree = _kdtree(X)
+        if old <= self.k or self.votes is None:  # a row's vote held every label: all again
+            again = np.arange(n + len(Q))
+            self.fresh = True
+        else:
+            new = X[old:]
+            rows = self.rows()
+            near = np.zeros(len(rows), bool)
+            for s in range(0, len(new), 64):  # rows whose k-th nearest is farther than a new label
+                part = new[s:s + 64]
+                d2 = (np.einsum("ij,ij->i", rows, rows)[:, None]
+                      + np.einsum("ij,ij->i", part, part)[None, :] - 2.0 * rows @ part.T)
+                near |= (d2 <= (self.radius[:, None] ** 2) * (1 + 1e-9) + 1e-12).any(axis=1)
+            self.fresh = False
+            again = np.concatenate([np.flatnonzero(near[:old]),
+                                    np.arange(old, n),
+                                    n + np.flatnonzero(near[old:old + oldq]),
+                                    n + np.arange(oldq, len(Q))])
+            self.votes = np.concatenate([self.votes[:old], np.zeros((n - old, self.n_actions)),
+                                         self.votes[old:], np.zeros((len(Q) - oldq,
+                                                                     self.n_actions))])
+            self.radius = np.concatenate([self.radius[:old], np.zeros(n - old),
+                                          self.radius[old:], np.zeros(len(Q) - oldq)])
+            self.labels = np.concatenate([self.labels[:old], np.zeros(n - old, np.int64),
+                                          self.labels[old:], np.zeros(len(Q) - oldq, np.int64)])
+        if self.votes is None or len(self.votes) != n + len(Q):
+            self.votes = np.zeros((n + len(Q), self.n_actions))
+            self.radius = np.zeros(n + len(Q))
+            self.labels = np.zeros(n + len(Q), np.int64)
+        self.X, self.Q, self.n = X, Q, n
+        if len(again):
+            rows = self.rows()
+            d, nn = _neighbours(self.tree, rows[again], self.k, n)
+            self.votes[again] = _counts(nn, y, self.n_actions)
+            self.radius[again] = d[:, -1]
+            before = self.labels[again].copy()
+            before[(again >= old) & (again < n)] = -1  # new labels' rows
+            before[again >= n + oldq] = -1  # new copies' rows
+            self.labels[again] = self.edit(self.votes[again])
+            self.changed = again[self.labels[again] != before]  # new, or voted otherwise
+        else:
+            self.changed = again
+        return again
 
 
 class PersonLearner(DemonstrationLearner):
-    """A ``DemonstrationLearner`` for labels given by a person (see the module's docstring).
+    """A ``DemonstrationLearner`` for labels given by a person (see the module's docstring),
+    learning by ``rule`` (a ``LearningRule`` that edits its labels; default
+    ``client.behaviour.rule.PERSON``); ``lag``, ``k``, ``copies``, ``sigma`` and ``seed``
+    given here replace the rule's (``lag`` None: estimated).
 
     Every label offered (``observe``, ``observe_vector``) is kept; ``classifier`` is the tree
-    built from all of them (spawn rule and other ``**tree_params`` as for
-    ``DemonstrationLearner``, default ``spawn="winner"``), rebuilt when labels came since it
-    was last asked for, in up to ``passes`` shuffled passes (``_build``). ``k``: neighbours of the vote. ``vote``: ``"majority"`` (the label most
-    of them carry), ``"mean"`` (the action nearest to their mean command), ``"median"``
-    (nearest to their median command: ``median_actions``), ``"median-turn"`` (their median
-    turning and mean forward speed: ``median_turn_actions``), ``"trimmed"`` (their
-    interquartile mean command: ``trimmed_actions``) or ``"sided"`` (the mean command of those
-    that agree on the side: ``sided_actions``; the default, also for None). ``copies``,
-    ``sigma``: jittered copies of each vector (normal noise of ``sigma`` in feature units,
-    seeded with ``seed``) the tree also learns the vote's answer at (0: none; 1 by default). Sample
-    selection (``stride``, ``min_delta``) does not apply: the vote needs every label."""
+    of ``training_set``: every labelled vector and its copies with their edited labels,
+    learned in an order shuffled with the rule's seed (``**tree_params`` join the rule's
+    tree parameters, default ``spawn="winner"``). It is brought up to date when labels came
+    since it was last asked for: the lag re-estimated when the labels grew by the rule's
+    ``regrow`` since the last estimate (a new lag: every vote again), else only the votes a
+    new label enters, then the tree learned again. Sample selection (``stride``,
+    ``min_delta``) does not apply: the vote needs every label."""
 
     def __init__(self, features: FeatureSpec, actions: ActionSet = DEFAULT_ACTIONS, *,
-                 k: int = PERSON_DEFAULTS["k"], copies: int = PERSON_DEFAULTS["copies"],
-                 sigma: float = PERSON_DEFAULTS["sigma"], vote: str | None = PERSON_DEFAULTS["vote"],
-                 passes: int = PERSON_DEFAULTS["passes"], build: str = PERSON_DEFAULTS["build"],
-                 seed: int = 0, lag: int | None = None, task: str | None = None,
-                 parent: str | None = None, provenance: Mapping | None = None, **tree_params):
-        if not (isinstance(k, int) and k >= 1):
-            raise ValueError(f"k must be an integer >= 1, got {k!r}")
-        if not (isinstance(copies, int) and copies >= 0):
-            raise ValueError(f"copies must be an integer >= 0, got {copies!r}")
-        if not (sigma >= 0 and math.isfinite(sigma)):
-            raise ValueError(f"sigma must be a finite number >= 0, got {sigma!r}")
-        vote = PERSON_DEFAULTS["vote"] if vote is None else vote
-        if vote not in VOTES:
-            raise ValueError("vote must be one of " + ", ".join(map(repr, VOTES))
-                             + f", got {vote!r}")
-        if not (isinstance(passes, int) and passes >= 1):
-            raise ValueError(f"passes must be an integer >= 1, got {passes!r}")
-        if build not in ("batch", "repair"):
-            raise ValueError(f"build must be 'batch' or 'repair', got {build!r}")
-        if build == "repair" and copies:
-            raise ValueError("build 'repair' learns the labelled vectors only (copies=0)")
-        if lag is not None and not (isinstance(lag, int) and 0 <= lag <= MAX_LAG):
-            raise ValueError(f"lag must be None (estimated) or an integer 0..{MAX_LAG}, got "
-                             f"{lag!r}")
-        self.build = build
+                 rule: LearningRule = PERSON, lag=_KEEP, k: int | None = None,
+                 copies: int | None = None, sigma: float | None = None,
+                 seed: int | None = None, task: str | None = None, parent: str | None = None,
+                 provenance: Mapping | None = None, **tree_params):
+        import dataclasses
+
+        if not rule.person:
+            raise ValueError(f"a PersonLearner learns by a rule that edits its labels, not "
+                             f"the {rule.name!r} rule")
+        edits = {name: v for name, v in (("k", k), ("copies", copies), ("sigma", sigma))
+                 if v is not None}
+        if edits:
+            rule = rule.replace(editing=dataclasses.replace(rule.editing, **edits))
+        if lag is not _KEEP:
+            rule = rule.replace(lag=lag)
+        if seed is not None:
+            rule = rule.replace(seed=seed)
+        rule = rule.replace(tree={"spawn": "winner", **rule.tree, **tree_params})
+        self.rule = rule
+        a, e = rule.alignment, rule.editing
         # None: estimated from the labels (each keeps the scans before its own: ``observe``'s
         # ``earlier``); an integer: fixed, the scans the labels were shifted by when paired
-        self.lag = lag
-        self._ws: list[np.ndarray] = []  # lag None: per label its features at lags 0..MAX_LAG
+        self.lag = a.lag
+        self.k, self.copies, self.sigma, self.seed = e.k, e.copies, float(e.sigma), rule.seed
+        self._lags = a.max_lag + 1 if a.lag is None else 1  # feature columns kept per label
+        self._W = np.zeros((0, self._lags, features.dim))  # per label: its features at lags
+        self._y = np.zeros(0, np.int64)
+        self._n = 0
+        self._noise = np.zeros((0, features.dim))  # the copies' noise, drawn as labels come
+        self._rng = np.random.default_rng(rule.seed)  # has drawn exactly ``_noise``
         self._estimate: tuple[int, int, list[float]] | None = None  # (labels, lag, agreement)
-        self.k, self.copies, self.sigma, self.vote = k, copies, float(sigma), vote
-        self.passes, self.seed = passes, seed
-        self._xs: list[np.ndarray] = []
-        self._ys: list[int] = []
+        self._work: tuple[int, list[float]] | None = None  # an estimate under way (labels, raw)
+        self._edited: _Edited | None = None
+        self._whole: int | None = None  # the vectors the tree was last learned from at once
+        self._pending: list = []  # (labels, copies) new or voted otherwise since the last tree
+        self._stale = True  # every vote was taken again since the last tree
         self._clf = None
         self._built = -1
-        tree_params.setdefault("spawn", "winner")
         super().__init__(features, actions, task=task, parent=parent, provenance=provenance,
-                         **tree_params)
+                         rule=rule, **rule.tree)
 
-    # the tree: built from every label when asked for
+    # the tree: brought up to date when asked for
     @property
     def classifier(self):
-        if self._built != len(self._ys):
+        if self._built != self._n:
             self._clf = self._build()
-            self._built = len(self._ys)
+            self._built = self._n
         return self._clf
 
     @classifier.setter
     def classifier(self, clf) -> None:  # DemonstrationLearner's __init__: the empty tree
         self._clf = clf
-        self._built = len(self._ys)
+        self._built = self._n
 
     def _learn(self, x: np.ndarray, label: str, earlier=None) -> None:
-        self._xs.append(np.asarray(x, dtype=np.float64).reshape(-1))
-        self._ys.append(self.actions.names.index(label))
-        if self.lag is None:  # lags 0..MAX_LAG; those not held: the label's own scan
-            w = np.repeat(self._xs[-1][None, :], MAX_LAG + 1, axis=0)
-            if earlier is not None and len(earlier):
-                e = np.asarray(earlier, dtype=np.float64).reshape(-1, self.features.dim)
-                w[1:1 + min(len(e), MAX_LAG)] = e[:MAX_LAG]
-            self._ws.append(w)
+        x = np.asarray(x, dtype=np.float64).reshape(-1)
+        w = np.repeat(x[None, :], self._lags, axis=0)  # lags not held: the label's own scan
+        if self._lags > 1 and earlier is not None and len(earlier):
+            e = np.asarray(earlier, dtype=np.float64).reshape(-1, self.features.dim)
+            m = min(len(e), self._lags - 1)
+            w[1:1 + m] = e[:m]
+        if self._n == len(self._W):  # grown by doubling: appending stays O(1) a label
+            cap = max(64, 2 * len(self._W))
+            self._W = np.concatenate([self._W, np.zeros((cap - len(self._W), *self._W.shape[1:]))])
+            self._y = np.concatenate([self._y, np.zeros(cap - len(self._y), np.int64)])
+        self._W[self._n] = w
+        self._y[self._n] = self.actions.names.index(label)
+        self._n += 1
         self.vectors += 1
         if self._rec_x is not None:
-            self._rec_x.append(self._xs[-1])
+            self._rec_x.append(x)
             self._rec_y.append(label)
 
     def observe(self, ranges, yaw: float, label: str, earlier=None) -> bool:
         """Keep one labelled observation (every one is kept: True). ``earlier``: with the lag
-        estimated (``lag=None``), the feature vectors of the scans shown 1, 2, ... scans before
-        this one (nearest first, at most ``MAX_LAG``; fewer when they are not known or the
+        estimated, the feature vectors of the scans shown 1, 2, ... scans before this one
+        (nearest first, at most the rule's ``max_lag``; fewer when they are not known or the
         robot was put elsewhere: the lags beyond take this scan)."""
         return self.observe_vector(self.features.extract(ranges, yaw), label, earlier)
 
@@ -427,43 +413,6 @@ class PersonLearner(DemonstrationLearner):
         self._learn(x, label, earlier)
         return True
 
-    @property
-    def estimated_lag(self) -> int:
-        """The lag the tree is built with: fixed, or estimated from every label so far
-        (``estimate_lag`` over lags 0..MAX_LAG; ``LAG`` below ``MIN_ESTIMATE`` labels)."""
-        if self.lag is not None:
-            return self.lag
-        n = len(self._ys)
-        if self._estimate is None or self._estimate[0] != n:
-            if n < MIN_ESTIMATE:
-                self._estimate = (n, LAG, [])
-            else:
-                lag, agree = estimate_lag(np.stack(self._ws), np.array(self._ys, np.int64),
-                                          self.k, len(self.actions))
-                self._estimate = (n, lag, agree)
-        return self._estimate[1]
-
-    @property
-    def lag_agreement(self) -> list[float]:
-        """The held-out agreement at each lag 0..MAX_LAG behind ``estimated_lag`` (empty when
-        the lag is fixed or not estimated yet)."""
-        _ = self.estimated_lag
-        return list(self._estimate[2]) if self.lag is None else []
-
-    def _vectors(self) -> np.ndarray:
-        """The labelled vectors at the lag the tree is built with."""
-        if self.lag is None and self._ws:
-            return np.stack(self._ws)[:, self.estimated_lag]
-        return np.array(self._xs, dtype=np.float64).reshape(-1, self.features.dim)
-
-    def labelled(self) -> tuple[np.ndarray, list[str]]:
-        """The labels as given, in order: per label its features at lags 0..``MAX_LAG`` (the
-        scan it names, then the scans shown before it; with a fixed lag, one column: the scan
-        it was paired with), (labels, lags, dim), and its action's name."""
-        W = (np.stack(self._ws) if self.lag is None and self._ws
-             else np.array(self._xs, dtype=np.float64).reshape(-1, 1, self.features.dim))
-        return W, [self.actions.names[i] for i in self._ys]
-
     def observe_vectors(self, X: np.ndarray, labels) -> int:
         X, labels = self._checked(X, labels)
         for x, label in zip(X, labels, strict=True):  # (no earlier scans: lag 0 if estimated)
@@ -471,82 +420,149 @@ class PersonLearner(DemonstrationLearner):
             self._learn(x, label)
         return len(X)
 
-    def training_set(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(X, y)`` the tree is built from: the labelled vectors with the vote's labels (and
-        the jittered copies), label indices into ``actions.names``, in the order the tree
-        learns them (shuffled with ``seed``)."""
+    @property
+    def estimated_lag(self) -> int:
+        """The lag the tree is built with: fixed, or estimated from the labels (``estimate_lag``
+        over lags 0..max_lag; the rule's default below its ``min_labels`` labels; estimated
+        again once the labels grew by its ``regrow`` since the last estimate: past the rule's
+        ``extend_above`` vectors one lag's agreement at each build, the lag so far meanwhile,
+        so that no build waits for a whole estimate)."""
+        if self.lag is not None:
+            return self.lag
+        self._estimating(all_at_once=not self._long())
+        return self._estimate[1]
+
+    def _long(self) -> bool:
+        """Past the rule's ``extend_above`` vectors (labels and copies)."""
+        ext = self.rule.extend_above
+        return ext is not None and self._n * (1 + self.copies) >= ext
+
+    def _estimating(self, all_at_once: bool, step: bool = False) -> None:
+        """Bring the lag estimate up to date: all at once, or (``step``) one more lag's
+        agreement of an estimate begun at the labels there were then."""
+        a, n = self.rule.alignment, self._n
+        last = self._estimate
+        if n < a.min_labels:
+            if last is None or last[0] != n:
+                self._estimate = (n, a.default, [])
+            return
+        first = last is None or last[0] < a.min_labels
+        if self._work is None and (first or (n != last[0] and n >= last[0] * (1.0 + a.regrow))):
+            self._work = (n, [])  # an estimate begun at n labels
+        if self._work is None or not (all_at_once or first or step):
+            return
+        n0, raw = self._work
+        while len(raw) < self._lags:
+            raw.append(agreement_at(self._W[:n0], self._y[:n0], len(raw), self.k,
+                                     len(self.actions), a.block, a.folds, a.max_decisions))
+            if not (all_at_once or first):
+                break  # one lag a build
+        if len(raw) == self._lags:
+            self._estimate = (n0, *smoothed_lag(raw))
+            self._work = None
+
+    @property
+    def lag_agreement(self) -> list[float]:
+        """The held-out agreement at each lag 0..max_lag behind ``estimated_lag`` (empty when
+        the lag is fixed or not estimated yet)."""
+        _ = self.estimated_lag
+        return list(self._estimate[2]) if self.lag is None else []
+
+    def _vectors(self) -> np.ndarray:
+        """The labelled vectors at the lag the tree is built with."""
+        return np.ascontiguousarray(self._W[:self._n, self.estimated_lag if self._lags > 1 else 0])
+
+    def labelled(self) -> tuple[np.ndarray, list[str]]:
+        """The labels as given, in order: per label its features at lags 0..max_lag (the scan
+        it names, then the scans shown before it; with a fixed lag, one column: the scan it
+        was paired with), (labels, lags, dim), and its action's name."""
+        return (self._W[:self._n].copy(),
+                [self.actions.names[i] for i in self._y[:self._n]])
+
+    def _edit(self, votes: np.ndarray) -> np.ndarray:
+        """The edited label (an action index) of each row of ``votes``: the rule's vote."""
+        return sided_actions(votes, self.actions, self.rule.editing.side_share)
+
+    def _copies(self, X: np.ndarray) -> np.ndarray:
+        """The jittered copies of the labelled vectors ``X`` (``copies`` a label, in order),
+        their noise drawn once for each label as it came (seeded: the same copies whatever
+        the build)."""
+        want = len(X) * self.copies
+        if len(self._noise) < want:
+            self._noise = np.concatenate([self._noise, self._rng.normal(
+                0.0, self.sigma, (want - len(self._noise), X.shape[1]))])
+        return np.clip(np.repeat(X, self.copies, axis=0) + self._noise[:want], 0.0, 1.0)
+
+    def _update(self) -> tuple[np.ndarray, np.ndarray]:
+        """The training set, votes brought up to date (``_Edited``): (rows, edited labels)."""
+        if self.lag is None:
+            self._estimating(all_at_once=not self._long(), step=True)
         X = self._vectors()
-        y = np.array(self._ys, dtype=np.int64)
-        if len(y) == 0:
-            return X, y
-        n = len(self.actions)
-        if self.vote in _VOTES:
-            ym = _VOTES[self.vote](nearest_votes(X, X, y, self.k, n), self.actions)
-        else:
-            ym = majority_labels(X, y, self.k, n)
-        rng = np.random.default_rng(self.seed)
-        if self.copies == 0:
-            order = rng.permutation(len(ym))
-            return X[order], ym[order]
-        Q = np.clip(np.repeat(X, self.copies, axis=0)
-                    + rng.normal(0.0, self.sigma, (len(X) * self.copies, X.shape[1])), 0.0, 1.0)
-        votes = nearest_votes(Q, X, y, self.k, n)
-        yq = (_VOTES[self.vote](votes, self.actions) if self.vote in _VOTES
-              else votes.argmax(axis=1))
-        XA, yA = np.concatenate([X, Q]), np.concatenate([ym, yq])
-        order = rng.permutation(len(yA))
-        return XA[order], yA[order]
+        y = self._y[:self._n]
+        lag = self.estimated_lag
+        if self._edited is None or self._edited.lag != lag or self._edited.n > len(X):
+            self._edited = _Edited(lag, self.k, len(self.actions), self._edit)  # all again
+        ed = self._edited
+        ed.update(X, self._copies(X), y)
+        # what the tree has not learned yet, for ``_build`` (labels' and copies' own indices:
+        # a row's index in ``rows()`` moves as labels come)
+        self._stale |= ed.fresh
+        self._pending.append((ed.changed[ed.changed < ed.n], ed.changed[ed.changed >= ed.n] - ed.n))
+        return ed.rows(), ed.labels
+
+    def training_set(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(X, y)`` the tree is built from: the labelled vectors with their edited labels,
+        then their jittered copies with theirs, label indices into ``actions.names``, in the
+        order the tree learns them (shuffled with the rule's seed)."""
+        if self._n == 0:
+            return np.zeros((0, self.features.dim)), np.zeros(0, np.int64)
+        rows, labels = self._update()
+        order = copy.deepcopy(self._rng).permutation(len(labels))
+        return rows[order], labels[order]
 
     def _build(self):
-        """The tree of ``training_set``, learned in passes over it until it answers every
-        vector with its label (at most ``passes``): presented in the order taught, a run along
-        one wall carves one big sphere that hides what came before; shuffled and repeated, the
-        spheres follow the labels."""
+        """The tree of ``training_set``, learned in its order; past the rule's
+        ``extend_above`` vectors, the tree so far (a copy) extended with the vectors new or
+        voted otherwise since (in an order shuffled with the seed), learned again from every
+        vector once they grew by the alignment's ``regrow`` since it last was (or every vote
+        was taken again)."""
         from rhbl import HypersphereClassifier
 
-        if self.build == "repair" and getattr(self._clf, "tree_", None) is not None:
-            clf = self._clf  # the tree so far, repaired where it disagrees with the vote
-            X = self._vectors()
-            y = np.array(self._ys, dtype=np.int64)
-            y = majority_labels(X, y, self.k, len(self.actions))
-        else:
-            params = {"default_label": self.actions.names[0], **self.tree_params}
-            clf = HypersphereClassifier(**params)
-            X, y = self.training_set()
-        if len(y):
-            labels = np.array(self.actions.names)[y]
-            todo = np.arange(len(y)) if clf is not self._clf else None
-            for _ in range(self.passes):
-                if todo is None:  # repair: only where the tree disagrees with the vote
-                    todo = np.flatnonzero(clf.predict(X) != labels)
-                if len(todo):
-                    clf.partial_fit(X[todo], labels[todo])
-                todo = np.flatnonzero(clf.predict(X) != labels)
-                if not len(todo):
-                    break
+        names = np.array(self.actions.names)
+        if self._n == 0:
+            return HypersphereClassifier(**{"default_label": names[0], **self.tree_params})
+        rows, labels = self._update()
+        ext, n = self.rule.extend_above, self._edited.n
+        todo = np.unique(np.concatenate([np.concatenate([x, n + q]) for x, q in self._pending]))
+        stale, self._stale, self._pending = self._stale, False, []
+        if (ext is not None and self._clf is not None and self._whole is not None
+                and not stale and len(labels) >= ext
+                and len(labels) < self._whole * (1.0 + self.rule.alignment.regrow)):
+            clf = copy.deepcopy(self._clf)  # (a tree handed out before stays as it was)
+            todo = todo[copy.deepcopy(self._rng).permutation(len(todo))]
+            if len(todo):
+                clf.partial_fit(rows[todo], names[labels[todo]])
+            return clf
+        clf = HypersphereClassifier(**{"default_label": names[0], **self.tree_params})
+        order = copy.deepcopy(self._rng).permutation(len(labels))
+        clf.partial_fit(rows[order], names[labels[order]])
+        self._whole = len(labels)
         return clf
 
     def metadata(self) -> dict:
         meta = super().metadata()
-        meta["learning"] = {"rule": PERSON_RULE, "lag": self.lag,
-                            "estimated_lag": self.estimated_lag, "k": self.k, "copies": self.copies,
-                            "sigma": self.sigma, "vote": self.vote, "passes": self.passes,
-                            "build": self.build,
-                            "seed": self.seed}
+        meta["learning"] = {**self.rule.to_dict(), "estimated_lag": self.estimated_lag}
         return meta
 
     @classmethod
     def from_metadata(cls, meta: Mapping, features: FeatureSpec, actions: ActionSet,
                       parent: str | None = None) -> PersonLearner:
-        """An empty learner with the settings ``metadata()`` recorded in ``meta`` (a snapshot's
-        or a journal header's): its labels are learned again from the journal."""
-        learning = dict(meta.get("learning") or {})
-        if learning.get("rule") != PERSON_RULE:
-            raise ValueError(f"not a person's tree: learning rule {learning.get('rule')!r}")
-        opts = {k: learning[k] for k in ("k", "copies", "sigma", "vote", "passes", "build",
-                                         "seed", "lag") if k in learning}
-        return cls(features, actions, task=meta.get("task"), parent=parent,
-                   **opts, **(meta.get("tree_params") or {}))
+        """An empty learner by the rule ``meta`` records (a snapshot's or a journal header's:
+        ``LearningRule.of``): its labels are learned again from the journal."""
+        rule = LearningRule.of(meta)
+        if not rule.person:
+            raise ValueError(f"not a person's tree: learning rule {rule.name!r}")
+        return cls(features, actions, rule=rule, task=meta.get("task"), parent=parent)
 
     def compact(self, *args, **kw):
         raise ValueError("a PersonLearner's tree is rebuilt from its labels: compact the "

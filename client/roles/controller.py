@@ -11,16 +11,19 @@ commanding (and logs it), and the server's watchdog stops the robot.
 With ``--follow`` the starting order does not matter: started before the learner (or before its
 first snapshot) it waits for the first tree (``--wait-tree``, forever by default), then drives.
 
-The tree's actions go through a loop guard (``client.behaviour.guard.RotationGuard``, on by
-default, ``--no-guard`` to drive the tree's answers as they are): an order to rotate the other
-way within 5 scans of a rotation is overruled (the robot keeps turning as it was, for at most
-``--guard-hold`` scans in a row), so the robot does not bounce between a rot-left and a rot-right
-sphere for ever; every overruled reversal is counted (``--stats``: ``overruled``) and logged at a
-bounded rate; and, for a tree taught by hand (or with ``--guard-clearance M`` for any tree), a
-forward order while a laser return lies in the robot's path (within 0.5 m ahead and 0.3 m of
-its centre line) becomes a rotation in place (``--stats``: ``avoided``), and an overruled
-reversal drives straight on while that path is clear (``--stats``: ``straight_on``;
-``--no-guard-straight``: keep turning; docs/teaching.md has the study behind all three). Its
+The tree's actions go through the guard its learning rule says (a safety layer,
+``client.behaviour.guard.RotationGuard``; the snapshot's ``client.behaviour.rule.GuardSettings``,
+read again for every tree swapped in; ``--no-guard`` drives the tree's answers as they are, the
+other ``--guard-*`` options replace one part): an order to rotate the other way within 5 scans
+of a rotation is overruled (the robot keeps turning as it was, for at most ``--guard-hold``
+scans in a row), so the robot does not bounce between a rot-left and a rot-right sphere for
+ever; every overruled reversal is counted (``--stats``: ``overruled``) and logged at a bounded
+rate; and, with the rule's path check (a tree taught by hand: 0.3 m; ``--guard-clearance M``
+for any tree), a forward order while a laser return lies in the robot's path (within 0.5 m
+ahead and 0.3 m of its centre line) becomes a rotation in place (``--stats``: ``avoided``), and
+an overruled reversal drives straight on while that path is clear (``--stats``:
+``straight_on``; ``--no-guard-straight``: keep turning; docs/teaching.md has the study behind
+all three). Its
 decisions (``Decision``, for viewers) say when the guard stepped in lately on a reversal
 (``looping``) and what it commanded instead of the tree's (``executed``): ``rhbl console``
 then asks the person to show the robot the way out.
@@ -44,6 +47,7 @@ from client.behaviour.actions import ActionSet
 from client.behaviour.features import FEATURES, FeatureSpec, PayloadReader
 from client.behaviour.goals import GoalPolicy
 from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, check_compatible
+from client.behaviour.rule import LearningRule
 from client.decision import Decider
 from client.player import PlayerClient
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
@@ -127,6 +131,7 @@ def _policy_from(clf_bytes_or_path, features: str | None) -> TreePolicy:
         meta = dict(clf.metadata or {})
         check_compatible(meta, FEATURES[features] if features else None)
         spec, actions = FeatureSpec.from_dict(meta["features"]), ActionSet.from_dict(meta["actions"])
+        LearningRule.of(meta)  # the rule (its guard) the tree is driven by: readable
     except IncompatibleSnapshotError as exc:
         raise ProcessError(f"controller: {source}: {exc}", EXIT_USAGE) from exc
     except FileNotFoundError as exc:
@@ -178,8 +183,10 @@ class ControllerProcess:
 
     def __init__(self, ctx: Context):
         self.ctx, self.args = ctx, ctx.args
-        # kept across tree swaps: a new tree does not reset what the robot is doing
-        self.guard = guard.from_arguments(self.args)
+        # kept across tree swaps: a new tree does not reset what the robot is doing; its
+        # settings are each tree's rule's (``_guard``), ``guarding`` whether it is on for it
+        self.guard = guard.RotationGuard()
+        self.guarding = False
         self.policy: TreePolicy | None = None  # swapped between scans by the follower
         self.reader: PayloadReader | None = None  # the policy's features read with each scan
         # subscribed before the first query: a tree announced meanwhile is not missed
@@ -210,7 +217,7 @@ class ControllerProcess:
                             block=True)
 
     def swap(self, policy: TreePolicy) -> None:
-        self._clearance(policy)
+        self._guard(policy)
         self._reader(policy)
         self.policy = policy
 
@@ -218,16 +225,16 @@ class ControllerProcess:
         """The payload reader of ``policy``'s features (none for a ROS 2 robot's scans)."""
         self.reader = None if self.args.ros2 else policy.features.reader()
 
-    def _clearance(self, policy: TreePolicy) -> None:
-        """The guard's path check for this tree (``--guard-clearance``, or by who taught it;
-        a tree with goals: on, as rhbl evaluate measures it, docs/goals.md)."""
-        if self.guard is not None and self.args.guard_clearance is None:
-            self.guard.clearance = (guard.CLEARANCE if isinstance(policy, GoalPolicy)
-                                    else guard.clearance_for(policy.metadata))
+    def _guard(self, policy: TreePolicy) -> None:
+        """The guard this tree is driven through: its rule's, the options given replacing
+        parts of it (``guard.settings``)."""
+        settings = guard.settings(self.args, policy.metadata)
+        self.guard.apply(settings)
+        self.guarding = settings.on
 
     def run(self) -> int:
         self.policy = self.first_tree()
-        self._clearance(self.policy)
+        self._guard(self.policy)
         self._reader(self.policy)
         log.info("tree loaded: %s; features %s", _describe(self.policy),
                  self.policy.features.to_dict())
@@ -254,9 +261,7 @@ class ControllerProcess:
 
     def counters(self) -> dict:
         return {"commands": self.n, "unanswered": self.bad,
-                "overruled": 0 if self.guard is None else self.guard.overruled,
-                "avoided": 0 if self.guard is None else self.guard.avoided,
-                "straight_on": 0 if self.guard is None else self.guard.straight_on,
+                **self.guard.interventions,
                 "swaps": 0 if self.follower is None else self.follower.swaps,
                 "refused_trees": 0 if self.follower is None else self.follower.refused,
                 "dropped": {**self.client.decoder.counts,
@@ -353,7 +358,7 @@ class ControllerProcess:
             else:
                 x = p.features.extract(scan.ranges, scan.pose[2])
             name = str(p.classifier.predict_one(x))
-            if self.guard is not None:
+            if self.guarding:
                 name = self.guard_choose(name, scan)
             self.executed = name
             return p.actions[name], p, x
@@ -402,7 +407,7 @@ class ControllerProcess:
         never stops the controller (the command is already out)."""
         try:  # with the loop guard's state: a console asks the person to show the way out
             self.decider.publish(policy, x, scan, executed=self.executed,
-                                 looping=self.guard is not None and self.guard.looping)
+                                 looping=self.guarding and self.guard.looping)
         except Exception as exc:  # noqa: BLE001 - viewers only
             log.debug("decision of scan %d not published: %s", scan.id, exc)
 

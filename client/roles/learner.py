@@ -61,7 +61,7 @@ from collections import deque
 from client.behaviour.features import DEFAULT_FEATURES, FEATURES, FeatureError
 from client.behaviour.given import behaviour_arg
 from client.behaviour.spec import behaviour
-from client.behaviour.teaching import MAX_LAG, add_person_arguments
+from client.behaviour.teaching import add_person_arguments
 from client.journal import JournalError, journal_path
 from client.labels import MAX_BACKLOG, MAX_BACKLOG_BYTES, Acknowledgements, Pairing, scan_bytes
 from client.laser import Laser
@@ -136,9 +136,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "--resume or --fold-journal: the script rule); 'script' forces "
                              "the script rule (each label learned as it arrives); 'person' the "
                              "person rule (labels paired with the scan a reaction time --lag "
-                             "earlier, the tree rebuilt from every label by the vote of its "
-                             "nearest labels). A lineage keeps the rule it was made with (its "
-                             "journal's header)")
+                             "earlier, the tree learned from every label edited by the vote of "
+                             "its nearest labels; client.behaviour.rule). A lineage keeps the "
+                             "rule it was made with (its journal's header)")
     add_person_arguments(parser)
     parser.add_argument("--behaviour", default=None, type=behaviour_arg, metavar="NAME|FILE",
                         help="learn this behaviour: its perception is the feature spec (a "
@@ -157,6 +157,12 @@ def features_of(args: argparse.Namespace) -> tuple:
                          "or --task")
     b = behaviour(args.behaviour)
     return b.perception or b.features, b.name
+
+
+def guard_of(args: argparse.Namespace) -> bool | None:
+    """False when ``--behaviour`` turns the controller's guard off for its trees (its file's
+    ``guard = false``), else None (the rule's)."""
+    return None if args.behaviour is None or behaviour(args.behaviour).guard else False
 
 
 # ---- the process --------------------------------------------------------------------------
@@ -203,8 +209,8 @@ class LearnerProcess:
         self.pairing = Pairing(self.args.scan_buffer, self.args.match_timeout,
                                on_scan_seen=self.watch.seen, laser=self.laser,
                                **({"lag_of": self._lag_of} if self.lineage.undecided else
-                                  {"lag": self.lineage.lag or 0,
-                                   "window": MAX_LAG if self.lineage.estimates else 0}))
+                                  dict(zip(("lag", "window"), self.lineage.pairing(),
+                                           strict=True))))
         self.stats = {"learned": 0, "paired": 0, "rejected": 0, "lost": 0, "duplicates": 0,
                       "withdrawals": 0, "withdrawn_skipped": 0}
         # teachers' withdrawals as they arrive (decoded in zenoh's thread), applied by the loop
@@ -240,7 +246,7 @@ class LearnerProcess:
                 stride=args.stride, min_delta=args.min_delta,
                 fsync_interval=args.fsync_interval, fold_journal=args.fold_journal,
                 journal_write=journal_write, teacher=args.teacher, lag=args.lag,
-                vote=args.vote, lock_wait=args.lock_wait)
+                guard=guard_of(args), lock_wait=args.lock_wait)
         except JournalError as exc:
             raise ProcessError(f"learner: {exc}") from exc
 

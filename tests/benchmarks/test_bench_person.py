@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 from client.behaviour.actions import DEFAULT_ACTIONS
-from client.behaviour.teaching import MAX_LAG
+from client.behaviour.rule import PERSON
+
+MAX_LAG = PERSON.alignment.max_lag
 
 
 @pytest.fixture(scope="module")

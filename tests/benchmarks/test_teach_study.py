@@ -10,7 +10,7 @@ import types
 
 import pytest
 
-from client.behaviour.guard import RotationGuard, clearance_for
+from client.behaviour.guard import RotationGuard, settings_for
 from client.behaviour.learning import TreePolicy
 from lab.evaluate import evaluate
 from lab.harness import resolve_world
@@ -90,8 +90,8 @@ def test_a_short_session_by_hand_gives_a_robot_that_follows_the_wall(study, peop
                                study.make_method("person"), demo=120.0, correct=60.0,
                                guard=True)
     assert rec.labels > 1000 and rec.wrong > 0  # the person did press wrong keys
-    report = evaluate(spec, RotationGuard(TreePolicy.from_learner(learner),
-                                          clearance=clearance_for(learner.metadata())),
+    report = evaluate(spec, RotationGuard.of(settings_for(learner.metadata()),
+                                             TreePolicy.from_learner(learner)),
                       seconds=60.0)
     for ep in report["learner"]:
         assert ep["oscillation_loops"] == [], ep["start"]

@@ -170,27 +170,31 @@ def test_a_persons_lineage_is_rebuilt_from_its_whole_journal(tmp_path):
         Lineage(tmp_path / "n.rhbl", features="wall", teacher="person", lag=-1)
 
 
-def test_a_new_persons_lineage_takes_the_vote_asked_for_and_keeps_it(tmp_path):
+def test_a_new_lineage_keeps_its_rule_and_a_behaviours_guard_off(tmp_path):
+    """The rule (``client.behaviour.rule``) is written whole into the journal's header and the
+    snapshot; a recovered lineage learns by the header's rule; a behaviour that turns the
+    guard off gives trees whose rule says so (the controller reads it from the snapshot)."""
+    from client.behaviour.rule import PERSON, LearningRule
+
     out = tmp_path / "t.rhbl"
-    core = Lineage(out, features="wall", teacher="person", vote="median-turn")
-    assert core.learner.vote == "median-turn"
+    core = Lineage(out, features="wall", teacher="person", guard=False)
+    assert core.learner.rule == PERSON.replace(guard=False) and "sided vote" in core.describe()
     _feed(core, 60, seed=0)
     core.snapshot()
     core.close()
-    assert load_snapshot(out)[3]["learning"]["vote"] == "median-turn"
+    rule = LearningRule.of(load_snapshot(out)[3])
+    assert rule == core.learner.rule and rule.guard.on is False
     again = Lineage(out, features="wall")  # the journal's header keeps it
-    assert again.learner.vote == "median-turn" and "median-turn vote" in again.describe()
-    ref = Lineage(tmp_path / "ref.rhbl", features="wall", teacher="person",
-                      vote="median-turn")
+    assert again.learner.rule == rule
+    ref = Lineage(tmp_path / "ref.rhbl", features="wall", teacher="person")
     _feed(ref, 60, seed=0)
-    assert again.learner.classifier.tree_equal(ref.learner.classifier)
+    assert again.learner.classifier.tree_equal(ref.learner.classifier)  # the guard: not learning
+    assert LearningRule.of(ref.metadata()).guard.on is True
     for c in (again, ref):
         c.close()
-    for kw in ({"teacher": "script"}, {"teacher": "auto", "fold_journal": True}):
-        with pytest.raises(ProcessError, match="--vote is the person rule's"):
-            Lineage(tmp_path / "s.rhbl", features="wall", vote="mean", **kw)
-    with pytest.raises(ProcessError, match="--vote must be one of"):
-        Lineage(tmp_path / "b.rhbl", features="wall", teacher="person", vote="loudest")
+    script = Lineage(tmp_path / "s.rhbl", features="wall", teacher="script", guard=False)
+    assert script.learner.rule.name == "script" and script.learner.rule.guard.on is False
+    script.close()
 
 
 def test_the_majority_outvotes_a_wrong_key(tmp_path):
@@ -202,7 +206,7 @@ def test_the_majority_outvotes_a_wrong_key(tmp_path):
         ranges = (base + rng.normal(0, 0.05, 360)).astype(np.float32)
         for core in cores.values():
             core.learn(k, 0.1 * k, ranges, 0.0, label)
-    X = np.array(cores["person"].learner._xs)
+    X = cores["person"].learner.labelled()[0][:, 0]  # each label's own scan
     assert set(map(str, cores["person"].learner.classifier.predict(X))) == {"fwd"}
     assert len(cores["person"].journal) == 40  # the wrong key is kept as given, outvoted
     for core in cores.values():

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from client.behaviour.learning import load_snapshot
-from client.behaviour.teaching import MAX_LAG, PersonLearner
+from client.behaviour.rule import PERSON
+from client.behaviour.teaching import PersonLearner
 from client.journal import Journal, journal_path
 from client.labels import PERSON_SOURCES, SOURCE, Pairing, by_person
 from client.lineage import Lineage
@@ -20,6 +21,7 @@ from protocol import keys
 from protocol.messages import Scan, TeacherAction, Withdrawal
 
 LABELS = ["fwd", "fwd-left", "rot-left", "fwd-right", "rot-right"]
+MAX_LAG = PERSON.alignment.max_lag
 
 
 def _ranges(rng) -> np.ndarray:

@@ -1,5 +1,6 @@
-"""``rhbl evaluate`` drives a tree taught by hand through the controller's guard (as ``rhbl
-controller`` does), the scripted teacher's alone; ``--guard``/``--no-guard`` force either."""
+"""``rhbl evaluate`` judges the tree alone and, beside it, drives it through the guard its
+learning rule says (as ``rhbl controller`` does), counting what the guard did; ``--no-guard``:
+the tree alone only."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from client.behaviour.guard import CLEARANCE
+from client.behaviour.rule import PERSON
 from lab.cli import main
 from rhbl import snapshot
 
@@ -34,20 +35,25 @@ def _evaluate(tmp_path, tree, *options) -> dict:
 
 
 @pytest.mark.parametrize(("options", "expected"), [
-    ((), None), (("--guard",), 0.0), (("--guard", "--guard-clearance", "0.2"), 0.2)])
-def test_a_scripted_tree_is_evaluated_alone_unless_asked(tmp_path, options, expected):
+    (("--no-guard",), None), ((), 0.0), (("--guard", "--guard-clearance", "0.2"), 0.2)])
+def test_a_scripted_tree_is_judged_alone_and_driven_through_its_rules_guard(tmp_path, options,
+                                                                            expected):
     report = _evaluate(tmp_path, WALL_TREE, *options)
+    assert report["judged"] == "the tree alone"
     if expected is None:
-        assert report["guard"] is None
+        assert report["guard"] is None and report["guarded"] is None
     else:
         assert report["guard"]["clearance"] == expected and report["guard"]["hold"] == 30
+        assert set(report["guarded"]) >= {"success_rate", "collisions", "loops"}
+        assert report["guard"]["overruled"] >= 0 and report["guard"]["avoided"] >= 0
 
 
 def test_a_tree_taught_by_hand_is_evaluated_as_the_controller_drives_it(tmp_path, capsys):
     tree = _as_taught_by_hand(tmp_path)
     report = _evaluate(tmp_path, tree)
-    assert report["guard"]["clearance"] == CLEARANCE > 0
-    assert "driven through the controller's guard" in capsys.readouterr().out
+    assert report["guard"]["clearance"] == PERSON.guard.clearance > 0
+    out = capsys.readouterr().out
+    assert "judged by the tree alone" in out and "driven through the controller's guard" in out
     assert _evaluate(tmp_path, tree, "--no-guard")["guard"] is None
     assert _evaluate(tmp_path, tree, "--guard-hold", "7")["guard"]["hold"] == 7
     assert report["guard"]["straight"] is True

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 
 from client.behaviour.guard import (
-    CLEARANCE,
     RotationGuard,
     add_arguments,
-    clearance_for,
-    from_arguments,
     in_path,
+    settings,
+    settings_for,
 )
+from client.behaviour.rule import PERSON, SCRIPT, GuardSettings
 
 
 class Script:
@@ -116,10 +116,15 @@ def test_with_clearance_a_forward_order_into_the_path_rotates_away():
     assert off.choose("fwd", corner) == "fwd" and off.avoided == 0
 
 
-def test_the_controllers_clearance_is_on_for_a_tree_taught_by_hand_only():
-    assert clearance_for({"learning": {"rule": "person", "lag": 3}}) == CLEARANCE > 0
-    assert clearance_for({"learning": {"stride": 1}}) == 0.0
-    assert clearance_for({}) == 0.0 and clearance_for(None) == 0.0
+def test_the_guard_is_the_trees_rules_and_a_rule_can_turn_it_off():
+    # snapshots written before the rule was stored whole: the rule their metadata describes
+    assert settings_for({"learning": {"rule": "person", "lag": 3}}).clearance == 0.3
+    assert settings_for({"learning": {"stride": 1}}).clearance == 0.0
+    assert settings_for({}) == settings_for(None) == SCRIPT.guard
+    # written whole: what the rule says, also off
+    off = PERSON.replace(guard=False)
+    assert settings_for({"learning": off.to_dict()}) == GuardSettings(on=False, clearance=0.3)
+    assert settings_for({"learning": PERSON.to_dict()}) == PERSON.guard
 
 
 def test_an_overruled_reversal_drives_straight_on_while_the_path_is_clear():
@@ -140,10 +145,17 @@ def test_an_overruled_reversal_drives_straight_on_while_the_path_is_clear():
         assert (g.overruled, g.straight_on) == (1, 0)
 
 
-def test_the_options_make_the_guard_they_ask_for():
+def test_the_options_replace_parts_of_the_rules_guard():
     ap = argparse.ArgumentParser()
     add_arguments(ap)
-    g = from_arguments(ap.parse_args(["--guard-clearance", "0.3", "--guard-hold", "4"]))
+    g = RotationGuard.of(settings(ap.parse_args(["--guard-clearance", "0.3", "--guard-hold",
+                                                 "4"])))
     assert (g.clearance, g.hold, g.straight) == (0.3, 4, True)
-    assert from_arguments(ap.parse_args(["--no-guard-straight"])).straight is False
-    assert from_arguments(ap.parse_args(["--no-guard"])) is None
+    assert settings(ap.parse_args(["--no-guard-straight"])).straight is False
+    assert settings(ap.parse_args(["--no-guard"])).on is False
+    person = {"learning": PERSON.to_dict()}
+    assert settings(ap.parse_args([]), person) == PERSON.guard
+    assert settings(ap.parse_args(["--guard-clearance", "0"]), person).clearance == 0.0
+    off = {"learning": PERSON.replace(guard=False).to_dict()}
+    assert settings(ap.parse_args([]), off).on is False
+    assert settings(ap.parse_args(["--guard"]), off).on is True

@@ -92,7 +92,7 @@ def test_inline_perception_beams_or_sectors_reuses_the_feature_spec(tmp_path):
 
 
 @pytest.mark.parametrize(("change", "field", "allowed"), [
-    (('instructions = "drive about"', 'colour = "red"'), "colour", "allowed: expert, goals, instructions"),
+    (('instructions = "drive about"', 'colour = "red"'), "colour", "allowed: expert, goals, guard, instructions"),
     (('name = "mine"', "name = 3"), "name", "a non-empty string"),
     (('perception = "wall"', 'perception = "sonar"'), "perception", "a shipped feature spec"),
     (('side = "left"', 'side = "up"'), "expert.side", "one of right, left"),
@@ -144,3 +144,19 @@ def _good() -> dict:
     import tomllib
 
     return tomllib.loads(GOOD)
+
+
+def test_a_behaviour_can_turn_the_controllers_guard_off(tmp_path):
+    """``guard = false``: its trees' learning rule records the guard off (``rhbl learner
+    --behaviour``), so the controller drives the tree's answers as they are."""
+    import argparse
+
+    from client.roles.learner import guard_of
+
+    assert behaviour(str(write(tmp_path, GOOD))).guard is True
+    off = write(tmp_path, 'guard = false\n' + GOOD, "off.toml")
+    assert behaviour(str(off)).guard is False
+    assert guard_of(argparse.Namespace(behaviour=str(off))) is False
+    assert guard_of(argparse.Namespace(behaviour=None)) is None
+    with pytest.raises(BehaviourError, match="guard"):
+        behaviour(str(write(tmp_path, 'guard = "no"\n' + GOOD, "bad.toml")))

@@ -1,5 +1,6 @@
 """Learning from a person: the reaction lag, the neighbours' vote, the PersonLearner."""
 
+import dataclasses
 import types
 
 import numpy as np
@@ -8,25 +9,19 @@ import pytest
 from client.behaviour.actions import DEFAULT_ACTIONS
 from client.behaviour.features import FEATURES
 from client.behaviour.learning import DemonstrationLearner, TreePolicy
+from client.behaviour.rule import PERSON, LearningRule
 from client.behaviour.teaching import (
-    LAG,
-    MAX_LAG,
-    PERSON_DEFAULTS,
     PersonLearner,
     answered_scan,
     estimate_lag,
-    majority_labels,
-    mean_actions,
-    median_actions,
-    median_turn_actions,
     nearest_votes,
     parse_lag,
     sided_actions,
-    trimmed_actions,
 )
 from rhbl import load
 
 NAMES = DEFAULT_ACTIONS.names
+LAG, MAX_LAG = PERSON.alignment.default, PERSON.alignment.max_lag
 
 
 def _scans(ids, jump_at=None):
@@ -64,67 +59,6 @@ def test_nearest_votes_counts_the_labels_of_the_k_nearest():
     assert nearest_votes(np.array([[0.5]]), X, y, 99, 3).tolist() == [[2.0, 1.0, 2.0]]
 
 
-def test_majority_outvotes_a_lone_label_and_a_tie_keeps_the_own():
-    X = np.linspace(0.0, 1.0, 11).reshape(-1, 1)
-    y = np.zeros(11, dtype=np.int64)
-    y[5] = 3  # one wrong key in the middle of a run
-    assert majority_labels(X, y, 5, 5).tolist() == [0] * 11
-    two = np.array([[0.0], [1.0]])
-    assert majority_labels(two, np.array([1, 2]), 2, 5).tolist() == [1, 2]
-
-
-def test_mean_action_of_left_and_right_steering_is_forward():
-    votes = np.zeros((3, 5))
-    i = {n: k for k, n in enumerate(NAMES)}
-    votes[0, [i["fwd-left"], i["fwd-right"]]] = 5
-    votes[1, i["rot-left"]] = 4
-    votes[1, i["fwd-left"]] = 1
-    votes[2, i["fwd-right"]] = 1
-    assert [NAMES[a] for a in mean_actions(votes, DEFAULT_ACTIONS)] == [
-        "fwd", "rot-left", "fwd-right"]
-
-
-def test_median_action_keeps_a_turn_a_minority_of_confused_keys_pulls_to_forward():
-    votes = np.zeros((3, 5))
-    i = {n: k for k, n in enumerate(NAMES)}
-    votes[0, i["fwd-right"]], votes[0, i["rot-left"]] = 6, 4     # left and right confused
-    votes[1, [i["fwd-left"], i["fwd-right"]]] = 5                 # zig-zag: forward
-    votes[2, i["rot-right"]], votes[2, i["fwd-left"]] = 6, 4
-    assert [NAMES[a] for a in median_actions(votes, DEFAULT_ACTIONS)] == [
-        "fwd-right", "fwd", "rot-right"]
-    # the mean averages the minority in: forward, forward, an arc
-    assert [NAMES[a] for a in mean_actions(votes, DEFAULT_ACTIONS)] == [
-        "fwd", "fwd", "fwd-right"]
-
-
-
-def test_median_turn_keeps_the_turn_of_the_median_and_the_pace_of_the_mean():
-    votes = np.zeros((2, 5))
-    i = {n: k for k, n in enumerate(NAMES)}
-    votes[0, i["fwd-right"]], votes[0, i["rot-left"]] = 6, 4     # left and right confused
-    votes[1, i["rot-left"]], votes[1, i["fwd"]] = 6, 4            # turning, often going on
-    assert [NAMES[a] for a in median_turn_actions(votes, DEFAULT_ACTIONS)] == [
-        "fwd-right", "fwd-left"]
-    # the median stops to rotate once half the keys were a rotation; the mean goes straight
-    assert [NAMES[a] for a in median_actions(votes, DEFAULT_ACTIONS)] == [
-        "fwd-right", "rot-left"]
-    assert [NAMES[a] for a in mean_actions(votes, DEFAULT_ACTIONS)] == ["fwd", "fwd-left"]
-
-
-def test_the_interquartile_mean_averages_a_zig_zag_and_keeps_a_confused_turn():
-    votes = np.zeros((4, 5))
-    i = {n: k for k, n in enumerate(NAMES)}
-    votes[0, i["fwd-right"]], votes[0, i["fwd-left"]] = 55, 45    # over-steering: forward
-    votes[1, i["fwd-right"]], votes[1, i["rot-left"]] = 6, 4      # left and right confused
-    votes[2, i["rot-left"]], votes[2, i["fwd"]] = 6, 4
-    votes[3, i["rot-right"]] = 3                                  # all agree
-    assert [NAMES[a] for a in trimmed_actions(votes, DEFAULT_ACTIONS)] == [
-        "fwd", "fwd-right", "fwd-left", "rot-right"]
-    # the median keeps the zig-zag's larger side; the mean lets the confusion pull to forward
-    assert NAMES[median_actions(votes[:1], DEFAULT_ACTIONS)[0]] == "fwd-right"
-    assert NAMES[mean_actions(votes[1:2], DEFAULT_ACTIONS)[0]] == "fwd"
-
-
 def test_the_sided_vote_keeps_a_tapped_turn_and_drops_a_confused_side():
     votes = np.zeros((5, 5))
     i = {n: k for k, n in enumerate(NAMES)}
@@ -136,8 +70,6 @@ def test_the_sided_vote_keeps_a_tapped_turn_and_drops_a_confused_side():
     votes[4, i["fwd"]], votes[4, i["rot-left"]], votes[4, i["rot-right"]] = 80, 8, 7
     assert [NAMES[a] for a in sided_actions(votes, DEFAULT_ACTIONS)] == [
         "fwd", "fwd-right", "fwd-right", "rot-right", "fwd"]
-    # the interquartile mean hears the tapped turn as forward
-    assert NAMES[trimmed_actions(votes[2:3], DEFAULT_ACTIONS)[0]] == "fwd"
     # two thirds: a side at least that heavy is kept (a zig-zag), a lighter one dropped
     edge = np.zeros((2, 5))
     edge[0, i["fwd-left"]], edge[0, i["fwd-right"]] = 3, 2
@@ -205,13 +137,16 @@ def test_person_learner_copies_are_seeded_and_the_tree_saves(tmp_path):
     assert a.classifier.tree_.equal(b.classifier.tree_)
     path = a.save(tmp_path / "person.rhbl")
     meta = load(path).metadata
-    assert meta["learning"] == {"rule": "person", "lag": None, "estimated_lag": LAG,
-                                "k": PERSON_DEFAULTS["k"],
-                                "copies": 2,
-                                "sigma": PERSON_DEFAULTS["sigma"], "vote": PERSON_DEFAULTS["vote"],
-                                "passes": PERSON_DEFAULTS["passes"],
-                                "build": PERSON_DEFAULTS["build"], "seed": 4}
+    learning = meta["learning"]
+    assert {k: learning[k] for k in ("rule", "lag", "estimated_lag", "k", "copies", "sigma",
+                                     "vote", "seed")} == {
+        "rule": "person", "lag": None, "estimated_lag": LAG, "k": PERSON.editing.k,
+        "copies": 2, "sigma": PERSON.editing.sigma, "vote": "sided", "seed": 4}
     assert meta["tree_params"]["spawn"] == "winner"
+    # the whole rule is in the metadata: read back, it is the rule the learner learned by
+    assert LearningRule.of(meta) == a.rule and a.rule.editing.copies == 2
+    assert learning["editing"]["method"] == "wilson-edited-knn"
+    assert learning["guard"]["clearance"] == PERSON.guard.clearance > 0
     assert meta["provenance"]["vectors"] == 80
 
 
@@ -220,7 +155,7 @@ def test_person_learner_rejects_bad_settings_and_labels():
         PersonLearner(FEATURES["wall"], k=0)
     with pytest.raises(ValueError, match="copies must be"):
         PersonLearner(FEATURES["wall"], copies=-1)
-    with pytest.raises(ValueError, match="vote must be one of 'majority', 'mean', 'median', 'median-turn', 'trimmed', 'sided'"):
+    with pytest.raises(TypeError, match="vote"):  # one vote: the rule's (studies: benchmarks)
         PersonLearner(FEATURES["wall"], vote="mode")
     person = PersonLearner(FEATURES["wall"])
     with pytest.raises(ValueError, match="'jump' is not an action"):
@@ -317,3 +252,68 @@ def test_labelled_gives_the_labels_as_given_with_their_earlier_scans():
     fixed = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, lag=2)
     fixed.observe_vector(x, "fwd")
     assert fixed.labelled()[0].shape == (1, 1, len(x))
+
+
+@pytest.mark.parametrize("lag", [2, None])
+def test_the_tree_kept_up_to_date_label_by_label_is_the_tree_built_at_once(lag):
+    """Live (the tree asked for after every few labels: only the votes a new label enters are
+    taken again) and at once (every vote): the same training set and the same tree."""
+    W, y = _delayed_labels(4, n=700)
+    rule = PERSON if lag is not None else PERSON.replace(
+        alignment=dataclasses.replace(PERSON.alignment, regrow=0.0))  # the lag: every build
+    live = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, rule=rule, lag=lag, k=10)
+    once = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, rule=rule, lag=lag, k=10)
+    for t, (w, label) in enumerate(zip(W, y, strict=True)):
+        for learner in (live, once):
+            if lag is None:
+                learner.observe_vector(w[0], NAMES[label], earlier=w[1:])
+            else:
+                learner.observe_vector(w[lag], NAMES[label])
+        if t % 7 == 0 or t in (9, 10, 11, 12):
+            _ = live.classifier
+    a, b = live.training_set(), once.training_set()
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    assert live.classifier.tree_.equal(once.classifier.tree_)
+
+
+def test_past_extend_above_the_tree_is_extended_and_learned_again_at_each_growth():
+    """A long session (``extend_above``: here from the first vector): the tree so far is
+    extended with what is new or voted otherwise (a tree handed out stays as it was), and it is
+    learned again at once when the vectors grew by the alignment's ``regrow``."""
+    rng = np.random.default_rng(2)
+    rule = PERSON.replace(extend_above=0, lag=0)
+    learner = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, rule=rule, k=5, copies=0)
+    learner.observe_vectors(rng.uniform(0.1, 0.4, (400, 5)), ["fwd"] * 400)
+    first = learner.classifier
+    assert learner._whole == 400  # the first tree: learned at once
+    corner = rng.uniform(0.8, 0.9, (20, 5))  # a place nobody showed before, one key
+    learner.observe_vectors(corner, ["rot-left"] * 20)
+    second = learner.classifier
+    assert second is not first and learner._whole == 400  # extended, not learned again
+    assert set(map(str, second.predict(corner))) == {"rot-left"}
+    assert set(map(str, first.predict(corner))) == {"fwd"}  # handed out before: as it was
+    learner.observe_vectors(rng.uniform(0.1, 0.4, (40, 5)), ["fwd"] * 40)  # 460 >= 400 * 1.125
+    _ = learner.classifier
+    assert learner._whole == 460  # grown by an eighth: learned again at once
+
+
+def test_a_long_sessions_lag_is_estimated_again_one_lag_a_build():
+    """Past ``extend_above`` no build waits for a whole estimate: each computes one lag's
+    agreement of the estimate begun when the labels had grown by ``regrow``; the lag so far
+    meanwhile, the estimate's lag once every lag is done (the same as at once)."""
+    W, y = _delayed_labels(4, n=1200)
+    rule = PERSON.replace(extend_above=0)
+    learner = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, rule=rule, k=5)
+    for w, label in zip(W[:1000], y[:1000], strict=True):
+        learner.observe_vector(w[0], NAMES[label], earlier=w[1:])
+    assert learner.estimated_lag == 4  # the first estimate: at once
+    for w, label in zip(W[1000:], y[1000:], strict=True):  # grown by a fifth
+        learner.observe_vector(w[0], NAMES[label], earlier=w[1:])
+    steps = 0
+    while learner._work is not None or steps == 0:
+        learner.observe_vector(W[-1, 0], NAMES[y[-1]], earlier=W[-1, 1:])  # a label, a build
+        _ = learner.classifier
+        steps += 1
+    assert steps == MAX_LAG + 1 and learner._estimate[0] == 1201  # begun at the first build
+    at_once = estimate_lag(np.concatenate([W, W[-1:]]), np.r_[y, y[-1]], k=5, n_labels=5)
+    assert (learner.estimated_lag, learner.lag_agreement) == at_once
