@@ -5,7 +5,8 @@
 // #learner data-up/seq, #labels data-given/held/waiting/withdrawn, #agreement data-value/n,
 // #trouble data-markers/loops/stalls/collisions, #stuck data-why, #episode data-n/state,
 // #clock data-t; and window.rhbl.view(): what the page shows now, read-only (the robot as
-// drawn, the walls, the mode, who drives, the action executed, the scan displayed, the clock).
+// drawn, the walls, the goal, the mode, who drives, the action executed, the scan displayed,
+// the clock).
 "use strict";
 
 const $ = (id) => document.getElementById(id);
@@ -650,6 +651,7 @@ Object.defineProperty(window, "rhbl", { value: Object.freeze({
       scan_id: sh.scan ? sh.scan.id : null, holder: $("hold").dataset.holder || "",
       stuck: S.teach && S.teach.stuck ? S.teach.stuck.why : null, link: $("link").dataset.state || "",
       markers: S.teach ? S.teach.markers.map((k) => ({ ...k })) : [],
+      goal: S.world && S.world.goal ? S.world.goal.slice() : null,
     };
   },
 }) });
