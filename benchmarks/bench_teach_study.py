@@ -104,9 +104,12 @@ class Method:
     name: str
     lag: int | None
     options: dict
+    # the perception (a FeatureSpec); None: the wall features of both tasks' recipes
+    # (lab.recipe.RECIPES); another behaviour's: its own (bench_peers' person sessions)
+    features: object = None
 
     def learner(self, task: str = "wall-following") -> DemonstrationLearner:
-        spec = FEATURES["wall"]  # the features of both tasks' recipes (lab.recipe.RECIPES)
+        spec = FEATURES["wall"] if self.features is None else self.features
         if self.name == "person":
             return PersonLearner(spec, DEFAULT_ACTIONS, task=task, lag=self.lag, **self.options)
         spawn = "all" if self.name == "literal" else "winner"
