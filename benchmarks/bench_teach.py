@@ -406,6 +406,59 @@ def evaluate_run(result: dict, world: str | None = None, unseen=None,
     return result
 
 
+class _Alone:
+    """A person model driving by themselves as a policy (``lab.harness.drive``): the page's
+    view made from the pose and the world's walls; a hesitation (no key) drives the key before
+    it."""
+
+    def __init__(self, person, people, walls):
+        from client.behaviour.actions import DEFAULT_ACTIONS
+        from lab.episode import DT
+
+        self.person, self.people, self.walls, self.dt = person, people, walls, DT
+        self.actions = DEFAULT_ACTIONS
+
+    def reset(self) -> None:
+        self.person.reset()
+        self.t, self.last = 0.0, "fwd"
+
+    def act(self, ranges, pose) -> str:
+        key = self.person.observe(self.people.View(t=self.t, pose=tuple(pose), walls=self.walls))
+        self.t += self.dt
+        self.last = key or self.last
+        return self.last
+
+
+def person_alone(behaviour: str, name: str, seed: int, world: str | None = None,
+                 episodes: int | None = None) -> float:
+    """The person model driving by themselves (demonstrate mode, nothing learned) from the
+    start poses of ``world`` (default the behaviour's first teaching world), judged by the
+    behaviour's success rule as ``rhbl evaluate`` judges a tree (the expert's episode beside
+    it): its success rate. A reference: what the person's own driving achieves."""
+    import people
+
+    from lab import metrics
+    from lab.behaviours import get, world_of
+    from lab.evaluate import _teacher_episode
+    from lab.harness import drive
+
+    b = get(behaviour)
+    spec = world_of(b, world or b.teach[0])
+    walls = np.asarray(spec.segments(), dtype=float).reshape(-1, 4)
+    starts = spec.start_poses
+    ok = []
+    for k in range(len(starts) if episodes is None else episodes):
+        start = starts[k % len(starts)]
+        driver = _Alone(people.person(name, b, seed=1000 * seed + k), people, walls)
+        ep = drive(spec, driver, start, b.seconds, seed=seed * 1000 + k, behaviour=b)
+        tt = _teacher_episode(spec, b, driver.actions, start, b.seconds, seed * 1000 + k,
+                              0.0, 0.0, driver.dt)
+        tm = tt.metrics(spec.goal, b.rules)
+        tm["success"] = metrics.judge(b.rules, tm, None)
+        ok.append(bool(metrics.judge(b.rules, ep.metrics(spec.goal, b.rules), tm)))
+    return sum(ok) / len(ok)
+
+
 def run_one(person_name: str, seed: int, demo: float, correct: float, *,
             behaviour: str = "wall-following", world: str | None = None, unseen=None,
             eval_episodes: int | None = None, eval_seconds: float | None = None,
@@ -455,21 +508,23 @@ def table(results: list[dict]) -> str:
     """The runs, then per behaviour, person model and learner the means over its seeds
     (markdown). Success is the tree alone / through the guard."""
     rows = ["| behaviour | person (set) | learner | seed | taught world: alone / guard | "
-            "held-out worlds: alone / guard | guard interventions | loops: alone / guard | "
+            "held-out worlds: alone / guard | person alone (taught world) | guard "
+            "interventions | loops: alone / guard | "
             "collisions: alone / guard | tree nodes | labels given | goals | teaching s | "
             "evaluating s | person views/s | page frames/s (low tenth) |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         b = r.get("behaviour", "wall-following")
         who = f"{r['person']} ({person_set(r['person'])})"
         if "error" in r:
             rows.append(f"| {b} | {who} | {r['learner']} | {r['seed']} | failed: "
-                        f"{r['error'][:80]} |" + " |" * 11)
+                        f"{r['error'][:80]} |" + " |" * 12)
             continue
         goals = sum(r.get(m, {}).get("goals", 0) for m in ("demonstrate", "correct"))
         rows.append(
             f"| {b} | {who} | {r['learner']} | {r['seed']} | {_alone_guard(r, 'success_taught')} "
-            f"| {_alone_guard(r, 'success_unseen')} | {r.get('interventions_guard', '-')} | "
+            f"| {_alone_guard(r, 'success_unseen')} | {_pct(r.get('person_alone'))} | "
+            f"{r.get('interventions_guard', '-')} | "
             f"{r.get('loops_alone', r.get('loops'))} / {r.get('loops_guard', '-')} | "
             f"{r.get('collisions_alone', r.get('collisions'))} / "
             f"{r.get('collisions_guard', '-')} | {r['tree']['nodes']} | "
@@ -478,8 +533,9 @@ def table(results: list[dict]) -> str:
             f"({_rate(r, 'page_fps_p10')}) |")
     rows += ["", "| behaviour | person (set) | learner | runs | taught world alone (mean, worst) "
              "| held-out alone (mean, worst) | taught with guard (mean) | held-out with guard "
-             "(mean) | guard interventions (mean) | loops alone (mean) | tree nodes (mean) | "
-             "labels (mean) |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "(mean) | person alone (mean) | guard interventions (mean) | loops alone (mean) | "
+             "tree nodes (mean) | labels (mean) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     groups: dict[tuple[str, str, str], list[dict]] = {}
     for r in results:
         if "error" not in r:
@@ -501,6 +557,7 @@ def table(results: list[dict]) -> str:
             f"{_pct(statistics.fmean(unseen))} ({_pct(min(unseen))}) | "
             f"{_pct(mean(lambda r: r.get('success_taught_guard')))} | "
             f"{_pct(mean(lambda r: r.get('success_unseen_guard')))} | "
+            f"{_pct(mean(lambda r: r.get('person_alone')))} | "
             f"{num(mean(lambda r: r.get('interventions_guard')), '{:.0f}')} | "
             f"{num(mean(lambda r: r.get('loops_alone', r.get('loops'))))} | "
             f"{num(mean(lambda r: r['tree']['nodes']), '{:.0f}')} | "
@@ -707,6 +764,11 @@ def main(argv=None) -> int:
 
     def evaluated(r: dict) -> None:
         runs = [r]
+        try:  # the reference: the person's own driving in the taught world
+            r["person_alone"] = person_alone(r["behaviour"], r["person"], r["seed"], args.world,
+                                             args.eval_episodes)
+        except Exception as exc:  # noqa: BLE001 - said in the table
+            r["person_alone_error"] = f"{type(exc).__name__}: {exc}"
         try:
             if literal is not None:
                 runs.append(literal_run(r, literal))

@@ -615,7 +615,10 @@ class FollowerStyle(PilotStyle):
     bearing: float = 3.0            # misjudged bearings: the scan turned by this much (deg, sd)
     arc_turn: tuple[float, float] = (0.15, 0.3)  # arcs=False: an arc is a rotation this long ...
     arc_fwd: tuple[float, float] = (0.2, 0.4)    # ... then forward this long, again and again
-    close: float = 0.4              # correct mode: something nearer than this: take over
+    commit: float = 10.0            # once turned round on the spot (>= ``round_turn`` rad), no
+    round_turn: float = 2.0         # ... new rotation for this long (s) unless blocked ahead
+    blocked: float = 0.5            # ... (the way straight ahead shorter than this, m)
+    close: float = 0.3              # correct mode: something nearer than this: take over
     against: float = 0.7            # ... the robot turning against the person's wish this
     patience: float = 2.0           # ... fraction of the last ``patience`` s: take over
 
@@ -642,9 +645,20 @@ class Follower(Pilot):
         self.expert.reset()
         self._against: deque = deque(maxlen=400)  # (t, the robot turned against the wish)
         self._arc_phase: tuple[str, float] | None = None
+        self._seen_t, self._yaw = 0.0, None     # the view judged last: its time, heading
+        self._turning = 0.0                      # heading turned in the rotation meant now
+        self._turned_round_at = -math.inf
 
     def _judge(self, view: View) -> Seen:
         s = self.style
+        # how far the rotation the person means has turned the robot (a turn-round remembered)
+        if self._yaw is not None and self.m.intent in ("rot-left", "rot-right"):
+            self._turning += abs(_wrap(view.pose[2] - self._yaw))
+        elif self._turning:
+            if self._turning >= s.round_turn:
+                self._turned_round_at = self._seen_t
+            self._turning = 0.0
+        self._seen_t, self._yaw = view.t, view.pose[2]
         r = scan_of(view).astype(np.float64)
         r *= max(0.5, 1.0 + float(self.rng.normal(0.0, s.noise)))  # distances misjudged
         shift = int(round(float(self.rng.normal(0.0, s.bearing)) * (r.size - 1) / SCAN_FOV))
@@ -658,7 +672,16 @@ class Follower(Pilot):
         return Seen(scan=r, nearest=float(r.min()))
 
     def wanted(self, p: Seen) -> str:
-        return self.expert.act(p.scan, None)
+        """The expert's answer, but a person who has just turned round on the spot does not
+        turn round again at once (``commit``) while the way straight ahead is open."""
+        want = self.expert.act(p.scan, None)
+        s = self.style
+        if want.startswith("rot") and self._seen_t - self._turned_round_at < s.commit:
+            n = p.scan.size
+            ahead = p.scan[int(n * 0.4):int(n * 0.6) + 1]  # +-18 deg about the heading
+            if float(ahead.min()) > s.blocked:
+                return "fwd"
+        return want
 
     def _trouble(self, p: Seen, seen: View) -> bool:
         s, m = self.style, self.m
@@ -689,7 +712,7 @@ class Follower(Pilot):
 
     def _fine(self, p: Seen) -> bool:
         self._against.clear()
-        return p.nearest > self.style.close + 0.15 and not self.wanted(p).startswith("rot")
+        return p.nearest > self.style.close + 0.05 and not self.wanted(p).startswith("rot")
 
     def _press(self, now: float, intent: str | None) -> str | None:
         key = super()._press(now, intent)
@@ -715,11 +738,11 @@ ANY_DEV = {
     # fast and sloppy: wrong keys (half of them left/right confused), turns let go of late
     "rushed": FollowerStyle("rushed", reaction=0.20, rt_sigma=0.3, min_hold=0.1, wrong=0.15,
                             mirror=0.5, notice=0.1, oversteer=0.35, hesitate=0.01,
-                            noise=0.10, close=0.32, patience=3.0, settle=1.0),
+                            noise=0.10, close=0.28, patience=3.0, settle=1.0),
     # slow, spread-out reactions and lapses of attention (the key stays held meanwhile)
     "lapsing": FollowerStyle("lapsing", reaction=0.45, rt_sigma=0.45, period=0.15,
                              wrong=0.08, oversteer=0.2, hesitate=0.05, pause=(0.4, 1.2),
-                             lapse=0.05, lapse_for=(0.5, 1.5), noise=0.08, close=0.45,
+                             lapse=0.05, lapse_for=(0.5, 1.5), noise=0.08, close=0.35,
                              settle=2.0),
     # never an arc key: forward, or a rotation in place, in turns
     "arcless": FollowerStyle("arcless", reaction=0.28, rt_sigma=0.3, wrong=0.08,
