@@ -24,14 +24,16 @@ pose per world for 20 s, the first held-out world only), to check that it runs.
 Model size: RHBL nodes (spheres), decision tree nodes, kNN stored vectors, MLP weights and
 biases.
 
-``--people steady,bang,...`` (or ``all``): also a session of each person model
-(``benchmarks/people.py``) teaching wall following in the room, in-process as the teaching
-study runs it (``bench_teach_study.teach``: 240 s of demonstrating, 120 s of correcting while
-the person's tree drives through the guard; one session a seed); RHBL is the person's learner
-rebuilt from the labels (its person rule), the others learn each label with the scan the
-person's learner paired it with (its estimated lag). Each model has its rows, and with more
-than one, the rows "wall-following by N people" pool every model's sessions (the success over
-all their episodes). ``--behaviour ""`` with it: the people only.
+``--people calm,steady,...`` (or ``all``): also a session of each person model
+(``benchmarks/people.py``) teaching each ``--people-behaviour`` (default wall following, in the
+room; any shipped behaviour, in its first teaching world, for the people of ``people.ANY``),
+in-process as the teaching study runs it (``bench_teach_study.teach``: 240 s of demonstrating,
+120 s of correcting while the person's tree drives through the guard; one session a seed); RHBL
+is the person's learner rebuilt from the labels (its person rule), the others learn each label
+with the scan the person's learner paired it with (its estimated lag). Each behaviour and model
+has its rows, and with more than one model of a behaviour, the rows "B by N people" pool every
+model's sessions of it (the success over all their episodes). ``--behaviour ""`` with it: the
+people only.
 """
 
 from __future__ import annotations
@@ -65,8 +67,10 @@ LEARNERS = {
     "tree": "DecisionTreeClassifier(random_state=seed)",
     "mlp": "MLPClassifier(hidden_layer_sizes=(32, 32), max_iter=300, random_state=seed)",
 }
-# the person models of benchmarks/people.py (their names; the module is loaded when used)
-PEOPLE_MODELS = ["steady", "hurried", "cautious", "oversteerer", "novice", "tapper", "pilot",
+# the person models of benchmarks/people.py (their names; the module is loaded when used): a
+# person for any behaviour (people.ANY), then the right-hand wall's own (wall following only)
+PEOPLE_MODELS = ["calm", "rushed", "lapsing", "arcless", "tapping", "heavy", "muddled",
+                 "steady", "hurried", "cautious", "oversteerer", "novice", "tapper", "pilot",
                  "bang", "jitter", "wide"]
 QUICK = {"seconds": 60.0, "rounds": 1, "round_scales": (), "round_free": 0}
 SINGLE_QUERIES = 100   # queries timed one at a time, per repeat
@@ -263,42 +267,50 @@ def run_seed(b, seed: int, learners: list[str], quick: bool = False) -> dict:
     return out
 
 
-def person_session(model: str, seed: int, quick: bool = False):
-    """A person model's session teaching wall following in the room, in-process as the teaching
-    study runs it (``bench_teach_study.teach``: the person's learner, the guard while the tree
-    drives in correct mode): ``(learner, X, y)``, the person's learner and every label the
-    person gave, each with the scan the learner paired it with (its estimated lag)."""
+def _person_method(b):
+    """The teaching study's person method with ``b``'s perception."""
+    import dataclasses
+
+    from bench_teach_study import make_method
+
+    return dataclasses.replace(make_method("person"), features=b.features)
+
+
+def person_session(model: str, seed: int, quick: bool = False, behaviour: str = "wall-following"):
+    """A person model's session teaching ``behaviour`` in its first teaching world (wall
+    following: the room), in-process as the teaching study runs it (``bench_teach_study.teach``:
+    the person's learner with the behaviour's perception, the guard while the tree drives in
+    correct mode): ``(learner, X, y)``, the person's learner and every label the person gave,
+    each with the scan the learner paired it with (its estimated lag). ``model``: a person for
+    any behaviour or the right-hand wall's own (``people.person``)."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
-    from bench_teach_study import make_method, teach
-    from people import PEOPLE
+    from bench_teach_study import teach
+    from people import person
 
-    from lab.harness import resolve_world
-
-    if model not in PEOPLE:
-        raise ValueError(f"no person model {model!r}; known: {', '.join(PEOPLE)}")
+    b = get(behaviour)
+    who = person(model, b, seed=seed)  # ValueError naming the models
     times = {"demo": 60.0, "correct": 30.0} if quick else {}
-    _, learner = teach(resolve_world("room"), PEOPLE[model](seed=seed), make_method("person"),
-                       seed=seed, guard=True, **times)
+    _, learner = teach(world_of(b, b.teach[0]), who, _person_method(b), seed=seed, guard=True,
+                       **times)
     W, labels = learner.labelled()
     return learner, W[:, learner.estimated_lag if W.shape[1] > 1 else 0], np.array(labels)
 
 
-def run_person(model: str, seed: int, learners: list[str], quick: bool = False) -> dict:
-    """One person model's session (``person_session``) learned by every learner: RHBL is the
-    person's learner rebuilt from the same labels (its person rule: the lag, the neighbours'
-    vote), the others clone the labels as paired; each driven, without the guard, in wall
-    following's teaching and held-out worlds."""
-    from bench_teach_study import make_method
-
-    b = get("wall-following")
-    learner, X, y = person_session(model, seed, quick)
+def run_person(model: str, seed: int, learners: list[str], quick: bool = False,
+               behaviour: str = "wall-following") -> dict:
+    """One person model's session teaching ``behaviour`` (``person_session``) learned by every
+    learner: RHBL is the person's learner rebuilt from the same labels (its person rule: the
+    lag, the neighbours' vote), the others clone the labels as paired; each driven, without the
+    guard, in the behaviour's teaching and held-out worlds."""
+    b = get(behaviour)
+    learner, X, y = person_session(model, seed, quick, behaviour)
     out = {"seed": seed, "vectors": len(X), "trained_nodes": learner.nodes, "learners": {}}
     held = list(b.held_out)[:1] if quick else list(b.held_out)
     for name in learners:
         if name == "rhbl":
             W, labels = learner.labelled()
             t0 = time.perf_counter()
-            again = make_method("person").learner()  # the session's learner, new
+            again = _person_method(b).learner()  # the session's learner, new
             for w, label in zip(W, labels, strict=True):
                 if learner.lag is None:
                     again.observe_vector(w[0], label, earlier=w[1:])
@@ -390,17 +402,22 @@ def world_rows(results: dict[str, list[dict]], learners: list[str]) -> list[list
     return rows
 
 
-PERSON = "wall-following by "  # the results' key of a person model's sessions: this + its name
+PERSON = " by "  # the results' key of a person model's sessions: behaviour + this + its name
 
 
 def pooled(results: dict[str, list[dict]]) -> dict[str, list[dict]]:
-    """``results`` and, when they hold more than one person model's sessions, those sessions
-    together under "wall-following by N people" (every model's seeds: the success over all
-    their episodes, sizes and times over all their sessions)."""
-    people = [k for k in results if k.startswith(PERSON)]
-    if len(people) < 2:
-        return results
-    return {**results, f"{PERSON}{len(people)} people": [r for k in people for r in results[k]]}
+    """``results`` and, for each behaviour taught by more than one person model, those sessions
+    together under "B by N people" (every model's seeds: the success over all their episodes,
+    sizes and times over all their sessions)."""
+    by: dict[str, list[str]] = {}
+    for k in results:
+        if PERSON in k:
+            by.setdefault(k.split(PERSON, 1)[0], []).append(k)
+    out = dict(results)
+    for bname, people in by.items():
+        if len(people) > 1:
+            out[f"{bname}{PERSON}{len(people)} people"] = [r for k in people for r in results[k]]
+    return out
 
 
 HEADER = ["behaviour", "learner", "success taught", "success held out", "collisions / seed",
@@ -485,9 +502,13 @@ def main(argv=None) -> int:
                     help=f"comma-separated (default: all: {','.join(LEARNERS)})")
     ap.add_argument("--seeds", type=_seeds, default=[0, 1, 2], help="training seeds (default 0,1,2)")
     ap.add_argument("--people", type=_names(PEOPLE_MODELS, "people", every=True), default=[],
-                    help="also these person models' sessions teaching wall following in the "
-                         "room (in-process, benchmarks/people.py), one a seed; 'all': "
+                    help="also these person models' sessions teaching each --people-behaviour "
+                         "(in-process, benchmarks/people.py), one a seed; 'all': "
                          f"{','.join(PEOPLE_MODELS)}; default none")
+    ap.add_argument("--people-behaviour", type=_names(behaviours, "people-behaviour"),
+                    default=["wall-following"],
+                    help="the behaviours the --people teach, comma-separated (default "
+                         "wall-following; the right-hand wall's own models teach only that)")
     ap.add_argument("--quick", action="store_true", help="a small run (see above)")
     ap.add_argument("--json", default=None, help="write every measurement here")
     ap.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
@@ -496,6 +517,16 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if not args.from_json and not args.behaviour and not args.people:
         ap.error("nothing to measure: --behaviour is empty and no --people given")
+    if args.people:
+        sys.path.insert(0, str(ROOT / "benchmarks"))
+        from people import person
+
+        try:
+            for bname in args.people_behaviour:
+                for model in args.people:
+                    person(model, bname)
+        except ValueError as exc:
+            ap.error(f"--people: {exc}")
     t0 = time.perf_counter()
     results: dict[str, list[dict]] = {}
     if args.from_json:
@@ -511,11 +542,12 @@ def main(argv=None) -> int:
             results[bname].append(run_seed(b, seed, args.learners, args.quick))
             if args.json:  # after every seed: a run stopped part-way keeps what it measured
                 _write(args.json, results, args, time.perf_counter() - t0)
-    for model in [] if args.from_json else args.people:
-        key = f"{PERSON}{model}"
+    for bname, model in [] if args.from_json else [(bn, m) for bn in args.people_behaviour
+                                                    for m in args.people]:
+        key = f"{bname}{PERSON}{model}"
         results[key] = []
         for seed in args.seeds:
-            results[key].append(run_person(model, seed, args.learners, args.quick))
+            results[key].append(run_person(model, seed, args.learners, args.quick, bname))
             if args.json:
                 _write(args.json, results, args, time.perf_counter() - t0)
     wall = time.perf_counter() - t0

@@ -1,37 +1,48 @@
 """Teaching by hand, measured: person models drive the real console page in a real headless
-Chromium, and the tree they taught is evaluated.
+Chromium, and the tree they taught is evaluated, for every shipped behaviour.
 
-Per run (one person model, one seed): a real ``rhbl server`` (the room world, real
-time), a real ``rhbl learner``, a real ``rhbl console`` and Debian's Chromium on the page
-(selenium). The person (``benchmarks/people.py``: ``PEOPLE[name](seed=...)``) is fed what the
-page shows at each frame (``window.rhbl.view()``: the page's clock, the robot as drawn, the
-walls, the mode, who drives, the action executed, the scan displayed) and the keys it holds are
-pressed and released on the page like a person's (selenium key events: arrows, ``Home``, ``C``).
+Per run (one behaviour, one person model, one seed): a real ``rhbl server`` (the behaviour's
+first teaching world, real time), a real ``rhbl learner --behaviour B``, a real ``rhbl console
+--behaviour B`` and Debian's Chromium on the page (selenium). The person
+(``benchmarks/people.py``: ``people.person(name, B, seed)``; a person for any behaviour means
+what the behaviour's scripted expert answers, the right-hand wall's own models follow that wall)
+is fed what the page shows at each frame (``window.rhbl.view()``: the page's clock, the robot as
+drawn, the walls, the goal, the mode, who drives, the action executed, the scan displayed, the
+stuck notice) and the keys it holds are pressed and released on the page like a person's
+(selenium key events: arrows, ``Home``, ``C``, the number keys).
 
 1. demonstrate: the robot at its start pose (``Home``), the person drives for ``--demo`` s;
 2. correct: a ``rhbl controller --from-learner --follow`` drives the learner's tree, the page in
    correct mode (``C``): the person takes over when they judge it necessary, for ``--correct`` s;
-3. the learner's saved tree is evaluated (``lab.evaluate``) from every start pose of the room it
-   was taught in and of the unseen rooms (``--unseen``).
+   in a world with a goal, when the robot reaches it the person puts it at the next start pose
+   (a number key) and teaches the way again, in either mode;
+3. the learner's saved tree is evaluated (``rhbl evaluate --behaviour B``) from the start poses
+   of the world it was taught in and of the behaviour's held-out worlds, by the tree ALONE
+   (``--no-guard``) and through the controller's guard (``--guard``: its interventions, reversals
+   overruled plus forward orders turned into rotations, counted) (``--guards``).
 
-The table gives per run and per model (mean over its seeds) the success in the taught room and
-in the unseen rooms, the oscillation loops and collisions in those evaluations, the tree's size,
-the labels (given at the page; standing in the learner's journal) and what the person saw (the
-views of the page they decided on per second, the page's own frame rate). With ``--learners
-default,literal`` (the default) the session is also recorded (``rhbl record``) and the paper's
-literal algorithm (``--literal-args``, default ``--teacher script --spawn all``: each label
-learned as it arrives, with the scan it names, every sphere spawned) is retrained from that
-recording (``rhbl train --from-recording``, the live learner's own pairing) and evaluated the
-same way: a baseline on exactly the labels the person taught the default learner, corrections
-included (given while the default learner's tree drove), at no extra session.
+The table gives per run and per behaviour, model and learner (mean over its seeds) the success
+in the taught world and in the held-out worlds (the tree alone / with the guard), the guard's
+interventions, the oscillation loops and collisions in those evaluations, the tree's size, the
+labels given at the page, the goals reached while teaching, the wall time of teaching and of
+evaluating, and what the person saw (the views of the page they decided on per second, the
+page's own frame rate: a loaded machine shows there). With ``--learners default,literal`` the
+session is also recorded (``rhbl record``) and the paper's literal algorithm (``--literal-args``,
+default ``--teacher script --spawn all``) is retrained from that recording and evaluated the same
+way: a baseline on exactly the labels the person taught the default learner.
 
-    python benchmarks/bench_teach.py --people steady,hurried --seeds 0,1,2 \
+    python benchmarks/bench_teach.py --behaviour all --people any-dev --seeds 0,1,2 \
         [--demo 240] [--correct 120] [--learners default[,literal]] [--jobs 2] [--json out.json]
+    python benchmarks/bench_teach.py --behaviour dead-end --people calm --quick   # in parts
 
-``--people`` takes names, ``dev``, ``held-out``, ``fresh`` or ``all``. The budget per run is at most 240 s
-demonstrating plus 120 s correcting (real time). ``--jobs 2`` runs two sessions at once, each
-with its own server, ports, console and browser (the views/s and frames/s columns say whether
-the machine kept up: compare them with a single run's).
+``--behaviour`` takes shipped names or files, comma-separated, or ``all``; ``--people`` names
+and groups: ``any-dev`` (the development set of a person for any behaviour), ``any-held-out``
+(written after, never tuned on), ``any``; ``dev``, ``held-out``, ``fresh``, ``all`` (the
+right-hand wall's own, wall following only). The budget per run is at most 240 s demonstrating
+plus 120 s correcting (real time). ``--quick``: 120 + 60 s, seed 0, 3 episodes per evaluated
+world, no literal baseline. ``--jobs 2`` runs two sessions at once, each with its own server,
+ports, console and browser (the views/s and frames/s columns say whether the machine kept up);
+``--jobs 1`` evaluates each run before the next starts.
 """
 
 from __future__ import annotations
@@ -56,9 +67,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests" / "integration"))
+sys.path.insert(0, str(ROOT / "tests"))  # tests/conftest.py's own imports (waiting)
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 MAX_DEMO, MAX_CORRECT = 240.0, 120.0
+# --quick: a run in parts (a behaviour, a model at a time), on a shorter budget than the issue's
+QUICK = {"seeds": "0", "demo": 120.0, "correct": 60.0, "learners": "default",
+         "eval_episodes": 3}
 UNSEEN = ("eval-room-jagged", "eval-room-l", "eval-room-ring")
 LITERAL = "--teacher script --spawn all"  # rhbl train --from-recording: the paper's rule
 # the keys held for each action (the page combines them as a person's fingers do)
@@ -81,6 +96,8 @@ class Page:
         browser.find_element("id", "view").click()  # the keys reach the page
         self.held: set[str] = set()
         self._walls = None
+        self.starts: list = []
+        self.start = 0  # the start pose Home puts the robot at (the first)
 
     def view_raw(self) -> dict:
         return self.b.execute_script("return window.rhbl ? window.rhbl.view() : null")
@@ -92,9 +109,12 @@ class Page:
             return None
         if self._walls is None or len(self._walls) != len(v["walls"]):
             self._walls = np.asarray(v["walls"], dtype=float).reshape(-1, 4)
+        self.starts = v.get("starts") or []
+        goal = v.get("goal")
         return people.View(t=float(v["t"]), pose=tuple(float(x) for x in v["pose"]),
                            walls=self._walls, mode=v["mode"], driver=v["driver"] or "",
-                           action=v["action"], scan_id=v["scan_id"])
+                           action=v["action"], scan_id=v["scan_id"], stuck=v.get("stuck"),
+                           goal=None if goal is None else tuple(float(x) for x in goal))
 
     def hold(self, action: str | None) -> None:
         """Hold the keys of ``action`` (None: none), releasing the others."""
@@ -133,11 +153,14 @@ class Page:
 
 
 def teach(page: Page, person, people, seconds: float, mode: str) -> dict:
-    """The person at the page for ``seconds`` of the page's clock; what they did."""
+    """The person at the page for ``seconds`` of the page's clock; what they did. A world
+    with a goal: when the robot reaches it the person puts it at the world's next start pose
+    (the page's number keys) and teaches the way again (``goals`` counts them)."""
     v = None
     while v is None:
         v = page.view(people)
     t0, frames, keys_held, presses = v.t, 0, 0, 0
+    goals, placed_at = 0, -math.inf
     w0 = time.monotonic()
     last = None
     fps, next_fps = [], w0 + 1.0  # the page's own frame rate, read once a second
@@ -151,6 +174,12 @@ def teach(page: Page, person, people, seconds: float, mode: str) -> dict:
             next_fps += 1.0
             with contextlib.suppress(ValueError):
                 fps.append(float(page.data("fps", "fps")))
+        if (v.goal is not None and v.t - placed_at > 3.0
+                and math.dist(v.pose[:2], v.goal[:2]) < v.goal[2]):
+            page.hold(None)
+            goals, placed_at = goals + 1, v.t
+            page.press(str(1 + (page.start + goals) % max(1, len(page.starts))))
+            continue
         key = person.observe(v)
         if key != last:
             presses += key is not None
@@ -161,7 +190,7 @@ def teach(page: Page, person, people, seconds: float, mode: str) -> dict:
     page.hold(None)
     wall = time.monotonic() - w0
     return {"mode": mode, "seconds": round(v.t - t0, 2), "frames": frames,
-            "frames_with_a_key": keys_held, "presses": presses,
+            "frames_with_a_key": keys_held, "presses": presses, "goals": goals,
             # what the person saw: the views they decided on per wall second, and the page's
             # frames per second (its #fps, once a second: median and the lowest tenth)
             "person_hz": round(frames / wall, 1) if wall > 0 else None,
@@ -175,24 +204,31 @@ def _labels(page: Page) -> dict:
 
 
 def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
-              record: bool = False, learner_args: str = "", world: str = "room",
-              workdir: Path | None = None, log=print) -> dict:
-    """A person teaches at the page: demonstrating, then correcting (see the module); what they
-    did and the learner's tree (``tree_path``), not evaluated yet. ``record``: a ``rhbl
+              behaviour: str = "wall-following", record: bool = False, learner_args: str = "",
+              world: str | None = None, workdir: Path | None = None, log=print) -> dict:
+    """A person teaches ``behaviour`` at the page (its learner, its console; ``world``, by
+    default its first teaching world): demonstrating, then correcting (see the module); what
+    they did and the learner's tree (``tree_path``), not evaluated yet. ``record``: a ``rhbl
     record`` of the session too (``recording``), for the literal baseline (``literal_run``)."""
     import people
     import zenoh  # noqa: F401 - fail early without it
     from browser import ConsoleProcess, chromium, close_chromium
 
+    from client.behaviour.given import as_argument
+    from lab.behaviours import get
     from lab.children import Child, rhbl_argv
     from tests.conftest import _server_factory
+
+    b = get(behaviour)
+    world = world or b.teach[0]
+    person = people.person(person_name, b, seed=seed)  # ValueError before anything starts
 
     work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-bench-teach-"))
     work.mkdir(parents=True, exist_ok=True)
     out = work / "tree.rhbl"
     extra = shlex.split(learner_args)
     started, children, browser = [], [], None
-    result = {"person": person_name, "seed": seed, "learner": "default",
+    result = {"behaviour": b.name, "person": person_name, "seed": seed, "learner": "default",
               "learner_args": " ".join(extra), "world": world,
               "demo_budget": demo, "correct_budget": correct, "workdir": str(work)}
     t_start = time.monotonic()
@@ -206,19 +242,19 @@ def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
             if not rec.wait_for_line("recording ", 60):
                 raise RuntimeError(f"the recorder did not start:\n{rec.output()[-2000:]}")
             result["recording"] = str(work / "session.mcap")
-        lrn = Child("learner", rhbl_argv("learner", "--features", "wall", "--out", str(out),
+        lrn = Child("learner", rhbl_argv("learner", "--behaviour", as_argument(b), "--out", str(out),
                                          "--snapshot-every", "1", "--stats",
                                          str(work / "learner.json"), "--connect", srv.endpoint,
                                          *extra), work, cwd=ROOT, stop_signal=signal.SIGINT,
                     stop_timeout=60.0).start()
         children.append(lrn)
-        console = ConsoleProcess(srv.endpoint, "--stats", str(work / "console.json"))
+        console = ConsoleProcess(srv.endpoint, "--stats", str(work / "console.json"),
+                                 "--behaviour", as_argument(b))
         children.append(console)
         url = console.wait_url()
         browser = chromium()
         page = Page(browser, url)
         page.until(lambda p: p.data("learner", "up") == "1", 60, "a learner is up")
-        person = people.PEOPLE[person_name](seed=seed)
         person.reset()
         page.press("HOME")  # the robot at its start pose
         page.until(lambda p: "reset" in p.b.find_element("id", "info").text, 10, "reset")
@@ -276,7 +312,8 @@ def literal_run(result: dict, literal_args: str = LITERAL) -> dict:
 
     work = Path(result["workdir"])
     out = work / "literal.rhbl"
-    argv = rhbl_argv("train", "--from-recording", result["recording"], "--features", "wall",
+    argv = rhbl_argv("train", "--from-recording", result["recording"], "--behaviour",
+                     result.get("behaviour", "wall-following"),
                      *shlex.split(literal_args), "--out", str(out))
     t0 = time.monotonic()
     done = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=3600)
@@ -285,66 +322,156 @@ def literal_run(result: dict, literal_args: str = LITERAL) -> dict:
                            f"{done.stdout[-500:]}{done.stderr[-1000:]}")
     line = next(ln for ln in done.stdout.splitlines() if ln.startswith("trained from"))
     paired = int(line.split(": ", 1)[1].split(" labeled", 1)[0])
-    keep = ("person", "seed", "world", "demo_budget", "correct_budget", "workdir", "labels",
+    keep = ("behaviour", "person", "seed", "world", "demo_budget", "correct_budget", "workdir", "labels",
             "demonstrate", "correct", "labels_demonstrated")
     return {**{k: result[k] for k in keep if k in result}, "learner": "literal",
             "learner_args": literal_args, "rule": "literal", "tree_path": str(out),
             "labels_standing": paired, "retrain_s": round(time.monotonic() - t0, 1)}
 
 
-def evaluate_run(result: dict, world: str = "room", unseen=UNSEEN,
+GUARDS = ("alone", "guard")  # the tree alone (--no-guard), then through the guard (--guard)
+
+
+def _interventions(guard: dict | None) -> int:
+    """What the guard changed in one evaluation: reversals overruled plus forward orders turned
+    into rotations (0 without a guard)."""
+    return 0 if not guard else int(sum(v for k, v in guard.items()
+                                       if k in ("overruled", "avoided") and isinstance(v, int)))
+
+
+def evaluate_run(result: dict, world: str | None = None, unseen=None,
                  eval_episodes: int | None = None, eval_seconds: float | None = None,
-                 tag: str = "") -> dict:
-    """Evaluate a run's tree (``rhbl evaluate``, i.e. ``lab.evaluate``, in its own process, with
-    its defaults: a tree taught by hand through the controller's guard) in the room it was
-    taught in and in the unseen rooms; the figures added to ``result`` (each room's report in
-    the run's folder, ``eval<tag>-<learner>-<room>.json``: default and literal share it)."""
+                 tag: str = "", guards=GUARDS) -> dict:
+    """Evaluate a run's tree (``rhbl evaluate --behaviour B``, i.e. ``lab.evaluate``, in its own
+    process) in the world it was taught in (``world``, default the run's) and in the held-out
+    worlds (``unseen``, default the behaviour's), once per entry of ``guards``: ``"alone"``
+    the tree alone (``--no-guard``), ``"guard"`` through the controller's guard (``--guard``:
+    its interventions counted), ``"default"`` as ``rhbl evaluate`` chooses. The figures added
+    to ``result``: ``evals[mode][world]``, and per mode ``success_taught_<mode>``,
+    ``success_unseen_<mode>``, ``loops_<mode>``, ``collisions_<mode>``; the first mode's also
+    as ``eval``, ``success_taught``, ``success_unseen``, ``loops``, ``collisions`` (each
+    world's report in the run's folder, ``eval<tag>-<learner>-<mode>-<world>.json``)."""
+    from lab.behaviours import get
     from lab.children import rhbl_argv
 
+    b = get(result.get("behaviour", "wall-following"))
+    world = world or result.get("world") or b.teach[0]
+    unseen = list(b.held_out if unseen is None else unseen)
     work = Path(result["workdir"])
-    result["eval"] = {}
-    for name in (world, *unseen):
-        out = work / f"eval{tag}-{result['learner']}-{name}.json"  # default, literal
-        argv = rhbl_argv("evaluate", "--world", name, "--tree", result["tree_path"],
-                         "--seed", str(result["seed"]), "--json", str(out))
-        if eval_episodes is not None:
-            argv += ["--episodes", str(eval_episodes)]
-        if eval_seconds is not None:
-            argv += ["--seconds", str(eval_seconds)]
-        done = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=3600)
-        if done.returncode != 0:
-            raise RuntimeError(f"rhbl evaluate --world {name} exited {done.returncode}: "
-                               f"{done.stdout[-500:]}{done.stderr[-1000:]}")
-        rep = json.loads(out.read_text())
-        result["tree"] = rep["tree"]
-        result["eval"][name] = {
-            "success_rate": rep["success_rate"], "episodes": rep["episodes"],
-            "loops": len(rep["loops"]),
-            "collisions": int(sum(e["collisions"] for e in rep["learner"])),
-            "wall_band": round(statistics.fmean(e["wall_band_fraction"] for e in rep["learner"]), 3),
-            "teacher_success_rate": rep["teacher_success_rate"], "guard": rep.get("guard")}
-    taught = result["eval"][world]
-    others = [result["eval"][n] for n in unseen]
-    result["success_taught"] = taught["success_rate"]
-    result["success_unseen"] = (statistics.fmean(e["success_rate"] for e in others)
-                                if others else None)
-    result["loops"] = sum(e["loops"] for e in result["eval"].values())
-    result["loops_taught"] = taught["loops"]
-    result["collisions"] = sum(e["collisions"] for e in result["eval"].values())
+    result["evals"] = {}
+    t0 = time.monotonic()
+    for mode in guards:
+        flag = {"alone": ["--no-guard"], "guard": ["--guard"], "default": []}[mode]
+        evals = result["evals"][mode] = {}
+        for name in (world, *unseen):
+            out = work / f"eval{tag}-{result['learner']}-{mode}-{name}.json"
+            argv = rhbl_argv("evaluate", "--behaviour", b.name if b.path is None else
+                             str(b.path), "--world", name, "--tree", result["tree_path"],
+                             "--seed", str(result["seed"]), "--json", str(out), *flag)
+            if eval_episodes is not None:
+                argv += ["--episodes", str(eval_episodes)]
+            if eval_seconds is not None:
+                argv += ["--seconds", str(eval_seconds)]
+            done = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=3600)
+            if done.returncode != 0:
+                raise RuntimeError(f"rhbl evaluate --world {name} exited {done.returncode}: "
+                                   f"{done.stdout[-500:]}{done.stderr[-1000:]}")
+            rep = json.loads(out.read_text())
+            result["tree"] = rep["tree"]
+            band = [e["wall_band_fraction"] for e in rep["learner"]
+                    if e.get("wall_band_fraction") is not None]
+            evals[name] = {
+                "success_rate": rep["success_rate"], "episodes": rep["episodes"],
+                "loops": len(rep["loops"]),
+                "collisions": int(sum(e["collisions"] for e in rep["learner"])),
+                "wall_band": round(statistics.fmean(band), 3) if band else None,
+                "teacher_success_rate": rep["teacher_success_rate"], "guard": rep.get("guard"),
+                "interventions": _interventions(rep.get("guard"))}
+        taught = evals[world]
+        others = [evals[n] for n in unseen]
+        result[f"success_taught_{mode}"] = taught["success_rate"]
+        result[f"success_unseen_{mode}"] = (statistics.fmean(e["success_rate"] for e in others)
+                                            if others else None)
+        result[f"loops_{mode}"] = sum(e["loops"] for e in evals.values())
+        result[f"collisions_{mode}"] = sum(e["collisions"] for e in evals.values())
+        result[f"interventions_{mode}"] = sum(e["interventions"] for e in evals.values())
+    first = guards[0]
+    result["eval"] = result["evals"][first]
+    result["success_taught"] = result[f"success_taught_{first}"]
+    result["success_unseen"] = result[f"success_unseen_{first}"]
+    result["loops"] = result[f"loops_{first}"]
+    result["loops_taught"] = result["eval"][world]["loops"]
+    result["collisions"] = result[f"collisions_{first}"]
+    result["eval_wall_s"] = round(time.monotonic() - t0, 1)
     return result
 
 
-def run_one(person_name: str, seed: int, demo: float, correct: float, *, world: str = "room",
-            unseen=UNSEEN, eval_episodes: int | None = None, eval_seconds: float | None = None,
-            literal: str | None = None, **kw) -> list[dict]:
-    """One run, taught then evaluated (see the module); its figures, then (``literal``: the
-    literal algorithm's options) the literal baseline's on the same labels."""
-    r = teach_one(person_name, seed, demo, correct, world=world, record=literal is not None,
-                  **kw)
-    out = [evaluate_run(r, world, unseen, eval_episodes, eval_seconds)]
+class _Alone:
+    """A person model driving by themselves as a policy (``lab.harness.drive``): the page's
+    view made from the pose and the world's walls; a hesitation (no key) drives the key before
+    it."""
+
+    def __init__(self, person, people, walls):
+        from client.behaviour.actions import DEFAULT_ACTIONS
+        from lab.episode import DT
+
+        self.person, self.people, self.walls, self.dt = person, people, walls, DT
+        self.actions = DEFAULT_ACTIONS
+
+    def reset(self) -> None:
+        self.person.reset()
+        self.t, self.last = 0.0, "fwd"
+
+    def act(self, ranges, pose) -> str:
+        key = self.person.observe(self.people.View(t=self.t, pose=tuple(pose), walls=self.walls))
+        self.t += self.dt
+        self.last = key or self.last
+        return self.last
+
+
+def person_alone(behaviour: str, name: str, seed: int, world: str | None = None,
+                 episodes: int | None = None) -> float:
+    """The person model driving by themselves (demonstrate mode, nothing learned) from the
+    start poses of ``world`` (default the behaviour's first teaching world), judged by the
+    behaviour's success rule as ``rhbl evaluate`` judges a tree (the expert's episode beside
+    it): its success rate. A reference: what the person's own driving achieves."""
+    import people
+
+    from lab import metrics
+    from lab.behaviours import get, world_of
+    from lab.evaluate import _teacher_episode
+    from lab.harness import drive
+
+    b = get(behaviour)
+    spec = world_of(b, world or b.teach[0])
+    walls = np.asarray(spec.segments(), dtype=float).reshape(-1, 4)
+    starts = spec.start_poses
+    ok = []
+    for k in range(len(starts) if episodes is None else episodes):
+        start = starts[k % len(starts)]
+        driver = _Alone(people.person(name, b, seed=1000 * seed + k), people, walls)
+        ep = drive(spec, driver, start, b.seconds, seed=seed * 1000 + k, behaviour=b)
+        tt = _teacher_episode(spec, b, driver.actions, start, b.seconds, seed * 1000 + k,
+                              0.0, 0.0, driver.dt)
+        tm = tt.metrics(spec.goal, b.rules)
+        tm["success"] = metrics.judge(b.rules, tm, None)
+        ok.append(bool(metrics.judge(b.rules, ep.metrics(spec.goal, b.rules), tm)))
+    return sum(ok) / len(ok)
+
+
+def run_one(person_name: str, seed: int, demo: float, correct: float, *,
+            behaviour: str = "wall-following", world: str | None = None, unseen=None,
+            eval_episodes: int | None = None, eval_seconds: float | None = None,
+            literal: str | None = None, guards=GUARDS, **kw) -> list[dict]:
+    """One run of ``person_name`` teaching ``behaviour``, taught then evaluated (see the
+    module); its figures, then (``literal``: the literal algorithm's options) the literal
+    baseline's on the same labels."""
+    r = teach_one(person_name, seed, demo, correct, behaviour=behaviour, world=world,
+                  record=literal is not None, **kw)
+    out = [evaluate_run(r, world, unseen, eval_episodes, eval_seconds, guards=guards)]
     if literal is not None:
         out.append(evaluate_run(literal_run(r, literal), world, unseen, eval_episodes,
-                                eval_seconds))
+                                eval_seconds, guards=guards))
     return out
 
 
@@ -357,57 +484,117 @@ def _rate(r: dict, key: str) -> str:
     return f"{min(vals):.0f}" if vals else "-"
 
 
+def person_set(name: str) -> str:
+    """The set a person model belongs to (benchmarks/people.py)."""
+    import people
+
+    for label, group in (("dev", people.ANY_DEV), ("held-out", people.ANY_HELD_OUT),
+                         ("wall dev", people.DEV), ("wall held-out", people.HELD_OUT),
+                         ("wall fresh", people.FRESH)):
+        if name in group:
+            return label
+    return "?"
+
+
+def _alone_guard(r: dict, key: str) -> str:
+    """A figure of the tree alone / through the guard (runs before both: the one measured)."""
+    a, g = r.get(f"{key}_alone"), r.get(f"{key}_guard")
+    if a is None and g is None:
+        return _pct(r.get(key))
+    return f"{_pct(a)} / {_pct(g)}"
+
+
 def table(results: list[dict]) -> str:
-    """The runs, then per person model and learner the means over its seeds (markdown)."""
-    rows = ["| person | learner | seed | taught room | unseen rooms | loops | collisions | "
-            "tree nodes | labels given | labels standing | person views/s | page frames/s "
-            "(low tenth) |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    """The runs, then per behaviour, person model and learner the means over its seeds
+    (markdown). Success is the tree alone / through the guard."""
+    rows = ["| behaviour | person (set) | learner | seed | taught world: alone / guard | "
+            "held-out worlds: alone / guard | person alone (taught world) | guard "
+            "interventions | loops: alone / guard | "
+            "collisions: alone / guard | tree nodes | labels given | goals | teaching s | "
+            "evaluating s | person views/s | page frames/s (low tenth) |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
+        b = r.get("behaviour", "wall-following")
+        who = f"{r['person']} ({person_set(r['person'])})"
         if "error" in r:
-            rows.append(f"| {r['person']} | {r['learner']} | {r['seed']} | failed: "
-                        f"{r['error'][:60]} | | | | | | | | |")
+            rows.append(f"| {b} | {who} | {r['learner']} | {r['seed']} | failed: "
+                        f"{r['error'][:80]} |" + " |" * 12)
             continue
-        rows.append(f"| {r['person']} | {r['learner']} | {r['seed']} | {_pct(r['success_taught'])} "
-                    f"| {_pct(r['success_unseen'])} | {r['loops']} | {r['collisions']} | "
-                    f"{r['tree']['nodes']} | {r['labels']['given']} | {r['labels_standing']} | "
-                    f"{_rate(r, 'person_hz')} | {_rate(r, 'page_fps')} "
-                    f"({_rate(r, 'page_fps_p10')}) |")
-    rows += ["", "| person | learner | runs | taught room (mean, worst) | unseen rooms (mean, worst) | "
-             "loops (mean) | collisions (mean) | tree nodes (mean) | labels (mean) |",
-             "|---|---|---|---|---|---|---|---|---|"]
-    groups: dict[tuple[str, str], list[dict]] = {}
+        goals = sum(r.get(m, {}).get("goals", 0) for m in ("demonstrate", "correct"))
+        rows.append(
+            f"| {b} | {who} | {r['learner']} | {r['seed']} | {_alone_guard(r, 'success_taught')} "
+            f"| {_alone_guard(r, 'success_unseen')} | {_pct(r.get('person_alone'))} | "
+            f"{r.get('interventions_guard', '-')} | "
+            f"{r.get('loops_alone', r.get('loops'))} / {r.get('loops_guard', '-')} | "
+            f"{r.get('collisions_alone', r.get('collisions'))} / "
+            f"{r.get('collisions_guard', '-')} | {r['tree']['nodes']} | "
+            f"{r['labels']['given']} | {goals} | {r.get('teaching_wall_s', '-')} | "
+            f"{r.get('eval_wall_s', '-')} | {_rate(r, 'person_hz')} | {_rate(r, 'page_fps')} "
+            f"({_rate(r, 'page_fps_p10')}) |")
+    rows += ["", "| behaviour | person (set) | learner | runs | taught world alone (mean, worst) "
+             "| held-out alone (mean, worst) | taught with guard (mean) | held-out with guard "
+             "(mean) | person alone (mean) | guard interventions (mean) | loops alone (mean) | "
+             "tree nodes (mean) | labels (mean) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    groups: dict[tuple[str, str, str], list[dict]] = {}
     for r in results:
         if "error" not in r:
-            groups.setdefault((r["person"], r["learner"]), []).append(r)
-    for (p, lrn), rs in groups.items():
+            groups.setdefault((r.get("behaviour", "wall-following"), r["person"],
+                               r["learner"]), []).append(r)
+    for (b, p, lrn), rs in groups.items():
         def mean(f, rs=rs):
-            return statistics.fmean(f(r) for r in rs)
-        taught = [r["success_taught"] for r in rs]
-        unseen = [r["success_unseen"] or 0.0 for r in rs]
-        rows.append(f"| {p} | {lrn} | {len(rs)} | {_pct(statistics.fmean(taught))} "
-                    f"({_pct(min(taught))}) | {_pct(statistics.fmean(unseen))} "
-                    f"({_pct(min(unseen))}) | "
-                    f"{mean(lambda r: r['loops']):.1f} | {mean(lambda r: r['collisions']):.1f} | "
-                    f"{mean(lambda r: r['tree']['nodes']):.0f} | "
-                    f"{mean(lambda r: r['labels']['given']):.0f} |")
+            vals = [v for v in (f(r) for r in rs) if v is not None]
+            return statistics.fmean(vals) if vals else None
+
+        def num(v, fmt="{:.1f}"):
+            return "-" if v is None else fmt.format(v)
+
+        taught = [r.get("success_taught_alone", r["success_taught"]) for r in rs]
+        unseen = [r.get("success_unseen_alone", r["success_unseen"]) or 0.0 for r in rs]
+        rows.append(
+            f"| {b} | {p} ({person_set(p)}) | {lrn} | {len(rs)} | "
+            f"{_pct(statistics.fmean(taught))} ({_pct(min(taught))}) | "
+            f"{_pct(statistics.fmean(unseen))} ({_pct(min(unseen))}) | "
+            f"{_pct(mean(lambda r: r.get('success_taught_guard')))} | "
+            f"{_pct(mean(lambda r: r.get('success_unseen_guard')))} | "
+            f"{_pct(mean(lambda r: r.get('person_alone')))} | "
+            f"{num(mean(lambda r: r.get('interventions_guard')), '{:.0f}')} | "
+            f"{num(mean(lambda r: r.get('loops_alone', r.get('loops'))))} | "
+            f"{num(mean(lambda r: r['tree']['nodes']), '{:.0f}')} | "
+            f"{num(mean(lambda r: r['labels']['given']), '{:.0f}')} |")
     return "\n".join(rows)
 
 
+GROUPS = {"any-dev": "ANY_DEV", "any-held-out": "ANY_HELD_OUT", "any": "ANY",
+          "dev": "DEV", "held-out": "HELD_OUT", "fresh": "FRESH", "all": "PEOPLE"}
+
+
 def _names(text: str, people) -> list[str]:
-    if text == "all":
-        return list(people.PEOPLE)
-    if text == "dev":
-        return list(people.DEV)
-    if text == "held-out":
-        return list(people.HELD_OUT)
-    if text == "fresh":
-        return list(people.FRESH)
-    names = [n for n in text.split(",") if n]
-    bad = [n for n in names if n not in people.PEOPLE]
-    if bad or not names:
-        raise ValueError(f"--people: unknown {', '.join(bad) or '(none)'}; one of "
-                         f"{', '.join(people.PEOPLE)}, dev, held-out, fresh, all")
+    """``--people``: names and groups (``any-dev``, ``any-held-out``, ``any``: models of a
+    person for any behaviour; ``dev``, ``held-out``, ``fresh``, ``all``: the right-hand wall's
+    own, wall following only), comma-separated, in order, each once."""
+    names: list[str] = []
+    known = {**people.ANY, **people.PEOPLE}
+    for part in (n for n in text.split(",") if n):
+        group = getattr(people, GROUPS[part]) if part in GROUPS else None
+        if group is None and part not in known:
+            raise ValueError(f"--people: unknown {part!r}; one of {', '.join(known)}, "
+                             f"{', '.join(GROUPS)}")
+        names += [n for n in (group or [part]) if n not in names]
+    if not names:
+        raise ValueError("--people: no person model named")
+    return names
+
+
+def _behaviours(text: str) -> list[str]:
+    """``--behaviour``: shipped names or behaviour files, comma-separated, or ``all``."""
+    from client.behaviour.spec import behaviour, behaviour_names
+
+    names = behaviour_names() if text == "all" else [n for n in text.split(",") if n]
+    if not names:
+        raise ValueError("--behaviour: none named")
+    for n in names:
+        behaviour(n)  # BehaviourError (a ValueError) naming it
     return names
 
 
@@ -452,14 +639,25 @@ def main(argv=None) -> int:
     import people
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--people", default="dev", help="names, dev, held-out, fresh or all (default dev; "
-                                                "benchmarks/people.py)")
-    ap.add_argument("--seeds", default="0,1,2", help="seeds, e.g. 0,1,2 (default)")
-    ap.add_argument("--demo", type=float, default=MAX_DEMO,
+    ap.add_argument("--behaviour", default="wall-following",
+                    help="the behaviours taught: shipped names or files, comma-separated, or "
+                         "all (default wall-following)")
+    ap.add_argument("--people", default="any-dev",
+                    help="person models: names or groups, comma-separated: any-dev, "
+                         "any-held-out, any (a person for any behaviour), dev, held-out, fresh, "
+                         "all (the right-hand wall's own, wall following only) (default "
+                         "any-dev; benchmarks/people.py)")
+    ap.add_argument("--quick", action="store_true",
+                    help=f"the quick size, for running in parts: {QUICK['demo']:g} s "
+                         f"demonstrating + {QUICK['correct']:g} s correcting, seed "
+                         f"{QUICK['seeds']}, {QUICK['eval_episodes']} episodes per evaluated "
+                         "world, no literal baseline (each given option still wins)")
+    ap.add_argument("--seeds", default=None, help="seeds, e.g. 0,1,2 (default; --quick: 0)")
+    ap.add_argument("--demo", type=float, default=None,
                     help=f"seconds demonstrating per run (at most {MAX_DEMO:g}; default)")
-    ap.add_argument("--correct", type=float, default=MAX_CORRECT,
+    ap.add_argument("--correct", type=float, default=None,
                     help=f"seconds correcting per run (at most {MAX_CORRECT:g}; default)")
-    ap.add_argument("--learners", default="default,literal",
+    ap.add_argument("--learners", default=None,
                     help="default (the learner's defaults) or default,literal (default: also "
                          "the paper's literal algorithm as a baseline, learned from the same "
                          "session's labels: its recording retrained)")
@@ -474,9 +672,14 @@ def main(argv=None) -> int:
                     help="sessions at once (1 or 2; each its own server, ports, console and "
                          "browser): check the person views/s and page frames/s columns against "
                          "a single run")
-    ap.add_argument("--world", default="room", help="the room taught in (default room)")
-    ap.add_argument("--unseen", default=",".join(UNSEEN),
-                    help=f"unseen rooms, comma-separated (default {','.join(UNSEEN)})")
+    ap.add_argument("--world", default=None,
+                    help="the world taught in (default: the behaviour's first teaching world)")
+    ap.add_argument("--unseen", default=None,
+                    help="held-out worlds, comma-separated (default: the behaviour's)")
+    ap.add_argument("--guards", default=",".join(GUARDS),
+                    help="how each tree is evaluated, comma-separated: alone (--no-guard), "
+                         "guard (--guard, its interventions counted), default (rhbl evaluate's "
+                         "choice) (default alone,guard; the first gives the summary's figures)")
     ap.add_argument("--eval-episodes", type=int, default=None,
                     help="episodes per evaluated room (default: one per start pose)")
     ap.add_argument("--eval-seconds", type=float, default=None,
@@ -491,6 +694,11 @@ def main(argv=None) -> int:
                          "with this checkout's rhbl evaluate (--world, --unseen, --eval-*), "
                          "print their table and, with --json, write it")
     args = ap.parse_args(argv)
+    full = {"seeds": "0,1,2", "demo": MAX_DEMO, "correct": MAX_CORRECT,
+            "learners": "default,literal", "eval_episodes": None}
+    for k, v in (QUICK if args.quick else full).items():
+        if getattr(args, k) is None:
+            setattr(args, k, v)
     if args.evaluate_again:
         return _evaluate_again(args)
     if args.table:
@@ -505,7 +713,15 @@ def main(argv=None) -> int:
         print(table(runs))
         return 0
     try:
+        behaviours = _behaviours(args.behaviour)
         names = _names(args.people, people)
+        for b in behaviours:  # every model can teach every behaviour asked for
+            for n in names:
+                people.person(n, b)
+        guards = tuple(x for x in args.guards.split(",") if x)
+        if not guards or any(g not in ("alone", "guard", "default") for g in guards):
+            raise ValueError(f"--guards: alone, guard or default, comma-separated, got "
+                             f"{args.guards!r}")
         seeds = parse_seeds(args.seeds)
         if not 0 < args.demo <= MAX_DEMO or not 0 < args.correct <= MAX_CORRECT:
             raise ValueError(f"--demo must be in (0, {MAX_DEMO:g}] and --correct in "
@@ -516,10 +732,13 @@ def main(argv=None) -> int:
                              f"learns the default run's labels), got {args.learners!r}")
         if args.jobs not in (1, 2):
             raise ValueError(f"--jobs must be 1 or 2, got {args.jobs}")
-        unseen = [x for x in args.unseen.split(",") if x]
+        if (args.world or args.unseen) and len(behaviours) > 1:
+            raise ValueError("--world and --unseen name one behaviour's worlds: give one "
+                             "--behaviour with them")
+        unseen = None if args.unseen is None else [x for x in args.unseen.split(",") if x]
         from lab.harness import resolve_world
 
-        for w in (args.world, *unseen):
+        for w in ([args.world] if args.world else []) + (unseen or []):
             resolve_world(w)
         if args.eval_episodes is not None and args.eval_episodes < 1:
             raise ValueError("--eval-episodes must be >= 1")
@@ -530,8 +749,10 @@ def main(argv=None) -> int:
         return 2
     top = Path(args.workdir) if args.workdir else Path(tempfile.mkdtemp(prefix="rhbl-bench-teach-"))
     literal = args.literal_args if "literal" in learners else None
-    print(f"bench_teach: {len(names)} people x {len(seeds)} seeds, {args.jobs} at a time, "
-          f"{args.demo:g} s demonstrating + {args.correct:g} s correcting each"
+    runs_asked = [(b, n, s) for b in behaviours for n in names for s in seeds]
+    print(f"bench_teach: {len(behaviours)} behaviours x {len(names)} people x {len(seeds)} "
+          f"seeds, {args.jobs} at a time, {args.demo:g} s demonstrating + {args.correct:g} s "
+          f"correcting each, evaluated {' and '.join(guards)}"
           f"{', with the literal baseline' if literal else ''}; logs in {top}", flush=True)
     results: list[dict] = []
     lock = threading.Lock()
@@ -543,44 +764,57 @@ def main(argv=None) -> int:
 
     def evaluated(r: dict) -> None:
         runs = [r]
+        try:  # the reference: the person's own driving in the taught world
+            r["person_alone"] = person_alone(r["behaviour"], r["person"], r["seed"], args.world,
+                                             args.eval_episodes)
+        except Exception as exc:  # noqa: BLE001 - said in the table
+            r["person_alone_error"] = f"{type(exc).__name__}: {exc}"
         try:
             if literal is not None:
                 runs.append(literal_run(r, literal))
         except Exception as exc:  # noqa: BLE001 - said in the table
-            runs.append({"person": r["person"], "seed": r["seed"], "learner": "literal",
-                         "error": f"retraining: {type(exc).__name__}: {exc}"})
+            runs.append({"behaviour": r["behaviour"], "person": r["person"], "seed": r["seed"],
+                         "learner": "literal", "error": f"retraining: {type(exc).__name__}: {exc}"})
         for x in runs:
             if "error" in x:
                 continue
             try:
-                evaluate_run(x, args.world, unseen, args.eval_episodes, args.eval_seconds)
+                evaluate_run(x, args.world, unseen, args.eval_episodes, args.eval_seconds,
+                             guards=guards)
             except Exception as exc:  # noqa: BLE001 - said in the table
                 x["error"] = f"evaluation: {type(exc).__name__}: {exc}"
-            print(f"  -> {json.dumps({k: v for k, v in x.items() if k != 'eval'})}", flush=True)
+            print(f"  -> {json.dumps({k: v for k, v in x.items() if k not in ('eval', 'evals')})}",
+                  flush=True)
         with lock:
             results.extend(runs)
         save()
 
-    def session(name: str, seed: int) -> None:
+    def session(behaviour: str, name: str, seed: int) -> None:
         try:
-            r = teach_one(name, seed, args.demo, args.correct, record=literal is not None,
-                          learner_args=args.learner_args, world=args.world,
-                          workdir=top / f"{name}-{seed}", log=lambda s: print(s, flush=True))
+            r = teach_one(name, seed, args.demo, args.correct, behaviour=behaviour,
+                          record=literal is not None, learner_args=args.learner_args,
+                          world=args.world, workdir=top / f"{behaviour}-{name}-{seed}",
+                          log=lambda s: print(s, flush=True))
         except Exception as exc:  # noqa: BLE001 - the next run still runs; said
             with lock:
-                results.append({"person": name, "seed": seed, "learner": "default",
-                                "error": f"{type(exc).__name__}: {exc}"})
+                results.append({"behaviour": behaviour, "person": name, "seed": seed,
+                                "learner": "default", "error": f"{type(exc).__name__}: {exc}"})
             save()
             return
-        evals.submit(evaluated, r)
+        if args.jobs == 1:
+            evaluated(r)  # one thing at a time: the next person's page has the machine
+        else:
+            evals.submit(evaluated, r)
 
-    # ``--jobs`` people teach at once (real time, mostly waiting on the page); each run's trees
-    # are evaluated one at a time while the next people teach
+    # ``--jobs 2``: two people teach at once (real time, mostly waiting on the page), each
+    # run's trees evaluated one at a time while the next people teach; ``--jobs 1``: one
+    # session, then its evaluation, then the next
     with (concurrent.futures.ThreadPoolExecutor(max_workers=1) as evals,
           concurrent.futures.ThreadPoolExecutor(max_workers=args.jobs) as teach_pool):
-        list(teach_pool.map(lambda ns: session(*ns), [(n, s) for n in names for s in seeds]))
-    order = {(n, s): k for k, (n, s) in enumerate((n, s) for n in names for s in seeds)}
-    results.sort(key=lambda r: (order.get((r["person"], r["seed"]), 0), r["learner"]))
+        list(teach_pool.map(lambda bns: session(*bns), runs_asked))
+    order = {k: i for i, k in enumerate(runs_asked)}
+    results.sort(key=lambda r: (order.get((r.get("behaviour", "wall-following"), r["person"],
+                                           r["seed"]), 0), r["learner"]))
     save()
     print(table(results))
     return 0 if all("error" not in r for r in results) else 1

@@ -112,9 +112,12 @@ class Method:
     name: str
     lag: int | None
     options: dict
+    # the perception (a FeatureSpec); None: the wall features of both tasks' recipes
+    # (lab.recipe.RECIPES); another behaviour's: its own (bench_peers' person sessions)
+    features: object = None
 
     def learner(self, task: str = "wall-following") -> DemonstrationLearner:
-        spec = FEATURES["wall"]  # the features of both tasks' recipes (lab.recipe.RECIPES)
+        spec = FEATURES["wall"] if self.features is None else self.features
         if self.name == "person":
             if "vote" in self.options:  # a study's vote (benchmarks/study_votes.py)
                 from study_votes import StudyLearner

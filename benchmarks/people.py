@@ -1,5 +1,12 @@
-"""Models of people teaching wall following at the console (``rhbl console``): benchmark code,
-not product code (``benchmarks/bench_teach_study.py`` and the tests import it).
+"""Models of people teaching at the console (``rhbl console``): benchmark code, not product code
+(``benchmarks/bench_teach.py``, ``benchmarks/bench_teach_study.py`` and the tests import it).
+
+Two families. ``ANY`` (:class:`Follower`, the end of this module) teach ANY behaviour: what they
+mean is the behaviour file's scripted expert on the scan they read off the page's map, what they
+press is a person's hands on it; ``ANY_DEV`` is their development set, ``ANY_HELD_OUT`` was
+written after it and is measured, never tuned on. ``person(name, behaviour, seed)`` makes
+either family's model. The rest of this docstring is about the right-hand wall's own models
+(``PEOPLE``: wall following only).
 
 A model is a person who follows the RIGHT-hand wall by looking at the page's map (the robot, the
 walls, the laser hits) with a key held down. It knows nothing of the scripted teacher (it imports
@@ -43,8 +50,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-__all__ = ["DEV", "FRESH", "HELD_OUT", "KEYS", "PEOPLE", "Person", "Pilot", "PilotStyle", "Style",
-           "View", "percept"]
+__all__ = ["ANY", "ANY_DEV", "ANY_HELD_OUT", "DEV", "FRESH", "HELD_OUT", "KEYS", "PEOPLE",
+           "Follower", "FollowerStyle", "Person", "Pilot", "PilotStyle", "Seen", "Style", "View",
+           "percept", "person", "scan_of"]
 
 KEYS = ("fwd", "fwd-left", "rot-left", "fwd-right", "rot-right")
 _MIRROR = {"fwd": "fwd", "fwd-left": "fwd-right", "fwd-right": "fwd-left",
@@ -63,7 +71,8 @@ class View:
     ``t``: the page's clock (s); ``pose``: the robot as drawn (x, y, yaw); ``walls``: the map's
     wall segments (S, 4) as x0, y0, x1, y1; ``mode``: the page's mode; ``driver``: who drives
     (``"teacher"``, ``"controller"`` or ``""``); ``action``: the action executed now (the side
-    panel's "action"); ``scan_id``: the scan displayed (for the record only)."""
+    panel's "action"); ``scan_id``: the scan displayed (for the record only); ``stuck``: the
+    page's notice that the robot is stuck; ``goal``: the world's goal as drawn."""
 
     t: float
     pose: tuple[float, float, float]
@@ -72,6 +81,8 @@ class View:
     driver: str = ""
     action: str | None = None
     scan_id: int | None = None
+    stuck: str | None = None        # the page's "the robot is stuck here" notice (why), if any
+    goal: tuple[float, float, float] | None = None  # the world's goal drawn (x, y, radius)
 
 
 @dataclass(frozen=True)
@@ -549,3 +560,226 @@ FRESH = {
 }
 
 PEOPLE = {**DEV, **HELD_OUT, **FRESH}
+
+
+# -- a person for any behaviour ------------------------------------------------------------
+#
+# The models above follow the right-hand wall by a geometry of their own. A :class:`Follower`
+# follows whatever behaviour it is given: what it MEANS to press is what the behaviour file's
+# scripted expert (its ``[expert]``, reactive style) answers for the scan the person reads off
+# the page's map (the walls ray-cast from the robot as drawn, a frame and a reaction time old,
+# with the person's misjudgement of distances and bearings); what it PRESSES is a person's
+# hands on that intent (:class:`FollowerStyle`): a skewed reaction time and its spread, lapses
+# of attention with the key held, wrong keys, a key held at least so long (taps or long
+# holds), turns let go of late (over-steering), hesitations, and for some never an arc key.
+# In correct mode it takes over as the right-hand wall's models do (HG-DAgger): the robot too
+# close to something, going its own way against the person's for a while, stuck (the page's
+# "stuck" notice), spinning, circling or flickering; then it lets go once it is fine.
+
+SCAN_BEAMS, SCAN_FOV, SCAN_REACH = 360, 180.0, 8.0  # the robot's laser, as the page draws it
+
+
+def scan_of(view: View, beams: int = SCAN_BEAMS, fov: float = SCAN_FOV,
+            reach: float = SCAN_REACH) -> np.ndarray:
+    """The ranges a laser at the robot as drawn would read off the map's walls (float32,
+    ``beams`` over ``fov`` degrees, the first at the robot's right), ``reach`` where none."""
+    x, y, yaw = view.pose
+    w = view.walls
+    ang = yaw + np.radians(np.linspace(-fov / 2.0, fov / 2.0, beams))
+    ux, uy = np.cos(ang)[:, None], np.sin(ang)[:, None]
+    x0, y0 = (w[:, 0] - x)[None, :], (w[:, 1] - y)[None, :]
+    dx, dy = (w[:, 2] - w[:, 0])[None, :], (w[:, 3] - w[:, 1])[None, :]
+    den = ux * dy - uy * dx
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (x0 * dy - y0 * dx) / den
+        u = (x0 * uy - y0 * ux) / den
+    hit = (np.abs(den) > 1e-12) & (s >= 0) & (u >= 0) & (u <= 1)
+    r = np.where(hit, s, np.inf).min(axis=1)
+    return np.minimum(r, reach).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class Seen:
+    """What a :class:`Follower` reads off the map: the scan it judges, its nearest return."""
+
+    scan: np.ndarray
+    nearest: float
+
+
+@dataclass(frozen=True)
+class FollowerStyle(PilotStyle):
+    """A :class:`Follower`'s hands and eyes (:class:`PilotStyle`'s reaction time, lapses,
+    wrong keys, holds, taps, over-steering, hesitations and correct mode; its steering fields
+    play no part: the behaviour's expert steers)."""
+
+    bearing: float = 3.0            # misjudged bearings: the scan turned by this much (deg, sd)
+    arc_turn: tuple[float, float] = (0.15, 0.3)  # arcs=False: an arc is a rotation this long ...
+    arc_fwd: tuple[float, float] = (0.2, 0.4)    # ... then forward this long, again and again
+    commit: float = 10.0            # once turned round on the spot (>= ``round_turn`` rad), no
+    round_turn: float = 2.0         # ... new rotation for this long (s) unless blocked ahead
+    blocked: float = 0.5            # ... (the way straight ahead shorter than this, m)
+    close: float = 0.3              # correct mode: something nearer than this: take over
+    against: float = 0.7            # ... the robot turning against the person's wish this
+    patience: float = 2.0           # ... fraction of the last ``patience`` s: take over
+
+
+_TURN_SIGN = {"fwd": 0, "fwd-left": 1, "rot-left": 1, "fwd-right": -1, "rot-right": -1}
+
+
+class Follower(Pilot):
+    """A person following ``behaviour`` (a shipped behaviour's name or a
+    ``client.behaviour.spec.Behaviour``) at the page: see the section's comment above."""
+
+    style: FollowerStyle
+
+    def __init__(self, style: FollowerStyle, behaviour, seed: int = 0):
+        from client.behaviour.spec import Behaviour
+        from client.behaviour.spec import behaviour as load
+
+        self.behaviour = behaviour if isinstance(behaviour, Behaviour) else load(behaviour)
+        self.expert = self.behaviour.expert("reactive")
+        super().__init__(style, seed=seed)
+
+    def reset(self) -> None:
+        super().reset()
+        self.expert.reset()
+        self._against: deque = deque(maxlen=400)  # (t, the robot turned against the wish)
+        self._arc_phase: tuple[str, float] | None = None
+        self._seen_t, self._yaw = 0.0, None     # the view judged last: its time, heading
+        self._turning = 0.0                      # heading turned in the rotation meant now
+        self._turned_round_at = -math.inf
+
+    def _judge(self, view: View) -> Seen:
+        s = self.style
+        # how far the rotation the person means has turned the robot (a turn-round remembered)
+        if self._yaw is not None and self.m.intent in ("rot-left", "rot-right"):
+            self._turning += abs(_wrap(view.pose[2] - self._yaw))
+        elif self._turning:
+            if self._turning >= s.round_turn:
+                self._turned_round_at = self._seen_t
+            self._turning = 0.0
+        self._seen_t, self._yaw = view.t, view.pose[2]
+        r = scan_of(view).astype(np.float64)
+        r *= max(0.5, 1.0 + float(self.rng.normal(0.0, s.noise)))  # distances misjudged
+        shift = int(round(float(self.rng.normal(0.0, s.bearing)) * (r.size - 1) / SCAN_FOV))
+        if shift:  # bearings misjudged: the picture turned a little
+            r = np.roll(r, shift)
+            if shift > 0:
+                r[:shift] = r[shift]
+            else:
+                r[shift:] = r[shift - 1]
+        r = np.minimum(r, SCAN_REACH).astype(np.float32)
+        return Seen(scan=r, nearest=float(r.min()))
+
+    def wanted(self, p: Seen) -> str:
+        """The expert's answer, but a person who has just turned round on the spot does not
+        turn round again at once (``commit``) while the way straight ahead is open."""
+        want = self.expert.act(p.scan, None)
+        s = self.style
+        if want.startswith("rot") and self._seen_t - self._turned_round_at < s.commit:
+            n = p.scan.size
+            ahead = p.scan[int(n * 0.4):int(n * 0.6) + 1]  # +-18 deg about the heading
+            if float(ahead.min()) > s.blocked:
+                return "fwd"
+        return want
+
+    def _trouble(self, p: Seen, seen: View) -> bool:
+        s, m = self.style, self.m
+        if p.nearest < s.close or getattr(seen, "stuck", None):
+            return True
+        wish = self.wanted(p)
+        if seen.action in _TURN_SIGN:
+            self._against.append((seen.t, _TURN_SIGN[seen.action] * _TURN_SIGN[wish] < 0
+                                  or (_TURN_SIGN[wish] != 0 and seen.action == "fwd"
+                                      and wish.startswith("rot"))))
+        recent = [a for t, a in self._against if t >= seen.t - s.patience]
+        if (len(recent) >= 5 and self._against[0][0] <= seen.t - s.patience
+                and sum(recent) >= s.against * len(recent)):
+            return True
+        window = [(t, xy) for t, xy, _ in m.trail if t >= seen.t - s.spin_window]
+        if (len(window) >= 2 and seen.t - window[0][0] >= s.spin_window * 0.9
+                and max(math.dist(window[0][1], xy) for _, xy in window) < s.spin_move):
+            return True
+        circle = [(xy, yaw) for t, xy, yaw in m.trail if t >= seen.t - s.circle_window]
+        if len(circle) >= 2:
+            turned = sum(abs(_wrap(b[1] - a[1])) for a, b in zip(circle, circle[1:], strict=False))
+            if turned > 2 * math.pi and max(math.dist(circle[0][0], xy)
+                                            for xy, _ in circle) < s.circle_move:
+                return True
+        acts = [a for t, a in m.actions if t >= seen.t - 3.0]
+        return sum(1 for a, b in zip(acts, acts[1:], strict=False)
+                   if {a, b} == {"rot-left", "rot-right"}) >= 3
+
+    def _fine(self, p: Seen) -> bool:
+        self._against.clear()
+        return p.nearest > self.style.close + 0.05 and not self.wanted(p).startswith("rot")
+
+    def _press(self, now: float, intent: str | None) -> str | None:
+        key = super()._press(now, intent)
+        if self.style.arcs or key not in ("fwd-left", "fwd-right"):
+            self._arc_phase = None
+            return key
+        # no arc keys: an arc is pressed as a short rotation, then forward, and so on
+        rot = "rot-left" if key == "fwd-left" else "rot-right"
+        phase = self._arc_phase
+        if phase is None or now >= phase[1]:
+            nxt = rot if phase is None or phase[0] == "fwd" else "fwd"
+            span = self.style.arc_turn if nxt == rot else self.style.arc_fwd
+            phase = self._arc_phase = (nxt, now + float(self.rng.uniform(*span)))
+        return phase[0]
+
+
+# A person for any behaviour, the DEVELOPMENT set: the figures of docs/studies/
+# people-for-every-behaviour.md were looked at for these while the benchmark was being made
+ANY_DEV = {
+    # unhurried and accurate: a log-normal reaction time about 0.3 s, few wrong keys
+    "calm": FollowerStyle("calm", reaction=0.30, rt_sigma=0.25, wrong=0.05, oversteer=0.15,
+                          hesitate=0.02, noise=0.06),
+    # fast and sloppy: wrong keys (half of them left/right confused), turns let go of late
+    "rushed": FollowerStyle("rushed", reaction=0.20, rt_sigma=0.3, min_hold=0.1, wrong=0.15,
+                            mirror=0.5, notice=0.1, oversteer=0.35, hesitate=0.01,
+                            noise=0.10, close=0.28, patience=3.0, settle=1.0),
+    # slow, spread-out reactions and lapses of attention (the key stays held meanwhile)
+    "lapsing": FollowerStyle("lapsing", reaction=0.45, rt_sigma=0.45, period=0.15,
+                             wrong=0.08, oversteer=0.2, hesitate=0.05, pause=(0.4, 1.2),
+                             lapse=0.05, lapse_for=(0.5, 1.5), noise=0.08, close=0.35,
+                             settle=2.0),
+    # never an arc key: forward, or a rotation in place, in turns
+    "arcless": FollowerStyle("arcless", reaction=0.28, rt_sigma=0.3, wrong=0.08,
+                             oversteer=0.15, hesitate=0.02, arcs=False, min_hold=0.15),
+}
+
+# A person for any behaviour, HELD OUT: written after ANY_DEV and after the benchmark's
+# settings were fixed; measured, never tuned on (nothing was changed after their figures)
+ANY_HELD_OUT = {
+    # turns in taps: held 0.25 s, let go for 0.1-0.3 s, and so on
+    "tapping": FollowerStyle("tapping", reaction=0.26, rt_sigma=0.3, wrong=0.10,
+                             oversteer=0.1, hesitate=0.03, taps=0.25, tap_gap=(0.1, 0.3),
+                             noise=0.08),
+    # long holds: every key held at least half a second, turns let go of up to 0.5 s late
+    "heavy": FollowerStyle("heavy", reaction=0.35, rt_sigma=0.25, min_hold=0.5, wrong=0.10,
+                           oversteer=0.5, hesitate=0.02, noise=0.08, settle=2.0),
+    # a muddle: left and right confused, distances and bearings misjudged, lapses
+    "muddled": FollowerStyle("muddled", reaction=0.32, rt_sigma=0.4, wrong=0.14, mirror=0.8,
+                             notice=0.3, oversteer=0.25, hesitate=0.04, lapse=0.03,
+                             noise=0.14, bearing=6.0),
+}
+
+ANY = {**ANY_DEV, **ANY_HELD_OUT}
+
+
+def person(name: str, behaviour="wall-following", seed: int = 0) -> Person:
+    """The person model ``name`` teaching ``behaviour`` (a name or a Behaviour): one of
+    ``ANY`` (any behaviour), or of ``PEOPLE`` (the right-hand wall's own, wall following only).
+    ValueError naming the models otherwise."""
+    if name in ANY:
+        return Follower(ANY[name], behaviour, seed=seed)
+    bname = getattr(behaviour, "name", behaviour)
+    if name in PEOPLE:
+        if bname != "wall-following":
+            raise ValueError(f"person model {name!r} follows the right-hand wall only "
+                             f"(wall following), not {bname!r}; for any behaviour: "
+                             f"{', '.join(ANY)}")
+        return PEOPLE[name](seed=seed)
+    raise ValueError(f"no person model {name!r}; for any behaviour: {', '.join(ANY)}; "
+                     f"wall following only: {', '.join(PEOPLE)}")

@@ -25,7 +25,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from client.behaviour.actions import DEFAULT_ACTIONS
-from client.behaviour.features import FEATURES, FeatureError
+from client.behaviour.features import FEATURES, FeatureError, FeatureSpec
 from client.behaviour.learning import DemonstrationLearner
 from client.behaviour.rule import rule_for
 from client.behaviour.tasks import task_of_features
@@ -96,7 +96,7 @@ def first_label_source(paths, robots: list[str] | None = None) -> str | None:
     return None
 
 
-def retrain(paths, features: str = "wall", robots: list[str] | None = None,
+def retrain(paths, features: str | FeatureSpec = "wall", robots: list[str] | None = None,
             task: str | None = None, stride: int = 1, min_delta: float = 0.0,
             tree_params: dict | None = None, record: bool = False, teacher: str = "auto",
             lag: int | None = None) -> tuple[DemonstrationLearner, dict]:
@@ -107,9 +107,10 @@ def retrain(paths, features: str = "wall", robots: list[str] | None = None,
     (the learning rule ``client.behaviour.rule.rule_for`` chooses, recorded in the snapshot);
     ``"auto"``: the person rule when the first label came from a person (``by_person``).
     Returns (learner, stats)."""
-    spec = FEATURES[features]
+    spec = features if isinstance(features, FeatureSpec) else FEATURES[features]
     params = {"spawn": "winner", **(tree_params or {})}
-    task = task or task_of_features(features)
+    if task is None and not isinstance(features, FeatureSpec):
+        task = task_of_features(features)
     chose = ""
     if teacher == "auto":  # as the live learner chooses: by the first label's source
         source = first_label_source(paths, robots)
@@ -189,7 +190,7 @@ def save_retrained(learner: DemonstrationLearner, stats: dict, out: str | Path) 
 
 # the flags of ``rhbl train`` a retraining uses (the features, the tree, a compaction on the
 # recordings' vectors); every other one drives a simulation and is refused with its name
-USES = ("out", "from_recording", "features", "spawn", "distance", "min_radius", "max_nodes",
+USES = ("out", "from_recording", "behaviour", "features", "spawn", "distance", "min_radius", "max_nodes",
         "stride", "compact", "compact_max_nodes", "compact_max_error", "teacher", "lag")
 
 
@@ -201,13 +202,14 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
     if given:
         raise ValueError(f"{', '.join(given)} {'does' if len(given) == 1 else 'do'} not apply to "
                          f"--from-recording (no simulation runs: it learns the recordings' "
-                         f"labels; it takes --features, --spawn, --distance, --min-radius, "
+                         f"labels; it takes --behaviour (its perception and name), --features, --spawn, --distance, --min-radius, "
                          f"--max-nodes, --stride, --compact with its --compact-max-*, --teacher "
                          f"and --lag)")
 
 
 def train_main(args) -> int:
     """``rhbl train --from-recording FILE [FILE ...]``: the harness's CLI hands over here."""
+    from lab.behaviours import get
     from lab.cli import build_parser
 
     check_args(build_parser("train"), args)
@@ -216,7 +218,10 @@ def train_main(args) -> int:
             if v is not None}
     compact = _compact_params(args)
     try:
-        learner, stats = retrain(args.from_recording, features=args.features or "wall",
+        b = get(args.behaviour) if args.behaviour else None
+        features = args.features or (b.features if b is not None else "wall")
+        learner, stats = retrain(args.from_recording, features=features,
+                                 task=None if b is None else b.name,
                                  stride=args.stride or 1, tree_params=tree,
                                  record=compact is not None, teacher=args.teacher, lag=args.lag)
     except RecordingError as exc:

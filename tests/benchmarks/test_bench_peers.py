@@ -67,6 +67,7 @@ def test_a_peer_drives_with_the_features_and_actions_of_the_tree(bench):
     (["--learners", "svm"], "unknown 'svm'"),
     (["--seeds", "a,b"], "--seeds must be integers"),
     (["--people", "nobody"], "unknown 'nobody'"),
+    (["--people", "steady", "--people-behaviour", "wandering"], "right-hand wall only"),
     (["--behaviour", ""], "nothing to measure"),
 ])
 def test_bad_input_is_one_line_naming_it(bench, capsys, argv, says):

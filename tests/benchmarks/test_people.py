@@ -152,3 +152,78 @@ def test_a_tapper_holds_each_tap_then_lets_go_whatever_the_page_rate(people, vie
     assert 0.5 < sum(held) / len(held) < 0.7  # 0.21-0.39 s on, 0.2 s off
     starts = sum(1 for a, b in zip(held, held[1:], strict=False) if b and not a)
     assert 4 <= starts <= 8  # about two taps a second over 3 s
+
+
+# -- a person for any behaviour (people.Follower) -------------------------------------------
+
+def test_the_map_read_as_a_scan_is_what_the_laser_reads(people):
+    """``scan_of``: the walls ray-cast from the robot as drawn give the simulator's scan."""
+    from lab.behaviours import get, world_of
+    from server.world import World
+
+    for name in ("wandering", "dead-end"):
+        b = get(name)
+        spec = world_of(b, b.teach[0])
+        world = World(spec, robots=1, seed=0)
+        world.reset(poses=[tuple(spec.pose)])
+        walls = np.asarray(spec.segments(), dtype=float).reshape(-1, 4)
+        seen = people.scan_of(people.View(t=0.0, pose=tuple(spec.pose), walls=walls))
+        assert np.allclose(seen, world.scan(0), atol=1e-4), name
+
+
+def test_a_follower_means_what_the_behaviours_expert_answers(people, view):
+    """No noise, no slips: after its reaction time a follower holds the expert's key."""
+    from lab.behaviours import get
+
+    style = people.FollowerStyle("test", reaction=0.2, rt_sigma=0.0, wrong=0.0, hesitate=0.0,
+                                 oversteer=0.0, noise=0.0, bearing=0.0)
+    for name, pose in (("corridor-centring", (2.0, 0.7, 0.0)),  # nearer the right wall
+                       ("wandering", (9.5, 1.5, 0.0))):       # a wall just ahead
+        f = people.Follower(style, name)
+        keys = [f.observe(view(0.05 * k, pose)) for k in range(12)]
+        expert = get(name).expert("reactive")
+        want = expert.act(people.scan_of(view(0.0, pose)), None)
+        assert keys[0] is None and keys[-1] == want, name
+    assert want.startswith("rot")  # the wanderer turns on the spot at a wall
+
+
+def test_every_follower_answers_keys_only_and_is_deterministic(people, view):
+    def drive(person):
+        return [person.observe(view(0.1 * k, (2.0 + 0.03 * k, 0.7 + 0.02 * k, 0.1)))
+                for k in range(60)]
+
+    for name in people.ANY:
+        keys = drive(people.person(name, "corridor-centring", seed=3))
+        assert set(keys) <= {*people.KEYS, None}, name
+        assert drive(people.person(name, "corridor-centring", seed=3)) == keys, name
+    assert set(people.ANY_DEV).isdisjoint(people.ANY_HELD_OUT)
+
+
+def test_an_arcless_follower_presses_no_arc_key(people, view):
+    person = people.person("arcless", "wall-following", seed=1)
+    keys = {person.observe(view(0.1 * k, (2.0 + 0.03 * k, 0.4 + 0.03 * k, 0.2 * math.sin(k)))
+                           ) for k in range(300)}
+    assert keys <= {"fwd", "rot-left", "rot-right", None} and {"fwd", "rot-left"} <= keys
+
+
+def test_a_follower_takes_over_a_robot_too_close_and_lets_go_when_fine(people, view):
+    style = people.FollowerStyle("test", reaction=0.2, rt_sigma=0.0, wrong=0.0, hesitate=0.0,
+                                 oversteer=0.0, noise=0.0, bearing=0.0, settle=0.5)
+    f = people.Follower(style, "corridor-centring")
+    calm = [f.observe(view(0.1 * k, (3.0, 1.5, 0.0), "correct", driver="controller",
+                           action="fwd")) for k in range(10)]
+    assert calm == [None] * 10  # midway along the corridor: hands off
+    close = [f.observe(view(1.0 + 0.1 * k, (3.0, 0.3, 0.0), "correct", driver="controller",
+                            action="fwd")) for k in range(10)]
+    assert close[-1] == "fwd-left"  # 0.3 m from the right wall: steers off it
+    back = [f.observe(view(2.0 + 0.1 * k, (3.0, 1.5, 0.0), "correct", driver="teacher",
+                           action="fwd")) for k in range(30)]
+    assert back[-1] is None  # fine again: lets go
+
+
+def test_a_right_hand_wall_model_teaches_wall_following_only(people):
+    assert isinstance(people.person("steady", "wall-following"), people.Person)
+    with pytest.raises(ValueError, match="right-hand wall only"):
+        people.person("steady", "wandering")
+    with pytest.raises(ValueError, match="no person model 'nobody'"):
+        people.person("nobody", "wandering")

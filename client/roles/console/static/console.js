@@ -6,7 +6,8 @@
 // #trouble data-markers/loops/stalls/collisions, #stuck data-why, #episode data-n/state,
 // #clock data-t, #view data-beacons/seen (the beacons drawn, the ids of those the robot sees);
 // and window.rhbl.view(): what the page shows now, read-only (the robot as drawn, the walls,
-// the beacons and those seen, the mode, who drives, the action executed, the scan displayed,
+// the goal, the beacons and those seen, the mode, who drives, the action executed, the scan
+// displayed,
 // the clock).
 "use strict";
 
@@ -691,6 +692,7 @@ Object.defineProperty(window, "rhbl", { value: Object.freeze({
       scan_id: sh.scan ? sh.scan.id : null, holder: $("hold").dataset.holder || "",
       stuck: S.teach && S.teach.stuck ? S.teach.stuck.why : null, link: $("link").dataset.state || "",
       markers: S.teach ? S.teach.markers.map((k) => ({ ...k })) : [],
+      goal: S.world && S.world.goal ? S.world.goal.slice() : null,
     };
   },
 }) });
