@@ -24,12 +24,14 @@ pose per world for 20 s, the first held-out world only), to check that it runs.
 Model size: RHBL nodes (spheres), decision tree nodes, kNN stored vectors, MLP weights and
 biases.
 
-``--people steady,bang,...``: also a session of each person model (``benchmarks/people.py``)
-teaching wall following in the room, in-process as the teaching study runs it
-(``bench_teach_study.teach``: 240 s of demonstrating, 120 s of correcting while the person's
-tree drives through the guard; one session a seed); RHBL is the person's learner rebuilt from
-the labels (its person rule), the others learn each label with the scan the person's learner
-paired it with (its estimated lag). ``--behaviour ""`` with it: the people only.
+``--people steady,bang,...`` (or ``all``): also a session of each person model
+(``benchmarks/people.py``) teaching wall following in the room, in-process as the teaching
+study runs it (``bench_teach_study.teach``: 240 s of demonstrating, 120 s of correcting while
+the person's tree drives through the guard; one session a seed); RHBL is the person's learner
+rebuilt from the labels (its person rule), the others learn each label with the scan the
+person's learner paired it with (its estimated lag). Each model has its rows, and with more
+than one, the rows "wall-following by N people" pool every model's sessions (the success over
+all their episodes). ``--behaviour ""`` with it: the people only.
 """
 
 from __future__ import annotations
@@ -388,6 +390,19 @@ def world_rows(results: dict[str, list[dict]], learners: list[str]) -> list[list
     return rows
 
 
+PERSON = "wall-following by "  # the results' key of a person model's sessions: this + its name
+
+
+def pooled(results: dict[str, list[dict]]) -> dict[str, list[dict]]:
+    """``results`` and, when they hold more than one person model's sessions, those sessions
+    together under "wall-following by N people" (every model's seeds: the success over all
+    their episodes, sizes and times over all their sessions)."""
+    people = [k for k in results if k.startswith(PERSON)]
+    if len(people) < 2:
+        return results
+    return {**results, f"{PERSON}{len(people)} people": [r for k in people for r in results[k]]}
+
+
 HEADER = ["behaviour", "learner", "success taught", "success held out", "collisions / seed",
           "model size", "learning s", "predict µs (one)", "predict µs/vector (batch)"]
 
@@ -402,8 +417,10 @@ def _seeds(text: str) -> list[int]:
     return seeds
 
 
-def _names(known: list[str], what: str, empty: bool = False):
+def _names(known: list[str], what: str, empty: bool = False, every: bool = False):
     def check(text: str) -> list[str]:
+        if every and text.strip() == "all":
+            return list(known)
         names = [v.strip() for v in text.split(",") if v.strip()]
         bad = [v for v in names if v not in known]
         if (not names and not (empty and text == "")) or bad:
@@ -467,9 +484,10 @@ def main(argv=None) -> int:
     ap.add_argument("--learners", type=_names(list(LEARNERS), "learners"), default=list(LEARNERS),
                     help=f"comma-separated (default: all: {','.join(LEARNERS)})")
     ap.add_argument("--seeds", type=_seeds, default=[0, 1, 2], help="training seeds (default 0,1,2)")
-    ap.add_argument("--people", type=_names(PEOPLE_MODELS, "people"), default=[],
+    ap.add_argument("--people", type=_names(PEOPLE_MODELS, "people", every=True), default=[],
                     help="also these person models' sessions teaching wall following in the "
-                         "room (in-process, benchmarks/people.py), one a seed; default none")
+                         "room (in-process, benchmarks/people.py), one a seed; 'all': "
+                         f"{','.join(PEOPLE_MODELS)}; default none")
     ap.add_argument("--quick", action="store_true", help="a small run (see above)")
     ap.add_argument("--json", default=None, help="write every measurement here")
     ap.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
@@ -494,20 +512,21 @@ def main(argv=None) -> int:
             if args.json:  # after every seed: a run stopped part-way keeps what it measured
                 _write(args.json, results, args, time.perf_counter() - t0)
     for model in [] if args.from_json else args.people:
-        key = f"wall-following by {model}"
+        key = f"{PERSON}{model}"
         results[key] = []
         for seed in args.seeds:
             results[key].append(run_person(model, seed, args.learners, args.quick))
             if args.json:
                 _write(args.json, results, args, time.perf_counter() - t0)
     wall = time.perf_counter() - t0
-    vectors = {k: round(statistics.fmean(r["vectors"] for r in runs)) for k, runs in results.items()}
-    print(table(HEADER, summary_rows(results, args.learners),
+    shown = pooled(results)
+    vectors = {k: round(statistics.fmean(r["vectors"] for r in runs)) for k, runs in shown.items()}
+    print(table(HEADER, summary_rows(shown, args.learners),
                 title=f"Peers: the same demonstrations, seeds {','.join(map(str, args.seeds))}"
                       f"{' (quick)' if args.quick else ''}; vectors learned per seed: "
                       + ", ".join(f"{k} {v}" for k, v in vectors.items())))
     print()
-    print(table(["behaviour", "world", *args.learners, "expert"], world_rows(results, args.learners),
+    print(table(["behaviour", "world", *args.learners, "expert"], world_rows(shown, args.learners),
                 title="Success per world (all seeds' episodes)"))
     same = all(r["learners"]["rhbl"]["size"] == r["trained_nodes"]
                for runs in results.values() for r in runs

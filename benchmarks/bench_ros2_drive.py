@@ -32,6 +32,7 @@ sys.path.insert(0, str(ROOT / "tests" / "integration"))  # the ROS 2-style robot
 from ros2_robot import OtherLaser, Ros2StyleRobot  # noqa: E402
 
 from client.behaviour.learning import TreePolicy  # noqa: E402
+from lab.behaviours import behaviour_for_world  # noqa: E402
 from lab.children import Child, free_port, rhbl_argv  # noqa: E402
 from lab.evaluate import evaluate, success  # noqa: E402
 from lab.harness import make_learner, resolve_world  # noqa: E402
@@ -55,12 +56,13 @@ def main() -> int:
     tmp = Path(tempfile.mkdtemp(prefix="rhbl-bench-ros2-"))
     tree = tmp / "tree.rhbl"
     t0 = time.monotonic()
-    learner = make_learner(spec.task)
-    train(spec, learner, RECIPES[spec.task], seed=args.seed)
+    task = behaviour_for_world(spec).name  # the shipped behaviour that names the world
+    learner = make_learner(RECIPES[task])
+    train(spec, learner, RECIPES[task], seed=args.seed)
     learner.save(tree)
     policy = TreePolicy.load(tree)
     native = evaluate(spec, policy)
-    print(f"{spec.name}: tree of {native['tree']['nodes']} nodes (recipe {spec.task}, seed "
+    print(f"{spec.name}: tree of {native['tree']['nodes']} nodes (recipe {task}, seed "
           f"{args.seed}), trained and evaluated natively in {time.monotonic() - t0:.0f} s",
           flush=True)
     steps = int(round(native["seconds"] / 0.1))
@@ -83,14 +85,14 @@ def main() -> int:
                 finally:
                     robot.close()
                 m = ep.metrics(spec.goal)
-                m["success"] = success(spec.task, m, native["teacher"][k])
+                m["success"] = success(task, m, native["teacher"][k])
                 m["other"] = ep.actions.count("other")  # Twists that are none of the tree's
                 m["resent"] = robot.resent  # scans sent again: no Twist within 1-2 s
                 ros2.append(m)
         finally:
             ctl.stop()
     counters = json.loads(stats.read_text()) if stats.exists() else {}
-    _report(spec, native, ros2, steps, args, counters)
+    _report(spec, task, native, ros2, steps, args, counters)
     return 0
 
 
@@ -102,7 +104,7 @@ def _cell(m: dict, task: str) -> str:
             f"collisions {m['collisions']})")
 
 
-def _report(spec, native: dict, ros2: list[dict], steps: int, args, counters: dict) -> None:
+def _report(spec, task: str, native: dict, ros2: list[dict], steps: int, args, counters: dict) -> None:
     print(f"{len(ros2)} starts, {steps * 0.1:g} sim s each; ROS 2 robot: {args.beams} beams over "
           f"{args.fov:g} deg, 10 m; controller commands {counters.get('commands', '?')}, "
           f"dropped {counters.get('dropped', '?')}")
@@ -110,8 +112,8 @@ def _report(spec, native: dict, ros2: list[dict], steps: int, args, counters: di
     print("|---|---|---|---|")
     for k, start in enumerate(spec.start_poses):
         pose = ", ".join(f"{v:g}" for v in start)
-        print(f"| ({pose}) | {_cell(native['teacher'][k], spec.task)} | "
-              f"{_cell(native['learner'][k], spec.task)} | {_cell(ros2[k], spec.task)} |")
+        print(f"| ({pose}) | {_cell(native['teacher'][k], task)} | "
+              f"{_cell(native['learner'][k], task)} | {_cell(ros2[k], task)} |")
     n_ok, r_ok = sum(native["success"]), sum(m["success"] for m in ros2)
     print(f"success: natively {n_ok}/{len(ros2)}, through --ros2 {r_ok}/{len(ros2)}; "
           f"Twists that were none of the tree's actions: {sum(m['other'] for m in ros2)}; "

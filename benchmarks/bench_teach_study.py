@@ -74,6 +74,13 @@ UNSEEN_HELD_OUT = ("eval-holdout-room-oct", "eval-holdout2-room-spike", "eval-ho
 # --task maze: taught in the tiered maze, the unseen mazes of docs/experiments.md's first table
 MAZE_WORLDS = ("maze", "eval-maze-3tier", "eval-maze-5tier", "eval-maze-narrow")
 DEFAULT_WORLDS = {"wall-following": (TAUGHT, *UNSEEN_DEV), "maze": MAZE_WORLDS}
+
+
+def task_of(spec) -> str:
+    """The behaviour a world of this study is taught or judged for (worlds name none): a world
+    with a goal is a maze, every other one a room to follow the right-hand wall in."""
+    return "maze" if spec.goal is not None else "wall-following"
+
 # --where near: the robot dragged off its path (m, normal), turned (rad, uniform), and left at
 # least this far from every wall (m): the person then shows the way back
 NEAR = (0.2, 0.8, 0.35)
@@ -165,7 +172,7 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
     robot reaches it, in either mode, the person puts it at the world's next start pose (the
     console's set_pose) and teaches the way again (``Session.goals`` counts them)."""
     rng = np.random.default_rng(seed + 555)
-    learner = method.learner() if spec.task == "wall-following" else method.learner(spec.task)
+    learner = method.learner(task_of(spec))
     world = World(spec, robots=1, seed=seed)
     world.reset(poses=[tuple(spec.pose)])
     walls = spec.segments()
@@ -279,7 +286,7 @@ def alone(model: str, seed: int, world: str) -> list[dict]:
     key = (model, seed, world)
     if key not in _ALONE:
         spec = resolve_world(world)
-        seconds = EVAL_SECONDS[spec.task]
+        seconds = EVAL_SECONDS[task_of(spec)]
         _ALONE[key] = [drive_alone(spec, PEOPLE[model](seed=1000 * seed + i), st, seconds,
                                    seed=seed).metrics(spec.goal)
                        for i, st in enumerate(spec.start_poses)]
@@ -364,12 +371,12 @@ def person_row(model: str, seeds, worlds) -> dict:
     out = {}
     for name in worlds:
         spec = resolve_world(name)
-        seconds = EVAL_SECONDS[spec.task]
+        seconds = EVAL_SECONDS[task_of(spec)]
         ok = []
         for seed in seeds:
             for st, own in zip(spec.start_poses, alone(model, seed, name), strict=True):
                 tt = _teacher_episode(spec, DEFAULT_ACTIONS, st, seconds, 0, 0.0, 0.0, DT)
-                ok.append(success(spec.task, own, tt.metrics(spec.goal)))
+                ok.append(success(task_of(spec), own, tt.metrics(spec.goal)))
         out[name] = float(np.mean(ok))
     return out
 

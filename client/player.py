@@ -45,6 +45,9 @@ from protocol.decoding import Decoder
 from protocol.messages import (
     Ack,
     DriverState,
+    Fiducial,
+    FiducialGeometry,
+    FiducialItem,
     Geometry,
     LaserConfig,
     MotorPower,
@@ -58,7 +61,7 @@ from protocol.messages import (
     WorldInfo,
 )
 
-__all__ = ["LaserProxy", "PlayerClient", "Position2dProxy", "RequestError", "ScanChannel",
+__all__ = ["FiducialLog", "FiducialProxy", "LaserProxy", "PlayerClient", "Position2dProxy", "RequestError", "ScanChannel",
            "SimulationProxy"]
 
 log = logging.getLogger(__name__)
@@ -110,6 +113,7 @@ class PlayerClient:
         self._packer = VelCmdPacker(source)
         self._position2d: Position2dProxy | None = None
         self._laser: LaserProxy | None = None
+        self._fiducial: FiducialProxy | None = None
         self._simulation: SimulationProxy | None = None
 
     # -- subscriptions ----------------------------------------------------------------------
@@ -120,6 +124,7 @@ class PlayerClient:
         key, cls = {
             "state": (keys.state_key(self.robot, self.index), State),
             "scan": (keys.scan_key(self.robot, self.index), Scan),
+            "fiducial": (keys.fiducial_key(self.robot, self.index), Fiducial),
             "driver": (keys.driver_key(self.robot, self.index), DriverState),
         }[kind]
 
@@ -153,6 +158,13 @@ class PlayerClient:
         return self._laser
 
     @property
+    def fiducial(self) -> FiducialProxy:
+        """The fiducial finder (Player's ``fiducial``; served in a world with beacons)."""
+        if self._fiducial is None:
+            self._fiducial = FiducialProxy(self)
+        return self._fiducial
+
+    @property
     def simulation(self) -> SimulationProxy:
         """The simulator's sim-only requests (Player's ``simulation`` interface)."""
         if self._simulation is None:
@@ -178,9 +190,13 @@ class PlayerClient:
             if not fresh():
                 return False
             state, scan = self._latest.get("state"), self._latest.get("scan")
-            if "state" in self._subs and "scan" in self._subs:
-                return state is not None and scan is not None and state.ts >= scan.ts
-            return True
+            if "state" in self._subs and "scan" in self._subs and (
+                    state is None or scan is None or state.ts < scan.ts):
+                return False
+            # the tick's beacons, sent before its scan: waited for once any came (a world
+            # without beacons sends none)
+            fid = self._latest.get("fiducial")
+            return fid is None or scan is None or fid.seq >= scan.id
 
         with self._cond:
             self._cond.wait_for(in_step, timeout)
@@ -217,6 +233,14 @@ class PlayerClient:
         channel = ScanChannel(self, depth)
         self._channels.append(channel)
         return channel
+
+    def fiducials(self, depth: int = 64) -> FiducialLog:
+        """The robot's fiducial messages of the last ``depth`` ticks by scan id (``at(scan.id)``:
+        what the fiducial finder saw at that scan), to pair with the scans of a ``ScanChannel``
+        (a behaviour's ``beacon`` features: ``PayloadReader.see``); undeclared by ``close``."""
+        log_ = FiducialLog(self, depth)
+        self._channels.append(log_)
+        return log_
 
     def send_command(
         self, vx: float, va: float, state: bool = True, scan_id: int | None = None,
@@ -326,6 +350,58 @@ class ScanChannel:
         while (sample := self._try()) is not None:
             last = sample
         return None if last is None else self.decode(last.payload.to_bytes())
+
+    def close(self) -> None:
+        try:
+            self._sub.undeclare()
+        except Exception:  # the session may be closed already
+            log.debug("undeclare failed", exc_info=True)
+
+
+class FiducialLog:
+    """The fiducial messages of a client's robot, the last ``depth`` of them by ``seq`` (the id of
+    the scan of the same tick; ``PlayerClient.fiducials``): ``at(scan_id, timeout=0)`` the
+    message of that tick, waiting up to ``timeout`` s for it (None: not here: too old, not come,
+    or a world without beacons; the server sends it before its scan, but the two arrive on
+    separate subscribers), ``seen(scan_id, timeout=0)`` its items (``()`` when none),
+    ``latest``. Decoded on arrival (a malformed one dropped and
+    counted by the client's decoder); any thread."""
+
+    def __init__(self, client: PlayerClient, depth: int = 64) -> None:
+        if int(depth) < 1:
+            raise ValueError(f"a fiducial log holds at least one message, got depth {depth}")
+        from collections import OrderedDict
+
+        self.depth = int(depth)
+        self._decoder = client.decoder
+        self._lock = threading.Condition()
+        self._by_seq: OrderedDict[int, Fiducial] = OrderedDict()
+        self.latest: Fiducial | None = None
+        self.key = keys.fiducial_key(client.robot, client.index)
+        self._sub = client.session.declare_subscriber(self.key, self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        msg = self._decoder.decode(Fiducial, sample.payload.to_bytes())
+        if msg is None:
+            return
+        with self._lock:
+            self._by_seq[msg.seq] = msg
+            self._by_seq.move_to_end(msg.seq)
+            while len(self._by_seq) > self.depth:
+                self._by_seq.popitem(last=False)
+            self.latest = msg
+            self._lock.notify_all()
+
+    def at(self, scan_id: int, timeout: float = 0.0) -> Fiducial | None:
+        with self._lock:
+            if timeout > 0:  # waited for unless a later tick's came (then it never will)
+                self._lock.wait_for(lambda: scan_id in self._by_seq or (
+                    self.latest is not None and self.latest.seq > scan_id), timeout)
+            return self._by_seq.get(scan_id)
+
+    def seen(self, scan_id: int, timeout: float = 0.0) -> tuple[FiducialItem, ...]:
+        msg = self.at(scan_id, timeout)
+        return () if msg is None else msg.items
 
     def close(self) -> None:
         try:
@@ -477,6 +553,54 @@ class LaserProxy(_Proxy):
 
     def get_geom(self) -> Geometry:
         return Geometry.decode(self.client.request("laser", "get_geom"))
+
+
+class FiducialProxy(_Proxy):
+    """The fiducial finder (libplayerc's ``playerc_fiducial``): ``items`` (the beacons in view,
+    each a ``FiducialItem`` of ``id``, ``range``, ``bearing`` and its ``x``, ``y`` in the sensor
+    frame), ``count``, indexing, ``find(id)``, the message's ``seq`` (the id of the scan of the
+    same tick) and ``ts``; ``get_geom()`` the sensor's geometry, ranges and field of view
+    (``FiducialGeometry``). Nothing in view: no items; a world without beacons publishes none,
+    so ``fiducial`` stays None."""
+
+    KINDS = ("fiducial",)
+
+    def __init__(self, client: PlayerClient) -> None:
+        super().__init__(client)
+        self.fiducial: Fiducial | None = None
+        self._geom: FiducialGeometry | None = None
+
+    def _refresh(self, latest):
+        if "fiducial" in latest:
+            self.fiducial = latest["fiducial"]
+
+    @property
+    def items(self) -> tuple[FiducialItem, ...]:
+        return () if self.fiducial is None else self.fiducial.items
+
+    @property
+    def count(self) -> int:
+        return len(self.items)
+
+    def __len__(self) -> int:
+        return self.count
+
+    def __getitem__(self, i) -> FiducialItem:
+        return self.items[i]
+
+    def find(self, beacon_id: int) -> FiducialItem | None:
+        """The beacon ``beacon_id`` if it is in view (None: not seen, or not identified)."""
+        return None if self.fiducial is None else self.fiducial.find(beacon_id)
+
+    seq = property(lambda self: 0 if self.fiducial is None else self.fiducial.seq)
+    ts = property(lambda self: 0.0 if self.fiducial is None else self.fiducial.ts)
+
+    def get_geom(self) -> FiducialGeometry:
+        """The sensor's pose and size on the robot, ``min_range``, ``max_range``,
+        ``max_range_id``, ``fov`` and ``rate`` (asked once, then kept)."""
+        if self._geom is None:
+            self._geom = FiducialGeometry.decode(self.client.request("fiducial", "get_geom"))
+        return self._geom
 
 
 class SimulationProxy:

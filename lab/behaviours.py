@@ -16,7 +16,7 @@ import json
 from pathlib import Path
 
 from client.behaviour.given import behaviour_arg  # --behaviour NAME|FILE: the processes' too
-from client.behaviour.spec import Behaviour, BehaviourError, behaviour, shipped
+from client.behaviour.spec import Behaviour, BehaviourError, behaviour, for_world, shipped
 from lab.recipe import RECIPES, Recipe
 from process import arguments, files
 from server import world_path
@@ -53,9 +53,10 @@ def teaching_world(b: Behaviour) -> WorldSpec:
 def recipe_of(b: Behaviour) -> Recipe:
     """The behaviour's training recipe: the recipe of the same name (``lab.recipe.RECIPES``, the
     published figures'), else wall following's; with the behaviour's perception, its first
-    teaching world and the fields its ``[recipe]`` table changes."""
+    teaching world (its demonstrations), its other teaching worlds (corrective rounds there
+    too: ``round_worlds``) and the fields its ``[recipe]`` table changes."""
     base = RECIPES.get(b.name) or RECIPES["wall-following"]
-    changes = dict(b.recipe)
+    changes = {"round_worlds": b.teach[1:], **b.recipe}
     fields = {f.name for f in dataclasses.fields(Recipe)} - {"task", "world", "features"}
     for key, value in changes.items():
         if key not in fields:
@@ -70,31 +71,14 @@ def recipe_of(b: Behaviour) -> Recipe:
         raise BehaviourError(f"{b.path or b.name}: field 'recipe': {exc}") from None
 
 
-def _same_world(named: str, spec: WorldSpec) -> bool:
-    if named == spec.name:
-        return True
-    return spec.path is not None and "/" in named and Path(named).resolve() == spec.path.resolve()
-
-
-def behaviour_for_world(spec: WorldSpec) -> Behaviour:
-    """The behaviour of a world: the one its ``task`` names (a world file may still name one),
-    else the shipped behaviour that names the world among its teaching or held-out worlds;
-    BehaviourError when none does, or more than one (then ``--behaviour`` says which)."""
-    known = shipped()
-    if spec.task is not None:
-        if spec.task not in known:
-            raise BehaviourError(f"world {spec.name!r} names task {spec.task!r}, which is no "
-                                 f"shipped behaviour ({', '.join(known)})")
-        return known[spec.task]
-    naming = [b for b in known.values() if any(_same_world(w, spec) for w in b.worlds)]
-    if len(naming) == 1:
-        return naming[0]
-    if naming:
-        raise BehaviourError(f"world {spec.name!r} names no task and the behaviours "
-                             f"{', '.join(b.name for b in naming)} name it: say which with "
-                             "--behaviour NAME|FILE")
-    raise BehaviourError(f"world {spec.name!r} names no task and no shipped behaviour names it: "
-                         "say which behaviour with --behaviour NAME|FILE")
+def behaviour_for_world(spec: WorldSpec, hint: str | None = None) -> Behaviour:
+    """The behaviour of a world: the shipped behaviour that names it among its teaching or
+    held-out worlds (``client.behaviour.spec.for_world``: when several do, the one that drives
+    from the world's own start poses); when none does (or several), the one an older world
+    file's ``task`` names, else the shipped behaviour ``hint`` names (``lab.evaluate``: the
+    tree's own task); BehaviourError when none is left, or more than one (then
+    ``--behaviour`` says which)."""
+    return for_world(spec.name, spec.path, spec.task or hint)
 
 
 # ------------------------------------------------------------------------------ the command
@@ -118,7 +102,8 @@ def to_dict(b: Behaviour) -> dict:
             "expert": {"name": b.expert_name, **b.expert_params},
             "worlds": {"teach": list(b.teach), "held_out": list(b.held_out)},
             "starts": {w: [list(p) for p in poses] for w, poses in b.starts.items()},
-            "success": b.rules, "instructions": b.instructions}
+            "success": b.rules, "instructions": b.instructions,
+            "goals": None if b.goals is None else b.goals.to_dict()}
 
 
 def describe(b: Behaviour) -> str:
@@ -134,6 +119,11 @@ def describe(b: Behaviour) -> str:
              f"  taught in: {', '.join(b.teach)}",
              f"  held out: {', '.join(b.held_out) or 'none'}",
              f"  success: {rules}"]
+    if b.goals is not None:
+        g = b.goals
+        order = " -> ".join(str(g.beacons[k]) for k in g.visits)
+        lines.insert(4, f"  goals: beacons {order}" + (" (a cycle)" if g.cycle else "")
+                     + f", each reached within {', '.join(f'{w:g}' for w in g.within)} m")
     if b.instructions:
         lines += ["  instructions:", *("    " + line for line in b.instructions.splitlines())]
     return "\n".join(line for line in lines if line)

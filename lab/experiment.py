@@ -52,7 +52,8 @@ def run_trial(task: str | Behaviour, seed: int, recipe: Recipe | None = None, wo
               teacher_params: dict | None = None) -> dict:
     """Train ``recipe`` (default: the behaviour's) on ``world`` (default: the recipe's) with
     ``seed``, then evaluate the tree there and on each of ``eval_worlds``, all by the
-    behaviour ``task``'s success rule."""
+    behaviour ``task``'s success rule (and, ``world`` not given, in its other teaching
+    worlds)."""
     b = get(task)
     recipe = recipe_of(b) if recipe is None else recipe
     spec = world_of(b, world or recipe.world)
@@ -70,7 +71,8 @@ def run_trial(task: str | Behaviour, seed: int, recipe: Recipe | None = None, wo
            "height_before": rec.get("height_before", learner.height),
            "compaction": rec.get("method"),
            "vectors": learner.vectors, "train_wall_s": round(t_train, 2), "worlds": {}}
-    for w in [world or recipe.world, *eval_worlds]:
+    taught = [] if world is not None else [w for w in b.teach[1:] if w != recipe.world]
+    for w in [world or recipe.world, *taught, *eval_worlds]:
         wspec = world_of(b, str(w))
         rep = evaluate(wspec, tree, episodes=episodes, seconds=eval_seconds, seed=seed,
                        range_noise=range_noise, odom_noise=odom_noise, behaviour=b)
@@ -197,6 +199,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write every trial's results here (JSON)")
 
 
+def _goal_experiment(b: Behaviour, args, ev: list[str]) -> dict:
+    from lab.goals import goal_experiment_table, run_goal_trial
+
+    recipe = recipe_from_args(recipe_of(b), args)
+    if args.world:
+        recipe = recipe.replace(world=args.world)
+    rows = [run_goal_trial(b, args.seed + i, recipe, [recipe.world, *ev], episodes=args.episodes)
+            for i in range(args.trials)]
+    print(f"\n{b.name}: {args.trials} trials")
+    print(goal_experiment_table(b, rows))
+    return {"task": b.name, "trials": args.trials, "recipe": _plain(recipe), "rows": rows}
+
+
 def main(args) -> int:
     tasks = [get(t) for t in (BOTH if args.task == "both" else [args.task])]
     results = {}
@@ -206,6 +221,9 @@ def main(args) -> int:
             ev: list[str] = []
         else:
             ev = args.eval_world if args.eval_world is not None else default_eval_worlds(task)
+        if task.goals is not None:  # goals in order: beside the reactive tree (lab.goals)
+            results[task.name] = _goal_experiment(task, args, ev)
+            continue
         res = run_experiment(task, trials=args.trials, seed0=args.seed,
                              recipe=recipe_from_args(recipe_of(task), args), world=args.world,
                              eval_seconds=args.seconds, episodes=args.episodes, eval_worlds=ev,
@@ -215,7 +233,9 @@ def main(args) -> int:
         print(f"\n{task.name}: {args.trials} trials")
         print(format_worlds(res))
     print()
-    print(table_i(results))
+    paper = {k: v for k, v in results.items() if "summary" in v}
+    if paper:
+        print(table_i(paper))
     print(f"({time.perf_counter() - t0:.0f} s)")
     if args.json:
         files.write_text(args.json, json.dumps(results, indent=1), "--json")

@@ -25,7 +25,7 @@ from pathlib import Path
 from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
 from client.behaviour.learning import DemonstrationLearner, TreePolicy
 from client.behaviour.rule import rule_for
-from client.behaviour.spec import Behaviour
+from client.behaviour.spec import Behaviour, BehaviourError, shipped
 from lab import metrics
 from lab.behaviours import behaviour_for_world
 from lab.episode import DT, Episode
@@ -129,7 +129,8 @@ def drive(spec: WorldSpec, driver, start, seconds: float, seed: int = 0, teacher
     """Drive ``driver`` (anything with ``act(ranges, pose)``: a TreePolicy or a scripted policy)
     from ``start`` for ``seconds``; ``teacher`` (optional) is asked what it would do on each
     state (teacher agreement). Stops at the goal, when the world has one. The episode records
-    what ``behaviour``'s success rule measures (default: the world's behaviour)."""
+    what ``behaviour``'s success rule measures (default: the world's behaviour, else the one
+    the driver was taught; in a world no behaviour names, the right-hand wall's distance)."""
     actions = getattr(driver, "actions", DEFAULT_ACTIONS)
     world = World(spec, robots=1, seed=seed, range_noise=range_noise, odom_noise=odom_noise)
     start = tuple(float(v) for v in start)
@@ -138,7 +139,13 @@ def drive(spec: WorldSpec, driver, start, seconds: float, seed: int = 0, teacher
     if teacher is not None:
         teacher.reset()
     ep = Episode(start=start, dt=dt, kind=kind)
-    record = recorded(behaviour_for_world(spec) if behaviour is None else behaviour)
+    if behaviour is None:
+        try:
+            behaviour = behaviour_for_world(spec, (getattr(driver, "metadata", None) or {})
+                                            .get("task"))
+        except BehaviourError:  # a world no behaviour names: the paper's measure
+            behaviour = shipped()["wall-following"]
+    record = recorded(behaviour)
     t0 = time.perf_counter()
     for _ in range(int(round(seconds / dt))):
         ranges = world.scan(0)

@@ -21,6 +21,8 @@ the robot to the nearest wall on the followed side at each step, ``dt`` the step
     teacher_agreement(actions, teacher_actions) -> float | None
     progress_stuck(poses, dt, window_s=30.0, min_progress=0.5) -> bool
     covered_area(poses, cell=0.5) -> float            # m^2 of the cells of ``cell`` m entered
+    goals_in_order(poses, targets, dt) -> [times]     # targets ((x, y, radius), ...) in order:
+                                                      # when each was reached after the one before
     centred_fraction(gaps, tolerance=0.3) -> float    # fraction of steps with |left - right| <= it
     wall_success(m, teacher_distance, band=0.8, ratio=0.7) -> bool
     maze_success(m) -> bool
@@ -48,6 +50,7 @@ __all__ = [
     "distance",
     "episode_metrics",
     "goal_reached",
+    "goals_in_order",
     "judge",
     "maze_success",
     "oscillation_loops",
@@ -214,6 +217,22 @@ def centred_fraction(gaps: Sequence[float], tolerance: float = 0.3) -> float:
     return float(np.count_nonzero(np.abs(g) <= tolerance) / g.size)
 
 
+def goals_in_order(poses, targets, dt: float) -> list[float]:
+    """The times (s) at which the robot's centre came within each target's radius (``targets``:
+    ``(x, y, radius)`` in the order they are to be reached), each after the one before; as many
+    times as targets reached in order (a goal passed out of order does not count)."""
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3) if len(poses) else np.zeros((0, 3))
+    times: list[float] = []
+    i = 0
+    for x, y, radius in targets:
+        inside = np.hypot(p[i:, 0] - x, p[i:, 1] - y) <= radius
+        if not inside.any():
+            break
+        i += int(np.argmax(inside))
+        times.append(round((i + 1) * dt, 6))
+    return times
+
+
 def judge(rules: dict, m: dict, teacher_m: dict | None = None) -> bool:
     """A behaviour's success rule (``client.behaviour.spec.RULES``: rule -> its parameters) on
     an episode's metrics ``m`` (``episode_metrics`` given the same ``rules``): True when every
@@ -239,6 +258,8 @@ def judge(rules: dict, m: dict, teacher_m: dict | None = None) -> bool:
             ok = bool(m["goal_reached"])
         elif rule == "coverage":
             ok = m.get("covered_area") is not None and m["covered_area"] >= p["area"]
+        elif rule == "goals":
+            ok = m.get("goals_total") is not None and m["goals_reached"] >= m["goals_total"]
         else:
             raise ValueError(f"no success rule {rule!r}")
         if not ok:
@@ -248,11 +269,13 @@ def judge(rules: dict, m: dict, teacher_m: dict | None = None) -> bool:
 
 def episode_metrics(poses, stalls, actions, dt: float, side=None, goal=None,
                     teacher_actions=None, start=None, band=BAND, rules: dict | None = None,
-                    gaps=None) -> dict:
+                    gaps=None, targets=None) -> dict:
     """Every per-episode field of ``rhbl evaluate --json`` (except ``success``). ``rules`` (a
     behaviour's success rule) sets the band of ``wall-band``, the window of ``progress`` and
     adds ``centred_fraction`` (from ``gaps``, per step: left minus right wall distance) and
-    ``covered_area`` when it has ``centred`` or ``coverage``."""
+    ``covered_area`` when it has ``centred`` or ``coverage``; ``targets`` (a goal behaviour's
+    beacons in the order of its goals, ``(x, y, radius)``) adds ``goals_reached``,
+    ``goals_total`` and ``goal_times`` (``goals_in_order``)."""
     rules = rules or {}
     if "wall-band" in rules:
         band = (rules["wall-band"]["near"], rules["wall-band"]["far"])
@@ -279,7 +302,13 @@ def episode_metrics(poses, stalls, actions, dt: float, side=None, goal=None,
     } | ({"centred_fraction": round(centred_fraction(gaps or (), rules["centred"]["tolerance"]), 4)}
          if "centred" in rules else {}) | (
         {"covered_area": round(covered_area(poses, rules["coverage"]["cell"]), 4)}
-        if "coverage" in rules else {})
+        if "coverage" in rules else {}) | (_goal_fields(poses, targets, dt)
+                                           if targets is not None else {})
+
+
+def _goal_fields(poses, targets, dt: float) -> dict:
+    times = goals_in_order(poses, targets, dt)
+    return {"goals_reached": len(times), "goals_total": len(targets), "goal_times": times}
 
 
 def summarize(values: Sequence[float]) -> dict:

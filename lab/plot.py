@@ -1,7 +1,8 @@
 """Pictures: a world with paths (the paper's figures 3 and 4), optionally a tree's spheres.
 
     plot_paths(world, paths, out, title=None, spheres=None, dims=(0, 1), feature_names=None) -> Path
-        world : server.world.WorldSpec (walls, goal, start poses) or an (M, 4) array of segments
+        world : server.world.WorldSpec (walls, goal, start poses, beacons) or an (M, 4) array of
+                segments
         paths : {"teacher": poses (N, 3), "learner": poses, ...} drawn in that order; a list of
                 pose arrays per name draws several episodes of the same kind
         out   : PNG path (matplotlib's Agg backend, no display needed)
@@ -45,6 +46,11 @@ def draw_world(ax, world) -> None:
     goal = getattr(world, "goal", None)
     if goal is not None:
         ax.add_patch(Circle(goal.center, goal.radius, color="gold", alpha=0.4, label="goal"))
+    for b in getattr(world, "beacons", ()) or ():  # fiducial beacons: their colour, their id
+        ax.add_patch(Circle(b.pos, max(b.size / 2, 0.08), facecolor=np.array(b.colour) / 255.0,
+                            edgecolor="black", lw=1, zorder=3))
+        ax.text(b.pos[0], b.pos[1] + max(b.size / 2, 0.08) + 0.05, str(b.id), fontsize=8,
+                ha="center", va="bottom", zorder=3)
     for k, (x, y, yaw) in enumerate(getattr(world, "start_poses", []) or []):
         ax.annotate("", xy=(x + 0.4 * math.cos(yaw), y + 0.4 * math.sin(yaw)), xytext=(x, y),
                     arrowprops={"arrowstyle": "->", "color": "green"})

@@ -10,8 +10,9 @@ it). docs/experiments.md says how each value was chosen and what it measured.
 One training run (``lab.harness.train``): demonstrations from the ``starts`` poses, each
 ``segment`` seconds (or until the goal), then from sampled poses (``random_segment`` x
 ``segment`` each) until ``seconds`` of sim time are used; then ``rounds`` corrective (DAgger)
-rounds of ``round_seconds`` per start pose, first in copies of the world scaled by each of
-``round_scales``, each round also from ``round_free`` random free-space poses; last, the
+rounds of ``round_seconds`` per start pose, first in each of ``round_worlds`` (and its scaled copies),
+then in copies of the world scaled by each of ``round_scales``, each round also from
+``round_free`` random free-space poses; last, the
 ``compact`` step (also after the demonstrations and after every round with ``compact_rounds``;
 redone against held-out visited states with ``compact_visits``).
 """
@@ -80,6 +81,10 @@ class Recipe:
     takeover: float = 0.0           # the teacher drives while a beam is closer than this (m)
     round_scales: tuple[float, ...] = ()
     round_free: int = 0
+    # corrective rounds also in these worlds (names or paths: a behaviour's other teaching
+    # worlds, ``lab.behaviours.recipe_of``), each from its own start poses and in its copies
+    # scaled by ``round_scales``, before the training world's
+    round_worlds: tuple[str, ...] = ()
     # scale augmentation: each labelled state offered again with the scan scaled
     augment: int = 0
     augment_scale: float = 1.3
@@ -149,6 +154,10 @@ class Recipe:
         if (n is not None or e is not None) and not self.compact.startswith("prune"):
             raise ValueError(f"recipe compact_max_nodes/compact_max_error apply to compact "
                              f"'prune' or 'prune-balanced' only, got compact {self.compact!r}")
+        worlds = self.round_worlds
+        if isinstance(worlds, str) or not all(isinstance(w, str) and w for w in worlds):
+            raise bad("round_worlds", "a list of world names or paths")
+        object.__setattr__(self, "round_worlds", tuple(worlds))
         for name in ("round_scales", "visit_scales"):
             scales = tuple(float(v) for v in getattr(self, name))
             if not all(math.isfinite(v) and v > 0 for v in scales):

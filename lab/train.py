@@ -63,7 +63,8 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
           policy=None, on_step: OnStep | None = None,
           behaviour: Behaviour | None = None) -> Episode:
     """One training run of ``recipe`` (default: the behaviour's, ``lab.behaviours.recipe_of``)
-    of ``behaviour`` (default: the world's, ``lab.behaviours.behaviour_for_world``): its
+    of ``behaviour`` (default: the world's, ``lab.behaviours.behaviour_for_world``; in a world
+    no shipped behaviour names, the recipe's task, else the learner's): its
     scripted expert (or ``policy``) demonstrates for ``recipe.seconds`` (sim time, in total)
     while ``learner`` observes every step.
 
@@ -89,7 +90,8 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
     and corrects, the compacted tree. With ``recipe.compact_visits`` the last compaction is
     redone against the learned vectors plus held-out states the compacted tree reaches
     (``visited_states``)."""
-    b = behaviour_for_world(spec) if behaviour is None else behaviour
+    b = behaviour if behaviour is not None else behaviour_for_world(
+        spec, recipe.task if recipe is not None else learner.task)
     recipe, compact = _checked(spec, b, learner, recipe)
     policy = policy or b.expert(actions=learner.actions)
     rng = np.random.default_rng(seed)
@@ -104,9 +106,10 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
                     seed=seed, noise=noise, on_step=on_step, record=recorded(b))
     demo_vectors = ep.learned
     rounds = 0 if start is not None else recipe.rounds  # a corrective demonstration: no rounds
+    others = [world_of(b, w) for w in recipe.round_worlds] if rounds else []
     round_stats, between = _rounds(spec, learner, policy, fixed, recipe, rounds, compact, ep,
                                    rng=rng, aug=aug, seed=seed, noise=noise, on_step=on_step,
-                                   record=recorded(b))
+                                   record=recorded(b), others=others)
     compaction = _last_compaction(spec, learner, recipe, compact, seed, policy, on_step, b)
     ep.wall_time = time.perf_counter() - t0
     learner.session = _session_record(
@@ -187,11 +190,14 @@ def _demonstration_start(spec: WorldSpec, recipe: Recipe, fixed: list, segment: 
 def _rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, fixed: list, recipe: Recipe,
             rounds: int, compact: dict | None, ep: Episode, *, rng, aug, seed: int,
             noise: tuple[float, float], on_step: OnStep | None = None,
-            record: dict | None = None) -> tuple[list[dict], list[dict]]:
-    """The corrective rounds of ``train``: in each copy scaled by ``recipe.round_scales``, then
-    in the training world (its corrections are the latest); with ``recipe.compact_rounds`` the
-    tree is compacted after the demonstrations and after every round but the last. Returns the
-    rounds' statistics and the compactions between them."""
+            record: dict | None = None, others: list[WorldSpec] = ()
+            ) -> tuple[list[dict], list[dict]]:
+    """The corrective rounds of ``train``: in each of ``others`` (``recipe.round_worlds``, from
+    their own start poses) and its copies scaled by ``recipe.round_scales``, then in each copy of
+    the training world so scaled, then in the training world (its corrections are the latest);
+    with ``recipe.compact_rounds`` the tree is compacted after the demonstrations and after
+    every round but the last. Returns the rounds' statistics and the compactions between
+    them."""
     between: list[dict] = []  # the compactions before the last step (compact_rounds)
     round_stats: list[dict] = []
     if rounds <= 0:
@@ -199,7 +205,7 @@ def _rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, fixed: list,
     after_round = None
     if compact is not None and recipe.compact_rounds:
         between.append(learner.compact(**compact, data="after the demonstrations"))
-        todo = [rounds * (len(recipe.round_scales) + 1)]  # rounds left
+        todo = [rounds * (len(recipe.round_scales) + 1) * (len(others) + 1)]  # rounds left
 
         def after_round(where: str) -> bool:  # every round but the last (whose compaction
             todo[0] -= 1                      # is the last step)
@@ -207,6 +213,14 @@ def _rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, fixed: list,
                 between.append(learner.compact(**compact, data=f"after {where}"))
             return todo[0] > 0
     range_noise, odom_noise = noise
+    for other in others:  # another teaching world: its copies, then itself
+        for f in (*recipe.round_scales, None):
+            w = other if f is None else other.scaled(f)
+            for st in _corrective_rounds(w, learner, policy, w.start_poses, recipe, seed,
+                                         range_noise, odom_noise, ep, rng=rng, aug=aug,
+                                         after_round=after_round, scale=f, on_step=on_step,
+                                         record=record):
+                round_stats.append(dict(st, scale=f, world=other.name))
     for f in recipe.round_scales:
         scaled = spec.scaled(f)
         for st in _corrective_rounds(scaled, learner, policy, scaled.start_poses, recipe,
@@ -254,6 +268,8 @@ def _session_record(spec: WorldSpec, recipe: Recipe, ep: Episode, *, seed: int, 
             "round_stats": round_stats,
             "round_free": recipe.round_free if rounds else None,
             "round_scales": list(recipe.round_scales) if rounds else None,
+            "round_worlds": list(recipe.round_worlds) if rounds and recipe.round_worlds
+            else None,
             "augment": augment,
             "augment_scale": recipe.augment_scale if augment else None,
             "range_noise": noise[0], "odom_noise": noise[1],
@@ -384,7 +400,8 @@ def visited_states(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recip
     scaled by each of ``scales`` (default: ``recipe.round_scales``), then in ``spec``, but the
     tree learns nothing. ``seed`` draws the poses (use one other than the training run's for
     held-out states)."""
-    b = behaviour_for_world(spec) if behaviour is None else behaviour
+    b = behaviour if behaviour is not None else behaviour_for_world(
+        spec, recipe.task if recipe is not None else learner.task)
     recipe = recipe_of(b) if recipe is None else recipe
     recipe = recipe.replace(rounds=rounds)
     policy = policy or b.expert(actions=learner.actions)
@@ -455,6 +472,10 @@ def main(args) -> int:
         spec = resolve_world(args.world) if b is None else world_of(b, args.world)
     b = behaviour_for_world(spec) if b is None else b
     recipe = recipe_from_args(recipe_of(b), args)
+    if b.goals is not None:  # goals in order: two trees, the goal learner (lab.goals)
+        from lab.goals import train_main
+
+        return train_main(args, b, spec, recipe)
     if args.resume:
         if recipe.compact != "none":
             raise ValueError(f"--compact {recipe.compact} needs a fresh tree: a resumed learner "
@@ -475,9 +496,10 @@ def main(args) -> int:
                    on_step=None if tap is None else tap.step, behaviour=b)
     out = learner.save(args.out)
     m = ep.metrics()
+    note = _scales_note(learner.session.get('round_scales'), learner.session.get('round_worlds'))
     print(f"trained on {spec.name} ({b.name}) for {recipe.seconds:g} s from {list(ep.start)}: "
           f"{len(ep.segments)} demonstrations + {learner.session.get('rounds', 0)} corrective "
-          f"rounds{_scales_note(learner.session.get('round_scales'))}, {ep.learned} vectors "
+          f"rounds{note}, {ep.learned} vectors "
           f"learned, tree {_size_note(learner.session.get('compaction'))}{learner.nodes} nodes, "
           f"height {learner.height}; "
           f"teacher collisions {m['collisions']}; {ep.wall_time:.1f} s wall time")
@@ -492,5 +514,7 @@ def _size_note(rec) -> str:
             f"{rec['height_before']}, to ")
 
 
-def _scales_note(scales) -> str:
-    return f" (each also in copies scaled {', '.join(f'{f:g}' for f in scales)})" if scales else ""
+def _scales_note(scales, worlds=None) -> str:
+    also = [f"copies scaled {', '.join(f'{f:g}' for f in scales)}"] if scales else []
+    also += [f"{', '.join(worlds)}"] if worlds else []
+    return f" (each also in {' and in '.join(also)})" if also else ""

@@ -41,6 +41,7 @@ __all__ = [
     "Layout",
     "Number",
     "ProtocolError",
+    "Records",
     "Rest",
     "String",
     "Vector",
@@ -370,6 +371,46 @@ class IntegerList(Kind):
             raise DecodeError(f"{what}: field '{key}': expected {self.expected}, "
                               f"got {type(x).__name__}{of}")
         return tuple(get_int({key: e}, key, what, minimum=minimum) for e in x)
+
+
+class Records(Kind):
+    """A list of at most ``max_items`` maps, each with the fields ``fields`` (name -> ``Kind``,
+    all required; other keys of an item are ignored), as a tuple of ``record(**fields)`` (a
+    NamedTuple, say); written from such records (their attributes) as maps."""
+
+    nil_absent = False
+
+    def __init__(self, fields: dict[str, Kind], record: Any, max_items: int) -> None:
+        self.item_kinds, self.record, self.max_items = dict(fields), record, int(max_items)
+        names = ", ".join(fields)
+        self.expected = f"a list of at most {max_items} maps of {names}"
+        self.schema = {"type": "array", "maxItems": max_items,
+                       "items": {"type": "object",
+                                 "properties": {k: kind.schema for k, kind in fields.items()},
+                                 "required": list(fields)}}
+
+    def write(self, value):
+        kinds = self.item_kinds
+        return [{k: kind.write(getattr(r, k)) for k, kind in kinds.items()} for r in value]
+
+    def read(self, x, key, what):
+        if not isinstance(x, list | tuple) or len(x) > self.max_items:
+            of = f" of {len(x)}" if isinstance(x, list | tuple) else ""
+            raise DecodeError(f"{what}: field '{key}': expected {self.expected}, "
+                              f"got {type(x).__name__}{of}")
+        out = []
+        for i, item in enumerate(x):
+            name = f"{key}[{i}]"
+            if not isinstance(item, dict):
+                raise DecodeError(f"{what}: field '{name}': expected a map of "
+                                  f"{', '.join(self.item_kinds)}, got {item!r:.80}")
+            values = {}
+            for k, kind in self.item_kinds.items():
+                if k not in item:
+                    raise kind.missing(f"{name}.{k}", what)
+                values[k] = kind.read(item[k], f"{name}.{k}", what)
+            out.append(self.record(**values))
+        return tuple(out)
 
 
 class Const(Kind):

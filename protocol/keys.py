@@ -6,6 +6,7 @@ named ``r<i>`` by default (:func:`robot_name`). ``index`` is the Player device i
 
     scan_key("r0")                 -> rhbl/r0/laser/0/data/scan
     scan_key(EVERY)                -> rhbl/*/laser/0/data/scan   (the same key of every robot)
+    fiducial_key("r0")             -> rhbl/r0/fiducial/0/data/fiducials
     robot_keys("r0"), robot_keys() -> rhbl/r0/**, rhbl/**         (everything of one, of all)
     every_token()                  -> rhbl/alive/**              (every process's token)
     parse("rhbl/r0/position2d/0/cmd/vel/teacher")
@@ -30,6 +31,7 @@ __all__ = [
     "controller_decision_key",
     "driver_key",
     "every_token",
+    "fiducial_key",
     "learner_ack_key",
     "learner_notice_key",
     "learner_snapshot_key",
@@ -88,6 +90,12 @@ def state_key(robot: str = "r0", index: int = 0) -> str:
 def scan_key(robot: str = "r0", index: int = 0) -> str:
     """Laser scans, published by the server every tick."""
     return f"{_dev(robot, 'laser', index)}/data/scan"
+
+
+def fiducial_key(robot: str = "r0", index: int = 0) -> str:
+    """The beacons a robot's fiducial finder sees (``Fiducial``), published by the server every
+    tick in a world with beacons (Player's ``fiducial`` interface)."""
+    return f"{_dev(robot, 'fiducial', index)}/data/fiducials"
 
 
 def driver_key(robot: str = "r0", index: int = 0) -> str:
@@ -200,10 +208,10 @@ def every_token() -> str:
 
 # ---- parsing ----------------------------------------------------------------------------------
 # what a key of ours is: the message it carries (docs/protocol.md section 3)
-KINDS = ("state", "scan", "driver", "cmd", "request", "sim", "label", "labeled", "withdraw",
+KINDS = ("state", "scan", "fiducial", "driver", "cmd", "request", "sim", "label", "labeled", "withdraw",
          "ack", "notice", "snapshot", "decision", "alive", "other")
 _DATA = {("position2d", "state"): "state", ("laser", "scan"): "scan",
-         ("position2d", "driver"): "driver"}
+         ("fiducial", "fiducials"): "fiducial", ("position2d", "driver"): "driver"}
 _ROLE_KEYS = {("teacher", "action"): "label", ("teacher", "labeled"): "labeled",
               ("teacher", "withdraw"): "withdraw",
               ("learner", "ack"): "ack", ("learner", "notice"): "notice",

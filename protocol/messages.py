@@ -14,7 +14,7 @@ import math
 import struct
 import sys
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
@@ -30,6 +30,7 @@ from protocol.codec import (
     Layout,
     Number,
     ProtocolError,
+    Records,
     Rest,
     String,
     Vector,
@@ -53,7 +54,11 @@ __all__ = [
     "PROTOCOL_VERSION",
     "Ack",
     "DecodeError",
+    "BeaconInfo",
     "DriverState",
+    "Fiducial",
+    "FiducialGeometry",
+    "FiducialItem",
     "Geometry",
     "LabeledScan",
     "LaserConfig",
@@ -85,6 +90,7 @@ MAX_VA = math.radians(100.0)
 MAX_BEAMS = 100_000
 MAX_ORIGIN = 64  # characters of a teacher session's identity (``origin``)
 MAX_WITHDRAWN = 100_000  # labels one withdrawal may name (hours of demonstration at 10 Hz)
+MAX_BEACONS = 256  # beacons a world may hold, and a fiducial message may list
 
 
 class Ranges(Kind):
@@ -308,6 +314,50 @@ def _scan_in_bulk(cls, m: dict):
         return None
     return cls(ts=ts, id=sid, ranges=ranges, pose=pose, min_angle=lo,
                max_angle=hi, resolution=res, max_range=mr, truth=truth)
+
+
+class FiducialItem(NamedTuple):
+    """One beacon a fiducial finder sees (Player's ``player_fiducial_item``): its ``id`` (0: seen
+    but too far to identify), ``range`` (m) and ``bearing`` (rad, sensor frame, counter-clockwise
+    positive: a beacon on the robot's left has a positive bearing)."""
+
+    id: int
+    range: float
+    bearing: float
+
+    @property
+    def x(self) -> float:
+        """Its position ahead of the sensor (m; Player's ``pose.px``)."""
+        return self.range * math.cos(self.bearing)
+
+    @property
+    def y(self) -> float:
+        """Its position to the sensor's left (m; Player's ``pose.py``)."""
+        return self.range * math.sin(self.bearing)
+
+
+@message
+class Fiducial(_Message):
+    """What a robot's fiducial finder sees at sim time ``ts``: ``items``, one
+    :class:`FiducialItem` per beacon within range and field of view and not hidden behind a
+    wall (none: an empty list). ``seq`` numbers them as the robot's scans: the scan of the same
+    tick has ``id == seq``. ``pose`` the odometry pose, ``truth`` the true pose (simulation)."""
+
+    WHAT: ClassVar[str] = "fiducial"
+    ts: float = wire(NUM)
+    seq: int = wire(UINT)
+    items: tuple[FiducialItem, ...] = wire(
+        Records({"id": UINT, "range": NUM, "bearing": NUM}, FiducialItem, MAX_BEACONS),
+        default=(), required=True)
+    pose: tuple[float, float, float] = wire(VEC3, default=(0.0, 0.0, 0.0), required=True)
+    truth: tuple[float, float, float] | None = wire(VEC3, default=None)
+
+    def find(self, beacon_id: int) -> FiducialItem | None:
+        """The item of the beacon ``beacon_id`` (None: not in view)."""
+        for item in self.items:
+            if item.id == beacon_id:
+                return item
+        return None
 
 
 @message
@@ -556,6 +606,24 @@ class Geometry(_Message):
 
 
 @message
+class FiducialGeometry(_Message):
+    """Reply to the fiducial finder's ``get_geom`` (Player's ``PLAYER_FIDUCIAL_REQ_GET_GEOM`` and
+    ``GET_FOV`` in one): the sensor's ``pose`` [x, y, yaw] on the robot and ``size`` [length,
+    width] (m) as in :class:`Geometry`; ``min_range``, ``max_range`` (m: a beacon farther is not
+    seen), ``max_range_id`` (m: a beacon farther is reported with id 0), ``fov`` (rad, centred on
+    the sensor's heading) and ``rate`` (Hz, that of the scans)."""
+
+    WHAT: ClassVar[str] = "fiducial geom"
+    pose: tuple[float, float, float] = wire(VEC3)
+    size: tuple[float, float] = wire(Vector(2))
+    min_range: float = wire(NUM)
+    max_range: float = wire(NUM)
+    max_range_id: float = wire(NUM)
+    fov: float = wire(NUM)
+    rate: float = wire(NUM, default=10.0, required=True)
+
+
+@message
 class LaserConfig(_Message):
     """Reply to the laser's ``get_config``."""
 
@@ -599,11 +667,22 @@ class SimPose(_Message):
     ts: float = wire(NUM, default=0.0)
 
 
+class BeaconInfo(NamedTuple):
+    """A beacon of a world (``WorldInfo.beacons``): ``id``, centre ``pos`` [x, y] (m),
+    ``colour`` (``#rrggbb``) and ``size`` (m, its diameter)."""
+
+    id: int
+    pos: tuple[float, float]
+    colour: str
+    size: float
+
+
 @message
 class WorldInfo(_Message):
     """Reply to the sim-only ``get_world``: what a viewer needs to draw the world. ``walls`` are
     line segments ``[x0, y0, x1, y1]`` (m, world frame), ``goal`` is ``[x, y, radius]`` or absent,
-    ``starts`` the world's start poses ``[x, y, yaw]`` (the default one first)."""
+    ``starts`` the world's start poses ``[x, y, yaw]`` (the default one first), ``beacons`` its
+    fiducial beacons (:class:`BeaconInfo`; left out when it has none)."""
 
     WHAT: ClassVar[str] = "world info"
     name: str = wire(STR)
@@ -611,6 +690,10 @@ class WorldInfo(_Message):
     walls: tuple[tuple[float, float, float, float], ...] = wire(VectorList(4), default=())
     starts: tuple[tuple[float, float, float], ...] = wire(VectorList(3), default=())
     goal: tuple[float, float, float] | None = wire(VEC3, default=None, kw_only=True)
+    beacons: tuple[BeaconInfo, ...] = wire(
+        Records({"id": UINT, "pos": Vector(2), "colour": String(max_len=16), "size": NUM},
+                BeaconInfo, MAX_BEACONS),
+        default=(), omit_false=True, kw_only=True)
 
 
 @message
@@ -647,7 +730,7 @@ class Nack(_Message):
 # the message each kind of key carries (``protocol.keys.parse(key).kind``; the replies of the
 # requests are not published, except the world, which recorders keep on its request's key)
 CARRIES: dict[str, type[_Message]] = {
-    "state": State, "scan": Scan, "driver": DriverState, "cmd": VelCmd, "label": TeacherAction,
+    "state": State, "scan": Scan, "fiducial": Fiducial, "driver": DriverState, "cmd": VelCmd, "label": TeacherAction,
     "labeled": LabeledScan, "withdraw": Withdrawal, "ack": LearnerAck, "notice": TreeNotice, "decision": Decision,
     "world": WorldInfo}
 

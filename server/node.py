@@ -2,7 +2,8 @@
 
 One :class:`ServerNode` owns a :class:`server.world.World` and a zenoh session. ``run()`` ticks
 at a fixed rate in sim time (``rate`` Hz): each tick applies the arbitrated commands, steps the
-world by ``1/rate`` s and publishes every robot's state and scan. Pacing:
+world by ``1/rate`` s and publishes every robot's state and scan (and, in a world with beacons,
+what its fiducial finder sees, before the scan). Pacing:
 
 - real time (``speedup=1``) or N times real time (``speedup=N``), or as fast as possible
   (``speedup=0``);
@@ -41,7 +42,11 @@ from protocol.decoding import Decoder
 from protocol.messages import (
     COMMAND_MAX_PAYLOAD,
     Ack,
+    BeaconInfo,
     DriverState,
+    Fiducial,
+    FiducialGeometry,
+    FiducialItem,
     Geometry,
     LaserConfig,
     MotorPower,
@@ -55,7 +60,7 @@ from protocol.messages import (
     WorldInfo,
 )
 from server.arbiter import Arbiter, priority_of
-from server.world import LASER, ROBOT, World, WorldSpec
+from server.world import FIDUCIAL, LASER, ROBOT, World, WorldSpec
 
 __all__ = [
     "DuplicateRobotError",
@@ -73,11 +78,22 @@ _CMD_QUEUE = 1024  # commands queued per robot between two ticks (zenoh waits wh
 
 
 def world_info(spec: WorldSpec) -> WorldInfo:
-    """The ``get_world`` reply of a world: its walls as segments, goal and start poses."""
+    """The ``get_world`` reply of a world: its walls as segments, goal, start poses and
+    beacons."""
     goal = None if spec.goal is None else (*spec.goal.center, spec.goal.radius)
+    beacons = tuple(BeaconInfo(b.id, b.pos, "#{:02x}{:02x}{:02x}".format(*b.colour), b.size)
+                    for b in spec.beacons)
     return WorldInfo(name=spec.name, task=spec.task or "",  # "": the world names no task
                      walls=tuple(tuple(s) for s in spec.segments().tolist()),
-                     goal=goal, starts=tuple(tuple(p) for p in spec.start_poses))
+                     goal=goal, starts=tuple(tuple(p) for p in spec.start_poses),
+                     beacons=beacons)
+
+
+def fiducial_geometry(rate: float) -> FiducialGeometry:
+    """The fiducial finder's ``get_geom`` reply (``server.world.FIDUCIAL``)."""
+    return FiducialGeometry(pose=(FIDUCIAL.offset, 0.0, 0.0), size=FIDUCIAL.size,
+                            min_range=FIDUCIAL.min_range, max_range=FIDUCIAL.max_range,
+                            max_range_id=FIDUCIAL.max_range_id, fov=FIDUCIAL.fov, rate=rate)
 
 
 def _undeclare(declared: Any) -> None:
@@ -189,6 +205,7 @@ class ServerNode:
         self._robots = [_RobotIO(n, i, self.watchdog) for i, n in enumerate(names)]
         self._by_name = {r.name: r for r in self._robots}
         self._world_info = world_info(world.spec)
+        self._beacons = bool(world.spec.beacons)
         if refuse_duplicates:
             self._refuse_duplicates()
         # every declaration, undeclared in reverse order by close() (on every path)
@@ -219,6 +236,9 @@ class ServerNode:
         for r in self._robots:
             r.pubs["state"] = self._keep(s.declare_publisher(keys.state_key(r.name)))
             r.pubs["scan"] = self._keep(s.declare_publisher(keys.scan_key(r.name)))
+            if self._beacons:  # the fiducial finder: published in a world with beacons
+                r.pubs["fiducial"] = self._keep(
+                    s.declare_publisher(keys.fiducial_key(r.name)))
             r.pubs["driver"] = self._keep(s.declare_publisher(keys.driver_key(r.name)))
             if self.lockstep:  # an answer wakes the lock-step wait at once
                 self._keep(
@@ -240,6 +260,7 @@ class ServerNode:
                 ("position2d", "motor_power"),
                 ("laser", "get_geom"),
                 ("laser", "get_config"),
+                ("fiducial", "get_geom"),
             ]:
                 self._keep(
                     s.declare_queryable(
@@ -363,6 +384,8 @@ class ServerNode:
         i = r.index
         if iface == "sim":
             return self._answer_sim(r, name, payload)
+        if iface == "fiducial":
+            return fiducial_geometry(self.rate)
         if iface == "laser":
             if name == "get_geom":
                 return Geometry(pose=(LASER.offset, 0.0, 0.0), size=_LASER_SIZE)
@@ -441,6 +464,7 @@ class ServerNode:
         ts = w.time
         robots = self._robots if robots is None else robots
         scans = w.scans([r.index for r in robots])  # all lasers cast together (server.laser)
+        seen = w.fiducials([r.index for r in robots]) if self._beacons else None
         for k, r in enumerate(robots):
             i = r.index
             r.seq += 1
@@ -458,6 +482,11 @@ class ServerNode:
                     truth=truth,
                 ).encode()
             )
+            if seen is not None:  # before the scan: a client holding scan k has its beacons
+                f = seen[k]
+                items = tuple(map(FiducialItem, f.ids, f.ranges, f.bearings))
+                r.pubs["fiducial"].put(Fiducial(ts=ts, seq=r.scan_id, items=items, pose=pos,
+                                                truth=truth).encode())
             r.pubs["scan"].put(
                 Scan(
                     ts=ts,

@@ -35,12 +35,16 @@ import numpy as np
 import pymunk
 from pymunk import _chipmunk_cffi
 
-from protocol.messages import MAX_VA, MAX_VX
-from server import laser
+from protocol.messages import MAX_BEACONS, MAX_VA, MAX_VX
+from server import fiducial, laser
 
 __all__ = [
+    "BEACON_COLOURS",
+    "FIDUCIAL",
     "LASER",
     "ROBOT",
+    "Beacon",
+    "FiducialSpec",
     "Goal",
     "LaserSpec",
     "Pose",
@@ -56,7 +60,8 @@ __all__ = [
     "wrap_angle",
 ]
 
-TASKS = ("wall-following", "maze", "doorways", "dead-end", "corridor-centring", "wandering")
+TASKS = ("wall-following", "maze", "doorways", "dead-end", "corridor-centring", "wandering",
+         "red-green")
 
 
 def wrap_angle(a: float) -> float:
@@ -108,8 +113,34 @@ class LaserSpec:
         return self.min_angle + np.arange(self.count, dtype=np.float64) * self.resolution
 
 
+@dataclass(frozen=True)
+class FiducialSpec:
+    """The fiducial finder (Player's ``fiducial`` interface, Stage's fiducial finder model) at
+    the robot's centre, facing forward: a beacon is seen when its centre is within
+    ``max_range`` of the sensor, within ``fov`` (centred on the heading) and no wall crosses the
+    line from the sensor to its centre first; its id is reported within ``max_range_id``, 0
+    (seen, not identified) beyond it. Other robots do not hide a beacon."""
+
+    min_range: float = 0.0  # m: a beacon nearer is reported at this range (as Stage does)
+    max_range: float = 8.0  # m (the laser's range)
+    max_range_id: float = 8.0  # m (Stage's default is 5 m; here a room's width)
+    fov: float = math.pi  # rad (180 degrees, the laser's field of view)
+    offset: float = 0.0  # m ahead of the robot's centre
+    size: tuple[float, float] = (0.1, 0.1)  # m, the sensor's footprint (length, width)
+
+
 ROBOT = RobotSpec()
 LASER = LaserSpec()
+FIDUCIAL = FiducialSpec()
+
+# the colours a beacon may name (``colour = "red"``), else ``[r, g, b]`` of 0..255
+BEACON_COLOURS: dict[str, tuple[int, int, int]] = {
+    "red": (220, 40, 40), "green": (40, 170, 60), "blue": (40, 90, 220),
+    "yellow": (230, 200, 30), "orange": (240, 140, 20), "purple": (140, 60, 190),
+    "cyan": (30, 190, 200), "magenta": (210, 50, 170), "white": (245, 245, 245),
+    "black": (20, 20, 20), "grey": (128, 128, 128),
+}
+_DEFAULT_BEACON_SIZE = 0.2  # m
 
 
 class WorldError(ValueError):
@@ -135,17 +166,39 @@ class Goal:
 
 
 @dataclass(frozen=True)
+class Beacon:
+    """A fiducial beacon (``[[beacons]]`` of a world file): ``id`` (>= 1; 0 is what a fiducial
+    finder reports for a beacon it sees but cannot identify), the centre ``pos`` [x, y] (m),
+    ``colour`` [r, g, b] (0..255) and ``size`` (m, its diameter)."""
+
+    id: int
+    pos: tuple[float, float]
+    colour: tuple[int, int, int] = BEACON_COLOURS["orange"]
+    size: float = _DEFAULT_BEACON_SIZE
+
+
+@dataclass(frozen=True)
 class WorldSpec:
     """A parsed world file. ``pose`` is the default start; ``starts`` extra start poses."""
 
     name: str
-    task: str | None  # the behaviour the world was made for, if it names one (most do not need to)
+    # an older world file's ``task`` (a shipped behaviour's name), kept as a hint only: worlds
+    # name no task, a behaviour names its worlds (client.behaviour.spec.for_world); None mostly
+    task: str | None
     pose: tuple[float, float, float]
     starts: tuple[tuple[float, float, float], ...] = ()
     walls: tuple[Wall, ...] = ()
     goal: Goal | None = None
     path: Path | None = None
     extra: dict[str, Any] = field(default_factory=dict, compare=False)
+    beacons: tuple[Beacon, ...] = ()
+
+    def beacon(self, beacon_id: int) -> Beacon | None:
+        """The beacon of id ``beacon_id`` (None: the world has none)."""
+        for b in self.beacons:
+            if b.id == beacon_id:
+                return b
+        return None
 
     @property
     def start_poses(self) -> list[tuple[float, float, float]]:
@@ -176,18 +229,19 @@ class WorldSpec:
         return float(_point_segment_distance(np.array([x, y]), segs).min())
 
     def inside(self, x: float, y: float) -> bool:
-        """True when (x, y) lies inside every closed wall polyline of the world (even-odd rule;
-        a world with no closed wall: everywhere)."""
-        for w in self.walls:
-            if not w.closed:
-                continue
+        """True when (x, y) lies in the free space the closed wall polylines bound: inside an
+        odd number of them (the even-odd rule over all of them: inside the outer wall and
+        outside every box, pillar or island drawn as a closed polyline within it; a world with
+        no closed wall: everywhere)."""
+        count = 0
+        closed = [w for w in self.walls if w.closed]
+        for w in closed:
             inside = False
             for x0, y0, x1, y1 in w.segments():
                 if (y0 > y) != (y1 > y) and x < x0 + (y - y0) * (x1 - x0) / (y1 - y0):
                     inside = not inside
-            if not inside:
-                return False
-        return True
+            count += inside
+        return not closed or count % 2 == 1
 
     def scaled(self, factor: float) -> WorldSpec:
         """A copy uniformly scaled about the origin by ``factor``: wall points, start poses
@@ -202,9 +256,11 @@ class WorldSpec:
                       for w in self.walls)
         goal = None if self.goal is None else Goal(
             (self.goal.center[0] * factor, self.goal.center[1] * factor), self.goal.radius)
+        beacons = tuple(replace(b, pos=(b.pos[0] * factor, b.pos[1] * factor))
+                        for b in self.beacons)
         return replace(self, name=f"{self.name}x{factor:g}", pose=pose(self.pose),
                        starts=tuple(pose(p) for p in self.starts), walls=walls, goal=goal,
-                       path=None)
+                       beacons=beacons, path=None)
 
 
 # ------------------------------------------------------------------------- free-space poses
@@ -305,6 +361,64 @@ def _parse_goal(src: str, goal_raw: Any) -> Goal | None:
     return Goal(center=center, radius=radius)  # type: ignore[arg-type]
 
 
+def _parse_colour(src: str, key: str, v: Any, default: tuple[int, int, int]):
+    if v is None:
+        return default
+    if isinstance(v, str):
+        if v.lower() not in BEACON_COLOURS:
+            raise _err(src, key, f"a colour name (one of {sorted(BEACON_COLOURS)}) or "
+                       f"[r, g, b] of integers 0..255", v)
+        return BEACON_COLOURS[v.lower()]
+    if (not isinstance(v, list) or len(v) != 3
+            or any(isinstance(c, bool) or not isinstance(c, int) or not 0 <= c <= 255
+                   for c in v)):
+        raise _err(src, key, "[r, g, b] of integers 0..255 or a colour name", v)
+    return (int(v[0]), int(v[1]), int(v[2]))
+
+
+_PALETTE = ("orange", "blue", "purple", "cyan", "magenta", "yellow")
+
+
+def _parse_beacons(src: str, raw: Any, walls: list[Wall]) -> tuple[Beacon, ...]:
+    """``[[beacons]]``: each ``id`` (an integer >= 1, unique), ``pos`` [x, y] within the walls'
+    bounding box (on a wall is fine: a beacon mounted there), optional ``colour`` (a name or
+    [r, g, b]) and ``size`` (m, > 0, default 0.2)."""
+    if raw is None:
+        return ()
+    if not isinstance(raw, list) or len(raw) > MAX_BEACONS:
+        raise _err(src, "beacons", f"a list of at most {MAX_BEACONS} [[beacons]] tables "
+                   f"with id and pos", raw if not isinstance(raw, list) else f"{len(raw)}")
+    probe = WorldSpec(name="-", task=None, pose=(0.0, 0.0, 0.0), walls=tuple(walls))
+    x0, y0, x1, y1 = probe.bounds()
+    out: list[Beacon] = []
+    seen: set[int] = set()
+    for i, b in enumerate(raw):
+        key = f"beacons[{i}]"
+        if not isinstance(b, dict):
+            raise _err(src, key, "a table with id = <integer>, pos = [x, y]", b)
+        unknown = sorted(set(b) - {"id", "pos", "colour", "size"})
+        if unknown:
+            raise _err(src, f"{key}.{unknown[0]}", "one of id, pos, colour, size", unknown[0])
+        bid = b.get("id")
+        if isinstance(bid, bool) or not isinstance(bid, int) or not 1 <= bid < 2**31:
+            raise _err(src, f"{key}.id", "an integer >= 1 (0 means a beacon not identified)",
+                       bid)
+        if bid in seen:
+            raise _err(src, f"{key}.id", "an id no other beacon has", bid)
+        seen.add(bid)
+        x, y = _vec(src, f"{key}.pos", b.get("pos"), 2, "[x, y] in m")
+        if not (x0 <= x <= x1 and y0 <= y <= y1):
+            raise _err(src, f"{key}.pos", f"a point within the walls' bounds (x {x0:g}..{x1:g}, "
+                       f"y {y0:g}..{y1:g})", [x, y])
+        size = _number(src, f"{key}.size", b.get("size", _DEFAULT_BEACON_SIZE))
+        if not 0 < size <= 5.0:
+            raise _err(src, f"{key}.size", "a size in m, > 0 and <= 5", size)
+        colour = _parse_colour(src, f"{key}.colour", b.get("colour"),
+                               BEACON_COLOURS[_PALETTE[(bid - 1) % len(_PALETTE)]])
+        out.append(Beacon(id=bid, pos=(x, y), colour=colour, size=size))
+    return tuple(out)
+
+
 def parse_world(
     data: dict[str, Any], source: str = "<world>", path: Path | None = None
 ) -> WorldSpec:
@@ -315,7 +429,7 @@ def parse_world(
     name = data.get("name", Path(source).stem)
     if not isinstance(name, str) or not name:
         raise _err(src, "name", "a non-empty string", name)
-    task = data.get("task")  # optional: a behaviour names its worlds (client.behaviour.spec)
+    task = data.get("task")  # an older file's: accepted as a hint (a behaviour names its worlds)
     if task is not None and task not in TASKS:
         raise _err(src, "task", f"one of {list(TASKS)} or no task at all", task)
     robot = data.get("robot")
@@ -335,7 +449,8 @@ def parse_world(
     goal = _parse_goal(src, data.get("goal"))
     if task == "maze" and goal is None:
         raise _err(src, "goal", "a [goal] table (required for task = 'maze')", None)
-    known = {"name", "task", "robot", "walls", "goal"}
+    beacons = _parse_beacons(src, data.get("beacons"), walls)
+    known = {"name", "task", "robot", "walls", "goal", "beacons"}
     spec = WorldSpec(
         name=name,
         task=task,
@@ -345,6 +460,7 @@ def parse_world(
         goal=goal,
         path=path,
         extra={k: v for k, v in data.items() if k not in known},
+        beacons=beacons,
     )
     segs = spec.segments()
     for key, p in [("robot.pose", pose)] + [
@@ -451,6 +567,7 @@ class World:
         # (keyed by the heading alone, so they outlive a reset)
         self._laser = laser.Laser(self._segs, self._bearings, LASER.max_range, ROBOT.radius,
                                   robots=self.n_robots)
+        self._finder = fiducial.FiducialFinder(self._segs, spec.beacons, FIDUCIAL)
         self._rows = np.arange(self.n_robots, dtype=np.intp)
         self.reset()
 
@@ -714,6 +831,15 @@ class World:
             for k in range(n):
                 out[k] = self._add_noise(out[k])
         return out
+
+    def fiducials(self, indices: list[int] | None = None) -> list[fiducial.Seen]:
+        """What the fiducial finders of robots ``indices`` (default: all) see: one
+        ``server.fiducial.Seen`` (ids, ranges, bearings of the beacons in view) per robot, from
+        their true poses (no noise). Empty in a world without beacons."""
+        rows = self._rows if indices is None else np.asarray(indices, dtype=np.intp).reshape(-1)
+        if not self.spec.beacons:
+            return self._finder.detect(np.zeros((len(rows), 3)))
+        return self._finder.detect(np.asarray([self.pose(int(i)) for i in rows]))
 
     def _add_noise(self, ranges: np.ndarray) -> np.ndarray:
         if self.range_noise > 0.0:

@@ -16,6 +16,22 @@ call each (``PayloadReader``: the controller's hot path; ``Scan.decode`` for any
 
 ``heading="lr"`` appends the paper's maze feature: 0.66 when the robot is right-directional
 (cos(yaw) >= 0, heading towards +x) and 0.33 when left-directional.
+
+``beacon`` appends what the fiducial finder sees of one beacon (Player's ``fiducial``
+interface: ``protocol.messages.Fiducial``), three values after the beams and the heading:
+``in view`` (1.0, or 0.0 when that beacon is not seen), its ``range`` clamped to and divided by
+``beacon_range`` m, and its ``bearing`` as ``(bearing / pi + 1) / 2`` (0.5 straight ahead, more
+to the left; ``beacon_bearing`` degrees less than 180: the bearing clipped to +- it and mapped
+so, a finer view of a narrower field). "None in view" is a value of its own: ``NO_BEACON`` (0.0, 1.0, 0.5: not seen, as
+far as can be, ahead), so a tree tells it apart from any sighting by the first value alone.
+``beacon`` is an id (``beacon = 2``: that beacon always) or ``"goal"``: the beacon the caller
+names with each scan (``target=``; the current goal's, say; None: none, so none in view)::
+
+    spec = FeatureSpec(beams=(...), beacon="goal")
+    x = spec.extract(ranges, yaw, seen=fiducial.items, target=2)
+
+A process reading scans pairs each with its tick's sightings through the client's fiducial log
+(``client.player.PlayerClient.fiducials``: ``log.seen(scan.id)``), then ``reader.see(...)``.
 """
 
 from __future__ import annotations
@@ -36,12 +52,14 @@ from rhbl.tree import KERNELS_ENV
 
 from . import _payload_layout as _layout
 
-__all__ = ["DEFAULT_FEATURES", "FeatureSpec", "FeatureError", "FEATURES", "HEADING_LEFT",
-           "HEADING_RIGHT", "PayloadReader"]
+__all__ = ["BEACON_GOAL", "DEFAULT_FEATURES", "FeatureSpec", "FeatureError", "FEATURES",
+           "HEADING_LEFT", "HEADING_RIGHT", "NO_BEACON", "PayloadReader"]
 
 HEADING_LEFT = 0.33
 HEADING_RIGHT = 0.66
 _HEADINGS = (None, "lr")
+BEACON_GOAL = "goal"  # ``beacon``: the beacon named with each scan (``target``)
+NO_BEACON = (0.0, 1.0, 0.5)  # the beacon's three values when it is not in view
 
 
 log = logging.getLogger(__name__)
@@ -75,6 +93,9 @@ class FeatureSpec:
     heading: str | None = None
     window: float = 0.0
     fov: float = 180.0
+    beacon: int | str | None = None
+    beacon_range: float = 8.0
+    beacon_bearing: float = 180.0  # degrees: the bearing is clipped to +- this, mapped on [0, 1]
     _cache: dict = field(default_factory=dict, compare=False, repr=False, hash=False)
 
     def __post_init__(self):
@@ -93,10 +114,38 @@ class FeatureSpec:
             raise FeatureError(f"heading must be one of {_HEADINGS}, got {self.heading!r}")
         if self.window < 0:
             raise FeatureError(f"window must be >= 0, got {self.window}")
+        b = self.beacon
+        if b is not None and b != BEACON_GOAL and (isinstance(b, bool) or not isinstance(b, int)
+                                                   or b < 1):
+            raise FeatureError(f"beacon must be a beacon id (an integer >= 1) or "
+                               f"{BEACON_GOAL!r}, got {b!r}")
+        if not (self.beacon_range > 0 and math.isfinite(self.beacon_range)):
+            raise FeatureError(f"beacon_range must be > 0 m, got {self.beacon_range}")
+        if not 0 < self.beacon_bearing <= 180:
+            raise FeatureError(f"beacon_bearing must be in (0, 180] degrees, got "
+                               f"{self.beacon_bearing}")
 
     @property
     def dim(self) -> int:
-        return len(self.beams) + (1 if self.heading else 0)
+        return len(self.beams) + (1 if self.heading else 0) + (3 if self.beacon else 0)
+
+    def beacon_values(self, seen=None, target: int | None = None) -> tuple[float, float, float]:
+        """The three beacon features (``in view``, range, bearing) of the beacon this spec
+        follows (its ``beacon`` id, or ``target`` for ``"goal"``) among ``seen`` (items with
+        ``id``, ``range``, ``bearing``: ``Fiducial.items``; None: nothing seen):
+        ``NO_BEACON`` when it is not among them."""
+        want = target if self.beacon == BEACON_GOAL else self.beacon
+        if not want or not seen:  # none named (or 0: no beacon is identified as it)
+            return NO_BEACON
+        for item in seen:
+            if item.id == want:
+                r = min(max(float(item.range), 0.0), self.beacon_range) / self.beacon_range
+                b = float(item.bearing)
+                if not (math.isfinite(r) and math.isfinite(b)):
+                    return NO_BEACON
+                half = math.radians(self.beacon_bearing)
+                return (1.0, r, min(max((b / half + 1.0) / 2.0, 0.0), 1.0))
+        return NO_BEACON
 
     def _slices(self, count: int) -> list[tuple[int, int]]:
         key = count
@@ -130,7 +179,11 @@ class FeatureSpec:
                                 else None)
         return self._cache[key]
 
-    def extract(self, ranges, yaw: float = 0.0) -> np.ndarray:
+    def extract(self, ranges, yaw: float = 0.0, seen=None, target: int | None = None
+                ) -> np.ndarray:
+        """The features of one scan (``ranges``, odometry heading ``yaw``); with ``beacon``,
+        of what the fiducial finder saw at that scan (``seen``, ``target``:
+        :meth:`beacon_values`)."""
         r = ranges if type(ranges) is np.ndarray else np.asarray(ranges)
         if r.ndim != 1 or r.size < 2:
             raise FeatureError(f"ranges must be a 1-D scan, got shape {r.shape}")
@@ -145,16 +198,19 @@ class FeatureSpec:
              for x in mins]  # NaN or negative: treat as no reading (far)
         if self.heading == "lr":
             v.append(HEADING_RIGHT if math.cos(yaw) >= 0.0 else HEADING_LEFT)
+        if self.beacon:
+            v.extend(self.beacon_values(seen, target))
         return np.array(v, dtype=np.float64)
 
     def reader(self) -> PayloadReader:
         """A ``PayloadReader``: scans read in place from their payloads with these features."""
         return PayloadReader(self)
 
-    def extract_many(self, ranges, yaws=None) -> np.ndarray:
+    def extract_many(self, ranges, yaws=None, seen=None, targets=None) -> np.ndarray:
         """The features of many scans of one beam count at once: ``ranges`` (scans, beams),
-        ``yaws`` one per scan (default 0); row i is ``extract(ranges[i], yaws[i])``, bit for bit
-        (a fleet's scans of a tick, for one batched tree query)."""
+        ``yaws`` one per scan (default 0), with ``beacon`` ``seen`` and ``targets`` one per scan
+        (default None); row i is ``extract(ranges[i], yaws[i], seen[i], targets[i])``, bit for
+        bit (a fleet's scans of a tick, for one batched tree query)."""
         r = np.asarray(ranges)
         if r.ndim != 2 or r.shape[1] < 2:
             raise FeatureError(f"ranges must be scans of one beam count (scans, beams), got "
@@ -162,9 +218,15 @@ class FeatureSpec:
         yaws = [0.0] * len(r) if yaws is None else [float(y) for y in yaws]
         if len(yaws) != len(r):
             raise FeatureError(f"{len(r)} scans but {len(yaws)} headings")
+        seen = [None] * len(r) if seen is None else list(seen)
+        targets = [None] * len(r) if targets is None else list(targets)
+        if len(seen) != len(r) or len(targets) != len(r):
+            raise FeatureError(f"{len(r)} scans but {len(seen)} sightings and {len(targets)} "
+                               f"targets")
         at = self._reduce_at(r.shape[1])
         if at is None or not len(r):  # a window at the scan's end: one scan at a time
-            return np.array([self.extract(row, y) for row, y in zip(r, yaws, strict=True)],
+            return np.array([self.extract(row, y, s, t) for row, y, s, t
+                             in zip(r, yaws, seen, targets, strict=True)],
                             dtype=np.float64).reshape(len(r), self.dim)
         # as extract: each window's minimum as a double, clamped (NaN or negative: far), scaled
         x = np.minimum.reduceat(r, at, axis=1)[:, ::2].astype(np.float64)
@@ -172,6 +234,10 @@ class FeatureSpec:
         if self.heading == "lr":
             side = [HEADING_RIGHT if math.cos(y) >= 0.0 else HEADING_LEFT for y in yaws]
             v = np.column_stack([v, np.array(side, dtype=np.float64)])
+        if self.beacon:
+            v = np.column_stack([v, np.array([self.beacon_values(s, t) for s, t
+                                              in zip(seen, targets, strict=True)],
+                                             dtype=np.float64).reshape(len(r), 3)])
         return v
 
     def to_dict(self) -> dict:
@@ -182,6 +248,11 @@ class FeatureSpec:
             "heading": self.heading,
             "window": self.window,
             "fov": self.fov,
+            # only when used: the dicts of specs without (every snapshot before) are unchanged
+            **({"beacon": self.beacon, "beacon_range": self.beacon_range}
+               if self.beacon else {}),
+            **({"beacon_bearing": self.beacon_bearing}
+               if self.beacon and self.beacon_bearing != 180.0 else {}),
         }
 
     @classmethod
@@ -194,6 +265,9 @@ class FeatureSpec:
                 heading=data.get("heading"),
                 window=float(data.get("window", 0.0)),
                 fov=float(data.get("fov", 180.0)),
+                beacon=data.get("beacon"),
+                beacon_range=float(data.get("beacon_range", 8.0)),
+                beacon_bearing=float(data.get("beacon_bearing", 180.0)),
             )
         except (KeyError, TypeError) as exc:
             raise FeatureError(f"a feature spec dict needs 'beams', got {data!r}") from exc
@@ -228,7 +302,8 @@ class PayloadReader:
     each (the controller's hot path: no map built, no array made, the ranges not copied).
 
     After ``read(data)`` returned True, until the next ``read``: ``ts``, ``id``, ``x`` (the
-    features, ``spec.extract(scan.ranges, scan.pose[2])``: equal values), ``ranges`` (a
+    features, ``spec.extract(scan.ranges, scan.pose[2])``: equal values; the beacon's, if
+    the spec has them, "none in view" until :meth:`see` sets them), ``ranges`` (a
     read-only view into ``data``), ``pose``, ``min_angle``, ``max_angle``, ``resolution``,
     ``max_range``, ``truth``, ``bearings()`` are those of the scan ``Scan.decode(data)`` gives,
     and ``to_scan()`` is that ``Scan``. ``read`` is False for a payload not laid out exactly as
@@ -277,8 +352,16 @@ class PayloadReader:
         self.ts, self.id = self._head.item(_layout.TS), self._ints.item(_layout.ID)
         if self.spec.heading == "lr":
             yaw = self._head.item(_layout.YAW)
-            self.x[-1] = HEADING_RIGHT if math.cos(yaw) >= 0.0 else HEADING_LEFT
+            self.x[len(self.spec.beams)] = HEADING_RIGHT if math.cos(yaw) >= 0.0 else HEADING_LEFT
+        if self.spec.beacon:
+            self.x[-3:] = NO_BEACON  # until ``see`` says what the fiducial finder saw
         return True
+
+    def see(self, seen=None, target: int | None = None) -> None:
+        """Set the beacon features of the scan read (``spec.beacon_values(seen, target)``;
+        ``read`` leaves them at ``NO_BEACON``). Nothing to do for a spec without ``beacon``."""
+        if self.spec.beacon:
+            self.x[-3:] = self.spec.beacon_values(seen, target)
 
     @property
     def count(self) -> int:

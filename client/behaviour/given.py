@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from process.arguments import Checked, files_checked
 
-from .spec import RULES, Behaviour, behaviour, shipped
+from .spec import RULES, Behaviour, BehaviourError, behaviour, for_world, shipped
 
 __all__ = ["as_argument", "behaviour_arg", "behaviour_of_world", "rule_words", "to_page"]
 
@@ -82,14 +82,13 @@ def rule_words(b: Behaviour) -> str:
 
 
 def behaviour_of_world(world: str, task: str | None = None) -> Behaviour | None:
-    """The shipped behaviour of a world as a server tells it (``get_world``: its name and the
-    task its file may name): the task's behaviour, else the one shipped behaviour that names the
-    world among its worlds; None when none does, or several (then the process is told which)."""
-    known = shipped()
-    if task and task in known:
-        return known[task]
-    naming = [b for b in known.values() if world in b.worlds]
-    return naming[0] if len(naming) == 1 else None
+    """The shipped behaviour of a world as a server tells it (``get_world``: its name, and the
+    task an old world file may still name, a hint): ``client.behaviour.spec.for_world``; None
+    when no shipped behaviour names it, or several do (then the process is told which)."""
+    try:
+        return for_world(world, task=task or None)
+    except BehaviourError:
+        return None
 
 
 def to_page(b: Behaviour) -> dict:

@@ -8,6 +8,7 @@
     b.starts                                # its own start poses per world (name -> poses), if any
     b.rules                                 # its success rule: {"no-collision": {}, "wall-band": {...}}
     shipped()                               # every shipped behaviour, by name
+    for_world("room")                       # the shipped behaviour of a world (worlds name none)
 
 A behaviour file (docs/behaviours.md is the format with an example):
 
@@ -47,7 +48,8 @@ from pathlib import Path
 from typing import Any
 
 from .actions import DEFAULT_ACTIONS, ActionSet
-from .features import FEATURES, FeatureError, FeatureSpec
+from .features import BEACON_GOAL, FEATURES, FeatureError, FeatureSpec
+from .goals import Goals, parse_goals
 from .policies import STYLES, Policy
 from .tasks import TASKS
 
@@ -57,6 +59,7 @@ __all__ = [
     "BehaviourError",
     "behaviour",
     "behaviour_names",
+    "for_world",
     "load_behaviour",
     "parse_behaviour",
     "shipped",
@@ -90,12 +93,16 @@ RULES: dict[str, dict[str, Any]] = {
     "goal": {},
     # at least ``area`` square metres covered: the cells of ``cell`` metres the robot entered
     "coverage": {"cell": 0.5, "area": 10.0},
+    # the behaviour's [goals] reached in their order (each within its distance of its beacon,
+    # plus ``slack`` metres), judged from the robot's true path
+    "goals": {"slack": 0.1},
 }
 SIDES = ("right", "left")
 INPUTS = {"heading": "lr"}  # extra perception inputs -> FeatureSpec.heading
 _TOP = {"name", "summary", "perception", "instructions", "expert", "worlds", "starts", "success",
-        "recipe", "guard"}
-_PERCEPTION = {"beams", "sectors", "window", "clamp", "scale", "fov", "inputs"}
+        "recipe", "goals", "guard"}
+_PERCEPTION = {"beams", "sectors", "window", "clamp", "scale", "fov", "inputs", "beacon",
+               "beacon_range", "beacon_bearing"}
 _WORLDS = {"teach", "held_out"}
 
 
@@ -153,6 +160,7 @@ class Behaviour:
     perception: str | None = None  # the shipped feature spec's name, None when inline
     recipe: dict[str, Any] = field(default_factory=dict, compare=False)
     path: Path | None = None
+    goals: Goals | None = None  # its goals in order ([goals]; client.behaviour.goals), if any
     guard: bool = True  # the controller's guard (a safety layer) on for its trees; false: off
 
     @property
@@ -204,7 +212,7 @@ def _parameters(cls: type) -> set[str]:
 
 def _perception(src: str, v: Any) -> tuple[FeatureSpec, str | None]:
     """A shipped spec's name, or an inline table (beams or sectors, window, clamp, scale, fov,
-    inputs) made into a FeatureSpec by its own checks."""
+    inputs, beacon, beacon_range) made into a FeatureSpec by its own checks."""
     if isinstance(v, str):
         if v not in FEATURES:
             raise _err(src, "perception", f"a shipped feature spec ({', '.join(FEATURES)}) or a "
@@ -239,11 +247,26 @@ def _perception(src: str, v: Any) -> tuple[FeatureSpec, str | None]:
             or len(set(inputs)) != len(inputs):
         raise _err(src, "perception.inputs", f"a list of distinct extra inputs from "
                                              f"{list(INPUTS)}", inputs)
+    # the fiducial finder's view of one beacon: its id, or "goal" (the current goal's beacon)
+    beacon = t.get("beacon")
+    if beacon is not None and beacon != BEACON_GOAL and (
+            isinstance(beacon, bool) or not isinstance(beacon, int) or beacon < 1):
+        raise _err(src, "perception.beacon", f"a beacon id (an integer >= 1) or "
+                                             f"{BEACON_GOAL!r}", beacon)
+    for key in ("beacon_range", "beacon_bearing"):
+        if key in t and beacon is None:
+            raise BehaviourError(f"{_where(src, f'perception.{key}')}: only with 'beacon'")
     try:
         spec = FeatureSpec(beams=beams, window=window, fov=fov,
                            clamp=_number(src, "perception.clamp", t.get("clamp", 2.0)),
                            scale=_number(src, "perception.scale", t.get("scale", 2.0)),
-                           heading=INPUTS[inputs[0]] if inputs else None)
+                           heading=INPUTS[inputs[0]] if inputs else None, beacon=beacon,
+                           beacon_range=_number(src, "perception.beacon_range",
+                                                t.get("beacon_range", 8.0), 1e-9,
+                                                "a number > 0 (m)"),
+                           beacon_bearing=_number(src, "perception.beacon_bearing",
+                                                  t.get("beacon_bearing", 180.0), 1e-9,
+                                                  "a number of degrees in (0, 180]"))
     except FeatureError as exc:
         raise BehaviourError(f"{_where(src, 'perception')}: {exc}") from None
     return spec, None
@@ -383,10 +406,21 @@ def parse_behaviour(data: Any, source: str = "<behaviour>", path: Path | None = 
     guard = data.get("guard", True)
     if not isinstance(guard, bool):
         raise _err(src, "guard", "true or false", guard)
+    goals = None
+    if "goals" in data:
+        try:
+            goals = parse_goals(data["goals"])
+        except ValueError as exc:
+            raise BehaviourError(f"{src}: {exc}") from None
+    rules = _rules(src, data["success"])
+    if ("goals" in rules) != (goals is not None):
+        raise BehaviourError(f"{_where(src, 'success.goals')}: a behaviour with [goals] is "
+                             "judged by the 'goals' rule, and only such a one")
     return Behaviour(name=name, summary=summary.strip(), features=features, expert_name=expert,
-                     teach=teach, held_out=held_out, rules=_rules(src, data["success"]),
+                     teach=teach, held_out=held_out, rules=rules,
                      expert_params=params, starts=starts, instructions=instructions.strip(),
-                     perception=perception, recipe=dict(recipe), path=path, guard=guard)
+                     perception=perception, recipe=dict(recipe), path=path, goals=goals,
+                     guard=guard)
 
 
 def load_behaviour(path: str | Path) -> Behaviour:
@@ -441,3 +475,38 @@ def behaviour(name_or_path: str | Path) -> Behaviour:
         return load_behaviour(p)
     raise BehaviourError(f"behaviour {text!r} is neither a shipped behaviour ({', '.join(known)}) "
                          "nor a behaviour file")
+
+
+def _names_world(named: str, name: str, path: Path | None) -> bool:
+    """Whether a world as a behaviour names it (a name, or a path) is the world ``name`` (its
+    file at ``path``, when known)."""
+    if named == name:
+        return True
+    return path is not None and "/" in named and Path(named).resolve() == Path(path).resolve()
+
+
+def for_world(name: str, path: str | Path | None = None, task: str | None = None,
+              behaviours: Mapping[str, Behaviour] | None = None) -> Behaviour:
+    """The shipped behaviour a world is taught or evaluated for. Worlds name no task: a
+    behaviour names its worlds. The behaviours (default: the shipped ones) that name the world
+    ``name`` (its file at ``path``) among their teaching or held-out worlds; when several do,
+    those that drive from the world's own start poses (give no ``[starts]`` of their own for
+    it: the world's poses were drawn for them; ``room``'s for ``wall-following``, not for
+    ``left-wall``); when still several, or none, the one an old world file's ``task`` names (a
+    hint only, so that such files keep working). BehaviourError when none or several remain
+    (then ``--behaviour`` says which)."""
+    known = shipped() if behaviours is None else behaviours
+    naming = [b for b in known.values() if any(_names_world(w, name, path) for w in b.worlds)]
+    if len(naming) > 1:
+        own = [b for b in naming if not any(_names_world(w, name, path) for w in b.starts)]
+        naming = own or naming
+    if len(naming) != 1 and task is not None and task in known \
+            and (not naming or known[task] in naming):
+        return known[task]
+    if len(naming) == 1:
+        return naming[0]
+    if naming:
+        raise BehaviourError(f"world {name!r}: the behaviours {', '.join(b.name for b in naming)}"
+                             " name it: say which with --behaviour NAME|FILE")
+    raise BehaviourError(f"world {name!r}: no shipped behaviour names it: say which behaviour "
+                         "with --behaviour NAME|FILE")

@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .actions import DEFAULT_ACTIONS, ActionSet
+from .goals import BeaconSeeker
 from .policies import (
     STYLES,
     CorridorCentrer,
@@ -123,3 +124,9 @@ TASKS["corridor-centring"] = Task("corridor-centring", features="around",
 # wandering)
 TASKS["wandering"] = Task("wandering", features="around", teacher="wanderer", side=None,
                           reactive=Wanderer, smooth=Wanderer, eval_worlds="eval-clutter*.toml")
+
+# goals in order: to each beacon the behaviour's [goals] name in turn, keeping off the walls
+# (the shipped behaviours red-green, patrol and remembered; client.behaviour.goals)
+TASKS["red-green"] = Task("red-green", features="around", teacher="beacon-seeker", side=None,
+                          reactive=BeaconSeeker, smooth=BeaconSeeker,
+                          eval_worlds="eval-goals*.toml")

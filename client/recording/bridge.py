@@ -40,7 +40,7 @@ __all__ = ["FoxgloveSink", "add_arguments", "main"]
 log = logging.getLogger(__name__)
 
 WORLD_REPEAT = 3.0  # s between repeats of the world scene
-DRAWN = ("scan", "state", "driver", "notice", "world")  # kinds the viewer channels show
+DRAWN = ("scan", "fiducial", "state", "driver", "notice", "world")  # kinds the viewer channels show
 
 
 class FoxgloveSink:

@@ -13,11 +13,12 @@ message. Topics (frame ``world`` = the world file's coordinates; frame ``<robot>
 
 | topic | schema | what |
 |---|---|---|
-| ``/world`` | ``foxglove.SceneUpdate`` | walls (lines), the goal (a disc), each robot's body (in its frame) |
+| ``/world`` | ``foxglove.SceneUpdate`` | walls (lines), the goal (a disc), the beacons (discs of their colour, with their id), each robot's body (in its frame) |
 | ``/tf`` | ``foxglove.FrameTransform`` | ``world`` -> ``<robot>`` at every scan (the true pose) |
 | ``/<robot>/laser`` | ``foxglove.LaserScan`` | the scan, in the robot's frame |
 | ``/<robot>/pose`` | ``foxglove.PoseInFrame`` | the robot's pose in ``world`` |
 | ``/<robot>/path`` | ``foxglove.PosesInFrame`` | the path so far (once per sim second; last 2000 poses 5 cm apart) |
+| ``/<robot>/fiducials`` | ``foxglove.SceneUpdate`` | the beacons its fiducial finder sees (a line to each, a ring round it, its id), in the robot's frame (a world with beacons) |
 | ``/<robot>/status`` | JSON | who drives, the tree's size (nodes, height, vectors), sim time (on change, at least once per sim second) |
 """
 
@@ -65,7 +66,7 @@ class ViewerMessage:
 
 def viewer_topics(robot: str) -> list[str]:
     return ["/world", "/tf", f"/{robot}/laser", f"/{robot}/pose", f"/{robot}/path",
-            f"/{robot}/status"]
+            f"/{robot}/fiducials", f"/{robot}/status"]
 
 
 _SCHEMAS: dict[type, tuple[str, str, bytes]] = {}
@@ -90,6 +91,17 @@ def _quat(yaw: float) -> fm.Quaternion:
 
 def _pose(x: float, y: float, yaw: float, z: float = 0.0) -> fm.Pose:
     return fm.Pose(position=fm.Vector3(x=float(x), y=float(y), z=z), orientation=_quat(float(yaw)))
+
+
+def _colour(text: str) -> fm.Color:
+    """A ``#rrggbb`` colour (grey when it is not one)."""
+    try:
+        if len(text) != 7 or text[0] != "#":
+            raise ValueError(text)
+        r, g, b = (int(text[i:i + 2], 16) / 255.0 for i in (1, 3, 5))
+    except (TypeError, ValueError):
+        r = g = b = 0.5
+    return fm.Color(r=r, g=g, b=b, a=1.0)
 
 
 @dataclass
@@ -141,9 +153,26 @@ class ViewerFeed:
                                                 size=fm.Vector3(x=2 * gr, y=2 * gr, z=0.02),
                                                 bottom_scale=1.0, top_scale=1.0,
                                                 color=fm.Color(r=0.1, g=0.8, b=0.2, a=0.5))]))
+        for b in getattr(info, "beacons", ()):
+            entities.append(self._beacon(b, stamp))
         entities.append(self._body(robot, stamp))
         self._robot(robot).body_sent = True
         return [_proto("/world", fm.SceneUpdate(entities=entities), time_ns)]
+
+    @staticmethod
+    def _beacon(b, stamp) -> fm.SceneEntity:
+        """A beacon of the world: a disc of its colour and size, its id above it."""
+        colour = _colour(b.colour)
+        x, y = b.pos
+        return fm.SceneEntity(
+            timestamp=stamp, frame_id=WORLD_FRAME, id=f"beacon:{b.id}",
+            cylinders=[fm.CylinderPrimitive(pose=_pose(x, y, 0.0, 0.15),
+                                            size=fm.Vector3(x=b.size, y=b.size, z=0.3),
+                                            bottom_scale=1.0, top_scale=1.0, color=colour)],
+            texts=[fm.TextPrimitive(pose=_pose(x, y, 0.0, 0.45), billboard=True, font_size=14.0,
+                                    scale_invariant=True, text=str(b.id),
+                                    color=fm.Color(r=1.0, g=1.0, b=1.0, a=1.0))],
+            metadata=[fm.KeyValuePair(key="beacon", value=str(b.id))])
 
     @staticmethod
     def _body(robot: str, stamp) -> fm.SceneEntity:
@@ -174,7 +203,35 @@ class ViewerFeed:
                                 vectors=msg.vectors)
         if kind == "world":
             return self.world(robot, msg, time_ns)
+        if kind == "fiducial":
+            return self._fiducials(robot, msg, time_ns)
         return []
+
+    def _fiducials(self, robot: str, fid, time_ns: int) -> list[ViewerMessage]:
+        """What the robot's fiducial finder sees, in its frame: a line from the sensor to each
+        beacon in view, a ring round it and its id (an entity with none: nothing in view)."""
+        stamp = _stamp(time_ns)
+        seen = fm.Color(r=1.0, g=0.85, b=0.1, a=1.0)
+        lines, texts = [], []
+        for item in fid.items:
+            px, py = item.x, item.y
+            ring = [fm.Point3(x=px + 0.25 * math.cos(a), y=py + 0.25 * math.sin(a), z=0.3)
+                    for a in (k * math.tau / 16 for k in range(17))]
+            lines += [fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineList,
+                                       pose=_pose(0, 0, 0), thickness=0.02,
+                                       scale_invariant=False, color=seen,
+                                       points=[fm.Point3(x=0.0, y=0.0, z=0.3),
+                                               fm.Point3(x=px, y=py, z=0.3)]),
+                      fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineStrip,
+                                       pose=_pose(0, 0, 0), thickness=0.04,
+                                       scale_invariant=False, color=seen, points=ring)]
+            texts.append(fm.TextPrimitive(
+                pose=_pose(px, py, 0.0, 0.6), billboard=True, font_size=14.0,
+                scale_invariant=True, color=seen,
+                text=f"{item.id or '?'} {item.range:.2f} m {math.degrees(item.bearing):+.0f} deg"))
+        entity = fm.SceneEntity(timestamp=stamp, frame_id=robot, id=f"fiducials:{robot}",
+                                frame_locked=True, lines=lines, texts=texts)
+        return [_proto(f"/{robot}/fiducials", fm.SceneUpdate(entities=[entity]), time_ns)]
 
     def _scan(self, robot: str, scan, time_ns: int) -> list[ViewerMessage]:
         x, y, yaw = scan.truth if scan.truth is not None else scan.pose

@@ -239,8 +239,8 @@ class RecordingWriter:
         if KINDS.get(kind) is not None:
             msg = self.decoder.decode(KINDS[kind], data, where=key)
         if sim_time is None:
-            ts = getattr(msg, "ts", None) if kind in ("state", "scan", "driver", "cmd",
-                                                      "label") else None
+            ts = getattr(msg, "ts", None) if kind in ("state", "scan", "fiducial", "driver",
+                                                      "cmd", "label") else None
             if ts is not None:
                 sim_time = float(ts)
                 if kind in ("state", "scan"):

@@ -37,8 +37,9 @@ __all__ = ["MAX_GAP", "SENSOR_KINDS", "ReplayPlan", "ReplayProcess", "add_argume
 
 log = logging.getLogger(__name__)
 
-SENSOR_KINDS = ("state", "scan", "driver")  # what the server publishes
-_PLAIN_KEY = {"state": keys.state_key, "scan": keys.scan_key, "driver": keys.driver_key}
+SENSOR_KINDS = ("state", "fiducial", "scan", "driver")  # what the server publishes
+_PLAIN_KEY = {"state": keys.state_key, "fiducial": keys.fiducial_key, "scan": keys.scan_key,
+              "driver": keys.driver_key}
 MAX_GAP = 5.0  # default --max-gap: a longer pause in a recording is played as this long
 
 

@@ -36,6 +36,7 @@ when they cannot be had from that laser) and ``Odometry`` in, a ``Twist`` on ``c
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import threading
 import time
@@ -45,8 +46,9 @@ import zenoh
 from client.behaviour import guard
 from client.behaviour.actions import ActionSet
 from client.behaviour.features import FEATURES, FeatureSpec, PayloadReader
+from client.behaviour.goals import GoalPolicy
 from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, check_compatible
-from client.behaviour.rule import LearningRule
+from client.behaviour.rule import PATH_CHECK, LearningRule
 from client.decision import Decider
 from client.player import PlayerClient
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
@@ -140,6 +142,13 @@ def _policy_from(clf_bytes_or_path, features: str | None) -> TreePolicy:
     except Exception as exc:  # noqa: BLE001 - its metadata: features or actions malformed
         raise ProcessError(f"controller: cannot load the tree: {source}: invalid metadata: "
                            f"{exc}", EXIT_USAGE) from exc
+    if isinstance(meta.get("goals"), dict):  # two trees and a goal state (docs/goals.md)
+        from client.behaviour.goals import GoalPolicy
+
+        try:
+            return GoalPolicy.from_classifier(clf, source)
+        except SnapshotError as exc:
+            raise ProcessError(f"controller: cannot load the tree: {exc}", EXIT_USAGE) from exc
     return TreePolicy(clf, spec, actions, meta)
 
 
@@ -192,6 +201,8 @@ class ControllerProcess:
         ctx.scope.callback(self.decider.close)
         self.t0: float | None = None
         self.executed: str | None = None  # the action commanded for the last scan answered
+        self.fiducials = None  # a tree with goals: the robot's fiducial log (run)
+        self.finished = False  # a tree with goals: every goal reached
         self.n = self.bad = 0
         ctx.scope.callback(self.close)  # on every path, after "stopping (signal)"
         ctx.report(self.counters)
@@ -216,9 +227,12 @@ class ControllerProcess:
         self.reader = None if self.args.ros2 else policy.features.reader()
 
     def _guard(self, policy: TreePolicy) -> None:
-        """The guard this tree is driven through: its rule's, the options given replacing
-        parts of it (``guard.settings``)."""
+        """The guard this tree is driven through: its rule's (a tree with goals: with the path
+        check, as rhbl evaluate measures it, docs/goals.md), the options given replacing parts
+        of it (``guard.settings``)."""
         settings = guard.settings(self.args, policy.metadata)
+        if isinstance(policy, GoalPolicy) and self.args.guard_clearance is None:
+            settings = dataclasses.replace(settings, clearance=PATH_CHECK.clearance)
         self.guard.apply(settings)
         self.guarding = settings.on
 
@@ -228,6 +242,13 @@ class ControllerProcess:
         self._reader(self.policy)
         log.info("tree loaded: %s; features %s", _describe(self.policy),
                  self.policy.features.to_dict())
+        if isinstance(self.policy, GoalPolicy):  # goals in order: the beacons of every scan
+            if self.args.ros2 or self.follower is not None:
+                raise ProcessError("controller: a tree with goals drives an rhbl robot, without "
+                                   "--ros2 or --follow (docs/goals.md)", EXIT_USAGE)
+            self.fiducials = self.client.fiducials()
+            self.policy.reset()
+            log.info("pursuing %s", self.policy.tracker.describe())
         if self.follower is not None:
             self.follower.start()
         # the first scan is taken from the controller's own subscription and answered: a
@@ -304,6 +325,9 @@ class ControllerProcess:
             log.info("drove %.1f s of sim time: done", scan.ts - self.t0)
             return False
         answered = self.answer(scan)
+        if self.finished:
+            log.info("every goal reached (%s): done", self.policy.tracker.describe())
+            return False
         if answered is not None:
             (vx, va), policy, x = answered
             with uninterrupted():  # a stop does not leave a command sent and uncounted
@@ -329,7 +353,11 @@ class ControllerProcess:
         answered: a follower may swap in another one meanwhile); None (logged) when it cannot."""
         p = self.policy
         try:
-            if type(scan) is PayloadReader and scan.spec is p.features:
+            if isinstance(p, GoalPolicy):
+                x = self.goal_features(p, scan)
+                if x is None:
+                    return None
+            elif type(scan) is PayloadReader and scan.spec is p.features:
                 x = scan.x  # read with the scan
             else:
                 x = p.features.extract(scan.ranges, scan.pose[2])
@@ -344,6 +372,26 @@ class ControllerProcess:
                 log.warning("scan %d not answered (%d so far; the watchdog stops the robot): "
                             "%s: %s", scan.id, self.bad, type(exc).__name__, exc)
             return None
+
+    def goal_features(self, p, scan: Scan | PayloadReader):
+        """A tree with goals: the beacons seen at ``scan`` (the fiducial message of its tick)
+        go to the completion tree, which may finish the current goal (logged, with why); the
+        features are then the scan's and the current goal's beacon's. None: every goal is
+        reached (``finished``)."""
+        seen = self.fiducials.seen(scan.id, timeout=0.2)
+        ev = p.see({int(item.id): item for item in seen if item.id}, t=scan.ts)
+        if ev is not None:
+            log.info("goal %d/%d (beacon %s) done at %.1f s: %s; now %s", ev["visit"] + 1,
+                     len(p.goals.visits), ev["beacon"], scan.ts, ev["why"],
+                     p.tracker.describe())
+        if p.tracker.finished:
+            self.finished = True
+            return None
+        if type(scan) is PayloadReader and scan.spec is p.features:
+            scan.see(seen, target=p.tracker.beacon)
+            return scan.x
+        return p.features.extract(scan.ranges, scan.pose[2], seen=seen,
+                                  target=p.tracker.beacon)
 
     def guard_choose(self, name: str, scan: Scan) -> str:
         """The loop guard's action for the tree's ``name`` (an overruled reversal logged at a

@@ -80,3 +80,27 @@ def test_a_missing_json_file_is_one_line(bench, tmp_path, capsys):
     assert bench.main(["--from-json", str(tmp_path / "none.json")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "none.json" in err[0]
+
+
+def test_several_person_models_are_pooled_in_rows_of_their_own(bench):
+    """``--people all`` names every model; with more than one model's sessions the table gains
+    rows pooling them (the success over all their episodes), each model keeping its own."""
+    ap_people = bench._names(bench.PEOPLE_MODELS, "people", every=True)
+    assert ap_people("all") == bench.PEOPLE_MODELS and ap_people("steady,bang") == ["steady",
+                                                                                     "bang"]
+
+    def run(ok: int, size: int) -> dict:
+        world = {"kind": "held_out", "episodes": 4, "successes": ok, "collisions": 0,
+                 "teacher_success_rate": 1.0}
+        return {"seed": 0, "vectors": 10, "trained_nodes": size, "learners": {"rhbl": {
+            "size": size, "fit_s": 1.0, "single_us": 2.0, "batch_us": 1.0,
+            "worlds": {"eval-room-l": world}}}}
+
+    one = {"wall-following": [run(4, 9)], "wall-following by steady": [run(4, 5)]}
+    assert bench.pooled(one) == one  # one model: nothing to pool
+    two = {**one, "wall-following by bang": [run(1, 7)]}
+    pooled = bench.pooled(two)
+    assert list(pooled) == [*two, "wall-following by 2 people"]
+    rows = {r[0]: r for r in bench.summary_rows(pooled, ["rhbl"])}
+    assert rows["wall-following by 2 people"][3] == "62% (5/8)"
+    assert rows["wall-following by bang"][3] == "25% (1/4)"

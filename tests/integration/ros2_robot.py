@@ -33,7 +33,7 @@ import zenoh
 from rosbags.typesys import Stores, get_typestore
 from waiting import Timeout, eventually
 
-from client.behaviour.tasks import TASKS
+from client.behaviour.spec import for_world
 from lab import metrics
 from lab.episode import DT, Episode
 from server.laser import Laser
@@ -191,7 +191,7 @@ class Ros2StyleRobot:
         after that a step waits ``timeout`` s for its Twist, sending its scan again every 2 s
         (``resent`` counts them; AssertionError if none comes)."""
         ep = Episode(start=self.start, dt=DT, kind="ros2")
-        side = TASKS[self.spec.task].side
+        side = for_world(self.spec.name, self.spec.path).band_side  # its behaviour's band side
         self.publish()
         twist = self.next_twist(1.0)
         if twist is None:

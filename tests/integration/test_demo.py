@@ -55,7 +55,8 @@ def test_short_demo(tmp_path):
     assert rnd["episodes"] == 2 and rnd["seconds"] >= 39 and corrector["exit"] == 0
     assert rnd["labels"] + corrector["missed"] >= 0.95 * rnd["scans"], (rnd, corrector)
     # the labels of both phases are in the tree
-    assert s["tree"]["nodes"] > 1 and s["tree"]["vectors"] >= s["demonstration_labels"] + 350
+    assert s["tree"]["nodes"] > 1 and rnd["labels"] > 0
+    assert s["tree"]["vectors"] >= s["demonstration_labels"] + rnd["labels"], (s["tree"], rnd)
     assert len(s["learned"]) == 2 and all(m["seconds"] >= 19 for m in s["learned"])
 
 

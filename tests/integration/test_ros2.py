@@ -489,8 +489,8 @@ def test_record_ros2_is_read_by_mcap_ros2_and_rosbags(server, tmp_path):
 def wall_tree(tmp_path_factory) -> Path:
     """The wall-following recipe's tree (``rhbl train --world room``), trained in-process."""
     spec = resolve_world("room")
-    learner = make_learner(spec.task)
-    train(spec, learner, RECIPES[spec.task], seed=0)
+    learner = make_learner("wall-following")
+    train(spec, learner, RECIPES["wall-following"], seed=0)
     path = tmp_path_factory.mktemp("tree") / "wall.rhbl"
     learner.save(path)
     return path
@@ -527,7 +527,7 @@ def test_a_tree_drives_a_640_beam_240_degree_ros2_robot_as_well_as_natively(wall
                     robot.close()
                 m = ep.metrics(spec.goal)
                 assert m["seconds"] == native["learner"][k]["seconds"]
-                ros2_success.append(success(spec.task, m, native["teacher"][k]))
+                ros2_success.append(success("wall-following", m, native["teacher"][k]))
                 assert "other" not in ep.actions  # every Twist was one of the tree's actions
         finally:
             stats = _stop(ctl)

@@ -4,12 +4,14 @@ taught and evaluated with no code change."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 
 import pytest
 
-from client.behaviour.spec import RULES, BehaviourError, shipped
+from client.behaviour.learning import TreePolicy
+from client.behaviour.spec import RULES, BehaviourError, for_world, shipped
 from lab import metrics
 from lab.behaviours import behaviour_for_world, get, recipe_of, teaching_world, world_of
 from lab.cli import main
@@ -69,18 +71,43 @@ def test_the_measures_the_rules_need():
 
 
 def test_a_worlds_behaviour():
-    assert behaviour_for_world(resolve_world("room")).name == "wall-following"
+    """Worlds name no task: a behaviour names its worlds. Of several naming one, the behaviour
+    that drives from the world's own start poses; an older file's task is a hint only."""
+    assert behaviour_for_world(resolve_world("room")).name == "wall-following"  # not left-wall
+    assert behaviour_for_world(resolve_world("eval-room-ring")).name == "wall-following"
     assert behaviour_for_world(resolve_world("maze")).name == "maze"
-    world = {"name": "eval-room-l", "robot": {"pose": [2.0, 0.7, 0.0]},
+    assert behaviour_for_world(resolve_world("clutter-room")).name == "wandering"
+    world = {"name": "eval-maze-3tier", "robot": {"pose": [2.0, 0.7, 0.0]},
              "walls": [{"points": [[0, 0], [4, 0], [4, 4], [0, 4]], "closed": True}]}
-    untasked = parse_world(dict(world, name="eval-maze-3tier"))
-    assert untasked.task is None
-    assert behaviour_for_world(untasked).name == "maze"  # one behaviour names it
-    with pytest.raises(BehaviourError, match="the behaviours left-wall, wall-following name it: "
+    assert behaviour_for_world(parse_world(world)).name == "maze"  # one behaviour names it
+    mine = parse_world(dict(world, name="my-room"))  # no behaviour names it
+    with pytest.raises(BehaviourError, match="no shipped behaviour names it: say which "
+                                             "behaviour with --behaviour"):
+        behaviour_for_world(mine)
+    assert behaviour_for_world(mine, "left-wall").name == "left-wall"  # a tree's task: a hint
+    old = parse_world(dict(world, name="my-room", task="wall-following"))  # an older file
+    assert behaviour_for_world(old, "left-wall").name == "wall-following"
+    both = {b: dataclasses.replace(shipped()[b], starts={}) for b in ("wall-following",
+                                                                        "left-wall")}
+    with pytest.raises(BehaviourError, match="the behaviours wall-following, left-wall name it: "
                                              "say which with --behaviour"):
-        behaviour_for_world(parse_world(world))
-    with pytest.raises(BehaviourError, match="names no task and no shipped behaviour names it"):
-        behaviour_for_world(parse_world(dict(world, name="nowhere")))
+        for_world("room", behaviours=both)
+    assert for_world("room", task="left-wall", behaviours=both).name == "left-wall"
+
+
+def test_a_tree_in_a_world_no_behaviour_names_is_judged_by_its_own_task(tmp_path):
+    """``rhbl train --world corridor`` and ``rhbl evaluate --world eval-holdout-room-oct`` name
+    no behaviour: the recipe's task teaches, the tree's own task judges."""
+    from lab.evaluate import evaluate
+    from lab.harness import make_learner
+    from lab.train import train
+
+    learner = make_learner(RECIPES["wall-following"])
+    train(resolve_world("corridor"), learner, RECIPES["wall-following"].replace(
+        seconds=5.0, rounds=0), seed=0)
+    rep = evaluate(resolve_world("eval-holdout-room-oct"), TreePolicy.from_learner(learner),
+                   episodes=1, seconds=2.0)
+    assert rep["task"] == "wall-following" and rep["learner"][0]["wall_band_fraction"] is not None
 
 
 def test_the_recipe_of_a_behaviour():
@@ -176,6 +203,53 @@ def test_a_behaviour_written_as_a_file_is_taught_and_evaluated_with_no_code_chan
     assert rep["success_rate"] == sum(rep["success"]) / 2
     assert main(["evaluate", "--behaviour", str(path), "--tree", str(tree), "--world",
                  "eval-room-l", "--episodes", "1"]) == 0
+
+
+FAR_WALL = """
+name = "far-wall"
+summary = "follow the wall on the robot's right further out, at 0.5-1.4 m: a test's own behaviour"
+perception = "wall"
+
+[expert]
+name = "wall-follower"
+side = "right"
+target = 0.9
+
+[worlds]
+teach = ["room"]
+held_out = ["eval-room-l"]
+
+[recipe]
+seconds = 300
+rounds = 2
+round_seconds = 40
+
+[success]
+time-limit = { seconds = 60 }
+no-collision = {}
+wall-band = { side = "right", near = 0.5, far = 1.4, fraction = 0.7 }
+distance = { of_teacher = 0.7 }
+"""
+
+
+def test_a_new_behaviour_file_is_learned_to_its_own_rule_with_no_code_change(tmp_path):
+    """A behaviour nobody shipped (the right-hand wall at 0.9 m instead of 0.6, judged in a band
+    of 0.5-1.4 m), written as a file: ``rhbl experiment FILE`` teaches it with its expert and
+    recipe and judges the tree by its rule, in the room it is taught in and in a held-out
+    room, and the learned robot keeps that wall in that band (seed 0: 6 of 6 starts in the
+    room, 5 of 5 in eval-room-l; the test asks for all but one)."""
+    path = tmp_path / "far-wall.toml"
+    path.write_text(FAR_WALL)
+    out = tmp_path / "far.json"
+    assert main(["experiment", str(path), "--trials", "1", "--json", str(out)]) == 0
+    res = json.loads(out.read_text())["far-wall"]
+    worlds = res["rows"][0]["worlds"]
+    assert list(worlds) == ["room", "eval-room-l"]
+    for name, w in worlds.items():
+        assert w["teacher_success_rate"] == 1.0, name  # the file's expert keeps its own band
+        assert w["success_rate"] >= 1 - 1 / w["episodes"], (name, w)  # and so does the tree
+        assert w["collisions"] == 0, name
+    assert res["recipe"]["seconds"] == 300 and res["recipe"]["rounds"] == 2
 
 
 def test_left_wall_following_is_a_file_its_expert_succeeds_from_every_start():

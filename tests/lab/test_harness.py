@@ -16,7 +16,7 @@ CORRIDOR = "corridor"
 
 def test_train_then_evaluate_cli(tmp_path, capsys):
     tree = tmp_path / "t.rhbl"
-    assert cli(["train", "--world", CORRIDOR, "--seconds", "40", "--out", str(tree), "--seed", "1"]) == 0
+    assert cli(["train", "--behaviour", "wall-following", "--world", CORRIDOR, "--seconds", "40", "--out", str(tree), "--seed", "1"]) == 0
     assert tree.exists()
     out_json, png = tmp_path / "e.json", tmp_path / "e.png"
     assert cli(["evaluate", "--world", CORRIDOR, "--tree", str(tree), "--episodes", "2",
@@ -38,9 +38,9 @@ def test_train_then_evaluate_cli(tmp_path, capsys):
 def test_resume_with_a_corrective_start(tmp_path):
     first = tmp_path / "a.rhbl"
     second = tmp_path / "b.rhbl"
-    assert cli(["train", "--world", CORRIDOR, "--seconds", "10", "--out", str(first),
+    assert cli(["train", "--behaviour", "wall-following", "--world", CORRIDOR, "--seconds", "10", "--out", str(first),
                 "--rounds", "0"]) == 0
-    assert cli(["train", "--world", CORRIDOR, "--seconds", "10", "--out", str(second),
+    assert cli(["train", "--behaviour", "wall-following", "--world", CORRIDOR, "--seconds", "10", "--out", str(second),
                 "--resume", str(first), "--start", "5,1,3.1416"]) == 0
     _, _, _, meta = load_snapshot(second)
     prov = meta["provenance"]
@@ -74,7 +74,7 @@ def test_experiment_cli_small(capsys):
 
 def test_train_compacts_on_the_vectors_it_learned(tmp_path, capsys):
     spec = resolve_world(CORRIDOR)
-    short = RECIPES[spec.task].replace(seconds=20.0, rounds=1, round_seconds=5.0)
+    short = RECIPES["wall-following"].replace(seconds=20.0, rounds=1, round_seconds=5.0)
     compacting = short.replace(compact="exact")
     learner = make_learner(compacting)
     assert learner.recording
@@ -90,7 +90,7 @@ def test_train_compacts_on_the_vectors_it_learned(tmp_path, capsys):
     assert list(full.classifier.predict(X)) == list(learner.classifier.predict(X))
     # the CLI: --compact prune --compact-max-nodes N, recorded in the snapshot
     tree = tmp_path / "c.rhbl"
-    assert cli(["train", "--world", CORRIDOR, "--seconds", "20", "--rounds", "0", "--out",
+    assert cli(["train", "--behaviour", "wall-following", "--world", CORRIDOR, "--seconds", "20", "--rounds", "0", "--out",
                 str(tree), "--compact", "prune-balanced", "--compact-max-nodes", "5"]) == 0
     assert "compacted (prune) from" in capsys.readouterr().out
     _, _, _, meta = load_snapshot(tree)
@@ -109,14 +109,14 @@ def test_experiment_reports_nodes_before_and_after_compaction(capsys):
 
 def test_a_compacting_recipe_needs_a_recording_learner():
     spec = resolve_world(CORRIDOR)
-    recipe = RECIPES[spec.task].replace(seconds=5.0, rounds=0, compact="exact")
+    recipe = RECIPES["wall-following"].replace(seconds=5.0, rounds=0, compact="exact")
     with pytest.raises(ValueError, match="compact 'exact' needs a learner"):
-        train(spec, make_learner(RECIPES[spec.task]), recipe, seed=0)
+        train(spec, make_learner(RECIPES["wall-following"]), recipe, seed=0)
 
 
 def test_compact_rounds_compacts_between_rounds_and_keeps_learning(tmp_path):
     spec = resolve_world(CORRIDOR)
-    recipe = RECIPES[spec.task].replace(seconds=20.0, rounds=2, round_seconds=5.0,
+    recipe = RECIPES["wall-following"].replace(seconds=20.0, rounds=2, round_seconds=5.0,
                                         compact="prune-balanced", compact_max_nodes=4,
                                         compact_rounds=True)
     learner = make_learner(recipe)
@@ -145,7 +145,7 @@ def test_compact_rounds_compacts_between_rounds_and_keeps_learning(tmp_path):
 
 def test_compact_rounds_in_scaled_copies_compacts_after_every_round_but_the_last():
     spec = resolve_world(CORRIDOR)
-    recipe = RECIPES[spec.task].replace(seconds=10.0, rounds=1, round_seconds=3.0,
+    recipe = RECIPES["wall-following"].replace(seconds=10.0, rounds=1, round_seconds=3.0,
                                         round_scales=(1.2,), compact="exact",
                                         compact_rounds=True)
     learner = make_learner(recipe)
@@ -157,7 +157,7 @@ def test_compact_rounds_in_scaled_copies_compacts_after_every_round_but_the_last
 
 def test_visited_states_label_what_the_tree_reaches_and_learn_nothing():
     spec = resolve_world(CORRIDOR)
-    recipe = RECIPES[spec.task].replace(seconds=10.0, rounds=0, round_seconds=2.0,
+    recipe = RECIPES["wall-following"].replace(seconds=10.0, rounds=0, round_seconds=2.0,
                                         round_free=1)
     learner = make_learner(recipe)
     train(spec, learner, recipe, seed=0)
@@ -175,7 +175,7 @@ def test_visited_states_label_what_the_tree_reaches_and_learn_nothing():
 
 def test_compact_rounds_bad_combinations_are_named_errors(tmp_path, capsys):
     out = str(tmp_path / "x.rhbl")
-    assert cli(["train", "--world", CORRIDOR, "--out", out, "--compact-rounds"]) == 2
+    assert cli(["train", "--behaviour", "wall-following", "--world", CORRIDOR, "--out", out, "--compact-rounds"]) == 2
     assert "compact_rounds needs a compaction step" in capsys.readouterr().err
     (tmp_path / "none.mcap").write_bytes(b"")  # the combination is refused before it is read
     assert cli(["train", "--from-recording", str(tmp_path / "none.mcap"), "--out", out,
@@ -186,7 +186,7 @@ def test_compact_rounds_bad_combinations_are_named_errors(tmp_path, capsys):
 
 def test_compact_visits_redoes_the_last_compaction_with_held_out_states():
     spec = resolve_world(CORRIDOR)
-    base = RECIPES[spec.task].replace(seconds=10.0, rounds=1, round_seconds=2.0,
+    base = RECIPES["wall-following"].replace(seconds=10.0, rounds=1, round_seconds=2.0,
                                       compact="prune-balanced", compact_max_nodes=3,
                                       compact_rounds=True)
     plain = make_learner(base)

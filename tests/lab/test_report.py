@@ -36,8 +36,8 @@ def test_episode_of_a_run_and_its_metrics():
 
 def test_evaluate_prints_one_markdown_row_per_driver_and_episode():
     spec = resolve_world("corridor")
-    learner = make_learner(spec.task)
-    train(spec, learner, RECIPES[spec.task].replace(seconds=10, rounds=0), seed=0)
+    learner = make_learner("wall-following")
+    train(spec, learner, RECIPES["wall-following"].replace(seconds=10, rounds=0), seed=0)
     rep = evaluate(spec, TreePolicy.from_learner(learner), episodes=2, seconds=3.0)
     lines = format_table(rep).splitlines()
     assert lines[1] == "| " + " | ".join([*EPISODE_HEADERS, "success"]) + " |"

@@ -15,8 +15,8 @@ from lab.train import train
 
 def test_world_starts_then_sampled_poses():
     spec = resolve_world("corridor")
-    learner = make_learner(spec.task)
-    recipe = RECIPES[spec.task].replace(seconds=60, starts="world", segment=10,
+    learner = make_learner("wall-following")
+    recipe = RECIPES["wall-following"].replace(seconds=60, starts="world", segment=10,
                                         random_segment=0.5, rounds=0)
     traj = train(spec, learner, recipe, seed=1)
     n_fixed = len(spec.start_poses)
@@ -28,8 +28,8 @@ def test_world_starts_then_sampled_poses():
 
 def test_explicit_start_is_one_demonstration():
     spec = resolve_world("corridor")
-    learner = make_learner(spec.task)
-    recipe = RECIPES[spec.task].replace(seconds=20, starts="world", segment=5)
+    learner = make_learner("wall-following")
+    recipe = RECIPES["wall-following"].replace(seconds=20, starts="world", segment=5)
     traj = train(spec, learner, recipe, seed=0, start=spec.start_poses[-1])
     assert traj.segments == [list(spec.start_poses[-1])]
 
@@ -48,8 +48,8 @@ def test_maze_recipe_features_and_reactive_labels():
 
 def test_corrective_rounds_learner_drives_teacher_labels():
     spec = resolve_world("corridor")
-    learner = make_learner(spec.task)
-    recipe = RECIPES[spec.task].replace(seconds=20, starts="world", segment=10,
+    learner = make_learner("wall-following")
+    recipe = RECIPES["wall-following"].replace(seconds=20, starts="world", segment=10,
                                         random_segment=0.0, rounds=2, round_seconds=5,
                                         takeover=0.3, round_scales=())
     traj = train(spec, learner, recipe, seed=0)
@@ -64,8 +64,8 @@ def test_corrective_rounds_learner_drives_teacher_labels():
 
 def test_free_starts_and_free_round_poses():
     spec = resolve_world("corridor")
-    learner = make_learner(spec.task)
-    recipe = RECIPES[spec.task].replace(seconds=40, starts="free", segment=10,
+    learner = make_learner("wall-following")
+    recipe = RECIPES["wall-following"].replace(seconds=40, starts="free", segment=10,
                                         random_segment=0.5, rounds=1, round_seconds=3,
                                         round_free=2)
     traj = train(spec, learner, recipe, seed=2)
@@ -80,10 +80,10 @@ def test_scale_augmentation_offers_scaled_scans_labelled_by_the_teacher():
     from lab.train import _Augmenter
 
     spec = resolve_world("corridor")
-    plain = make_learner(spec.task)
-    recipe = RECIPES[spec.task].replace(seconds=10, rounds=0)
+    plain = make_learner("wall-following")
+    recipe = RECIPES["wall-following"].replace(seconds=10, rounds=0)
     train(spec, plain, recipe, seed=3)
-    learner = make_learner(spec.task)
+    learner = make_learner("wall-following")
     traj = train(spec, learner, recipe.replace(augment=2, augment_scale=1.3), seed=3)
     assert learner.vectors == 3 * plain.vectors  # each state offered 1 + 2 times
     assert traj.learned == learner.vectors
@@ -118,8 +118,8 @@ def test_scale_augmentation_needs_a_scan_only_teacher():
 
 def test_rounds_in_scaled_copies_of_the_world():
     spec = resolve_world("corridor")
-    learner = make_learner(spec.task)
-    recipe = RECIPES[spec.task].replace(seconds=10, rounds=1, round_seconds=2,
+    learner = make_learner("wall-following")
+    recipe = RECIPES["wall-following"].replace(seconds=10, rounds=1, round_seconds=2,
                                         round_scales=(0.9, 1.1))
     train(spec, learner, recipe, seed=0)
     stats = learner.session["round_stats"]
@@ -127,14 +127,38 @@ def test_rounds_in_scaled_copies_of_the_world():
     assert learner.session["round_scales"] == [0.9, 1.1]
 
 
+def test_rounds_in_the_other_teaching_worlds_come_first():
+    """``round_worlds``: corrective rounds also in other worlds (a behaviour's other teaching
+    worlds), each in its scaled copies then itself, before the training world's; a behaviour
+    with two teaching worlds gets them from ``recipe_of``."""
+    from lab.behaviours import get, recipe_of
+
+    spec = resolve_world("corridor")
+    learner = make_learner("wall-following")
+    recipe = RECIPES["wall-following"].replace(seconds=10, rounds=1, round_seconds=2,
+                                               round_scales=(0.9,), round_worlds=("room",))
+    train(spec, learner, recipe, seed=0)
+    stats = learner.session["round_stats"]
+    assert [(s.get("world"), s.get("scale")) for s in stats] == [
+        ("room", 0.9), ("room", None), (None, 0.9), (None, None)]
+    assert learner.session["round_worlds"] == ["room"]
+    assert stats[1]["steps"] == len(resolve_world("room").start_poses) * 20  # its own starts
+    for bad in ("room", ("room", ""), (3,)):
+        with pytest.raises(ValueError, match="round_worlds"):
+            RECIPES["wall-following"].replace(round_worlds=bad)
+    wandering = get("wandering")
+    assert recipe_of(wandering).round_worlds == wandering.teach[1:] != ()
+    assert recipe_of(get("wall-following")).round_worlds == ()
+
+
 def test_the_recipe_runs_rounds_in_scaled_copies_and_none_turns_them_off():
     spec = resolve_world("maze")
-    learner = make_learner(spec.task)
+    learner = make_learner("maze")
     recipe = RECIPES["maze"].replace(seconds=10, rounds=1, round_seconds=2)  # its scales
     train(spec, learner, recipe, seed=0)
     assert [s.get("scale") for s in learner.session["round_stats"]] == [0.85, 1.2, None]
     room = resolve_world("corridor")  # wall following: the world itself only
-    learner = make_learner(room.task)
+    learner = make_learner("wall-following")
     recipe = RECIPES["wall-following"].replace(seconds=10, rounds=1, round_seconds=2)
     train(room, learner, recipe, seed=0)
     assert [s.get("scale") for s in learner.session["round_stats"]] == [None]

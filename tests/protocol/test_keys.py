@@ -24,6 +24,8 @@ def test_every_robots_key_is_a_wildcard_given_on_purpose():
 @pytest.mark.parametrize("key,kind,extra", [
     (keys.state_key("r0"), "state", {"iface": "position2d", "index": 0}),
     (keys.scan_key("r0"), "scan", {"iface": "laser", "index": 0}),
+    (keys.fiducial_key("r0"), "fiducial", {"iface": "fiducial", "index": 0}),
+    (keys.request_key("r0", "fiducial", "get_geom"), "request", {"name": "get_geom"}),
     (keys.driver_key("r0"), "driver", {}),
     (keys.cmd_vel_key("r0"), "cmd", {"source": None}),
     (keys.cmd_vel_key("r0", source="teacher"), "cmd", {"source": "teacher"}),

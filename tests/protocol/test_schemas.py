@@ -19,6 +19,8 @@ FULL = [
     m.State(ts=1.0, seq=2, pos=(1, 2, 0.1), vel=(0.2, 0, 0.1), stall=True, driver="teacher",
             truth=(1, 2, 0.1)),
     m.Scan(ts=1.0, id=3, ranges=R, pose=(1, 2, 0.1), truth=(1, 2, 0.1)),
+    m.Fiducial(ts=1.0, seq=3, items=(m.FiducialItem(1, 2.5, -0.5), m.FiducialItem(0, 7.9, 1.5)),
+               pose=(1, 2, 0.1), truth=(1, 2, 0.1)),
     m.VelCmd(vx=0.3, va=0.1, source="controller", scan_id=3, ts=1.0),
     m.DriverState(source="teacher", ts=1.0, priority=2),
     m.TeacherAction(scan_id=3, action="fwd", ts=1.0, executed="rot-left", origin="o1", seq=4),
@@ -31,11 +33,13 @@ FULL = [
                nodes=7, executed="rot-left", looping=True),
     m.Geometry(pose=(0, 0, 0), size=(0.5, 0.4), radius=0.25),
     m.LaserConfig(min_angle=-1.5, max_angle=1.5, resolution=0.01, max_range=8.0, count=360),
+    m.FiducialGeometry(pose=(0, 0, 0), size=(0.1, 0.1), min_range=0.0, max_range=8.0,
+                       max_range_id=5.0, fov=3.14, rate=10.0),
     m.SetOdom(pose=(0, 0, 0)),
     m.SetPose(pose=(1, 1, 0), reset_odom=False),
     m.SimPose(pose=(1, 1, 0), odom=(0, 0, 0), ts=1.0),
     m.WorldInfo(name="room", task="maze", walls=((0, 0, 1, 0),), goal=(1, 1, 0.5),
-                starts=((1, 1, 0),)),
+                starts=((1, 1, 0),), beacons=(m.BeaconInfo(1, (1.0, 2.0), "#dc2828", 0.2),)),
     m.MotorPower(state=True),
     m.Ack(info="ok"),
     m.Nack(reason="no"),
@@ -43,6 +47,7 @@ FULL = [
 MINIMAL = [
     m.State(ts=1.0, seq=2, pos=(1, 2, 0.1)),
     m.Scan(ts=1.0, id=3, ranges=R),
+    m.Fiducial(ts=1.0, seq=3),
     m.VelCmd(),
     m.TeacherAction(scan_id=3, action="fwd"),
     m.LearnerAck(origin="o1", upto=0),
@@ -106,7 +111,8 @@ def test_a_schema_names_the_version_and_the_type():
 
 
 @pytest.mark.parametrize("key,kind", [
-    ("rhbl/r0/laser/0/data/scan", "scan"), ("rhbl/r0/position2d/0/cmd/vel/teacher", "cmd"),
+    ("rhbl/r0/laser/0/data/scan", "scan"), ("rhbl/r0/fiducial/0/data/fiducials", "fiducial"),
+    ("rhbl/r0/position2d/0/cmd/vel/teacher", "cmd"),
     ("rhbl/r0/learner/ack", "ack"), ("rhbl/r0/controller/decision", "decision"),
     ("rhbl/r0/teacher/labeled", "labeled"), ("rhbl/r0/teacher/withdraw", "withdraw"),
     ("rhbl/r0/sim/req/get_world", "world"),

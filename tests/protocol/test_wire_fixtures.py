@@ -16,10 +16,16 @@ import pytest
 from client.recording.mcap_file import read_recording
 from protocol import messages as m
 from protocol.codec import DecodeError
-from tests.protocol.fixtures.make_messages import ADDED_AFTER_V1, MESSAGES
+from tests.protocol.fixtures.make_messages import ADDED, ADDED_AFTER_V1, MESSAGES
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 STORED = msgpack.unpackb((FIXTURES / "messages-v1.msgpack").read_bytes(), raw=False)
+# the message types added after the v1 bytes, each in a file of its own (make_messages.py)
+for _file in sorted((FIXTURES / "added").glob("*.msgpack")):
+    _added = msgpack.unpackb(_file.read_bytes(), raw=False)
+    STORED["messages"].update(_added["messages"])
+    STORED["hostile"] += _added["hostile"]
+MESSAGES = {**MESSAGES, **ADDED}
 
 
 def _same(a, b) -> bool:

@@ -51,7 +51,7 @@ def test_worlds_are_closed():
 
 def test_maze_is_tiered_with_goal_in_last_tier():
     spec = load_world(server.world_path("maze"))
-    assert spec.task == "maze" and spec.goal is not None
+    assert spec.task is None and spec.goal is not None  # a behaviour names its worlds
     assert spec.goal.center[1] > 6.6 and spec.pose[1] < 2.2
 
 
@@ -340,3 +340,30 @@ def test_scaled_copy_of_a_world():
     for bad in (0.0, -1.0, math.nan):
         with pytest.raises(ValueError, match="scale factor"):
             maze.scaled(bad)
+
+
+def test_shipped_worlds_name_no_task_and_an_older_files_task_is_still_read():
+    """Worlds no longer name a task (a behaviour names its worlds); a user's older world file
+    with ``task = ...`` is still read, its task kept as a hint."""
+    for name in server.world_names():
+        assert load_world(server.world_path(name)).task is None, name
+    old = parse_world({"name": "mine", "task": "wall-following", "robot": {"pose": [2, 0.5, 0]},
+                       "walls": [{"points": [[0, 0], [4, 0], [4, 3]], "closed": True}]})
+    assert old.task == "wall-following" and old.scaled(1.2).task == "wall-following"
+
+
+def test_free_space_is_outside_the_boxes_within_the_outer_wall():
+    """A world with boxes, pillars or an island drawn as closed polylines inside its outer
+    wall: its free space is inside the outer wall and outside each of them (so free-space
+    poses, ``round_free`` and free demonstrations, exist there)."""
+    from server.world import free_pose
+
+    clutter = load_world(server.world_path("clutter-room"))
+    assert clutter.inside(5.0, 1.0) and not clutter.inside(2.5, 2.4)  # in box 1.2 x 1.0 m
+    assert not clutter.inside(-1.0, 1.0)  # outside the outer wall
+    ring = load_world(server.world_path("eval-room-ring"))
+    assert ring.inside(3.0, 0.7) and not ring.inside(7.0, 3.5)  # round the island, not on it
+    rng = np.random.default_rng(0)
+    poses = [free_pose(clutter, rng) for _ in range(20)]
+    assert all(p is not None and clutter.inside(p.x, p.y) and clutter.clearance(p.x, p.y) >= 0.45
+               for p in poses)

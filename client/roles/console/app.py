@@ -36,7 +36,8 @@ once (a last zero command, then the teacher's hold token is withdrawn, so the se
 robot to the controller, or stops it, on the next tick). Episodes, undo and placing the robot
 are refused while another page holds it.
 
-Messages to the page: ``hello``, ``world``, ``state``, ``scan``, ``cmd`` (the action being
+Messages to the page: ``hello``, ``world`` (with the beacons), ``state``, ``scan``,
+``fiducial`` (the beacons the robot sees, in a world with beacons), ``cmd`` (the action being
 executed), ``notice``, ``decision``, ``control`` (who holds each robot), ``robots``, ``teach``
 (the learner, the labels, episodes, agreement, markers, stuck: ``client.roles.console.lesson``),
 ``placed``, ``info``, ``error``.
@@ -89,7 +90,7 @@ from client.roles.console.web import (
 from process.runtime import EXIT_USAGE, Context, ProcessError
 from protocol import keys
 from protocol.decoding import Decoder
-from protocol.messages import Decision, Scan, State, TreeNotice, VelCmd, WorldInfo
+from protocol.messages import Decision, Fiducial, Scan, State, TreeNotice, VelCmd, WorldInfo
 
 __all__ = ["SEND_TIMEOUT", "STALE", "Console", "body", "parse_http"]
 
@@ -199,6 +200,7 @@ class Console(Tutor):
         self.subs.append(s.liveliness().declare_subscriber(
             keys.alive_key("server", "**"), self._on_server, history=True))
         for key_of, fn in ((keys.state_key, self._on_state), (keys.scan_key, self._on_scan),
+                           (keys.fiducial_key, self._on_fiducial),
                            (keys.learner_notice_key, self._on_notice),
                            (keys.controller_decision_key, self._on_decision),
                            (keys.cmd_vel_subscription, self._on_cmd)):
@@ -267,6 +269,15 @@ class Console(Tutor):
             "pose": [round(x, 4) for x in pose],
             "ranges": [round(x, 3) for x in sc.ranges.tolist()]})
         self._hand(robot, "scan", text, sc)
+
+    def _on_fiducial(self, sample) -> None:
+        f, robot = self._decode(Fiducial, sample)
+        if f is None:
+            return
+        self._hand(robot, "fiducial", json.dumps({
+            "t": "fiducial", "robot": robot, "seq": f.seq, "ts": f.ts,
+            "items": [{"id": i.id, "range": round(i.range, 4), "bearing": round(i.bearing, 4)}
+                      for i in f.items]}), f)
 
     def _on_notice(self, sample) -> None:
         n, robot = self._decode(TreeNotice, sample)
@@ -359,6 +370,8 @@ class Console(Tutor):
                 r.world = json.dumps({
                     "t": "world", "robot": r.name, "name": w.name, "task": w.task,
                     "walls": w.walls, "goal": w.goal, "starts": r.starts,
+                    "beacons": [{"id": b.id, "pos": b.pos, "colour": b.colour, "size": b.size}
+                                for b in w.beacons],
                     "start": r.start_index, "behaviour": None if b is None else to_page(b)})
                 self._to_pages(r, "world", r.world)
 

@@ -4,8 +4,10 @@
 // (the pose drawn last), #hold data-holder, #tree data-nodes/vectors, #fps data-fps/frames,
 // #learner data-up/seq, #labels data-given/held/waiting/withdrawn, #agreement data-value/n,
 // #trouble data-markers/loops/stalls/collisions, #stuck data-why, #episode data-n/state,
-// #clock data-t; and window.rhbl.view(): what the page shows now, read-only (the robot as
-// drawn, the walls, the mode, who drives, the action executed, the scan displayed, the clock).
+// #clock data-t, #view data-beacons/seen (the beacons drawn, the ids of those the robot sees);
+// and window.rhbl.view(): what the page shows now, read-only (the robot as drawn, the walls,
+// the beacons and those seen, the mode, who drives, the action executed, the scan displayed,
+// the clock).
 "use strict";
 
 const $ = (id) => document.getElementById(id);
@@ -14,7 +16,7 @@ const g = canvas.getContext("2d");
 
 const S = {
   ws: null, page: null, robot: null, viewOnly: false, mode: "demonstrate",
-  world: null, state: null, scan: null, notice: null, decision: null, control: null,
+  world: null, state: null, scan: null, fiducial: null, notice: null, decision: null, control: null,
   cmds: {}, trail: [], teach: null, dragging: null,
   view: { cx: 0, cy: 0, scale: 50, fitted: false }, follow: false,
   keys: new Set(), pad: null, gamepad: null, sent: null, sentScan: -1,
@@ -93,6 +95,7 @@ function receive(m) {
       S.scan = m;
       if (S.sent) { send({ t: "drive", action: S.sent, scan_id: m.id }); S.sentScan = m.id; }
       break;
+    case "fiducial": S.fiducial = m; break;
     case "notice": S.notice = m; break;
     case "decision": S.decision = m; break;
     case "cmd": S.cmds[m.source] = m; break;
@@ -216,7 +219,7 @@ function setRobots(names) {
 
 $("robot").onchange = (e) => {
   release();
-  S.robot = e.target.value; S.world = null; S.state = null; S.scan = null; S.notice = null;
+  S.robot = e.target.value; S.world = null; S.state = null; S.scan = null; S.fiducial = null; S.notice = null;
   S.decision = null; S.control = null; S.cmds = {}; S.trail = [];
   send({ t: "view", robot: S.robot });
 };
@@ -455,6 +458,7 @@ function draw() {
     g.stroke();
   }
   if (S.world) startsDrawn(px);
+  beacons(px, S.state ? S.state.pose : S.scan ? S.scan.pose : null);
   trail(px);
   const sc = S.scan;
   if (sc) {
@@ -496,6 +500,41 @@ function draw() {
   scaleBar(h, v.scale);
   panel();
   S.shown = { pose, scan: sc };
+}
+
+// the world's beacons, discs of their colour with their id; those the robot's fiducial finder
+// sees now ringed, a dashed line from the robot to each (an unidentified one, id 0, where the
+// finder says it is)
+function beacons(px, pose) {
+  const list = S.world ? S.world.beacons || [] : [];
+  const items = S.fiducial ? S.fiducial.items : [];
+  const seen = new Set(items.map((i) => i.id));
+  for (const b of list) {
+    const [x, y] = b.pos, r = Math.max(b.size / 2, 3 * px);
+    g.fillStyle = b.colour; g.strokeStyle = "#222"; g.lineWidth = px;
+    g.beginPath(); g.arc(x, y, r, 0, 2 * Math.PI); g.fill(); g.stroke();
+    if (seen.has(b.id)) {
+      g.strokeStyle = "rgba(255,190,0,0.95)"; g.lineWidth = 3 * px;
+      g.beginPath(); g.arc(x, y, r + 5 * px, 0, 2 * Math.PI); g.stroke();
+    }
+    g.save(); g.translate(x, y); g.scale(px, -px);
+    g.fillStyle = "#222"; g.font = "bold 11px system-ui, sans-serif";
+    g.fillText(String(b.id), r / px + 4, -r / px - 2);
+    g.restore();
+  }
+  if (pose && items.length) {
+    const [x, y, yaw] = pose;
+    g.setLineDash([5 * px, 4 * px]); g.strokeStyle = "rgba(230,160,0,0.9)"; g.lineWidth = 1.5 * px;
+    g.beginPath();
+    for (const i of items) {
+      g.moveTo(x, y);
+      g.lineTo(x + i.range * Math.cos(yaw + i.bearing), y + i.range * Math.sin(yaw + i.bearing));
+    }
+    g.stroke(); g.setLineDash([]);
+  }
+  const ids = list.map((b) => b.id).join(","), shown = [...seen].sort((a, b) => a - b).join(",");
+  if (canvas.dataset.beacons !== ids) canvas.dataset.beacons = ids;
+  if (canvas.dataset.seen !== shown) canvas.dataset.seen = shown;
 }
 
 // a light grid every metre (every 5 m when zoomed out), in world coordinates
@@ -646,6 +685,8 @@ Object.defineProperty(window, "rhbl", { value: Object.freeze({
     return {
       t: st ? st.ts : null, pose: sh.pose ? sh.pose.slice() : null,
       walls: S.world ? S.world.walls.map((w) => w.slice()) : [], starts: S.world ? (S.world.starts || []).map((p) => p.slice()) : [],
+      beacons: S.world ? (S.world.beacons || []).map((b) => ({ id: b.id, pos: b.pos.slice(), colour: b.colour })) : [],
+      seen: S.fiducial ? S.fiducial.items.map((i) => ({ ...i })) : [],
       mode: S.mode, driver: drv, action: drv && c ? c.action : null,
       scan_id: sh.scan ? sh.scan.id : null, holder: $("hold").dataset.holder || "",
       stuck: S.teach && S.teach.stuck ? S.teach.stuck.why : null, link: $("link").dataset.state || "",
