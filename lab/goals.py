@@ -353,14 +353,14 @@ def format_goal_table(report: dict) -> str:
 
 def guarded(policy, on: bool = True):
     """``policy`` driven as ``rhbl controller --guard`` drives a tree: through the rotation
-    guard with the path check (``client.behaviour.guard``: the person rule's settings); ``on`` False: as
-    it is. A goal behaviour's trees, and its reactive baseline's, are measured so by default
-    (docs/goals.md: without it, a tree that bounces between its rotations near a corner
-    stays there)."""
+    guard with the path check (``client.behaviour.guard``, ``client.behaviour.rule.PATH_CHECK``);
+    ``on`` False: as it is. A goal behaviour's trees, and its reactive baseline's, are measured
+    so by default (docs/goals.md: without it, a tree that bounces between its rotations near a
+    corner stays there)."""
     from client.behaviour.guard import RotationGuard
-    from client.behaviour.rule import PERSON
+    from client.behaviour.rule import PATH_CHECK
 
-    return RotationGuard.of(PERSON.guard, policy) if on else policy
+    return RotationGuard.of(PATH_CHECK, policy) if on else policy
 
 
 def run_goal_trial(b: Behaviour, seed: int, recipe: Recipe, worlds: list[str],

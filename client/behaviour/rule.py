@@ -45,8 +45,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["GuardSettings", "LearningRule", "NeighbourEditing", "PERSON", "ReactionAlignment",
-           "SCRIPT", "rule_for"]
+__all__ = ["GuardSettings", "LearningRule", "NeighbourEditing", "PATH_CHECK", "PERSON",
+           "ReactionAlignment", "SCRIPT", "rule_for"]
 
 EDITING_METHOD = "wilson-edited-knn"  # the editing's name in the metadata
 
@@ -241,9 +241,11 @@ class LearningRule:
                                    extend_above=None if extend is None else int(extend))
 
 
+# The guard with its path check: a person's trees' (and a goal behaviour's, docs/goals.md)
+PATH_CHECK = GuardSettings(clearance=0.3)
 # The rules, chosen here (docs/teaching.md, "The learning rule", has the study behind them).
 PERSON = LearningRule("person", alignment=ReactionAlignment(), editing=NeighbourEditing(),
-                      guard=GuardSettings(clearance=0.3), extend_above=20000)
+                      guard=PATH_CHECK, extend_above=20000)
 SCRIPT = LearningRule("script")  # the paper's: each label learned as it arrives; the loop guard
 
 

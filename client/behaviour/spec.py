@@ -403,6 +403,9 @@ def parse_behaviour(data: Any, source: str = "<behaviour>", path: Path | None = 
             raise _err(src, f"starts.{world}", f"a world the behaviour names "
                                                f"({', '.join(sorted(named))})", world)
     recipe = _table(src, "recipe", data.get("recipe", {}))
+    guard = data.get("guard", True)
+    if not isinstance(guard, bool):
+        raise _err(src, "guard", "true or false", guard)
     goals = None
     if "goals" in data:
         try:
@@ -413,9 +416,6 @@ def parse_behaviour(data: Any, source: str = "<behaviour>", path: Path | None = 
     if ("goals" in rules) != (goals is not None):
         raise BehaviourError(f"{_where(src, 'success.goals')}: a behaviour with [goals] is "
                              "judged by the 'goals' rule, and only such a one")
-    guard = data.get("guard", True)
-    if not isinstance(guard, bool):
-        raise _err(src, "guard", "true or false", guard)
     return Behaviour(name=name, summary=summary.strip(), features=features, expert_name=expert,
                      teach=teach, held_out=held_out, rules=rules,
                      expert_params=params, starts=starts, instructions=instructions.strip(),

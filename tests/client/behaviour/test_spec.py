@@ -92,7 +92,8 @@ def test_inline_perception_beams_or_sectors_reuses_the_feature_spec(tmp_path):
 
 
 @pytest.mark.parametrize(("change", "field", "allowed"), [
-    (('instructions = "drive about"', 'colour = "red"'), "colour", "allowed: expert, goals, guard, instructions"),
+    (('instructions = "drive about"', 'colour = "red"'), "colour",
+     "allowed: expert, goals, guard, instructions"),
     (('name = "mine"', "name = 3"), "name", "a non-empty string"),
     (('perception = "wall"', 'perception = "sonar"'), "perception", "a shipped feature spec"),
     (('side = "left"', 'side = "up"'), "expert.side", "one of right, left"),
