@@ -51,6 +51,7 @@ __all__ = [
     "COMMAND_MAX_PAYLOAD",
     "MAX_BEAMS",
     "Decision",
+    "DecisionGoal",
     "PROTOCOL_VERSION",
     "Ack",
     "DecodeError",
@@ -146,6 +147,44 @@ class DecisionPath(Kind):
                          get_int(item, "depth", at, minimum=0),
                          get_float(item, "radius", at), get_str(item, "label", at)))
         return tuple(path)
+
+
+class DecisionGoal(NamedTuple):
+    """The goal a decision pursued (``Decision.goal``): ``index`` (0-based) of ``count`` goals in
+    the sequence (a patrol's every visit counted) and the ``beacon`` it names."""
+
+    index: int
+    count: int
+    beacon: int
+
+    def describe(self) -> str:
+        """``goal 1/2 (beacon 1)``"""
+        return f"goal {self.index + 1}/{self.count} (beacon {self.beacon})"
+
+
+class GoalOfDecision(Kind):
+    """A :class:`DecisionGoal` as a map ``{"index", "count", "beacon"}``: non-negative integers,
+    ``index`` below ``count``."""
+
+    expected = "a map of index, count, beacon"
+    schema = {"type": "object", "required": ["index", "count", "beacon"],
+              "properties": {"index": {"type": "integer", "minimum": 0},
+                             "count": {"type": "integer", "minimum": 1},
+                             "beacon": {"type": "integer", "minimum": 0}},
+              "description": "the goal pursued: index (0-based) of count, the beacon it names"}
+
+    def write(self, value):
+        return {"index": int(value[0]), "count": int(value[1]), "beacon": int(value[2])}
+
+    def read(self, x, key, what):
+        if not isinstance(x, dict):
+            raise DecodeError(f"{what}: field '{key}': expected {self.expected}, got {x!r:.80}")
+        goal = DecisionGoal(*(get_int({f"{key}.{k}": x[k]} if k in x else {}, f"{key}.{k}",
+                                      what, minimum=0) for k in DecisionGoal._fields))
+        if goal.index >= goal.count:
+            raise DecodeError(f"{what}: field '{key}': expected index below count, got index "
+                              f"{goal.index} of {goal.count}")
+        return goal
 
 
 # the kinds of field the messages have
@@ -579,9 +618,12 @@ class Decision(_Message):
     guard overruled the tree's (a reversal of the rotation, or a forward order into what lies
     ahead; None: the tree's was), ``looping`` the guard overruled a reversal lately
     (``RotationGuard.looping``: the robot is held from a rot-left/rot-right loop; a person
-    should show it the way out)."""
+    should show it the way out). A tree with goals (docs/goals.md): ``goal`` the goal pursued
+    (:class:`DecisionGoal`; None: a tree without goals), ``goal_why`` why the last goal changed
+    (None: none has yet)."""
 
     WHAT: ClassVar[str] = "controller/decision"
+    MAX_GOAL_WHY: ClassVar[int] = 512  # characters of ``goal_why``
     MAX_SIZE: ClassVar[int] = COMMAND_MAX_PAYLOAD
     MAX_PATH: ClassVar[int] = DecisionPath.MAX
     scan_id: int = wire(UINT)
@@ -592,6 +634,9 @@ class Decision(_Message):
     nodes: int = wire(UINT, default=0)
     executed: str | None = wire(STR, default=None)
     looping: bool = wire(BOOL, default=False, omit_false=True)
+    # added after v1: left out when None, so a decision without goals is encoded as before
+    goal: DecisionGoal | None = wire(GoalOfDecision(), default=None)
+    goal_why: str | None = wire(String(max_len=MAX_GOAL_WHY), default=None)
 
 
 @message
