@@ -16,7 +16,7 @@ import contextlib
 import zenoh
 
 from protocol import keys
-from protocol.messages import Decision, Scan
+from protocol.messages import Decision, DecisionGoal, Scan
 
 __all__ = ["Decider", "snapshot_id"]
 
@@ -43,11 +43,14 @@ class Decider:
         self._watched = status.matching
 
     def publish(self, policy, x, scan: Scan, executed: str | None = None,
-                looping: bool = False) -> str | None:
+                looping: bool = False, goal: DecisionGoal | None = None,
+                goal_why: str | None = None) -> str | None:
         """Publish the decision of the policy's tree for the features ``x`` of ``scan``; returns
         the action (the winner's label), or None when nothing subscribes to decisions.
         ``executed``: the action commanded, when the loop guard overruled the tree's (said
-        only when it differs); ``looping``: the guard stepped in lately."""
+        only when it differs); ``looping``: the guard stepped in lately; a tree with goals:
+        ``goal`` the goal pursued, ``goal_why`` why the last goal changed (cut to
+        ``Decision.MAX_GOAL_WHY`` characters)."""
         if not self._watched:
             return None
         clf = policy.classifier
@@ -60,7 +63,8 @@ class Decider:
             nodes=int(getattr(clf, "node_count_", 0)),
             path=tuple((e["index"], e["depth"], e["radius"], str(e["label"])) for e in path),
             executed=executed if executed is not None and executed != action else None,
-            looping=bool(looping),
+            looping=bool(looping), goal=goal,
+            goal_why=None if goal_why is None else goal_why[:Decision.MAX_GOAL_WHY],
         ).encode())
         return action
 

@@ -26,7 +26,8 @@ an overruled reversal drives straight on while that path is clear (``--stats``:
 all three). Its
 decisions (``Decision``, for viewers) say when the guard stepped in lately on a reversal
 (``looping``) and what it commanded instead of the tree's (``executed``): ``rhbl console``
-then asks the person to show the robot the way out.
+then asks the person to show the robot the way out; a tree with goals, the goal pursued and why
+the last goal changed (``goal``, ``goal_why``).
 
 With ``--ros2`` it drives a ROS 2 robot instead (``client.ros2.nodes.Ros2Robot``, docs/ros2.md): its
 ``LaserScan`` (any beam count and span, resampled to the tree's features, or refused with exit 2
@@ -57,7 +58,7 @@ from process import arguments
 from process.runtime import EXIT_NO_SERVER, EXIT_USAGE, Context, ProcessError, uninterrupted
 from protocol import keys
 from protocol.decoding import Decoder
-from protocol.messages import Scan, TreeNotice
+from protocol.messages import DecisionGoal, Scan, TreeNotice
 
 __all__ = ["ControllerProcess", "add_arguments", "fetch_snapshot", "load_tree", "main"]
 
@@ -203,6 +204,7 @@ class ControllerProcess:
         self.executed: str | None = None  # the action commanded for the last scan answered
         self.fiducials = None  # a tree with goals: the robot's fiducial log (run)
         self.finished = False  # a tree with goals: every goal reached
+        self.goal_why: str | None = None  # a tree with goals: why the last goal changed
         self.n = self.bad = 0
         ctx.scope.callback(self.close)  # on every path, after "stopping (signal)"
         ctx.report(self.counters)
@@ -380,10 +382,10 @@ class ControllerProcess:
         reached (``finished``)."""
         seen = self.fiducials.seen(scan.id, timeout=0.2)
         ev = p.see({int(item.id): item for item in seen if item.id}, t=scan.ts)
-        if ev is not None:
-            log.info("goal %d/%d (beacon %s) done at %.1f s: %s; now %s", ev["visit"] + 1,
-                     len(p.goals.visits), ev["beacon"], scan.ts, ev["why"],
-                     p.tracker.describe())
+        if ev is not None:  # the decisions say it too (``Decision.goal_why``)
+            self.goal_why = (f"goal {ev['visit'] + 1}/{len(p.goals.visits)} (beacon "
+                             f"{ev['beacon']}) done at {scan.ts:.1f} s: {ev['why']}")
+            log.info("%s; now %s", self.goal_why, p.tracker.describe())
         if p.tracker.finished:
             self.finished = True
             return None
@@ -409,9 +411,14 @@ class ControllerProcess:
     def publish_decision(self, policy, x, scan: Scan) -> None:
         """The decision of the scan just answered, for viewers; a failure here is logged and
         never stops the controller (the command is already out)."""
+        goal = None
+        if isinstance(policy, GoalPolicy) and not policy.tracker.finished:
+            t = policy.tracker
+            goal = DecisionGoal(t.visit, len(t.goals.visits), t.beacon)
         try:  # with the loop guard's state: a console asks the person to show the way out
             self.decider.publish(policy, x, scan, executed=self.executed,
-                                 looping=self.guarding and self.guard.looping)
+                                 looping=self.guarding and self.guard.looping, goal=goal,
+                                 goal_why=self.goal_why if goal is not None else None)
         except Exception as exc:  # noqa: BLE001 - viewers only
             log.debug("decision of scan %d not published: %s", scan.id, exc)
 
