@@ -36,7 +36,13 @@ from client.player import PlayerClient  # noqa: E402
 from lab.children import Child, rhbl_argv  # noqa: E402
 from process.session import make_config  # noqa: E402
 from protocol import keys  # noqa: E402
-from protocol.messages import Decision, State, TeacherAction, TreeNotice  # noqa: E402
+from protocol.messages import (  # noqa: E402
+    Decision,
+    DecisionGoal,
+    State,
+    TeacherAction,
+    TreeNotice,
+)
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 
@@ -555,6 +561,32 @@ def test_screenshot_of_the_page(env, browser):
     env["watch"].wait(Watch.stopped, STOP_WITHIN, "stopped")
     assert path.stat().st_size > 10_000
     _home(env)
+
+
+def test_the_decision_trace_shows_the_goal_and_why_it_changed(env, browser):
+    """A controller driving a tree with goals (docs/goals.md): its decisions say the goal
+    pursued and why the last one changed, and the page shows both beside the decision; a
+    decision without a goal clears it."""
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    _open(browser, env["console"].url)
+    why = ("goal 1/2 (beacon 1) done at 12.3 s: completion tree: sphere 95 (depth 91) says "
+           "done at beacon 1 (range 0.59 m, bearing 5 deg)")
+    pursued = lambda d: d.find_element("id", "pursued")  # noqa: E731
+    env["session"].put(keys.controller_decision_key("r0"), Decision(
+        scan_id=1, action="fwd", path=((0, 0, 2.9, "fwd"),), goal=DecisionGoal(1, 2, 2),
+        goal_why=why).encode())
+    WebDriverWait(browser, 10).until(lambda d: pursued(d).get_attribute("data-index") == "1")
+    assert pursued(browser).text == f"goal 2/2 (beacon 2); last change: {why}"
+    assert pursued(browser).get_attribute("data-beacon") == "2"
+    view = browser.execute_script("return window.rhbl.view()")
+    assert view["pursued"] == {"index": 1, "count": 2, "beacon": 2, "why": why}
+    env["session"].put(keys.controller_decision_key("r0"), Decision(
+        scan_id=2, action="fwd", path=((0, 0, 2.9, "fwd"),)).encode())
+    WebDriverWait(browser, 10).until(lambda d: pursued(d).get_attribute("data-index") == "")
+    assert pursued(browser).text == "-"
+    assert browser.execute_script("return window.rhbl.view()")["pursued"] is None
+    assert _errors(browser) == []
 
 
 def test_tls_with_a_token(env, tmp_path):

@@ -297,7 +297,8 @@ class Console(Tutor):
         self._hand(robot, "decision", json.dumps({
             "t": "decision", "robot": robot, "scan_id": d.scan_id, "ts": d.ts,
             "action": d.action, "snapshot_id": d.snapshot_id, "nodes": d.nodes, "path": path,
-            "executed": d.executed, "looping": d.looping}), d)
+            "executed": d.executed, "looping": d.looping,
+            "goal": None if d.goal is None else d.goal._asdict(), "goal_why": d.goal_why}), d)
 
     def _on_cmd(self, sample) -> None:
         c, robot = self._decode(VelCmd, sample)

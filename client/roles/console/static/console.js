@@ -647,6 +647,11 @@ function panel() {
     $("decision").textContent = win
       ? `${d.action}${guard}: sphere #${win.index}, radius ${win.radius === null ? "inf" : win.radius.toFixed(3)}, depth ${win.depth} (scan ${d.scan_id}, tree ${d.snapshot_id || "from a file"}, ${d.nodes} nodes)`
       : d.action;
+    // a tree with goals: the goal pursued, and why the last one changed (docs/goals.md)
+    const g = d.goal, p = $("pursued");
+    p.dataset.index = g ? g.index : ""; p.dataset.beacon = g ? g.beacon : "";
+    p.title = d.goal_why || "";
+    p.textContent = g ? `goal ${g.index + 1}/${g.count} (beacon ${g.beacon})${d.goal_why ? "; last change: " + d.goal_why : ""}` : "-";
     $("path").innerHTML = "";
     for (const e of d.path) {
       const li = document.createElement("li");
@@ -693,6 +698,7 @@ Object.defineProperty(window, "rhbl", { value: Object.freeze({
       stuck: S.teach && S.teach.stuck ? S.teach.stuck.why : null, link: $("link").dataset.state || "",
       markers: S.teach ? S.teach.markers.map((k) => ({ ...k })) : [],
       goal: S.world && S.world.goal ? S.world.goal.slice() : null,
+      pursued: S.decision && S.decision.goal ? { ...S.decision.goal, why: S.decision.goal_why } : null,
     };
   },
 }) });
