@@ -12,9 +12,13 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
+from waiting import eventually  # noqa: E402
+
 from client.behaviour.goals import GoalLearner, parse_goals  # noqa: E402
 from lab.behaviours import get  # noqa: E402
 from lab.children import Child, rhbl_argv  # noqa: E402
+from protocol import keys  # noqa: E402
+from protocol.messages import Decision, DecisionGoal  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(180)]
 ROOT = Path(__file__).resolve().parents[2]
@@ -69,10 +73,6 @@ def _slow(tmp_path) -> Path:
 def test_the_decisions_say_the_goal_and_why_it_changed(tmp_path, start_server, client_config):
     """The controller's decisions (``rhbl/<robot>/controller/decision``, what a console and a
     recording get) carry the goal pursued, and from the first change on why it changed."""
-    from protocol import keys
-    from protocol.messages import Decision, DecisionGoal
-    from waiting import eventually
-
     srv = start_server("goals-red-green", lockstep=True)
     got: list[Decision] = []
     with zenoh.open(client_config(srv.endpoint)) as session:
