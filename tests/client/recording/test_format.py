@@ -61,3 +61,20 @@ def test_a_file_that_is_no_recording_is_named(tmp_path):
     bad.write_bytes(b"\x82\xa1v\x01")  # four bytes of msgpack
     with pytest.raises(RecordingError, match="tree.rhbl is not an MCAP recording"):
         list(read_recording(bad))
+
+
+def test_a_decision_with_a_goal_is_recorded_with_it(tmp_path):
+    """A controller driving a tree with goals: its decisions keep the goal pursued and why the
+    last one changed in a recording, and the recording's schema describes both."""
+    out = tmp_path / "g.mcap"
+    d = m.Decision(scan_id=4, action="fwd", goal=m.DecisionGoal(1, 2, 2),
+                   goal_why="goal 1/2 (beacon 1) done at 2.5 s: completion tree: sphere 3")
+    with RecordingWriter(out, viewer=False) as w:
+        w.write(keys.controller_decision_key("r0"), d.encode(), 1_000_000_000)
+    (rec,) = [r for r in read_recording(out) if r.kind == "decision"]
+    assert m.Decision.decode(rec.data) == d
+    with open(out, "rb") as f:
+        summary = make_reader(f).get_summary()
+    (schema,) = [s for s in summary.schemas.values() if s.name == m.Decision.schema_name()]
+    props = json.loads(schema.data)["properties"]
+    assert {"goal", "goal_why"} <= set(props) and "beacon" in props["goal"]["properties"]
