@@ -52,8 +52,8 @@ class EpisodeTask:
     (snapshot bytes, its features and actions in its metadata) drives from ``start`` for
     ``seconds`` (None: the behaviour's time limit) with ``seed``; ``guard``: the controller's
     guard's settings (``client.behaviour.guard.RotationGuard`` keywords), None: the tree alone.
-    ``trace``: also return the winning sphere and the features of every step (refinement's
-    credit assignment)."""
+    ``trace``: also return the winning sphere, the features, the action and the followed
+    wall's distance of every step (refinement's credit assignment)."""
 
     behaviour: str
     world: str
@@ -65,6 +65,7 @@ class EpisodeTask:
     odom_noise: float = 0.0
     guard: tuple | None = None  # ((keyword, value), ...): hashable
     trace: bool = False
+    scale: float = 1.0  # the world scaled by this (``WorldSpec.scaled``; the start as given)
 
     @property
     def tree_hash(self) -> str:
@@ -118,10 +119,11 @@ def _behaviour(name: str):
 
 
 @functools.cache
-def _world(behaviour: str, world: str):
+def _world(behaviour: str, world: str, scale: float = 1.0):
     from lab.behaviours import world_of
 
-    return world_of(_behaviour(behaviour), world)
+    spec = world_of(_behaviour(behaviour), world)
+    return spec if scale == 1.0 else spec.scaled(scale)
 
 
 class _Traced(TreePolicy):
@@ -158,7 +160,7 @@ def run_episode(task: EpisodeTask) -> dict:
     from lab.evaluate import judged_episode
 
     b = _behaviour(task.behaviour)
-    spec = _world(task.behaviour, task.world)
+    spec = _world(task.behaviour, task.world, float(task.scale))
     policy = _policy(task)
     policy.tracing = task.trace
     driver = policy if task.guard is None else RotationGuard(policy, **dict(task.guard))

@@ -136,3 +136,40 @@ def test_a_cluster_worker_killed_loses_no_episode(cluster, serial):
 def test_a_cluster_that_is_not_there_is_named():
     with pytest.raises(ValueError, match="127.0.0.1:9"):
         Runner(cluster="tcp://127.0.0.1:9")
+
+
+def test_refine_on_a_tiny_budget_writes_a_tree_that_drives_with_its_lineage(tmp_path):
+    import hashlib
+
+    from lab.behaviours import get, teaching_world
+    from lab.evaluate import evaluate
+
+    out, report = tmp_path / "refined.rhbl", tmp_path / "refine.json"
+    assert main(["refine", "--behaviour", "wall-following", "--tree", str(WALL_TREE),
+                 "--out", str(out), "--seconds", "15", "--scales", "none", "--minutes",
+                 "0.5", "--workers", "2", "--json", str(report)]) == 0
+    policy = TreePolicy.load(out)  # loads, with its features and actions
+    b = get("wall-following")
+    rep = evaluate(teaching_world(b), policy, episodes=1, seconds=5, behaviour=b)
+    assert rep["learner"][0]["seconds"] == 5  # it drives
+    lineage = policy.classifier.metadata["refinement"][-1]
+    assert lineage["parent"] == str(WALL_TREE)
+    assert lineage["parent_sha256"] == hashlib.sha256(WALL_TREE.read_bytes()).hexdigest()
+    assert lineage["episodes"] >= 6
+    assert lineage["after"]["nodes"] == policy.classifier.node_count_
+    assert lineage["after"]["fitness"] >= lineage["before"]["fitness"]
+    assert set(lineage["worlds_after"]) == {"room", *b.held_out}
+    assert json.loads(report.read_text())["after"] == lineage["after"]
+
+
+def test_refine_moves_keep_an_rhbl_tree():
+    from lab.refine import added, leaves, relabelled, without
+
+    clf = TreePolicy.load(WALL_TREE).classifier
+    s = leaves(clf)[0]
+    other = next(str(a) for a in clf.classes_ if a != clf.classes_[clf.tree_.label[s]])
+    assert str(relabelled(clf, s, other).classes_[relabelled(clf, s, other).tree_.label[s]]) == other
+    assert without(clf, s).node_count_ == clf.node_count_ - 1
+    x = clf.tree_arrays()["centers"][s] * 0.999
+    grown = added(clf, x, other)
+    assert grown.predict_one(x) == other
