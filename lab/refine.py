@@ -234,11 +234,12 @@ def _blame(pr: _Practice, window: int, b) -> tuple[Counter, list]:
 
 def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = None,
            budget: float = 600.0, seeds=(0,), scales=SCALES, window: int = 30,
-           candidates: int = 6, prune: bool = True, say=print, validate: bool = True,
+           candidates: int = 6, prune: bool = True, say=None, validate: bool = True,
            seconds: float | None = None):
     """``policy``'s tree refined by practice (the module's docstring): ``(classifier,
     report)``. ``seconds``: each episode's length (default: the behaviour's time limit)."""
     t0 = time.perf_counter()
+    say = say or (lambda text: print(text, flush=True))
     actions = list(policy.actions.names)
     clf = policy.classifier
     pr = _Practice(b, policy, runner, _practice_tasks(b, seeds, scales, seconds))

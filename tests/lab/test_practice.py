@@ -53,6 +53,7 @@ def test_an_episode_is_judged_as_evaluate_judges_it(tmp_path):
         assert r["teacher"] == report["teacher"][k]
 
 
+@pytest.mark.slow
 def test_evaluate_on_a_pool_reports_what_it_reports_here(tmp_path):
     reports = []
     for workers in ("1", "2"):
@@ -138,6 +139,7 @@ def test_a_cluster_that_is_not_there_is_named():
         Runner(cluster="tcp://127.0.0.1:9")
 
 
+@pytest.mark.slow
 def test_refine_on_a_tiny_budget_writes_a_tree_that_drives_with_its_lineage(tmp_path):
     import hashlib
 
