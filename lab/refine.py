@@ -9,7 +9,8 @@ behaviour's held-out worlds, which it never practised in.
 
 The practice set: every start pose of the behaviour's teaching worlds, in the worlds as they
 are and scaled by ``scales`` (0.85 and 1.2 by default: the same rooms a little tighter and
-wider), ``seeds`` per start. Its fitness: per episode 1 for a success, else half the fraction
+wider), and ``free`` poses drawn in each one's free space, ``seeds`` per start; but those the
+scripted expert itself fails from. Its fitness: per episode 1 for a success, else half the fraction
 of the episode driven before its first collision (a failure that collides later is nearer a
 success); summed over the set.
 
@@ -181,16 +182,24 @@ class _Practice:
             self.results[i] = r
 
 
-def _practice_tasks(b, seeds, scales, seconds=None) -> list[EpisodeTask]:
+def _practice_tasks(b, seeds, scales, seconds=None, free: int = 0) -> list[EpisodeTask]:
+    """Every start pose of each teaching world, as it is and scaled by each of ``scales``, and
+    ``free`` poses in its free space (``server.world.free_pose``, drawn with seed 100 + the
+    scale's place: not the poses the tree was taught from), each with every seed."""
+    from server.world import free_pose
+
     name = str(b.path) if b.path else b.name
     out = []
     for w in b.teach:
-        spec = world_of(b, w)
-        for scale in (1.0, *scales):
-            for k, start in enumerate(spec.start_poses):
-                s = tuple(v * scale for v in start[:2]) + (start[2],)
+        base = world_of(b, w)
+        for j, scale in enumerate((1.0, *scales)):
+            spec = base if scale == 1.0 else base.scaled(scale)
+            rng = np.random.default_rng(100 + j)
+            poses = list(spec.start_poses)
+            poses += [tuple(p) for p in (free_pose(spec, rng) for _ in range(free)) if p]
+            for k, start in enumerate(poses):
                 for seed in seeds:
-                    out.append(EpisodeTask(name, w, b"", tuple(float(v) for v in s),
+                    out.append(EpisodeTask(name, w, b"", tuple(float(v) for v in start),
                                            seed=seed * 1000 + k, seconds=seconds,
                                            trace=True, scale=float(scale)))
     return out
@@ -235,19 +244,26 @@ def _blame(pr: _Practice, window: int, b) -> tuple[Counter, list]:
 def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = None,
            budget: float = 600.0, seeds=(0,), scales=SCALES, window: int = 30,
            candidates: int = 6, prune: bool = True, say=None, validate: bool = True,
-           seconds: float | None = None):
+           seconds: float | None = None, free: int = 0):
     """``policy``'s tree refined by practice (the module's docstring): ``(classifier,
     report)``. ``seconds``: each episode's length (default: the behaviour's time limit)."""
     t0 = time.perf_counter()
     say = say or (lambda text: print(text, flush=True))
     actions = list(policy.actions.names)
     clf = policy.classifier
-    pr = _Practice(b, policy, runner, _practice_tasks(b, seeds, scales, seconds))
+    pr = _Practice(b, policy, runner, _practice_tasks(b, seeds, scales, seconds, free))
     pr.results = pr.run(clf)
+    # a start the behaviour's own expert fails from teaches nothing: left out
+    fair = [i for i, r in enumerate(pr.results) if r["teacher"]["success"]]
+    dropped = len(pr.tasks) - len(fair)
+    if fair and dropped:
+        pr.tasks, pr.results = [pr.tasks[i] for i in fair], [pr.results[i] for i in fair]
     before = {"fitness": round(pr.fitness, 4), "nodes": int(clf.node_count_),
               "success": round(np.mean([r["success"] for r in pr.results]), 4)}
     say(f"practice: {len(pr.tasks)} episodes ({', '.join(b.teach)}, scales 1"
-        f"{''.join(f', {s:g}' for s in scales)}; {len(seeds)} seed(s)) on {runner.describe()}:"
+        f"{''.join(f', {s:g}' for s in scales)}; {free} free-space starts each; "
+        f"{len(seeds)} seed(s); {dropped} left out: the expert fails there) on "
+        f"{runner.describe()}:"
         f" fitness {before['fitness']:.2f}, success {before['success']:.0%}, "
         f"{before['nodes']} nodes")
     moves: Counter = Counter()
@@ -345,7 +361,8 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
                          "seed": t.seed, "collision_step": f})
     report = {"before": before, "after": after, "episodes": pr.episodes,
               "practice": {"worlds": list(b.teach), "scales": [1.0, *scales],
-                           "seeds": list(seeds), "episodes": len(pr.tasks)},
+                           "seeds": list(seeds), "free": free, "episodes": len(pr.tasks),
+                           "left_out": dropped},
               "moves": dict(moves), "seconds": round(time.perf_counter() - t0, 1),
               "asks": asks, "max_nodes": max_nodes, "height": int(clf.height_)}
     if validate:
@@ -378,6 +395,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scales", type=parse_scales, default=SCALES, metavar="F,F",
                         help="practise also in the teaching worlds scaled by these factors "
                              "(default 0.85,1.2; 'none': the worlds as they are only)")
+    parser.add_argument("--free", type=arguments.non_negative_int, default=0,
+                        help="also practise from this many poses drawn in the free space of "
+                             "each (scaled) teaching world (default 0)")
     parser.add_argument("--window", type=arguments.positive_int, default=30,
                         help="steps before a collision whose spheres are blamed (default 30: "
                              "3 s)")
@@ -394,7 +414,7 @@ def main(args) -> int:
         clf, report = refine(b, policy, runner, max_nodes=args.max_nodes,
                              budget=args.minutes * 60.0, seeds=tuple(range(args.seeds)),
                              window=args.window, seconds=args.seconds,
-                             scales=tuple(f for f in args.scales if f != 1.0))
+                             scales=tuple(f for f in args.scales if f != 1.0), free=args.free)
     record = {"parent": str(args.tree), "parent_sha256": hashlib.sha256(raw).hexdigest(),
               "behaviour": b.name, **{k: v for k, v in report.items() if k != "asks"}}
     meta = dict(clf.metadata)
