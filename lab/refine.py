@@ -100,17 +100,58 @@ def relabelled(clf, sphere: int, action: str):
     return _classifier(clf, arr["centers"], arr["radii"], arr["parent"], arr["label"], classes)
 
 
-def without(clf, sphere: int):
-    """``clf`` without sphere ``sphere`` (not the root): its children go to its parent; the
-    spheres after it move down one index."""
+def without(clf, spheres):
+    """``clf`` without sphere(s) ``spheres`` (an index or several; never the root): each one's
+    children go to its nearest kept ancestor; the kept spheres keep their order."""
     arr = clf.tree_arrays()
+    n = len(arr["parent"])
+    keep = np.ones(n, dtype=bool)
+    keep[np.atleast_1d(np.asarray(spheres, dtype=np.int64))] = False
+    if not keep[0]:
+        raise ValueError("the root stays")
     parent = arr["parent"].copy()
-    parent[parent == sphere] = parent[sphere]
-    keep = np.arange(len(parent)) != sphere
-    parent = parent[keep]
-    parent[parent > sphere] -= 1
+    for i in range(1, n):  # parents precede children: a parent's own parent is final already
+        if not keep[parent[i]]:
+            parent[i] = parent[parent[i]]
+    new = np.cumsum(keep) - 1
+    parent = np.where(parent[keep] < 0, -1, new[np.maximum(parent[keep], 0)])
     return _classifier(clf, arr["centers"][keep], arr["radii"][keep], parent,
                        arr["label"][keep], [str(v) for v in clf.classes_])
+
+
+def _prune_pass(pr, clf) -> list[int]:
+    """One pass of closed-loop leaf pruning on ``pr`` (its results become those of ``clf``
+    without the leaves returned): each leaf removed alone, all in one batch; kept out when
+    the fitness does not fall and its episodes (before and after) meet no other kept-out
+    leaf's."""
+    use = Counter()
+    for r in pr.results:
+        use.update(r["winners"].tolist())
+    order = sorted(leaves(clf), key=lambda s: (use.get(s, 0), -s))
+    trials = [(s, pr.using(s)) for s in order]
+    outs = pr.run_many([(without(clf, s), idx) for s, idx in trials])
+    fit = pr.fitness
+    gone, touched, seen = [], set(), set()  # removed; their episodes; spheres those now use
+    for (s, idx), out in zip(trials, outs, strict=True):
+        if pr.change(idx, out) < fit - 1e-9 or touched & set(idx) or s in seen:
+            continue
+        now = set()
+        for r in out:  # the single-removal tree's indices, as the tree's
+            w = r["winners"]
+            r["winners"] = np.where(w >= s, w + 1, w).astype(np.int32)
+            now.update(r["winners"].tolist())
+        if now & set(gone):
+            continue
+        gone.append(s)
+        touched.update(idx)
+        seen |= now
+        fit = fit - sum(score(pr.results[i]) for i in idx) + sum(map(score, out))
+        pr.keep(idx, out)
+    if gone:
+        new = np.cumsum(~np.isin(np.arange(clf.node_count_), gone)) - 1
+        for r in pr.results:
+            r["winners"] = new[r["winners"]].astype(np.int32)
+    return sorted(gone)
 
 
 def added(clf, x: np.ndarray, action: str):
@@ -325,27 +366,15 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
                 f"{pr.episodes} episodes, {time.perf_counter() - t0:.0f} s")
         if not prune:
             break
-        # prune: leaves least used first, each kept out if the fitness does not fall
-        use = Counter()
-        for r in pr.results:
-            use.update(r["winners"].tolist())
-        order = sorted(leaves(clf), key=lambda s: (use.get(s, 0), -s))
-        removed, gone = 0, []
-        for s in order:
-            if left() <= 0:
+        # prune: every leaf tried at once (least used first), each kept out if the fitness
+        # does not fall; removals whose episodes do not meet are independent, and kept together
+        removed = 0
+        while left() > 0:
+            gone = _prune_pass(pr, clf)
+            if not gone:
                 break
-            now = s - sum(1 for g in gone if g < s)  # later removals moved it down
-            idx = pr.using(now)
-            cand = without(clf, now)
-            out = pr.run(cand, idx) if idx else []
-            if pr.change(idx, out) >= pr.fitness - 1e-9:
-                clf = cand
-                pr.keep(idx, out)
-                for r in pr.results:  # the spheres after it moved down one
-                    w = r["winners"]
-                    r["winners"] = np.where(w > now, w - 1, w).astype(np.int32)
-                gone.append(s)
-                removed += 1
+            clf = without(clf, gone)
+            removed += len(gone)
         if removed:
             moves["pruned"] += removed
             changed = True
@@ -398,6 +427,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--free", type=arguments.non_negative_int, default=0,
                         help="also practise from this many poses drawn in the free space of "
                              "each (scaled) teaching world (default 0)")
+    parser.add_argument("--prune", action=argparse.BooleanOptionalAction, default=True,
+                        help="remove the leaves whose removal keeps the practice fitness "
+                             "(default on; --no-prune: repair only)")
     parser.add_argument("--window", type=arguments.positive_int, default=30,
                         help="steps before a collision whose spheres are blamed (default 30: "
                              "3 s)")
@@ -414,7 +446,8 @@ def main(args) -> int:
         clf, report = refine(b, policy, runner, max_nodes=args.max_nodes,
                              budget=args.minutes * 60.0, seeds=tuple(range(args.seeds)),
                              window=args.window, seconds=args.seconds,
-                             scales=tuple(f for f in args.scales if f != 1.0), free=args.free)
+                             scales=tuple(f for f in args.scales if f != 1.0), free=args.free,
+                             prune=args.prune)
     record = {"parent": str(args.tree), "parent_sha256": hashlib.sha256(raw).hexdigest(),
               "behaviour": b.name, **{k: v for k, v in report.items() if k != "asks"}}
     meta = dict(clf.metadata)

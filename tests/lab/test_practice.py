@@ -175,3 +175,24 @@ def test_refine_moves_keep_an_rhbl_tree():
     x = clf.tree_arrays()["centers"][s] * 0.999
     grown = added(clf, x, other)
     assert grown.predict_one(x) == other
+
+
+@pytest.mark.slow
+def test_a_prune_pass_leaves_the_results_of_the_pruned_tree():
+    """The leaves kept out together give exactly the episodes each gave alone (credit is
+    only ever taken from episodes in which a sphere decided)."""
+    from lab.behaviours import get
+    from lab.refine import _Practice, _practice_tasks, _prune_pass, without
+
+    policy = TreePolicy.load(WALL_TREE)
+    with Runner(workers=1) as runner:
+        pr = _Practice(get("wall-following"), policy, runner,
+                       _practice_tasks(get("wall-following"), (0,), (), seconds=8.0))
+        pr.results = pr.run(policy.classifier)
+        gone = _prune_pass(pr, policy.classifier)
+        assert gone
+        pruned = without(policy.classifier, gone)
+        fresh = pr.run(pruned)
+    assert _judged(fresh) == _judged(pr.results)
+    for a, b in zip(fresh, pr.results, strict=True):
+        assert a["winners"].tolist() == b["winners"].tolist()
