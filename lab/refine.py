@@ -58,6 +58,7 @@ from process import arguments, files
 __all__ = ["add_arguments", "fitness", "main", "refine"]
 
 SCALES = (0.85, 1.2)
+PRUNE = ("all", "used", "none")
 
 
 def score(r: dict) -> float:
@@ -119,16 +120,16 @@ def without(clf, spheres):
                        arr["label"][keep], [str(v) for v in clf.classes_])
 
 
-def _prune_pass(pr, clf) -> list[int]:
+def _prune_pass(pr, clf, unused: bool = True) -> list[int]:
     """One pass of closed-loop leaf pruning on ``pr`` (its results become those of ``clf``
     without the leaves returned): each leaf removed alone, all in one batch; kept out when
     the fitness does not fall and its episodes (before and after) meet no other kept-out
-    leaf's."""
+    leaf's. ``unused``: also the leaves no episode reached (else they stay)."""
     use = Counter()
     for r in pr.results:
         use.update(r["winners"].tolist())
     order = sorted(leaves(clf), key=lambda s: (use.get(s, 0), -s))
-    trials = [(s, pr.using(s)) for s in order]
+    trials = [(s, idx) for s in order if (idx := pr.using(s)) or unused]
     outs = pr.run_many([(without(clf, s), idx) for s, idx in trials])
     fit = pr.fitness
     gone, touched, seen = [], set(), set()  # removed; their episodes; spheres those now use
@@ -223,7 +224,8 @@ class _Practice:
             self.results[i] = r
 
 
-def _practice_tasks(b, seeds, scales, seconds=None, free: int = 0) -> list[EpisodeTask]:
+def _practice_tasks(b, seeds, scales, seconds=None, free: int = 0, noise=(0.0, 0.0)
+                    ) -> list[EpisodeTask]:
     """Every start pose of each teaching world, as it is and scaled by each of ``scales``, and
     ``free`` poses in its free space (``server.world.free_pose``, drawn with seed 100 + the
     scale's place: not the poses the tree was taught from), each with every seed."""
@@ -242,6 +244,7 @@ def _practice_tasks(b, seeds, scales, seconds=None, free: int = 0) -> list[Episo
                 for seed in seeds:
                     out.append(EpisodeTask(name, w, b"", tuple(float(v) for v in start),
                                            seed=seed * 1000 + k, seconds=seconds,
+                                           range_noise=noise[0], odom_noise=noise[1],
                                            trace=True, scale=float(scale)))
     return out
 
@@ -284,15 +287,15 @@ def _blame(pr: _Practice, window: int, b) -> tuple[Counter, list]:
 
 def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = None,
            budget: float = 600.0, seeds=(0,), scales=SCALES, window: int = 30,
-           candidates: int = 6, prune: bool = True, say=None, validate: bool = True,
-           seconds: float | None = None, free: int = 0):
+           candidates: int = 6, prune: str = "all", say=None, validate: bool = True,
+           seconds: float | None = None, free: int = 0, noise=(0.0, 0.0)):
     """``policy``'s tree refined by practice (the module's docstring): ``(classifier,
     report)``. ``seconds``: each episode's length (default: the behaviour's time limit)."""
     t0 = time.perf_counter()
     say = say or (lambda text: print(text, flush=True))
     actions = list(policy.actions.names)
     clf = policy.classifier
-    pr = _Practice(b, policy, runner, _practice_tasks(b, seeds, scales, seconds, free))
+    pr = _Practice(b, policy, runner, _practice_tasks(b, seeds, scales, seconds, free, noise))
     pr.results = pr.run(clf)
     # a start the behaviour's own expert fails from teaches nothing: left out
     fair = [i for i, r in enumerate(pr.results) if r["teacher"]["success"]]
@@ -364,13 +367,13 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
             say(f"repair: {m[0]} {m[1:]}: fitness {pr.fitness:.2f}, success "
                 f"{np.mean([r['success'] for r in pr.results]):.0%}, {clf.node_count_} nodes, "
                 f"{pr.episodes} episodes, {time.perf_counter() - t0:.0f} s")
-        if not prune:
+        if prune == "none":
             break
         # prune: every leaf tried at once (least used first), each kept out if the fitness
         # does not fall; removals whose episodes do not meet are independent, and kept together
         removed = 0
         while left() > 0:
-            gone = _prune_pass(pr, clf)
+            gone = _prune_pass(pr, clf, unused=prune == "all")
             if not gone:
                 break
             clf = without(clf, gone)
@@ -390,7 +393,7 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
                          "seed": t.seed, "collision_step": f})
     report = {"before": before, "after": after, "episodes": pr.episodes,
               "practice": {"worlds": list(b.teach), "scales": [1.0, *scales],
-                           "seeds": list(seeds), "free": free, "episodes": len(pr.tasks),
+                           "seeds": list(seeds), "free": free, "noise": list(noise), "episodes": len(pr.tasks),
                            "left_out": dropped},
               "moves": dict(moves), "seconds": round(time.perf_counter() - t0, 1),
               "asks": asks, "max_nodes": max_nodes, "height": int(clf.height_)}
@@ -427,9 +430,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--free", type=arguments.non_negative_int, default=0,
                         help="also practise from this many poses drawn in the free space of "
                              "each (scaled) teaching world (default 0)")
-    parser.add_argument("--prune", action=argparse.BooleanOptionalAction, default=True,
-                        help="remove the leaves whose removal keeps the practice fitness "
-                             "(default on; --no-prune: repair only)")
+    parser.add_argument("--range-noise", type=arguments.non_negative_float, default=0.0,
+                        help="practise with this laser noise (server option; the seeds then "
+                             "differ; the validation runs without)")
+    parser.add_argument("--odom-noise", type=arguments.non_negative_float, default=0.0,
+                        help="practise with this odometry noise (server option)")
+    parser.add_argument("--prune", choices=PRUNE, default="all",
+                        help="remove the leaves whose removal keeps the practice fitness: "
+                             "'all' of them (default), 'used': only those some practice episode "
+                             "used (a leaf no episode reached stays: the practice set says "
+                             "nothing of it), 'none': repair only")
     parser.add_argument("--window", type=arguments.positive_int, default=30,
                         help="steps before a collision whose spheres are blamed (default 30: "
                              "3 s)")
@@ -447,7 +457,7 @@ def main(args) -> int:
                              budget=args.minutes * 60.0, seeds=tuple(range(args.seeds)),
                              window=args.window, seconds=args.seconds,
                              scales=tuple(f for f in args.scales if f != 1.0), free=args.free,
-                             prune=args.prune)
+                             prune=args.prune, noise=(args.range_noise, args.odom_noise))
     record = {"parent": str(args.tree), "parent_sha256": hashlib.sha256(raw).hexdigest(),
               "behaviour": b.name, **{k: v for k, v in report.items() if k != "asks"}}
     meta = dict(clf.metadata)
