@@ -215,6 +215,25 @@ class _Practice:
     def using(self, sphere: int) -> list[int]:
         return [i for i, r in enumerate(self.results) if (r["winners"] == sphere).any()]
 
+    def reaching(self, grown, old: int) -> list[int]:
+        """The episodes the spheres ``old ..`` of ``grown`` (added to the tree they ran with)
+        can change: those with a step inside one of them (a sphere changes no answer outside
+        itself; the traced states are float32, hence the slack)."""
+        arr = grown.tree_arrays()
+        centers, radii = arr["centers"][old:], arr["radii"][old:]
+        slack = 1e-4 * (1.0 + radii)
+        out = []
+        for i, r in enumerate(self.results):
+            x = r["states"].astype(np.float64)
+            for c, rad, sl in zip(centers, radii, slack, strict=True):
+                d = ((x - c) ** 2).sum(axis=1)
+                if grown.distance == "euclidean":
+                    d = np.sqrt(d)
+                if (d <= rad + sl).any():
+                    out.append(i)
+                    break
+        return out
+
     def change(self, idx: list[int], new: list) -> float:
         """The fitness with the episodes ``idx`` replaced by ``new``."""
         return self.fitness - sum(score(self.results[i]) for i in idx) + sum(map(score, new))
@@ -348,8 +367,10 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
                     now = pr.results[i]["actions"][k]
                     for a in actions:
                         if a != now:
-                            trials.append((("add", i, k, a), added(clf, x, a),
-                                           list(range(len(pr.tasks)))))
+                            grown = added(clf, x, a)
+                            if grown.node_count_ > clf.node_count_:
+                                trials.append((("add", i, k, a), grown,
+                                               pr.reaching(grown, clf.node_count_)))
             if not trials:
                 break
             outs = pr.run_many([(c, idx) for _m, c, idx in trials])

@@ -196,3 +196,27 @@ def test_a_prune_pass_leaves_the_results_of_the_pruned_tree():
     assert _judged(fresh) == _judged(pr.results)
     for a, b in zip(fresh, pr.results, strict=True):
         assert a["winners"].tolist() == b["winners"].tolist()
+
+
+@pytest.mark.slow
+def test_a_sphere_added_changes_only_the_episodes_it_reaches():
+    from lab.behaviours import get
+    from lab.refine import _Practice, _practice_tasks, added
+
+    policy = TreePolicy.load(WALL_TREE)
+    clf = policy.classifier
+    with Runner(workers=1) as runner:
+        pr = _Practice(get("wall-following"), policy, runner,
+                       _practice_tasks(get("wall-following"), (0,), (), seconds=8.0))
+        pr.results = pr.run(clf)
+        r = pr.results[0]
+        k = len(r["actions"]) // 2
+        other = next(a for a in policy.actions.names if a != r["actions"][k])
+        grown = added(clf, r["states"][k], other)
+        assert grown.node_count_ > clf.node_count_
+        idx = pr.reaching(grown, clf.node_count_)
+        assert 0 in idx
+        fresh = pr.run(grown)
+    for i, (a, b) in enumerate(zip(fresh, pr.results, strict=True)):
+        if i not in idx:
+            assert _judged([a]) == _judged([b]) and a["winners"].tolist() == b["winners"].tolist()
