@@ -120,17 +120,23 @@ def without(clf, spheres):
                        arr["label"][keep], [str(v) for v in clf.classes_])
 
 
-def _prune_pass(pr, clf, unused: bool = True) -> list[int]:
+def _prune_pass(pr, clf, unused: bool = True, left=None) -> list[int]:
     """One pass of closed-loop leaf pruning on ``pr`` (its results become those of ``clf``
     without the leaves returned): each leaf removed alone, all in one batch; kept out when
     the fitness does not fall and its episodes (before and after) meet no other kept-out
-    leaf's. ``unused``: also the leaves no episode reached (else they stay)."""
+    leaf's. ``unused``: also the leaves no episode reached (else they stay); ``left()``: the
+    seconds left (the leaves not tried when it is up stay)."""
     use = Counter()
     for r in pr.results:
         use.update(r["winners"].tolist())
     order = sorted(leaves(clf), key=lambda s: (use.get(s, 0), -s))
     trials = [(s, idx) for s in order if (idx := pr.using(s)) or unused]
-    outs = pr.run_many([(without(clf, s), idx) for s, idx in trials])
+    outs, step = [], max(8, 4 * pr.runner.workers)
+    for at in range(0, len(trials), step):
+        if at and left is not None and left() <= 0:
+            trials = trials[:at]
+            break
+        outs += pr.run_many([(without(clf, s), idx) for s, idx in trials[at:at + step]])
     fit = pr.fitness
     gone, touched, seen = [], set(), set()  # removed; their episodes; spheres those now use
     for (s, idx), out in zip(trials, outs, strict=True):
@@ -373,12 +379,17 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
                                                pr.reaching(grown, clf.node_count_)))
             if not trials:
                 break
-            outs = pr.run_many([(c, idx) for _m, c, idx in trials])
             best, best_fit = None, pr.fitness + 1e-9
-            for (m, c, idx), out in zip(trials, outs, strict=True):
-                f = pr.change(idx, out)
-                if f > best_fit:
-                    best, best_fit = (m, c, idx, out), f
+            step = max(1, 2 * runner.workers)  # candidates per batch: the time checked between
+            for at in range(0, len(trials), step):
+                if at and left() <= 0:
+                    break
+                part = trials[at:at + step]
+                outs = pr.run_many([(c, idx) for _m, c, idx in part])
+                for (m, c, idx), out in zip(part, outs, strict=True):
+                    f = pr.change(idx, out)
+                    if f > best_fit:
+                        best, best_fit = (m, c, idx, out), f
             if best is None:
                 break
             m, clf, idx, out = best
@@ -394,7 +405,7 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
         # does not fall; removals whose episodes do not meet are independent, and kept together
         removed = 0
         while left() > 0:
-            gone = _prune_pass(pr, clf, unused=prune == "all")
+            gone = _prune_pass(pr, clf, unused=prune == "all", left=left)
             if not gone:
                 break
             clf = without(clf, gone)
