@@ -27,8 +27,11 @@ radii, labels and parents; nothing else):
    each candidate is driven in closed loop on just the episodes it can change (those in which
    the sphere decided a step: the others are the same episode), and the best that raises the
    fitness is kept; again until none does or the time is up;
-3. **pruning**: each leaf (least used first) is removed if the fitness does not fall: CART's
-   cost-complexity pruning, each subtree chosen by closed-loop fitness on the practice set.
+3. **pruning** (``prune``): each leaf some practice episode reached (``"used"``, the default;
+   ``"all"``: every leaf; ``"none"``: no pruning), least used first, is removed if the fitness
+   does not fall: CART's cost-complexity pruning, each subtree chosen by closed-loop fitness on
+   the practice set. A leaf no episode reached stays: removing it changes nothing the practice
+   set can see, and those were what the held-out rooms lost (docs/studies/refine-by-practice.md).
 
 The snapshot's ``metadata["refinement"]`` records the lineage: the parent file and its sha256,
 the fitness (and success rate) before and after on the practice set and on the held-out worlds,
@@ -312,7 +315,7 @@ def _blame(pr: _Practice, window: int, b) -> tuple[Counter, list]:
 
 def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = None,
            budget: float = 600.0, seeds=(0,), scales=SCALES, window: int = 30,
-           candidates: int = 6, prune: str = "all", say=None, validate: bool = True,
+           candidates: int = 6, prune: str = "used", say=None, validate: bool = True,
            seconds: float | None = None, free: int = 0, noise=(0.0, 0.0)):
     """``policy``'s tree refined by practice (the module's docstring): ``(classifier,
     report)``. ``seconds``: each episode's length (default: the behaviour's time limit)."""
@@ -428,7 +431,7 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
                            "seeds": list(seeds), "free": free, "noise": list(noise), "episodes": len(pr.tasks),
                            "left_out": dropped},
               "moves": dict(moves), "seconds": round(time.perf_counter() - t0, 1),
-              "asks": asks, "max_nodes": max_nodes, "height": int(clf.height_)}
+              "asks": asks, "max_nodes": max_nodes, "prune": prune, "height": int(clf.height_)}
     if validate:
         report["worlds_before"] = _held_out(b, policy.classifier, policy, runner, 0, seconds)
         report["worlds_after"] = _held_out(b, clf, policy, runner, 0, seconds)
@@ -467,11 +470,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "differ; the validation runs without)")
     parser.add_argument("--odom-noise", type=arguments.non_negative_float, default=0.0,
                         help="practise with this odometry noise (server option)")
-    parser.add_argument("--prune", choices=PRUNE, default="all",
+    parser.add_argument("--prune", choices=PRUNE, default="used",
                         help="remove the leaves whose removal keeps the practice fitness: "
-                             "'all' of them (default), 'used': only those some practice episode "
-                             "used (a leaf no episode reached stays: the practice set says "
-                             "nothing of it), 'none': repair only")
+                             "'used': those some practice episode reached (default; a leaf no "
+                             "episode reached stays: the practice set says nothing of it), "
+                             "'all' of them, 'none': repair only (docs/studies/"
+                             "refine-by-practice.md: 'all' lost the held-out rooms)")
     parser.add_argument("--window", type=arguments.positive_int, default=30,
                         help="steps before a collision whose spheres are blamed (default 30: "
                              "3 s)")
