@@ -352,7 +352,8 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
         pr.results = pr.run(clf)
         moves["pruned to size"] += 1
         say(f"size: pruned to {clf.node_count_} nodes against its own actions on "
-            f"{len(X)} visited states: fitness {pr.fitness:.2f}")
+            f"{len(X)} visited states: fitness {pr.fitness:.2f}, "
+            f"{time.perf_counter() - t0:.0f} s")
 
     # 2./3. repair, then prune; again while either changes something
     changed = True
@@ -506,6 +507,10 @@ def main(args) -> int:
           f" -> {report['after']['fitness']:.2f} (success {report['before']['success']:.0%} -> "
           f"{report['after']['success']:.0%}); {report['episodes']} episodes, "
           f"{report['seconds']:g} s")
+    if report["after"]["fitness"] < report["before"]["fitness"]:
+        print(f"  the tree is worse than its parent on the practice set: --max-nodes "
+              f"{args.max_nodes} cost more than the repairs gave back in the time (more "
+              f"--minutes, or a larger --max-nodes)")
     for w in wb:
         tag = "taught" if w in b.teach else "held out"
         print(f"  {w} ({tag}): success {wb[w]:.0%} -> {wa[w]:.0%}")
