@@ -145,17 +145,18 @@ class _Traced(TreePolicy):
         x = np.asarray(self.features.extract(ranges, yaw), dtype=np.float64)
         clf = self.classifier
         node = clf.tree_.apply_one(np.array(x))
-        if node < 0:  # outside the unit cube: the classifier's checks say why
-            return str(clf.predict_one(x))
-        self.winners.append(node)
+        self.winners.append(node)  # -1: outside the unit cube (no sphere decided)
         self.states.append(x)
+        if node < 0:  # the classifier's checks say why
+            return str(clf.predict_one(x))
         return self.names[int(clf.tree_.label[node])]
 
 
 def run_episode(task: EpisodeTask) -> dict:
     """One episode judged as ``rhbl evaluate`` judges it (``lab.evaluate.judged_episode``):
-    ``{"success", "metrics", "teacher", "steps"}``, with ``trace``: ``"winners"`` (the sphere
-    that decided each step) and ``"states"`` (its features, float32)."""
+    ``{"success", "metrics", "teacher", "steps", "stalls"}`` (``stalls``: the steps a collision
+    began), with ``trace``: ``"winners"`` (the sphere that decided each step), ``"states"``
+    (its features, float32), ``"actions"`` and ``"side"`` (the followed wall's distance)."""
     from client.behaviour.guard import RotationGuard
     from lab.evaluate import judged_episode
 

@@ -148,7 +148,7 @@ def _prune_pass(pr, clf, unused: bool = True, left=None) -> list[int]:
         now = set()
         for r in out:  # the single-removal tree's indices, as the tree's
             w = r["winners"]
-            r["winners"] = np.where(w >= s, w + 1, w).astype(np.int32)
+            r["winners"] = np.where(w >= s, w + 1, w).astype(np.int32)  # -1 stays
             now.update(r["winners"].tolist())
         if now & set(gone):
             continue
@@ -160,7 +160,8 @@ def _prune_pass(pr, clf, unused: bool = True, left=None) -> list[int]:
     if gone:
         new = np.cumsum(~np.isin(np.arange(clf.node_count_), gone)) - 1
         for r in pr.results:
-            r["winners"] = new[r["winners"]].astype(np.int32)
+            w = r["winners"]
+            r["winners"] = np.where(w < 0, -1, new[np.maximum(w, 0)]).astype(np.int32)
     return sorted(gone)
 
 
@@ -308,7 +309,7 @@ def _blame(pr: _Practice, window: int, b) -> tuple[Counter, list]:
             steps = [int(k) for k in np.flatnonzero((side < band["near"]) | (side > band["far"]))]
         else:
             steps = list(range(max(0, len(w) - 4 * window), len(w)))
-        blamed.update(int(w[k]) for k in steps)
+        blamed.update(int(w[k]) for k in steps if w[k] >= 0)
         where += [(i, k) for k in reversed(steps)]
     return blamed, where
 
