@@ -32,6 +32,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("lab.train", "in-process: a scripted teacher demonstrates on a world, write a tree"),
     "evaluate": ("lab.evaluate", "in-process: run a tree (and the teacher) from a world's start poses"),
     "compact": ("lab.compact", "make an existing tree smaller, keeping its behaviour on its data"),
+    "refine": ("lab.refine", "improve a taught tree by practice in simulation, judged by its behaviour's success rule"),
     "experiment": ("lab.experiment", "repeat train-then-evaluate over seeds; the paper's Table I"),
     "record": ("client.recording.record", "record every message of the robots' keys into an MCAP file"),
     "replay": ("client.recording.replay", "republish a recording's sensor stream on zenoh with its timing"),

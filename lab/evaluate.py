@@ -26,13 +26,14 @@ other ``--guard-*`` options replace a part of the rule's guard.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 
 from client.behaviour import guard
 from client.behaviour.learning import TreePolicy
 from client.behaviour.spec import Behaviour
-from lab import metrics
+from lab import metrics, practice
 from lab.behaviours import behaviour_arg, behaviour_for_world, get, teaching_world, world_of
 from lab.harness import DT, OnStep, drive, recorded, resolve_world
 from lab.recipe import EVAL_SECONDS, per_task
@@ -42,7 +43,7 @@ from process import arguments, files
 from server import world_arg
 from server.world import WorldSpec
 
-__all__ = ["add_arguments", "evaluate", "format_table", "main", "success"]
+__all__ = ["add_arguments", "evaluate", "format_table", "judged_episode", "main", "success"]
 
 
 def success(task: str | Behaviour, m: dict, teacher_m: dict | None) -> bool:
@@ -79,15 +80,38 @@ def _teacher_episode(spec: WorldSpec, b: Behaviour, actions, start, seconds: flo
     return tt
 
 
+def judged_episode(spec: WorldSpec, b: Behaviour, policy, start, seconds: float, seed: int,
+                   range_noise: float = 0.0, odom_noise: float = 0.0, dt: float = DT,
+                   on_step: OnStep | None = None, both: bool = False):
+    """One start judged: the behaviour's scripted expert and ``policy`` drive from ``start``
+    with ``seed``, each judged by the behaviour's success rule (the policy's distance compared
+    with the expert's): ``(learner metrics, expert metrics, learner episode)``, with ``both``
+    the expert's episode too. The one place an episode is judged (``lab.practice`` runs it on
+    a pool or a cluster)."""
+    tt = _teacher_episode(spec, b, policy.actions, start, seconds, seed, range_noise,
+                          odom_noise, dt, on_step)
+    tm = tt.metrics(spec.goal, b.rules)
+    tm["success"] = metrics.judge(b.rules, tm, None)
+    lt = drive(spec, policy, start, seconds, seed=seed, teacher=b.expert(actions=policy.actions),
+               range_noise=range_noise, odom_noise=odom_noise, dt=dt, kind="learner",
+               on_step=on_step, behaviour=b)
+    lm = lt.metrics(spec.goal, b.rules)
+    lm["success"] = metrics.judge(b.rules, lm, tm)
+    return (lm, tm, lt, tt) if both else (lm, tm, lt)
+
+
 def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
              seconds: float | None = None, seed: int = 0, range_noise: float = 0.0,
              odom_noise: float = 0.0, keep_paths: bool = False, dt: float = DT,
-             on_step: OnStep | None = None, behaviour: Behaviour | str | None = None) -> dict:
+             on_step: OnStep | None = None, behaviour: Behaviour | str | None = None,
+             runner=None) -> dict:
     """Run ``policy`` and the behaviour's scripted expert from the start poses (cycled over
     ``episodes``) and judge each episode by the behaviour's success rule (``behaviour``: a
     Behaviour, a shipped one's name or a file; default: the world's, ``lab.behaviours``, and
     in a world no shipped behaviour names, the one the tree was taught: its snapshot's task);
-    ``on_step`` sees every step (``lab.harness.step_world``)."""
+    ``on_step`` sees every step (``lab.harness.step_world``). ``runner`` (a
+    ``lab.practice.Runner``): the episodes run there (a process pool, a Dask cluster), the same
+    results; not with ``on_step`` or ``keep_paths``, which run here."""
     taught = (getattr(policy, "metadata", None) or {}).get("task")
     b = behaviour_for_world(spec, taught) if behaviour is None else get(behaviour)
     if "goal" in b.rules and spec.goal is None:
@@ -98,23 +122,32 @@ def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
     episodes = len(starts) if episodes is None else int(episodes)
     seconds = b.seconds if seconds is None else float(seconds)
     learner_eps, teacher_eps, paths = [], [], {"teacher": [], "learner": []}
-    for k in range(episodes):
-        start = starts[k % len(starts)]
-        ep_seed = seed * 1000 + k
-        tt = _teacher_episode(spec, b, policy.actions, start, seconds, ep_seed, range_noise,
-                              odom_noise, dt, on_step)
-        tm = tt.metrics(spec.goal, b.rules)
-        tm["success"] = metrics.judge(b.rules, tm, None)
-        lt = drive(spec, policy, start, seconds, seed=ep_seed,
-                   teacher=b.expert(actions=policy.actions), range_noise=range_noise,
-                   odom_noise=odom_noise, dt=dt, kind="learner", on_step=on_step, behaviour=b)
-        lm = lt.metrics(spec.goal, b.rules)
-        lm["success"] = metrics.judge(b.rules, lm, tm)
-        learner_eps.append(lm)
-        teacher_eps.append(tm)
-        if keep_paths:
-            paths["teacher"].append(tt.poses)
-            paths["learner"].append(lt.poses)
+    starts_k = [starts[k % len(starts)] for k in range(episodes)]
+    if runner is not None and on_step is None and not keep_paths and dt == DT:
+        from lab.practice import EpisodeTask, tree_bytes
+
+        data = tree_bytes(getattr(policy, "policy", None) or policy)
+        held = None if not hasattr(policy, "hold") else (
+            ("hold", policy.hold), ("memory", policy.memory), ("clearance", policy.clearance),
+            ("lookahead", policy.lookahead), ("straight", policy.straight))
+        where = str(spec.path) if spec.path is not None else spec.name
+        tasks = [EpisodeTask(str(b.path) if b.path else b.name, where, data, tuple(start),
+                             seed * 1000 + k, seconds, range_noise, odom_noise, held)
+                 for k, start in enumerate(starts_k)]
+        for r in runner.map(tasks):
+            learner_eps.append(r["metrics"])
+            teacher_eps.append(r["teacher"])
+            for k, v in (r.get("guard") or {}).items():  # what the guard overruled, summed
+                setattr(policy, k, getattr(policy, k) + v)
+    else:
+        for k, start in enumerate(starts_k):
+            lm, tm, lt, tt = judged_episode(spec, b, policy, start, seconds, seed * 1000 + k,
+                                            range_noise, odom_noise, dt, on_step, both=True)
+            learner_eps.append(lm)
+            teacher_eps.append(tm)
+            if keep_paths:
+                paths["teacher"].append(tt.poses)
+                paths["learner"].append(lt.poses)
     clf = policy.classifier
     rate = sum(e["success"] for e in learner_eps) / max(1, len(learner_eps))
     report = {
@@ -201,6 +234,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--record", metavar="FILE", default=None, type=arguments.output_file,
                         help="also write the episodes (tree and teacher runs) as an MCAP "
                              "recording (docs/recording.md)")
+    practice.add_arguments(parser)
 
 
 def _goals_main(args, spec: WorldSpec, policy, b: Behaviour | None) -> int:
@@ -259,17 +293,24 @@ def main(args) -> int:
                          f"{policy.classifier.n_features_in_} features (0 .. "
                          f"{policy.classifier.n_features_in_ - 1})")
     settings = guard.settings(args, policy.metadata)
+    if (args.record or args.plot) and (args.workers or args.cluster):
+        raise ValueError("--record and --plot run the episodes in this process: leave out "
+                         "--workers and --cluster")
+    here = bool(args.record or args.plot)
     run = {"episodes": args.episodes, "seconds": args.seconds, "seed": args.seed,
            "range_noise": args.range_noise, "odom_noise": args.odom_noise, "behaviour": b}
-    with record_run(args.record, "rhbl evaluate") as tap:  # None without --record
-        report = evaluate(spec, policy, keep_paths=bool(args.plot),
-                          on_step=None if tap is None else tap.step, **run)
+    with (contextlib.nullcontext() if here else practice.runner_from_args(args)) as runner:
+        with record_run(args.record, "rhbl evaluate") as tap:  # None without --record
+            report = evaluate(spec, policy, keep_paths=bool(args.plot),
+                              on_step=None if tap is None else tap.step, runner=runner, **run)
+        guarded = g = None
+        if settings.on:  # the same episodes as the controller drives them: through the guard
+            guarded = guard.RotationGuard.of(settings, policy)
+            g = evaluate(spec, guarded, runner=runner, **run)
     paths = report.pop("_paths", None)
     report["judged"] = "the tree alone"
     report["guard"] = report["guarded"] = None
-    if settings.on:  # the same episodes as the controller drives them: through the guard
-        guarded = guard.RotationGuard.of(settings, policy)
-        g = evaluate(spec, guarded, **run)
+    if settings.on:
         report["guard"] = {**dataclasses.asdict(settings), **guarded.interventions}
         report["guarded"] = {"success_rate": g["success_rate"], "success": g["success"],
                              "collisions": sum(e["collisions"] for e in g["learner"]),

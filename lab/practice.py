@@ -1,0 +1,329 @@
+"""Closed-loop episodes at scale: one picklable task per episode, run in this process, on every
+core of this machine (a process pool) or on a Dask cluster (``distributed``, the optional
+``cluster`` extra). ``rhbl evaluate`` and ``rhbl refine`` run their episodes here.
+
+    task = EpisodeTask("wall-following", "room", tree_bytes, start=(3, 0.7, 0), seed=0)
+    result = run_episode(task)     # {"success", "metrics", "teacher", ...}: evaluate's judge
+    with Runner(workers=None, cluster=None) as runner:   # None: a process per core
+        results = runner.map(tasks)                      # in the order of the tasks
+    results = run_episodes(tasks, cluster="tcp://10.0.0.5:8786")  # an existing Dask scheduler
+
+An episode is a function of its task alone: the world is made from the task's seed, the tree
+from its bytes, and nothing of the process it runs in is read (the scripted expert's episode,
+which the success rule compares with, is the same wherever it is computed). So the results are
+the same run serially, on the pool or on a cluster, in any order. A worker that dies loses no
+result: the pool is made again and the tasks that had not come back run again (at most
+``retries`` times); a Dask scheduler reruns the tasks of a lost worker on another one (its
+``allowed-failures``, 3 by default).
+
+Dask (not Ray) because it is pure Python, a pip install of a few small packages, and its
+``LocalCluster`` starts in a test in about a second; ``dask scheduler`` / ``dask worker
+ADDRESS`` on other machines make the cluster a user gives with ``--cluster`` (each worker needs
+rhbl installed, the same version).
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import functools
+import hashlib
+import logging
+import multiprocessing
+import os
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from client.behaviour.learning import TreePolicy, check_compatible
+from process import arguments
+
+__all__ = ["EpisodeTask", "Runner", "add_arguments", "cluster_address", "cores",
+           "run_episode", "run_episodes", "runner_from_args", "tree_bytes"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class EpisodeTask:
+    """One closed-loop episode: ``behaviour`` (a shipped behaviour's name or a behaviour file)
+    judges it in ``world`` (a name or a file, with the behaviour's start poses), the tree
+    (snapshot bytes, its features and actions in its metadata) drives from ``start`` for
+    ``seconds`` (None: the behaviour's time limit) with ``seed``; ``guard``: the controller's
+    guard's settings (``client.behaviour.guard.RotationGuard`` keywords), None: the tree alone.
+    ``trace``: also return the winning sphere, the features, the action and the followed
+    wall's distance of every step (refinement's credit assignment)."""
+
+    behaviour: str
+    world: str
+    tree: bytes = field(repr=False)
+    start: tuple[float, float, float]
+    seed: int = 0
+    seconds: float | None = None
+    range_noise: float = 0.0
+    odom_noise: float = 0.0
+    guard: tuple | None = None  # ((keyword, value), ...): hashable
+    trace: bool = False
+    scale: float = 1.0  # the world scaled by this (``WorldSpec.scaled``; the start as given)
+
+    @property
+    def tree_hash(self) -> str:
+        return hashlib.sha256(self.tree).hexdigest()
+
+
+def tree_bytes(policy) -> bytes:
+    """A TreePolicy's tree as snapshot bytes, with its features and actions (what a task
+    carries)."""
+    clf = policy.classifier
+    meta = {**(clf.metadata or {}), **(policy.metadata or {})}
+    meta["features"], meta["actions"] = policy.features.to_dict(), policy.actions.to_dict()
+    saved = clf.metadata
+    clf.metadata = dict(saved or {})
+    try:
+        return clf.to_bytes(meta)
+    finally:
+        clf.metadata = saved
+
+
+# -------------------------------------------------------------------------- one episode
+
+_POLICIES: OrderedDict = OrderedDict()  # tree hash -> TreePolicy (this process's last few)
+
+
+def _policy(task: EpisodeTask):
+    from client.behaviour.actions import ActionSet
+    from client.behaviour.features import FeatureSpec
+    from rhbl import loads
+
+    key = task.tree_hash
+    hit = _POLICIES.get(key)
+    if hit is None:
+        clf = loads(task.tree, source="<episode task's tree>")
+        meta = dict(clf.metadata or {})
+        check_compatible(meta)
+        hit = _Traced(clf, FeatureSpec.from_dict(meta["features"]),
+                      ActionSet.from_dict(meta["actions"]), meta)
+        _POLICIES[key] = hit
+        while len(_POLICIES) > 8:
+            _POLICIES.popitem(last=False)
+    _POLICIES.move_to_end(key)
+    return hit
+
+
+@functools.cache
+def _behaviour(name: str):
+    from lab.behaviours import get
+
+    return get(name)
+
+
+@functools.cache
+def _world(behaviour: str, world: str, scale: float = 1.0):
+    from lab.behaviours import world_of
+
+    spec = world_of(_behaviour(behaviour), world)
+    return spec if scale == 1.0 else spec.scaled(scale)
+
+
+class _Traced(TreePolicy):
+    """A TreePolicy that notes the winning sphere and the features of every answer (``tracing``
+    on), the same answers as TreePolicy's."""
+
+    tracing = False
+    winners: list = []
+    states: list = []
+
+    def reset(self) -> None:
+        self.winners, self.states = [], []
+        self.names = [str(v) for v in self.classifier.classes_]
+
+    def act(self, ranges, pose) -> str:
+        if not self.tracing:
+            return super().act(ranges, pose)
+        yaw = float(pose[2]) if pose is not None else 0.0
+        x = np.asarray(self.features.extract(ranges, yaw), dtype=np.float64)
+        clf = self.classifier
+        node = clf.tree_.apply_one(np.array(x))
+        self.winners.append(node)  # -1: outside the unit cube (no sphere decided)
+        self.states.append(x)
+        if node < 0:  # the classifier's checks say why
+            return str(clf.predict_one(x))
+        return self.names[int(clf.tree_.label[node])]
+
+
+def run_episode(task: EpisodeTask) -> dict:
+    """One episode judged as ``rhbl evaluate`` judges it (``lab.evaluate.judged_episode``):
+    ``{"success", "metrics", "teacher", "steps", "stalls"}`` (``stalls``: the steps a collision
+    began), with ``trace``: ``"winners"`` (the sphere that decided each step), ``"states"``
+    (its features, float32), ``"actions"`` and ``"side"`` (the followed wall's distance)."""
+    from client.behaviour.guard import RotationGuard
+    from lab.evaluate import judged_episode
+
+    b = _behaviour(task.behaviour)
+    spec = _world(task.behaviour, task.world, float(task.scale))
+    policy = _policy(task)
+    policy.tracing = task.trace
+    driver = policy if task.guard is None else RotationGuard(policy, **dict(task.guard))
+    seconds = b.seconds if task.seconds is None else float(task.seconds)
+    lm, tm, ep = judged_episode(spec, b, driver, tuple(task.start), seconds, task.seed,
+                                task.range_noise, task.odom_noise)
+    out = {"success": bool(lm["success"]), "metrics": lm, "teacher": tm, "steps": len(ep.poses),
+           "stalls": [i for i, s in enumerate(ep.stalls) if s and (i == 0 or not ep.stalls[i - 1])]}
+    if task.trace:
+        out["winners"] = np.asarray(policy.winners, dtype=np.int32)
+        out["states"] = np.asarray(policy.states, dtype=np.float32)
+        out["actions"] = list(ep.actions)
+        out["side"] = np.asarray(ep.side, dtype=np.float32) if ep.side else None
+    if task.guard is not None:
+        out["guard"] = {k: getattr(driver, k) for k in ("overruled", "avoided", "straight_on")}
+    policy.tracing = False
+    return out
+
+
+# -------------------------------------------------------------------------- many episodes
+
+
+def cores() -> int:
+    """The cores this process may run on."""
+    affinity = getattr(os, "sched_getaffinity", None)
+    return len(affinity(0)) if affinity else (os.cpu_count() or 1)
+
+
+class Runner:
+    """Runs episode tasks: ``cluster`` (a Dask scheduler's address) on that cluster; else on
+    ``workers`` processes of this machine (None: one per core; 1: in this process). Keep one
+    for many ``map`` calls (the pool's processes or the cluster's connection stay)."""
+
+    def __init__(self, workers: int | None = None, cluster: str | None = None,
+                 retries: int = 3):
+        if workers is not None and workers < 1:
+            raise ValueError(f"workers must be >= 1, got {workers}")
+        self.cluster = cluster
+        self.workers = cores() if workers is None else int(workers)
+        self.retries = retries
+        self.episodes = 0  # tasks run so far
+        self.rerun = 0  # tasks run again after their worker died (the pool)
+        self._pool: cf.ProcessPoolExecutor | None = None
+        self._client = None
+        if cluster is not None:
+            try:
+                from distributed import Client
+            except ImportError:
+                raise ValueError("--cluster needs Dask's distributed (pip install "
+                                 "'rhbl[cluster]')") from None
+            try:
+                self._client = Client(cluster, timeout="10s", set_as_default=False)
+            except (OSError, TimeoutError) as exc:
+                raise ValueError(f"--cluster {cluster}: cannot reach a Dask scheduler "
+                                 f"there ({exc})") from None
+
+    def describe(self) -> str:
+        if self._client is not None:
+            n = len(self._client.scheduler_info(n_workers=-1).get("workers", {}))
+            return f"the Dask cluster at {self.cluster} ({n} workers)"
+        return "this process" if self.workers == 1 else f"{self.workers} processes"
+
+    def _new_pool(self) -> cf.ProcessPoolExecutor:
+        ctx = multiprocessing.get_context("forkserver")
+        return cf.ProcessPoolExecutor(self.workers, mp_context=ctx)
+
+    def worker_pids(self) -> list[int]:
+        """The process ids of the pool's workers (none before the first ``map``)."""
+        pool = self._pool
+        return [] if pool is None else sorted(pool._processes or {})
+
+    def map(self, tasks: list[EpisodeTask]) -> list[dict]:
+        """Every task's result, in the order of ``tasks``."""
+        tasks = list(tasks)
+        self.episodes += len(tasks)
+        if not tasks:
+            return []
+        if self._client is not None:
+            futures = self._client.map(run_episode, tasks, pure=False)
+            return self._client.gather(futures)
+        if self.workers == 1 or len(tasks) == 1:
+            return [run_episode(t) for t in tasks]
+        return self._on_pool(tasks)
+
+    def _on_pool(self, tasks: list[EpisodeTask]) -> list[dict]:
+        results: list = [None] * len(tasks)
+        todo = list(range(len(tasks)))
+        for attempt in range(self.retries + 1):
+            if self._pool is None:
+                self._pool = self._new_pool()
+            futures = {self._pool.submit(run_episode, tasks[i]): i for i in todo}
+            lost = []
+            for fut in cf.as_completed(futures):
+                i = futures[fut]
+                try:
+                    results[i] = fut.result()
+                except cf.process.BrokenProcessPool:
+                    lost.append(i)
+            if not lost:
+                return results
+            log.warning("a worker process died: %d episodes run again", len(lost))
+            self.rerun += len(lost)
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
+            todo = sorted(lost)
+            if attempt == self.retries:
+                break
+        raise RuntimeError(f"{len(todo)} episodes lost their worker {self.retries + 1} times")
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+
+    def __enter__(self) -> Runner:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def run_episodes(tasks: list[EpisodeTask], cluster: str | None = None,
+                 workers: int | None = None) -> list[dict]:
+    """Every task's result in order: on the Dask cluster at ``cluster``, else on ``workers``
+    processes (None: one per core)."""
+    with Runner(workers=workers, cluster=cluster) as runner:
+        return runner.map(tasks)
+
+
+# -------------------------------------------------------------------------- the options
+
+
+def _cluster(text: str) -> str:
+    scheme, sep, rest = text.partition("://")
+    if not sep:
+        scheme, rest = "tcp", text
+    if scheme not in ("tcp", "tls"):
+        raise ValueError(f"must be a Dask scheduler's address tcp://HOST:PORT, got {text!r}")
+    arguments.address.parse(rest)
+    return f"{scheme}://{rest}"
+
+
+cluster_address = arguments.Checked("cluster address", _cluster)
+cluster_address.kind, cluster_address.example = "address", "tcp://127.0.0.1:8786"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--workers N`` and ``--cluster ADDRESS``: where the episodes run."""
+    parser.add_argument("--workers", type=arguments.positive_int, default=None,
+                        help="run the episodes on this many processes of this machine "
+                             "(default: one per core; 1: in this process)")
+    parser.add_argument("--cluster", type=cluster_address, default=None, metavar="ADDRESS",
+                        help="run the episodes on the Dask cluster whose scheduler is at "
+                             "tcp://HOST:PORT (needs the 'cluster' extra: pip install "
+                             "'rhbl[cluster]'; every worker with rhbl installed)")
+
+
+def runner_from_args(args: argparse.Namespace) -> Runner:
+    if args.cluster is not None and args.workers is not None:
+        raise ValueError("give --workers N or --cluster ADDRESS, not both (a cluster's "
+                         "workers are its own)")
+    return Runner(workers=args.workers, cluster=args.cluster)

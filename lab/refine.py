@@ -1,0 +1,525 @@
+"""``rhbl refine``: a taught tree practises in simulation and improves itself, judged by its
+behaviour's own success rule (the judge of ``rhbl evaluate``), then is validated on the
+behaviour's held-out worlds, which it never practised in.
+
+    rhbl refine --behaviour wall-following --tree T --out T2 [--max-nodes 55] [--minutes 10]
+                [--workers N | --cluster tcp://HOST:PORT] [--json REPORT]
+
+    tree, report = refine(b, policy, runner, max_nodes=55, budget=600)
+
+The practice set: every start pose of the behaviour's teaching worlds, in the worlds as they
+are and scaled by ``scales`` (0.85 and 1.2 by default: the same rooms a little tighter and
+wider), and ``free`` poses drawn in each one's free space, ``seeds`` per start; but those the
+scripted expert itself fails from. Its fitness: per episode 1 for a success, else half the fraction
+of the episode driven before its first collision (a failure that collides later is nearer a
+success); summed over the set.
+
+Every move keeps the tree an RHBL tree the controller drives unchanged (spheres with centres,
+radii, labels and parents; nothing else):
+
+1. **size** (with ``max_nodes``, for a larger tree): weakest-link pruning (``rhbl.compaction``,
+   balanced) against the tree's *own* actions on the states it visited in practice (no teacher),
+   down to ``max_nodes``;
+2. **repair**: credit assignment over the failing episodes: the spheres that decided the steps
+   before each first collision (``window`` steps), or the steps off the wall band, are blamed;
+   for the most blamed, every other action is tried (a relabelled sphere), and at the blamed
+   states a new sphere with each other action is tried (``learn_one``: the paper's spawn rule);
+   each candidate is driven in closed loop on just the episodes it can change (those in which
+   the sphere decided a step: the others are the same episode), and the best that raises the
+   fitness is kept; again until none does or the time is up;
+3. **pruning** (``prune``): each leaf some practice episode reached (``"used"``, the default;
+   ``"all"``: every leaf; ``"none"``: no pruning), least used first, is removed if the fitness
+   does not fall: CART's cost-complexity pruning, each subtree chosen by closed-loop fitness on
+   the practice set. A leaf no episode reached stays: removing it changes nothing the practice
+   set can see, and those were what the held-out rooms lost (docs/studies/refine-by-practice.md).
+
+The snapshot's ``metadata["refinement"]`` records the lineage: the parent file and its sha256,
+the fitness (and success rate) before and after on the practice set and on the held-out worlds,
+the episodes run, the moves kept, the time; ``"asks"`` the practice episodes it could not fix
+(world, start and where the failure began): where a person's correction is needed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import hashlib
+import json
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from client.behaviour.learning import TreePolicy
+from lab import practice
+from lab.behaviours import behaviour_arg, get, world_of
+from lab.practice import EpisodeTask, Runner
+from lab.recipe import parse_scales
+from process import arguments, files
+
+__all__ = ["add_arguments", "fitness", "main", "refine"]
+
+SCALES = (0.85, 1.2)
+PRUNE = ("all", "used", "none")
+
+
+def score(r: dict) -> float:
+    """One episode's fitness: 1 for a success, else half the fraction of it driven before the
+    first collision (the whole of it, when it failed otherwise)."""
+    if r["success"]:
+        return 1.0
+    steps = max(1, r["steps"])
+    first = r["stalls"][0] if r["stalls"] else steps
+    return 0.5 * first / steps
+
+
+def fitness(results: list[dict]) -> float:
+    return float(sum(score(r) for r in results))
+
+
+# ------------------------------------------------------------------------ the tree's moves
+
+
+def _classifier(clf, centers, radii, parent, label, classes):
+    from rhbl import HypersphereClassifier
+    from rhbl.tree import SphereTree
+
+    tree = SphereTree.from_arrays(centers, radii, parent, label, distance=clf.distance,
+                                  eps=clf.eps)
+    params = {k: v for k, v in clf.get_params().items() if k not in ("distance", "eps")}
+    return HypersphereClassifier.from_tree(tree, classes, n_seen=clf.n_seen_,
+                                           n_skipped=clf.n_skipped_,
+                                           n_relabelled=clf.n_relabelled_,
+                                           metadata=dict(clf.metadata), **params)
+
+
+def relabelled(clf, sphere: int, action: str):
+    """``clf`` with sphere ``sphere`` deciding ``action``."""
+    arr = clf.tree_arrays()
+    classes = [str(v) for v in clf.classes_]
+    if action not in classes:
+        classes.append(action)
+    arr["label"][sphere] = classes.index(action)
+    return _classifier(clf, arr["centers"], arr["radii"], arr["parent"], arr["label"], classes)
+
+
+def without(clf, spheres):
+    """``clf`` without sphere(s) ``spheres`` (an index or several; never the root): each one's
+    children go to its nearest kept ancestor; the kept spheres keep their order."""
+    arr = clf.tree_arrays()
+    n = len(arr["parent"])
+    keep = np.ones(n, dtype=bool)
+    keep[np.atleast_1d(np.asarray(spheres, dtype=np.int64))] = False
+    if not keep[0]:
+        raise ValueError("the root stays")
+    parent = arr["parent"].copy()
+    for i in range(1, n):  # parents precede children: a parent's own parent is final already
+        if not keep[parent[i]]:
+            parent[i] = parent[parent[i]]
+    new = np.cumsum(keep) - 1
+    parent = np.where(parent[keep] < 0, -1, new[np.maximum(parent[keep], 0)])
+    return _classifier(clf, arr["centers"][keep], arr["radii"][keep], parent,
+                       arr["label"][keep], [str(v) for v in clf.classes_])
+
+
+def _prune_pass(pr, clf, unused: bool = True, left=None) -> list[int]:
+    """One pass of closed-loop leaf pruning on ``pr`` (its results become those of ``clf``
+    without the leaves returned): each leaf removed alone, all in one batch; kept out when
+    the fitness does not fall and its episodes (before and after) meet no other kept-out
+    leaf's. ``unused``: also the leaves no episode reached (else they stay); ``left()``: the
+    seconds left (the leaves not tried when it is up stay)."""
+    use = Counter()
+    for r in pr.results:
+        use.update(r["winners"].tolist())
+    order = sorted(leaves(clf), key=lambda s: (use.get(s, 0), -s))
+    trials = [(s, idx) for s in order if (idx := pr.using(s)) or unused]
+    outs, step = [], max(8, 4 * pr.runner.workers)
+    for at in range(0, len(trials), step):
+        if at and left is not None and left() <= 0:
+            trials = trials[:at]
+            break
+        outs += pr.run_many([(without(clf, s), idx) for s, idx in trials[at:at + step]])
+    fit = pr.fitness
+    gone, touched, seen = [], set(), set()  # removed; their episodes; spheres those now use
+    for (s, idx), out in zip(trials, outs, strict=True):
+        if pr.change(idx, out) < fit - 1e-9 or touched & set(idx) or s in seen:
+            continue
+        now = set()
+        for r in out:  # the single-removal tree's indices, as the tree's
+            w = r["winners"]
+            r["winners"] = np.where(w >= s, w + 1, w).astype(np.int32)  # -1 stays
+            now.update(r["winners"].tolist())
+        if now & set(gone):
+            continue
+        gone.append(s)
+        touched.update(idx)
+        seen |= now
+        fit = fit - sum(score(pr.results[i]) for i in idx) + sum(map(score, out))
+        pr.keep(idx, out)
+    if gone:
+        new = np.cumsum(~np.isin(np.arange(clf.node_count_), gone)) - 1
+        for r in pr.results:
+            w = r["winners"]
+            r["winners"] = np.where(w < 0, -1, new[np.maximum(w, 0)]).astype(np.int32)
+    return sorted(gone)
+
+
+def added(clf, x: np.ndarray, action: str):
+    """``clf`` having learned ``action`` at ``x`` (the paper's rule: a sphere spawns where the
+    winner disagrees)."""
+    arr = clf.tree_arrays()
+    new = _classifier(clf, arr["centers"], arr["radii"], arr["parent"], arr["label"],
+                      [str(v) for v in clf.classes_])
+    new.learn_one(np.asarray(x, dtype=np.float64), action)
+    return new
+
+
+def leaves(clf) -> list[int]:
+    parent = clf.tree_arrays()["parent"]
+    has_child = np.zeros(len(parent), dtype=bool)
+    has_child[parent[1:]] = True
+    return [int(i) for i in np.flatnonzero(~has_child) if i != 0]
+
+
+# ------------------------------------------------------------------------ practice
+
+
+@dataclasses.dataclass
+class _Practice:
+    """The practice set, its episodes' results for the current tree, and the runner."""
+
+    b: object
+    policy: TreePolicy
+    runner: Runner
+    tasks: list  # EpisodeTask without the tree
+    results: list = dataclasses.field(default_factory=list)
+    episodes: int = 0
+
+    def with_tree(self, clf, tasks=None) -> list:
+        data = practice.tree_bytes(TreePolicy(clf, self.policy.features, self.policy.actions,
+                                              self.policy.metadata))
+        return [dataclasses.replace(t, tree=data) for t in (self.tasks if tasks is None
+                                                            else tasks)]
+
+    def run(self, clf, idx=None) -> list:
+        tasks = self.with_tree(clf, None if idx is None else [self.tasks[i] for i in idx])
+        self.episodes += len(tasks)
+        return self.runner.map(tasks)
+
+    def run_many(self, trials: list[tuple]) -> list[list]:
+        """``[(clf, episode indices), ...]`` -> each one's results, in one map (all in
+        parallel)."""
+        batch, cut = [], [0]
+        for clf, idx in trials:
+            batch += self.with_tree(clf, [self.tasks[i] for i in idx])
+            cut.append(len(batch))
+        self.episodes += len(batch)
+        out = self.runner.map(batch)
+        return [out[cut[k]:cut[k + 1]] for k in range(len(trials))]
+
+    @property
+    def fitness(self) -> float:
+        return fitness(self.results)
+
+    def using(self, sphere: int) -> list[int]:
+        return [i for i, r in enumerate(self.results) if (r["winners"] == sphere).any()]
+
+    def reaching(self, grown, old: int) -> list[int]:
+        """The episodes the spheres ``old ..`` of ``grown`` (added to the tree they ran with)
+        can change: those with a step inside one of them (a sphere changes no answer outside
+        itself; the traced states are float32, hence the slack)."""
+        arr = grown.tree_arrays()
+        centers, radii = arr["centers"][old:], arr["radii"][old:]
+        slack = 1e-4 * (1.0 + radii)
+        out = []
+        for i, r in enumerate(self.results):
+            x = r["states"].astype(np.float64)
+            for c, rad, sl in zip(centers, radii, slack, strict=True):
+                d = ((x - c) ** 2).sum(axis=1)
+                if grown.distance == "euclidean":
+                    d = np.sqrt(d)
+                if (d <= rad + sl).any():
+                    out.append(i)
+                    break
+        return out
+
+    def change(self, idx: list[int], new: list) -> float:
+        """The fitness with the episodes ``idx`` replaced by ``new``."""
+        return self.fitness - sum(score(self.results[i]) for i in idx) + sum(map(score, new))
+
+    def keep(self, idx: list[int], new: list) -> None:
+        for i, r in zip(idx, new, strict=True):
+            self.results[i] = r
+
+
+def _practice_tasks(b, seeds, scales, seconds=None, free: int = 0, noise=(0.0, 0.0)
+                    ) -> list[EpisodeTask]:
+    """Every start pose of each teaching world, as it is and scaled by each of ``scales``, and
+    ``free`` poses in its free space (``server.world.free_pose``, drawn with seed 100 + the
+    scale's place: not the poses the tree was taught from), each with every seed."""
+    from server.world import free_pose
+
+    name = str(b.path) if b.path else b.name
+    out = []
+    for w in b.teach:
+        base = world_of(b, w)
+        for j, scale in enumerate((1.0, *scales)):
+            spec = base if scale == 1.0 else base.scaled(scale)
+            rng = np.random.default_rng(100 + j)
+            poses = list(spec.start_poses)
+            poses += [tuple(p) for p in (free_pose(spec, rng) for _ in range(free)) if p]
+            for k, start in enumerate(poses):
+                for seed in seeds:
+                    out.append(EpisodeTask(name, w, b"", tuple(float(v) for v in start),
+                                           seed=seed * 1000 + k, seconds=seconds,
+                                           range_noise=noise[0], odom_noise=noise[1],
+                                           trace=True, scale=float(scale)))
+    return out
+
+
+def _held_out(b, clf, policy, runner, seed: int = 0, seconds=None) -> dict:
+    """Success per held-out world (and the teaching worlds), every start pose, as ``rhbl
+    evaluate`` runs it."""
+    from lab.evaluate import evaluate
+
+    p = TreePolicy(clf, policy.features, policy.actions, policy.metadata)
+    out = {}
+    for w in (*b.teach, *b.held_out):
+        rep = evaluate(world_of(b, w), p, seed=seed, behaviour=b, runner=runner,
+                       seconds=seconds)
+        out[w] = round(rep["success_rate"], 4)
+    return out
+
+
+def _blame(pr: _Practice, window: int, b) -> tuple[Counter, list]:
+    """Spheres blamed for the failures (how many blamed steps each decided) and the blamed
+    (episode, step) pairs, latest first."""
+    band = b.rules.get("wall-band")
+    blamed, where = Counter(), []
+    for i, r in enumerate(pr.results):
+        if r["success"]:
+            continue
+        w = r["winners"]
+        if r["stalls"]:
+            f = r["stalls"][0]
+            steps = list(range(max(0, f - window), min(f, len(w))))
+        elif band is not None and r.get("side") is not None:
+            side = r["side"][:len(w)]
+            steps = [int(k) for k in np.flatnonzero((side < band["near"]) | (side > band["far"]))]
+        else:
+            steps = list(range(max(0, len(w) - 4 * window), len(w)))
+        blamed.update(int(w[k]) for k in steps if w[k] >= 0)
+        where += [(i, k) for k in reversed(steps)]
+    return blamed, where
+
+
+def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = None,
+           budget: float = 600.0, seeds=(0,), scales=SCALES, window: int = 30,
+           candidates: int = 6, prune: str = "used", say=None, validate: bool = True,
+           seconds: float | None = None, free: int = 0, noise=(0.0, 0.0)):
+    """``policy``'s tree refined by practice (the module's docstring): ``(classifier,
+    report)``. ``seconds``: each episode's length (default: the behaviour's time limit)."""
+    t0 = time.perf_counter()
+    say = say or (lambda text: print(text, flush=True))
+    actions = list(policy.actions.names)
+    clf = policy.classifier
+    pr = _Practice(b, policy, runner, _practice_tasks(b, seeds, scales, seconds, free, noise))
+    pr.results = pr.run(clf)
+    # a start the behaviour's own expert fails from teaches nothing: left out
+    fair = [i for i, r in enumerate(pr.results) if r["teacher"]["success"]]
+    dropped = len(pr.tasks) - len(fair)
+    if fair and dropped:
+        pr.tasks, pr.results = [pr.tasks[i] for i in fair], [pr.results[i] for i in fair]
+    before = {"fitness": round(pr.fitness, 4), "nodes": int(clf.node_count_),
+              "success": round(np.mean([r["success"] for r in pr.results]), 4)}
+    say(f"practice: {len(pr.tasks)} episodes ({', '.join(b.teach)}, scales 1"
+        f"{''.join(f', {s:g}' for s in scales)}; {free} free-space starts each; "
+        f"{len(seeds)} seed(s); {dropped} left out: the expert fails there) on "
+        f"{runner.describe()}:"
+        f" fitness {before['fitness']:.2f}, success {before['success']:.0%}, "
+        f"{before['nodes']} nodes")
+    moves: Counter = Counter()
+
+    def left() -> float:
+        return budget - (time.perf_counter() - t0)
+
+    # 1. size: weakest-link pruning against the tree's own actions where it drove
+    if max_nodes is not None and clf.node_count_ > max_nodes:
+        X = np.concatenate([r["states"] for r in pr.results]).astype(np.float64)
+        y = np.concatenate([np.asarray(r["actions"][:len(r["states"])]) for r in pr.results])
+        clf = clf.compact(X, y, method="prune", max_nodes=max_nodes, class_weight="balanced",
+                          data="refine: the states it visited in practice, its own actions")
+        pr.results = pr.run(clf)
+        moves["pruned to size"] += 1
+        say(f"size: pruned to {clf.node_count_} nodes against its own actions on "
+            f"{len(X)} visited states: fitness {pr.fitness:.2f}, "
+            f"{time.perf_counter() - t0:.0f} s")
+
+    # 2./3. repair, then prune; again while either changes something
+    changed = True
+    while changed and left() > 0:
+        changed = False
+        while left() > 0 and not all(r["success"] for r in pr.results):
+            blamed, where = _blame(pr, window, b)
+            trials = []
+            for s, _n in blamed.most_common(candidates):
+                idx = pr.using(s)
+                for a in actions:
+                    if a != str(clf.classes_[clf.tree_.label[s]]):
+                        trials.append((("relabel", s, a), relabelled(clf, s, a), idx))
+            if max_nodes is None or clf.node_count_ < max_nodes:
+                seen = set()
+                for i, k in where[::max(1, window // 3)][:candidates]:
+                    x = pr.results[i]["states"][k]
+                    if (i, k) in seen:
+                        continue
+                    seen.add((i, k))
+                    now = pr.results[i]["actions"][k]
+                    for a in actions:
+                        if a != now:
+                            grown = added(clf, x, a)
+                            if grown.node_count_ > clf.node_count_:
+                                trials.append((("add", i, k, a), grown,
+                                               pr.reaching(grown, clf.node_count_)))
+            if not trials:
+                break
+            best, best_fit = None, pr.fitness + 1e-9
+            step = max(1, 2 * runner.workers)  # candidates per batch: the time checked between
+            for at in range(0, len(trials), step):
+                if at and left() <= 0:
+                    break
+                part = trials[at:at + step]
+                outs = pr.run_many([(c, idx) for _m, c, idx in part])
+                for (m, c, idx), out in zip(part, outs, strict=True):
+                    f = pr.change(idx, out)
+                    if f > best_fit:
+                        best, best_fit = (m, c, idx, out), f
+            if best is None:
+                break
+            m, clf, idx, out = best
+            pr.keep(idx, out)
+            moves[m[0]] += 1
+            changed = True
+            say(f"repair: {m[0]} {m[1:]}: fitness {pr.fitness:.2f}, success "
+                f"{np.mean([r['success'] for r in pr.results]):.0%}, {clf.node_count_} nodes, "
+                f"{pr.episodes} episodes, {time.perf_counter() - t0:.0f} s")
+        if prune == "none":
+            break
+        # prune: every leaf tried at once (least used first), each kept out if the fitness
+        # does not fall; removals whose episodes do not meet are independent, and kept together
+        removed = 0
+        while left() > 0:
+            gone = _prune_pass(pr, clf, unused=prune == "all", left=left)
+            if not gone:
+                break
+            clf = without(clf, gone)
+            removed += len(gone)
+        if removed:
+            moves["pruned"] += removed
+            changed = True
+            say(f"prune: {removed} leaves removed: {clf.node_count_} nodes, fitness "
+                f"{pr.fitness:.2f}, {pr.episodes} episodes, {time.perf_counter() - t0:.0f} s")
+    after = {"fitness": round(pr.fitness, 4), "nodes": int(clf.node_count_),
+             "success": round(np.mean([r["success"] for r in pr.results]), 4)}
+    asks = []
+    for t, r in zip(pr.tasks, pr.results, strict=True):
+        if not r["success"]:
+            f = r["stalls"][0] if r["stalls"] else None
+            asks.append({"world": t.world, "scale": t.scale, "start": list(t.start),
+                         "seed": t.seed, "collision_step": f})
+    report = {"before": before, "after": after, "episodes": pr.episodes,
+              "practice": {"worlds": list(b.teach), "scales": [1.0, *scales],
+                           "seeds": list(seeds), "free": free, "noise": list(noise), "episodes": len(pr.tasks),
+                           "left_out": dropped},
+              "moves": dict(moves), "seconds": round(time.perf_counter() - t0, 1),
+              "asks": asks, "max_nodes": max_nodes, "prune": prune, "height": int(clf.height_)}
+    if validate:
+        report["worlds_before"] = _held_out(b, policy.classifier, policy, runner, 0, seconds)
+        report["worlds_after"] = _held_out(b, clf, policy, runner, 0, seconds)
+    return clf, report
+
+
+# ------------------------------------------------------------------------ the command
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--behaviour", required=True, type=behaviour_arg,
+                        help="the behaviour whose success rule is the fitness and whose "
+                             "teaching worlds it practises in (its held-out worlds validate)")
+    parser.add_argument("--tree", required=True, type=arguments.input_file,
+                        help="the taught tree (a snapshot of rhbl train, rhbl learner, ...)")
+    parser.add_argument("--out", required=True, type=arguments.output_file,
+                        help="write the refined tree here (its lineage in its metadata)")
+    parser.add_argument("--max-nodes", type=arguments.positive_int, default=None,
+                        help="prune a larger tree to this many spheres first, and never grow "
+                             "beyond (default: no limit)")
+    parser.add_argument("--minutes", type=arguments.positive_float, default=10.0,
+                        help="stop improving after this many minutes (default 10)")
+    parser.add_argument("--seeds", type=arguments.positive_int, default=1,
+                        help="episodes per start pose, seeds 0..N-1 (they differ with noise; "
+                             "default 1)")
+    parser.add_argument("--seconds", type=arguments.seconds, default=None,
+                        help="sim seconds per episode (default: the behaviour's time limit)")
+    parser.add_argument("--scales", type=parse_scales, default=SCALES, metavar="F,F",
+                        help="practise also in the teaching worlds scaled by these factors "
+                             "(default 0.85,1.2; 'none': the worlds as they are only)")
+    parser.add_argument("--free", type=arguments.non_negative_int, default=0,
+                        help="also practise from this many poses drawn in the free space of "
+                             "each (scaled) teaching world (default 0)")
+    parser.add_argument("--range-noise", type=arguments.non_negative_float, default=0.0,
+                        help="practise with this laser noise (server option; the seeds then "
+                             "differ; the validation runs without)")
+    parser.add_argument("--odom-noise", type=arguments.non_negative_float, default=0.0,
+                        help="practise with this odometry noise (server option)")
+    parser.add_argument("--prune", choices=PRUNE, default="used",
+                        help="remove the leaves whose removal keeps the practice fitness: "
+                             "'used': those some practice episode reached (default; a leaf no "
+                             "episode reached stays: the practice set says nothing of it), "
+                             "'all' of them, 'none': repair only (docs/studies/"
+                             "refine-by-practice.md: 'all' lost the held-out rooms)")
+    parser.add_argument("--window", type=arguments.positive_int, default=30,
+                        help="steps before a collision whose spheres are blamed (default 30: "
+                             "3 s)")
+    parser.add_argument("--json", default=None, type=arguments.output_file,
+                        help="write the report here")
+    practice.add_arguments(parser)
+
+
+def main(args) -> int:
+    b = get(args.behaviour)
+    policy = TreePolicy.load(args.tree)
+    raw = Path(args.tree).read_bytes()
+    with practice.runner_from_args(args) as runner:
+        clf, report = refine(b, policy, runner, max_nodes=args.max_nodes,
+                             budget=args.minutes * 60.0, seeds=tuple(range(args.seeds)),
+                             window=args.window, seconds=args.seconds,
+                             scales=tuple(f for f in args.scales if f != 1.0), free=args.free,
+                             prune=args.prune, noise=(args.range_noise, args.odom_noise))
+    record = {"parent": str(args.tree), "parent_sha256": hashlib.sha256(raw).hexdigest(),
+              "behaviour": b.name, **{k: v for k, v in report.items() if k != "asks"}}
+    meta = dict(clf.metadata)
+    meta["refinement"] = [*list(meta.get("refinement") or []), record]
+    meta["features"], meta["actions"] = policy.features.to_dict(), policy.actions.to_dict()
+    clf.save(args.out, metadata=meta)
+    wb, wa = report.get("worlds_before", {}), report.get("worlds_after", {})
+    print(f"refined {args.tree} -> {args.out}: {report['before']['nodes']} -> "
+          f"{report['after']['nodes']} nodes; practice fitness {report['before']['fitness']:.2f}"
+          f" -> {report['after']['fitness']:.2f} (success {report['before']['success']:.0%} -> "
+          f"{report['after']['success']:.0%}); {report['episodes']} episodes, "
+          f"{report['seconds']:g} s")
+    if report["after"]["fitness"] < report["before"]["fitness"]:
+        print(f"  the tree is worse than its parent on the practice set: --max-nodes "
+              f"{args.max_nodes} cost more than the repairs gave back in the time (more "
+              f"--minutes, or a larger --max-nodes)")
+    for w in wb:
+        tag = "taught" if w in b.teach else "held out"
+        print(f"  {w} ({tag}): success {wb[w]:.0%} -> {wa[w]:.0%}")
+    for a in report["asks"]:
+        pose = ",".join(f"{v:g}" for v in a["start"])
+        print(f"  could not fix: {a['world']} scaled {a['scale']:g} from {pose} (seed "
+              f"{a['seed']}), collision at step {a['collision_step']}: show me there")
+    if args.json:
+        files.write_text(args.json, json.dumps(report, indent=1), "--json")
+        print(f"wrote {args.json}")
+    return 0

@@ -1,0 +1,222 @@
+"""Episodes run anywhere give the same results (``lab.practice``): in this process, on a pool
+of processes, on a local Dask cluster the test starts on 127.0.0.1; a worker killed (by PID)
+while it runs episodes loses none of them."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+from pathlib import Path
+
+import pytest
+from waiting import eventually
+
+from client.behaviour.learning import TreePolicy
+from lab.cli import main
+from lab.practice import EpisodeTask, Runner, run_episode, run_episodes, tree_bytes
+
+WALL_TREE = Path(__file__).resolve().parents[1] / "rhbl" / "data" / "room-1200.rhbl"
+STARTS = [(3.0, 0.7, 0.0), (8.0, 0.7, 0.0), (11.3, 6.5, 1.5708), (10.0, 8.3, 3.14159)]
+
+
+def _tasks(seconds: float = 20.0, n: int = 8) -> list[EpisodeTask]:
+    data = tree_bytes(TreePolicy.load(WALL_TREE))
+    return [EpisodeTask("wall-following", "room", data, STARTS[k % len(STARTS)], seed=k,
+                        seconds=seconds) for k in range(n)]
+
+
+def _judged(results: list[dict]) -> list:
+    """What a result says, without the trace."""
+    return [(r["success"], r["metrics"], r["teacher"], r["steps"], r["stalls"]) for r in results]
+
+
+@pytest.fixture(scope="module")
+def serial() -> list:
+    return _judged([run_episode(t) for t in _tasks()])
+
+
+def test_an_episode_is_judged_as_evaluate_judges_it(tmp_path):
+    out = tmp_path / "report.json"
+    assert main(["evaluate", "--behaviour", "wall-following", "--tree", str(WALL_TREE),
+                 "--episodes", "2", "--seconds", "20", "--workers", "1",
+                 "--json", str(out)]) == 0
+    report = json.loads(out.read_text())
+    data = tree_bytes(TreePolicy.load(WALL_TREE))
+    from lab.behaviours import get, teaching_world
+
+    starts = teaching_world(get("wall-following")).start_poses
+    for k in range(2):
+        r = run_episode(EpisodeTask("wall-following", "room", data, starts[k], seed=k,
+                                    seconds=20.0))
+        assert r["metrics"] == report["learner"][k]
+        assert r["teacher"] == report["teacher"][k]
+
+
+@pytest.mark.slow
+def test_evaluate_on_a_pool_reports_what_it_reports_here(tmp_path):
+    reports = []
+    for workers in ("1", "2"):
+        out = tmp_path / f"report-{workers}.json"
+        assert main(["evaluate", "--behaviour", "wall-following", "--tree", str(WALL_TREE),
+                     "--episodes", "4", "--seconds", "15", "--workers", workers,
+                     "--json", str(out)]) == 0
+        reports.append(json.loads(out.read_text()))
+    assert reports[0] == reports[1]
+
+
+def test_a_trace_names_the_sphere_of_every_step():
+    task = _tasks(seconds=5.0, n=1)[0]
+    traced = run_episode(EpisodeTask(**{**task.__dict__, "trace": True}))
+    plain = run_episode(task)
+    assert _judged([traced]) == _judged([plain])
+    clf = TreePolicy.load(WALL_TREE).classifier
+    assert len(traced["winners"]) == traced["steps"] == len(traced["states"])
+    names = [str(clf.classes_[clf.tree_.label[w]]) for w in traced["winners"]]
+    assert names == traced["actions"]
+
+
+@pytest.mark.slow
+def test_the_pool_gives_the_serial_results(serial):
+    assert _judged(run_episodes(_tasks(), workers=2)) == serial
+
+
+@pytest.mark.slow
+def test_a_pool_worker_killed_loses_no_episode(serial):
+    tasks = _tasks()
+    with Runner(workers=2) as runner:
+        runner.map(tasks[:2])  # the pool's processes are up
+        pids = runner.worker_pids()
+        assert len(pids) == 2
+        import threading
+
+        got: dict = {}
+        t = threading.Thread(target=lambda: got.update(r=runner.map(tasks)))
+        t.start()
+        os.kill(pids[0], signal.SIGKILL)
+        t.join(timeout=120)
+        assert not t.is_alive()
+        assert runner.rerun >= 1
+        assert _judged(got["r"]) == serial
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  host="127.0.0.1", dashboard_address=None,
+                                  protocol="tcp") as c:
+        yield c
+
+
+@pytest.mark.slow
+def test_a_cluster_gives_the_serial_results(cluster, serial):
+    assert _judged(run_episodes(_tasks(), cluster=cluster.scheduler_address)) == serial
+
+
+@pytest.mark.slow
+def test_a_cluster_worker_killed_loses_no_episode(cluster, serial):
+    from distributed import Client
+
+    tasks = _tasks(seconds=60.0, n=8)
+    expected = _judged([run_episode(t) for t in tasks])
+    with Client(cluster.scheduler_address, set_as_default=False) as client:
+        client.wait_for_workers(2)
+        pids = client.run(os.getpid)  # worker address -> its process id
+        futures = client.map(run_episode, tasks, pure=False)
+        # the first worker that is running an episode is killed while it runs it
+        busy = eventually(lambda: [w for w, keys in client.processing().items() if keys],
+                          what="a worker running an episode")
+        os.kill(pids[busy[0]], signal.SIGKILL)
+        results = client.gather(futures)
+        assert _judged(results) == expected
+        eventually(lambda: len(client.scheduler_info(n_workers=-1)["workers"]) == 2,
+                   what="the nanny's new worker")
+
+
+def test_a_cluster_that_is_not_there_is_named():
+    with pytest.raises(ValueError, match="127.0.0.1:9"):
+        Runner(cluster="tcp://127.0.0.1:9")
+
+
+@pytest.mark.slow
+def test_refine_on_a_tiny_budget_writes_a_tree_that_drives_with_its_lineage(tmp_path):
+    import hashlib
+
+    from lab.behaviours import get, teaching_world
+    from lab.evaluate import evaluate
+
+    out, report = tmp_path / "refined.rhbl", tmp_path / "refine.json"
+    assert main(["refine", "--behaviour", "wall-following", "--tree", str(WALL_TREE),
+                 "--out", str(out), "--seconds", "15", "--scales", "none", "--minutes",
+                 "0.5", "--workers", "2", "--json", str(report)]) == 0
+    policy = TreePolicy.load(out)  # loads, with its features and actions
+    b = get("wall-following")
+    rep = evaluate(teaching_world(b), policy, episodes=1, seconds=5, behaviour=b)
+    assert rep["learner"][0]["seconds"] == 5  # it drives
+    lineage = policy.classifier.metadata["refinement"][-1]
+    assert lineage["parent"] == str(WALL_TREE)
+    assert lineage["parent_sha256"] == hashlib.sha256(WALL_TREE.read_bytes()).hexdigest()
+    assert lineage["episodes"] >= 6
+    assert lineage["after"]["nodes"] == policy.classifier.node_count_
+    assert lineage["after"]["fitness"] >= lineage["before"]["fitness"]
+    assert set(lineage["worlds_after"]) == {"room", *b.held_out}
+    assert json.loads(report.read_text())["after"] == lineage["after"]
+
+
+def test_refine_moves_keep_an_rhbl_tree():
+    from lab.refine import added, leaves, relabelled, without
+
+    clf = TreePolicy.load(WALL_TREE).classifier
+    s = leaves(clf)[0]
+    other = next(str(a) for a in clf.classes_ if a != clf.classes_[clf.tree_.label[s]])
+    assert str(relabelled(clf, s, other).classes_[relabelled(clf, s, other).tree_.label[s]]) == other
+    assert without(clf, s).node_count_ == clf.node_count_ - 1
+    x = clf.tree_arrays()["centers"][s] * 0.999
+    grown = added(clf, x, other)
+    assert grown.predict_one(x) == other
+
+
+@pytest.mark.slow
+def test_a_prune_pass_leaves_the_results_of_the_pruned_tree():
+    """The leaves kept out together give exactly the episodes each gave alone (credit is
+    only ever taken from episodes in which a sphere decided)."""
+    from lab.behaviours import get
+    from lab.refine import _Practice, _practice_tasks, _prune_pass, without
+
+    policy = TreePolicy.load(WALL_TREE)
+    with Runner(workers=1) as runner:
+        pr = _Practice(get("wall-following"), policy, runner,
+                       _practice_tasks(get("wall-following"), (0,), (), seconds=8.0))
+        pr.results = pr.run(policy.classifier)
+        gone = _prune_pass(pr, policy.classifier)
+        assert gone
+        pruned = without(policy.classifier, gone)
+        fresh = pr.run(pruned)
+    assert _judged(fresh) == _judged(pr.results)
+    for a, b in zip(fresh, pr.results, strict=True):
+        assert a["winners"].tolist() == b["winners"].tolist()
+
+
+@pytest.mark.slow
+def test_a_sphere_added_changes_only_the_episodes_it_reaches():
+    from lab.behaviours import get
+    from lab.refine import _Practice, _practice_tasks, added
+
+    policy = TreePolicy.load(WALL_TREE)
+    clf = policy.classifier
+    with Runner(workers=1) as runner:
+        pr = _Practice(get("wall-following"), policy, runner,
+                       _practice_tasks(get("wall-following"), (0,), (), seconds=8.0))
+        pr.results = pr.run(clf)
+        r = pr.results[0]
+        k = len(r["actions"]) // 2
+        other = next(a for a in policy.actions.names if a != r["actions"][k])
+        grown = added(clf, r["states"][k], other)
+        assert grown.node_count_ > clf.node_count_
+        idx = pr.reaching(grown, clf.node_count_)
+        assert 0 in idx
+        fresh = pr.run(grown)
+    for i, (a, b) in enumerate(zip(fresh, pr.results, strict=True)):
+        if i not in idx:
+            assert _judged([a]) == _judged([b]) and a["winners"].tolist() == b["winners"].tolist()
