@@ -175,7 +175,8 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
     robot reaches it, in either mode, the person puts it at the world's next start pose (the
     console's set_pose) and teaches the way again (``Session.goals`` counts them)."""
     rng = np.random.default_rng(seed + 555)
-    learner = method.learner(task_of(spec))
+    task = task_of(spec)
+    learner = method.learner() if task == "wall-following" else method.learner(task)
     world = World(spec, robots=1, seed=seed)
     world.reset(poses=[tuple(spec.pose)])
     walls = spec.segments()

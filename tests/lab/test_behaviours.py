@@ -96,8 +96,9 @@ def test_a_worlds_behaviour():
 
 
 def test_a_tree_in_a_world_no_behaviour_names_is_judged_by_its_own_task(tmp_path):
-    """``rhbl train --world corridor`` and ``rhbl evaluate --world eval-holdout-room-oct`` name
-    no behaviour: the recipe's task teaches, the tree's own task judges."""
+    """``corridor`` and ``eval-holdout-room-oct`` are named by no behaviour: in-process
+    training there takes the recipe's task, evaluation the tree's own (``rhbl train --world
+    corridor`` asks for ``--behaviour``)."""
     from lab.evaluate import evaluate
     from lab.harness import make_learner
     from lab.train import train

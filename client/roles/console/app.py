@@ -369,7 +369,8 @@ class Console(Tutor):
                 own = () if b is None else b.starts.get(w.name, ())
                 r.starts = tuple(tuple(p) for p in own) or w.starts
                 r.world = json.dumps({
-                    "t": "world", "robot": r.name, "name": w.name, "task": w.task,
+                    "t": "world", "robot": r.name, "name": w.name,
+                    "task": w.task if b is None else b.name,  # the behaviour's, not the world's
                     "walls": w.walls, "goal": w.goal, "starts": r.starts,
                     "beacons": [{"id": b.id, "pos": b.pos, "colour": b.colour, "size": b.size}
                                 for b in w.beacons],
