@@ -312,8 +312,14 @@ def literal_run(result: dict, literal_args: str = LITERAL) -> dict:
 
     work = Path(result["workdir"])
     out = work / "literal.rhbl"
-    argv = rhbl_argv("train", "--from-recording", result["recording"], "--behaviour",
-                     result.get("behaviour", "wall-following"),
+    from lab.behaviours import get
+
+    b = get(result.get("behaviour", "wall-following"))
+    if b.perception is None:  # rhbl train --from-recording takes a named feature spec only
+        raise RuntimeError(f"the literal baseline needs a named perception; {b.name}'s is "
+                           "inline")
+    argv = rhbl_argv("train", "--from-recording", result["recording"], "--features",
+                     b.perception,
                      *shlex.split(literal_args), "--out", str(out))
     t0 = time.monotonic()
     done = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=3600)

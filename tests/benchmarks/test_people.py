@@ -213,9 +213,9 @@ def test_a_follower_takes_over_a_robot_too_close_and_lets_go_when_fine(people, v
     calm = [f.observe(view(0.1 * k, (3.0, 1.5, 0.0), "correct", driver="controller",
                            action="fwd")) for k in range(10)]
     assert calm == [None] * 10  # midway along the corridor: hands off
-    close = [f.observe(view(1.0 + 0.1 * k, (3.0, 0.3, 0.0), "correct", driver="controller",
+    close = [f.observe(view(1.0 + 0.1 * k, (3.0, 0.27, 0.0), "correct", driver="controller",
                             action="fwd")) for k in range(10)]
-    assert close[-1] == "fwd-left"  # 0.3 m from the right wall: steers off it
+    assert close[-1] == "fwd-left"  # 0.27 m from the right wall: steers off it
     back = [f.observe(view(2.0 + 0.1 * k, (3.0, 1.5, 0.0), "correct", driver="teacher",
                            action="fwd")) for k in range(30)]
     assert back[-1] is None  # fine again: lets go
