@@ -346,6 +346,7 @@ def open_session(config: zenoh.Config, role: str = "process", wait_router: float
     mode = _mode(config)
     t0 = time.monotonic()
     next_note = t0
+    was_refused = False  # the attempt before was refused: a router coming up now is tried again
     while True:
         try:
             session = zenoh.open(config)
@@ -354,7 +355,11 @@ def open_session(config: zenoh.Config, role: str = "process", wait_router: float
             reasons = _diagnose(connect, _config_endpoints(config, "listen/endpoints"), default)
             refused = bool(connect) and all("connection refused" in r for r in reasons)
             waited = time.monotonic() - t0
-            if wait_router is None or not refused or (wait_router and waited >= wait_router):
+            # refused while opening, listening by the diagnosis: the router came up between
+            # the two, so one more attempt (a second refusal by a listener is an error)
+            retry = refused or was_refused
+            was_refused = refused
+            if wait_router is None or not retry or (wait_router and waited >= wait_router):
                 raise ProcessError(
                     f"{role}: cannot open a zenoh session ({mode} mode, connect "
                     f"{connect or 'none'}): {'; '.join(reasons) or exc}. zenoh said: {exc}",

@@ -380,8 +380,13 @@ class ControllerProcess:
         go to the completion tree, which may finish the current goal (logged, with why); the
         features are then the scan's and the current goal's beacon's. None: every goal is
         reached (``finished``)."""
-        seen = self.fiducials.seen(scan.id, timeout=0.2)
-        ev = p.see({int(item.id): item for item in seen if item.id}, t=scan.ts)
+        # the message of the scan's tick, waited for longer once messages flow (it is sent
+        # before the scan, on another subscriber); none came (the subscription was not up yet,
+        # or lost): nothing is known of the beacons, so no goal is judged done on this scan
+        msg = self.fiducials.at(scan.id, timeout=1.0 if self.fiducials.latest else 0.2)
+        seen = () if msg is None else msg.items
+        ev = None if msg is None else p.see({int(item.id): item for item in seen if item.id},
+                                            t=scan.ts)
         if ev is not None:  # the decisions say it too (``Decision.goal_why``)
             self.goal_why = (f"goal {ev['visit'] + 1}/{len(p.goals.visits)} (beacon "
                              f"{ev['beacon']}) done at {scan.ts:.1f} s: {ev['why']}")

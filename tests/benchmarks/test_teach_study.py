@@ -56,8 +56,8 @@ def test_labels_are_tied_to_the_scan_the_person_answered(study):
     seen = []
 
     class Recording(study.Method):
-        def learner(self):
-            real = super().learner()
+        def learner(self, task: str = "wall-following"):
+            real = super().learner(task)
             real.observe = lambda ranges, yaw, label: seen.append(ranges.copy()) or True
             return real
 
