@@ -259,17 +259,7 @@ def _goals_main(args, spec: WorldSpec, policy, b: Behaviour | None) -> int:
           f"{g['overruled']} rotation reversals overruled, {g['avoided']} forward orders "
           f"turned into a rotation (path check {g['clearance']:g} m)" if g else
           "driven by the trees alone (--no-guard)")
-    if args.json:
-        files.write_text(args.json, json.dumps(report, indent=1), "--json")
-        print(f"wrote {args.json}")
-    if args.plot:
-        from lab.plot import plot_paths
-
-        plot_paths(spec, paths, args.plot,
-                   title=f"{spec.name}: teacher (blue) and learned robot (red), "
-                         f"success {report['success_rate']:.0%}")
-        print(f"wrote {args.plot}")
-    return 0
+    return _write(args, spec, report, paths)
 
 
 def main(args) -> int:
@@ -326,6 +316,12 @@ def main(args) -> int:
               f"rotation reversals ({gr['straight_on']} of them driven straight on) and turned "
               f"{gr['avoided']} forward orders into a rotation (path check "
               f"{gr['clearance']:g} m)")
+    return _write(args, spec, report, paths,
+                  spheres=policy.classifier if args.spheres else None, dims=dims)
+
+
+def _write(args, spec: WorldSpec, report: dict, paths, **draw) -> int:
+    """``--json`` (the report) and ``--plot`` (the paths; ``draw``: the spheres to draw)."""
     if args.json:
         files.write_text(args.json, json.dumps(report, indent=1), "--json")
         print(f"wrote {args.json}")
@@ -334,7 +330,6 @@ def main(args) -> int:
 
         plot_paths(spec, paths, args.plot,
                    title=f"{spec.name}: teacher (blue) and learned robot (red), "
-                         f"success {report['success_rate']:.0%}",
-                   spheres=policy.classifier if args.spheres else None, dims=dims)
+                         f"success {report['success_rate']:.0%}", **draw)
         print(f"wrote {args.plot}")
     return 0
