@@ -40,12 +40,15 @@ def test_the_map_draws_the_beacons_and_highlights_the_ones_in_view(env, browser)
     _open(browser, env["console"].url)
     canvas = browser.find_element("id", "view")
     eventually(lambda: canvas.get_attribute("data-beacons") == "1,2", 20, "the beacons drawn")
-    env["sim"].set_pose2d(6.5, 3.0, 0.0)  # facing the green beacon, id 2
-    eventually(lambda: _seen(browser) == "2", 20, "beacon 2 highlighted")
+    env["sim"].set_pose2d(6.5, 3.0, 0.0)  # facing the green beacon, id 2, a little to the left
+    # (from the start pose beacon 2 is in view too, to the right: the message of the new pose
+    # is the one whose bearing is positive)
+    eventually(lambda: browser.execute_script("return window.rhbl.view().seen"), 20,
+               "beacon 2 alone in view, a little to the left",
+               until=lambda seen: [i["id"] for i in seen] == [2] and seen[0]["bearing"] > 0)
+    assert _seen(browser) == "2"
     view = browser.execute_script("return window.rhbl.view()")
     assert [(b["id"], b["colour"]) for b in view["beacons"]] == [(1, "#dc2828"), (2, "#28aa3c")]
-    (item,) = view["seen"]
-    assert item["id"] == 2 and item["bearing"] > 0  # a little to the left
     env["sim"].set_pose2d(1.0, 3.0, 0.0)  # the partition hides beacon 2, beacon 1 behind
     eventually(lambda: _seen(browser) == "", 20, "none highlighted")
     env["sim"].set_pose2d(1.0, 3.0, math.pi)
