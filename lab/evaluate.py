@@ -218,7 +218,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seconds", type=arguments.seconds, default=None,
                         help=f"sim seconds per episode (default: the behaviour's time limit: "
                              f"{per_task(EVAL_SECONDS)})")
-    parser.add_argument("--seed", type=arguments.seed, default=0)
+    parser.add_argument("--seed", type=arguments.seed, default=0,
+                        help="episode k runs with seed SEED*1000+k (the noise; default 0)")
     parser.add_argument("--range-noise", type=arguments.non_negative_float, default=0.0,
                         help="laser noise (server option)")
     parser.add_argument("--odom-noise", type=arguments.non_negative_float, default=0.0,
