@@ -212,7 +212,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "as the baseline (a shipped behaviour's name, 'rhbl behaviours' "
                              "lists them, or a behaviour file); default: the world's")
     parser.add_argument("--tree", required=True, type=arguments.input_file,
-                        help="snapshot written by 'rhbl train'")
+                        help="the tree's snapshot (of rhbl train, rhbl learner, rhbl refine, ...)")
     parser.add_argument("--episodes", type=arguments.positive_int, default=None,
                         help="episodes, cycling over the world's start poses (default: one per pose)")
     parser.add_argument("--seconds", type=arguments.seconds, default=None,
