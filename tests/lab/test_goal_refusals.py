@@ -44,3 +44,21 @@ def test_refine_refuses_a_behaviour_with_goals(tmp_path):
 def test_a_wall_behaviour_is_still_taken():
     r = _rhbl("learner", "--behaviour", "wall-following", "--help")
     assert r.returncode == 0, r.stderr
+
+
+def test_evaluate_of_a_goal_tree_refuses_the_options_it_cannot_apply(tmp_path):
+    """Options rhbl evaluate has for one tree but not yet for a tree with goals are refused
+    by name (they were silently ignored), before any episode runs."""
+    import numpy as np
+
+    from client.behaviour.goals import GoalLearner, parse_goals
+    from lab.behaviours import get
+
+    b = get("red-green")
+    learner = GoalLearner(b.features, parse_goals({"beacons": [1, 2]}), task="red-green")
+    learner.observe(np.full(b.features.dim, 0.5), "fwd")
+    learner.observe_completion(np.array([0.5, 0.5]), True)
+    tree = learner.save(tmp_path / "goals.rhbl")
+    for extra in (["--workers", "2"], ["--guard-clearance", "0.1"], ["--no-guard-straight"]):
+        r = _rhbl("evaluate", "--tree", str(tree), "--world", "goals-red-green", *extra)
+        assert r.returncode == 2 and extra[0] in r.stderr and "with goals" in r.stderr, r.stderr
