@@ -91,7 +91,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", default=None, type=arguments.output_file,
                         help="also write them (or it) in full as JSON: name, summary, "
                              "perception (the feature spec), expert, worlds, starts, success "
-                             "rule, instructions")
+                             "rule, instructions, goals")
 
 
 def to_dict(b: Behaviour) -> dict:

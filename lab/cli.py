@@ -30,7 +30,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "console": ("client.roles.console", "a web page to watch, teach and correct the robot from a browser"),
     "behaviours": ("lab.behaviours", "list the behaviours a robot can be taught (or show one in full)"),
     "train": ("lab.train", "in-process: a scripted teacher demonstrates on a world, write a tree"),
-    "evaluate": ("lab.evaluate", "in-process: run a tree (and the teacher) from a world's start poses"),
+    "evaluate": ("lab.evaluate", "in simulation: run a tree (and the behaviour's scripted expert) from a world's start poses, judged by its success rule"),
     "compact": ("lab.compact", "make an existing tree smaller, keeping its behaviour on its data"),
     "refine": ("lab.refine", "improve a taught tree by practice in simulation, judged by its behaviour's success rule"),
     "experiment": ("lab.experiment", "repeat train-then-evaluate over seeds; the paper's Table I"),

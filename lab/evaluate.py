@@ -212,13 +212,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "as the baseline (a shipped behaviour's name, 'rhbl behaviours' "
                              "lists them, or a behaviour file); default: the world's")
     parser.add_argument("--tree", required=True, type=arguments.input_file,
-                        help="snapshot written by 'rhbl train'")
+                        help="the tree's snapshot (of rhbl train, rhbl learner, rhbl refine, ...)")
     parser.add_argument("--episodes", type=arguments.positive_int, default=None,
                         help="episodes, cycling over the world's start poses (default: one per pose)")
     parser.add_argument("--seconds", type=arguments.seconds, default=None,
                         help=f"sim seconds per episode (default: the behaviour's time limit: "
                              f"{per_task(EVAL_SECONDS)})")
-    parser.add_argument("--seed", type=arguments.seed, default=0)
+    parser.add_argument("--seed", type=arguments.seed, default=0,
+                        help="episode k runs with seed SEED*1000+k (the noise; default 0)")
     parser.add_argument("--range-noise", type=arguments.non_negative_float, default=0.0,
                         help="laser noise (server option)")
     parser.add_argument("--odom-noise", type=arguments.non_negative_float, default=0.0,
@@ -242,9 +243,16 @@ def _goals_main(args, spec: WorldSpec, policy, b: Behaviour | None) -> int:
     notes (when, which goal, the next one and why) and in the JSON report."""
     from lab.goals import evaluate_goals, format_goal_table, guarded
 
-    if args.range_noise or args.odom_noise or args.spheres:
-        raise ValueError("--range-noise, --odom-noise and --spheres are not for a behaviour "
-                         "with goals yet (docs/goals.md)")
+    given = [flag for flag, on in (
+        ("--range-noise", bool(args.range_noise)), ("--odom-noise", bool(args.odom_noise)),
+        ("--spheres", bool(args.spheres)), ("--workers", args.workers is not None),
+        ("--cluster", args.cluster is not None), ("--guard-hold", args.guard_hold is not None),
+        ("--guard-straight" if args.guard_straight else "--no-guard-straight",
+         args.guard_straight is not None),
+        ("--guard-clearance", args.guard_clearance is not None)) if on]
+    if given:
+        raise ValueError(f"{', '.join(given)}: not for a tree with goals yet (it is driven here, "
+                         "through the rule's guard or none: --guard/--no-guard; docs/goals.md)")
     b = get(policy.metadata.get("task")) if b is None else b
     on = args.guard is not False  # a goal behaviour's tree: through the guard unless --no-guard
     with record_run(args.record, "rhbl evaluate") as tap:

@@ -488,7 +488,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args) -> int:
     b = get(args.behaviour)
+    if b.goals is not None:
+        raise ValueError(f"behaviour {b.name!r} has goals in order ([goals]); "
+                         "refine practises one tree, not a tree with goals (docs/goals.md)")
     policy = TreePolicy.load(args.tree)
+    if "goals" in (policy.metadata or {}):
+        raise ValueError(f"{args.tree} holds a tree with goals in order; refine "
+                         "practises one tree, not a tree with goals (docs/goals.md)")
     raw = Path(args.tree).read_bytes()
     with practice.runner_from_args(args) as runner:
         clf, report = refine(b, policy, runner, max_nodes=args.max_nodes,

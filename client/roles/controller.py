@@ -71,7 +71,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_process_arguments(parser)
     src = parser.add_mutually_exclusive_group(required=True)
     src.add_argument("--tree", metavar="PATH", type=arguments.input_file,
-                     help="a snapshot written by the learner")
+                     help="a snapshot (of rhbl learner, rhbl train, rhbl refine, ...; a goal "
+                          "behaviour's with both its trees, docs/goals.md)")
     src.add_argument("--from-learner", action="store_true",
                      help="fetch the learner's latest snapshot with a zenoh query")
     parser.add_argument("--follow", action="store_true",

@@ -59,7 +59,7 @@ import time
 from collections import deque
 
 from client.behaviour.features import DEFAULT_FEATURES, FEATURES, FeatureError
-from client.behaviour.given import behaviour_arg
+from client.behaviour.given import reflex_arg
 from client.behaviour.spec import behaviour
 from client.behaviour.teaching import add_person_arguments
 from client.journal import JournalError, journal_path
@@ -140,7 +140,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "its nearest labels; client.behaviour.rule). A lineage keeps the "
                              "rule it was made with (its journal's header)")
     add_person_arguments(parser)
-    parser.add_argument("--behaviour", default=None, type=behaviour_arg, metavar="NAME|FILE",
+    parser.add_argument("--behaviour", default=None, type=reflex_arg, metavar="NAME|FILE",
                         help="learn this behaviour: its perception is the feature spec (a "
                              "file's inline one too) and its name the task in the metadata (a "
                              "shipped behaviour's name or a behaviour file; docs/behaviours.md); "

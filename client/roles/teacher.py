@@ -49,7 +49,7 @@ import time
 import numpy as np
 
 from client.behaviour.actions import DEFAULT_ACTIONS
-from client.behaviour.given import behaviour_arg
+from client.behaviour.given import reflex_arg
 from client.behaviour.policies import STYLES, TAKEOVER, Demonstrator, takes_over
 from client.behaviour.spec import behaviour
 from client.behaviour.tasks import TASKS, make_policy, task_of_teacher
@@ -85,7 +85,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--policy", choices=POLICIES, default=None,
                         help="scripted expert of a task, or keyboard teleop (default: "
                              "wall-follower, or the expert of --behaviour)")
-    parser.add_argument("--behaviour", default=None, type=behaviour_arg, metavar="NAME|FILE",
+    parser.add_argument("--behaviour", default=None, type=reflex_arg, metavar="NAME|FILE",
                         help="demonstrate this behaviour: its scripted expert with the "
                              "parameters of its file (a shipped behaviour's name or a "
                              "behaviour file; docs/behaviours.md); not with --policy")

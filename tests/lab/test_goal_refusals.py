@@ -1,0 +1,64 @@
+"""A behaviour with goals in order is taught by rhbl train/experiment and driven by rhbl
+controller; the processes that teach or learn one reflex over the bus, and rhbl refine, refuse
+it with one line naming what takes it (exit 2), before anything starts."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _rhbl(*args):
+    return subprocess.run([sys.executable, "-m", "lab.cli", *args], cwd=ROOT, capture_output=True,
+                          text=True, timeout=60)
+
+
+@pytest.mark.parametrize("argv", [
+    ("learner", "--behaviour", "red-green", "--out", "{tmp}/t.rhbl"),
+    ("teacher", "--behaviour", "patrol"),
+    ("console", "--behaviour", "remembered"),
+    ("demo", "--behaviour", "red-green", "--out", "{tmp}/demo"),
+])
+def test_a_process_of_one_reflex_refuses_a_behaviour_with_goals(argv, tmp_path):
+    r = _rhbl(*(a.format(tmp=tmp_path) for a in argv))
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert "has goals in order ([goals])" in r.stderr and "rhbl controller" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr
+    assert not any(tmp_path.iterdir())  # nothing written
+
+
+def test_refine_refuses_a_behaviour_with_goals(tmp_path):
+    tree = tmp_path / "t.rhbl"
+    tree.write_bytes(b"")
+    r = _rhbl("refine", "--behaviour", "red-green", "--tree", str(tree), "--out",
+              str(tmp_path / "t2.rhbl"))
+    assert r.returncode == 2 and "'red-green' has goals in order" in r.stderr, r.stderr
+    assert not (tmp_path / "t2.rhbl").exists()
+
+
+def test_a_wall_behaviour_is_still_taken():
+    r = _rhbl("learner", "--behaviour", "wall-following", "--help")
+    assert r.returncode == 0, r.stderr
+
+
+def test_evaluate_of_a_goal_tree_refuses_the_options_it_cannot_apply(tmp_path):
+    """Options rhbl evaluate has for one tree but not yet for a tree with goals are refused
+    by name (they were silently ignored), before any episode runs."""
+    import numpy as np
+
+    from client.behaviour.goals import GoalLearner, parse_goals
+    from lab.behaviours import get
+
+    b = get("red-green")
+    learner = GoalLearner(b.features, parse_goals({"beacons": [1, 2]}), task="red-green")
+    learner.observe(np.full(b.features.dim, 0.5), "fwd")
+    learner.observe_completion(np.array([0.5, 0.5]), True)
+    tree = learner.save(tmp_path / "goals.rhbl")
+    for extra in (["--workers", "2"], ["--guard-clearance", "0.1"], ["--no-guard-straight"]):
+        r = _rhbl("evaluate", "--tree", str(tree), "--world", "goals-red-green", *extra)
+        assert r.returncode == 2 and extra[0] in r.stderr and "with goals" in r.stderr, r.stderr
