@@ -178,6 +178,7 @@ def setup_logging(role: str, level: str = "INFO") -> None:
 # how often a stop signal is delivered again while the main thread has not unwound
 REDELIVER_S = 1.0
 _stopping = threading.Event()
+_redelivering = threading.Event()  # the stop signal's redelivery loop runs (``_raise_exit``)
 
 
 # a stop signal that lands in one of these is delivered again shortly instead of raised there:
@@ -213,13 +214,17 @@ def _deferred_here(frame) -> bool:
 
 
 def _raise_exit(signum, frame) -> None:
-    first = not _stopping.is_set()
     _stopping.set()
     if _deferred_here(frame):  # raised here it would be lost, or cut an uninterrupted block
         threading.Thread(target=_redeliver, args=(signum, DEFER_S, False), name="stop-signal",
                          daemon=True).start()
         return
-    if first:
+    # the first time it is raised (not the first signal: a deferred one was not raised), the
+    # signal is delivered again until acted on: before, a signal deferred once and then
+    # swallowed where it was raised left the process running (a server stopped during its
+    # start kept on until SIGKILL)
+    if not _redelivering.is_set():
+        _redelivering.set()
         threading.Thread(target=_redeliver, args=(signum,), name="stop-signal",
                          daemon=True).start()
     raise SystemExit(EXIT_OK)

@@ -120,9 +120,9 @@ def test_the_player_clients_fiducial_proxy(session):
         fid, laser = client.fiducial, client.laser
         assert isinstance(fid, FiducialProxy) and fid.count == 0 and fid.find(2) is None
         first = place(session, (6.5, 3.0, 0.0))
-        while True:
+        while True:  # a read pairs the scan with its tick's beacons once any came
             assert client.read(timeout=patience(5.0))
-            if laser.id >= first:
+            if laser.id >= first and fid.seq >= first:
                 break
         assert fid.seq == laser.id  # the beacons of the scan's own tick
         assert [i.id for i in fid.items] == [2] and len(fid) == 1
