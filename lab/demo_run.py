@@ -337,13 +337,17 @@ class Demo:
             self.rec = EpisodeCollector("r0", DEFAULT_ACTIONS, self.behaviour.band_side)
             writer = demo_recording(args.record, self.out, self.say)  # None without --record
             self.recording = None if writer is None else Path(writer.path)
-            self.tap = BusTap(session, [self.rec, *([writer] if writer else [])],
-                              world=writer is not None)  # one tap: episodes and the recording
+            # a tap each: a recording that falls behind (a loaded machine) never delays what
+            # the demo sees of its episodes
+            self.tap = BusTap(session, [self.rec], world=False)
+            recording = None if writer is None else BusTap(session, [writer], world=True)
             try:
                 return self._phases()
             finally:
                 self.tap.close()
-                say_demo_recording(self.tap, writer, self.say)
+                if recording is not None:
+                    recording.close()
+                    say_demo_recording(recording, writer, self.say)
 
     def _phases(self) -> int:
         args = self.args
