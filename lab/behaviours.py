@@ -50,11 +50,20 @@ def teaching_world(b: Behaviour) -> WorldSpec:
     return world_of(b, b.teach[0])
 
 
-def recipe_of(b: Behaviour) -> Recipe:
+def recipe_of(b: Behaviour, paper: bool = False) -> Recipe:
     """The behaviour's training recipe: the recipe of the same name (``lab.recipe.RECIPES``, the
-    published figures'), else wall following's; with the behaviour's perception, its first
-    teaching world (its demonstrations), its other teaching worlds (corrective rounds there
-    too: ``round_worlds``) and the fields its ``[recipe]`` table changes."""
+    paper's Table I scenarios'), else wall following's; with the behaviour's perception, its
+    first teaching world (its demonstrations), its other teaching worlds (corrective rounds
+    there too: ``round_worlds``) and the fields its ``[recipe]`` table changes.
+
+    ``paper``: the paper's scenario of that name as Table I was reproduced (``rhbl experiment
+    --paper``): the recipe of ``RECIPES`` alone, in its one world; BehaviourError for a
+    behaviour that is not one of the paper's two."""
+    if paper:
+        if b.name not in RECIPES:
+            raise BehaviourError(f"{b.path or b.name}: not one of the paper's scenarios (--paper "
+                                 f"goes with {' or '.join(RECIPES)})")
+        return RECIPES[b.name]
     base = RECIPES.get(b.name) or RECIPES["wall-following"]
     changes = {"round_worlds": b.teach[1:], **b.recipe}
     fields = {f.name for f in dataclasses.fields(Recipe)} - {"task", "world", "features"}

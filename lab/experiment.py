@@ -71,7 +71,7 @@ def run_trial(task: str | Behaviour, seed: int, recipe: Recipe | None = None, wo
            "height_before": rec.get("height_before", learner.height),
            "compaction": rec.get("method"),
            "vectors": learner.vectors, "train_wall_s": round(t_train, 2), "worlds": {}}
-    taught = [] if world is not None else [w for w in b.teach[1:] if w != recipe.world]
+    taught = [] if world is not None else [w for w in recipe.round_worlds if w != recipe.world]
     for w in [world or recipe.world, *taught, *eval_worlds]:
         wspec = world_of(b, str(w))
         rep = evaluate(wspec, tree, episodes=episodes, seconds=eval_seconds, seed=seed,
@@ -120,9 +120,10 @@ def _plain(recipe: Recipe) -> dict:
     return out
 
 
-def table_i(results: dict[str, dict]) -> str:
-    """The paper's Table I beside ours (markdown, ``lab.report``). When the recipe compacted
-    the trees: also the nodes and height before compaction (means), and per trial in notes."""
+def table_i(results: dict[str, dict], paper: bool = True) -> str:
+    """The paper's Table I beside ours (markdown, ``lab.report``; ``paper`` False: the trees
+    of the behaviours' own recipes, not the reproduction). When the recipe compacted the
+    trees: also the nodes and height before compaction (means), and per trial in notes."""
     compacted = any(r.get("compaction") for res in results.values() for r in res["rows"])
     rows = []
     for task, res in results.items():
@@ -142,8 +143,10 @@ def table_i(results: dict[str, dict]) -> str:
     before_cols = ["nodes before compaction", "height before compaction"] if compacted else []
     return table(["scenario", "paper nodes", "paper height", *before_cols, "our nodes",
                   "our height", "success (training world)"], rows,
-                 title="Table I. Spawned tree properties (paper vs this reproduction, mean +/- "
-                       "std over trials)", notes=notes)
+                 title="Table I. Spawned tree properties (paper vs "
+                       + ("this reproduction" if paper else "the behaviour's own recipe: "
+                          "--paper reproduces the paper's scenario")
+                       + ", mean +/- std over trials)", notes=notes)
 
 
 def format_worlds(res: dict) -> str:
@@ -190,6 +193,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="extra evaluation world (repeatable); default: the behaviour's "
                              "held-out worlds; 'none' for none")
     parser.add_argument("--teacher", choices=sorted(TEACHERS), default="reactive")
+    parser.add_argument("--paper", action="store_true",
+                        help="the paper's scenario as its Table I was reproduced (wall-following "
+                             "and maze): the recipe and the one teaching world of lab.recipe."
+                             "RECIPES, without the behaviour file's other teaching worlds and "
+                             "[recipe] changes")
     add_recipe_arguments(parser, seconds="--train-seconds")
     parser.add_argument("--range-noise", type=arguments.non_negative_float, default=0.0)
     parser.add_argument("--odom-noise", type=arguments.non_negative_float, default=0.0)
@@ -202,7 +210,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _goal_experiment(b: Behaviour, args, ev: list[str]) -> dict:
     from lab.goals import goal_experiment_table, run_goal_trial
 
-    recipe = recipe_from_args(recipe_of(b), args)
+    recipe = recipe_from_args(recipe_of(b, args.paper), args)
     if args.world:
         recipe = recipe.replace(world=args.world)
     rows = [run_goal_trial(b, args.seed + i, recipe, [recipe.world, *ev], episodes=args.episodes)
@@ -224,8 +232,9 @@ def main(args) -> int:
         if task.goals is not None:  # goals in order: beside the reactive tree (lab.goals)
             results[task.name] = _goal_experiment(task, args, ev)
             continue
-        res = run_experiment(task, trials=args.trials, seed0=args.seed,
-                             recipe=recipe_from_args(recipe_of(task), args), world=args.world,
+        recipe = recipe_from_args(recipe_of(task, args.paper), args)
+        res = run_experiment(task, trials=args.trials, seed0=args.seed, recipe=recipe,
+                             world=args.world,
                              eval_seconds=args.seconds, episodes=args.episodes, eval_worlds=ev,
                              teacher=args.teacher, range_noise=args.range_noise,
                              odom_noise=args.odom_noise, train_noise=args.train_noise)
@@ -235,7 +244,7 @@ def main(args) -> int:
     print()
     paper = {k: v for k, v in results.items() if "summary" in v}
     if paper:
-        print(table_i(paper))
+        print(table_i(paper, args.paper))
     print(f"({time.perf_counter() - t0:.0f} s)")
     if args.json:
         files.write_text(args.json, json.dumps(results, indent=1), "--json")

@@ -11,7 +11,8 @@ One training run (``lab.harness.train``): demonstrations from the ``starts`` pos
 ``segment`` seconds (or until the goal), then from sampled poses (``random_segment`` x
 ``segment`` each) until ``seconds`` of sim time are used; then ``rounds`` corrective (DAgger)
 rounds of ``round_seconds`` per start pose, first in each of ``round_worlds`` (and its scaled copies),
-then in copies of the world scaled by each of ``round_scales``, each round also from
+then in ``round_generated`` randomised worlds (``lab.generated``), then in copies of the world
+scaled by each of ``round_scales``, each round also from
 ``round_free`` random free-space poses; last, the
 ``compact`` step (also after the demonstrations and after every round with ``compact_rounds``;
 redone against held-out visited states with ``compact_visits``).
@@ -43,6 +44,7 @@ __all__ = [
 ]
 
 STARTS = ("default", "world", "free")
+GENERATORS = ("rooms", "mazes", "clutter")  # lab.generated's kinds
 SPAWN = ("all", "winner")
 DISTANCE = ("squared", "euclidean")
 TREE_PARAMS = ("spawn", "distance", "min_radius", "max_nodes", "max_depth")
@@ -85,6 +87,11 @@ class Recipe:
     # worlds, ``lab.behaviours.recipe_of``), each from its own start poses and in its copies
     # scaled by ``round_scales``, before the training world's
     round_worlds: tuple[str, ...] = ()
+    # corrective rounds also in this many randomised worlds of the kind ``generator`` names
+    # (``lab.generated``: "rooms", "mazes", "clutter"; domain randomisation), drawn from the
+    # training seed, each from its own start poses, after ``round_worlds``
+    round_generated: int = 0
+    generator: str = "rooms"
     # scale augmentation: each labelled state offered again with the scan scaled
     augment: int = 0
     augment_scale: float = 1.3
@@ -131,7 +138,8 @@ class Recipe:
                 raise bad(name, "a finite number >= 0")
         if not self.perturb <= 1:
             raise bad("perturb", "a fraction in [0, 1]")
-        for name in ("rounds", "round_free", "augment", "compact_visits", "visit_free"):
+        for name in ("rounds", "round_free", "augment", "compact_visits", "visit_free",
+                     "round_generated"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise bad(name, "an integer >= 0")
@@ -154,6 +162,8 @@ class Recipe:
         if (n is not None or e is not None) and not self.compact.startswith("prune"):
             raise ValueError(f"recipe compact_max_nodes/compact_max_error apply to compact "
                              f"'prune' or 'prune-balanced' only, got compact {self.compact!r}")
+        if self.generator not in GENERATORS:
+            raise bad("generator", f"one of {', '.join(GENERATORS)}")
         worlds = self.round_worlds
         if isinstance(worlds, str) or not all(isinstance(w, str) and w for w in worlds):
             raise bad("round_worlds", "a list of world names or paths")
@@ -191,8 +201,11 @@ class Recipe:
         return out
 
     def for_demo(self) -> Recipe:
-        """The recipe ``rhbl demo`` runs over zenoh (this one with the task's ``DEMO`` changes)."""
-        return self.replace(**DEMO.get(self.task, {}))
+        """The recipe ``rhbl demo`` runs over zenoh: this one with the task's ``DEMO`` changes,
+        less what one server in one world cannot run (rounds in scaled copies, in other or
+        randomised worlds, from free-space poses)."""
+        return self.replace(round_scales=(), round_free=0, round_worlds=(), round_generated=0,
+                            **DEMO.get(self.task, {}))
 
 
 # The default recipe per task (docs/experiments.md "Current recipe" has the measurements
@@ -213,8 +226,9 @@ RECIPES: dict[str, Recipe] = {
 # What ``rhbl demo`` changes for its time budget (about two minutes on a shared 2-core machine):
 # the maze runs 4 corrective rounds instead of 6 (``--rounds 6`` for the recipe's). The demo
 # also leaves out, by construction (one server serves one world, the demo teleports only to
-# its start poses): rounds in scaled copies, rounds from free-space poses and the wall
-# following's demonstrations from free-space poses; each start pose demonstrates ``segment``.
+# its start poses): rounds in scaled copies, in other teaching worlds and in randomised worlds,
+# rounds from free-space poses and the wall following's demonstrations from free-space poses;
+# each start pose demonstrates ``segment``.
 DEMO: dict[str, dict] = {"maze": {"rounds": 4}}
 
 # Sim seconds of one evaluation episode per task (``rhbl evaluate``, the demo's final drives).
@@ -307,6 +321,11 @@ _FLAGS: list[tuple[str, str, dict, str]] = [
      "sim seconds per start pose in each corrective round"),
     ("--round-free", "round_free", {"type": arguments.non_negative_int},
      "corrective rounds also drive from this many random free-space poses"),
+    ("--round-generated", "round_generated", {"type": arguments.non_negative_int},
+     "corrective rounds also in this many randomised worlds of --generator (domain "
+     "randomisation, lab.generated), drawn from the seed"),
+    ("--generator", "generator", {"choices": list(GENERATORS)},
+     "the kind of randomised world of --round-generated"),
     ("--takeover", "takeover", {"type": arguments.non_negative_float},
      "in corrective rounds the teacher drives while a beam is closer than this (m; 0 = never)"),
     ("--augment", "augment", {"type": arguments.non_negative_int},

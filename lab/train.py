@@ -38,6 +38,7 @@ from lab.behaviours import (
     world_of,
 )
 from lab.episode import DT, Episode
+from lab.generated import generated
 from lab.harness import (
     OnStep,
     demonstration_starts,
@@ -107,9 +108,11 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
     demo_vectors = ep.learned
     rounds = 0 if start is not None else recipe.rounds  # a corrective demonstration: no rounds
     others = [world_of(b, w) for w in recipe.round_worlds] if rounds else []
+    drawn = generated(recipe.generator, recipe.round_generated if rounds else 0, seed,
+                      b.band_side or "right")
     round_stats, between = _rounds(spec, learner, policy, fixed, recipe, rounds, compact, ep,
                                    rng=rng, aug=aug, seed=seed, noise=noise, on_step=on_step,
-                                   record=recorded(b), others=others)
+                                   record=recorded(b), others=others, drawn=drawn)
     compaction = _last_compaction(spec, learner, recipe, compact, seed, policy, on_step, b)
     ep.wall_time = time.perf_counter() - t0
     learner.session = _session_record(
@@ -190,10 +193,11 @@ def _demonstration_start(spec: WorldSpec, recipe: Recipe, fixed: list, segment: 
 def _rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, fixed: list, recipe: Recipe,
             rounds: int, compact: dict | None, ep: Episode, *, rng, aug, seed: int,
             noise: tuple[float, float], on_step: OnStep | None = None,
-            record: dict | None = None, others: list[WorldSpec] = ()
-            ) -> tuple[list[dict], list[dict]]:
+            record: dict | None = None, others: list[WorldSpec] = (),
+            drawn: list[WorldSpec] = ()) -> tuple[list[dict], list[dict]]:
     """The corrective rounds of ``train``: in each of ``others`` (``recipe.round_worlds``, from
-    their own start poses) and its copies scaled by ``recipe.round_scales``, then in each copy of
+    their own start poses) and its copies scaled by ``recipe.round_scales``, then in each of
+    ``drawn`` (randomised worlds, ``lab.generated``: of every size already), then in each copy of
     the training world so scaled, then in the training world (its corrections are the latest);
     with ``recipe.compact_rounds`` the tree is compacted after the demonstrations and after
     every round but the last. Returns the rounds' statistics and the compactions between
@@ -205,7 +209,7 @@ def _rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, fixed: list,
     after_round = None
     if compact is not None and recipe.compact_rounds:
         between.append(learner.compact(**compact, data="after the demonstrations"))
-        todo = [rounds * (len(recipe.round_scales) + 1) * (len(others) + 1)]  # rounds left
+        todo = [rounds * ((len(recipe.round_scales) + 1) * (len(others) + 1) + len(drawn))]
 
         def after_round(where: str) -> bool:  # every round but the last (whose compaction
             todo[0] -= 1                      # is the last step)
@@ -221,6 +225,11 @@ def _rounds(spec: WorldSpec, learner: DemonstrationLearner, policy, fixed: list,
                                          after_round=after_round, scale=f, on_step=on_step,
                                          record=record):
                 round_stats.append(dict(st, scale=f, world=other.name))
+    for w in drawn:
+        for st in _corrective_rounds(w, learner, policy, w.start_poses, recipe, seed,
+                                     range_noise, odom_noise, ep, rng=rng, aug=aug,
+                                     after_round=after_round, on_step=on_step, record=record):
+            round_stats.append(dict(st, world=w.name))
     for f in recipe.round_scales:
         scaled = spec.scaled(f)
         for st in _corrective_rounds(scaled, learner, policy, scaled.start_poses, recipe,
@@ -270,6 +279,8 @@ def _session_record(spec: WorldSpec, recipe: Recipe, ep: Episode, *, seed: int, 
             "round_scales": list(recipe.round_scales) if rounds else None,
             "round_worlds": list(recipe.round_worlds) if rounds and recipe.round_worlds
             else None,
+            "round_generated": ({"worlds": recipe.round_generated, "kind": recipe.generator}
+                                if rounds and recipe.round_generated else None),
             "augment": augment,
             "augment_scale": recipe.augment_scale if augment else None,
             "range_noise": noise[0], "odom_noise": noise[1],

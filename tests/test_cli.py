@@ -146,5 +146,7 @@ def test_demo_help_says_the_values_the_demo_uses(tmp_path):
                 "--round-seconds": demo.round_seconds, "--drive-seconds": demo.drive}
         for flag, value in used.items():
             assert shown[flag][k] == value, (task, flag)
-        assert demo.scenario.recipe == RECIPES[task].replace(**DEMO.get(task, {}))
+        assert demo.scenario.recipe == RECIPES[task].for_demo()
+        assert demo.scenario.recipe.rounds == DEMO.get(task, {}).get("rounds", RECIPES[task].rounds)
+        assert demo.scenario.recipe.round_scales == () == demo.scenario.recipe.round_worlds
         assert demo.drive == EVAL_SECONDS[task] and demo.spec.name == RECIPES[task].world

@@ -1,0 +1,276 @@
+"""Randomised teaching worlds (domain randomisation): rooms, tiered mazes and cluttered rooms
+drawn at random from a seed, for corrective rounds in worlds nobody drew, so that what a tree
+is taught does not hang on the few shapes of its teaching worlds.
+
+    spec = generate("rooms", rng, side="right")   # a server.world.WorldSpec, in memory
+    specs = generated("rooms", 4, seed)           # a training run's: the same for the same seed
+    rhbl generate rooms --count 8 --seed 1000 --out my-worlds/   # as world files, to evaluate on
+
+A behaviour asks for them in its file (``[recipe] round_generated = 6`` and ``generator =
+"rooms"``); ``lab.train`` runs its corrective rounds in each, from the world's own start poses,
+after its other teaching worlds. The kinds, each a family of shapes with the sizes drawn
+uniformly from the ranges below (no range was chosen on a held-out world):
+
+* ``rooms``: a rectangle of 8-14 x 6-10 m whose sides carry up to two features each, an alcove
+  (1.2-2.2 m wide, 0.6-2.0 m deep), a protrusion (0.8-2.0 m wide, 0.3-1.2 m deep) or a
+  sawtooth, and whose corners may be cut diagonally (0.5-1.5 m); one room in two has an
+  island, leaving a corridor of 1.4-2.6 m round it. Start poses 0.7 m from a wall, the wall on
+  the side the behaviour follows.
+* ``mazes``: 3-5 tiers of 1.7-2.6 m by 7-11 m, openings of 1.0-1.5 m at alternating ends, the
+  first at either end; the goal at the far end of the last tier.
+* ``clutter``: a room of 8-13 x 6-10 m with 3-6 boxes (0.4-2.4 m sides, some turned) and 2-4
+  pillars (0.3-0.6 m), at least 1.2 m from each other and from the walls.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+import numpy as np
+
+from process import arguments, files
+from server.world import WorldSpec, parse_world
+
+__all__ = ["KINDS", "add_arguments", "draw", "generate", "generated", "main", "to_toml"]
+
+KINDS = ("rooms", "mazes", "clutter")
+CLEAR = 0.7  # m from a wall to a start pose
+
+
+def _u(rng, lo, hi) -> float:
+    return float(rng.uniform(lo, hi))
+
+
+def _side_features(rng, length: float, inward_room: float) -> list[tuple[float, float, str, float]]:
+    """Features along one side: (start, width, kind, depth), sorted, 1.2 m from its ends and
+    1.5 m from each other."""
+    out: list[tuple[float, float, str, float]] = []
+    for _ in range(int(rng.integers(0, 3))):
+        kind = str(rng.choice(["alcove", "protrusion", "teeth"]))
+        if kind == "alcove":
+            w, d = _u(rng, 1.2, 2.2), _u(rng, 0.6, 2.0)
+        elif kind == "protrusion":
+            w, d = _u(rng, 0.8, 2.0), min(_u(rng, 0.3, 1.2), inward_room)
+        else:
+            w, d = 2.0 * int(rng.integers(1, 3)) * _u(rng, 0.4, 0.6), _u(rng, 0.3, 0.6)
+        lo, hi = 1.2, length - 1.2 - w
+        if hi <= lo:
+            continue
+        s = _u(rng, lo, hi)
+        if all(s + w + 1.5 <= a or a + b + 1.5 <= s for a, b, _, _ in out):
+            out.append((s, w, kind, d))
+    return sorted(out)
+
+
+def _room(rng, side: str) -> dict:
+    w, h = _u(rng, 8.0, 14.0), _u(rng, 6.0, 10.0)
+    island = rng.random() < 0.5
+    gap = _u(rng, 1.4, 2.6)
+    inward = (gap - 1.0) if island else min(w, h) / 4
+    corners = [(0.0, 0.0), (w, 0.0), (w, h), (0.0, h)]
+    cuts = [(_u(rng, 0.5, 1.5) if rng.random() < 0.4 else 0.0) for _ in corners]
+    pts: list[tuple[float, float]] = []
+    starts = []
+    for k in range(4):  # counter-clockwise: the wall is on a robot's right going this way
+        a, b = np.array(corners[k]), np.array(corners[(k + 1) % 4])
+        length = float(np.linalg.norm(b - a))
+        d = (b - a) / length
+        n = np.array([-d[1], d[0]])  # inward
+        c0, c1 = cuts[k], cuts[(k + 1) % 4]
+        pts.append(tuple(a + d * c0))
+        feats = [f for f in _side_features(rng, length, inward) if f[0] > c0 + 0.3
+                 and f[0] + f[1] < length - c1 - 0.3]
+        for s, fw, kind, depth in feats:
+            if kind == "teeth":
+                teeth = max(1, round(fw / (2 * 0.5)))
+                step = fw / (2 * teeth)
+                for t in range(2 * teeth + 1):
+                    off = depth if t % 2 else 0.0
+                    pts.append(tuple(a + d * (s + t * step) + n * off))
+                continue
+            sign = -1.0 if kind == "alcove" else 1.0
+            pts += [tuple(a + d * s), tuple(a + d * s + n * sign * depth),
+                    tuple(a + d * (s + fw) + n * sign * depth), tuple(a + d * (s + fw))]
+        # a start on the longest stretch of this side free of features, 0.7 m off the wall
+        edges = [c0 + 0.3] + [x for s, fw, _, _ in feats for x in (s, s + fw)] + [length - c1 - 0.3]
+        spans = [(edges[i], edges[i + 1]) for i in range(0, len(edges), 2)]
+        lo, hi = max(spans, key=lambda p: p[1] - p[0])
+        if hi - lo >= 1.0:
+            p = a + d * (lo + 0.5 * (hi - lo)) + n * CLEAR
+            yaw = math.atan2(d[1], d[0]) if side == "right" else math.atan2(-d[1], -d[0])
+            starts.append([round(float(p[0]), 3), round(float(p[1]), 3), round(yaw, 4)])
+        if c1 > 0:
+            pts.append(tuple(b - d * c1))
+    walls = [{"closed": True, "points": [[round(x, 3), round(y, 3)] for x, y in _dedup(pts)]}]
+    if island:
+        x0, y0, x1, y1 = gap, gap, w - gap, h - gap
+        if x1 - x0 >= 1.0 and y1 - y0 >= 1.0:
+            walls.append({"closed": True, "points": [[round(x, 3), round(y, 3)] for x, y in
+                                                     ((x0, y0), (x1, y0), (x1, y1), (x0, y1))]})
+    return {"robot": {"pose": starts[0], "starts": starts[1:]}, "walls": walls}
+
+
+def _dedup(pts):
+    out = []
+    for p in pts:
+        if not out or math.dist(out[-1], p) > 1e-6:
+            out.append(p)
+    if len(out) > 1 and math.dist(out[0], out[-1]) <= 1e-6:
+        out.pop()
+    return out
+
+
+def _maze(rng, side: str) -> dict:
+    tiers = int(rng.integers(3, 6))
+    th, w, gap = _u(rng, 1.7, 2.6), _u(rng, 7.0, 11.0), _u(rng, 1.0, 1.5)
+    first_right = bool(rng.random() < 0.5)
+    walls = [{"closed": True, "points": [[0, 0], [round(w, 3), 0], [round(w, 3), round(tiers * th, 3)],
+                                         [0, round(tiers * th, 3)]]}]
+    for k in range(1, tiers):
+        right = first_right if k % 2 == 1 else not first_right
+        y = round(k * th, 3)
+        walls.append({"points": [[0, y], [round(w - gap, 3), y]] if right
+                      else [[round(gap, 3), y], [round(w, 3), y]]})
+    last_right = first_right if (tiers - 1) % 2 == 1 else not first_right  # last opening's end
+    # the last tier is entered at that end: the goal at the other
+    gx = 1.0 if last_right else w - 1.0
+    y0 = th / 2
+    starts = [[1.5, round(y0 - 0.3, 3), 0.0], [1.5, round(y0 + 0.3, 3), 0.0],
+              [2.5, round(y0, 3), 0.3], [2.5, round(y0, 3), -0.3]]
+    return {"robot": {"pose": [1.0, round(y0, 3), 0.0], "starts": starts}, "walls": walls,
+            "goal": {"center": [round(gx, 3), round((tiers - 0.5) * th, 3)], "radius": 0.75}}
+
+
+def _clutter(rng, side: str) -> dict:
+    w, h = _u(rng, 8.0, 13.0), _u(rng, 6.0, 10.0)
+    walls = [{"closed": True, "points": [[0, 0], [round(w, 3), 0], [round(w, 3), round(h, 3)],
+                                         [0, round(h, 3)]]}]
+    shapes: list[tuple[float, float, float]] = []  # centre and radius of what is placed
+    want = int(rng.integers(3, 7)) + int(rng.integers(2, 5))
+    for _ in range(200):
+        if len(shapes) >= want:
+            break
+        pillar = len(shapes) >= want - 2
+        if pillar:
+            r = _u(rng, 0.15, 0.3)
+            a = b = r
+        else:
+            a, b = _u(rng, 0.2, 1.2), _u(rng, 0.2, 1.2)
+            r = math.hypot(a, b)
+        cx, cy = _u(rng, 1.2 + r, w - 1.2 - r), _u(rng, 1.2 + r, h - 1.2 - r)
+        if any(math.hypot(cx - x, cy - y) < r + q + 1.2 for x, y, q in shapes):
+            continue
+        shapes.append((cx, cy, r))
+        if pillar:
+            pts = [[cx + r * math.cos(t * math.tau / 8), cy + r * math.sin(t * math.tau / 8)]
+                   for t in range(8)]
+        else:
+            t = _u(rng, 0, math.pi) if rng.random() < 0.3 else 0.0
+            c, s = math.cos(t), math.sin(t)
+            pts = [[cx + c * x - s * y, cy + s * x + c * y]
+                   for x, y in ((-a, -b), (a, -b), (a, b), (-a, b))]
+        walls.append({"closed": True, "points": [[round(x, 3), round(y, 3)] for x, y in pts]})
+    starts = []
+    for _ in range(400):
+        if len(starts) >= 5:
+            break
+        x, y = _u(rng, 0.8, w - 0.8), _u(rng, 0.8, h - 0.8)
+        if all(math.hypot(x - sx, y - sy) > q + 0.8 for sx, sy, q in shapes):
+            starts.append([round(x, 3), round(y, 3), round(_u(rng, -math.pi, math.pi), 4)])
+    return {"robot": {"pose": starts[0], "starts": starts[1:]}, "walls": walls}
+
+
+_MAKERS = {"rooms": _room, "mazes": _maze, "clutter": _clutter}
+
+
+def draw(kind: str, rng: np.random.Generator, side: str = "right",
+         name: str = "generated") -> tuple[dict, WorldSpec]:
+    """One randomised world of ``kind`` (``KINDS``) drawn with ``rng``, as the mapping a world
+    file holds and as the world; start poses with the wall on the robot's ``side`` (rooms).
+    Drawn again (up to 20 times) when a draw does not make a valid world."""
+    if kind not in _MAKERS:
+        raise ValueError(f"generator must be one of {', '.join(KINDS)}, got {kind!r}")
+    if side not in ("left", "right"):
+        raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+    last: Exception | None = None
+    for _ in range(20):
+        try:
+            data = {"name": name, **_MAKERS[kind](rng, side)}
+            return data, parse_world(data, source=name)
+        except (ValueError, IndexError) as exc:  # no start pose, or one too near a wall
+            last = exc
+    raise ValueError(f"no valid {kind} world in 20 draws: {last}")
+
+
+def generate(kind: str, rng: np.random.Generator, side: str = "right",
+             name: str = "generated") -> WorldSpec:
+    """One randomised world (``draw``'s world)."""
+    return draw(kind, rng, side, name)[1]
+
+
+def _rng(seed: int) -> np.random.Generator:
+    return np.random.default_rng([seed, 0x5EED])
+
+
+def generated(kind: str, count: int, seed: int, side: str = "right") -> list[WorldSpec]:
+    """``count`` randomised worlds of ``kind`` for the training run of ``seed`` (the same worlds
+    for the same seed, here and in ``rhbl generate``), named ``<kind>-<seed>-<i>``."""
+    rng = _rng(seed)
+    return [generate(kind, rng, side, name=f"{kind}-{seed}-{i}") for i in range(count)]
+
+
+def to_toml(data: dict) -> str:
+    """A drawn world (``draw``'s mapping) as a world file (docs/protocol.md section 10)."""
+    def vec(v) -> str:
+        return "[" + ", ".join(vec(x) if isinstance(x, list | tuple) else f"{x:g}"
+                               for x in v) + "]"
+
+    robot = data["robot"]
+    out = ["# drawn by rhbl generate (lab.generated), not by hand",
+           f'name = "{data["name"]}"', "", "[robot]", f"pose = {vec(robot['pose'])}",
+           f"starts = {vec(robot['starts'])}"]
+    for w in data["walls"]:
+        out += ["", "[[walls]]"] + (["closed = true"] if w.get("closed") else []) + [
+            f"points = {vec(w['points'])}"]
+    if data.get("goal"):
+        g = data["goal"]
+        out += ["", "[goal]", f"center = {vec(g['center'])}", f"radius = {g['radius']:g}"]
+    return "\n".join(out) + "\n"
+
+
+# ------------------------------------------------------------------------------ the command
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("kind", choices=list(KINDS),
+                        help="rooms (walls to follow), mazes (tiered, with a goal) or clutter "
+                             "(boxes and pillars to wander among)")
+    parser.add_argument("--count", type=arguments.positive_int, default=8)
+    parser.add_argument("--seed", type=arguments.seed, default=0,
+                        help="the same seed draws the same worlds (a training run of seed S "
+                             "with round_generated = N is taught in the first N of seed S)")
+    parser.add_argument("--side", choices=["right", "left"], default="right",
+                        help="rooms: the start poses have the wall on the robot's right or left")
+    parser.add_argument("--out", required=True, type=arguments.output_folder,
+                        help="the folder to write KIND-SEED-I.toml into (made if missing; an "
+                             "existing file of that name is not replaced)")
+
+
+def main(args) -> int:
+    out = Path(args.out)
+    rng = _rng(args.seed)
+    drawn = [draw(args.kind, rng, args.side, f"{args.kind}-{args.seed}-{i}")[0]
+             for i in range(args.count)]
+    for data in drawn:
+        path = out / f"{data['name']}.toml"
+        try:
+            fd = files.open_output(path, overwrite=False, what="--out")
+        except FileExistsError:
+            raise ValueError(f"--out: {path} exists (not replaced): give another folder or "
+                             "--seed") from None
+        with open(fd, "w", encoding="utf-8") as f:
+            f.write(to_toml(data))
+        print(f"wrote {path}")
+    return 0

@@ -1,0 +1,103 @@
+"""Randomised teaching worlds (``lab.generated``, ``rhbl generate``, the recipe's
+``round_generated``) and the paper's scenario kept apart from a behaviour's own recipe
+(``rhbl experiment --paper``)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from lab.behaviours import get, recipe_of
+from lab.cli import main
+from lab.generated import KINDS, generated
+from lab.harness import make_learner, resolve_world
+from lab.recipe import RECIPES
+from lab.train import train
+from server.world import World, load_world
+
+
+def _side_of_nearest_wall(spec, pose) -> float:
+    """> 0: the nearest wall point is on the robot's left, < 0: on its right."""
+    x, y, yaw = pose
+    best, sign = math.inf, 0.0
+    for x0, y0, x1, y1 in spec.segments():
+        dx, dy = x1 - x0, y1 - y0
+        t = max(0.0, min(1.0, ((x - x0) * dx + (y - y0) * dy) / (dx * dx + dy * dy)))
+        px, py = x0 + t * dx, y0 + t * dy
+        d = math.hypot(px - x, py - y)
+        if d < best:
+            best = d
+            sign = math.cos(yaw) * (py - y) - math.sin(yaw) * (px - x)
+    return sign
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_the_same_seed_draws_the_same_valid_worlds(kind):
+    a, b = generated(kind, 3, seed=7), generated(kind, 3, seed=7)
+    assert [w.walls for w in a] == [w.walls for w in b]
+    assert [w.name for w in a] == [f"{kind}-7-{i}" for i in range(3)]
+    assert a[0].walls != generated(kind, 1, seed=8)[0].walls
+    for spec in a:
+        assert len(spec.start_poses) >= 2
+        world = World(spec, robots=1, seed=0)
+        for pose in spec.start_poses:
+            assert spec.inside(pose[0], pose[1]) and spec.clearance(pose[0], pose[1]) > 0.45
+            world.reset(poses=[pose])
+            assert float(np.min(world.scan(0))) > 0.3  # in the free space, walls in view
+        if kind == "mazes":
+            assert spec.goal is not None and spec.inside(*spec.goal.center)
+
+
+@pytest.mark.parametrize("side", ["right", "left"])
+def test_room_starts_have_the_wall_on_the_side_asked(side):
+    for spec in generated("rooms", 4, seed=3, side=side):
+        for pose in spec.start_poses:
+            s = _side_of_nearest_wall(spec, pose)
+            assert (s < 0) if side == "right" else (s > 0), (spec.name, pose)
+            assert spec.clearance(pose[0], pose[1]) == pytest.approx(0.7, abs=0.05)
+
+
+def test_rhbl_generate_writes_world_files_it_does_not_replace(tmp_path, capsys):
+    out = tmp_path / "worlds"
+    assert main(["generate", "mazes", "--count", "2", "--seed", "5", "--out", str(out)]) == 0
+    files = sorted(out.glob("*.toml"))
+    assert [f.name for f in files] == ["mazes-5-0.toml", "mazes-5-1.toml"]
+    for f, spec in zip(files, generated("mazes", 2, seed=5), strict=True):
+        loaded = load_world(f)
+        assert loaded.name == spec.name and loaded.goal == spec.goal
+        assert loaded.start_poses == spec.start_poses
+        assert np.allclose(loaded.segments(), spec.segments(), atol=1e-3)
+    before = files[0].read_text()
+    capsys.readouterr()
+    assert main(["generate", "mazes", "--count", "2", "--seed", "5", "--out", str(out)]) == 2
+    assert "mazes-5-0.toml exists (not replaced)" in capsys.readouterr().err
+    assert files[0].read_text() == before
+    with pytest.raises(SystemExit) as exc:
+        main(["generate", "hills", "--out", str(out)])
+    assert exc.value.code == 2 and "invalid choice: 'hills'" in capsys.readouterr().err
+
+
+def test_corrective_rounds_in_generated_worlds():
+    spec = resolve_world("room")
+    learner = make_learner("wall-following")
+    recipe = RECIPES["wall-following"].replace(seconds=10, rounds=1, round_seconds=2,
+                                               round_generated=2, generator="rooms")
+    train(spec, learner, recipe, seed=4, behaviour=get("wall-following"))
+    worlds = [s.get("world") for s in learner.session["round_stats"]]
+    assert worlds == ["rooms-4-0", "rooms-4-1", None]
+    assert learner.session["round_generated"] == {"worlds": 2, "kind": "rooms"}
+    with pytest.raises(ValueError, match="generator"):
+        recipe.replace(generator="hills")
+    with pytest.raises(ValueError, match="round_generated"):
+        recipe.replace(round_generated=-1)
+
+
+def test_the_paper_scenario_is_kept_apart_from_the_behaviour_recipe(tmp_path, capsys):
+    wall = get("wall-following")
+    assert recipe_of(wall, paper=True) == RECIPES["wall-following"]
+    assert recipe_of(get("maze"), paper=True) == RECIPES["maze"]
+    assert recipe_of(wall, paper=True).round_worlds == ()
+    with pytest.raises(ValueError, match="not one of the paper's scenarios"):
+        recipe_of(get("wandering"), paper=True)
+    assert main(["experiment", "wandering", "--paper", "--trials", "1"]) == 2
+    assert "--paper goes with wall-following or maze" in capsys.readouterr().err
