@@ -22,8 +22,8 @@ from process import arguments, files
 from server import world_path
 from server.world import WorldSpec, load_world
 
-__all__ = ["add_arguments", "behaviour_arg", "behaviour_for_world", "describe", "get", "main",
-           "recipe_of", "teaching_world", "to_dict", "world_of"]
+__all__ = ["add_arguments", "add_paper_argument", "behaviour_arg", "behaviour_for_world",
+           "describe", "get", "main", "recipe_of", "teaching_world", "to_dict", "world_of"]
 
 
 def get(name_or_path: str | Path | Behaviour) -> Behaviour:
@@ -78,6 +78,15 @@ def recipe_of(b: Behaviour, paper: bool = False) -> Recipe:
                             features=b.perception or b.features, **changes)
     except (TypeError, ValueError) as exc:
         raise BehaviourError(f"{b.path or b.name}: field 'recipe': {exc}") from None
+
+
+def add_paper_argument(parser: argparse.ArgumentParser) -> None:
+    """``--paper``: the paper's scenario instead of the behaviour's own recipe (``recipe_of``)."""
+    parser.add_argument("--paper", action="store_true",
+                        help="the paper's scenario as its Table I was reproduced (wall-following "
+                             "and maze): the recipe and the one teaching world of lab.recipe."
+                             "RECIPES, without the behaviour file's other teaching worlds and "
+                             "[recipe] changes (randomised rooms, free-space poses)")
 
 
 def behaviour_for_world(spec: WorldSpec, hint: str | None = None) -> Behaviour:

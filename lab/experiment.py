@@ -23,7 +23,7 @@ import time
 from client.behaviour.learning import TreePolicy
 from client.behaviour.spec import Behaviour
 from lab import metrics
-from lab.behaviours import behaviour_arg, get, recipe_of, world_of
+from lab.behaviours import add_paper_argument, behaviour_arg, get, recipe_of, world_of
 from lab.evaluate import evaluate
 from lab.harness import make_learner
 from lab.recipe import Recipe, add_recipe_arguments, recipe_from_args
@@ -193,11 +193,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="extra evaluation world (repeatable); default: the behaviour's "
                              "held-out worlds; 'none' for none")
     parser.add_argument("--teacher", choices=sorted(TEACHERS), default="reactive")
-    parser.add_argument("--paper", action="store_true",
-                        help="the paper's scenario as its Table I was reproduced (wall-following "
-                             "and maze): the recipe and the one teaching world of lab.recipe."
-                             "RECIPES, without the behaviour file's other teaching worlds and "
-                             "[recipe] changes")
+    add_paper_argument(parser)
     add_recipe_arguments(parser, seconds="--train-seconds")
     parser.add_argument("--range-noise", type=arguments.non_negative_float, default=0.0)
     parser.add_argument("--odom-noise", type=arguments.non_negative_float, default=0.0)

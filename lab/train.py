@@ -30,6 +30,7 @@ from client.behaviour.policies import Demonstrator, takes_over
 from client.behaviour.spec import Behaviour
 from client.behaviour.teaching import add_person_arguments
 from lab.behaviours import (
+    add_paper_argument,
     behaviour_arg,
     behaviour_for_world,
     get,
@@ -441,6 +442,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "or a behaviour file); default: the world's")
     parser.add_argument("--out", required=True, type=arguments.output_file,
                         help="snapshot to write")
+    add_paper_argument(parser)
     parser.add_argument("--resume", default=None, type=arguments.input_file,
                         help="continue training this snapshot (a corrective demonstration)")
     parser.add_argument("--start", type=parse_pose, default=None,
@@ -482,7 +484,7 @@ def main(args) -> int:
     else:
         spec = resolve_world(args.world) if b is None else world_of(b, args.world)
     b = behaviour_for_world(spec) if b is None else b
-    recipe = recipe_from_args(recipe_of(b), args)
+    recipe = recipe_from_args(recipe_of(b, args.paper), args)
     if b.goals is not None:  # goals in order: two trees, the goal learner (lab.goals)
         from lab.goals import train_main
 

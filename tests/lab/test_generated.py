@@ -101,3 +101,6 @@ def test_the_paper_scenario_is_kept_apart_from_the_behaviour_recipe(tmp_path, ca
         recipe_of(get("wandering"), paper=True)
     assert main(["experiment", "wandering", "--paper", "--trials", "1"]) == 2
     assert "--paper goes with wall-following or maze" in capsys.readouterr().err
+    assert main(["train", "--behaviour", "wandering", "--paper", "--out",
+                 str(tmp_path / "t.rhbl")]) == 2
+    assert not (tmp_path / "t.rhbl").exists()
