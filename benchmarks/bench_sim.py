@@ -112,7 +112,7 @@ def bench_in_process(world: str, seconds: float, repeats: int = 3) -> dict:
 
 def free_poses(spec, n: int, spacing: float = 0.7) -> list[tuple[float, float, float]]:
     """Up to ``n`` poses on a grid, clear of walls (for many-robot runs)."""
-    from server.world import _point_segment_distance
+    from server.worldfile import point_segment_distance
 
     xmin, ymin, xmax, ymax = spec.bounds()
     segs = spec.segments()
@@ -120,7 +120,7 @@ def free_poses(spec, n: int, spacing: float = 0.7) -> list[tuple[float, float, f
     out = []
     for y in np.arange(ymin + 0.5, ymax - 0.3, spacing):
         for x in np.arange(xmin + 0.5, xmax - 0.3, spacing):
-            if _point_segment_distance(np.array([x, y]), segs).min() < ROBOT.radius + 0.15:
+            if point_segment_distance(np.array([x, y]), segs).min() < ROBOT.radius + 0.15:
                 continue
             probe.reset(poses=[(float(x), float(y), 0.0)])
             r = probe.scan(0)  # inside the walls: something within range in most directions
