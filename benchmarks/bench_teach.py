@@ -445,8 +445,8 @@ def person_alone(behaviour: str, name: str, seed: int, world: str | None = None,
 
     from lab import metrics
     from lab.behaviours import get, world_of
-    from lab.evaluate import _teacher_episode
     from lab.harness import drive
+    from lab.practice import teacher_episode
 
     b = get(behaviour)
     spec = world_of(b, world or b.teach[0])
@@ -457,7 +457,7 @@ def person_alone(behaviour: str, name: str, seed: int, world: str | None = None,
         start = starts[k % len(starts)]
         driver = _Alone(people.person(name, b, seed=1000 * seed + k), people, walls)
         ep = drive(spec, driver, start, b.seconds, seed=seed * 1000 + k, behaviour=b)
-        tt = _teacher_episode(spec, b, driver.actions, start, b.seconds, seed * 1000 + k,
+        tt = teacher_episode(spec, b, driver.actions, start, b.seconds, seed * 1000 + k,
                               0.0, 0.0, driver.dt)
         tm = tt.metrics(spec.goal, b.rules)
         tm["success"] = metrics.judge(b.rules, tm, None)

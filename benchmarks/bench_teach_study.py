@@ -370,16 +370,18 @@ def run_one(model: str, seed: int, method: str, worlds, *, demo: float = 240.0,
 def person_row(model: str, seeds, worlds) -> dict:
     """The person driving alone, judged by ``lab.evaluate``'s rule (the scripted teacher's
     distance) in each world."""
-    from lab.evaluate import _teacher_episode
+    from lab.behaviours import get
+    from lab.practice import teacher_episode
 
     out = {}
     for name in worlds:
         spec = resolve_world(name)
         seconds = EVAL_SECONDS[task_of(spec)]
+        b = get(task_of(spec))
         ok = []
         for seed in seeds:
             for st, own in zip(spec.start_poses, alone(model, seed, name), strict=True):
-                tt = _teacher_episode(spec, DEFAULT_ACTIONS, st, seconds, 0, 0.0, 0.0, DT)
+                tt = teacher_episode(spec, b, DEFAULT_ACTIONS, st, seconds, 0, 0.0, 0.0, DT)
                 ok.append(success(task_of(spec), own, tt.metrics(spec.goal)))
         out[name] = float(np.mean(ok))
     return out

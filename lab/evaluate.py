@@ -35,7 +35,7 @@ from client.behaviour.learning import TreePolicy
 from client.behaviour.spec import Behaviour
 from lab import metrics, practice
 from lab.behaviours import behaviour_arg, behaviour_for_world, get, teaching_world, world_of
-from lab.harness import DT, OnStep, drive, recorded, resolve_world
+from lab.harness import DT, OnStep, resolve_world
 from lab.recipe import EVAL_SECONDS, per_task
 from lab.report import episode_table
 from lab.sim_tap import record_run
@@ -43,7 +43,7 @@ from process import arguments, files
 from server import world_arg
 from server.world import WorldSpec
 
-__all__ = ["add_arguments", "evaluate", "format_table", "judged_episode", "main", "success"]
+__all__ = ["add_arguments", "evaluate", "format_table", "main", "success"]
 
 
 def success(task: str | Behaviour, m: dict, teacher_m: dict | None) -> bool:
@@ -51,53 +51,6 @@ def success(task: str | Behaviour, m: dict, teacher_m: dict | None) -> bool:
     metrics ``m`` (``teacher_m``: the teacher's from the same start, for a distance compared
     with the teacher's; None: not compared): ``lab.metrics.judge``."""
     return metrics.judge(get(task).rules, m, teacher_m)
-
-
-_TEACHER_CACHE: dict = {}
-
-
-def _teacher_episode(spec: WorldSpec, b: Behaviour, actions, start, seconds: float, seed: int,
-                     range_noise: float, odom_noise: float, dt: float,
-                     on_step: OnStep | None = None):
-    """The behaviour's scripted expert's episode from ``start``. Without noise it does not
-    depend on the seed (and not on the tree), so it is computed once per world, expert, start
-    and length."""
-    key = None
-    if range_noise == 0.0 and odom_noise == 0.0:
-        key = (spec.name, str(spec.path), spec.walls, spec.goal, tuple(start), seconds, dt,
-               tuple(actions.names), b.expert_name, repr(sorted(b.expert_params.items())),
-               tuple(recorded(b).items()))
-        hit = _TEACHER_CACHE.get(key)
-        if hit is not None:
-            return hit
-    tt = drive(spec, b.expert(actions=actions), start, seconds, seed=seed,
-               range_noise=range_noise, odom_noise=odom_noise, dt=dt, kind="teacher",
-               on_step=on_step, behaviour=b)
-    if key is not None:
-        if len(_TEACHER_CACHE) > 256:
-            _TEACHER_CACHE.clear()
-        _TEACHER_CACHE[key] = tt
-    return tt
-
-
-def judged_episode(spec: WorldSpec, b: Behaviour, policy, start, seconds: float, seed: int,
-                   range_noise: float = 0.0, odom_noise: float = 0.0, dt: float = DT,
-                   on_step: OnStep | None = None, both: bool = False):
-    """One start judged: the behaviour's scripted expert and ``policy`` drive from ``start``
-    with ``seed``, each judged by the behaviour's success rule (the policy's distance compared
-    with the expert's): ``(learner metrics, expert metrics, learner episode)``, with ``both``
-    the expert's episode too. The one place an episode is judged (``lab.practice`` runs it on
-    a pool or a cluster)."""
-    tt = _teacher_episode(spec, b, policy.actions, start, seconds, seed, range_noise,
-                          odom_noise, dt, on_step)
-    tm = tt.metrics(spec.goal, b.rules)
-    tm["success"] = metrics.judge(b.rules, tm, None)
-    lt = drive(spec, policy, start, seconds, seed=seed, teacher=b.expert(actions=policy.actions),
-               range_noise=range_noise, odom_noise=odom_noise, dt=dt, kind="learner",
-               on_step=on_step, behaviour=b)
-    lm = lt.metrics(spec.goal, b.rules)
-    lm["success"] = metrics.judge(b.rules, lm, tm)
-    return (lm, tm, lt, tt) if both else (lm, tm, lt)
 
 
 def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
@@ -141,7 +94,7 @@ def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
                 setattr(policy, k, getattr(policy, k) + v)
     else:
         for k, start in enumerate(starts_k):
-            lm, tm, lt, tt = judged_episode(spec, b, policy, start, seconds, seed * 1000 + k,
+            lm, tm, lt, tt = practice.judged_episode(spec, b, policy, start, seconds, seed * 1000 + k,
                                             range_noise, odom_noise, dt, on_step, both=True)
             learner_eps.append(lm)
             teacher_eps.append(tm)

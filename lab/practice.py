@@ -37,9 +37,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from client.behaviour.learning import TreePolicy, check_compatible
+from client.behaviour.spec import Behaviour
+from lab import metrics
+from lab.harness import DT, OnStep, drive, recorded
 from process import arguments
+from server.world import WorldSpec
 
-__all__ = ["EpisodeTask", "Runner", "add_arguments", "cluster_address", "cores",
+__all__ = ["EpisodeTask", "Runner", "add_arguments", "cluster_address", "cores", "judged_episode",
+           "teacher_episode",
            "run_episode", "run_episodes", "runner_from_args", "tree_bytes"]
 
 log = logging.getLogger(__name__)
@@ -152,13 +157,59 @@ class _Traced(TreePolicy):
         return self.names[int(clf.tree_.label[node])]
 
 
+_TEACHER_CACHE: dict = {}
+
+
+def teacher_episode(spec: WorldSpec, b: Behaviour, actions, start, seconds: float, seed: int,
+                     range_noise: float, odom_noise: float, dt: float,
+                     on_step: OnStep | None = None):
+    """The behaviour's scripted expert's episode from ``start``. Without noise it does not
+    depend on the seed (and not on the tree), so it is computed once per world, expert, start
+    and length."""
+    key = None
+    if range_noise == 0.0 and odom_noise == 0.0:
+        key = (spec.name, str(spec.path), spec.walls, spec.goal, tuple(start), seconds, dt,
+               tuple(actions.names), b.expert_name, repr(sorted(b.expert_params.items())),
+               tuple(recorded(b).items()))
+        hit = _TEACHER_CACHE.get(key)
+        if hit is not None:
+            return hit
+    tt = drive(spec, b.expert(actions=actions), start, seconds, seed=seed,
+               range_noise=range_noise, odom_noise=odom_noise, dt=dt, kind="teacher",
+               on_step=on_step, behaviour=b)
+    if key is not None:
+        if len(_TEACHER_CACHE) > 256:
+            _TEACHER_CACHE.clear()
+        _TEACHER_CACHE[key] = tt
+    return tt
+
+
+def judged_episode(spec: WorldSpec, b: Behaviour, policy, start, seconds: float, seed: int,
+                   range_noise: float = 0.0, odom_noise: float = 0.0, dt: float = DT,
+                   on_step: OnStep | None = None, both: bool = False):
+    """One start judged: the behaviour's scripted expert and ``policy`` drive from ``start``
+    with ``seed``, each judged by the behaviour's success rule (the policy's distance compared
+    with the expert's): ``(learner metrics, expert metrics, learner episode)``, with ``both``
+    the expert's episode too. The one place an episode is judged (``rhbl evaluate``, and here
+    ``run_episode`` on a pool or a cluster)."""
+    tt = teacher_episode(spec, b, policy.actions, start, seconds, seed, range_noise,
+                          odom_noise, dt, on_step)
+    tm = tt.metrics(spec.goal, b.rules)
+    tm["success"] = metrics.judge(b.rules, tm, None)
+    lt = drive(spec, policy, start, seconds, seed=seed, teacher=b.expert(actions=policy.actions),
+               range_noise=range_noise, odom_noise=odom_noise, dt=dt, kind="learner",
+               on_step=on_step, behaviour=b)
+    lm = lt.metrics(spec.goal, b.rules)
+    lm["success"] = metrics.judge(b.rules, lm, tm)
+    return (lm, tm, lt, tt) if both else (lm, tm, lt)
+
+
 def run_episode(task: EpisodeTask) -> dict:
-    """One episode judged as ``rhbl evaluate`` judges it (``lab.evaluate.judged_episode``):
+    """One episode judged as ``rhbl evaluate`` judges it (``judged_episode``):
     ``{"success", "metrics", "teacher", "steps", "stalls"}`` (``stalls``: the steps a collision
     began), with ``trace``: ``"winners"`` (the sphere that decided each step), ``"states"``
     (its features, float32), ``"actions"`` and ``"side"`` (the followed wall's distance)."""
     from client.behaviour.guard import RotationGuard
-    from lab.evaluate import judged_episode
 
     b = _behaviour(task.behaviour)
     spec = _world(task.behaviour, task.world, float(task.scale))
