@@ -75,7 +75,7 @@ def test_a_closed_stdout_pipe_ends_quietly(tmp_path):
     out = tmp_path / "c.rhbl"
     proc = subprocess.Popen(
         [sys.executable, "-m", "lab.cli", "train", "--world", "room", "--seconds", "5",
-         "--out", str(out)],
+         "--rounds", "0", "--out", str(out)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         env={k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"})  # block-buffered
     proc.stdout.close()  # nobody reads: the first print meets a broken pipe

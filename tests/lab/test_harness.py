@@ -16,7 +16,8 @@ CORRIDOR = "corridor"
 
 def test_train_then_evaluate_cli(tmp_path, capsys):
     tree = tmp_path / "t.rhbl"
-    assert cli(["train", "--behaviour", "wall-following", "--world", CORRIDOR, "--seconds", "40", "--out", str(tree), "--seed", "1"]) == 0
+    assert cli(["train", "--behaviour", "wall-following", "--world", CORRIDOR, "--seconds", "40",
+                "--round-generated", "1", "--out", str(tree), "--seed", "1"]) == 0
     assert tree.exists()
     out_json, png = tmp_path / "e.json", tmp_path / "e.png"
     assert cli(["evaluate", "--world", CORRIDOR, "--tree", str(tree), "--episodes", "2",
@@ -66,7 +67,7 @@ def test_maze_episode_stops_at_goal_and_reports_time():
 
 
 def test_experiment_cli_small(capsys):
-    assert cli(["experiment", "wall-following", "--trials", "1", "--train-seconds", "20",
+    assert cli(["experiment", "wall-following", "--paper", "--trials", "1", "--train-seconds", "20",
                 "--seconds", "10", "--episodes", "1", "--eval-world", "none"]) == 0
     out = capsys.readouterr().out
     assert "Table I" in out and "53.4" in out
