@@ -35,7 +35,7 @@ SLOW_MODULES = ("benchmarks/test_bench_latency.py",)
 
 
 def pytest_collection_modifyitems(config, items) -> None:
-    """Marks slow every test of ``SLOW_FOLDERS`` and ``SLOW_MODULES``; with
+    """Marks slow every test of ``SLOW_FOLDERS`` and ``SLOW_MODULES`` and runs them first; with
     ``$RHBL_TEST_PATIENCE`` above 1, stretches each test's timeout (pytest-timeout's marker or
     the ini's) as every wait's deadline is."""
     default = float(config.getini("timeout") or 0)
@@ -48,6 +48,10 @@ def pytest_collection_modifyitems(config, items) -> None:
             seconds = float(marker.args[0]) if marker is not None and marker.args else default
             if seconds > 0:
                 item.add_marker(pytest.mark.timeout(seconds * PATIENCE), append=False)
+    # the slow files first (a stable sort: each file's tests stay together and in order), so
+    # that the workers of ``-n N --dist loadfile`` do not end on one long file while the others
+    # wait: the whole suite ends sooner
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
 
 
 @pytest.fixture
