@@ -124,6 +124,14 @@ def to_dict(b: Behaviour) -> dict:
             "goals": None if b.goals is None else b.goals.to_dict()}
 
 
+def _drawn(b: Behaviour) -> str:
+    """", and N randomised rooms" when its recipe also teaches it in drawn worlds."""
+    n = b.recipe.get("round_generated", 0)
+    kind = {"clutter": "cluttered rooms"}.get(b.recipe.get("generator", "rooms"),
+                                              b.recipe.get("generator", "rooms"))
+    return f", and {n} randomised {kind} (lab.generated)" if n else ""
+
+
 def describe(b: Behaviour) -> str:
     """A behaviour in full: its line, perception, expert, worlds, success rule, instructions."""
     rules = "; ".join(rule + (" " + ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"
@@ -134,7 +142,7 @@ def describe(b: Behaviour) -> str:
              f"  file: {b.path}" if b.path else "",
              f"  perception: {b.perception or 'inline'} ({b.features.dim} inputs)",
              f"  expert: {b.expert_name}" + (f" ({expert})" if expert else ""),
-             f"  taught in: {', '.join(b.teach)}",
+             f"  taught in: {', '.join(b.teach)}" + _drawn(b),
              f"  held out: {', '.join(b.held_out) or 'none'}",
              f"  success: {rules}"]
     if b.goals is not None:

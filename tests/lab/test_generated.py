@@ -92,6 +92,14 @@ def test_corrective_rounds_in_generated_worlds():
         recipe.replace(round_generated=-1)
 
 
+def test_rhbl_behaviours_says_where_a_behaviour_is_taught(capsys):
+    assert main(["behaviours", "wall-following"]) == 0
+    assert "taught in: room, and 8 randomised rooms" in capsys.readouterr().out
+    assert main(["behaviours", "maze"]) == 0
+    out = capsys.readouterr().out
+    assert "taught in: maze\n" in out and "randomised" not in out
+
+
 def test_the_paper_scenario_is_kept_apart_from_the_behaviour_recipe(tmp_path, capsys):
     wall = get("wall-following")
     assert recipe_of(wall, paper=True) == RECIPES["wall-following"]
