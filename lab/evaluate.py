@@ -94,8 +94,9 @@ def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
                 setattr(policy, k, getattr(policy, k) + v)
     else:
         for k, start in enumerate(starts_k):
-            lm, tm, lt, tt = practice.judged_episode(spec, b, policy, start, seconds, seed * 1000 + k,
-                                            range_noise, odom_noise, dt, on_step, both=True)
+            lm, tm, lt, tt = practice.judged_episode(
+                spec, b, policy, start, seconds, seed * 1000 + k, range_noise, odom_noise, dt,
+                on_step, both=True)
             learner_eps.append(lm)
             teacher_eps.append(tm)
             if keep_paths:
