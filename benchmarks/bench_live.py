@@ -4,8 +4,8 @@ side by side with the rebuild from every label the learner did before.
 
 Labels come from ``bench_person.demonstration`` (the scripted teacher driving the room with
 12% wrong keys, each label with the 6 scans shown before it). One ``PersonLearner`` by the
-person rule (``client.behaviour.rule.PERSON``: the lag estimated, the sided vote of 50
-neighbours, one jittered copy a label) is given the labels one by one, as ``rhbl learner``
+person rule (``client.behaviour.rule.PERSON``: the lag estimated, the sided vote of its
+neighbours, its jittered copies of each label) is given the labels one by one, as ``rhbl learner``
 is; at each size it is brought up to date, then for each of ``--repeat`` new labels the time
 until ``learner.classifier`` is the tree with that label (what the next snapshot publishes:
 only the votes the new label enters, then the tree extended with what changed, past the
@@ -145,7 +145,7 @@ def main(argv=None) -> int:
     extra = args.repeat + args.batch
     W, y = demonstration(sizes[-1] + extra)
     print(f"a person's tree reflecting new labels (the person rule: k={PERSON.editing.k}, "
-          f"sided vote, {PERSON.editing.copies} jittered copy a label, lag estimated over "
+          f"sided vote, {PERSON.editing.copies} jittered copies a label, lag estimated over "
           f"0..{PERSON.alignment.max_lag}), seconds:")
     print("| labels | a new label: median | worst | median CPU | tree learned at once | "
           f"{args.batch} new labels | a growth point's label | lag estimate | "

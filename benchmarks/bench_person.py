@@ -6,8 +6,8 @@ Labels come from the scripted teacher driving the room (``lab.train``'s world, t
 features: real feature vectors, consecutive scans alike), 12% of them replaced by a wrong key
 (a person's), each with the 6 scans shown before it (as the learner's pairing keeps them, for
 the lag estimate). For each N it times, in this process, the three parts of a rebuild
-(``PersonLearner``'s defaults: the lag estimated, the sided vote of 50 neighbours, one
-jittered copy of each label): the lag estimate (``estimate_lag``), the vote
+(``PersonLearner``'s defaults: the lag estimated, the sided vote of its neighbours, its
+jittered copies of each label): the lag estimate (``estimate_lag``), the vote
 (``PersonLearner.training_set``: the labels' vote and their copies', ``nearest_votes``) and the
 tree learning the voted vectors, best of ``--repeat``; beside the vote the same neighbours
 found by scikit-learn's ``KNeighborsClassifier`` (kd-tree, the same k, the same queries: the

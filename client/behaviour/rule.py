@@ -94,11 +94,13 @@ class NeighbourEditing:
     with the action nearest to the mean command of those of its ``k`` nearest labels (itself
     among them) that agree on the turning side (a side weighing less than ``side_share`` of
     the other's is taken for confusions and left out); ``copies`` jittered copies of each
-    (normal noise of ``sigma`` per feature) are learned with the vote at their place."""
+    (normal noise of ``sigma`` per feature) are learned with the vote at their place. ``k``
+    and ``copies`` were chosen by an ablation over every behaviour without goals and the
+    development person models (``benchmarks/ablate_person_rule.py``; docs/teaching.md)."""
 
-    k: int = 50
+    k: int = 10
     side_share: float = 2 / 3
-    copies: int = 1
+    copies: int = 4
     sigma: float = 0.06
 
     def __post_init__(self):

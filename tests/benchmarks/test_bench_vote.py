@@ -7,6 +7,7 @@ import pytest
 
 from client.behaviour.actions import DEFAULT_ACTIONS
 from client.behaviour.features import FEATURES
+from client.behaviour.rule import PERSON
 from client.behaviour.teaching import PersonLearner
 
 
@@ -34,7 +35,7 @@ def test_the_labels_learned_again_are_the_labels_as_a_learner_took_them(bench, s
     # another shuffle: every labelled vector again, in another order, with other copies
     other = bench.learn_again("person", W, labels, shuffle=4)
     X3, y3 = other.training_set()
-    assert not np.array_equal(X1, X3) and len(X3) == len(X1) == 2 * len(labels)
+    assert not np.array_equal(X1, X3) and len(X3) == len(X1) == (1 + PERSON.editing.copies) * len(labels)
     labelled = set(map(tuple, direct._vectors()))
     assert labelled <= set(map(tuple, X1)) and labelled <= set(map(tuple, X3))
     # without copies: the same vectors and votes, only the order differs
