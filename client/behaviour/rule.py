@@ -98,7 +98,7 @@ class NeighbourEditing:
     and ``copies`` were chosen by an ablation over every behaviour without goals and the
     development person models (``benchmarks/ablate_person_rule.py``; docs/teaching.md)."""
 
-    k: int = 10
+    k: int = 25
     side_share: float = 2 / 3
     copies: int = 4
     sigma: float = 0.06
