@@ -20,6 +20,10 @@ uniformly from the ranges below (no range was chosen on a held-out world):
   first at either end; the goal at the far end of the last tier.
 * ``clutter``: a room of 8-13 x 6-10 m with 3-6 boxes (0.4-2.4 m sides, some turned) and 2-4
   pillars (0.3-0.6 m), at least 1.2 m from each other and from the walls.
+* ``beacons``: a room of 9-14 x 6-9 m with 1-3 partitions (0.4 m thick, 35-60% of the room's
+  depth, from the top or the bottom wall, 2.5 m apart), up to two blocks (0.6-1.4 m sides)
+  against a side wall or in the open, and the beacons 1, 2 and 3 (red, green, blue) at least
+  0.9 m from every wall and 3 m from each other: for behaviours with goals (docs/goals.md).
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ from server.world import WorldSpec, parse_world
 
 __all__ = ["KINDS", "add_arguments", "draw", "generate", "generated", "main", "to_toml"]
 
-KINDS = ("rooms", "mazes", "clutter")
+KINDS = ("rooms", "mazes", "clutter", "beacons")
 CLEAR = 0.7  # m from a wall to a start pose
 
 
@@ -182,7 +186,68 @@ def _clutter(rng, side: str) -> dict:
     return {"robot": {"pose": starts[0], "starts": starts[1:]}, "walls": walls}
 
 
-_MAKERS = {"rooms": _room, "mazes": _maze, "clutter": _clutter}
+def _clearance(x: float, y: float, rects: list[tuple[float, float, float, float]], w: float,
+               h: float) -> float:
+    """Distance from (x, y) to the nearest of the room's walls and the rectangles
+    (x0, y0, x1, y1) standing in it."""
+    d = min(x, y, w - x, h - y)
+    for x0, y0, x1, y1 in rects:
+        d = min(d, math.hypot(max(x0 - x, 0.0, x - x1), max(y0 - y, 0.0, y - y1)))
+    return d
+
+
+def _beacons(rng, side: str) -> dict:
+    """A room with partitions from its walls, blocks on them and boxes in the open, and the
+    beacons 1, 2 and 3 standing on the floor (the goals' worlds: docs/goals.md)."""
+    w, h = _u(rng, 9.0, 14.0), _u(rng, 6.0, 9.0)
+    rects: list[tuple[float, float, float, float]] = []
+    xs: list[float] = []
+    for _ in range(int(rng.integers(1, 4))):  # partitions from the top or the bottom wall
+        x = _u(rng, 2.5, w - 2.5)
+        if any(abs(x - q) < 2.5 for q in xs):
+            continue
+        xs.append(x)
+        length = _u(rng, 0.35, 0.6) * h
+        rects.append((x - 0.2, h - length, x + 0.2, h) if rng.random() < 0.5
+                     else (x - 0.2, 0.0, x + 0.2, length))
+    for _ in range(int(rng.integers(0, 3))):  # blocks on the walls, boxes in the open
+        a, b = _u(rng, 0.3, 0.7), _u(rng, 0.3, 0.7)
+        cx, cy = _u(rng, a, w - a), _u(rng, b, h - b)
+        if rng.random() < 0.5:  # against the nearest side wall
+            cx = a if cx < w / 2 else w - a
+        box = (cx - a, cy - b, cx + a, cy + b)
+        if all(_clearance(0.5 * (box[0] + box[2]), 0.5 * (box[1] + box[3]), [r], w, h)
+               > max(a, b) + 1.3 for r in rects):
+            rects.append(box)
+    def spots(count: int, clear: float, apart: float) -> list[tuple[float, float]]:
+        out: list[tuple[float, float]] = []
+        for _ in range(600):
+            if len(out) >= count:
+                break
+            x, y = _u(rng, clear, w - clear), _u(rng, clear, h - clear)
+            if (_clearance(x, y, rects, w, h) >= clear
+                    and all(math.hypot(x - p, y - q) >= apart for p, q in out)):
+                out.append((x, y))
+        return out
+
+    beacons = spots(3, 0.9, 3.0)
+    if len(beacons) < 3:
+        raise ValueError("no room for three beacons 3 m apart")
+    starts = [[round(x, 3), round(y, 3), round(_u(rng, -math.pi, math.pi), 4)]
+              for x, y in spots(5, 0.8, 1.0)
+              if all(math.hypot(x - p, y - q) > 1.2 for p, q in beacons)]
+    walls = [{"closed": True, "points": [[0, 0], [round(w, 3), 0], [round(w, 3), round(h, 3)],
+                                         [0, round(h, 3)]]}]
+    walls += [{"closed": True, "points": [[round(x, 3), round(y, 3)] for x, y in
+                                          ((x0, y0), (x1, y0), (x1, y1), (x0, y1))]}
+              for x0, y0, x1, y1 in rects]
+    return {"robot": {"pose": starts[0], "starts": starts[1:]}, "walls": walls,
+            "beacons": [{"id": i + 1, "pos": [round(x, 3), round(y, 3)],
+                         "colour": ("red", "green", "blue")[i], "size": 0.3}
+                        for i, (x, y) in enumerate(beacons)]}
+
+
+_MAKERS = {"rooms": _room, "mazes": _maze, "clutter": _clutter, "beacons": _beacons}
 
 
 def draw(kind: str, rng: np.random.Generator, side: str = "right",
@@ -234,6 +299,9 @@ def to_toml(data: dict) -> str:
     for w in data["walls"]:
         out += ["", "[[walls]]"] + (["closed = true"] if w.get("closed") else []) + [
             f"points = {vec(w['points'])}"]
+    for bc in data.get("beacons", ()):
+        out += ["", "[[beacons]]", f"id = {bc['id']}", f"pos = {vec(bc['pos'])}",
+                f'colour = "{bc["colour"]}"', f"size = {bc['size']:g}"]
     if data.get("goal"):
         g = data["goal"]
         out += ["", "[goal]", f"center = {vec(g['center'])}", f"radius = {g['radius']:g}"]
@@ -245,8 +313,9 @@ def to_toml(data: dict) -> str:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("kind", choices=list(KINDS),
-                        help="rooms (walls to follow), mazes (tiered, with a goal) or clutter "
-                             "(boxes and pillars to wander among)")
+                        help="rooms (walls to follow), mazes (tiered, with a goal), clutter "
+                             "(boxes and pillars to wander among) or beacons (a room with "
+                             "partitions and the beacons 1-3, for goals)")
     parser.add_argument("--count", type=arguments.positive_int, default=8)
     parser.add_argument("--seed", type=arguments.seed, default=0,
                         help="the same seed draws the same worlds (a training run of seed S "

@@ -33,6 +33,7 @@ from client.behaviour.policies import Demonstrator, takes_over
 from client.behaviour.spec import Behaviour
 from lab import metrics
 from lab.episode import DT, Episode
+from lab.generated import generated
 from lab.harness import OnStep, demonstration_starts, step_world
 from lab.recipe import Recipe
 from server.world import World, WorldSpec, free_pose
@@ -93,8 +94,10 @@ def train_goals(spec: WorldSpec, b: Behaviour, recipe: Recipe, *, seed: int = 0,
     would start from any goal). Then ``rounds`` corrective rounds: the goal learner's action
     tree drives (the teacher's state says which goal is current and the teacher takes over
     within ``takeover`` m of a wall) from every start pose and ``round_free`` free-space poses,
-    ``round_seconds`` each, while the teacher labels every step: first in copies of the world
-    scaled by each of ``round_scales``, then in the world. The reactive learner learns
+    ``round_seconds`` each, while the teacher labels every step: first in ``round_generated``
+    randomised worlds of the kind ``generator`` names (``lab.generated``, drawn from the seed;
+    "beacons" for goals), then in copies of the world scaled by each of ``round_scales``, then
+    in the world. The reactive learner learns
     the same labelled steps."""
     _check(spec, b)
     actions = None
@@ -124,8 +127,11 @@ def train_goals(spec: WorldSpec, b: Behaviour, recipe: Recipe, *, seed: int = 0,
         done += _run(world, ep, expert, learner, reactive, steps, on_step=on_step,
                      demo=demo)
         k += 1
-    for f in (*recipe.round_scales, None):  # the scaled copies first, then the world
-        where = spec if f is None else spec.scaled(f)
+    # randomised worlds first (lab.generated, drawn from the seed), then the scaled copies, then
+    # the world, as lab.train orders its corrective rounds
+    drawn = generated(recipe.generator, recipe.round_generated if recipe.rounds else 0, seed)
+    for where in (*drawn, *(spec.scaled(f) for f in recipe.round_scales), spec):
+        _check(where, b)
         world = World(where, robots=1, seed=seed)
         starts = demonstration_starts(where, "world")
         for r in range(recipe.rounds):

@@ -44,7 +44,7 @@ __all__ = [
 ]
 
 STARTS = ("default", "world", "free")
-GENERATORS = ("rooms", "mazes", "clutter")  # lab.generated's kinds
+GENERATORS = ("rooms", "mazes", "clutter", "beacons")  # lab.generated's kinds
 SPAWN = ("all", "winner")
 DISTANCE = ("squared", "euclidean")
 TREE_PARAMS = ("spawn", "distance", "min_radius", "max_nodes", "max_depth")
@@ -88,7 +88,7 @@ class Recipe:
     # scaled by ``round_scales``, before the training world's
     round_worlds: tuple[str, ...] = ()
     # corrective rounds also in this many randomised worlds of the kind ``generator`` names
-    # (``lab.generated``: "rooms", "mazes", "clutter"; domain randomisation), drawn from the
+    # (``lab.generated``: "rooms", "mazes", "clutter", "beacons"; domain randomisation), drawn from the
     # training seed, each from its own start poses, after ``round_worlds``
     round_generated: int = 0
     generator: str = "rooms"

@@ -92,6 +92,38 @@ def test_corrective_rounds_in_generated_worlds():
         recipe.replace(round_generated=-1)
 
 
+def test_beacon_worlds_hold_the_three_beacons_apart_in_the_free_space(tmp_path):
+    from lab.generated import draw, to_toml
+
+    for spec in generated("beacons", 4, seed=2):
+        assert [b.id for b in spec.beacons] == [1, 2, 3]
+        for b in spec.beacons:
+            assert spec.inside(*b.pos) and spec.clearance(*b.pos) >= 0.9 - 1e-3
+        for i, b in enumerate(spec.beacons):
+            for c in spec.beacons[i + 1:]:
+                assert math.dist(b.pos, c.pos) >= 3.0 - 1e-3
+    data, spec = draw("beacons", np.random.default_rng(5), name="b5")
+    path = tmp_path / "b5.toml"
+    path.write_text(to_toml(data))
+    loaded = load_world(path)
+    assert loaded.beacons == spec.beacons and loaded.start_poses == spec.start_poses
+
+
+def test_a_goal_behaviour_is_corrected_in_generated_beacon_worlds_too():
+    from lab.goals import train_goals
+
+    b = get("red-green")
+    recipe = recipe_of(b).replace(seconds=20, segment=10.0, rounds=1, round_seconds=5.0,
+                                  round_scales=(), round_free=0, generator="beacons")
+    spec = resolve_world(b.teach[0])
+    _, _, without = train_goals(spec, b, recipe, seed=1)
+    _, _, with_two = train_goals(spec, b, recipe.replace(round_generated=2), seed=1)
+    starts = sum(len(w.start_poses) for w in generated("beacons", 2, seed=1))
+    # every start pose of both drawn worlds driven for up to 5 s (50 steps; a goal sequence
+    # finished sooner ends a drive)
+    assert without.learned < with_two.learned <= without.learned + 50 * starts
+
+
 def test_rhbl_behaviours_says_where_a_behaviour_is_taught(capsys):
     assert main(["behaviours", "wall-following"]) == 0
     assert "taught in: room, and 8 randomised rooms" in capsys.readouterr().out
