@@ -386,10 +386,14 @@ def evaluate_run(result: dict, world: str | None = None, unseen=None,
             result["tree"] = rep["tree"]
             band = [e["wall_band_fraction"] for e in rep["learner"]
                     if e.get("wall_band_fraction") is not None]
+            # rhbl evaluate judges the tree alone (success_rate, learner); with the guard on,
+            # the run through it is beside that, in "guarded"
+            driven = (rep["guarded"] if mode != "alone" and rep.get("guarded") else
+                      {"success_rate": rep["success_rate"], "loops": len(rep["loops"]),
+                       "collisions": sum(e["collisions"] for e in rep["learner"])})
             evals[name] = {
-                "success_rate": rep["success_rate"], "episodes": rep["episodes"],
-                "loops": len(rep["loops"]),
-                "collisions": int(sum(e["collisions"] for e in rep["learner"])),
+                "success_rate": driven["success_rate"], "episodes": rep["episodes"],
+                "loops": int(driven["loops"]), "collisions": int(driven["collisions"]),
                 "wall_band": round(statistics.fmean(band), 3) if band else None,
                 "teacher_success_rate": rep["teacher_success_rate"], "guard": rep.get("guard"),
                 "interventions": _interventions(rep.get("guard"))}

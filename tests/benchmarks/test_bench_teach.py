@@ -16,6 +16,7 @@ robot loops or leaves the wall, that part is an expected failure, said with the 
 from __future__ import annotations
 
 import importlib
+import json
 import sys
 from pathlib import Path
 
@@ -112,6 +113,16 @@ def test_a_person_teaches_another_behaviour_at_the_page(bench, tmp_path):
         assert 0.0 <= r[f"success_taught_{mode}"] <= 1.0
     assert r["evals"]["alone"]["corridor-winding"]["guard"] is None
     assert r["evals"]["guard"]["corridor-winding"]["guard"] is not None
+    # rhbl evaluate judges the tree alone and reports the run through the guard beside it: the
+    # guard's figures are that run's, the tree alone's its own
+    for mode in ("alone", "guard"):
+        for world, e in r["evals"][mode].items():
+            (path,) = Path(r["workdir"]).glob(f"eval*-{mode}-{world}.json")
+            rep = json.loads(path.read_text())
+            driven = rep["guarded"] if mode == "guard" else rep
+            assert e["success_rate"] == driven["success_rate"]
+            if mode == "guard":
+                assert e["collisions"] == rep["guarded"]["collisions"]
     assert isinstance(r["interventions_guard"], int) and r["interventions_alone"] == 0
     assert r["success_taught"] == r["success_taught_alone"]  # the summary: the tree alone
     assert "corridor-centring | calm (dev)" in bench.table([r])
