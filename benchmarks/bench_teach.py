@@ -632,7 +632,7 @@ def _evaluate_again(args) -> int:
         print(f"bench_teach: error: --evaluate-again: trees not found: {', '.join(missing)}",
               file=sys.stderr)
         return 2
-    unseen = [x for x in args.unseen.split(",") if x]
+    unseen = None if args.unseen is None else [x for x in args.unseen.split(",") if x]
     for r in runs:
         evaluate_run(r, world=args.world, unseen=unseen, eval_episodes=args.eval_episodes,
                      eval_seconds=args.eval_seconds, tag="-again")
