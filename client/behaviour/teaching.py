@@ -314,8 +314,8 @@ class _Edited:
 class PersonLearner(DemonstrationLearner):
     """A ``DemonstrationLearner`` for labels given by a person (see the module's docstring),
     learning by ``rule`` (a ``LearningRule`` that edits its labels; default
-    ``client.behaviour.rule.PERSON``); ``lag``, ``k``, ``copies``, ``sigma`` and ``seed``
-    given here replace the rule's (``lag`` None: estimated).
+    ``client.behaviour.rule.PERSON``); ``lag``, ``k``, ``copies``, ``sigma``, ``side_share``
+    and ``seed`` given here replace the rule's (``lag`` None: estimated).
 
     Every label offered (``observe``, ``observe_vector``) is kept; ``classifier`` is the tree
     of ``training_set``: every labelled vector and its copies with their edited labels,
@@ -329,15 +329,16 @@ class PersonLearner(DemonstrationLearner):
     def __init__(self, features: FeatureSpec, actions: ActionSet = DEFAULT_ACTIONS, *,
                  rule: LearningRule = PERSON, lag=_KEEP, k: int | None = None,
                  copies: int | None = None, sigma: float | None = None,
-                 seed: int | None = None, task: str | None = None, parent: str | None = None,
+                 side_share: float | None = None, seed: int | None = None,
+                 task: str | None = None, parent: str | None = None,
                  provenance: Mapping | None = None, **tree_params):
         import dataclasses
 
         if not rule.person:
             raise ValueError(f"a PersonLearner learns by a rule that edits its labels, not "
                              f"the {rule.name!r} rule")
-        edits = {name: v for name, v in (("k", k), ("copies", copies), ("sigma", sigma))
-                 if v is not None}
+        edits = {name: v for name, v in (("k", k), ("copies", copies), ("sigma", sigma),
+                                         ("side_share", side_share)) if v is not None}
         if edits:
             rule = rule.replace(editing=dataclasses.replace(rule.editing, **edits))
         if lag is not _KEEP:

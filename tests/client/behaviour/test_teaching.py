@@ -75,6 +75,11 @@ def test_the_sided_vote_keeps_a_tapped_turn_and_drops_a_confused_side():
     edge[0, i["fwd-left"]], edge[0, i["fwd-right"]] = 3, 2
     edge[1, i["fwd-left"]], edge[1, i["fwd-right"]] = 30, 19
     assert [NAMES[a] for a in sided_actions(edge, DEFAULT_ACTIONS)] == ["fwd", "fwd-left"]
+    # a learner takes the side share it is given (the study's ablation)
+    for share, want in ((0.0, ["fwd", "fwd"]), (1.0, ["fwd-left", "fwd-left"])):
+        learner = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, side_share=share)
+        assert learner.rule.editing.side_share == share
+        assert [NAMES[a] for a in learner._edit(edge)] == want
 
 
 def _walk(n=200, seed=0):
