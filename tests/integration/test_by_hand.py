@@ -44,7 +44,7 @@ def test_a_person_teaches_by_hand_with_one_command(browser, tmp_path):
         _open(browser, url)
         _until(browser, lambda d: _attr(d, "learner", "up") == "1", 30, "a learner is up")
         _press(browser, "HOME")
-        _until(browser, lambda d: "reset" in d.find_element("id", "info").text, 10, "reset")
+        _until(browser, lambda d: "reset" in d.find_element("id", "info").text, 30, "reset")
         _keys(browser, ("down", "ARROW_UP"))
         try:
             _until(browser, lambda d: _int(d, "labels", "given") >= 15, 30, "15 labels")
