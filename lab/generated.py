@@ -186,14 +186,17 @@ def _clutter(rng, side: str) -> dict:
     return {"robot": {"pose": starts[0], "starts": starts[1:]}, "walls": walls}
 
 
+def _to_rect(x: float, y: float, rect: tuple[float, float, float, float]) -> float:
+    """Distance from (x, y) to the rectangle (x0, y0, x1, y1)."""
+    x0, y0, x1, y1 = rect
+    return math.hypot(max(x0 - x, 0.0, x - x1), max(y0 - y, 0.0, y - y1))
+
+
 def _clearance(x: float, y: float, rects: list[tuple[float, float, float, float]], w: float,
                h: float) -> float:
-    """Distance from (x, y) to the nearest of the room's walls and the rectangles
-    (x0, y0, x1, y1) standing in it."""
-    d = min(x, y, w - x, h - y)
-    for x0, y0, x1, y1 in rects:
-        d = min(d, math.hypot(max(x0 - x, 0.0, x - x1), max(y0 - y, 0.0, y - y1)))
-    return d
+    """Distance from (x, y) to the nearest of the room's walls and the rectangles standing in
+    it."""
+    return min([x, y, w - x, h - y] + [_to_rect(x, y, r) for r in rects])
 
 
 def _beacons(rng, side: str) -> dict:
@@ -215,10 +218,9 @@ def _beacons(rng, side: str) -> dict:
         cx, cy = _u(rng, a, w - a), _u(rng, b, h - b)
         if rng.random() < 0.5:  # against the nearest side wall
             cx = a if cx < w / 2 else w - a
-        box = (cx - a, cy - b, cx + a, cy + b)
-        if all(_clearance(0.5 * (box[0] + box[2]), 0.5 * (box[1] + box[3]), [r], w, h)
-               > max(a, b) + 1.3 for r in rects):
-            rects.append(box)
+        if all(_to_rect(cx, cy, r) > max(a, b) + 1.3 for r in rects):
+            rects.append((cx - a, cy - b, cx + a, cy + b))
+
     def spots(count: int, clear: float, apart: float) -> list[tuple[float, float]]:
         out: list[tuple[float, float]] = []
         for _ in range(600):
