@@ -158,18 +158,17 @@ def main(argv=None) -> int:
     if args.json and Path(args.json).exists():
         rows = json.loads(Path(args.json).read_text())
     done = {(r["behaviour"], r["person"], r["method"], r["seed"]) for r in rows}
-    suffix = "" if args.teach_guard else " unguarded"
-    methods = [m + suffix for m in methods]
+    # a session's rows name its variant so (session: "... unguarded" without the teach guard)
+    named = [m + ("" if args.teach_guard else " unguarded") for m in methods]
     for b in behaviours:
         for p in people:
             for seed in seeds:
-                for m in methods:
-                    if (b, p, m, seed) in done:
+                for m, name in zip(methods, named, strict=True):
+                    if (b, p, name, seed) in done:
                         continue
-                    r = session(b, p, m.removesuffix(suffix) if suffix else m, seed,
-                                guard=args.teach_guard)
+                    r = session(b, p, m, seed, guard=args.teach_guard)
                     rows.append(r)
-                    print(f"{b} {p} seed {seed} {m}: {r['nodes']} nodes, lag {r['lag']}, "
+                    print(f"{b} {p} seed {seed} {name}: {r['nodes']} nodes, lag {r['lag']}, "
                           + ", ".join(f"{w} {v['successes']}/{v['episodes']} ({v['collisions']} "
                                       f"collisions)" for w, v in r["worlds"].items())
                           + f", {r['seconds']} s", flush=True)
@@ -177,7 +176,7 @@ def main(argv=None) -> int:
                         Path(args.json).write_text(json.dumps(rows, indent=1))
     print()
     print(tables([r for r in rows if r["behaviour"] in behaviours and r["person"] in people
-                  and r["method"] in methods and r["seed"] in seeds]))
+                  and r["method"] in named and r["seed"] in seeds]))
     return 0
 
 

@@ -97,8 +97,7 @@ def train_goals(spec: WorldSpec, b: Behaviour, recipe: Recipe, *, seed: int = 0,
     ``round_seconds`` each, while the teacher labels every step: first in ``round_generated``
     randomised worlds of the kind ``generator`` names (``lab.generated``, drawn from the seed;
     "beacons" for goals), then in copies of the world scaled by each of ``round_scales``, then
-    in the world. The reactive learner learns
-    the same labelled steps."""
+    in the world. The reactive learner learns the same labelled steps."""
     _check(spec, b)
     actions = None
     learner = GoalLearner(recipe.feature_spec(), b.goals, task=b.name, **recipe.tree_params())
@@ -130,8 +129,9 @@ def train_goals(spec: WorldSpec, b: Behaviour, recipe: Recipe, *, seed: int = 0,
     # randomised worlds first (lab.generated, drawn from the seed), then the scaled copies, then
     # the world, as lab.train orders its corrective rounds
     drawn = generated(recipe.generator, recipe.round_generated if recipe.rounds else 0, seed)
-    for where in (*drawn, *(spec.scaled(f) for f in recipe.round_scales), spec):
+    for where in drawn:  # the world and its scaled copies were checked above
         _check(where, b)
+    for where in (*drawn, *(spec.scaled(f) for f in recipe.round_scales), spec):
         world = World(where, robots=1, seed=seed)
         starts = demonstration_starts(where, "world")
         for r in range(recipe.rounds):

@@ -88,8 +88,8 @@ class Recipe:
     # scaled by ``round_scales``, before the training world's
     round_worlds: tuple[str, ...] = ()
     # corrective rounds also in this many randomised worlds of the kind ``generator`` names
-    # (``lab.generated``: "rooms", "mazes", "clutter", "beacons"; domain randomisation), drawn from the
-    # training seed, each from its own start poses, after ``round_worlds``
+    # (``lab.generated``: "rooms", "mazes", "clutter", "beacons"; domain randomisation), drawn
+    # from the training seed, each from its own start poses, after ``round_worlds``
     round_generated: int = 0
     generator: str = "rooms"
     # scale augmentation: each labelled state offered again with the scan scaled
