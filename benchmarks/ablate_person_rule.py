@@ -46,18 +46,10 @@ from lab.report import table  # noqa: E402
 TARGET = (0.9, 0.8)  # issue 38: taught world, held-out worlds
 
 
-def session(bname: str, model: str, method: str, seed: int, guard: bool = True,
-            demo: float = 240.0, correct: float = 120.0, episodes: int | None = None) -> dict:
-    """One session of ``model`` teaching ``bname`` by ``method``, its tree judged alone;
-    ``guard``: the controller's guard drives the tree in correct mode (as ``rhbl controller``
-    drives a person's tree), else the tree alone; ``demo``, ``correct``: the session's seconds;
-    ``episodes``: start poses driven a world (None: every one)."""
-    b = get(bname)
-    m = dataclasses.replace(make_method(method), features=b.features)
-    t0 = time.perf_counter()
-    sess, learner = teach(world_of(b, b.teach[0]), person(model, b, seed=seed), m, seed=seed,
-                          guard=guard, demo=demo, correct=correct)
-    policy = TreePolicy(learner.classifier, learner.features, learner.actions)
+def judge(b, policy, seed: int, episodes: int | None = None) -> dict:
+    """``policy`` alone from every start pose (``episodes``: that many a world) of ``b``'s
+    teaching and held-out worlds, judged by its rule: per world successes, episodes,
+    collisions."""
     worlds = {}
     for kind, names in (("taught", b.teach), ("held_out", b.held_out)):
         for w in names:
@@ -65,10 +57,49 @@ def session(bname: str, model: str, method: str, seed: int, guard: bool = True,
             worlds[w] = {"kind": kind, "successes": sum(rep["success"]),
                          "episodes": rep["episodes"],
                          "collisions": sum(e["collisions"] for e in rep["learner"])}
-    return {"behaviour": bname, "person": model, "method": method + ("" if guard else " unguarded"),
-            "seed": seed,
-            "nodes": int(learner.nodes), "labels": sess.labels, "lag": learner.estimated_lag,
-            "worlds": worlds, "seconds": round(time.perf_counter() - t0, 1)}
+    return worlds
+
+
+def session(bname: str, model: str, method: str, seed: int, guard: bool = True,
+            demo: float = 240.0, correct: float = 120.0, episodes: int | None = None,
+            refine: float = 0.0, runner=None, practice: dict | None = None) -> list[dict]:
+    """One session of ``model`` teaching ``bname`` by ``method``, its tree judged alone;
+    ``guard``: the controller's guard drives the tree in correct mode (as ``rhbl controller``
+    drives a person's tree), else the tree alone; ``demo``, ``correct``: the session's seconds;
+    ``episodes``: start poses driven a world (None: every one). ``refine`` > 0: the tree is
+    then refined by practice for that many minutes (``lab.refine.refine`` on ``runner``, as
+    ``rhbl refine`` runs it; ``practice``: more of its keywords) and judged again: a second
+    row, its variant named ``... refined N min``. The rows: the session's, then the refined
+    tree's."""
+    b = get(bname)
+    m = dataclasses.replace(make_method(method), features=b.features)
+    t0 = time.perf_counter()
+    sess, learner = teach(world_of(b, b.teach[0]), person(model, b, seed=seed), m, seed=seed,
+                          guard=guard, demo=demo, correct=correct)
+    policy = TreePolicy(learner.classifier, learner.features, learner.actions)
+    row = {"behaviour": bname, "person": model, "method": variant(method, guard, demo, correct),
+           "seed": seed,
+           "nodes": int(learner.nodes), "labels": sess.labels, "lag": learner.estimated_lag,
+           "worlds": judge(b, policy, seed, episodes), "seconds": round(time.perf_counter() - t0, 1)}
+    if refine <= 0:
+        return [row]
+    from lab.refine import refine as practise
+
+    t1 = time.perf_counter()
+    clf, rep = practise(b, policy, runner, budget=refine * 60.0, validate=False,
+                        say=lambda text: None, **(practice or {}))
+    better = TreePolicy(clf, learner.features, learner.actions)
+    return [row, {**row, "method": f"{row['method']} refined {refine:g} min",
+                  "nodes": int(clf.node_count_), "worlds": judge(b, better, seed, episodes),
+                  "refinement": {k: rep[k] for k in ("before", "after", "episodes", "moves")},
+                  "seconds": round(time.perf_counter() - t1, 1)}]
+
+
+def variant(method: str, guard: bool = True, demo: float = 240.0, correct: float = 120.0) -> str:
+    """A session's variant as its rows name it: the method, ``unguarded`` without the teach
+    guard, the session's seconds when not the issue's 240 + 120."""
+    times = "" if (demo, correct) == (240.0, 120.0) else f" {demo:g}+{correct:g} s"
+    return method + ("" if guard else " unguarded") + times
 
 
 def _rate(rows: list[dict], kind: str) -> tuple[int, int]:
@@ -121,6 +152,14 @@ def main(argv=None) -> int:
                     help="the controller's guard drives the tree while the person corrects "
                          "(default, as rhbl controller drives a person's tree; "
                          "--no-teach-guard: the tree alone, the variants named '... unguarded')")
+    ap.add_argument("--demo", type=float, default=240.0,
+                    help="seconds the person demonstrates (default 240)")
+    ap.add_argument("--correct", type=float, default=120.0,
+                    help="seconds the person corrects the driving tree (default 120; 0: none)")
+    ap.add_argument("--refine", type=float, default=0.0, metavar="MINUTES",
+                    help="also refine each session's tree by practice for this many minutes "
+                         "(rhbl refine's defaults, on every core) and judge it again: a "
+                         "variant named '... refined N min' beside the session's")
     ap.add_argument("--json", default=None, help="write every session here (and resume from it)")
     ap.add_argument("--table", default=None, metavar="JSON",
                     help="run nothing: print the tables of a --json file")
@@ -158,25 +197,33 @@ def main(argv=None) -> int:
     if args.json and Path(args.json).exists():
         rows = json.loads(Path(args.json).read_text())
     done = {(r["behaviour"], r["person"], r["method"], r["seed"]) for r in rows}
-    # a session's rows name its variant so (session: "... unguarded" without the teach guard)
-    named = [m + ("" if args.teach_guard else " unguarded") for m in methods]
-    for b in behaviours:
-        for p in people:
-            for seed in seeds:
-                for m, name in zip(methods, named, strict=True):
-                    if (b, p, name, seed) in done:
-                        continue
-                    r = session(b, p, m, seed, guard=args.teach_guard)
-                    rows.append(r)
-                    print(f"{b} {p} seed {seed} {name}: {r['nodes']} nodes, lag {r['lag']}, "
-                          + ", ".join(f"{w} {v['successes']}/{v['episodes']} ({v['collisions']} "
-                                      f"collisions)" for w, v in r["worlds"].items())
-                          + f", {r['seconds']} s", flush=True)
-                    if args.json:
-                        Path(args.json).write_text(json.dumps(rows, indent=1))
+    named = [variant(m, args.teach_guard, args.demo, args.correct) for m in methods]
+    rows_of = {n: [n] + ([f"{n} refined {args.refine:g} min"] if args.refine > 0 else [])
+               for n in named}  # the rows a session of each variant writes
+    from lab.practice import Runner
+
+    with Runner() as runner:
+        for b in behaviours:
+            for p in people:
+                for seed in seeds:
+                    for m, name in zip(methods, named, strict=True):
+                        if all((b, p, n, seed) in done for n in rows_of[name]):
+                            continue
+                        for r in session(b, p, m, seed, guard=args.teach_guard, demo=args.demo,
+                                         correct=args.correct, refine=args.refine,
+                                         runner=runner):
+                            rows.append(r)
+                            print(f"{b} {p} seed {seed} {r['method']}: {r['nodes']} nodes, "
+                                  f"lag {r['lag']}, "
+                                  + ", ".join(f"{w} {v['successes']}/{v['episodes']} "
+                                              f"({v['collisions']} collisions)"
+                                              for w, v in r["worlds"].items())
+                                  + f", {r['seconds']} s", flush=True)
+                        if args.json:
+                            Path(args.json).write_text(json.dumps(rows, indent=1))
     print()
     print(tables([r for r in rows if r["behaviour"] in behaviours and r["person"] in people
-                  and r["method"] in named and r["seed"] in seeds]))
+                  and any(r["method"] in rows_of[n] for n in named) and r["seed"] in seeds]))
     return 0
 
 

@@ -208,7 +208,8 @@ def run_episode(task: EpisodeTask) -> dict:
     """One episode judged as ``rhbl evaluate`` judges it (``judged_episode``):
     ``{"success", "metrics", "teacher", "steps", "stalls"}`` (``stalls``: the steps a collision
     began), with ``trace``: ``"winners"`` (the sphere that decided each step), ``"states"``
-    (its features, float32), ``"actions"`` and ``"side"`` (the followed wall's distance)."""
+    (its features, float32), ``"actions"``, ``"side"`` (the followed wall's distance) and
+    ``"poses"`` (the true pose after each step, float32)."""
     from client.behaviour.guard import RotationGuard
 
     b = _behaviour(task.behaviour)
@@ -226,6 +227,7 @@ def run_episode(task: EpisodeTask) -> dict:
         out["states"] = np.asarray(policy.states, dtype=np.float32)
         out["actions"] = list(ep.actions)
         out["side"] = np.asarray(ep.side, dtype=np.float32) if ep.side else None
+        out["poses"] = np.asarray([tuple(q)[:3] for q in ep.poses], dtype=np.float32)
     if task.guard is not None:
         out["guard"] = {k: getattr(driver, k) for k in ("overruled", "avoided", "straight_on")}
     policy.tracing = False

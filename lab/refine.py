@@ -36,7 +36,10 @@ radii, labels and parents; nothing else):
 The snapshot's ``metadata["refinement"]`` records the lineage: the parent file and its sha256,
 the fitness (and success rate) before and after on the practice set and on the held-out worlds,
 the episodes run, the moves kept, the time; ``"asks"`` the practice episodes it could not fix
-(world, start and where the failure began): where a person's correction is needed.
+(``ask``: the world, the start, what went wrong first and where to put the robot before it):
+where a person's correction is needed. A learner extending the tree keeps the record, and
+``rhbl console`` lists the asks of the world it shows ("show me here": one click puts the robot
+there).
 """
 
 from __future__ import annotations
@@ -58,7 +61,7 @@ from lab.practice import EpisodeTask, Runner
 from lab.recipe import parse_scales
 from process import arguments, files
 
-__all__ = ["add_arguments", "fitness", "main", "refine"]
+__all__ = ["add_arguments", "ask", "fitness", "main", "refine"]
 
 SCALES = (0.85, 1.2)
 PRUNE = ("all", "used", "none")
@@ -314,6 +317,31 @@ def _blame(pr: _Practice, window: int, b) -> tuple[Counter, list]:
     return blamed, where
 
 
+def ask(task: EpisodeTask, result: dict, window: int, b) -> dict:
+    """Where a person's correction is needed for a practice episode refinement could not fix
+    (``asks``: the console's "show me here", docs/console.md): the world, its scale, the
+    episode's start and seed, what went wrong first (``why``: ``collision``, ``band``: off the
+    followed wall's band, else ``failed``) and at which step, and ``pose``: where to put the
+    robot, ``window // 2`` steps before that step (the true pose then: a person placed there
+    sees what comes and shows the way), the start when nothing went wrong at one step."""
+    band = b.rules.get("wall-band")
+    step, why = None, "failed"
+    if result["stalls"]:
+        step, why = int(result["stalls"][0]), "collision"
+    elif band is not None and result.get("side") is not None:
+        side = np.asarray(result["side"])
+        off = np.flatnonzero((side < band["near"]) | (side > band["far"]))
+        if len(off):
+            step, why = int(off[0]), "band"
+    poses = result.get("poses")
+    if step is not None and poses is not None and len(poses):
+        pose = [float(v) for v in poses[max(0, min(step - window // 2, len(poses) - 1))]]
+    else:
+        pose = [float(v) for v in task.start]
+    return {"world": task.world, "scale": float(task.scale), "start": list(task.start),
+            "seed": int(task.seed), "why": why, "step": step, "pose": [round(v, 3) for v in pose]}
+
+
 def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = None,
            budget: float = 600.0, seeds=(0,), scales=SCALES, window: int = 30,
            candidates: int = 6, prune: str = "used", say=None, validate: bool = True,
@@ -422,12 +450,8 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
                 f"{pr.fitness:.2f}, {pr.episodes} episodes, {time.perf_counter() - t0:.0f} s")
     after = {"fitness": round(pr.fitness, 4), "nodes": int(clf.node_count_),
              "success": round(np.mean([r["success"] for r in pr.results]), 4)}
-    asks = []
-    for t, r in zip(pr.tasks, pr.results, strict=True):
-        if not r["success"]:
-            f = r["stalls"][0] if r["stalls"] else None
-            asks.append({"world": t.world, "scale": t.scale, "start": list(t.start),
-                         "seed": t.seed, "collision_step": f})
+    asks = [ask(t, r, window, b) for t, r in zip(pr.tasks, pr.results, strict=True)
+            if not r["success"]]
     report = {"before": before, "after": after, "episodes": pr.episodes,
               "practice": {"worlds": list(b.teach), "scales": [1.0, *scales],
                            "seeds": list(seeds), "free": free, "noise": list(noise), "episodes": len(pr.tasks),
@@ -503,7 +527,7 @@ def main(args) -> int:
                              scales=tuple(f for f in args.scales if f != 1.0), free=args.free,
                              prune=args.prune, noise=(args.range_noise, args.odom_noise))
     record = {"parent": str(args.tree), "parent_sha256": hashlib.sha256(raw).hexdigest(),
-              "behaviour": b.name, **{k: v for k, v in report.items() if k != "asks"}}
+              "behaviour": b.name, **report}  # with the asks: the console shows them
     meta = dict(clf.metadata)
     meta["refinement"] = [*list(meta.get("refinement") or []), record]
     meta["features"], meta["actions"] = policy.features.to_dict(), policy.actions.to_dict()
@@ -522,9 +546,12 @@ def main(args) -> int:
         tag = "taught" if w in b.teach else "held out"
         print(f"  {w} ({tag}): success {wb[w]:.0%} -> {wa[w]:.0%}")
     for a in report["asks"]:
-        pose = ",".join(f"{v:g}" for v in a["start"])
-        print(f"  could not fix: {a['world']} scaled {a['scale']:g} from {pose} (seed "
-              f"{a['seed']}), collision at step {a['collision_step']}: show me there")
+        pose = ",".join(f"{v:g}" for v in a["pose"])
+        what = {"collision": "collides", "band": "leaves the wall's band"}.get(a["why"], "fails")
+        print(f"  could not fix: {a['world']} scaled {a['scale']:g}, the episode from "
+              f"{','.join(f'{v:g}' for v in a['start'])} (seed {a['seed']}) {what}"
+              + (f" at step {a['step']}" if a["step"] is not None else "")
+              + f": show me there, from {pose} (rhbl console lists it)")
     if args.json:
         files.write_text(args.json, json.dumps(report, indent=1), "--json")
         print(f"wrote {args.json}")

@@ -151,6 +151,9 @@ class DemonstrationLearner:
         self.sessions = list(prov.get("sessions", []))
         self.parent = parent if parent is not None else prov.get("parent")
         self.created = prov.get("created", _now())
+        # the refinements (``rhbl refine``) of the tree this one extends, kept: their lineage,
+        # and the places practice could not fix (the console's "show me here")
+        self.refinement: list | None = None
         self._count = 0
         self._last_x: np.ndarray | None = None
         self._last_label: str | None = None
@@ -289,7 +292,7 @@ class DemonstrationLearner:
             "parent": self.parent,
             "sessions": self.sessions + ([self.session] if self.session else []),
         }
-        return {
+        meta = {
             "features": self.features.to_dict(),
             "actions": self.actions.to_dict(),
             "task": self.task,
@@ -298,6 +301,9 @@ class DemonstrationLearner:
                             if isinstance(v, str | int | float | bool | type(None))},
             "learning": self.rule.to_dict(),
         }
+        if self.refinement:
+            meta["refinement"] = self.refinement
+        return meta
 
     def save(self, path: str | Path) -> Path:
         path = Path(path)
@@ -326,6 +332,8 @@ class DemonstrationLearner:
 
             raise SnapshotError(str(path), f"invalid metadata: {exc}") from None
         learner.parent = str(path)
+        if isinstance(meta.get("refinement"), list):
+            learner.refinement = meta["refinement"]
         return learner
 
     from_snapshot = resume

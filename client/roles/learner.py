@@ -57,6 +57,7 @@ import logging
 import os
 import time
 from collections import deque
+from pathlib import Path
 
 from client.behaviour.features import DEFAULT_FEATURES, FEATURES, FeatureError
 from client.behaviour.given import reflex_arg
@@ -198,7 +199,10 @@ class LearnerProcess:
         on_stop_signal(self.request_stop)
         self.lineage = lineage
         ctx.scope.callback(self.close_journal)  # also on a path that never reaches finish()
-        self.latest = self.lineage.out.read_bytes() if self.lineage.out.exists() else None
+        # the tree it answers with: its snapshot; before its first one, the tree it extends
+        # (--resume: what drives, and what a console shows, until the first label is learned)
+        self.latest = (self.lineage.out.read_bytes() if self.lineage.out.exists()
+                       else Path(self.args.resume).read_bytes() if self.args.resume else None)
         self.snap_key = keys.learner_snapshot_key(ctx.robot)
         self.watch = ScanWatch("learner", keys.scan_key(ctx.robot), stale=3.0)
         # labels are paired with their scans as they arrive: nothing but labeled scans is queued

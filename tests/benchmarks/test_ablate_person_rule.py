@@ -16,6 +16,9 @@ def ablate(request):
 def test_a_session_teaches_with_the_variant_and_judges_every_world_of_the_behaviour(ablate):
     rows = [ablate.session("left-wall", "calm", m, seed=0, demo=20.0, correct=10.0, episodes=1)
             for m in ("person:copies=0", "person:copies=2")]
+    assert all(len(r) == 1 for r in rows)  # no refinement: the session's row alone
+    rows = [r[0] for r in rows]
+    assert [r["method"] for r in rows] == ["person:copies=0 20+10 s", "person:copies=2 20+10 s"]
     for r in rows:
         assert r["behaviour"] == "left-wall" and r["person"] == "calm" and r["labels"] > 0
         kinds = {w: v["kind"] for w, v in r["worlds"].items()}
@@ -24,6 +27,21 @@ def test_a_session_teaches_with_the_variant_and_judges_every_world_of_the_behavi
         assert all(v["episodes"] == 1 and 0 <= v["successes"] <= 1 for v in r["worlds"].values())
     # the copies are learned too: the same labels make a bigger tree with two copies each
     assert rows[1]["nodes"] > rows[0]["nodes"]
+
+
+@pytest.mark.slow
+def test_a_session_refined_by_practice_is_judged_again_beside_it(ablate):
+    from lab.practice import Runner
+
+    with Runner(workers=1) as runner:
+        rows = ablate.session("wall-following", "calm", "person", seed=0, demo=30.0,
+                              correct=0.0, episodes=1, refine=0.05, runner=runner,
+                              practice={"scales": (), "seconds": 10.0})
+    assert [r["method"] for r in rows] == ["person 30+0 s", "person 30+0 s refined 0.05 min"]
+    assert set(rows[1]["worlds"]) == set(rows[0]["worlds"])
+    ref = rows[1]["refinement"]
+    assert ref["episodes"] >= 6 and ref["after"]["fitness"] >= ref["before"]["fitness"]
+    assert rows[1]["nodes"] == ref["after"]["nodes"]
 
 
 def _row(method, behaviour, taught, held):

@@ -9,7 +9,7 @@ import pytest
 pytest.importorskip("aiohttp")
 
 from client.roles.console.app import MAX_ERRORS, MAX_KINDS, _Page  # noqa: E402
-from client.roles.console.lesson import UNDO_MAX, Teaching, Trouble  # noqa: E402
+from client.roles.console.lesson import MAX_ASKS, UNDO_MAX, Asks, Teaching, Trouble  # noqa: E402
 from client.roles.console.web import MAX_DEPTH, Refusals, read_message  # noqa: E402
 
 
@@ -151,3 +151,71 @@ def test_what_waits_for_a_page_that_does_not_read_is_bounded():
     texts = page.take()
     assert '"k": 9999' in next(t for t in texts if '"k"' in t)  # the latest scan
     assert any("more errors" in t for t in texts)
+
+
+def _refined(*asks) -> dict:
+    """A refined snapshot's metadata with these asks in its latest refinement."""
+    return {"refinement": [{"asks": []}, {"asks": list(asks)}]}
+
+
+def _an_ask(world="room", pose=(1.0, 2.0, 0.5), scale=1.0, why="collision") -> dict:
+    return {"world": world, "scale": scale, "start": [0.0, 0.0, 0.0], "seed": 0, "why": why,
+            "step": 40, "pose": list(pose)}
+
+
+def test_the_asks_of_the_world_shown_are_listed_and_the_others_counted():
+    a = Asks()
+    a.update(_refined(_an_ask(), _an_ask(pose=(3.0, 4.0, -1.0), why="band"),
+                      _an_ask(scale=0.85), _an_ask(world="eval-room-l"),
+                      _an_ask(world="worlds/room.toml", pose=(5.0, 1.0, 0.0))), "room")
+    s = a.summary()
+    assert [x["pose"] for x in s["asks"]] == [[1.0, 2.0, 0.5], [3.0, 4.0, -1.0], [5.0, 1.0, 0.0]]
+    assert [x["n"] for x in s["asks"]] == [1, 2, 3]
+    assert [x["why"] for x in s["asks"]] == ["collision", "band", "collision"]
+    assert s["asks_elsewhere"] == 2 and s["asking"] is None and a.changed
+    a.update(_refined(_an_ask()), None)  # no world known yet: every ask is elsewhere
+    assert a.summary()["asks"] == [] and a.summary()["asks_elsewhere"] == 1
+
+
+def test_labels_after_the_robot_is_put_at_an_ask_count_as_showing_it_there():
+    a = Asks()
+    a.update(_refined(_an_ask(), _an_ask(pose=(3.0, 4.0, -1.0))), "room")
+    a.labelled()  # not put at an ask: counts for none
+    assert [x["shown"] for x in a.summary()["asks"]] == [0, 0]
+    assert a.place(2).pose == (3.0, 4.0, -1.0)
+    a.labelled()
+    a.labelled()
+    assert [x["shown"] for x in a.summary()["asks"]] == [0, 2] and a.summary()["asking"] == 2
+    # a newer tree with the same asks (the learner took the labels in) keeps the count
+    a.update(_refined(_an_ask(pose=(3.0, 4.0, -1.0)), _an_ask()), "room")
+    assert [(x["n"], x["shown"]) for x in a.summary()["asks"]] == [(1, 2), (2, 0)]
+    assert a.summary()["asking"] == 1
+    a.moved()
+    a.labelled()
+    assert [x["shown"] for x in a.summary()["asks"]] == [2, 0] and a.summary()["asking"] is None
+
+
+@pytest.mark.parametrize("meta", [
+    None, {}, {"refinement": "x"}, {"refinement": []}, {"refinement": [None]},
+    {"refinement": [{"asks": {"pose": [1, 2, 3]}}]},
+    _refined({"world": "room"}), _refined({"world": "room", "pose": [1, 2]}),
+    _refined({"world": "room", "pose": [1, float("nan"), 0]}),
+    _refined({"world": "room", "pose": [1, True, 0]}), _refined({"world": 3, "pose": [1, 2, 0]}),
+    _refined("room"),
+])
+def test_malformed_asks_in_a_snapshot_are_left_out(meta):
+    a = Asks()
+    a.update(meta, "room")
+    assert a.summary()["asks"] == []
+
+
+def test_an_ask_that_is_not_there_is_refused_naming_the_range():
+    a = Asks()
+    with pytest.raises(ValueError, match="asks for nothing"):
+        a.place(1)
+    a.update(_refined(*[_an_ask(pose=(float(i), 1.0, 0.0)) for i in range(MAX_ASKS + 5)]),
+             "room")
+    assert len(a.summary()["asks"]) == MAX_ASKS
+    for bad in (0, MAX_ASKS + 1, "1", True, 1.0, None):
+        with pytest.raises(ValueError, match=f"1..{MAX_ASKS}"):
+            a.place(bad)

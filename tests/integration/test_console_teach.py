@@ -10,6 +10,9 @@ learner and console process: what a person at the page needs to teach well.
   says "the robot is stuck here: show it the way"; a key takes over and the prompt goes; so
   does a real ``rhbl controller`` whose loop guard holds the robot from a loop (its
   decisions say so);
+- where a tree's refinement by practice could not fix it (``rhbl refine``), a learner
+  extending the refined tree makes the page list the places ("the robot asks"): one click puts
+  the robot there, and the labels given from there count as shown;
 - at 1200x800 the side panel never overflows sideways, with long tree ids and big numbers.
 
 Keys are pressed as a person presses them (selenium's key events); tests wait on events (a
@@ -472,6 +475,59 @@ def test_a_remote_teacher_over_tls_with_a_token_teaches_the_same(env, tmp_path):
     finally:
         close_chromium(b)
         assert console.stop() == 0, console.output()
+
+
+def _refined_ahead(tmp: Path) -> tuple[Path, list]:
+    """A tree that only drives ahead (it collides), refined by ``rhbl refine`` for a few
+    seconds: the refined snapshot and the asks it keeps."""
+    from client.behaviour.learning import TreePolicy
+    from lab.cli import main
+    from rhbl import HypersphereClassifier
+
+    tree = TreePolicy.load(Path(__file__).resolve().parents[1] / "rhbl" / "data" /
+                           "room-1200.rhbl")
+    clf = HypersphereClassifier(default_label="fwd")
+    clf.partial_fit([[1.0] * tree.features.dim], ["fwd"])
+    ahead, refined = tmp / "ahead.rhbl", tmp / "refined.rhbl"
+    clf.save(str(ahead), metadata={"features": tree.features.to_dict(),
+                                   "actions": tree.actions.to_dict()})
+    assert main(["refine", "--behaviour", "wall-following", "--tree", str(ahead), "--out",
+                 str(refined), "--seconds", "10", "--scales", "none", "--minutes", "0.02",
+                 "--workers", "1"]) == 0
+    asks = TreePolicy.load(refined).metadata["refinement"][-1]["asks"]
+    return refined, [a for a in asks if a["world"] == "room" and a["scale"] == 1.0]
+
+
+def test_the_robot_asks_to_be_shown_where_practice_could_not_fix_it(env, browser, tmp_path):
+    w = env["watch"]
+    refined, asks = _refined_ahead(tmp_path)
+    assert asks, "refining a tree that only drives ahead for seconds fixes every start?"
+    learner = _rhbl("asks", tmp_path, "learner", "--resume", str(refined), "--out",
+                    str(tmp_path / "corrected.rhbl"), "--snapshot-every", "0.3", "--connect",
+                    env["srv"].endpoint)
+    try:
+        _wait_learner(env, learner)
+        _open(browser, env["console"].url)
+        _until(browser, lambda d: _int(d, "asks", "n") == len(asks), 20,
+               f"the page lists the {len(asks)} asks")
+        assert not browser.find_element("id", "asks").get_attribute("hidden")
+        n = len(asks)  # the last one: the robot is put where it went wrong
+        browser.find_element("css selector",
+                             f"#asks-list li[data-n='{n}'] button").click()
+        pose = asks[-1]["pose"]
+        w.wait(lambda w: _near(w.state.truth, pose) and abs(w.state.truth[2] - pose[2]) < 0.05,
+               10, "the robot where the tree asks")
+        _until(browser, lambda d: _attr(d, "asks", "asking") == str(n), 10, "asking there")
+        browser.find_element("id", "view").click()  # keys to the page again
+        _hold_until(browser, "ARROW_LEFT", lambda d: int(d.find_element(
+            "css selector", f"#asks-list li[data-n='{n}']").get_attribute("data-shown")
+            or 0) >= 3, "three labels shown there")
+        w.wait(Watch.stopped, 5, "the robot stops")
+        _press(browser, "HOME")  # put elsewhere: the labels count for no ask now
+        _until(browser, lambda d: _attr(d, "asks", "asking") == "", 10, "no ask now")
+        assert _errors(browser) == []
+    finally:
+        assert learner.stop() == 0, learner.output()
 
 
 def test_side_panel_never_overflows_at_1200x800(env, browser):

@@ -220,3 +220,29 @@ def test_a_sphere_added_changes_only_the_episodes_it_reaches():
     for i, (a, b) in enumerate(zip(fresh, pr.results, strict=True)):
         if i not in idx:
             assert _judged([a]) == _judged([b]) and a["winners"].tolist() == b["winners"].tolist()
+
+
+def test_a_failure_refinement_cannot_fix_asks_from_before_it_went_wrong():
+    """``lab.refine.ask``: a tree that only drives forward collides; the ask puts the robot
+    where it was ``window // 2`` steps before the collision, on its own path."""
+    import math
+
+    from lab.behaviours import get
+    from lab.refine import ask
+    from rhbl import HypersphereClassifier
+
+    policy = TreePolicy.load(WALL_TREE)
+    d = policy.features.dim
+    clf = HypersphereClassifier(default_label="fwd")
+    clf.partial_fit([[1.0] * d], ["fwd"])
+    ahead = TreePolicy(clf, policy.features, policy.actions)
+    task = EpisodeTask("wall-following", "room", tree_bytes(ahead), STARTS[0], seconds=30.0,
+                       trace=True)
+    r = run_episode(task)
+    assert not r["success"] and r["stalls"]
+    a = ask(task, r, 30, get("wall-following"))
+    assert a["why"] == "collision" and a["step"] == r["stalls"][0]
+    assert a["pose"] == [round(float(v), 3) for v in r["poses"][a["step"] - 15]]
+    assert math.dist(a["pose"][:2], STARTS[0][:2]) > 0.1  # on its way, not at its start
+    assert (a["world"], a["scale"], a["start"]) == ("room", 1.0, list(STARTS[0]))
+    json.dumps(a)  # it goes into the snapshot's metadata as it is

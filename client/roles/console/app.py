@@ -27,6 +27,7 @@ is answered with an ``error`` and the connection stays up):
     {"t": "undo", "seconds": 5}                   withdraw the labels of the last 5 s of teaching
     {"t": "place", "pose": [x, y, yaw]}           put the robot there (the simulator's set_pose)
     {"t": "place", "start": 2}                    ... at the world's start pose 2 (0 = the first)
+    {"t": "place", "ask": 1}                      ... where the tree's refinement asks (from 1)
     {"t": "reset"}                                the robot back at its start pose, markers gone
 
 One page at a time drives a robot: the first page that drives holds it until it leaves, switches
@@ -363,6 +364,9 @@ class Console(Tutor):
         async def get() -> None:
             w = await self.loop.run_in_executor(None, fetch)
             if w is not None:
+                r.world_name = w.name
+                if r.policy is not None:  # the tree came first: its asks in this world
+                    r.asks.update(r.policy.metadata, w.name)
                 b = self._behaviour_of(w)
                 # the behaviour's own start poses of the world, when it gives some (Home and
                 # the keys 1-9 put the robot there), else the world's
@@ -489,6 +493,7 @@ class Console(Tutor):
     def _send_robot(self, page: _Page) -> None:
         r = self._robot(page.robot)
         self._ask_world(r)
+        self._fetch_tree(r, first=True)
         if not self.view_only:
             self._publishers(r)  # the learner's status and the labels, before the first key
         elif r.learners is None:

@@ -23,6 +23,10 @@ console's teaching session, ``client.roles.console.tutor``, feeds it and says it
   when it stepped in (``Decision.looping``, fed to ``guarded``), which counts as a loop too
   (``stuck`` ``why`` ``guard``, a loop marker where it began) until ``GUARD_SECONDS`` pass
   without it.
+- **Asks** (``Asks``): the places a tree's refinement by practice could not fix (``rhbl
+  refine`` keeps them in the snapshot, ``lab.refine.ask``): those of the world shown, each
+  with where to put the robot, "show me here" on the page; the labels given after the robot
+  was put at one count as showing it there.
 """
 
 from __future__ import annotations
@@ -33,8 +37,8 @@ from dataclasses import asdict, dataclass
 
 from client.behaviour.loops import LoopDetector
 
-__all__ = ["AGREEMENT_WINDOW", "GUARD_SECONDS", "STALL_SECONDS", "UNDO_MAX", "Episode", "Marker", "Teaching",
-           "Trouble"]
+__all__ = ["AGREEMENT_WINDOW", "GUARD_SECONDS", "MAX_ASKS", "STALL_SECONDS", "UNDO_MAX", "Ask",
+           "Asks", "Episode", "Marker", "Teaching", "Trouble"]
 
 AGREEMENT_WINDOW = 60.0  # s of sim time the agreement is measured over
 UNDO_MAX = 120.0  # s: the longest undo
@@ -44,6 +48,8 @@ STALL_METRES = 0.1
 GUARD_SECONDS = 5.0  # s of sim time the guard's loop counts after the guard last stepped in
 MARKERS = 200  # markers kept per robot (the newest)
 NEAR = 0.3  # m: a marker of the same kind this close counts again instead of a new one
+MAX_ASKS = 50  # asks of a tree listed at most (the first ones)
+ASK_WHY = ("collision", "band", "failed")
 
 
 @dataclass
@@ -328,3 +334,94 @@ class Trouble:
 
     def summary(self) -> dict:
         return {"markers": [m.to_json() for m in self.markers], "stuck": self.stuck}
+
+
+@dataclass
+class Ask:
+    """A place the tree's refinement could not fix: ``n`` (its number on the page, from 1),
+    where to put the robot (``pose``), ``why`` the practice episode failed there
+    (``collision``, ``band``: it left the wall's band, ``failed``), and how many labels the
+    person gave since putting the robot there (``shown``)."""
+
+    n: int
+    pose: tuple[float, float, float]
+    why: str
+    shown: int = 0
+
+    def to_json(self) -> dict:
+        return {"n": self.n, "pose": [round(v, 3) for v in self.pose], "why": self.why,
+                "shown": self.shown}
+
+
+class Asks:
+    """The asks of the tree the console holds, in the world it shows (see the module)."""
+
+    def __init__(self):
+        self.here: list[Ask] = []
+        self.elsewhere = 0  # asks of other worlds, or of this one scaled (practice only)
+        self.asking: Ask | None = None  # the ask the robot was last put at by the page
+        self._shown: dict[tuple, int] = {}  # pose -> labels (kept across newer trees)
+        self.changed = False
+
+    @staticmethod
+    def of(meta) -> list:
+        """The asks of the latest refinement a snapshot's metadata records (a list of dicts;
+        anything else: none)."""
+        rec = meta.get("refinement") if isinstance(meta, dict) else None
+        last = rec[-1] if isinstance(rec, list) and rec else None
+        asks = last.get("asks") if isinstance(last, dict) else None
+        return asks if isinstance(asks, list) else []
+
+    def update(self, meta, world: str | None) -> None:
+        """The asks of a newly fetched tree (its metadata ``meta``) in ``world`` (the world's
+        name: an ask's world names it, or is a file of that name): a malformed one is left out."""
+        here, elsewhere = [], 0
+        for a in self.of(meta):
+            pose = a.get("pose") if isinstance(a, dict) else None
+            if (not isinstance(pose, list) or len(pose) != 3
+                    or not all(isinstance(v, int | float) and not isinstance(v, bool)
+                               and math.isfinite(v) for v in pose)):
+                continue
+            name = a.get("world")
+            scale = a.get("scale", 1.0)
+            if (world is None or not isinstance(name, str) or scale != 1.0
+                    or world not in (name, name.rsplit("/", 1)[-1].removesuffix(".toml"))):
+                elsewhere += 1
+                continue
+            if len(here) >= MAX_ASKS:
+                continue
+            why = a.get("why") if a.get("why") in ASK_WHY else "failed"
+            key = tuple(round(float(v), 3) for v in pose)
+            here.append(Ask(len(here) + 1, key, why, self._shown.get(key, 0)))
+        if [x.to_json() for x in here] != [x.to_json() for x in self.here] \
+                or elsewhere != self.elsewhere:
+            self.changed = True
+        self.here, self.elsewhere = here, elsewhere
+        if self.asking is not None:
+            self.asking = next((x for x in here if x.pose == self.asking.pose), None)
+
+    def place(self, n) -> Ask:
+        """The ask numbered ``n`` (the page put the robot there: labels count for it from
+        now). ValueError naming what was wrong."""
+        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= len(self.here):
+            raise ValueError(f"'ask' must be the number of an ask, 1..{len(self.here)}, got "
+                             f"{n!r:.40}" if self.here else "the tree asks for nothing here")
+        self.asking = self.here[n - 1]
+        self.changed = True
+        return self.asking
+
+    def moved(self) -> None:
+        """The robot was put somewhere else (a start, dragged, reset)."""
+        self.asking = None
+
+    def labelled(self) -> None:
+        """A label was given: it shows the ask the robot was put at, if any."""
+        a = self.asking
+        if a is not None:
+            a.shown += 1
+            self._shown[a.pose] = a.shown
+            self.changed = True
+
+    def summary(self) -> dict:
+        return {"asks": [a.to_json() for a in self.here], "asks_elsewhere": self.elsewhere,
+                "asking": None if self.asking is None else self.asking.n}

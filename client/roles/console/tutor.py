@@ -35,7 +35,7 @@ from client.behaviour.features import FeatureSpec
 from client.behaviour.learning import TreePolicy, check_compatible
 from client.labels import Hold, LabelPublisher, Learners
 from client.player import PlayerClient, RequestError
-from client.roles.console.lesson import Teaching, Trouble
+from client.roles.console.lesson import Asks, Teaching, Trouble
 from client.roles.console.web import error_message
 from protocol import keys
 from protocol.messages import Scan, State
@@ -47,6 +47,7 @@ log = logging.getLogger("client.roles.console.app")
 SCAN_MEMORY = 128  # scan ids remembered per robot (a page's label must name one of these)
 TEACH_EVERY = 0.5  # s between two ``teach`` messages of a robot
 TREE_EVERY = 2.0  # s at least between two fetches of the learner's tree (for the agreement)
+FIRST = "first"  # the tree wanted when a page opens before any notice (the learner's latest)
 _ROBOT_NUMBER = re.compile(r"^r(\d+)$")
 
 
@@ -67,6 +68,7 @@ class Robot:
     def __init__(self, name: str):
         self.name = name
         self.world: str | None = None  # JSON of the WorldInfo
+        self.world_name: str | None = None
         self.starts: tuple = ()  # the world's start poses
         self.world_asked = 0.0
         self.latest: dict[str, str] = {}  # kind -> JSON (for a page that starts watching)
@@ -83,6 +85,7 @@ class Robot:
         self.learners: Learners | None = None  # view-only: which learners are up
         self.teaching = Teaching()
         self.trouble = Trouble()
+        self.asks = Asks()  # where the tree's refinement asks for the person's correction
         self.policy: TreePolicy | None = None  # the learner's tree, for the agreement
         self.policy_id = ""
         self.tree_wanted: str | None = None  # a notice's snapshot id not fetched yet
@@ -129,8 +132,12 @@ class Tutor:
         self._to_pages(r, "control", self._control_text(r))
 
     # -- the learner's tree, for the agreement --
-    def _fetch_tree(self, r: Robot) -> None:
-        """Fetch the learner's latest tree (at most every ``TREE_EVERY`` s, one at a time)."""
+    def _fetch_tree(self, r: Robot, first: bool = False) -> None:
+        """Fetch the learner's latest tree (at most every ``TREE_EVERY`` s, one at a time);
+        ``first``: a page opens and no tree is held yet (one try: the learner's tree, its asks,
+        before any notice)."""
+        if first and r.policy is None and r.tree_wanted is None:
+            r.tree_wanted = FIRST
         now = time.monotonic()
         if r.tree_busy or r.tree_wanted in (None, r.policy_id) or now - r.tree_asked < TREE_EVERY:
             return
@@ -162,8 +169,11 @@ class Tutor:
                 r.tree_busy = False
             if policy is not None:
                 r.policy, r.policy_id = policy, wanted
+                r.asks.update(policy.metadata, r.world_name)
                 r.teach_dirty = True
-            if r.tree_wanted != r.policy_id:  # a newer notice came meanwhile
+            elif wanted == FIRST and r.tree_wanted == FIRST:
+                r.tree_wanted = None  # no learner, or no tree yet: its first notice says so
+            if r.tree_wanted != r.policy_id and r.tree_wanted is not None:  # a newer notice
                 self.loop.call_later(TREE_EVERY, self._fetch_tree, r)
 
         self._spawn(get())
@@ -183,7 +193,7 @@ class Tutor:
             "t": "teach", "robot": r.name, "seq": r.teach_seq,
             "learner": None if learners is None else {"up": bool(learners)},
             "labels": labels, "tree": r.policy_id or None,
-            **r.teaching.summary(now), **r.trouble.summary()})
+            **r.teaching.summary(now), **r.trouble.summary(), **r.asks.summary()})
 
     def _say_teaching(self, force: bool = False) -> None:
         now = time.monotonic()
@@ -264,10 +274,12 @@ class Tutor:
             except Exception as exc:  # noqa: BLE001 - a tree of other features: no score
                 log.debug("agreement not scored: %s", exc)
         seq = r.pubs.label(scan, action, action)
+        r.asks.labelled()
         was = r.teaching.current
         r.teaching.labelled(seq, scan.ts, pose)
         r.labelled = scan.id
-        if r.teaching.current is not was:
+        if r.teaching.current is not was or r.asks.changed:
+            r.asks.changed = False
             r.teach_dirty = True
 
     def _stop(self, r: Robot, why: str) -> None:
@@ -363,6 +375,15 @@ class Tutor:
         why = self._may_act(page, r, "move the robot")
         if why:
             return why
+        if "ask" in msg:  # "show me here": where refinement could not fix the tree
+            try:
+                a = r.asks.place(msg["ask"])
+            except ValueError as exc:
+                return str(exc)
+            r.teach_dirty = True
+            self._place(page, r, a.pose, f"ask {a.n}: show it the way from here")
+            return None
+        r.asks.moved()
         if "start" in msg:
             i = msg["start"]
             if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < len(r.starts):
@@ -389,6 +410,7 @@ class Tutor:
         self._stop(r, "the scene is reset")
         r.teaching.stop()
         r.trouble.clear()
+        r.asks.moved()
         r.teach_dirty = True
         self._place(page, r, r.starts[r.start_index], "its start pose (reset)", reset=True)
         return None

@@ -132,6 +132,21 @@ def test_demonstrator_labels_with_the_expert_while_perturbing():
     assert all(e == lab for lab, e in (calm.step(scan, (0, 0, 0)) for _ in range(50)))
 
 
+def test_a_tree_extended_keeps_the_refinements_of_its_parent(tmp_path):
+    """``rhbl refine``'s record (its lineage and its asks) stays in the snapshots of a learner
+    that extends the refined tree: the console lists the asks from the learner's tree."""
+    learner = DemonstrationLearner(FEATURES["wall"], DEFAULT_ACTIONS, task="wall-following")
+    learner.observe(_corridor_scan(0.3, 1.7), 0.0, "fwd-left")
+    assert "refinement" not in learner.metadata()
+    record = [{"parent": "a.rhbl", "asks": [{"world": "room", "pose": [1.0, 2.0, 0.0]}]}]
+    path = tmp_path / "refined.rhbl"
+    learner.classifier.save(str(path), metadata={**learner.metadata(), "refinement": record})
+    again = DemonstrationLearner.resume(path)
+    again.observe(_corridor_scan(1.1, 0.9), 0.0, "fwd-right")
+    assert again.metadata()["refinement"] == record
+    assert TreePolicy.load(again.save(tmp_path / "next.rhbl")).metadata["refinement"] == record
+
+
 def test_learner_observe_save_resume_and_compatibility(tmp_path):
     learner = DemonstrationLearner(FEATURES["wall"], DEFAULT_ACTIONS, task="wall-following",
                                    spawn="winner")

@@ -4,6 +4,8 @@
 // (the pose drawn last), #hold data-holder, #tree data-nodes/vectors, #fps data-fps/frames,
 // #learner data-up/seq, #labels data-given/held/waiting/withdrawn, #agreement data-value/n,
 // #trouble data-markers/loops/stalls/collisions, #stuck data-why, #episode data-n/state,
+// #asks data-n/elsewhere/asking (the places the tree's refinement asks to be shown; each
+// li data-n/shown and its "show me here" button),
 // #clock data-t, #view data-beacons/seen (the beacons drawn, the ids of those the robot sees);
 // and window.rhbl.view(): what the page shows now, read-only (the robot as drawn, the walls,
 // the goal, the beacons and those seen, the mode, who drives, the action executed, the scan
@@ -192,6 +194,7 @@ function showTeach() {
     : `episode ${cur.n} ${cur.state}: ${plural(cur.labels, "label")}`
       + (eps.length > 1 ? ` (${plural(eps.filter((e) => e.state !== "discarded").length, "episode")} kept)` : "");
   $("record").firstChild.textContent = m.episode !== null ? "stop " : "record ";
+  showAsks(m);
   const stuck = $("stuck");
   const show = m.stuck && S.mode !== "demonstrate";
   stuck.hidden = !show;
@@ -201,6 +204,34 @@ function showTeach() {
       ? `the robot is stuck here (${STUCK[m.stuck.why] || m.stuck.why}): show it the way`
       : `the robot is stuck here (${m.stuck.why}): switch to correct (C) to show it the way`;
   }
+}
+
+// where the tree's refinement by practice asks the person to show the way (rhbl refine)
+const ASK_WHY = { collision: "it collided", band: "it left the wall's band", failed: "it failed" };
+function showAsks(m) {
+  const asks = m.asks || [], sec = $("asks"), list = $("asks-list");
+  sec.hidden = !asks.length && !m.asks_elsewhere;
+  sec.dataset.n = asks.length; sec.dataset.elsewhere = m.asks_elsewhere || 0;
+  sec.dataset.asking = m.asking || "";
+  const key = JSON.stringify(asks) + (m.asking || "");
+  if (list.dataset.key !== key) {
+    list.dataset.key = key;
+    list.innerHTML = "";
+    for (const a of asks) {
+      const li = document.createElement("li");
+      li.dataset.n = a.n; li.dataset.shown = a.shown;
+      const [x, y, yaw] = a.pose;
+      li.append(`${ASK_WHY[a.why] || a.why} after (${x.toFixed(2)}, ${y.toFixed(2)}), heading ${(yaw * 180 / Math.PI).toFixed(0)}\u00b0`
+        + (a.shown ? `: shown, ${plural(a.shown, "label")}` : "") + (m.asking === a.n ? " (the robot is here)" : "") + " ");
+      const b = document.createElement("button");
+      b.textContent = "show me here"; b.title = "put the robot here; then correct it (C) and show it the way";
+      b.onclick = () => { release(); send({ t: "place", ask: a.n }); };
+      li.append(b);
+      list.append(li);
+    }
+  }
+  $("asks-elsewhere").textContent = m.asks_elsewhere
+    ? `${plural(m.asks_elsewhere, "more ask")} in practice worlds not shown here (scaled copies or other worlds)` : "";
 }
 
 // why the learned robot is stuck, as the panel says it
@@ -593,7 +624,9 @@ function trail(px) {
 }
 
 // where the learned robot looped (purple ring), stalled (teal square), collided (crimson X);
-// where it is stuck now, a pulsing ring
+// where the tree asks to be shown (an orange ring, its heading and "?n"); where it is stuck now,
+// a pulsing ring
+const ASK_COLOUR = "#d2691e";
 function marks(px) {
   const m = S.teach;
   if (!m) return;
@@ -609,6 +642,14 @@ function marks(px) {
       g.save(); g.translate(k.x, k.y); g.scale(px, -px);
       g.font = "bold 11px system-ui, sans-serif"; g.fillText(`\u00d7${k.count}`, 10, 14); g.restore();
     }
+  }
+  for (const a of m.asks || []) {  // the places the robot asks to be shown: a "?" and its heading
+    const [x, y, yaw] = a.pose;
+    g.strokeStyle = ASK_COLOUR; g.fillStyle = ASK_COLOUR; g.lineWidth = 2 * px;
+    g.beginPath(); g.arc(x, y, 0.2, 0, 2 * Math.PI);
+    g.moveTo(x, y); g.lineTo(x + 0.3 * Math.cos(yaw), y + 0.3 * Math.sin(yaw)); g.stroke();
+    g.save(); g.translate(x, y); g.scale(px, -px);
+    g.font = "bold 13px system-ui, sans-serif"; g.fillText(`?${a.n}`, 12, -8); g.restore();
   }
   if (m.stuck && Number.isFinite(m.stuck.x)) {
     const r = 0.35 + 0.1 * Math.sin(performance.now() / 200);
