@@ -123,11 +123,26 @@ def _behaviour(name: str):
     return get(name)
 
 
+DRAWN = "drawn"  # a task's world drawn at random: ``drawn:<kind>:<seed>:<i>:<side>``
+
+
+def drawn_name(kind: str, seed: int, i: int, side: str = "right") -> str:
+    """The name a task gives the ``i``-th world ``lab.generated.generated(kind, ., seed,
+    side)`` draws: each worker draws it again (the same world for the same name)."""
+    return f"{DRAWN}:{kind}:{int(seed)}:{int(i)}:{side}"
+
+
 @functools.cache
 def _world(behaviour: str, world: str, scale: float = 1.0):
     from lab.behaviours import world_of
 
-    spec = world_of(_behaviour(behaviour), world)
+    if world.startswith(DRAWN + ":"):
+        from lab.generated import generated
+
+        _, kind, seed, i, side = world.split(":")
+        spec = generated(kind, int(i) + 1, int(seed), side)[int(i)]
+    else:
+        spec = world_of(_behaviour(behaviour), world)
     return spec if scale == 1.0 else spec.scaled(scale)
 
 

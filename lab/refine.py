@@ -56,14 +56,15 @@ import numpy as np
 
 from client.behaviour.learning import TreePolicy
 from lab import practice
-from lab.behaviours import behaviour_arg, get, world_of
-from lab.practice import EpisodeTask, Runner
-from lab.recipe import parse_scales
+from lab.behaviours import behaviour_arg, get, recipe_of, world_of
+from lab.practice import EpisodeTask, Runner, drawn_name
+from lab.recipe import GENERATORS, parse_scales
 from process import arguments, files
 
 __all__ = ["add_arguments", "ask", "fitness", "main", "refine"]
 
 SCALES = (0.85, 1.2)
+PRACTICE_SEED = 500  # the drawn practice worlds' (training runs draw with their own seeds)
 PRUNE = ("all", "used", "none")
 
 
@@ -256,28 +257,32 @@ class _Practice:
             self.results[i] = r
 
 
-def _practice_tasks(b, seeds, scales, seconds=None, free: int = 0, noise=(0.0, 0.0)
-                    ) -> list[EpisodeTask]:
+def _practice_tasks(b, seeds, scales, seconds=None, free: int = 0, noise=(0.0, 0.0),
+                    drawn: tuple[str, int] | None = None) -> list[EpisodeTask]:
     """Every start pose of each teaching world, as it is and scaled by each of ``scales``, and
     ``free`` poses in its free space (``server.world.free_pose``, drawn with seed 100 + the
-    scale's place: not the poses the tree was taught from), each with every seed."""
+    scale's place: not the poses the tree was taught from), each with every seed; ``drawn`` =
+    (kind, count): also every start pose of ``count`` worlds ``lab.generated`` draws of that
+    kind (with ``PRACTICE_SEED``, not a training run's seed), as they are."""
     from server.world import free_pose
 
     name = str(b.path) if b.path else b.name
+    worlds = [(w, scale) for w in b.teach for scale in (1.0, *scales)]
+    if drawn is not None and drawn[1] > 0:
+        worlds += [(drawn_name(drawn[0], PRACTICE_SEED, i, b.band_side or "right"), 1.0)
+                   for i in range(drawn[1])]
     out = []
-    for w in b.teach:
-        base = world_of(b, w)
-        for j, scale in enumerate((1.0, *scales)):
-            spec = base if scale == 1.0 else base.scaled(scale)
-            rng = np.random.default_rng(100 + j)
-            poses = list(spec.start_poses)
-            poses += [tuple(p) for p in (free_pose(spec, rng) for _ in range(free)) if p]
-            for k, start in enumerate(poses):
-                for seed in seeds:
-                    out.append(EpisodeTask(name, w, b"", tuple(float(v) for v in start),
-                                           seed=seed * 1000 + k, seconds=seconds,
-                                           range_noise=noise[0], odom_noise=noise[1],
-                                           trace=True, scale=float(scale)))
+    for j, (w, scale) in enumerate(worlds):
+        spec = practice._world(name, w, float(scale))
+        rng = np.random.default_rng(100 + (j % (1 + len(scales))))
+        poses = list(spec.start_poses)
+        poses += [tuple(p) for p in (free_pose(spec, rng) for _ in range(free)) if p]
+        for k, start in enumerate(poses):
+            for seed in seeds:
+                out.append(EpisodeTask(name, w, b"", tuple(float(v) for v in start),
+                                       seed=seed * 1000 + k, seconds=seconds,
+                                       range_noise=noise[0], odom_noise=noise[1],
+                                       trace=True, scale=float(scale)))
     return out
 
 
@@ -345,14 +350,17 @@ def ask(task: EpisodeTask, result: dict, window: int, b) -> dict:
 def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = None,
            budget: float = 600.0, seeds=(0,), scales=SCALES, window: int = 30,
            candidates: int = 6, prune: str = "used", say=None, validate: bool = True,
-           seconds: float | None = None, free: int = 0, noise=(0.0, 0.0)):
+           seconds: float | None = None, free: int = 0, noise=(0.0, 0.0),
+           drawn: tuple[str, int] | None = None):
     """``policy``'s tree refined by practice (the module's docstring): ``(classifier,
-    report)``. ``seconds``: each episode's length (default: the behaviour's time limit)."""
+    report)``. ``seconds``: each episode's length (default: the behaviour's time limit);
+    ``drawn`` = (kind, count): practise also in that many worlds drawn at random."""
     t0 = time.perf_counter()
     say = say or (lambda text: print(text, flush=True))
     actions = list(policy.actions.names)
     clf = policy.classifier
-    pr = _Practice(b, policy, runner, _practice_tasks(b, seeds, scales, seconds, free, noise))
+    pr = _Practice(b, policy, runner, _practice_tasks(b, seeds, scales, seconds, free, noise,
+                                                      drawn))
     pr.results = pr.run(clf)
     # a start the behaviour's own expert fails from teaches nothing: left out
     fair = [i for i, r in enumerate(pr.results) if r["teacher"]["success"]]
@@ -362,7 +370,9 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
     before = {"fitness": round(pr.fitness, 4), "nodes": int(clf.node_count_),
               "success": round(np.mean([r["success"] for r in pr.results]), 4)}
     say(f"practice: {len(pr.tasks)} episodes ({', '.join(b.teach)}, scales 1"
-        f"{''.join(f', {s:g}' for s in scales)}; {free} free-space starts each; "
+        f"{''.join(f', {s:g}' for s in scales)}"
+        f"{f'; {drawn[1]} {drawn[0]} drawn' if drawn and drawn[1] else ''}; "
+        f"{free} free-space starts each; "
         f"{len(seeds)} seed(s); {dropped} left out: the expert fails there) on "
         f"{runner.describe()}:"
         f" fitness {before['fitness']:.2f}, success {before['success']:.0%}, "
@@ -454,6 +464,7 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
             if not r["success"]]
     report = {"before": before, "after": after, "episodes": pr.episodes,
               "practice": {"worlds": list(b.teach), "scales": [1.0, *scales],
+                           "drawn": list(drawn) if drawn and drawn[1] else None,
                            "seeds": list(seeds), "free": free, "noise": list(noise), "episodes": len(pr.tasks),
                            "left_out": dropped},
               "moves": dict(moves), "seconds": round(time.perf_counter() - t0, 1),
@@ -491,6 +502,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--free", type=arguments.non_negative_int, default=0,
                         help="also practise from this many poses drawn in the free space of "
                              "each (scaled) teaching world (default 0)")
+    parser.add_argument("--generated", type=arguments.non_negative_int, default=0,
+                        metavar="N",
+                        help="also practise in N worlds drawn at random by --generator "
+                             f"(rhbl generate; seed {PRACTICE_SEED}, not a training run's), "
+                             "from their start poses (default 0)")
+    parser.add_argument("--generator", choices=list(GENERATORS), default=None,
+                        help="the kind of world --generated draws (default: the behaviour's "
+                             "recipe's generator)")
     parser.add_argument("--range-noise", type=arguments.non_negative_float, default=0.0,
                         help="practise with this laser noise (server option; the seeds then "
                              "differ; the validation runs without)")
@@ -525,7 +544,8 @@ def main(args) -> int:
                              budget=args.minutes * 60.0, seeds=tuple(range(args.seeds)),
                              window=args.window, seconds=args.seconds,
                              scales=tuple(f for f in args.scales if f != 1.0), free=args.free,
-                             prune=args.prune, noise=(args.range_noise, args.odom_noise))
+                             prune=args.prune, noise=(args.range_noise, args.odom_noise),
+                             drawn=(args.generator or recipe_of(b).generator, args.generated))
     record = {"parent": str(args.tree), "parent_sha256": hashlib.sha256(raw).hexdigest(),
               "behaviour": b.name, **report}  # with the asks: the console shows them
     meta = dict(clf.metadata)

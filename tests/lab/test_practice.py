@@ -246,3 +246,25 @@ def test_a_failure_refinement_cannot_fix_asks_from_before_it_went_wrong():
     assert math.dist(a["pose"][:2], STARTS[0][:2]) > 0.1  # on its way, not at its start
     assert (a["world"], a["scale"], a["start"]) == ("room", 1.0, list(STARTS[0]))
     json.dumps(a)  # it goes into the snapshot's metadata as it is
+
+
+def test_practice_in_drawn_worlds_names_each_so_any_worker_draws_it_again():
+    from lab.behaviours import get
+    from lab.generated import generated
+    from lab.practice import _world, drawn_name
+    from lab.refine import PRACTICE_SEED, _practice_tasks
+
+    b = get("left-wall")
+    tasks = _practice_tasks(b, (0,), (), drawn=("rooms", 2))
+    drawn = [t for t in tasks if t.world.startswith("drawn:")]
+    want = generated("rooms", 2, PRACTICE_SEED, "left")
+    assert {t.world for t in drawn} == {drawn_name("rooms", PRACTICE_SEED, i, "left")
+                                        for i in range(2)}
+    assert len(drawn) == sum(len(w.start_poses) for w in want)
+    for i, w in enumerate(want):
+        spec = _world("left-wall", drawn_name("rooms", PRACTICE_SEED, i, "left"))
+        assert spec.walls == w.walls and spec.start_poses == w.start_poses
+    assert len(tasks) - len(drawn) == len(_practice_tasks(b, (0,), ()))
+    r = run_episode(EpisodeTask("left-wall", drawn[0].world, tree_bytes(
+        TreePolicy.load(WALL_TREE)), drawn[0].start, seconds=3.0))
+    assert r["steps"] == 30
