@@ -39,7 +39,7 @@ from bench_teach_study import make_method, teach  # noqa: E402
 from people import ANY, ANY_DEV, person  # noqa: E402
 
 from client.behaviour.learning import TreePolicy  # noqa: E402
-from lab.behaviours import get, world_of  # noqa: E402
+from lab.behaviours import get, recipe_of, world_of  # noqa: E402
 from lab.evaluate import evaluate  # noqa: E402
 from lab.report import table  # noqa: E402
 
@@ -89,7 +89,9 @@ def session(bname: str, model: str, method: str, seed: int, guard: bool = True,
     clf, rep = practise(b, policy, runner, budget=refine * 60.0, validate=False,
                         say=lambda text: None, **(practice or {}))
     better = TreePolicy(clf, learner.features, learner.actions)
-    return [row, {**row, "method": f"{row['method']} refined {refine:g} min",
+    drawn = (practice or {}).get("drawn")
+    more = f" +{drawn[1]} drawn" if drawn and drawn[1] else ""
+    return [row, {**row, "method": f"{row['method']} refined {refine:g} min{more}",
                   "nodes": int(clf.node_count_), "worlds": judge(b, better, seed, episodes),
                   "refinement": {k: rep[k] for k in ("before", "after", "episodes", "moves")},
                   "seconds": round(time.perf_counter() - t1, 1)}]
@@ -160,6 +162,10 @@ def main(argv=None) -> int:
                     help="also refine each session's tree by practice for this many minutes "
                          "(rhbl refine's defaults, on every core) and judge it again: a "
                          "variant named '... refined N min' beside the session's")
+    ap.add_argument("--refine-generated", type=int, default=0, metavar="N",
+                    help="with --refine: practise also in N worlds drawn by the behaviour's "
+                         "generator (rhbl refine --generated N); the variant is named "
+                         "'... refined M min +N drawn'")
     ap.add_argument("--json", default=None, help="write every session here (and resume from it)")
     ap.add_argument("--table", default=None, metavar="JSON",
                     help="run nothing: print the tables of a --json file")
@@ -198,7 +204,8 @@ def main(argv=None) -> int:
         rows = json.loads(Path(args.json).read_text())
     done = {(r["behaviour"], r["person"], r["method"], r["seed"]) for r in rows}
     named = [variant(m, args.teach_guard, args.demo, args.correct) for m in methods]
-    rows_of = {n: [n] + ([f"{n} refined {args.refine:g} min"] if args.refine > 0 else [])
+    drawn = f" +{args.refine_generated} drawn" if args.refine_generated else ""
+    rows_of = {n: [n] + ([f"{n} refined {args.refine:g} min{drawn}"] if args.refine > 0 else [])
                for n in named}  # the rows a session of each variant writes
     from lab.practice import Runner
 
@@ -209,9 +216,14 @@ def main(argv=None) -> int:
                     for m, name in zip(methods, named, strict=True):
                         if all((b, p, n, seed) in done for n in rows_of[name]):
                             continue
+                        practice = ({"drawn": (recipe_of(get(b)).generator,
+                                                args.refine_generated)}
+                                    if args.refine_generated else None)
                         for r in session(b, p, m, seed, guard=args.teach_guard, demo=args.demo,
                                          correct=args.correct, refine=args.refine,
-                                         runner=runner):
+                                         runner=runner, practice=practice):
+                            if (b, p, r["method"], seed) in done:
+                                continue  # (taught again, deterministic: the same row)
                             rows.append(r)
                             print(f"{b} {p} seed {seed} {r['method']}: {r['nodes']} nodes, "
                                   f"lag {r['lag']}, "

@@ -69,6 +69,7 @@ try:
 except OSError:  # pragma: no cover - no C library to ask (not Linux)
     _LIBC = None
 _PR_CAPBSET_DROP = 24
+_PR_SET_PDEATHSIG = 1
 # CAP_DAC_OVERRIDE, CAP_DAC_READ_SEARCH, CAP_FOWNER (linux/capability.h)
 _FILE_OVERRIDES = (1, 2, 3)
 
@@ -84,6 +85,19 @@ def without_file_override() -> None:
         if _LIBC.prctl(_PR_CAPBSET_DROP, cap, 0, 0, 0) != 0:
             err = ctypes.get_errno()
             raise OSError(err, f"prctl(PR_CAPBSET_DROP, {cap}): {os.strerror(err)}")
+
+
+def _dying_with(parent: int, then: Callable[[], None] | None) -> Callable[[], None]:
+    """A ``preexec_fn`` (Linux): the child gets SIGTERM when the thread that started it ends
+    (``PR_SET_PDEATHSIG``), at once if ``parent`` already ended; then ``then``."""
+    def preexec() -> None:
+        if _LIBC is not None:
+            _LIBC.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+        if os.getppid() != parent:  # the parent died before the line above
+            os.kill(os.getpid(), signal.SIGTERM)
+        if then is not None:
+            then()
+    return preexec
 
 
 def rhbl_argv(*args: str) -> list[str]:
@@ -102,13 +116,16 @@ class Child:
     :meth:`stop` go from that signal straight to SIGKILL (no SIGTERM in between), so an exit
     status of 0 means the first signal alone ended the process (for tests of how it stops).
     ``preexec_fn`` runs in the child before the command (e.g. to set a resource limit).
+    ``die_with_parent``: the child gets SIGTERM when this process dies, even by SIGKILL (Linux;
+    start it from a thread that lives as long as this process, the main thread): a parent that
+    cannot stop its children itself leaves none running.
     """
 
     def __init__(self, name: str, argv: Sequence[str], logdir: Path | None = None, *,
                  env: Mapping[str, str] | None = None, cwd: str | Path | None = None,
                  stop_signal: int = signal.SIGTERM, stop_timeout: float = 10.0,
                  escalate: bool = True, preexec_fn: Callable[[], None] | None = None,
-                 keep: int = 10_000) -> None:
+                 keep: int = 10_000, die_with_parent: bool = False) -> None:
         if not argv:
             raise ValueError(f"{name}: empty command line")
         self.name = name
@@ -121,6 +138,7 @@ class Child:
         self.stop_timeout = stop_timeout
         self.escalate = escalate
         self.preexec_fn = preexec_fn
+        self.die_with_parent = die_with_parent
         self.lines: collections.deque[str] = collections.deque(maxlen=keep)
         self.proc: subprocess.Popen | None = None
         self.rc: int | None = None
@@ -148,7 +166,8 @@ class Child:
             proc = subprocess.Popen(
                 self.argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL, env=self.env, cwd=self.cwd, start_new_session=True,
-                preexec_fn=self.preexec_fn, text=True, encoding="utf-8", errors="replace", bufsize=1)
+                preexec_fn=(_dying_with(os.getpid(), self.preexec_fn) if self.die_with_parent
+                            else self.preexec_fn), text=True, encoding="utf-8", errors="replace", bufsize=1)
         except OSError:
             if logf is not None:
                 logf.close()

@@ -138,10 +138,11 @@ class DemoError(Exception):
 
 class Child(children.Child):
     """One child process, logging into the output folder; stopped with SIGINT first (the
-    learner then writes its final snapshot), SIGTERM and SIGKILL by PID if it does not end."""
+    learner then writes its final snapshot), SIGTERM and SIGKILL by PID if it does not end; and
+    sent SIGTERM by the system when the demo dies, even killed (``die_with_parent``)."""
 
     def __init__(self, name: str, argv: list[str], logdir: Path) -> None:
-        super().__init__(name, argv, logdir, stop_signal=signal.SIGINT)
+        super().__init__(name, argv, logdir, stop_signal=signal.SIGINT, die_with_parent=True)
 
 
 # ---- the demo ------------------------------------------------------------------------------

@@ -6,6 +6,7 @@ import signal
 import socket
 import sys
 import time
+from pathlib import Path
 
 import pytest
 from waiting import eventually, patience
@@ -207,3 +208,38 @@ def test_without_file_override_root_is_refused_by_permissions(tmp_path):
     child = Child("dropped", py(code) + [str(folder)], preexec_fn=without_file_override).start()
     assert child.wait(30) == 0 and "refused 13" in child.output(), child.output()
     assert not (folder / "x").exists()
+
+
+def _gone(pid: int) -> bool:
+    """Process ``pid`` ended (gone, or a zombie nobody reaped yet)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
+    except FileNotFoundError:
+        return True
+
+
+def test_a_child_started_to_die_with_its_parent_ends_when_the_parent_is_killed(tmp_path):
+    """A parent (a real process) starts two children that would sleep for a minute, one with
+    ``die_with_parent``, then is SIGKILLed: that child ends (SIGTERM), the other runs on."""
+    import os
+
+    parent = Child("parent", py(
+        "import sys, time\n"
+        "from lab.children import Child\n"
+        "for die in (True, False):\n"
+        "    c = Child('sleeper', [sys.executable, '-c', 'import time; time.sleep(60)'],\n"
+        "              die_with_parent=die).start()\n"
+        "    print('child', die, c.pid, flush=True)\n"
+        "time.sleep(60)\n"), cwd=str(Path(__file__).resolve().parents[2])).start()
+    assert parent.wait_for_line("child False", timeout=30), parent.output()
+    pids = {x.split()[1]: int(x.split()[2]) for x in parent.lines if x.startswith("child ")}
+    try:
+        assert not _gone(pids["True"]) and not _gone(pids["False"])
+        parent.kill()
+        eventually(lambda: _gone(pids["True"]), patience(10), "the child ends with its parent")
+        assert not _gone(pids["False"])  # no such child: it runs on without its parent
+    finally:
+        for pid in pids.values():
+            if not _gone(pid):
+                os.kill(pid, signal.SIGKILL)
