@@ -31,6 +31,8 @@ import hashlib
 import logging
 import multiprocessing
 import os
+import threading
+import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
 
@@ -258,6 +260,33 @@ def cores() -> int:
     return len(affinity(0)) if affinity else (os.cpu_count() or 1)
 
 
+def _alive(pid: int) -> bool:
+    """Process ``pid`` runs (not gone, not a zombie waiting to be reaped)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except FileNotFoundError:
+        return False
+    except OSError:  # no /proc: ask the kernel
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        return True
+
+
+def _orphan_watch(owner: int, every: float = 0.5) -> None:
+    """A pool worker's initializer: it ends itself once ``owner`` (the process whose Runner
+    made the pool) is gone, so a command killed (even by SIGKILL) leaves no workers running
+    episodes for nobody (the pool's forkserver then ends with them)."""
+    def watch() -> None:
+        while _alive(owner):
+            time.sleep(every)
+        os._exit(0)
+
+    threading.Thread(target=watch, name="orphan-watch", daemon=True).start()
+
+
 class Runner:
     """Runs episode tasks: ``cluster`` (a Dask scheduler's address) on that cluster; else on
     ``workers`` processes of this machine (None: one per core; 1: in this process). Keep one
@@ -294,7 +323,8 @@ class Runner:
 
     def _new_pool(self) -> cf.ProcessPoolExecutor:
         ctx = multiprocessing.get_context("forkserver")
-        return cf.ProcessPoolExecutor(self.workers, mp_context=ctx)
+        return cf.ProcessPoolExecutor(self.workers, mp_context=ctx, initializer=_orphan_watch,
+                                      initargs=(os.getpid(),))
 
     def worker_pids(self) -> list[int]:
         """The process ids of the pool's workers (none before the first ``map``)."""

@@ -179,6 +179,17 @@ def added(clf, x: np.ndarray, action: str):
     return new
 
 
+def _to_size(clf, X: np.ndarray, max_nodes: int):
+    """``clf`` with at most ``max_nodes`` spheres: the weakest-link pruning keeps a sphere
+    tied with another on some state (``rhbl.compaction``), so it may stop above; the leaves
+    that decide the fewest of the states ``X`` go then, one at a time."""
+    while clf.node_count_ > max_nodes:
+        won = np.bincount(np.maximum(clf.tree_.apply(X), 0), minlength=clf.node_count_)
+        leaf = min(leaves(clf), key=lambda s: (won[s], -s))
+        clf = without(clf, [leaf])
+    return clf
+
+
 def leaves(clf) -> list[int]:
     parent = clf.tree_arrays()["parent"]
     has_child = np.zeros(len(parent), dtype=bool)
@@ -388,6 +399,7 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
         y = np.concatenate([np.asarray(r["actions"][:len(r["states"])]) for r in pr.results])
         clf = clf.compact(X, y, method="prune", max_nodes=max_nodes, class_weight="balanced",
                           data="refine: the states it visited in practice, its own actions")
+        clf = _to_size(clf, X, max_nodes)
         pr.results = pr.run(clf)
         moves["pruned to size"] += 1
         say(f"size: pruned to {clf.node_count_} nodes against its own actions on "

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import sys
 from pathlib import Path
 
 import pytest
@@ -268,3 +269,55 @@ def test_practice_in_drawn_worlds_names_each_so_any_worker_draws_it_again():
     r = run_episode(EpisodeTask("left-wall", drawn[0].world, tree_bytes(
         TreePolicy.load(WALL_TREE)), drawn[0].start, seconds=3.0))
     assert r["steps"] == 30
+
+
+def test_the_size_step_holds_max_nodes_even_where_pruning_stops_above_it():
+    from lab.refine import _to_size, leaves
+
+    clf = TreePolicy.load(WALL_TREE).classifier
+    X = clf.tree_arrays()["centers"][:400]
+    small = _to_size(clf, X, 40)
+    assert small.node_count_ == 40
+    assert _to_size(small, X, 40) is small  # already small enough: as it is
+    assert leaves(small)  # still a tree of spheres that answers
+    assert small.predict(X[:5]).shape == (5,)
+
+
+def test_the_pool_s_workers_end_when_the_process_that_made_it_is_killed(tmp_path):
+    """A real process runs long episodes on a pool of 2, then is SIGKILLed: its workers (the
+    forkserver's children, not its own) end by themselves instead of running on for nobody."""
+    from lab.children import Child
+
+    code = (
+        "import sys, threading, time\n"
+        "from pathlib import Path\n"
+        f"sys.path[:0] = [{str(Path(__file__).resolve().parent)!r}, "
+        f"{str(Path(__file__).resolve().parents[1])!r}]\n"
+        "from test_practice import _tasks\n"
+        "from lab.practice import Runner\n"
+        "r = Runner(workers=2)\n"
+        "r.map(_tasks(seconds=0.5, n=2))\n"
+        "threading.Thread(target=r.map, args=(_tasks(seconds=600.0, n=4),), daemon=True).start()\n"
+        "print('workers', *r.worker_pids(), flush=True)\n"
+        "time.sleep(600)\n")
+    parent = Child("pool-owner", [sys.executable, "-c", code], tmp_path,
+                   cwd=str(Path(__file__).resolve().parents[2])).start()
+    assert parent.wait_for_line("workers ", timeout=120), parent.output()
+    pids = [int(v) for v in next(x for x in parent.lines if x.startswith("workers ")).split()[1:]]
+    assert len(pids) == 2
+
+    def gone(pid: int) -> bool:
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                return f.read().rsplit(")", 1)[1].split()[0] == "Z"
+        except FileNotFoundError:
+            return True
+
+    try:
+        assert not any(map(gone, pids))
+        parent.kill()
+        eventually(lambda: all(map(gone, pids)), 30, "the workers end without their owner")
+    finally:
+        for pid in pids:
+            if not gone(pid):
+                os.kill(pid, signal.SIGKILL)
