@@ -38,7 +38,8 @@ from lab.harness import OnStep, demonstration_starts, step_world
 from lab.recipe import Recipe
 from server.world import World, WorldSpec, free_pose
 
-__all__ = ["drive_goals", "evaluate_goals", "expert_of", "sightings", "targets", "train_goals"]
+__all__ = ["drive_goals", "evaluate_goals", "expert_of", "judged_goal_episode", "sightings", "targets",
+           "train_goals"]
 
 log = logging.getLogger(__name__)
 
@@ -238,6 +239,27 @@ def episode_goal_metrics(ep: Episode, spec: WorldSpec, b: Behaviour) -> dict:
                                    targets=targets(spec, b))
 
 
+def judged_goal_episode(spec: WorldSpec, b: Behaviour, policy, start, seconds: float | None,
+                        seed: int, on_step: OnStep | None = None):
+    """One start of a goal behaviour judged (the goal behaviours' ``judged_episode``): its
+    scripted expert and ``policy`` drive from ``start`` with ``seed``, each judged by the
+    behaviour's rule: ``(learner metrics, expert metrics, learner episode, expert episode)``,
+    each metrics with its ``goal_events``. The one place a goal episode is judged (``rhbl
+    evaluate``, and ``lab.practice.run_episode`` on a pool or a cluster)."""
+    tt, t_events = drive_goals(spec, expert_of(b, policy.actions), start, b, seconds,
+                               seed=seed, kind="teacher", on_step=on_step)
+    tm = episode_goal_metrics(tt, spec, b)
+    tm["success"] = metrics.judge(b.rules, tm, None)
+    tm["goal_events"] = t_events
+    lt, events = drive_goals(spec, policy, start, b, seconds, seed=seed,
+                             teacher=expert_of(b, policy.actions), kind="learner",
+                             on_step=on_step)
+    lm = episode_goal_metrics(lt, spec, b)
+    lm["success"] = metrics.judge(b.rules, lm, tm)
+    lm["goal_events"] = events
+    return lm, tm, lt, tt
+
+
 def evaluate_goals(spec: WorldSpec, policy, b: Behaviour, episodes: int | None = None,
                    seconds: float | None = None, seed: int = 0, on_step: OnStep | None = None,
                    keep_paths: bool = False) -> dict:
@@ -248,18 +270,8 @@ def evaluate_goals(spec: WorldSpec, policy, b: Behaviour, episodes: int | None =
     episodes = len(starts) if episodes is None else int(episodes)
     learner_eps, teacher_eps, paths = [], [], {"teacher": [], "learner": []}
     for k in range(episodes):
-        start = starts[k % len(starts)]
-        tt, t_events = drive_goals(spec, expert_of(b, policy.actions), start, b, seconds,
-                                   seed=seed * 1000 + k, kind="teacher", on_step=on_step)
-        tm = episode_goal_metrics(tt, spec, b)
-        tm["success"] = metrics.judge(b.rules, tm, None)
-        tm["goal_events"] = t_events
-        lt, events = drive_goals(spec, policy, start, b, seconds, seed=seed * 1000 + k,
-                                 teacher=expert_of(b, policy.actions), kind="learner",
-                                 on_step=on_step)
-        lm = episode_goal_metrics(lt, spec, b)
-        lm["success"] = metrics.judge(b.rules, lm, tm)
-        lm["goal_events"] = events
+        lm, tm, lt, tt = judged_goal_episode(spec, b, policy, starts[k % len(starts)], seconds,
+                                             seed * 1000 + k, on_step)
         learner_eps.append(lm)
         teacher_eps.append(tm)
         if keep_paths:

@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from client.behaviour.goals import GoalPolicy
 from client.behaviour.learning import TreePolicy, check_compatible
 from client.behaviour.spec import Behaviour
 from lab import metrics
@@ -109,8 +110,11 @@ def _policy(task: EpisodeTask):
         clf = loads(task.tree, source="<episode task's tree>")
         meta = dict(clf.metadata or {})
         check_compatible(meta)
-        hit = _Traced(clf, FeatureSpec.from_dict(meta["features"]),
-                      ActionSet.from_dict(meta["actions"]), meta)
+        if isinstance(meta.get("goals"), dict):  # a tree with goals in order (lab.goals)
+            hit = _TracedGoals.from_classifier(clf, "<episode task's tree>")
+        else:
+            hit = _Traced(clf, FeatureSpec.from_dict(meta["features"]),
+                          ActionSet.from_dict(meta["actions"]), meta)
         _POLICIES[key] = hit
         while len(_POLICIES) > 8:
             _POLICIES.popitem(last=False)
@@ -148,15 +152,16 @@ def _world(behaviour: str, world: str, scale: float = 1.0):
     return spec if scale == 1.0 else spec.scaled(scale)
 
 
-class _Traced(TreePolicy):
-    """A TreePolicy that notes the winning sphere and the features of every answer (``tracing``
-    on), the same answers as TreePolicy's."""
+class _Tracing:
+    """Notes the winning sphere of the action tree and the features of every answer
+    (``tracing`` on), the same answers as the policy's own (``TreePolicy``, ``GoalPolicy``)."""
 
     tracing = False
     winners: list = []
     states: list = []
 
     def reset(self) -> None:
+        super().reset()
         self.winners, self.states = [], []
         self.names = [str(v) for v in self.classifier.classes_]
 
@@ -164,7 +169,7 @@ class _Traced(TreePolicy):
         if not self.tracing:
             return super().act(ranges, pose)
         yaw = float(pose[2]) if pose is not None else 0.0
-        x = np.asarray(self.features.extract(ranges, yaw), dtype=np.float64)
+        x = np.asarray(self.vector(ranges, yaw), dtype=np.float64)
         clf = self.classifier
         node = clf.tree_.apply_one(np.array(x))
         self.winners.append(node)  # -1: outside the unit cube (no sphere decided)
@@ -172,6 +177,15 @@ class _Traced(TreePolicy):
         if node < 0:  # the classifier's checks say why
             return str(clf.predict_one(x))
         return self.names[int(clf.tree_.label[node])]
+
+
+class _Traced(_Tracing, TreePolicy):
+    def vector(self, ranges, yaw: float) -> np.ndarray:
+        return self.features.extract(ranges, yaw)
+
+
+class _TracedGoals(_Tracing, GoalPolicy):
+    pass
 
 
 _TEACHER_CACHE: dict = {}
@@ -208,7 +222,16 @@ def judged_episode(spec: WorldSpec, b: Behaviour, policy, start, seconds: float,
     with ``seed``, each judged by the behaviour's success rule (the policy's distance compared
     with the expert's): ``(learner metrics, expert metrics, learner episode)``, with ``both``
     the expert's episode too. The one place an episode is judged (``rhbl evaluate``, and here
-    ``run_episode`` on a pool or a cluster)."""
+    ``run_episode`` on a pool or a cluster). A behaviour with goals in order is judged by
+    ``lab.goals.judged_goal_episode`` (no noise, the default step)."""
+    if b.goals is not None:
+        if range_noise or odom_noise or dt != DT or on_step is not None:
+            raise ValueError(f"behaviour {b.name!r} has goals in order: its episodes are "
+                             "driven without noise, at the default step, here")
+        from lab.goals import judged_goal_episode
+
+        lm, tm, lt, tt = judged_goal_episode(spec, b, policy, start, seconds, seed)
+        return (lm, tm, lt, tt) if both else (lm, tm, lt)
     tt = teacher_episode(spec, b, policy.actions, start, seconds, seed, range_noise,
                           odom_noise, dt, on_step)
     tm = tt.metrics(spec.goal, b.rules)

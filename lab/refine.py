@@ -54,6 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
+from client.behaviour.goals import GoalPolicy, load_policy
 from client.behaviour.learning import TreePolicy
 from lab import practice
 from lab.behaviours import behaviour_arg, get, recipe_of, world_of
@@ -212,8 +213,7 @@ class _Practice:
     episodes: int = 0
 
     def with_tree(self, clf, tasks=None) -> list:
-        data = practice.tree_bytes(TreePolicy(clf, self.policy.features, self.policy.actions,
-                                              self.policy.metadata))
+        data = practice.tree_bytes(_with(self.policy, clf))
         return [dataclasses.replace(t, tree=data) for t in (self.tasks if tasks is None
                                                             else tasks)]
 
@@ -297,12 +297,21 @@ def _practice_tasks(b, seeds, scales, seconds=None, free: int = 0, noise=(0.0, 0
     return out
 
 
+def _with(policy, clf):
+    """``policy`` (a ``TreePolicy``, or a ``GoalPolicy``: its completion tree and goals kept)
+    with the (action) tree ``clf``."""
+    if isinstance(policy, GoalPolicy):
+        return GoalPolicy(clf, policy.completion, policy.features, policy.goals, policy.actions,
+                          policy.metadata)
+    return TreePolicy(clf, policy.features, policy.actions, policy.metadata)
+
+
 def _held_out(b, clf, policy, runner, seed: int = 0, seconds=None) -> dict:
     """Success per held-out world (and the teaching worlds), every start pose, as ``rhbl
-    evaluate`` runs it."""
+    evaluate`` runs it (the tree alone)."""
     from lab.evaluate import evaluate
 
-    p = TreePolicy(clf, policy.features, policy.actions, policy.metadata)
+    p = _with(policy, clf)
     out = {}
     for w in (*b.teach, *b.held_out):
         rep = evaluate(world_of(b, w), p, seed=seed, behaviour=b, runner=runner,
@@ -543,13 +552,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args) -> int:
     b = get(args.behaviour)
-    if b.goals is not None:
-        raise ValueError(f"behaviour {b.name!r} has goals in order ([goals]); "
-                         "refine practises one tree, not a tree with goals (docs/goals.md)")
-    policy = TreePolicy.load(args.tree)
-    if "goals" in (policy.metadata or {}):
-        raise ValueError(f"{args.tree} holds a tree with goals in order; refine "
-                         "practises one tree, not a tree with goals (docs/goals.md)")
+    policy = load_policy(args.tree)
+    goals = isinstance(policy, GoalPolicy)
+    if goals != (b.goals is not None):
+        raise ValueError(
+            f"{args.tree} holds a tree with goals in order, behaviour {b.name!r} has none"
+            if goals else f"behaviour {b.name!r} has goals in order ([goals]): {args.tree} "
+            f"holds a single tree (rhbl train --behaviour {b.name} makes its trees)")
+    if goals and (args.range_noise or args.odom_noise):
+        raise ValueError("--range-noise/--odom-noise: a tree with goals in order practises "
+                         "without noise")
     raw = Path(args.tree).read_bytes()
     with practice.runner_from_args(args) as runner:
         clf, report = refine(b, policy, runner, max_nodes=args.max_nodes,

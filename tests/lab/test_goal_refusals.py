@@ -1,6 +1,7 @@
 """A behaviour with goals in order is taught by rhbl train/experiment and driven by rhbl
-controller; the processes that teach or learn one reflex over the bus, and rhbl refine, refuse
-it with one line naming what takes it (exit 2), before anything starts."""
+controller; the processes that teach or learn one reflex over the bus refuse it with one line
+naming what takes it (exit 2), before anything starts. rhbl refine practises a tree with goals
+(its action tree, the completion tree kept) and refuses a tree of the other kind."""
 
 from __future__ import annotations
 
@@ -32,13 +33,51 @@ def test_a_process_of_one_reflex_refuses_a_behaviour_with_goals(argv, tmp_path):
     assert not any(tmp_path.iterdir())  # nothing written
 
 
-def test_refine_refuses_a_behaviour_with_goals(tmp_path):
-    tree = tmp_path / "t.rhbl"
-    tree.write_bytes(b"")
-    r = _rhbl("refine", "--behaviour", "red-green", "--tree", str(tree), "--out",
-              str(tmp_path / "t2.rhbl"))
-    assert r.returncode == 2 and "'red-green' has goals in order" in r.stderr, r.stderr
-    assert not (tmp_path / "t2.rhbl").exists()
+def _goal_tree(tmp_path: Path) -> Path:
+    """A tiny tree with goals of red-green (two vectors, one completion mark)."""
+    import numpy as np
+
+    from client.behaviour.goals import GoalLearner, parse_goals
+    from lab.behaviours import get
+
+    b = get("red-green")
+    learner = GoalLearner(b.features, parse_goals({"beacons": [1, 2]}), task="red-green")
+    learner.observe(np.full(b.features.dim, 0.5), "fwd")
+    learner.observe(np.full(b.features.dim, 0.2), "rot-left")
+    learner.observe_completion(np.array([0.5, 0.5]), True)
+    learner.observe_completion(np.array([0.1, 0.9]), False)
+    return learner.save(tmp_path / "goals.rhbl")
+
+
+def test_refine_refuses_a_tree_of_the_other_kind(tmp_path):
+    single = Path(__file__).resolve().parents[1] / "rhbl" / "data" / "room-1200.rhbl"
+    for behaviour, tree, says in (
+            ("red-green", single, "'red-green' has goals in order ([goals])"),
+            ("wall-following", _goal_tree(tmp_path), "holds a tree with goals in order")):
+        r = _rhbl("refine", "--behaviour", behaviour, "--tree", str(tree), "--out",
+                  str(tmp_path / "t2.rhbl"))
+        assert r.returncode == 2 and says in r.stderr, r.stderr
+        assert "Traceback" not in r.stderr
+        assert not (tmp_path / "t2.rhbl").exists()
+
+
+@pytest.mark.slow
+def test_refine_practises_a_tree_with_goals_and_keeps_its_completion_tree(tmp_path):
+    from client.behaviour.goals import GoalPolicy
+
+    tree = _goal_tree(tmp_path)
+    out = tmp_path / "refined.rhbl"
+    r = _rhbl("refine", "--behaviour", "red-green", "--tree", str(tree), "--out", str(out),
+              "--seconds", "5", "--scales", "none", "--minutes", "0.02", "--workers", "1")
+    assert r.returncode == 0, r.stdout + r.stderr
+    before, after = GoalPolicy.load(tree), GoalPolicy.load(out)
+    assert after.goals == before.goals
+    assert after.completion.node_count_ == before.completion.node_count_
+    rec = after.metadata["refinement"][-1]
+    assert rec["behaviour"] == "red-green" and rec["episodes"] >= 1
+    assert set(rec["worlds_after"]) == {"goals-red-green", "eval-goals-red-green-wide",
+                                        "eval-goals-red-green-l"}
+    assert "goals-red-green (taught): success" in r.stdout
 
 
 def test_a_wall_behaviour_is_still_taken():
