@@ -212,7 +212,8 @@ class Recipe:
 # behind each value). Wall following: demonstrations from the start poses, then 30 s ones
 # from random free-space poses, three corrective rounds. Maze: long demonstrations from each
 # start pose, six corrective rounds in copies scaled 0.85 and 1.2 and in the maze itself, each
-# also from four random free-space poses.
+# also from four random free-space poses; its randomised worlds are tiered mazes (none in its
+# rounds: ``rhbl refine --generated`` draws them).
 RECIPES: dict[str, Recipe] = {
     "wall-following": Recipe(
         task="wall-following", world="room", seconds=600.0, starts="free", segment=60.0,
@@ -220,7 +221,7 @@ RECIPES: dict[str, Recipe] = {
     "maze": Recipe(
         task="maze", world="maze", seconds=600.0, starts="world", segment=240.0,
         random_segment=0.0, rounds=6, round_seconds=240.0, takeover=0.3,
-        round_scales=(0.85, 1.2), round_free=4),
+        round_scales=(0.85, 1.2), round_free=4, generator="mazes"),
 }
 
 # What ``rhbl demo`` changes for its time budget (about two minutes on a shared 2-core machine):
