@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 import pytest
-from waiting import eventually, patience
+from waiting import eventually, gone, patience
 
 from lab.children import Child, free_port, rhbl_argv
 
@@ -210,15 +210,6 @@ def test_without_file_override_root_is_refused_by_permissions(tmp_path):
     assert not (folder / "x").exists()
 
 
-def _gone(pid: int) -> bool:
-    """Process ``pid`` ended (gone, or a zombie nobody reaped yet)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
-    except FileNotFoundError:
-        return True
-
-
 def test_a_child_started_to_die_with_its_parent_ends_when_the_parent_is_killed(tmp_path):
     """A parent (a real process) starts two children that would sleep for a minute, one with
     ``die_with_parent``, then is SIGKILLed: that child ends (SIGTERM), the other runs on."""
@@ -235,11 +226,11 @@ def test_a_child_started_to_die_with_its_parent_ends_when_the_parent_is_killed(t
     assert parent.wait_for_line("child False", timeout=30), parent.output()
     pids = {x.split()[1]: int(x.split()[2]) for x in parent.lines if x.startswith("child ")}
     try:
-        assert not _gone(pids["True"]) and not _gone(pids["False"])
+        assert not gone(pids["True"]) and not gone(pids["False"])
         parent.kill()
-        eventually(lambda: _gone(pids["True"]), patience(10), "the child ends with its parent")
-        assert not _gone(pids["False"])  # no such child: it runs on without its parent
+        eventually(lambda: gone(pids["True"]), patience(10), "the child ends with its parent")
+        assert not gone(pids["False"])  # no such child: it runs on without its parent
     finally:
         for pid in pids.values():
-            if not _gone(pid):
+            if not gone(pid):
                 os.kill(pid, signal.SIGKILL)

@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from waiting import eventually
+from waiting import eventually, gone
 
 from client.behaviour.learning import TreePolicy
 from lab.cli import main
@@ -305,13 +305,6 @@ def test_the_pool_s_workers_end_when_the_process_that_made_it_is_killed(tmp_path
     assert parent.wait_for_line("workers ", timeout=120), parent.output()
     pids = [int(v) for v in next(x for x in parent.lines if x.startswith("workers ")).split()[1:]]
     assert len(pids) == 2
-
-    def gone(pid: int) -> bool:
-        try:
-            with open(f"/proc/{pid}/stat") as f:
-                return f.read().rsplit(")", 1)[1].split()[0] == "Z"
-        except FileNotFoundError:
-            return True
 
     try:
         assert not any(map(gone, pids))
