@@ -592,10 +592,20 @@ def main(args) -> int:
     for a in report["asks"]:
         pose = ",".join(f"{v:g}" for v in a["pose"])
         what = {"collision": "collides", "band": "leaves the wall's band"}.get(a["why"], "fails")
-        print(f"  could not fix: {a['world']} scaled {a['scale']:g}, the episode from "
+        if a["world"].startswith(practice.DRAWN + ":"):
+            _, kind, seed, i, side = a["world"].split(":")
+            where = (f"drawn world {kind}-{seed}-{i} (rhbl generate {kind} --seed {seed} "
+                     f"--count {int(i) + 1}{' --side ' + side if side != 'right' else ''} "
+                     "--out DIR writes it)")
+            shown = "not on the console: a world no server runs"
+        else:
+            where = f"{a['world']} scaled {a['scale']:g}"
+            shown = ("rhbl console lists it" if a["scale"] == 1.0
+                     else "not on the console: a scaled copy")
+        print(f"  could not fix: {where}, the episode from "
               f"{','.join(f'{v:g}' for v in a['start'])} (seed {a['seed']}) {what}"
               + (f" at step {a['step']}" if a["step"] is not None else "")
-              + f": show me there, from {pose} (rhbl console lists it)")
+              + f": show me there, from {pose} ({shown})")
     if args.json:
         files.write_text(args.json, json.dumps(report, indent=1), "--json")
         print(f"wrote {args.json}")
