@@ -297,6 +297,26 @@ class Demo:
                                 f"{cs[-1].tail() if cs else ''}")
             time.sleep(0.05)
 
+    def wait_labels_of(self, ep: Episode, last: int | None, quiet: float = 0.5,
+                       timeout: float = 5.0) -> None:
+        """Until the teacher's label of scan ``last`` (the episode's last) arrived, or none came
+        for ``quiet`` s (a teacher that does not label every scan), at most ``timeout`` s: a
+        teacher behind the server labels the episode's last scans after it stopped."""
+        if last is None:
+            return
+        deadline = time.monotonic() + timeout
+        seen, since = len(ep.labels), time.monotonic()
+        while time.monotonic() < deadline:
+            self.tap.sync()
+            got = self.rec.last_label_scan
+            if got is not None and got >= last:
+                return
+            if len(ep.labels) != seen:
+                seen, since = len(ep.labels), time.monotonic()
+            elif time.monotonic() - since >= quiet:
+                return
+            time.sleep(0.02)
+
     def episodes(self, kind: str, starts, seconds: float, what: str, *cs: Child,
                  round_: int = 0) -> list[Episode]:
         """One episode from each start pose (teleported there), ``seconds`` or until the goal."""
@@ -307,6 +327,7 @@ class Demo:
             self.rec.trim(ep, self.teleport(pose, *cs))
             self.wait_episode(ep, seconds, f"{what}, start {k + 1}/{len(starts)}", *cs)
             self.tap.sync()  # what arrived until now belongs to it
+            self.wait_labels_of(ep, self.rec.stop(ep))
             self.rec.end()
             out.append(ep)
         return out

@@ -78,6 +78,8 @@ class _Arrivals:
     cmds: dict = field(default_factory=dict)  # scan id -> (source, vx, va) (teacher's first)
     drivers: dict = field(default_factory=dict)  # ts -> driving source (State.driver)
     first_id: int = 0  # scans before this one (the old pose, before a teleport) are ignored
+    last_id: int | None = None  # scans after this one are not the episode's (``stop``)
+    label_ids: list = field(default_factory=list)  # the scan of each of the episode's labels
 
 
 class EpisodeCollector:
@@ -97,6 +99,7 @@ class EpisodeCollector:
         self.notice: dict = {}
         self.sources: dict[str, int] = {}  # commands seen per source (in an episode or not)
         self.labels = 0  # teacher labels seen (in an episode or not)
+        self.last_label_scan: int | None = None  # the scan of the episode's latest label
         self.decoder = Decoder(log, level=logging.DEBUG)  # a malformed message is left out
         self._on = {"scan": self._on_scan, "state": self._on_state, "cmd": self._on_cmd,
                     "notice": self._on_notice, "label": self._on_label}
@@ -125,7 +128,9 @@ class EpisodeCollector:
         if s is None:
             return
         with self.lock:
-            if ep is self.episode and s.id >= self.raw.first_id:
+            last = self.raw.last_id
+            if ep is self.episode and s.id >= self.raw.first_id and (last is None
+                                                                     or s.id <= last):
                 ep.ts.append(s.ts)
                 ep.poses.append(s.truth if s.truth is not None else s.pose)
                 if self.side is not None:
@@ -144,10 +149,17 @@ class EpisodeCollector:
 
     def _on_label(self, data: bytes) -> None:
         self.labels += 1
-        ep = self.episode
-        if ep is not None:
-            act = self.decoder.decode(TeacherAction, data)
+        if self.episode is None:
+            return
+        act = self.decoder.decode(TeacherAction, data)
+        with self.lock:
+            ep, raw = self.episode, self.raw
+            if ep is None or (act is not None and not raw.first_id <= act.scan_id <= (
+                    act.scan_id if raw.last_id is None else raw.last_id)):
+                return  # none open now, or a label of a scan that is not the episode's
             ep.labels.append(None if act is None else act.action)  # offered to the learner
+            raw.label_ids.append(None if act is None else act.scan_id)
+            self.last_label_scan = None if act is None else act.scan_id
 
     def _on_cmd(self, data: bytes) -> None:
         ep, raw = self.episode, self.raw
@@ -170,6 +182,7 @@ class EpisodeCollector:
     def begin(self, kind: str, start, round_: int = 0) -> Episode:
         with self.lock:
             self.raw = _Arrivals()
+            self.last_label_scan = None
             self.episode = Episode(start=tuple(start), dt=DT, kind=kind, round=round_)
             return self.episode
 
@@ -185,9 +198,21 @@ class EpisodeCollector:
                 if col:
                     setattr(ep, f, [col[k] for k in keep])
             raw.cmds = {i: c for i, c in raw.cmds.items() if i >= first_id}
+            mine = [k for k, i in enumerate(raw.label_ids) if i is None or i >= first_id]
+            ep.labels = [ep.labels[k] for k in mine]  # labels of the old pose's scans go too
+            raw.label_ids = [raw.label_ids[k] for k in mine]
             if ep.ts:
                 raw.stalls = {t: v for t, v in raw.stalls.items() if t >= round(ep.ts[0], 6)}
                 raw.drivers = {t: v for t, v in raw.drivers.items() if t >= round(ep.ts[0], 6)}
+
+    def stop(self, ep: Episode) -> int | None:
+        """``ep`` takes no scan after those it has (its last scan's id, None if none): the
+        labels of its scans may still come (a teacher behind the server), until ``end``."""
+        with self.lock:
+            last = ep.ids[-1] if ep.ids else None
+            if ep is self.episode and last is not None:
+                self.raw.last_id = last
+            return last
 
     def end(self) -> None:
         """Close the current episode: each recorded scan gets the action executed on it (the
