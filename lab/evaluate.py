@@ -77,21 +77,8 @@ def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
     learner_eps, teacher_eps, paths = [], [], {"teacher": [], "learner": []}
     starts_k = [starts[k % len(starts)] for k in range(episodes)]
     if runner is not None and on_step is None and not keep_paths and dt == DT:
-        from lab.practice import EpisodeTask, tree_bytes
-
-        data = tree_bytes(getattr(policy, "policy", None) or policy)
-        held = None if not hasattr(policy, "hold") else (
-            ("hold", policy.hold), ("memory", policy.memory), ("clearance", policy.clearance),
-            ("lookahead", policy.lookahead), ("straight", policy.straight))
-        where = str(spec.path) if spec.path is not None else spec.name
-        tasks = [EpisodeTask(str(b.path) if b.path else b.name, where, data, tuple(start),
-                             seed * 1000 + k, seconds, range_noise, odom_noise, held)
-                 for k, start in enumerate(starts_k)]
-        for r in runner.map(tasks):
-            learner_eps.append(r["metrics"])
-            teacher_eps.append(r["teacher"])
-            for k, v in (r.get("guard") or {}).items():  # what the guard overruled, summed
-                setattr(policy, k, getattr(policy, k) + v)
+        learner_eps, teacher_eps = practice.judged_on(runner, b, spec, policy, starts_k, seed,
+                                                      seconds, range_noise, odom_noise)
     else:
         for k, start in enumerate(starts_k):
             lm, tm, lt, tt = practice.judged_episode(
@@ -199,8 +186,7 @@ def _goals_main(args, spec: WorldSpec, policy, b: Behaviour | None) -> int:
 
     given = [flag for flag, on in (
         ("--range-noise", bool(args.range_noise)), ("--odom-noise", bool(args.odom_noise)),
-        ("--spheres", bool(args.spheres)), ("--workers", args.workers is not None),
-        ("--cluster", args.cluster is not None), ("--guard-hold", args.guard_hold is not None),
+        ("--spheres", bool(args.spheres)), ("--guard-hold", args.guard_hold is not None),
         ("--guard-straight" if args.guard_straight else "--no-guard-straight",
          args.guard_straight is not None),
         ("--guard-clearance", args.guard_clearance is not None)) if on]
@@ -209,11 +195,16 @@ def _goals_main(args, spec: WorldSpec, policy, b: Behaviour | None) -> int:
                          "through the rule's guard or none: --guard/--no-guard; docs/goals.md)")
     b = get(policy.metadata.get("task")) if b is None else b
     on = args.guard is not False  # a goal behaviour's tree: through the guard unless --no-guard
-    with record_run(args.record, "rhbl evaluate") as tap:
+    here = bool(args.record or args.plot)
+    if here and (args.workers or args.cluster):
+        raise ValueError("--record and --plot run the episodes in this process: leave out "
+                         "--workers and --cluster")
+    with (contextlib.nullcontext() if here else practice.runner_from_args(args)) as runner, \
+            record_run(args.record, "rhbl evaluate") as tap:
         report = evaluate_goals(spec, guarded(policy, on), b, episodes=args.episodes,
                                 seconds=args.seconds,
                                 seed=args.seed, on_step=None if tap is None else tap.step,
-                                keep_paths=bool(args.plot))
+                                keep_paths=bool(args.plot), runner=runner)
     paths = report.pop("_paths", None)
     print(format_goal_table(report))
     g = report["guard"]

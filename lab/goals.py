@@ -262,21 +262,30 @@ def judged_goal_episode(spec: WorldSpec, b: Behaviour, policy, start, seconds: f
 
 def evaluate_goals(spec: WorldSpec, policy, b: Behaviour, episodes: int | None = None,
                    seconds: float | None = None, seed: int = 0, on_step: OnStep | None = None,
-                   keep_paths: bool = False) -> dict:
+                   keep_paths: bool = False, runner=None) -> dict:
     """``lab.evaluate.evaluate``'s report for a goal behaviour: ``policy`` and the scripted
     teacher from each start pose, judged by the behaviour's rule; each learner episode also
-    lists its goal changes (``goal_events``: when, which goal, the next one and why)."""
+    lists its goal changes (``goal_events``: when, which goal, the next one and why).
+    ``runner`` (a ``lab.practice.Runner``): the episodes run there (the same results); not with
+    ``on_step`` or ``keep_paths``, which run here."""
     starts = spec.start_poses
     episodes = len(starts) if episodes is None else int(episodes)
     learner_eps, teacher_eps, paths = [], [], {"teacher": [], "learner": []}
-    for k in range(episodes):
-        lm, tm, lt, tt = judged_goal_episode(spec, b, policy, starts[k % len(starts)], seconds,
-                                             seed * 1000 + k, on_step)
-        learner_eps.append(lm)
-        teacher_eps.append(tm)
-        if keep_paths:
-            paths["teacher"].append(tt.poses)
-            paths["learner"].append(lt.poses)
+    if runner is not None and on_step is None and not keep_paths:
+        from lab.practice import judged_on
+
+        learner_eps, teacher_eps = judged_on(runner, b, spec, policy,
+                                             [starts[k % len(starts)] for k in range(episodes)],
+                                             seed, seconds)
+    else:
+        for k in range(episodes):
+            lm, tm, lt, tt = judged_goal_episode(spec, b, policy, starts[k % len(starts)],
+                                                 seconds, seed * 1000 + k, on_step)
+            learner_eps.append(lm)
+            teacher_eps.append(tm)
+            if keep_paths:
+                paths["teacher"].append(tt.poses)
+                paths["learner"].append(lt.poses)
     clf = policy.classifier
     completion = getattr(policy, "completion", None)
     guard = policy if hasattr(policy, "overruled") else None

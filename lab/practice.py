@@ -277,6 +277,30 @@ def run_episode(task: EpisodeTask) -> dict:
 # -------------------------------------------------------------------------- many episodes
 
 
+def judged_on(runner, b: Behaviour, spec: WorldSpec, policy, starts, seed: int,
+              seconds: float | None, range_noise: float = 0.0, odom_noise: float = 0.0
+              ) -> tuple[list, list]:
+    """``policy`` (a tree, a tree with goals, either through the controller's guard) judged
+    from each of ``starts`` (episode ``k`` with seed ``seed * 1000 + k``) on ``runner``, as
+    ``judged_episode`` judges it here: (the learner's metrics, the expert's), in order. What the
+    guard overruled is added to its counters."""
+    inner = getattr(policy, "policy", None) or policy  # a guard drives ``.policy``
+    held = None if inner is policy else tuple(
+        (k, getattr(policy, k)) for k in ("hold", "memory", "clearance", "lookahead",
+                                          "straight"))
+    data, where = tree_bytes(inner), str(spec.path) if spec.path is not None else spec.name
+    tasks = [EpisodeTask(str(b.path) if b.path else b.name, where, data, tuple(start),
+                         seed * 1000 + k, seconds, range_noise, odom_noise, held)
+             for k, start in enumerate(starts)]
+    learner, teacher = [], []
+    for r in runner.map(tasks):
+        learner.append(r["metrics"])
+        teacher.append(r["teacher"])
+        for k, v in (r.get("guard") or {}).items():  # what the guard overruled, summed
+            setattr(policy, k, getattr(policy, k) + v)
+    return learner, teacher
+
+
 def cores() -> int:
     """The cores this process may run on."""
     affinity = getattr(os, "sched_getaffinity", None)

@@ -98,6 +98,45 @@ def test_evaluate_of_a_goal_tree_refuses_the_options_it_cannot_apply(tmp_path):
     learner.observe(np.full(b.features.dim, 0.5), "fwd")
     learner.observe_completion(np.array([0.5, 0.5]), True)
     tree = learner.save(tmp_path / "goals.rhbl")
-    for extra in (["--workers", "2"], ["--guard-clearance", "0.1"], ["--no-guard-straight"]):
+    for extra in (["--guard-clearance", "0.1"], ["--no-guard-straight"]):
         r = _rhbl("evaluate", "--tree", str(tree), "--world", "goals-red-green", *extra)
         assert r.returncode == 2 and extra[0] in r.stderr and "with goals" in r.stderr, r.stderr
+
+
+@pytest.mark.slow
+def test_a_tree_with_goals_is_evaluated_on_a_pool_as_here(tmp_path):
+    """``rhbl evaluate --workers 2`` of a tree with goals (through the guard, as by default,
+    and alone) gives the report it gives in this process."""
+    import json
+
+    tree = _goal_tree(tmp_path)
+    for guard in ("--guard", "--no-guard"):
+        reports = []
+        for workers in ("1", "2"):
+            out = tmp_path / f"r{guard}{workers}.json"
+            r = _rhbl("evaluate", "--tree", str(tree), "--world", "goals-red-green",
+                      "--episodes", "3", "--seconds", "8", "--workers", workers, guard,
+                      "--json", str(out))
+            assert r.returncode == 0, r.stdout + r.stderr
+            reports.append(json.loads(out.read_text()))
+        assert reports[0] == reports[1]
+        assert reports[0]["episodes"] == 3 and len(reports[0]["learner"]) == 3
+
+
+@pytest.mark.slow
+def test_a_tree_with_goals_judged_on_a_pool_is_judged_as_in_this_process(tmp_path):
+    from client.behaviour.goals import GoalPolicy
+    from lab.behaviours import get, world_of
+    from lab.goals import evaluate_goals, guarded
+    from lab.practice import Runner
+
+    b = get("red-green")
+    spec = world_of(b, "goals-red-green")
+    tree = GoalPolicy.load(_goal_tree(tmp_path))
+    for on in (True, False):
+        here = evaluate_goals(spec, guarded(tree, on), b, episodes=2, seconds=8.0)
+        with Runner(workers=2) as runner:
+            there = evaluate_goals(spec, guarded(tree, on), b, episodes=2, seconds=8.0,
+                                   runner=runner)
+        assert there["learner"] == here["learner"] and there["teacher"] == here["teacher"]
+        assert there["guard"] == here["guard"]
