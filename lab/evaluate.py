@@ -191,7 +191,7 @@ def _goals_main(args, spec: WorldSpec, policy, b: Behaviour | None) -> int:
          args.guard_straight is not None),
         ("--guard-clearance", args.guard_clearance is not None)) if on]
     if given:
-        raise ValueError(f"{', '.join(given)}: not for a tree with goals yet (it is driven here, "
+        raise ValueError(f"{', '.join(given)}: not for a tree with goals yet (it is driven "
                          "through the rule's guard or none: --guard/--no-guard; docs/goals.md)")
     b = get(policy.metadata.get("task")) if b is None else b
     on = args.guard is not False  # a goal behaviour's tree: through the guard unless --no-guard
