@@ -502,14 +502,14 @@ def test_the_robot_asks_to_be_shown_where_practice_could_not_fix_it(env, browser
     w = env["watch"]
     refined, asks = _refined_ahead(tmp_path)
     assert asks, "refining a tree that only drives ahead for seconds fixes every start?"
+    _open(browser, env["console"].url)  # before the learner: its tree comes when it is up
     learner = _rhbl("asks", tmp_path, "learner", "--resume", str(refined), "--out",
                     str(tmp_path / "corrected.rhbl"), "--snapshot-every", "0.3", "--connect",
                     env["srv"].endpoint)
     try:
         _wait_learner(env, learner)
-        _open(browser, env["console"].url)
         _until(browser, lambda d: _int(d, "asks", "n") == len(asks), 20,
-               f"the page lists the {len(asks)} asks")
+               f"the page lists the {len(asks)} asks, no label given")
         assert not browser.find_element("id", "asks").get_attribute("hidden")
         n = len(asks)  # the last one: the robot is put where it went wrong
         browser.find_element("css selector",

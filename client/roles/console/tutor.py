@@ -200,6 +200,9 @@ class Tutor:
         for r in self.robots.values():
             if not any(p.robot == r.name for p in self.pages.values()):
                 continue
+            learners = r.pubs.learners if r.pubs is not None else r.learners
+            if r.policy is None and learners:  # a learner came up after the page opened
+                self._fetch_tree(r, first=True)  # (at most every TREE_EVERY s)
             if force or r.teach_dirty or now - r.teach_said >= TEACH_EVERY:
                 r.teach_said, r.teach_dirty = now, False
                 text = self._teach_text(r)
