@@ -139,6 +139,38 @@ def tables(rows: list[dict]) -> str:
             "session)\n" + table(head, body))
 
 
+def run_all(args, behaviours, people, methods, seeds, rows: list) -> tuple[list, dict]:
+    """Every session not in ``rows`` yet (they are appended, and written to ``--json`` as they
+    come): (the variants' names, the rows each variant's session writes)."""
+    from lab.practice import Runner
+
+    done = {(r["behaviour"], r["person"], r["method"], r["seed"]) for r in rows}
+    named = [variant(m, args.teach_guard, args.demo, args.correct) for m in methods]
+    drawn = f" +{args.refine_generated} drawn" if args.refine_generated else ""
+    rows_of = {n: [n] + ([f"{n} refined {args.refine:g} min{drawn}"] if args.refine > 0 else [])
+               for n in named}  # the rows a session of each variant writes
+    todo = [(b, p, seed, m, name) for b in behaviours for p in people for seed in seeds
+            for m, name in zip(methods, named, strict=True)
+            if not all((b, p, n, seed) in done for n in rows_of[name])]
+    with Runner() as runner:
+        for b, p, seed, m, _name in todo:
+            practice = ({"drawn": (recipe_of(get(b)).generator, args.refine_generated)}
+                        if args.refine_generated else None)
+            for r in session(b, p, m, seed, guard=args.teach_guard, demo=args.demo,
+                             correct=args.correct, refine=args.refine, runner=runner,
+                             practice=practice):
+                if (b, p, r["method"], seed) in done:
+                    continue  # (taught again, deterministic: the same row)
+                rows.append(r)
+                print(f"{b} {p} seed {seed} {r['method']}: {r['nodes']} nodes, lag {r['lag']}, "
+                      + ", ".join(f"{w} {v['successes']}/{v['episodes']} ({v['collisions']} "
+                                  f"collisions)" for w, v in r["worlds"].items())
+                      + f", {r['seconds']} s", flush=True)
+            if args.json:
+                Path(args.json).write_text(json.dumps(rows, indent=1))
+    return named, rows_of
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--methods", default="person",
@@ -202,37 +234,7 @@ def main(argv=None) -> int:
     rows = []
     if args.json and Path(args.json).exists():
         rows = json.loads(Path(args.json).read_text())
-    done = {(r["behaviour"], r["person"], r["method"], r["seed"]) for r in rows}
-    named = [variant(m, args.teach_guard, args.demo, args.correct) for m in methods]
-    drawn = f" +{args.refine_generated} drawn" if args.refine_generated else ""
-    rows_of = {n: [n] + ([f"{n} refined {args.refine:g} min{drawn}"] if args.refine > 0 else [])
-               for n in named}  # the rows a session of each variant writes
-    from lab.practice import Runner
-
-    with Runner() as runner:
-        for b in behaviours:
-            for p in people:
-                for seed in seeds:
-                    for m, name in zip(methods, named, strict=True):
-                        if all((b, p, n, seed) in done for n in rows_of[name]):
-                            continue
-                        practice = ({"drawn": (recipe_of(get(b)).generator,
-                                                args.refine_generated)}
-                                    if args.refine_generated else None)
-                        for r in session(b, p, m, seed, guard=args.teach_guard, demo=args.demo,
-                                         correct=args.correct, refine=args.refine,
-                                         runner=runner, practice=practice):
-                            if (b, p, r["method"], seed) in done:
-                                continue  # (taught again, deterministic: the same row)
-                            rows.append(r)
-                            print(f"{b} {p} seed {seed} {r['method']}: {r['nodes']} nodes, "
-                                  f"lag {r['lag']}, "
-                                  + ", ".join(f"{w} {v['successes']}/{v['episodes']} "
-                                              f"({v['collisions']} collisions)"
-                                              for w, v in r["worlds"].items())
-                                  + f", {r['seconds']} s", flush=True)
-                        if args.json:
-                            Path(args.json).write_text(json.dumps(rows, indent=1))
+    named, rows_of = run_all(args, behaviours, people, methods, seeds, rows)
     print()
     print(tables([r for r in rows if r["behaviour"] in behaviours and r["person"] in people
                   and any(r["method"] in rows_of[n] for n in named) and r["seed"] in seeds]))
