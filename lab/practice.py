@@ -139,7 +139,9 @@ def drawn_name(kind: str, seed: int, i: int, side: str = "right") -> str:
 
 
 @functools.cache
-def _world(behaviour: str, world: str, scale: float = 1.0):
+def task_world(behaviour: str, world: str, scale: float = 1.0):
+    """The world a task names (a behaviour's world, a file, or ``drawn_name``'s), scaled by
+    ``scale``; made once per process."""
     from lab.behaviours import world_of
 
     if world.startswith(DRAWN + ":"):
@@ -253,7 +255,7 @@ def run_episode(task: EpisodeTask) -> dict:
     from client.behaviour.guard import RotationGuard
 
     b = _behaviour(task.behaviour)
-    spec = _world(task.behaviour, task.world, float(task.scale))
+    spec = task_world(task.behaviour, task.world, float(task.scale))
     policy = _policy(task)
     policy.tracing = task.trace
     driver = policy if task.guard is None else RotationGuard(policy, **dict(task.guard))

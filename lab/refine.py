@@ -284,8 +284,8 @@ def _practice_tasks(b, seeds, scales, seconds=None, free: int = 0, noise=(0.0, 0
                    for i in range(drawn[1])]
     out = []
     for j, (w, scale) in enumerate(worlds):
-        spec = practice._world(name, w, float(scale))
-        rng = np.random.default_rng(100 + (j % (1 + len(scales))))
+        spec = practice.task_world(name, w, float(scale))
+        rng = np.random.default_rng(100 + (j % (1 + len(scales))))  # 100 + the scale's place
         poses = list(spec.start_poses)
         poses += [tuple(p) for p in (free_pose(spec, rng) for _ in range(free)) if p]
         for k, start in enumerate(poses):

@@ -252,7 +252,7 @@ def test_a_failure_refinement_cannot_fix_asks_from_before_it_went_wrong():
 def test_practice_in_drawn_worlds_names_each_so_any_worker_draws_it_again():
     from lab.behaviours import get
     from lab.generated import generated
-    from lab.practice import _world, drawn_name
+    from lab.practice import drawn_name, task_world
     from lab.refine import PRACTICE_SEED, _practice_tasks
 
     b = get("left-wall")
@@ -263,7 +263,7 @@ def test_practice_in_drawn_worlds_names_each_so_any_worker_draws_it_again():
                                         for i in range(2)}
     assert len(drawn) == sum(len(w.start_poses) for w in want)
     for i, w in enumerate(want):
-        spec = _world("left-wall", drawn_name("rooms", PRACTICE_SEED, i, "left"))
+        spec = task_world("left-wall", drawn_name("rooms", PRACTICE_SEED, i, "left"))
         assert spec.walls == w.walls and spec.start_poses == w.start_poses
     assert len(tasks) - len(drawn) == len(_practice_tasks(b, (0,), ()))
     r = run_episode(EpisodeTask("left-wall", drawn[0].world, tree_bytes(
