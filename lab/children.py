@@ -38,7 +38,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
-__all__ = ["Child", "free_port", "rhbl_argv", "rss_kib", "without_file_override"]
+__all__ = ["Child", "free_port", "rhbl_argv", "rss_kib", "running", "without_file_override"]
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +61,22 @@ def rss_kib(pid: int) -> int:
     except (OSError, ValueError, IndexError):
         pass
     return -1
+
+
+def running(pid: int) -> bool:
+    """Process ``pid`` runs: it is there and not a zombie waiting to be reaped (Linux's /proc;
+    elsewhere, whether the kernel knows it)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except FileNotFoundError:
+        return False
+    except OSError:  # no /proc: ask the kernel
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        return True
 
 
 # loaded here, in the parent: a preexec_fn runs between fork and exec, no place to load a library

@@ -182,8 +182,7 @@ class _Tracing:
 
 
 class _Traced(_Tracing, TreePolicy):
-    def vector(self, ranges, yaw: float) -> np.ndarray:
-        return self.features.extract(ranges, yaw)
+    pass
 
 
 class _TracedGoals(_Tracing, GoalPolicy):
@@ -309,27 +308,14 @@ def cores() -> int:
     return len(affinity(0)) if affinity else (os.cpu_count() or 1)
 
 
-def _alive(pid: int) -> bool:
-    """Process ``pid`` runs (not gone, not a zombie waiting to be reaped)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
-    except FileNotFoundError:
-        return False
-    except OSError:  # no /proc: ask the kernel
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            return False
-        return True
-
-
 def _orphan_watch(owner: int, every: float = 0.5) -> None:
     """A pool worker's initializer: it ends itself once ``owner`` (the process whose Runner
     made the pool) is gone, so a command killed (even by SIGKILL) leaves no workers running
     episodes for nobody (the pool's forkserver then ends with them)."""
+    from lab.children import running
+
     def watch() -> None:
-        while _alive(owner):
+        while running(owner):
             time.sleep(every)
         os._exit(0)
 

@@ -320,6 +320,14 @@ def _held_out(b, clf, policy, runner, seed: int = 0, seconds=None) -> dict:
     return out
 
 
+def _off_band(result: dict, band: dict | None) -> np.ndarray | None:
+    """The steps of a traced episode off the followed wall's band (None: no band to keep)."""
+    if band is None or result.get("side") is None:
+        return None
+    side = np.asarray(result["side"])
+    return np.flatnonzero((side < band["near"]) | (side > band["far"]))
+
+
 def _blame(pr: _Practice, window: int, b) -> tuple[Counter, list]:
     """Spheres blamed for the failures (how many blamed steps each decided) and the blamed
     (episode, step) pairs, latest first."""
@@ -332,9 +340,8 @@ def _blame(pr: _Practice, window: int, b) -> tuple[Counter, list]:
         if r["stalls"]:
             f = r["stalls"][0]
             steps = list(range(max(0, f - window), min(f, len(w))))
-        elif band is not None and r.get("side") is not None:
-            side = r["side"][:len(w)]
-            steps = [int(k) for k in np.flatnonzero((side < band["near"]) | (side > band["far"]))]
+        elif (off := _off_band(r, band)) is not None:
+            steps = [int(k) for k in off if k < len(w)]
         else:
             steps = list(range(max(0, len(w) - 4 * window), len(w)))
         blamed.update(int(w[k]) for k in steps if w[k] >= 0)
@@ -353,11 +360,8 @@ def ask(task: EpisodeTask, result: dict, window: int, b) -> dict:
     step, why = None, "failed"
     if result["stalls"]:
         step, why = int(result["stalls"][0]), "collision"
-    elif band is not None and result.get("side") is not None:
-        side = np.asarray(result["side"])
-        off = np.flatnonzero((side < band["near"]) | (side > band["far"]))
-        if len(off):
-            step, why = int(off[0]), "band"
+    elif (off := _off_band(result, band)) is not None and len(off):
+        step, why = int(off[0]), "band"
     poses = result.get("poses")
     if step is not None and poses is not None and len(poses):
         pose = [float(v) for v in poses[max(0, min(step - window // 2, len(poses) - 1))]]

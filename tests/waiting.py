@@ -28,7 +28,7 @@ import time
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
-__all__ = ["PATIENCE", "Timeout", "eventually", "gone", "listening", "patience", "wait_token"]
+__all__ = ["PATIENCE", "Timeout", "eventually", "listening", "patience", "wait_token"]
 
 T = TypeVar("T")
 
@@ -140,12 +140,3 @@ def listening(port: int) -> bool:
         except FileNotFoundError:
             continue
     return False
-
-
-def gone(pid: int) -> bool:
-    """Process ``pid`` ended: no longer there, or a zombie nobody has reaped yet (Linux)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
-    except FileNotFoundError:
-        return True

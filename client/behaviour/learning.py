@@ -374,9 +374,13 @@ class TreePolicy:
     def reset(self) -> None:
         pass
 
+    def vector(self, ranges, yaw: float) -> np.ndarray:
+        """The features of one scan: what ``act`` asks the tree about."""
+        return self.features.extract(ranges, yaw)
+
     def act(self, ranges, pose) -> str:
         yaw = float(pose[2]) if pose is not None else 0.0
-        return str(self.classifier.predict_one(self.features.extract(ranges, yaw)))
+        return str(self.classifier.predict_one(self.vector(ranges, yaw)))
 
     def act_many(self, ranges, yaws=None) -> list[str]:
         """``act`` for many scans of one beam count at once (``ranges`` (scans, beams), a

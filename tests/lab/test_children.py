@@ -9,9 +9,9 @@ import time
 from pathlib import Path
 
 import pytest
-from waiting import eventually, gone, patience
+from waiting import eventually, patience
 
-from lab.children import Child, free_port, rhbl_argv
+from lab.children import Child, free_port, rhbl_argv, running
 
 
 def py(code: str) -> list[str]:
@@ -226,11 +226,11 @@ def test_a_child_started_to_die_with_its_parent_ends_when_the_parent_is_killed(t
     assert parent.wait_for_line("child False", timeout=30), parent.output()
     pids = {x.split()[1]: int(x.split()[2]) for x in parent.lines if x.startswith("child ")}
     try:
-        assert not gone(pids["True"]) and not gone(pids["False"])
+        assert running(pids["True"]) and running(pids["False"])
         parent.kill()
-        eventually(lambda: gone(pids["True"]), patience(10), "the child ends with its parent")
-        assert not gone(pids["False"])  # no such child: it runs on without its parent
+        eventually(lambda: not running(pids["True"]), patience(10), "the child ends with its parent")
+        assert running(pids["False"])  # no such child: it runs on without its parent
     finally:
         for pid in pids.values():
-            if not gone(pid):
+            if running(pid):
                 os.kill(pid, signal.SIGKILL)

@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from waiting import eventually, gone
+from waiting import eventually
 
 from client.behaviour.learning import TreePolicy
 from lab.cli import main
@@ -286,7 +286,7 @@ def test_the_size_step_holds_max_nodes_even_where_pruning_stops_above_it():
 def test_the_pool_s_workers_end_when_the_process_that_made_it_is_killed(tmp_path):
     """A real process runs long episodes on a pool of 2, then is SIGKILLed: its workers (the
     forkserver's children, not its own) end by themselves instead of running on for nobody."""
-    from lab.children import Child
+    from lab.children import Child, running
 
     code = (
         "import sys, threading, time\n"
@@ -307,10 +307,11 @@ def test_the_pool_s_workers_end_when_the_process_that_made_it_is_killed(tmp_path
     assert len(pids) == 2
 
     try:
-        assert not any(map(gone, pids))
+        assert all(map(running, pids))
         parent.kill()
-        eventually(lambda: all(map(gone, pids)), 30, "the workers end without their owner")
+        eventually(lambda: not any(map(running, pids)), 30,
+                   "the workers end without their owner")
     finally:
         for pid in pids:
-            if not gone(pid):
+            if running(pid):
                 os.kill(pid, signal.SIGKILL)
