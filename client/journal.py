@@ -99,6 +99,12 @@ class JournalRecord:
     # a person's label whose lag the learner estimates: float32 features of the scans displayed
     # 1, 2, ... scans before this one (rows, nearest first; None: not kept)
     earlier: np.ndarray | None = None
+    # a goal behaviour's label (client.behaviour.goals.GoalStep): the beacon pursued, the one
+    # reached at this scan (or None), what the fiducial finder saw (float64 rows of id, range,
+    # bearing: as on the wire, so a replay learns the same vector); goal None: no goals
+    goal: int | None = None
+    reached: int | None = None
+    seen: np.ndarray | None = None
 
     def to_payload(self) -> dict:
         p = {
@@ -115,6 +121,11 @@ class JournalRecord:
             p["seq"] = int(self.seq)
         if self.earlier is not None:
             p["earlier"] = np.asarray(self.earlier, dtype="<f4").tobytes()
+        if self.goal is not None:
+            p["goal"] = int(self.goal)
+            if self.reached is not None:
+                p["reached"] = int(self.reached)
+            p["seen"] = np.asarray(self.seen, dtype="<f8").reshape(-1, 3).tobytes()
         return p
 
     @classmethod
@@ -134,6 +145,10 @@ class JournalRecord:
             seq=None if origin is None else int(p["seq"]),
             earlier=(None if earlier is None
                      else np.frombuffer(earlier, dtype="<f4").reshape(-1, max(1, len(x)))),
+            goal=None if p.get("goal") is None else int(p["goal"]),
+            reached=None if p.get("reached") is None else int(p["reached"]),
+            seen=(None if p.get("goal") is None
+                  else np.frombuffer(p.get("seen", b""), dtype="<f8").reshape(-1, 3)),
         )
 
 
@@ -546,12 +561,14 @@ class Journal:
     # ---- writing ------------------------------------------------------------------------
     def append(self, scan_id: int, ts: float, label: str, ranges, yaw: float,
                features, origin: str | None = None, seq: int | None = None,
-               earlier=None) -> int:
+               earlier=None, goal: int | None = None, reached: int | None = None,
+               seen=None) -> int:
         """Append one labeled vector (with the label's ``origin`` and ``seq`` when it has them,
-        and the ``earlier`` scans' features of a person's label); returns its index. Durable against a killed process on return; fsync'd within
-        ``fsync_interval`` seconds."""
+        the ``earlier`` scans' features of a person's label, and a goal behaviour's ``goal``,
+        ``reached`` and ``seen``); returns its index. Durable against a killed process on
+        return; fsync'd within ``fsync_interval`` seconds."""
         return self._append(JournalRecord(len(self), scan_id, ts, label, ranges, yaw,
-                                          features, origin, seq, earlier))
+                                          features, origin, seq, earlier, goal, reached, seen))
 
     def append_withdrawal(self, origin: str, wid: int, first: int, upto: int,
                           ts: float = 0.0, reason: str = "") -> int:

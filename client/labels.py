@@ -136,13 +136,14 @@ class Outbox:
                       "withdrawn": 0, "withdrawals_acked": 0, "refused": 0}
 
     def label(self, scan: Scan, action: str, executed: str | None,
-              source: str = "teacher") -> LabeledScan:
-        """The next label of this session for ``scan``, kept until acknowledged."""
+              source: str = "teacher", **goal) -> LabeledScan:
+        """The next label of this session for ``scan``, kept until acknowledged (``goal``: a
+        goal behaviour's ``goal``, ``reached`` and ``seen``, ``TeacherAction``'s)."""
         with self._lock:
             seq, self._next = self._next, self._next + 1
             item = LabeledScan(scan_id=scan.id, action=action, origin=self.origin, seq=seq,
                                ranges=scan.ranges, yaw=float(scan.pose[2]), source=source,
-                               ts=scan.ts, executed=executed)
+                               ts=scan.ts, executed=executed, **goal)
             due = self._clock() + self.resend_after
             self._entries[seq] = [item, due, 0]
             self._next_due = min(self._next_due, due)
@@ -320,15 +321,16 @@ class LabelPublisher:
                      "them (at most %d), resent after %g s", robot, self.outbox.origin,
                      outbox, resend_after)
 
-    def label(self, scan: Scan, action: str, executed: str | None) -> int | None:
-        """Publish the label of ``scan`` (kept in the outbox until acknowledged); its seq
-        (None without an outbox)."""
+    def label(self, scan: Scan, action: str, executed: str | None, **goal) -> int | None:
+        """Publish the label of ``scan`` (kept in the outbox until acknowledged; ``goal``: a
+        goal behaviour's ``goal``, ``reached`` and ``seen``); its seq (None without an
+        outbox)."""
         self.published += 1
         if self.outbox is None:
             act = TeacherAction(scan_id=scan.id, action=action, source=self.source, ts=scan.ts,
-                                executed=executed)
+                                executed=executed, **goal)
         else:  # kept before it is published: an acknowledgement cannot come first
-            act = self.outbox.label(scan, action, executed, self.source).action_message()
+            act = self.outbox.label(scan, action, executed, self.source, **goal).action_message()
         self.act_pub.put(act.encode())
         return act.seq
 

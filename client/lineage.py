@@ -25,6 +25,7 @@ import numpy as np
 
 from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
 from client.behaviour.features import DEFAULT_FEATURES, FEATURES, FeatureSpec
+from client.behaviour.goals import GoalLearner, Goals, GoalStep, learner_of, resume_learner
 from client.behaviour.learning import (
     DemonstrationLearner,
     IncompatibleSnapshotError,
@@ -133,9 +134,13 @@ class LineageLock:
 
 
 def _replay(learner: DemonstrationLearner, rec) -> None:
-    """Learn one journal record again (a person's label with the scans journaled before it)."""
+    """Learn one journal record again (a person's label with the scans journaled before it, a
+    goal behaviour's with its goal and what was seen)."""
     if rec.earlier is not None and isinstance(learner, PersonLearner):
         learner.observe(rec.ranges, rec.yaw, rec.label, earlier=rec.earlier)
+    elif rec.goal is not None and isinstance(learner, GoalLearner):
+        learner.observe(rec.ranges, rec.yaw, rec.label,
+                        GoalStep.of(rec.goal, rec.reached, rec.seen))
     else:
         learner.observe(rec.ranges, rec.yaw, rec.label)
 
@@ -153,7 +158,8 @@ class Lineage:
                  tree_params: dict | None = None, stride: int = 1, min_delta: float = 0.0,
                  fsync_interval: float = 1.0, actions: ActionSet = DEFAULT_ACTIONS,
                  fold_journal: bool = False, journal_write=os.write, teacher: str = "script",
-                 lag: int | None = None, lock_wait: float = 0.0, guard: bool | None = None):
+                 lag: int | None = None, lock_wait: float = 0.0, guard: bool | None = None,
+                 goals: Goals | None = None):
         max_lag = PERSON.alignment.max_lag
         if lag is not None and not (isinstance(lag, int) and 0 <= lag <= max_lag):
             raise ProcessError(f"learner: --lag must be 0..{max_lag} scans, got {lag!r}",
@@ -165,13 +171,13 @@ class Lineage:
         self.lock = LineageLock(self.out, lock_wait)  # before anything of the lineage is read
         try:
             self._open(features, resume, task, tree_params, stride, min_delta, fsync_interval,
-                       actions, fold_journal, journal_write, teacher, lag, guard)
+                       actions, fold_journal, journal_write, teacher, lag, guard, goals)
         except BaseException:
             self.close()
             raise
 
     def _open(self, features, resume, task, tree_params, stride, min_delta, fsync_interval,
-              actions, fold_journal, journal_write, teacher, lag, guard) -> None:
+              actions, fold_journal, journal_write, teacher, lag, guard, goals) -> None:
         """Recover the lineage at ``out`` or start a new one (``__init__``'s arguments)."""
         # a shipped spec's name, or a spec itself (a behaviour's inline perception)
         spec = features if isinstance(features, FeatureSpec) else (
@@ -206,7 +212,7 @@ class Lineage:
                          "params": {"spawn": "winner", **(tree_params or {})},
                          "stride": stride, "min_delta": min_delta, "lag": lag, "guard": guard,
                          "fsync_interval": fsync_interval, "write": journal_write,
-                         "actions": actions}
+                         "actions": actions, "goals": goals}
             self.journal = None
             if teacher == "auto" and (resume is not None or fold_journal):
                 log.info("--teacher auto with %s: the scripted rule (a person's rule "
@@ -236,6 +242,13 @@ class Lineage:
             return _resume(n["resume"], n["spec"])
         task = n["task"] or task_of_features(n["features"])
         chosen = rule_for(rule).replace(guard=n["guard"])
+        if n["goals"] is not None:  # goals in order: the scripted rule (docs/goals.md)
+            if chosen.person:
+                log.warning("a behaviour with goals learns a person's labels by the scripted "
+                            "rule (each label as it arrives: no lag estimate, no editing)")
+                chosen = rule_for("script").replace(guard=n["guard"])
+            return GoalLearner(n["spec"], n["goals"], n["actions"], task=task, rule=chosen,
+                               stride=n["stride"], min_delta=n["min_delta"], **n["params"])
         if chosen.person:
             return PersonLearner(n["spec"], n["actions"], task=task,
                                  rule=chosen.replace(lag=n["lag"]), **n["params"])
@@ -286,7 +299,7 @@ class Lineage:
         withdrawals that came before it are journaled. Raises JournalError (call again)."""
         if not self.undecided:
             return
-        rule = "person" if by_person(source) else "script"
+        rule = "person" if by_person(source) and self._new["goals"] is None else "script"
         self._create(rule, f": the first label came from {source or 'an unnamed teacher'!r}, "
                            f"so it learns by the {'person' if rule == 'person' else 'scripted'}"
                            f" rule ({self.describe_rule() or 'each label as it arrives'})")
@@ -427,10 +440,7 @@ class Lineage:
                                                ActionSet.from_dict(meta["actions"]))
         if header.get("parent") is not None:
             return _resume(header["parent"], None)
-        return DemonstrationLearner(
-            FeatureSpec.from_dict(meta["features"]), ActionSet.from_dict(meta["actions"]),
-            task=meta.get("task"), stride=rule.stride, min_delta=rule.min_delta, rule=rule,
-            **(meta.get("tree_params") or {}))
+        return learner_of(meta)
 
     def _journaled(self, origin: str | None, seq: int | None) -> None:
         """A label record of ``origin`` is in the journal: held, and within its span."""
@@ -502,7 +512,8 @@ class Lineage:
 
     def learn(self, scan_id: int, ts: float, ranges, yaw: float, label: str,
               origin: str | None = None, seq: int | None = None,
-              earlier=(), source: str | None = None) -> bool | None:
+              earlier=(), source: str | None = None, step: GoalStep | None = None
+              ) -> bool | None:
         """Journal (flushed) then learn one labeled scan; True when it reached the tree. A label
         with an identity (``origin``, ``seq``) is recorded in ``labels`` once journaled; one
         held already (a resend) is neither journaled nor learned again: None. Raises
@@ -511,7 +522,10 @@ class Lineage:
         later with the same vector) or ``Refused`` (nothing written: ranges that are negative
         or not finite, or of another beam count than the journal's labels, ``beams``: a
         lineage learns from one laser, client.laser). The first label of a lineage whose rule
-        is not chosen yet chooses it by its ``source`` (``choose``)."""
+        is not chosen yet chooses it by its ``source`` (``choose``). A lineage of a behaviour with
+        goals learns ``step`` (``GoalStep``: the goal pursued, the one reached, what was seen)
+        with each scan; a label without it, or naming a beacon its goals do not, is ``Refused``
+        (``goal``: nothing written)."""
         if self.holds(origin, seq):
             return None
         ranges = np.asarray(ranges)
@@ -521,22 +535,35 @@ class Lineage:
         if ranges.size and not (np.isfinite(ranges).all() and ranges.min() >= 0):
             raise Refused("ranges", f"the scan of label {seq} of teacher session {origin} has "
                                     "ranges that are negative or not finite")
+        goals = isinstance(self.learner, GoalLearner)
+        if goals and step is None:
+            raise Refused("goal", f"label {seq} of teacher session {origin} names no goal: "
+                                  "a tree with goals learns labels that say the goal pursued "
+                                  "and what the fiducial finder saw (rhbl teacher --behaviour "
+                                  "of a behaviour with goals)")
+        if goals:
+            try:
+                self.learner.goals.index_of(step.goal if step.reached is None else step.reached)
+            except ValueError as exc:
+                raise Refused("goal", f"label {seq} of teacher session {origin}: {exc}") from None
         if self.undecided:
             self.choose(source)
         elif self._early:
             self._journal_early()
-        x = self.learner.features.extract(ranges, yaw)
+        x = self.learner.vector(ranges, yaw, step if goals else None)
         back = None
         if self.estimates:  # the scans before it, (ranges, yaw) nearest first: the lag's data
             back = np.zeros((len(earlier), len(x)), np.float32)
             for i, (r, a) in enumerate(earlier):
                 back[i] = self.learner.features.extract(r, a)
         self.journal.append(scan_id, ts, label, ranges, yaw, x.astype(np.float32), origin, seq,
-                            back)
+                            back, **({} if not goals else {
+                                "goal": step.goal, "reached": step.reached, "seen": step.rows()}))
         self._journaled(origin, seq)
         if self.beams is None:
             self.beams = len(ranges)
         learned = (self.learner.observe(ranges, yaw, label, earlier=back) if self.estimates
+                   else self.learner.observe(ranges, yaw, label, step) if goals
                    else self.learner.observe(ranges, yaw, label))
         self.applied += 1
         self.standing += 1
@@ -606,7 +633,7 @@ class Lineage:
 
 def _resume(path, spec: FeatureSpec | None) -> DemonstrationLearner:
     try:
-        return DemonstrationLearner.resume(path, spec)
+        return resume_learner(path, spec)
     except IncompatibleSnapshotError as exc:  # names the file
         raise ProcessError(f"cannot extend {exc}", EXIT_USAGE) from exc
     except FileNotFoundError as exc:

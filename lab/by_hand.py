@@ -33,7 +33,7 @@ import subprocess
 import sys
 import time
 
-from client.behaviour.given import as_argument
+from client.behaviour.given import as_argument, reflex_arg
 from lab.demo_run import Child, Demo, DemoError
 
 __all__ = ["ByHand", "NOT_BY_HAND", "check_args"]
@@ -51,6 +51,8 @@ def check_args(args) -> None:
         raise ValueError(f"--by-hand: {', '.join(bad)} drive the scripted teacher's demo and do "
                          f"not apply (you teach; --behaviour, --world, --out, --console, "
                          f"--demonstrate, --correct, --starts, --drive-seconds and --record do)")
+    if args.behaviour is not None:  # the console takes no behaviour with goals yet
+        reflex_arg.parse(args.behaviour)
 
 
 class ByHand(Demo):

@@ -32,7 +32,7 @@ import logging
 import signal
 import sys
 
-from client.behaviour.given import reflex_arg
+from client.behaviour.given import behaviour_arg
 from lab.by_hand import ByHand
 from lab.children import free_port
 from lab.demo_run import SCENARIOS, Demo, DemoError
@@ -50,8 +50,10 @@ def _defaults(value) -> str:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", choices=list(SCENARIOS), default=None,
                         help="a task's demo: the shipped behaviour of its name (default: "
-                             "wall-following); or --behaviour")
-    parser.add_argument("--behaviour", default=None, type=reflex_arg, metavar="NAME|FILE",
+                             "wall-following); goals: goals in order, the red beacon then the "
+                             "green one (the shipped behaviour red-green, docs/goals.md); or "
+                             "--behaviour")
+    parser.add_argument("--behaviour", default=None, type=behaviour_arg, metavar="NAME|FILE",
                         help="demo this behaviour (a shipped behaviour's name or a behaviour "
                              "file; docs/behaviours.md): its expert teaches, its perception is "
                              "the learner's, its first teaching world and start poses are the "

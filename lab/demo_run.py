@@ -23,7 +23,8 @@ from lab.behaviours import get, recipe_of, world_of
 from lab.children import free_port
 from lab.children import rhbl_argv as _rhbl
 from lab.episode import Episode, EpisodeCollector
-from lab.metrics import judge
+from lab.goals import targets
+from lab.metrics import goals_in_order, judge
 from lab.recipe import EVAL_SECONDS, RECIPES, Recipe
 from process import files
 
@@ -113,6 +114,10 @@ def scenario_of(b: Behaviour) -> Scenario:
     return Scenario(recipe_of(b).for_demo(), b.seconds, b)
 
 
+# goals in order (docs/goals.md): the paper's own example, the red beacon and then the green one
+SCENARIOS["goals"] = scenario_of(get("red-green"))
+
+
 
 def demo_behaviour(args: argparse.Namespace) -> Behaviour:
     """The behaviour a demo runs: ``--behaviour`` (a name or a file), else ``--scenario``'s (a
@@ -120,6 +125,9 @@ def demo_behaviour(args: argparse.Namespace) -> Behaviour:
     if args.behaviour is not None and args.scenario is not None:
         raise ValueError(f"--scenario {args.scenario} and --behaviour {args.behaviour}: give "
                          "one (a scenario is the shipped behaviour of its name)")
+    scenario = SCENARIOS.get(args.scenario)
+    if scenario is not None and scenario.behaviour is not None:
+        return scenario.behaviour
     return get(args.behaviour or args.scenario or "wall-following")
 
 
@@ -157,6 +165,11 @@ class Demo:
         self.scenario.learner_args()  # a recipe the learner process cannot run: refused now
         # the world with the behaviour's own start poses for it
         self.spec = world_of(self.behaviour, args.world or self.scenario.world)
+        # goals in order: the beacons to reach, in order (the judge's view, lab.goals.targets)
+        self.targets = None if self.behaviour.goals is None else targets(self.spec,
+                                                                         self.behaviour)
+        # a tree with goals pursues them from the first again at each start pose it is put at
+        self.again = [] if self.targets is None else ["--goals-again"]
         stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
         self.out = Path(args.out or Path("rhbl-out") / f"{stamp}-{self.name}")
         self.out.mkdir(parents=True, exist_ok=True)
@@ -258,6 +271,7 @@ class Demo:
                      until_exit: Child | None = None) -> None:
         """Until ``seconds`` of sim time were recorded (or ``until_exit`` exits, or the goal)."""
         goal = self.spec.goal
+        goals = self.targets
         next_note = time.monotonic() + 2.0  # a line every 2 s, and one when the episode ends
         first_scan_by = time.monotonic() + 20.0
         while True:
@@ -279,6 +293,10 @@ class Demo:
                 if np.hypot(x - goal.center[0], y - goal.center[1]) <= goal.radius:
                     self.say(f"{what}: goal reached at {t:.0f} s")
                     return
+            if goals and ep.poses and until_exit is None and len(
+                    goals_in_order(ep.poses, goals, ep.dt)) == len(goals):
+                self.say(f"{what}: every goal reached in order at {t:.0f} s")
+                return
             if time.monotonic() >= next_note:
                 n = self.tree_notice()
                 self.say(f"{what}: sim {t:5.0f}/{seconds:g} s{n}")
@@ -411,7 +429,7 @@ class Demo:
         if self.rounds <= 0:
             return rounds
         follower = self.child("controller-follow", "controller", "--from-learner", "--follow",
-                              "--wait-server", "60", "--query-timeout", "10")
+                              "--wait-server", "60", "--query-timeout", "10", *self.again)
         self.wait_commands("controller", server, learner, follower)
         corrector = self.child("teacher-correct", "teacher",
                                *self.scenario.corrector_args(self.args.style), "--wait-server", "30")
@@ -450,7 +468,7 @@ class Demo:
     def drive_phase(self, starts, server: Child) -> list[Episode]:
         """3. The final tree alone from each start pose; then the server stops."""
         controller = self.child("controller", "controller", "--tree", str(self.tree),
-                                "--wait-server", "60")
+                                "--wait-server", "60", *self.again)
         self.wait_commands("controller", server, controller)
         learned = self.episodes("learner", starts, self.drive, "learned robot", server,
                                 controller)
@@ -462,8 +480,8 @@ class Demo:
                learned: list[Episode]) -> int:
         """4. The output folder (summary.json, trajectories.npz, paths.png) and the tables."""
         goal, rules = self.spec.goal, self.behaviour.rules
-        tms = [ep.metrics(goal, rules) for ep in demos]
-        lms = [ep.metrics(goal, rules) for ep in learned]
+        tms = [ep.metrics(goal, rules, self.targets) for ep in demos]
+        lms = [ep.metrics(goal, rules, self.targets) for ep in learned]
         # each final drive by the behaviour's rule, beside the teacher from the same start (its
         # demonstration's distance over the drive's length: the two last different times)
         self.success = [bool(judge(rules, m, _over(tms[k], m) if k < len(tms) else None))
@@ -497,14 +515,16 @@ class Demo:
         out = []
         for r in range(1, self.rounds + 1):
             eps = [ep for ep in rounds if ep.round == r]
-            ms = [ep.metrics(goal) for ep in eps]
+            ms = [ep.metrics(goal, targets=self.targets) for ep in eps]
             out.append({
                 "round": r, "episodes": len(eps),
                 "seconds": round(sum(m["seconds"] for m in ms), 1),
                 "scans": sum(len(ep.ts) for ep in eps), "labels": sum(len(ep.labels) for ep in eps),
                 "teacher_ticks": sum(ep.teacher_ticks for ep in eps),
                 "collisions": sum(m["collisions"] for m in ms),
-                "goals": (None if goal is None else sum(bool(m["goal_reached"]) for m in ms))})
+                "goals": (sum(m["goals_reached"] == m["goals_total"] for m in ms)
+                          if self.targets else
+                          None if goal is None else sum(bool(m["goal_reached"]) for m in ms))})
         return out
 
     def write_outputs(self, clf, meta, demos, rounds, learned, tms, lms, per_round,

@@ -60,14 +60,15 @@ class Episode:
         """Steps the teacher drove (in a corrective round: took over)."""
         return sum(1 for d in self.drivers if d == "teacher")
 
-    def metrics(self, goal=None, rules: dict | None = None) -> dict:
+    def metrics(self, goal=None, rules: dict | None = None, targets=None) -> dict:
         """Every per-episode metric (``lab.metrics.episode_metrics``; ``rules``: a behaviour's
-        success rule, whose parameters some metrics take)."""
+        success rule, whose parameters some metrics take; ``targets``: its goals in order,
+        ``lab.goals.targets``)."""
         return metrics.episode_metrics(
             self.poses, self.stalls, self.actions, self.dt,
             side=self.side if self.side else None, goal=goal,
             teacher_actions=self.teacher_actions or None, start=self.start, rules=rules,
-            gaps=self.gaps)
+            gaps=self.gaps, targets=targets)
 
 
 @dataclass

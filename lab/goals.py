@@ -26,6 +26,7 @@ from client.behaviour.goals import (
     GoalExpert,
     GoalLearner,
     GoalPolicy,
+    GoalStep,
     ReactiveBeaconPolicy,
     Sighting,
 )
@@ -143,11 +144,21 @@ def train_goals(spec: WorldSpec, b: Behaviour, recipe: Recipe, *, seed: int = 0,
                 expert.reset(0 if j < len(starts) else int(rng.integers(len(b.goals.visits))))
                 _run(world, ep, expert, learner, reactive,
                      int(round(recipe.round_seconds / dt)), on_step=on_step,
-                     driver=learner.policy(), takeover=recipe.takeover)
+                     driver=_frozen(learner), takeover=recipe.takeover)
     learner.flush()
     reactive.flush()
     ep.wall_time = time.perf_counter() - t0
     return learner, reactive, ep
+
+
+def _frozen(learner: GoalLearner) -> GoalPolicy:
+    """The learner's trees as they are now, as a corrective drive's driver: copies, which the
+    labels of that drive do not change."""
+    from rhbl import loads
+
+    p = learner.policy()
+    return GoalPolicy(loads(p.classifier.to_bytes()), loads(p.completion.to_bytes()),
+                      p.features, p.goals, p.actions, p.metadata)
 
 
 def _run(world: World, ep: Episode, expert: GoalExpert, learner: GoalLearner,
@@ -161,12 +172,11 @@ def _run(world: World, ep: Episode, expert: GoalExpert, learner: GoalLearner,
         ranges, odom = world.scan(0), world.odom(0)
         seen = sightings(world)
         c = learner.goals.completion_inputs(seen, expert.tracker.goal)
-        reached = expert.see(seen, t=n * ep.dt) is not None
-        learner.observe_completion(c, reached)
-        if expert.tracker.finished:
+        ev = expert.see(seen, t=n * ep.dt)
+        if expert.tracker.finished:  # the last goal reached: its mark, and no action
+            learner.observe_completion(c, True)
             break
-        beacon = expert.tracker.beacon
-        x = learner.vector(ranges, odom[2], seen, beacon)
+        step = GoalStep(expert.tracker.beacon, None if ev is None else ev["beacon"], seen)
         if demo is not None:
             label, executed = demo.step(ranges, odom)
         else:
@@ -174,7 +184,7 @@ def _run(world: World, ep: Episode, expert: GoalExpert, learner: GoalLearner,
             driver.tracker.visit = expert.tracker.visit
             driver._sightings = seen
             executed = label if takes_over(ranges, takeover) else driver.act(ranges, odom)
-        learner.observe(x, label)
+        learner.observe(ranges, odom[2], label, step)  # as the learner process learns it
         reactive.observe(reactive.vector(ranges, odom[2], seen), label)
         ep.labels.append(label)
         ep.learned += 1

@@ -38,6 +38,8 @@ def episode_row(driver: str, m: dict) -> list[str]:
     band = m["wall_band_fraction"]
     goal = ("-" if m["goal_reached"] is None else
             (f"yes, {m['time_to_goal']:.0f} s" if m["goal_reached"] else "no"))
+    if m.get("goals_total"):  # goals in order: how many of them, in order
+        goal = f"{m['goals_reached']}/{m['goals_total']} in order"
     agree = m.get("teacher_agreement")
     row = [driver, "(" + ", ".join(f"{v:.2f}" for v in (m["start"] or [])) + ")",
            f"{m['seconds']:.0f}", str(m["collisions"]), f"{m['distance']:.1f}",

@@ -375,6 +375,10 @@ class FiducialItem(NamedTuple):
         return self.range * math.sin(self.bearing)
 
 
+# what a fiducial finder sees (a Fiducial's items; a goal behaviour's label carries them too)
+_SEEN = Records({"id": UINT, "range": NUM, "bearing": NUM}, FiducialItem, MAX_BEACONS)
+
+
 @message
 class Fiducial(_Message):
     """What a robot's fiducial finder sees at sim time ``ts``: ``items``, one
@@ -385,9 +389,7 @@ class Fiducial(_Message):
     WHAT: ClassVar[str] = "fiducial"
     ts: float = wire(NUM)
     seq: int = wire(UINT)
-    items: tuple[FiducialItem, ...] = wire(
-        Records({"id": UINT, "range": NUM, "bearing": NUM}, FiducialItem, MAX_BEACONS),
-        default=(), required=True)
+    items: tuple[FiducialItem, ...] = wire(_SEEN, default=(), required=True)
     pose: tuple[float, float, float] = wire(VEC3, default=(0.0, 0.0, 0.0), required=True)
     truth: tuple[float, float, float] | None = wire(VEC3, default=None)
 
@@ -506,7 +508,17 @@ class TeacherAction(_Message):
     executed: str | None = wire(STR, default=None)
     origin: str | None = wire(ORIGIN, default=None, own=True)
     seq: int | None = wire(UINT, default=None, own=True)
+    # a behaviour with goals in order (docs/goals.md): the goal pursued, the goal reached at
+    # this scan and what the fiducial finder saw then
+    goal: int | None = wire(UINT, default=None, kw_only=True)
+    reached: int | None = wire(UINT, default=None, kw_only=True)
+    seen: tuple[FiducialItem, ...] | None = wire(_SEEN, default=None, kw_only=True)
     _read_own = classmethod(_read_identity)
+
+    def goal_fields(self) -> dict:
+        """``goal``, ``reached`` and ``seen`` as keywords (none: a label without goals)."""
+        return {k: getattr(self, k) for k in ("goal", "reached", "seen")
+                if getattr(self, k) is not None}
 
 
 @message
@@ -526,19 +538,25 @@ class LabeledScan(_Message):
     seq: int = wire(UINT, own=True)
     ranges: np.ndarray = wire(RANGES)
     yaw: float = wire(NUM, default=0.0, required=True)
+    goal: int | None = wire(UINT, default=None, kw_only=True)
+    reached: int | None = wire(UINT, default=None, kw_only=True)
+    seen: tuple[FiducialItem, ...] | None = wire(_SEEN, default=None, kw_only=True)
     _read_own = classmethod(_read_identity)
 
     @classmethod
     def of(cls, act: TeacherAction, ranges, yaw: float) -> LabeledScan:
         return cls(scan_id=act.scan_id, action=act.action, origin=act.origin, seq=act.seq,
                    ranges=ranges, yaw=float(yaw), source=act.source, ts=act.ts,
-                   executed=act.executed)
+                   executed=act.executed, **act.goal_fields())
 
     def action_message(self) -> TeacherAction:
         """The label alone, as it was first published."""
         return TeacherAction(scan_id=self.scan_id, action=self.action, source=self.source,
                              ts=self.ts, executed=self.executed, origin=self.origin,
-                             seq=self.seq)
+                             seq=self.seq, **self.goal_fields())
+
+    def goal_fields(self) -> dict:
+        return TeacherAction.goal_fields(self)
 
 
 @message

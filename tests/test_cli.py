@@ -125,10 +125,10 @@ def test_train_help_defaults_are_the_recipes():
         assert "default: the classifier's" in helps[flag]
 
 
-def _demo_defaults(helps: dict[str, str], flag: str) -> tuple[float, float]:
-    m = re.search(r"default: wall following (\S+?), maze (\S+?)[;)]", helps[flag])
+def _demo_defaults(helps: dict[str, str], flag: str) -> tuple[float, float, float]:
+    m = re.search(r"default: wall following (\S+?), maze (\S+?), goals (\S+?)[;)]", helps[flag])
     assert m, (flag, helps[flag])
-    return float(m.group(1)), float(m.group(2))
+    return float(m.group(1)), float(m.group(2)), float(m.group(3))
 
 
 def test_demo_help_says_the_values_the_demo_uses(tmp_path):
@@ -137,8 +137,14 @@ def test_demo_help_says_the_values_the_demo_uses(tmp_path):
     helps = _helps("demo")
     shown = {flag: _demo_defaults(helps, flag) for flag in
              ("--teach-seconds", "--rounds", "--round-seconds", "--drive-seconds")}
-    assert shown["--rounds"] == (3, 4)  # the maze demo: 4 rounds, not the recipe's 6
+    assert shown["--rounds"] == (3, 4, 2)  # the maze demo: 4 rounds, not the recipe's 6
     parser = build_parser("demo")
+    goals = Demo(parser.parse_args(["--scenario", "goals", "--out", str(tmp_path / "g"),
+                                    "--quiet"]))
+    assert (goals.teach, goals.rounds, goals.round_seconds, goals.drive) == \
+        tuple(shown[f][2] for f in ("--teach-seconds", "--rounds", "--round-seconds",
+                                    "--drive-seconds"))
+    assert goals.behaviour.name == "red-green" and goals.targets and goals.again
     for k, task in enumerate(("wall-following", "maze")):
         demo = Demo(parser.parse_args(["--scenario", task, "--out", str(tmp_path / task),
                                        "--quiet"]))

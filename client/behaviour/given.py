@@ -34,9 +34,10 @@ def _check_reflex(text: str) -> str:
     known = shipped().get(text)
     b = known if known is not None else (behaviour(text) if files_checked() else None)
     if b is not None and b.goals is not None:
-        raise ValueError(f"behaviour {b.name!r} has goals in order ([goals]): it is taught by "
-                         "rhbl train or rhbl experiment and driven by rhbl controller; the "
-                         "teacher, learner, console and demo do not take one yet (docs/goals.md)")
+        raise ValueError(f"behaviour {b.name!r} has goals in order ([goals]): the scripted "
+                         "teacher teaches it (rhbl teacher, rhbl demo), rhbl learner learns it "
+                         "and rhbl controller drives it; the console and rhbl demo --by-hand "
+                         "do not take one yet (docs/goals.md)")
     return text
 
 
@@ -44,8 +45,8 @@ def _check_reflex(text: str) -> str:
 behaviour_arg = Checked("behaviour", _check)
 # (a shipped name or a regular file, as a world is: the CLI walk tries the same hostile values)
 behaviour_arg.kind, behaviour_arg.example = "world", "wall-following"
-# the same, for the processes that teach or learn one reflex over the bus (teacher, learner,
-# console, demo): a behaviour with goals in order is refused, naming what takes it
+# the same, for where a person teaches one reflex (the console): a behaviour with goals in
+# order is refused, naming what takes it
 reflex_arg = Checked("behaviour", _check_reflex)
 reflex_arg.kind, reflex_arg.example = "world", "wall-following"
 
@@ -89,6 +90,9 @@ def _rule(rule: str, p: dict) -> str:
         return "the goal reached"
     if rule == "coverage":
         return f"at least {_num(p['area'])} m\u00b2 covered (cells of {_num(p['cell'])} m)"
+    if rule == "goals":
+        return (f"the goals reached in their order (each within its distance + "
+                f"{_num(p['slack'])} m of its beacon)")
     raise ValueError(f"no success rule {rule!r}; known: {', '.join(RULES)}")
 
 

@@ -43,7 +43,9 @@ import numpy as np
 
 from .actions import DEFAULT_ACTIONS, ActionSet
 from .features import BEACON_GOAL, FEATURES, FeatureSpec
+from .learning import DemonstrationLearner
 from .policies import Policy
+from .rule import LearningRule
 
 __all__ = [
     "DONE",
@@ -52,15 +54,20 @@ __all__ = [
     "GoalExpert",
     "GoalLearner",
     "GoalPolicy",
+    "GoalStep",
     "GoalTracker",
     "Goals",
     "ReactiveBeaconPolicy",
+    "Relocation",
     "Sighting",
+    "learner_of",
     "load_policy",
     "parse_goals",
+    "resume_learner",
 ]
 
 DONE, NOT_DONE = "done", "not-done"
+PUT = 0.5  # m from one tick to the next: the robot was put there (set_pose), not driven
 NEAR = 4.0  # the completion tree sees a goal's beacon's range up to this many times its distance
 GOALS_FORMAT = 1  # metadata["goals"]["version"]: a reader refuses a newer one by name
 
@@ -120,6 +127,15 @@ class Goals:
         if s is None:
             return np.array([0.0, 1.0])
         return np.array([1.0, min(max(float(s.range), 0.0) / (NEAR * self.within[goal]), 1.0)])
+
+    def index_of(self, beacon: int) -> int:
+        """The first goal (an index into ``beacons``) whose beacon is ``beacon``; ValueError
+        naming the goals when none is (a label of another behaviour)."""
+        try:
+            return self.beacons.index(int(beacon))
+        except ValueError:
+            raise ValueError(f"beacon {beacon} is not one of the goals' beacons "
+                             f"{list(self.beacons)}") from None
 
     def reached(self, sighting: Sighting | None, goal: int) -> bool:
         """The scripted teacher's rule: goal ``goal``'s beacon seen within its distance."""
@@ -216,6 +232,21 @@ class GoalTracker:
         if self.finished:
             return f"finished ({len(self.goals.visits)} goals)"
         return f"goal {self.visit + 1}/{len(self.goals.visits)}: beacon {self.beacon}"
+
+
+class Relocation:
+    """Whether the robot was put elsewhere (the simulator's ``set_pose``: a new episode) since
+    the last fiducial message: ``moved(msg)`` is True when it is farther than ``PUT`` m from
+    where the last one had it (its true pose when the message holds one, else odometry, which
+    such a move resets), some ten times what it drives in a tick."""
+
+    def __init__(self) -> None:
+        self.last: tuple | None = None
+
+    def moved(self, msg) -> bool:
+        where = msg.truth if msg.truth is not None else msg.pose
+        last, self.last = self.last, where
+        return last is not None and math.hypot(where[0] - last[0], where[1] - last[1]) > PUT
 
 
 class BeaconSeeker(Policy):
@@ -351,6 +382,18 @@ class GoalExpert:
         self.seeker.see(None if b is None else sightings.get(b))
         return ev
 
+    def label_state(self, sightings: Mapping[int, Sighting], t: float | None = None
+                    ) -> tuple[int, int | None]:
+        """For a teacher that demonstrates on and on (``rhbl teacher``): ``see`` this step's
+        sightings; once every goal is reached, start over with the first. Returns the goal
+        pursued (its beacon: what the next action is for) and the goal reached at this step
+        (its beacon, None: none), a label's ``goal`` and ``reached``."""
+        ev = self.see(sightings, t)
+        if self.tracker.finished:  # (the step that finished it: ``ev`` says which)
+            self.reset()
+            self.see(sightings, t)  # (at a cycle's end the first goal is reached again)
+        return self.tracker.beacon, None if ev is None else ev["beacon"]
+
     def act(self, ranges, pose=None) -> str:
         return self.seeker.act(ranges, pose)
 
@@ -373,80 +416,168 @@ def _tree(default_label: str, params: Mapping):
     return HypersphereClassifier(default_label=default_label, **params)
 
 
-def _metadata(features: FeatureSpec, actions: ActionSet, goals: Goals, completion,
-              task: str | None, extra: Mapping | None) -> dict:
-    return {"features": features.to_dict(), "actions": actions.to_dict(), "task": task,
-            **dict(extra or {}),
-            "goals": {"version": GOALS_FORMAT, **goals.to_dict(),
-                      "completion_inputs": ["goal-beacon-seen", "goal-beacon-range/near"],
-                      "near": NEAR,
-                      "completion": completion.to_bytes()}}
+def goals_metadata(goals: Goals, completion) -> dict:
+    """A goal snapshot's ``metadata["goals"]``: the goals, the format, the completion tree's
+    own snapshot (bytes) and its inputs."""
+    from rhbl import NotFittedError
+
+    meta = {"version": GOALS_FORMAT, **goals.to_dict(),
+            "completion_inputs": ["goal-beacon-seen", "goal-beacon-range/near"], "near": NEAR}
+    try:  # (none yet: a new lineage's journal header, before its first label)
+        meta["completion"] = completion.to_bytes()
+    except NotFittedError:
+        pass
+    return meta
 
 
-class GoalLearner:
-    """Learns a goal behaviour from demonstrations: the action tree from (laser, current
-    goal's beacon) -> the teacher's action, the completion tree from the current goal's beacon
-    -> ``done`` at the teacher's "reached" marks, ``not-done`` at every other step. Vectors
-    queue until a tree is read (``flush``), as ``DemonstrationLearner``'s do. ``tree_params``
-    go to both trees (``rhbl.HypersphereClassifier``)."""
+@dataclass(frozen=True)
+class GoalStep:
+    """What a goal behaviour's label says beside its scan (``TeacherAction``'s ``goal``,
+    ``reached`` and ``seen``): ``goal`` the beacon pursued (the one the action is for),
+    ``reached`` the beacon the teacher marked reached at this scan (None: none), ``seen`` the
+    beacons the fiducial finder saw then, by id."""
+
+    goal: int
+    reached: int | None
+    seen: Mapping[int, Sighting]
+
+    @classmethod
+    def of(cls, goal: int, reached: int | None, items) -> GoalStep:
+        """From a label's fields (``items``: ``FiducialItem``s or rows of id, range, bearing;
+        a beacon seen but not identified, id 0, is left out as ``sightings`` leaves it)."""
+        seen = {}
+        for i, r, b in items if items is not None else ():
+            if int(i):
+                seen[int(i)] = Sighting(int(i), float(r), float(b))
+        return cls(int(goal), None if reached is None else int(reached), seen)
+
+    def rows(self) -> np.ndarray:
+        """``seen`` as rows of id, range, bearing (what the journal keeps)."""
+        return np.array([(s.id, s.range, s.bearing) for s in self.seen.values()],
+                        dtype=np.float64).reshape(-1, 3)
+
+
+class GoalLearner(DemonstrationLearner):
+    """Learns a goal behaviour from demonstrations: the action tree (``classifier``, as every
+    ``DemonstrationLearner``'s) from (laser, current goal's beacon) -> the teacher's action,
+    the completion tree from the current goal's beacon -> ``done`` at the teacher's "reached"
+    marks, ``not-done`` at every other step. ``observe(ranges, yaw, label, step)`` takes one
+    labelled scan with its ``GoalStep``: the same code path in-process (``lab.goals``) and in
+    the learner process (``client.lineage``). ``tree_params`` go to both trees."""
 
     def __init__(self, features: FeatureSpec, goals: Goals, actions: ActionSet = DEFAULT_ACTIONS,
-                 *, task: str | None = None, **tree_params):
-        tree_params.setdefault("spawn", "winner")
+                 *, completion=None, **kw):
         _check_goal_features(features)
-        self.features, self.goals, self.actions, self.task = features, goals, actions, task
-        self.tree_params = dict(tree_params)
-        self.action_tree = _tree(actions.names[0], tree_params)
-        self.completion_tree = _tree(NOT_DONE, tree_params)
-        self._ax: list = []
-        self._ay: list = []
+        kw.setdefault("spawn", "winner")
+        super().__init__(features, actions, **kw)
+        self.goals = goals
+        self.completion_tree = (completion if completion is not None
+                                else _tree(NOT_DONE, self.tree_params))
         self._cx: list = []
         self._cy: list = []
-        self.vectors = 0
-        self.marks = 0  # "reached" marks learned
+        prov = kw.get("provenance") or {}
+        self.marks = int(prov.get("marks", 0))  # "reached" marks learned
 
-    def vector(self, ranges, yaw: float, sightings: Mapping[int, Sighting], beacon: int | None
-               ) -> np.ndarray:
+    def vector(self, ranges, yaw: float, step: GoalStep | None = None) -> np.ndarray:
         """The action tree's inputs: the perception's (``beacon = "goal"``: the laser's, then
-        those of ``beacon``, the current goal's)."""
-        return self.features.extract(ranges, yaw, seen=list(sightings.values()), target=beacon)
+        those of the goal pursued, ``step.goal``)."""
+        if step is None:
+            raise ValueError("a label of a behaviour with goals names the goal pursued and "
+                             "what the fiducial finder saw (its goal and seen)")
+        return self.features.extract(ranges, yaw, seen=list(step.seen.values()),
+                                     target=step.goal)
 
-    def observe(self, x: np.ndarray, label: str) -> None:
-        if label not in self.actions:
-            raise ValueError(f"label {label!r} is not an action: {self.actions.names}")
-        self._ax.append(x)
-        self._ay.append(label)
-        self.vectors += 1
+    def observe(self, ranges, yaw: float, label: str, step: GoalStep | None = None) -> bool:
+        """One labelled scan: the completion tree learns ``done`` for the goal reached at it
+        (``step.reached``) or ``not-done`` for the goal pursued; the action tree the label for
+        the goal pursued (the learner's sample selection, as ever). True when the action
+        reached the tree."""
+        x = self.vector(ranges, yaw, step)  # (checks the step)
+        self._check_label(label)
+        g = step.goal if step.reached is None else step.reached
+        self.observe_completion(self.goals.completion_inputs(step.seen, self.goals.index_of(g)),
+                                step.reached is not None)
+        return self._offer(x, label)
 
     def observe_completion(self, c: np.ndarray, done: bool) -> None:
         """The goal beacon's inputs ``c`` at a step the teacher marked reached (``done``) or
         not."""
-        self._cx.append(c)
+        self._cx.append(np.asarray(c, dtype=np.float64))
         self._cy.append(DONE if done else NOT_DONE)
         self.marks += bool(done)
 
-    def flush(self) -> None:
-        if self._ax:
-            self.action_tree.partial_fit(np.array(self._ax), self._ay)
-            self._ax, self._ay = [], []
+    def _flush(self) -> None:
+        super()._flush()
         if self._cx:
             self.completion_tree.partial_fit(np.array(self._cx), self._cy)
             self._cx, self._cy = [], []
 
+    def flush(self) -> None:
+        """Learn every vector and mark queued."""
+        self._flush()
+
+    @property
+    def action_tree(self):
+        return self.classifier
+
+    @property
+    def completion(self):
+        """The completion tree with every mark learned."""
+        self._flush()
+        return self.completion_tree
+
     def policy(self) -> GoalPolicy:
         """The trees as they are now, as a controller drives them."""
-        self.flush()
-        return GoalPolicy(self.action_tree, self.completion_tree, self.features, self.goals,
+        return GoalPolicy(self.classifier, self.completion, self.features, self.goals,
                           self.actions, self.metadata())
 
     def metadata(self) -> dict:
-        return {"features": self.features.to_dict(), "actions": self.actions.to_dict(),
-                "task": self.task, "provenance": {"vectors": self.vectors, "marks": self.marks},
-                "tree_params": {k: v for k, v in self.tree_params.items()
-                                if isinstance(v, str | int | float | bool | type(None))}}
+        meta = super().metadata()
+        meta["provenance"]["marks"] = self.marks
+        meta["goals"] = goals_metadata(self.goals, self.completion)
+        return meta
 
     def save(self, path: str | Path, extra: Mapping | None = None) -> Path:
         return self.policy().save(path, extra)
+
+    @classmethod
+    def _snapshot_parts(cls, clf, meta: Mapping, path) -> dict:
+        """The goals and the completion tree of a goal snapshot being resumed."""
+        policy = GoalPolicy.from_classifier(clf, str(path))
+        return {"goals": policy.goals, "completion": policy.completion}
+
+    @classmethod
+    def from_metadata(cls, meta: Mapping) -> GoalLearner:
+        """A new goal learner as the one whose metadata (a lineage's journal header) this is:
+        its perception, actions, goals, task, rule and tree parameters; empty trees."""
+        rule = LearningRule.of(meta)
+        return cls(FeatureSpec.from_dict(meta["features"]), Goals.from_dict(meta["goals"]),
+                   ActionSet.from_dict(meta["actions"]), task=meta.get("task"),
+                   stride=rule.stride, min_delta=rule.min_delta, rule=rule,
+                   **(meta.get("tree_params") or {}))
+
+
+def resume_learner(path: str | Path, features: FeatureSpec | None = None
+                   ) -> DemonstrationLearner:
+    """The learner that goes on from a snapshot: a ``GoalLearner`` for a goal snapshot, else a
+    ``DemonstrationLearner`` (``DemonstrationLearner.resume``: errors name the file)."""
+    from .learning import load_snapshot
+
+    meta = load_snapshot(path)[3]
+    cls = GoalLearner if isinstance(meta.get("goals"), dict) else DemonstrationLearner
+    return cls.resume(path, features)
+
+
+def learner_of(meta: Mapping) -> DemonstrationLearner:
+    """A new learner as the one whose metadata this is (a lineage's journal header), for the
+    scripted rule: a ``GoalLearner`` when it holds goals."""
+    if isinstance(meta.get("goals"), dict):
+        return GoalLearner.from_metadata(meta)
+    rule = LearningRule.of(meta)
+    return DemonstrationLearner(
+        FeatureSpec.from_dict(meta["features"]), ActionSet.from_dict(meta["actions"]),
+        task=meta.get("task"), stride=rule.stride, min_delta=rule.min_delta, rule=rule,
+        **(meta.get("tree_params") or {}))
 
 
 class GoalPolicy:
@@ -501,10 +632,11 @@ class GoalPolicy:
     def save(self, path: str | Path, extra: Mapping | None = None) -> Path:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        meta = _metadata(self.features, self.actions, self.goals, self.completion,
-                         self.metadata.get("task"),
-                         {k: v for k, v in {**self.metadata, **dict(extra or {})}.items()
-                          if k not in ("features", "actions", "task", "goals")})
+        meta = {"features": self.features.to_dict(), "actions": self.actions.to_dict(),
+                "task": self.metadata.get("task"),
+                **{k: v for k, v in {**self.metadata, **dict(extra or {})}.items()
+                   if k not in ("features", "actions", "task", "goals")},
+                "goals": goals_metadata(self.goals, self.completion)}
         self.classifier.save(str(path), metadata=meta)
         return path
 
@@ -525,7 +657,8 @@ class GoalPolicy:
             goals = Goals.from_dict(g)
             features = FeatureSpec.from_dict(meta["features"])
             actions = ActionSet.from_dict(meta["actions"])
-            completion = loads(bytes(g["completion"]), source=f"{source} (completion tree)")
+            completion = (loads(bytes(g["completion"]), source=f"{source} (completion tree)")
+                          if "completion" in g else _tree(NOT_DONE, {}))  # learned nothing yet
         except (ValueError, TypeError, KeyError) as exc:
             raise SnapshotError(source, f"invalid goals metadata: {exc}") from None
         return cls(clf, completion, features, goals, actions, meta)

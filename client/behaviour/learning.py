@@ -166,14 +166,22 @@ class DemonstrationLearner:
         if label not in self.actions:
             raise ValueError(f"label {label!r} is not an action of this learner: {self.actions.names}")
 
-    def observe(self, ranges, yaw: float, label: str) -> bool:
+    def vector(self, ranges, yaw: float, step=None) -> np.ndarray:
+        """The features of one scan (``step``: what a goal behaviour's label says beside it,
+        ``client.behaviour.goals.GoalLearner``; not used here)."""
+        return self.features.extract(ranges, yaw)
+
+    def observe(self, ranges, yaw: float, label: str, step=None) -> bool:
         """Offer one labelled observation; True when it reached the tree."""
         self._check_label(label)
+        return self._offer(self.vector(ranges, yaw, step), label)
+
+    def _offer(self, x: np.ndarray, label: str) -> bool:
+        """Sample selection (``stride``, ``min_delta``) of one labelled vector, then the tree."""
         self.seen += 1
         self._count += 1
         if (self._count - 1) % self.stride:
             return False
-        x = self.features.extract(ranges, yaw)
         if (self.min_delta > 0 and self._last_x is not None and label == self._last_label
                 and float(np.max(np.abs(x - self._last_x))) < self.min_delta):
             return False
@@ -323,10 +331,11 @@ class DemonstrationLearner:
         try:
             rule = LearningRule.of(meta)  # (a person's tree goes on by the script rule)
             tree_params = meta.get("tree_params", {}) or {}
-            learner = cls(feats, acts, task=meta.get("task"), classifier=clf,
+            learner = cls(feats, actions=acts, task=meta.get("task"), classifier=clf,
                           stride=rule.stride, min_delta=rule.min_delta,
                           rule=None if rule.person else rule,
-                          parent=str(path), provenance=meta.get("provenance"), **tree_params)
+                          parent=str(path), provenance=meta.get("provenance"),
+                          **cls._snapshot_parts(clf, meta, path), **tree_params)
         except (ValueError, TypeError, AttributeError) as exc:
             from rhbl import SnapshotError
 
@@ -337,6 +346,11 @@ class DemonstrationLearner:
         return learner
 
     from_snapshot = resume
+
+    @classmethod
+    def _snapshot_parts(cls, clf, meta: Mapping, path) -> dict:
+        """What a subclass's constructor takes from a snapshot being resumed besides the tree."""
+        return {}
 
 
 class TreePolicy:

@@ -47,7 +47,7 @@ import zenoh
 from client.behaviour import guard
 from client.behaviour.actions import ActionSet
 from client.behaviour.features import FEATURES, FeatureSpec, PayloadReader
-from client.behaviour.goals import GoalPolicy
+from client.behaviour.goals import GoalPolicy, Relocation
 from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, check_compatible
 from client.behaviour.rule import PATH_CHECK, LearningRule
 from client.decision import Decider
@@ -81,6 +81,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="expected feature specification (a tree trained otherwise is an error)")
     parser.add_argument("--seconds", type=arguments.seconds, default=None, metavar="S",
                         help="stop after driving S seconds of sim time (default: until stopped)")
+    parser.add_argument("--goals-again", action="store_true",
+                        help="a tree with goals: after the last goal stand still instead of "
+                             "ending, and whenever the robot is put elsewhere (the simulator's "
+                             "set_pose) pursue the goals from the first again (rhbl demo drives "
+                             "so from each start pose)")
     parser.add_argument("--query-timeout", type=arguments.seconds, default=5.0, metavar="SECONDS",
                         help="how long one query waits for the learner's snapshot (default 5)")
     parser.add_argument("--wait-tree", type=arguments.seconds_or_zero, default=None,
@@ -206,6 +211,7 @@ class ControllerProcess:
         self.fiducials = None  # a tree with goals: the robot's fiducial log (run)
         self.finished = False  # a tree with goals: every goal reached
         self.goal_why: str | None = None  # a tree with goals: why the last goal changed
+        self.relocation = Relocation()  # --goals-again: the robot put elsewhere
         self.n = self.bad = 0
         ctx.scope.callback(self.close)  # on every path, after "stopping (signal)"
         ctx.report(self.counters)
@@ -221,6 +227,10 @@ class ControllerProcess:
                             block=True)
 
     def swap(self, policy: TreePolicy) -> None:
+        old = self.policy
+        if isinstance(policy, GoalPolicy) and isinstance(old, GoalPolicy):
+            # a newer tree goes on with the goal being pursued (the state is the robot's)
+            policy.tracker, policy._sightings = old.tracker, old._sightings
         self._guard(policy)
         self._reader(policy)
         self.policy = policy
@@ -246,9 +256,9 @@ class ControllerProcess:
         log.info("tree loaded: %s; features %s", _describe(self.policy),
                  self.policy.features.to_dict())
         if isinstance(self.policy, GoalPolicy):  # goals in order: the beacons of every scan
-            if self.args.ros2 or self.follower is not None:
+            if self.args.ros2:
                 raise ProcessError("controller: a tree with goals drives an rhbl robot, without "
-                                   "--ros2 or --follow (docs/goals.md)", EXIT_USAGE)
+                                   "--ros2 (docs/goals.md)", EXIT_USAGE)
             self.fiducials = self.client.fiducials()
             self.policy.reset()
             log.info("pursuing %s", self.policy.tracker.describe())
@@ -328,9 +338,13 @@ class ControllerProcess:
             log.info("drove %.1f s of sim time: done", scan.ts - self.t0)
             return False
         answered = self.answer(scan)
-        if self.finished:
+        if self.finished and not self.args.goals_again:
             log.info("every goal reached (%s): done", self.policy.tracker.describe())
             return False
+        if self.finished:  # --goals-again: the robot stands until it is put elsewhere
+            with uninterrupted():
+                self.client.answer(scan, 0.0, 0.0)
+            return True
         if answered is not None:
             (vx, va), policy, x = answered
             with uninterrupted():  # a stop does not leave a command sent and uncounted
@@ -384,7 +398,14 @@ class ControllerProcess:
         # the message of the scan's tick, waited for longer once messages flow (it is sent
         # before the scan, on another subscriber); none came (the subscription was not up yet,
         # or lost): nothing is known of the beacons, so no goal is judged done on this scan
+        if self.fiducials is None:  # a tree with goals swapped in for one without
+            self.fiducials = self.client.fiducials()
         msg = self.fiducials.at(scan.id, timeout=1.0 if self.fiducials.latest else 0.2)
+        if msg is not None and self.args.goals_again and self.relocation.moved(msg):
+            p.reset()
+            self.finished, self.goal_why = False, None
+            log.info("the robot was put elsewhere at %.1f s: pursuing %s", scan.ts,
+                     p.tracker.describe())
         seen = () if msg is None else msg.items
         ev = None if msg is None else p.see({int(item.id): item for item in seen if item.id},
                                             t=scan.ts)

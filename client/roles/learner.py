@@ -60,7 +60,8 @@ from collections import deque
 from pathlib import Path
 
 from client.behaviour.features import DEFAULT_FEATURES, FEATURES, FeatureError
-from client.behaviour.given import reflex_arg
+from client.behaviour.given import behaviour_arg
+from client.behaviour.goals import GoalStep
 from client.behaviour.spec import behaviour
 from client.behaviour.teaching import add_person_arguments
 from client.journal import JournalError, journal_path
@@ -141,7 +142,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "its nearest labels; client.behaviour.rule). A lineage keeps the "
                              "rule it was made with (its journal's header)")
     add_person_arguments(parser)
-    parser.add_argument("--behaviour", default=None, type=reflex_arg, metavar="NAME|FILE",
+    parser.add_argument("--behaviour", default=None, type=behaviour_arg, metavar="NAME|FILE",
                         help="learn this behaviour: its perception is the feature spec (a "
                              "file's inline one too) and its name the task in the metadata (a "
                              "shipped behaviour's name or a behaviour file; docs/behaviours.md); "
@@ -149,15 +150,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def features_of(args: argparse.Namespace) -> tuple:
-    """The feature spec (a name or a spec) and the task the options give: ``--features`` and
-    ``--task``, or ``--behaviour``'s perception and name (ValueError: not both)."""
+    """The feature spec (a name or a spec), the task and the goals (None: none) the options
+    give: ``--features`` and ``--task``, or ``--behaviour``'s perception, name and goals
+    (ValueError: not both)."""
     if args.behaviour is None:
-        return args.features, args.task
+        return args.features, args.task, None
     if args.features is not None or args.task is not None:
         raise ValueError("--behaviour gives the features and the task: not with --features "
                          "or --task")
     b = behaviour(args.behaviour)
-    return b.perception or b.features, b.name
+    return b.perception or b.features, b.name, b.goals
 
 
 def guard_of(args: argparse.Namespace) -> bool | None:
@@ -242,7 +244,7 @@ class LearnerProcess:
         """The learner's snapshot and journal of ``args`` (``--out``, ``--resume``, ...);
         ProcessError when they cannot be used."""
         try:
-            features, task = features_of(args)
+            features, task, goals = features_of(args)
             return Lineage(
                 args.out, features=features, resume=args.resume, task=task,
                 tree_params={"spawn": args.spawn,
@@ -250,7 +252,7 @@ class LearnerProcess:
                 stride=args.stride, min_delta=args.min_delta,
                 fsync_interval=args.fsync_interval, fold_journal=args.fold_journal,
                 journal_write=journal_write, teacher=args.teacher, lag=args.lag,
-                guard=guard_of(args), lock_wait=args.lock_wait)
+                guard=guard_of(args), lock_wait=args.lock_wait, goals=goals)
         except JournalError as exc:
             raise ProcessError(f"learner: {exc}") from exc
 
@@ -363,7 +365,8 @@ class LearnerProcess:
                 learned = self.lineage.learn(
                     scan.id, scan.ts, scan.ranges, float(scan.pose[2]), act.action, act.origin,
                     act.seq, [(s.ranges, float(s.pose[2])) for s in getattr(scan, "earlier", ())],
-                    act.source)
+                    act.source, None if act.goal is None else
+                    GoalStep.of(act.goal, act.reached, act.seen))
             except Refused as exc:  # not this lineage's laser: not journaled, not acknowledged
                 self._pop()
                 self.refuse(exc)

@@ -49,7 +49,8 @@ import time
 import numpy as np
 
 from client.behaviour.actions import DEFAULT_ACTIONS
-from client.behaviour.given import reflex_arg
+from client.behaviour.given import behaviour_arg
+from client.behaviour.goals import GoalExpert, Relocation, Sighting
 from client.behaviour.policies import STYLES, TAKEOVER, Demonstrator, takes_over
 from client.behaviour.spec import behaviour
 from client.behaviour.tasks import TASKS, make_policy, task_of_teacher
@@ -85,7 +86,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--policy", choices=POLICIES, default=None,
                         help="scripted expert of a task, or keyboard teleop (default: "
                              "wall-follower, or the expert of --behaviour)")
-    parser.add_argument("--behaviour", default=None, type=reflex_arg, metavar="NAME|FILE",
+    parser.add_argument("--behaviour", default=None, type=behaviour_arg, metavar="NAME|FILE",
                         help="demonstrate this behaviour: its scripted expert with the "
                              "parameters of its file (a shipped behaviour's name or a "
                              "behaviour file; docs/behaviours.md); not with --policy")
@@ -168,6 +169,9 @@ def _demonstrator(args: argparse.Namespace):
         policy = (behaviour(args.behaviour).expert(args.style, DEFAULT_ACTIONS)
                   if args.behaviour is not None else
                   make_policy(task_of_teacher(args.policy), DEFAULT_ACTIONS, style=args.style))
+        goals = None if args.behaviour is None else behaviour(args.behaviour).goals
+        if goals is not None:  # goals in order: the seeker with the goal state it teaches
+            policy = GoalExpert(goals, policy)
     except ValueError as exc:
         raise ProcessError(f"teacher: {exc}", EXIT_USAGE) from exc
     return Demonstrator(policy, perturb=args.perturb, rng=np.random.default_rng(args.seed))
@@ -205,6 +209,15 @@ class TeacherProcess:
         self.t0: float | None = None
         self.n = self.perturbed = self.took = self.bad = 0
         self.first_scan: int | None = None  # the scan the first label answered
+        # a behaviour with goals: the fiducial finder's messages, each scan's labelled with the
+        # goal pursued, the one reached and what was seen (docs/goals.md)
+        policy = getattr(self.demo, "policy", None)
+        self.goals = policy if isinstance(policy, GoalExpert) else None
+        self.fiducials = self.client.fiducials() if self.goals is not None else None
+        if self.fiducials is not None:
+            ctx.scope.callback(self.fiducials.close)
+        self.relocation = Relocation()
+        self.reached = self.unseen = 0
         self.correcting = False
         self.last_id, self.missed = -1, 0  # correcting: scans dropped from the queue unlabelled
         ctx.scope.callback(self.close)  # on every path, after "stopping (signal)"
@@ -255,10 +268,44 @@ class TeacherProcess:
             return True
         if not self.track(scan):
             return False
+        goal = self.see_goals(scan)
+        if goal is None:
+            return True
         choice = self.choose(scan)
         if choice is not None:
-            self.publish(scan, *choice)
+            self.publish(scan, *choice, goal)
         return True
+
+    def see_goals(self, scan: Scan) -> dict | None:
+        """A behaviour with goals: what the fiducial finder saw at ``scan`` goes to the
+        teacher's goal state (a goal may be reached: logged), and the label's ``goal``,
+        ``reached`` and ``seen`` (``{}`` without goals). None: that tick's fiducial message did
+        not come (nothing is known of the beacons: the scan is not labelled, the robot stands)."""
+        if self.goals is None:
+            return {}
+        msg = self.fiducials.at(scan.id, timeout=1.0 if self.fiducials.latest else 0.2)
+        if msg is None:
+            self.unseen += 1
+            if self.unseen <= 3 or self.unseen % 100 == 0:
+                log.warning("scan %d: no fiducial message of its tick (%d so far): not "
+                            "labelled (a behaviour with goals needs what the robot sees of "
+                            "its beacons)", scan.id, self.unseen)
+            if not self.correcting:
+                self.client.answer(scan, 0.0, 0.0)
+            return None
+        if self.relocation.moved(msg):  # a new demonstration: from the first goal again
+            self.goals.reset()
+            log.info("the robot was put elsewhere at %.1f s: %s", scan.ts,
+                     self.goals.tracker.describe())
+        seen = {int(i.id): Sighting(int(i.id), float(i.range), float(i.bearing))
+                for i in msg.items if i.id}
+        before = self.goals.tracker.describe()
+        goal, reached = self.goals.label_state(seen, scan.ts)
+        if reached is not None:
+            self.reached += 1
+            log.info("%s: reached beacon %d at %.1f s; now %s", before, reached, scan.ts,
+                     self.goals.tracker.describe())
+        return {"goal": goal, "reached": reached, "seen": msg.items}
 
     def pause(self, scan: Scan) -> None:
         """The learner stopped or crashed: a label now would be lost. Stand still (now, not
@@ -338,7 +385,7 @@ class TeacherProcess:
         return None if label is None else (label, executed, vel)  # keyboard: nothing pressed
 
     def publish(self, scan: Scan, label: str, executed: str | None,
-                vel: tuple[float, float]) -> None:
+                vel: tuple[float, float], goal: dict | None = None) -> None:
         if self.n == 0:
             self.first_scan = scan.id
             log.info("first label: scan %d, %s", scan.id, label)
@@ -350,7 +397,8 @@ class TeacherProcess:
         elif self.hold is not None:
             self.hold.release()  # the controller drives from the next tick on
         with uninterrupted():  # a stop does not leave a label sent and uncounted
-            self.labels.label(scan, label, executed)
+            self.labels.label(scan, label, executed, **{
+                k: v for k, v in (goal or {}).items() if v is not None})
             self.n += 1
         if self.correcting:
             self.took += executed is not None
@@ -377,6 +425,7 @@ class TeacherProcess:
         return {"labels": self.n, "first_label_scan": self.first_scan,
                 "perturbed": self.perturbed, "taken_over": self.took,
                 "missed": self.missed, "not_demonstrated": self.bad,
+                "goals_reached": self.reached, "no_fiducial": self.unseen,
                 "handbacks": 0 if self.hold is None else self.hold.handbacks,
                 "outbox": None if box is None else {**box.stats, "unacknowledged": len(box)},
                 "dropped": {**self.client.decoder.counts, **self.labels.decoder.counts}}

@@ -29,7 +29,7 @@ def _eager(tmp_path) -> Path:
     from the world's default pose, the green one hidden behind a box), its action tree fwd."""
     b = get("red-green")
     learner = GoalLearner(b.features, parse_goals({"beacons": [1, 2]}), task="red-green")
-    learner.observe(np.full(b.features.dim, 0.5), "fwd")
+    learner.observe_vector(np.full(b.features.dim, 0.5), "fwd")
     learner.observe_completion(np.array([0.5, 0.5]), True)
     return learner.save(tmp_path / "eager.rhbl")
 
@@ -62,7 +62,7 @@ def _slow(tmp_path) -> Path:
     b = get("red-green")
     learner = GoalLearner(b.features, parse_goals({"beacons": [1, 2], "within": [1.5, 0.6]}),
                           task="red-green")
-    learner.observe(np.full(b.features.dim, 0.5), "fwd")
+    learner.observe_vector(np.full(b.features.dim, 0.5), "fwd")
     for _ in range(5):
         learner.observe_completion(np.array([0.0, 1.0]), False)
         learner.observe_completion(np.array([1.0, 0.9]), False)

@@ -14,12 +14,12 @@ from lab.cli import build_parser
 from lab.demo_run import SCENARIOS, demo_behaviour, scenario_of
 
 
-@pytest.mark.parametrize("task", list(SCENARIOS))
+@pytest.mark.parametrize("task", [t for t, sc in SCENARIOS.items() if sc.behaviour is None])
 def test_a_tasks_behaviour_runs_what_its_scenario_ran(task):
     before, now = SCENARIOS[task], scenario_of(shipped()[task])
     assert now.recipe == before.recipe and now.drive == before.drive
     learner = build_parser("learner").parse_args([*now.learner_args(), "--out", "x.rhbl"])
-    assert features_of(learner) == (before.recipe.features, task)
+    assert features_of(learner) == (before.recipe.features, task, None)
     old = build_parser("learner").parse_args([*before.learner_args(), "--out", "x.rhbl"])
     assert (learner.spawn, learner.stride, learner.min_delta, learner.max_nodes) == \
         (old.spawn, old.stride, old.min_delta, old.max_nodes)
@@ -39,7 +39,8 @@ def test_a_behaviour_file_gives_its_own_perception_and_name(tmp_path):
     sc = scenario_of(b)
     assert sc.recipe.rounds == 5 and sc.drive == 120.0  # its [recipe], its time limit
     learner = build_parser("learner").parse_args([*sc.learner_args(), "--out", "x.rhbl"])
-    spec, task = features_of(learner)
+    spec, task, goals = features_of(learner)
+    assert goals is None
     assert task == "mine" and spec.to_dict() == b.features.to_dict()
     assert build_parser("teacher").parse_args(sc.teacher_args("reactive", 0)).behaviour == \
         str(path.resolve())
@@ -52,3 +53,13 @@ def test_scenario_and_behaviour_are_one_choice():
     assert demo_behaviour(ns(behaviour="left-wall", scenario=None)).name == "left-wall"
     with pytest.raises(ValueError, match="--scenario maze and --behaviour left-wall: give one"):
         demo_behaviour(ns(behaviour="left-wall", scenario="maze"))
+
+
+def test_the_goals_scenario_is_red_green_taught_and_learned_with_its_goals():
+    sc = SCENARIOS["goals"]
+    assert sc.behaviour.name == "red-green" and sc.behaviour.goals is not None
+    learner = build_parser("learner").parse_args([*sc.learner_args(), "--out", "x.rhbl"])
+    spec, task, goals = features_of(learner)
+    assert task == "red-green" and goals == sc.behaviour.goals and spec.beacon == "goal"
+    teacher = build_parser("teacher").parse_args(sc.teacher_args("reactive", 0))
+    assert teacher.behaviour == "red-green"

@@ -1,6 +1,7 @@
-"""A behaviour with goals in order is taught by rhbl train/experiment and driven by rhbl
-controller; the processes that teach or learn one reflex over the bus refuse it with one line
-naming what takes it (exit 2), before anything starts. rhbl refine practises a tree with goals
+"""A behaviour with goals in order is taught by the scripted teacher (rhbl train/experiment,
+rhbl teacher, rhbl demo), learned by rhbl learner and driven by rhbl controller; where a person
+teaches one reflex (the console, rhbl demo --by-hand) it is refused with one line naming what
+takes it (exit 2), before anything starts. rhbl refine practises a tree with goals
 (its action tree, the completion tree kept) and refuses a tree of the other kind."""
 
 from __future__ import annotations
@@ -20,12 +21,10 @@ def _rhbl(*args):
 
 
 @pytest.mark.parametrize("argv", [
-    ("learner", "--behaviour", "red-green", "--out", "{tmp}/t.rhbl"),
-    ("teacher", "--behaviour", "patrol"),
     ("console", "--behaviour", "remembered"),
-    ("demo", "--behaviour", "red-green", "--out", "{tmp}/demo"),
+    ("demo", "--by-hand", "--behaviour", "red-green", "--out", "{tmp}/demo"),
 ])
-def test_a_process_of_one_reflex_refuses_a_behaviour_with_goals(argv, tmp_path):
+def test_where_a_person_teaches_a_behaviour_with_goals_is_refused(argv, tmp_path):
     r = _rhbl(*(a.format(tmp=tmp_path) for a in argv))
     assert r.returncode == 2, r.stdout + r.stderr
     assert "has goals in order ([goals])" in r.stderr and "rhbl controller" in r.stderr, r.stderr
@@ -42,8 +41,8 @@ def _goal_tree(tmp_path: Path) -> Path:
 
     b = get("red-green")
     learner = GoalLearner(b.features, parse_goals({"beacons": [1, 2]}), task="red-green")
-    learner.observe(np.full(b.features.dim, 0.5), "fwd")
-    learner.observe(np.full(b.features.dim, 0.2), "rot-left")
+    learner.observe_vector(np.full(b.features.dim, 0.5), "fwd")
+    learner.observe_vector(np.full(b.features.dim, 0.2), "rot-left")
     learner.observe_completion(np.array([0.5, 0.5]), True)
     learner.observe_completion(np.array([0.1, 0.9]), False)
     return learner.save(tmp_path / "goals.rhbl")
@@ -95,7 +94,7 @@ def test_evaluate_of_a_goal_tree_refuses_the_options_it_cannot_apply(tmp_path):
 
     b = get("red-green")
     learner = GoalLearner(b.features, parse_goals({"beacons": [1, 2]}), task="red-green")
-    learner.observe(np.full(b.features.dim, 0.5), "fwd")
+    learner.observe_vector(np.full(b.features.dim, 0.5), "fwd")
     learner.observe_completion(np.array([0.5, 0.5]), True)
     tree = learner.save(tmp_path / "goals.rhbl")
     for extra in (["--guard-clearance", "0.1"], ["--no-guard-straight"]):

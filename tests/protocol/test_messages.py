@@ -326,3 +326,26 @@ def test_velcmd_packer_gives_the_encoded_command_byte_for_byte(source, vx, va, s
     assert data == cmd.encode()
     if ts is None or math.isfinite(ts):
         assert VelCmd.decode(data) == cmd
+
+
+def test_a_goal_behaviours_label_says_the_goal_pursued_reached_and_seen():
+    """A label of a behaviour with goals carries the beacon pursued, the one reached at that
+    scan and what the fiducial finder saw; a resend carries them too; bad ones are refused by
+    name; a label without them is the same bytes as before."""
+    from protocol.messages import FiducialItem, LabeledScan
+
+    act = TeacherAction(scan_id=4, action="fwd", origin="ab12", seq=7, goal=2, reached=1,
+                        seen=(FiducialItem(1, 0.5, 0.1), FiducialItem(2, 4.0, -0.3)))
+    assert _roundtrip(act) == act
+    lab = _roundtrip(LabeledScan.of(act, np.ones(5, np.float32), 0.5))
+    assert (lab.goal, lab.reached, lab.seen) == (2, 1, act.seen)
+    assert lab.action_message() == act
+    plain = TeacherAction(scan_id=4, action="fwd")
+    assert set(msgpack.unpackb(plain.encode())) == {"v", "scan_id", "action", "source", "ts"}
+    good = msgpack.unpackb(act.encode())
+    for bad, field in [({"goal": -1}, "'goal'"), ({"reached": "x"}, "'reached'"),
+                       ({"seen": [{"id": 1, "range": math.nan, "bearing": 0.0}]}, r"'seen\[0\]\.range'"),
+                       ({"seen": [{"id": 1}]}, "'seen"), ({"seen": 5}, "'seen'"),
+                       ({"seen": [{"id": 1, "range": 1.0, "bearing": 0.0}] * 300}, "'seen'")]:
+        with pytest.raises(DecodeError, match=field):
+            TeacherAction.decode(msgpack.packb({**good, **bad}))

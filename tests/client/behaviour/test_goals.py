@@ -16,6 +16,7 @@ from client.behaviour.goals import (
     GoalExpert,
     GoalLearner,
     GoalPolicy,
+    GoalStep,
     Goals,
     GoalTracker,
     ReactiveBeaconPolicy,
@@ -126,12 +127,12 @@ def _taught(goals: Goals) -> GoalLearner:
         for goal, beacon in enumerate(goals.beacons):
             r = float(rng.uniform(0.7, 5.0))
             seen = {beacon: Sighting(beacon, r, float(rng.uniform(-0.3, 0.3)))}
-            learner.observe(learner.vector(_scan(), 0.0, seen, beacon), "fwd")
+            learner.observe_vector(learner.vector(_scan(), 0.0, GoalStep(beacon, None, seen)), "fwd")
             learner.observe_completion(goals.completion_inputs(seen, goal), False)
             near = {beacon: Sighting(beacon, float(rng.uniform(0.3, 0.58)), 0.0)}
             learner.observe_completion(goals.completion_inputs(near, goal), True)
             side = {beacon: Sighting(beacon, r, 1.2)}
-            learner.observe(learner.vector(_scan(), 0.0, side, beacon), "rot-left")
+            learner.observe_vector(learner.vector(_scan(), 0.0, GoalStep(beacon, None, side)), "rot-left")
     return learner
 
 
