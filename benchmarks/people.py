@@ -51,7 +51,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 __all__ = ["ANY", "ANY_DEV", "ANY_HELD_OUT", "DEV", "FRESH", "HELD_OUT", "KEYS", "PEOPLE",
-           "Follower", "FollowerStyle", "Person", "Pilot", "PilotStyle", "Seen", "Style", "View",
+           "Follower", "FollowerStyle", "GoalFollower", "Person", "Pilot", "PilotStyle", "Seen", "Style", "View",
            "percept", "person", "scan_of"]
 
 KEYS = ("fwd", "fwd-left", "rot-left", "fwd-right", "rot-right")
@@ -83,6 +83,10 @@ class View:
     scan_id: int | None = None
     stuck: str | None = None        # the page's "the robot is stuck here" notice (why), if any
     goal: tuple[float, float, float] | None = None  # the world's goal drawn (x, y, radius)
+    # goals in order: the beacons drawn (id -> x, y) and the goal the page says the person
+    # drives to (its "your goal": (visit, beacon id)), None without goals
+    beacons: dict | None = None
+    yours: tuple[int, int] | None = None
 
 
 @dataclass(frozen=True)
@@ -768,12 +772,97 @@ ANY_HELD_OUT = {
 ANY = {**ANY_DEV, **ANY_HELD_OUT}
 
 
+class GoalFollower(Follower):
+    """A :class:`Follower` teaching goals in order (a behaviour with ``[goals]``): the goal it
+    drives to is the one the page shows ("your goal"); it reads off the map where that beacon
+    is and whether the robot could see it (in front, within the fiducial finder's reach, no
+    wall in between) and steers as the behaviour's expert does for that sighting; when it
+    judges the robot within the goal's distance of the beacon (distances misjudged as any),
+    it presses G one reaction time later (``mark``), once per goal the page shows."""
+
+    REACH = 8.0  # m: the fiducial finder's (server.robot, max_range_id)
+
+    def reset(self) -> None:
+        super().reset()
+        self._shown = None          # the page's goal last frame
+        self._marked = False        # G pressed for it
+        self._mark_at: float | None = None
+
+    def sighting(self, view: View):
+        """The goal beacon as the robot would see it, read off the map (None: not in view)."""
+        from client.behaviour.goals import Sighting
+
+        if view.yours is None or not view.beacons or view.yours[1] not in view.beacons:
+            return None
+        bid = view.yours[1]
+        bx, by = view.beacons[bid]
+        x, y, yaw = view.pose
+        rng = math.hypot(bx - x, by - y)
+        bearing = _wrap(math.atan2(by - y, bx - x) - yaw)
+        if rng > self.REACH or abs(bearing) > math.pi / 2:
+            return None
+        if _ray(view.walls, x, y, yaw + bearing, far=rng + 0.5) < rng - 0.2:
+            return None  # a wall in between
+        j = 1.0 + float(self.rng.normal(0.0, self.style.noise))
+        return Sighting(bid, rng * max(0.5, j),
+                        bearing + math.radians(float(self.rng.normal(0.0, self.style.bearing))))
+
+    def _judge(self, view: View) -> Seen:
+        # a person steering at a target leads it: the robot as it will be when the key they
+        # press now takes effect, its motion under the key held carried on for their
+        # reaction time (the view they judge is that much old)
+        from client.behaviour.actions import DEFAULT_ACTIONS
+
+        key = self.m.key
+        if key is not None:
+            vx, va = DEFAULT_ACTIONS[key]
+            x, y, yaw = view.pose
+            dt = self.m.rt
+            mid = yaw + va * dt / 2
+            view = replace(view, pose=(x + vx * dt * math.cos(mid), y + vx * dt * math.sin(mid),
+                                       yaw + va * dt))
+        p = super()._judge(view)
+        self.expert.see(self.sighting(view))
+        return p
+
+    def wanted(self, p: Seen) -> str:
+        """The expert's answer for the beacon as seen: a person heading for a beacon turns
+        to it whenever it comes into view (no ``commit`` to straight on after a turn)."""
+        return self.expert.act(p.scan, None)
+
+    def mark(self, view: View) -> bool:
+        """Whether the person presses G now (the goal the page shows is reached)."""
+        if view.yours != self._shown:
+            self._shown, self._marked, self._mark_at = view.yours, False, None
+        if view.yours is None or self._marked or view.mode == "watch":
+            return False
+        if self._mark_at is None:
+            bx, by = view.beacons[view.yours[1]]
+            within = self.behaviour.goals.within[self.behaviour.goals.index_of(view.yours[1])]
+            judged = math.hypot(bx - view.pose[0], by - view.pose[1]) * (
+                1.0 + float(self.rng.normal(0.0, self.style.noise)))
+            if judged <= within:
+                self._mark_at = view.t + float(self.style.reaction * math.exp(
+                    self.rng.normal(0.0, self.style.rt_sigma)))
+            return False
+        if view.t >= self._mark_at:
+            self._marked = True
+            return True
+        return False
+
+
 def person(name: str, behaviour="wall-following", seed: int = 0) -> Person:
     """The person model ``name`` teaching ``behaviour`` (a name or a Behaviour): one of
     ``ANY`` (any behaviour), or of ``PEOPLE`` (the right-hand wall's own, wall following only).
     ValueError naming the models otherwise."""
     if name in ANY:
-        return Follower(ANY[name], behaviour, seed=seed)
+        goals = getattr(behaviour, "goals", None) if not isinstance(behaviour, str) else None
+        if isinstance(behaviour, str):
+            from client.behaviour.spec import behaviour as load
+
+            goals = load(behaviour).goals
+        return (GoalFollower if goals is not None else Follower)(ANY[name], behaviour,
+                                                                  seed=seed)
     bname = getattr(behaviour, "name", behaviour)
     if name in PEOPLE:
         if bname != "wall-following":

@@ -33,7 +33,7 @@ import subprocess
 import sys
 import time
 
-from client.behaviour.given import as_argument, reflex_arg
+from client.behaviour.given import as_argument
 from lab.demo_run import Child, Demo, DemoError
 
 __all__ = ["ByHand", "NOT_BY_HAND", "check_args"]
@@ -51,8 +51,6 @@ def check_args(args) -> None:
         raise ValueError(f"--by-hand: {', '.join(bad)} drive the scripted teacher's demo and do "
                          f"not apply (you teach; --behaviour, --world, --out, --console, "
                          f"--demonstrate, --correct, --starts, --drive-seconds and --record do)")
-    if args.behaviour is not None:  # the console takes no behaviour with goals yet
-        reflex_arg.parse(args.behaviour)
 
 
 class ByHand(Demo):
@@ -141,7 +139,7 @@ class ByHand(Demo):
         how = self.wait(args.demonstrate, "demonstrating", learner, server, console)
         self.say(f"demonstration over ({'Enter' if how == 'enter' else 'time'})")
         controller = self.child("controller", "controller", "--from-learner", "--follow",
-                                "--wait-tree", "60")
+                                "--wait-tree", "60", *self.again)
         print(f"2. correct ({args.correct:g} s; Enter or Ctrl-C here ends it sooner): the "
               "controller drives the learned tree now. Press C on the page (correct mode): "
               "keep your hands off while it does well, take over with the keys where it goes "

@@ -137,7 +137,7 @@ def test_demo_help_says_the_values_the_demo_uses(tmp_path):
     helps = _helps("demo")
     shown = {flag: _demo_defaults(helps, flag) for flag in
              ("--teach-seconds", "--rounds", "--round-seconds", "--drive-seconds")}
-    assert shown["--rounds"] == (3, 4, 2)  # the maze demo: 4 rounds, not the recipe's 6
+    assert shown["--rounds"] == (3, 4, 4)  # the maze demo: 4 rounds, not the recipe's 6
     parser = build_parser("demo")
     goals = Demo(parser.parse_args(["--scenario", "goals", "--out", str(tmp_path / "g"),
                                     "--quiet"]))

@@ -18,8 +18,7 @@ from process.arguments import Checked, files_checked
 
 from .spec import RULES, Behaviour, BehaviourError, behaviour, for_world, shipped
 
-__all__ = ["as_argument", "behaviour_arg", "behaviour_of_world", "reflex_arg", "rule_words",
-           "to_page"]
+__all__ = ["as_argument", "behaviour_arg", "behaviour_of_world", "rule_words", "to_page"]
 
 
 def _check(text: str) -> str:
@@ -29,26 +28,10 @@ def _check(text: str) -> str:
     return text
 
 
-def _check_reflex(text: str) -> str:
-    text = _check(text)
-    known = shipped().get(text)
-    b = known if known is not None else (behaviour(text) if files_checked() else None)
-    if b is not None and b.goals is not None:
-        raise ValueError(f"behaviour {b.name!r} has goals in order ([goals]): the scripted "
-                         "teacher teaches it (rhbl teacher, rhbl demo), rhbl learner learns it "
-                         "and rhbl controller drives it; the console and rhbl demo --by-hand "
-                         "do not take one yet (docs/goals.md)")
-    return text
-
-
 # ``--behaviour NAME|FILE`` (argparse type: a shipped behaviour's name or a behaviour file)
 behaviour_arg = Checked("behaviour", _check)
 # (a shipped name or a regular file, as a world is: the CLI walk tries the same hostile values)
 behaviour_arg.kind, behaviour_arg.example = "world", "wall-following"
-# the same, for where a person teaches one reflex (the console): a behaviour with goals in
-# order is refused, naming what takes it
-reflex_arg = Checked("behaviour", _check_reflex)
-reflex_arg.kind, reflex_arg.example = "world", "wall-following"
 
 
 def as_argument(b: Behaviour) -> str:

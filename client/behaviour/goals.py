@@ -32,6 +32,7 @@ and loads as before (``client.behaviour.learning.TreePolicy``).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 from collections.abc import Mapping
@@ -423,10 +424,8 @@ def goals_metadata(goals: Goals, completion) -> dict:
 
     meta = {"version": GOALS_FORMAT, **goals.to_dict(),
             "completion_inputs": ["goal-beacon-seen", "goal-beacon-range/near"], "near": NEAR}
-    try:  # (none yet: a new lineage's journal header, before its first label)
+    with contextlib.suppress(NotFittedError):  # (none yet: a new lineage's journal header)
         meta["completion"] = completion.to_bytes()
-    except NotFittedError:
-        pass
     return meta
 
 

@@ -1,8 +1,5 @@
-"""A behaviour with goals in order is taught by the scripted teacher (rhbl train/experiment,
-rhbl teacher, rhbl demo), learned by rhbl learner and driven by rhbl controller; where a person
-teaches one reflex (the console, rhbl demo --by-hand) it is refused with one line naming what
-takes it (exit 2), before anything starts. rhbl refine practises a tree with goals
-(its action tree, the completion tree kept) and refuses a tree of the other kind."""
+"""A behaviour with goals in order: rhbl refine practises a tree with goals (its action tree,
+the completion tree kept) and refuses a tree of the other kind."""
 
 from __future__ import annotations
 
@@ -18,18 +15,6 @@ ROOT = Path(__file__).resolve().parents[2]
 def _rhbl(*args):
     return subprocess.run([sys.executable, "-m", "lab.cli", *args], cwd=ROOT, capture_output=True,
                           text=True, timeout=60)
-
-
-@pytest.mark.parametrize("argv", [
-    ("console", "--behaviour", "remembered"),
-    ("demo", "--by-hand", "--behaviour", "red-green", "--out", "{tmp}/demo"),
-])
-def test_where_a_person_teaches_a_behaviour_with_goals_is_refused(argv, tmp_path):
-    r = _rhbl(*(a.format(tmp=tmp_path) for a in argv))
-    assert r.returncode == 2, r.stdout + r.stderr
-    assert "has goals in order ([goals])" in r.stderr and "rhbl controller" in r.stderr, r.stderr
-    assert "Traceback" not in r.stderr
-    assert not any(tmp_path.iterdir())  # nothing written
 
 
 def _goal_tree(tmp_path: Path) -> Path:

@@ -26,7 +26,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from client.behaviour.given import reflex_arg
+from client.behaviour.given import behaviour_arg
 from client.roles.common import add_process_arguments, run_role
 from process import arguments
 
@@ -63,7 +63,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="close a connection whose request headers have not all arrived "
                              "within this (or that is idle this long between requests; "
                              "default 10)")
-    parser.add_argument("--behaviour", default=None, type=reflex_arg, metavar="NAME|FILE",
+    parser.add_argument("--behaviour", default=None, type=behaviour_arg, metavar="NAME|FILE",
                         help="the behaviour taught: the page shows its instructions and its "
                              "success rule (a shipped behaviour's name or a behaviour file; "
                              "default: the world's behaviour when one shipped behaviour is "

@@ -76,6 +76,7 @@ from client.access import (
 )
 from client.behaviour.actions import DEFAULT_ACTIONS
 from client.behaviour.given import behaviour_of_world, to_page
+from client.behaviour.goals import GoalTracker
 from client.behaviour.spec import Behaviour, behaviour
 from client.labels import DRAIN, Learners
 from client.roles.console.tutor import SCAN_MEMORY, Robot, Tutor
@@ -368,6 +369,8 @@ class Console(Tutor):
                 if r.policy is not None:  # the tree came first: its asks in this world
                     r.asks.update(r.policy.metadata, w.name)
                 b = self._behaviour_of(w)
+                if b is not None and b.goals is not None and r.goals is None:
+                    r.goals = GoalTracker(b.goals)  # the person's: G marks one reached
                 # the behaviour's own start poses of the world, when it gives some (Home and
                 # the keys 1-9 put the robot there), else the world's
                 own = () if b is None else b.starts.get(w.name, ())
@@ -401,6 +404,10 @@ class Console(Tutor):
             r.last_scan = msg
             while len(r.scans) > SCAN_MEMORY:
                 r.scans.popitem(last=False)
+        elif kind == "fiducial":
+            r.fiducials[msg.seq] = msg
+            while len(r.fiducials) > SCAN_MEMORY:
+                r.fiducials.popitem(last=False)
         elif kind == "state":
             self._on_robot_state(r, msg)
         elif kind == "notice":
@@ -485,6 +492,8 @@ class Console(Tutor):
             err = self._place_msg(page, msg)
         elif t == "reset":
             err = self._reset(page)
+        elif t == "reached":
+            err = self._reached(page)
         else:
             err = f"unknown message type {t!r}"
         if err:

@@ -32,13 +32,14 @@ from typing import Protocol
 
 from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
 from client.behaviour.features import FeatureSpec
+from client.behaviour.goals import GoalTracker
 from client.behaviour.learning import TreePolicy, check_compatible
 from client.labels import Hold, LabelPublisher, Learners
 from client.player import PlayerClient, RequestError
 from client.roles.console.lesson import Asks, Teaching, Trouble
 from client.roles.console.web import error_message
 from protocol import keys
-from protocol.messages import Scan, State
+from protocol.messages import Fiducial, Scan, State
 
 __all__ = ["SCAN_MEMORY", "TEACH_EVERY", "TREE_EVERY", "Page", "Robot", "Tutor"]
 
@@ -73,6 +74,12 @@ class Robot:
         self.world_asked = 0.0
         self.latest: dict[str, str] = {}  # kind -> JSON (for a page that starts watching)
         self.scans: OrderedDict[int, Scan] = OrderedDict()  # id -> the scan (labels carry it)
+        # goals in order (docs/goals.md): the fiducial messages by the id of their tick's scan
+        # (a label carries what was seen), the person's goal state (None: a behaviour without
+        # goals) and the goal they marked reached, carried by the next label
+        self.fiducials: OrderedDict[int, Fiducial] = OrderedDict()
+        self.goals: GoalTracker | None = None
+        self.reached: int | None = None
         self.last_scan: Scan | None = None
         self.state: State | None = None
         self.holder: Page | None = None
@@ -193,6 +200,9 @@ class Tutor:
             "t": "teach", "robot": r.name, "seq": r.teach_seq,
             "learner": None if learners is None else {"up": bool(learners)},
             "labels": labels, "tree": r.policy_id or None,
+            "goals": None if r.goals is None else {
+                "visit": r.goals.visit, "of": len(r.goals.goals.visits),
+                "beacon": r.goals.beacon, "text": r.goals.describe()},
             **r.teaching.summary(now), **r.trouble.summary(), **r.asks.summary()})
 
     def _say_teaching(self, force: bool = False) -> None:
@@ -270,19 +280,61 @@ class Tutor:
         return None
 
     def _label(self, r: Robot, scan: Scan, action: str) -> None:
+        goal = {}
+        if r.goals is not None:  # the goal the person pursues, the one marked, what was seen
+            seen = r.fiducials.get(scan.id)
+            if seen is None:  # (sent before its scan: lost, or far behind): not labelled
+                log.debug("robot %s: no fiducial message of scan %d: not labelled", r.name,
+                          scan.id)
+                return
+            if r.goals.finished:  # every goal reached: the sequence again
+                r.goals.reset()
+            goal = {"goal": r.goals.beacon, "seen": seen.items}
+            if r.reached is not None:
+                goal["reached"], r.reached = r.reached, None
         pose = scan.truth if scan.truth is not None else scan.pose
         if r.policy is not None:  # what the tree would have done on this very scan
             try:
                 r.teaching.scored(scan.ts, r.policy.act(scan.ranges, scan.pose) == action)
             except Exception as exc:  # noqa: BLE001 - a tree of other features: no score
                 log.debug("agreement not scored: %s", exc)
-        seq = r.pubs.label(scan, action, action)
+        seq = r.pubs.label(scan, action, action, **goal)
         r.asks.labelled()
         was = r.teaching.current
         r.teaching.labelled(seq, scan.ts, pose)
         r.labelled = scan.id
         if r.teaching.current is not was or r.asks.changed:
             r.asks.changed = False
+            r.teach_dirty = True
+
+    def _reached(self, page: Page) -> str | None:
+        """The person says the goal they pursue is reached (the page's G): the next label
+        carries the mark and is for the next goal (after the last, the first again)."""
+        r = self.robots.get(page.robot)
+        why = self._may_act(page, r, "mark a goal reached")
+        if why:
+            return why
+        if r.goals is None:
+            return "the behaviour taught has no goals in order: no goal to mark reached"
+        if r.goals.finished:
+            r.goals.reset()
+        ts = r.last_scan.ts if r.last_scan is not None else None
+        ev = r.goals.advance("the person marked it reached at the page", ts)
+        r.reached = ev["beacon"]
+        if r.goals.finished:
+            r.goals.reset()
+        log.info("page #%d: robot %s reached goal %d (beacon %d); now %s", page.id, r.name,
+                 ev["visit"] + 1, ev["beacon"], r.goals.describe())
+        self._info(page, f"goal {ev['visit'] + 1} (beacon {ev['beacon']}) reached: now "
+                         f"{r.goals.describe()}")
+        r.teach_dirty = True
+        return None
+
+    def _restart_goals(self, r: Robot) -> None:
+        """The robot is put somewhere (a start, an ask, a reset): from the first goal again."""
+        if r.goals is not None:
+            r.goals.reset()
+            r.reached = None
             r.teach_dirty = True
 
     def _stop(self, r: Robot, why: str) -> None:
@@ -421,6 +473,7 @@ class Tutor:
     def _place(self, page: Page, r: Robot, pose, where: str, reset: bool = False) -> None:
         """Teleport the robot (``set_pose``, in a thread); the result said to the page."""
         self._publishers(r)
+        self._restart_goals(r)
         x, y, yaw = (float(v) for v in pose)
 
         async def go() -> None:

@@ -195,6 +195,10 @@ function showTeach() {
       + (eps.length > 1 ? ` (${plural(eps.filter((e) => e.state !== "discarded").length, "episode")} kept)` : "");
   $("record").firstChild.textContent = m.episode !== null ? "stop " : "record ";
   showAsks(m);
+  const G = $("yourgoal"), g = m.goals;
+  $("goals").hidden = !g;
+  G.dataset.beacon = g ? g.beacon : ""; G.dataset.visit = g ? g.visit : "";
+  G.textContent = g ? g.text : "-";
   const stuck = $("stuck");
   const show = m.stuck && S.mode !== "demonstrate";
   stuck.hidden = !show;
@@ -287,6 +291,7 @@ $("undo").onclick = undo;
 $("go").onclick = () => placeAt(Number($("starts").value));
 $("reset").onclick = reset;
 $("take").onclick = () => send({ t: "take" });
+$("reached").onclick = () => reached();
 $("follow").onchange = (e) => { S.follow = e.target.checked; };
 
 function showHold() {
@@ -332,12 +337,15 @@ function update() {
 
 function release() { S.keys.clear(); S.pad = null; S.gamepad = null; update(); }
 
+// goals in order: the goal you pursue is reached (the next label says so and is for the next)
+function reached() { if (S.teach && S.teach.goals) send({ t: "reached" }); }
+
 // the shortcuts (the page's "keys" table and docs/console.md say the same)
 const SHORTCUTS = {
   t: () => setMode("demonstrate"), v: () => setMode("watch"), c: () => setMode("correct"),
   r: () => episode(S.teach && S.teach.episode !== null ? "stop" : "start"),
   x: () => episode("discard"), e: () => episode("rerecord"),
-  z: undo, Backspace: undo, Home: reset,
+  z: undo, Backspace: undo, Home: reset, g: reached,
   f: () => { S.follow = !S.follow; $("follow").checked = S.follow; },
 };
 
@@ -740,6 +748,7 @@ Object.defineProperty(window, "rhbl", { value: Object.freeze({
       markers: S.teach ? S.teach.markers.map((k) => ({ ...k })) : [],
       goal: S.world && S.world.goal ? S.world.goal.slice() : null,
       pursued: S.decision && S.decision.goal ? { ...S.decision.goal, why: S.decision.goal_why } : null,
+      yours: S.teach && S.teach.goals ? { ...S.teach.goals } : null,
     };
   },
 }) });
