@@ -15,7 +15,11 @@ stuck notice) and the keys it holds are pressed and released on the page like a 
 2. correct: a ``rhbl controller --from-learner --follow`` drives the learner's tree, the page in
    correct mode (``C``): the person takes over when they judge it necessary, for ``--correct`` s;
    in a world with a goal, when the robot reaches it the person puts it at the next start pose
-   (a number key) and teaches the way again, in either mode;
+   (a number key) and teaches the way again, in either mode; goals in order (red-green,
+   patrol, remembered): the person presses G when they judge the goal the page shows reached
+   (``marks``), and after the last one puts the robot at the next start pose, in either mode
+   (the controller follows with ``--goals-again``); demonstrating and correcting may be up to
+   6 and 3 minutes (``--demo 360 --correct 180``);
 3. the learner's saved tree is evaluated (``rhbl evaluate --behaviour B``) from the start poses
    of the world it was taught in and of the behaviour's held-out worlds, by the tree ALONE
    (``--no-guard``) and through the controller's guard (``--guard``: its interventions, reversals

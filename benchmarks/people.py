@@ -5,7 +5,8 @@ Two families. ``ANY`` (:class:`Follower`, the end of this module) teach ANY beha
 mean is the behaviour file's scripted expert on the scan they read off the page's map, what they
 press is a person's hands on it; ``ANY_DEV`` is their development set, ``ANY_HELD_OUT`` was
 written after it and is measured, never tuned on. ``person(name, behaviour, seed)`` makes
-either family's model. The rest of this docstring is about the right-hand wall's own models
+either family's model; for a behaviour with goals in order it is a :class:`GoalFollower` (the
+goal the page shows, the beacon read off the map, G pressed when the robot is there). The rest of this docstring is about the right-hand wall's own models
 (``PEOPLE``: wall following only).
 
 A model is a person who follows the RIGHT-hand wall by looking at the page's map (the robot, the

@@ -29,6 +29,11 @@ decisions (``Decision``, for viewers) say when the guard stepped in lately on a 
 then asks the person to show the robot the way out; a tree with goals, the goal pursued and why
 the last goal changed (``goal``, ``goal_why``).
 
+A tree with goals in order (docs/goals.md) takes the fiducial message of each scan's tick and
+ends once every goal is reached; with ``--goals-again`` it stands still then instead, and pursues
+the goals from the first again whenever the robot is put elsewhere (what ``rhbl demo`` runs
+from each start pose); ``--follow`` swaps in a newer tree with the goal being pursued kept.
+
 With ``--ros2`` it drives a ROS 2 robot instead (``client.ros2.nodes.Ros2Robot``, docs/ros2.md): its
 ``LaserScan`` (any beam count and span, resampled to the tree's features, or refused with exit 2
 when they cannot be had from that laser) and ``Odometry`` in, a ``Twist`` on ``cmd_vel`` out.

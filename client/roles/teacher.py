@@ -30,6 +30,12 @@ unacknowledged the teacher pauses as above rather than drop one. On exit it wait
 the last acknowledgements. The outbox lives in this process: a killed teacher loses the labels
 not yet acknowledged. ``--no-wait-learner`` keeps no outbox.
 
+Goals in order (``--behaviour`` of a behaviour with ``[goals]``, docs/goals.md): the teacher also
+takes the fiducial message of each scan's tick; its goal state says when a goal is reached, and
+each label carries the goal pursued, the goal reached at that scan and what the finder saw
+(``TeacherAction``'s ``goal``, ``reached``, ``seen``). After the last goal it starts again with
+the first, and so it does when the robot is put elsewhere (``client.behaviour.goals.Relocation``).
+
 Correcting mode (``--correct``, the corrective (DAgger) rounds of the training recipe, Player
 style "the teacher watches and corrects"): the controller drives; for every scan the teacher
 publishes its label (the expert's choice, ``executed`` unset) but commands the robot only while
@@ -50,7 +56,7 @@ import numpy as np
 
 from client.behaviour.actions import DEFAULT_ACTIONS
 from client.behaviour.given import behaviour_arg
-from client.behaviour.goals import GoalExpert, Relocation, Sighting
+from client.behaviour.goals import GoalExpert, Relocation
 from client.behaviour.policies import STYLES, TAKEOVER, Demonstrator, takes_over
 from client.behaviour.spec import behaviour
 from client.behaviour.tasks import TASKS, make_policy, task_of_teacher
@@ -297,8 +303,7 @@ class TeacherProcess:
             self.goals.reset()
             log.info("the robot was put elsewhere at %.1f s: %s", scan.ts,
                      self.goals.tracker.describe())
-        seen = {int(i.id): Sighting(int(i.id), float(i.range), float(i.bearing))
-                for i in msg.items if i.id}
+        seen = {int(i.id): i for i in msg.items if i.id}  # (as the controller's, by id)
         before = self.goals.tracker.describe()
         goal, reached = self.goals.label_state(seen, scan.ts)
         if reached is not None:

@@ -209,3 +209,33 @@ def test_a_narrower_bearing_spreads_the_beacons_field_over_its_input():
             "worlds": {"teach": ["goals-red-green"]}, "success": {"no-collision": {}}}
     with pytest.raises(BehaviourError, match="perception.beacon_bearing': only with 'beacon'"):
         parse_behaviour({**base, "perception": {"sectors": 9, "beacon_bearing": 90}})
+
+
+def test_a_teacher_on_and_on_labels_the_goal_and_starts_again_after_the_last():
+    """``GoalExpert.label_state``: the goal pursued and the goal reached at a step, a label's
+    ``goal`` and ``reached``; after the last goal the first again (a patrol's end is its first
+    goal: reached again at once, the next pursued)."""
+    expert = GoalExpert(parse_goals({"beacons": [1, 2]}))
+    assert expert.label_state({1: Sighting(1, 3.0, 0.0)}) == (1, None)
+    assert expert.label_state({1: Sighting(1, 0.5, 0.0)}) == (2, 1)
+    assert expert.label_state({2: Sighting(2, 0.5, 0.0)}) == (1, 2)  # the last: from the first
+    assert expert.tracker.visit == 0 and not expert.tracker.finished
+    patrol = GoalExpert(parse_goals({"beacons": [1, 2], "cycle": True}))
+    for b in (1, 2):
+        patrol.label_state({b: Sighting(b, 0.5, 0.0)})
+    # the cycle ends at beacon 1: reached, and with the restart reached again: on to 2
+    assert patrol.label_state({1: Sighting(1, 0.5, 0.0)}) == (2, 1)
+
+
+def test_the_robot_put_elsewhere_is_told_by_a_jump_between_two_ticks():
+    from types import SimpleNamespace as Msg
+
+    from client.behaviour.goals import PUT, Relocation
+
+    r = Relocation()
+    assert not r.moved(Msg(truth=(1.0, 1.0, 0.0), pose=(0.0, 0.0, 0.0)))  # the first: no jump
+    assert not r.moved(Msg(truth=(1.0 + PUT * 0.9, 1.0, 0.0), pose=(5.0, 5.0, 0.0)))
+    assert r.moved(Msg(truth=(4.0, 1.0, 0.0), pose=(0.0, 0.0, 0.0)))
+    odom = Relocation()  # no true pose (a real robot): odometry, which a set_pose resets
+    odom.moved(Msg(truth=None, pose=(3.0, 2.0, 0.0)))
+    assert odom.moved(Msg(truth=None, pose=(0.0, 0.0, 0.0)))
