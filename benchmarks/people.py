@@ -782,6 +782,19 @@ class GoalFollower(Follower):
     it presses G one reaction time later (``mark``), once per goal the page shows."""
 
     REACH = 8.0  # m: the fiducial finder's (server.robot, max_range_id)
+    # a person heading for a beacon gives walls a wider berth than the script (its 0.45 m
+    # beside, 1 m ahead to call the way open): 0.9 m and 1.5 m, chosen on the development set
+    # driving alone (benchmarks/bench_teach.py's person_alone): the script's margins with a
+    # person's reaction time graze the boxes beside the way
+    NEAR, CLEAR = 0.9, 1.5
+
+    def __init__(self, style: FollowerStyle, behaviour, seed: int = 0):
+        super().__init__(style, behaviour, seed=seed)
+        from client.behaviour.goals import BeaconSeeker
+
+        e = self.expert
+        self.expert = BeaconSeeker(features=e.features, near=self.NEAR, clear=self.CLEAR,
+                                   aim=e.aim, ahead=e.ahead, lost=e.lost, arc=e.arc)
 
     def reset(self) -> None:
         super().reset()
