@@ -486,6 +486,12 @@ def _get_origin(m: dict, what: str, required: bool) -> tuple[str | None, int | N
     return origin, seq
 
 
+def _goal_fields(label) -> dict:
+    """A label's ``goal``, ``reached`` and ``seen`` as keywords (none: a label without goals)."""
+    return {k: getattr(label, k) for k in ("goal", "reached", "seen")
+            if getattr(label, k) is not None}
+
+
 def _read_identity(cls, m: dict, values: dict) -> None:
     """``_read_own`` of a label and a resent label: the identity ``origin`` and ``seq``, both
     or neither (both when ``REQUIRED`` names them)."""
@@ -508,17 +514,11 @@ class TeacherAction(_Message):
     executed: str | None = wire(STR, default=None)
     origin: str | None = wire(ORIGIN, default=None, own=True)
     seq: int | None = wire(UINT, default=None, own=True)
-    # a behaviour with goals in order (docs/goals.md): the goal pursued, the goal reached at
-    # this scan and what the fiducial finder saw then
+    # goals in order (docs/goals.md): the goal pursued, the one reached, what the finder saw
     goal: int | None = wire(UINT, default=None, kw_only=True)
     reached: int | None = wire(UINT, default=None, kw_only=True)
     seen: tuple[FiducialItem, ...] | None = wire(_SEEN, default=None, kw_only=True)
     _read_own = classmethod(_read_identity)
-
-    def goal_fields(self) -> dict:
-        """``goal``, ``reached`` and ``seen`` as keywords (none: a label without goals)."""
-        return {k: getattr(self, k) for k in ("goal", "reached", "seen")
-                if getattr(self, k) is not None}
 
 
 @message
@@ -547,16 +547,13 @@ class LabeledScan(_Message):
     def of(cls, act: TeacherAction, ranges, yaw: float) -> LabeledScan:
         return cls(scan_id=act.scan_id, action=act.action, origin=act.origin, seq=act.seq,
                    ranges=ranges, yaw=float(yaw), source=act.source, ts=act.ts,
-                   executed=act.executed, **act.goal_fields())
+                   executed=act.executed, **_goal_fields(act))
 
     def action_message(self) -> TeacherAction:
         """The label alone, as it was first published."""
         return TeacherAction(scan_id=self.scan_id, action=self.action, source=self.source,
                              ts=self.ts, executed=self.executed, origin=self.origin,
-                             seq=self.seq, **self.goal_fields())
-
-    def goal_fields(self) -> dict:
-        return TeacherAction.goal_fields(self)
+                             seq=self.seq, **_goal_fields(self))
 
 
 @message

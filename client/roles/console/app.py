@@ -184,7 +184,8 @@ class Console(Tutor):
         self.refusals = Refusals(log)
         self.assets = Assets(STATIC)
         self.stats = {"withdrawals": 0, "withdrawn": 0, "placed": 0, "closed_unread": 0,
-                      "unserved": 0, "robots_refused": 0, "pages_refused": 0}
+                      "unserved": 0, "robots_refused": 0, "pages_refused": 0,
+                      "no_fiducial": 0}  # goals in order: keys on a scan not labelled
         self.max_pages = int(getattr(ctx.args, "max_pages", MAX_PAGES))
         self.default_robot = ctx.robot
         # robot -> the liveliness tokens of the servers serving it (rhbl/alive/server/<id>/<robot>),

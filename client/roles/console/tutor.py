@@ -284,6 +284,7 @@ class Tutor:
         if r.goals is not None:  # the goal the person pursues, the one marked, what was seen
             seen = r.fiducials.get(scan.id)
             if seen is None:  # (sent before its scan: lost, or far behind): not labelled
+                self.stats["no_fiducial"] += 1
                 log.debug("robot %s: no fiducial message of scan %d: not labelled", r.name,
                           scan.id)
                 return
