@@ -57,11 +57,12 @@ class Laser:
         self.refused: dict[str, int] = {}  # by kind of misfit ("beams", "ranges", ...)
         self.by_key: dict[str, int] = {}  # by the message's kind ("scan", "teacher/labeled")
 
-    def too_big(self, size: int, what: str, key: str = "scan") -> bool:
+    def too_big(self, size: int, what: str, key: str = "scan", extra: int = 0) -> bool:
         """True (counted "beams", logged) when a message of ``size`` bytes is larger than one
-        carrying a scan of this laser can be: refused before it is even copied or decoded (a
-        flood of 400 KB labels otherwise grows the learner's heap for good)."""
-        if self.beams is None or size <= 4 * self.beams + _FIELDS:
+        carrying a scan of this laser (and ``extra`` bytes of other fields: a resent label's
+        fiducial items) can be: refused before it is even copied or decoded (a flood of 400 KB
+        labels otherwise grows the learner's heap for good)."""
+        if self.beams is None or size <= 4 * self.beams + _FIELDS + extra:
             return False
         self.refuse(LaserMismatch("beams", f"{what} of {size} bytes, more than a scan of the "
                                            f"laser's {self.beams} beams holds"), key)

@@ -229,6 +229,12 @@ class Lineage:
                          "scripted teacher's)", self.out)
             else:
                 self._create("person" if teacher == "person" else "script")
+        have = getattr(self.learner, "goals", None)
+        if goals is not None and have != goals:
+            raise ProcessError(
+                f"{self.out}: its tree learns {'no goals' if have is None else 'the goals ' + str(list(have.beacons))}, "
+                f"not the behaviour's {list(goals.beacons)} (within {list(goals.within)}): choose "
+                "another --out", EXIT_USAGE)
         if self.journal is not None:
             self._started()
         self.saved_applied = self.applied if self.out.exists() else -1
@@ -543,7 +549,9 @@ class Lineage:
                                   "of a behaviour with goals)")
         if goals:
             try:
-                self.learner.goals.index_of(step.goal if step.reached is None else step.reached)
+                for beacon in (step.goal, step.reached):
+                    if beacon is not None:
+                        self.learner.goals.index_of(beacon)
             except ValueError as exc:
                 raise Refused("goal", f"label {seq} of teacher session {origin}: {exc}") from None
         if self.undecided:

@@ -50,6 +50,7 @@ __all__ = [
     "CARRIES",
     "COMMAND_MAX_PAYLOAD",
     "MAX_BEAMS",
+    "SEEN_BYTES",
     "Decision",
     "DecisionGoal",
     "PROTOCOL_VERSION",
@@ -377,6 +378,7 @@ class FiducialItem(NamedTuple):
 
 # what a fiducial finder sees (a Fiducial's items; a goal behaviour's label carries them too)
 _SEEN = Records({"id": UINT, "range": NUM, "bearing": NUM}, FiducialItem, MAX_BEACONS)
+SEEN_BYTES = 5 + MAX_BEACONS * 41  # the most such a list takes in msgpack (a label's "seen")
 
 
 @message

@@ -42,6 +42,8 @@ from typing import Any
 
 import numpy as np
 
+from protocol.messages import MAX_VX
+
 from .actions import DEFAULT_ACTIONS, ActionSet
 from .features import BEACON_GOAL, FEATURES, FeatureSpec
 from .learning import DemonstrationLearner
@@ -180,6 +182,12 @@ def parse_goals(t: Any) -> Goals:
             for w in within):
         raise ValueError(f"field 'goals.within': expected a distance > 0 (m) or one per goal "
                          f"({len(beacons)}), got {t.get('within')!r}")
+    for k, b in enumerate(beacons):
+        first = beacons.index(b)
+        if within[k] != within[first]:
+            raise ValueError(f"field 'goals.within': beacon {b} is named twice with other "
+                             f"distances ({within[first]!r} and {within[k]!r}): a goal is "
+                             f"told by its beacon, give it one distance")
     cycle = t.get("cycle", False)
     if not isinstance(cycle, bool):
         raise ValueError(f"field 'goals.cycle': expected true or false, got {cycle!r}")
@@ -237,17 +245,21 @@ class GoalTracker:
 
 class Relocation:
     """Whether the robot was put elsewhere (the simulator's ``set_pose``: a new episode) since
-    the last fiducial message: ``moved(msg)`` is True when it is farther than ``PUT`` m from
-    where the last one had it (its true pose when the message holds one, else odometry, which
-    such a move resets), some ten times what it drives in a tick."""
+    the last fiducial message seen: ``moved(msg)`` is True when it is farther than ``PUT`` m
+    beyond what it can drive (``MAX_SPEED``) in the sim time between the two (its true pose
+    when the message holds one, else odometry, which such a move resets): ten times a tick's
+    drive for consecutive messages, and no false move after a gap (a paused teacher)."""
 
     def __init__(self) -> None:
-        self.last: tuple | None = None
+        self.last: tuple | None = None  # (where, ts)
 
     def moved(self, msg) -> bool:
         where = msg.truth if msg.truth is not None else msg.pose
-        last, self.last = self.last, where
-        return last is not None and math.hypot(where[0] - last[0], where[1] - last[1]) > PUT
+        last, self.last = self.last, (where, float(msg.ts))
+        if last is None:
+            return False
+        reach = PUT + MAX_VX * max(0.0, float(msg.ts) - last[1])  # (the server's speed limit)
+        return math.hypot(where[0] - last[0][0], where[1] - last[0][1]) > reach
 
 
 class BeaconSeeker(Policy):
@@ -393,6 +405,9 @@ class GoalExpert:
         if self.tracker.finished:  # (the step that finished it: ``ev`` says which)
             self.reset()
             self.see(sightings, t)  # (at a cycle's end the first goal is reached again)
+            if self.tracker.finished:  # every goal reached at this one spot: the first again
+                self.reset()
+                self.seeker.see(sightings.get(self.tracker.beacon))
         return self.tracker.beacon, None if ev is None else ev["beacon"]
 
     def act(self, ranges, pose=None) -> str:

@@ -412,6 +412,12 @@ def parse_behaviour(data: Any, source: str = "<behaviour>", path: Path | None = 
             goals = parse_goals(data["goals"])
         except ValueError as exc:
             raise BehaviourError(f"{src}: {exc}") from None
+    if goals is not None and features.beacon != BEACON_GOAL:
+        raise _err(src, "perception.beacon", f"{BEACON_GOAL!r} (a behaviour with [goals] sees "
+                                             "the current goal's beacon)", features.beacon)
+    if goals is not None and expert != "beacon-seeker":
+        raise _err(src, "expert.name", "beacon-seeker (the scripted teacher of goals in order)",
+                   expert)
     rules = _rules(src, data["success"])
     if ("goals" in rules) != (goals is not None):
         raise BehaviourError(f"{_where(src, 'success.goals')}: a behaviour with [goals] is "

@@ -73,7 +73,7 @@ from process import arguments, files
 from process.runtime import Context, ProcessError, on_stop_signal
 from protocol import keys
 from protocol.decoding import Decoder
-from protocol.messages import Scan, TeacherAction, TreeNotice, Withdrawal
+from protocol.messages import SEEN_BYTES, Scan, TeacherAction, TreeNotice, Withdrawal
 
 __all__ = ["LearnerProcess", "Pairing", "add_arguments", "main"]
 
@@ -285,7 +285,7 @@ class LearnerProcess:
 
     def on_labeled(self, sample) -> None:
         if not self.laser.too_big(len(sample.payload), "a label resent with its scan",
-                                  "teacher/labeled"):
+                                  "teacher/labeled", extra=SEEN_BYTES):
             self.pairing.on_labeled(sample.payload.to_bytes())
 
     def on_withdraw(self, sample) -> None:

@@ -90,10 +90,20 @@ def test_a_label_without_its_goal_or_with_another_beacon_is_refused_and_not_writ
     with pytest.raises(Refused, match="beacon 7 is not one of the goals' beacons"):
         core.learn(11, 1.1, _ranges(11), 0.0, "fwd", "s1", 11,
                    step=GoalStep.of(7, None, [(7, 2.0, 0.0)]))
-    assert not core.holds("s1", 10) and not core.holds("s1", 11)
+    with pytest.raises(Refused, match="beacon 99 is not one of the goals' beacons"):
+        core.learn(12, 1.2, _ranges(12), 0.0, "fwd", "s1", 12,
+                   step=GoalStep.of(99, 1, [(1, 0.4, 0.0)]))  # reached a goal, pursues another
+    assert not any(core.holds("s1", q) for q in (10, 11, 12))
     core.close()
     with Journal.open(journal_path(out)) as j:
         assert len(j) == 3
+    # the lineage learns these goals: a learner told other goals refuses it
+    from client.behaviour.goals import parse_goals
+    from process.runtime import ProcessError
+
+    with pytest.raises(ProcessError, match=r"its tree learns the goals \[1, 2\], not"):
+        Lineage(out, features=B.perception or B.features, task=B.name,
+                goals=parse_goals({"beacons": [2, 1]}))
 
 
 def test_a_plain_lineage_learns_a_goal_label_as_a_label(tmp_path):

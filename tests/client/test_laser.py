@@ -77,3 +77,26 @@ def test_a_lineage_learns_from_one_laser(tmp_path):
     core.close()
     again = Lineage(tmp_path / "t.rhbl", features="wall")  # the journal's labels say so
     assert again.beams == 360 and again.applied == 1
+
+
+def test_a_resent_label_of_goals_in_order_with_every_beacon_in_view_fits():
+    """A resent label carries what the fiducial finder saw (at most MAX_BEACONS items): it is
+    not refused as too big for the laser, a flood of 400 KB labels still is."""
+    import numpy as np
+
+    from client.laser import Laser
+    from protocol.messages import (
+        MAX_BEACONS,
+        SEEN_BYTES,
+        FiducialItem,
+        LabeledScan,
+        TeacherAction,
+    )
+
+    items = tuple(FiducialItem(2**32 - 1, 1e300, -3.14159) for _ in range(MAX_BEACONS))
+    act = TeacherAction(scan_id=1, action="fwd", origin="o" * 64, seq=2**40, goal=2**32 - 1,
+                        reached=2**32 - 1, seen=items)
+    size = len(LabeledScan.of(act, np.ones(180, np.float32), 0.0).encode())
+    laser = Laser(beams=180)
+    assert not laser.too_big(size, "a label", "teacher/labeled", extra=SEEN_BYTES)
+    assert laser.too_big(400_000, "a label", "teacher/labeled", extra=SEEN_BYTES)

@@ -83,6 +83,12 @@ def test_the_person_marks_each_goal_reached_and_the_learner_learns_both_trees(en
                "put at a start: goal 1 again")
         _drive(browser, 3, "three labels after the robot was put at a start")
         env["watch"].wait(Watch.stopped, 5, "the robot stops")
+        _press(browser, "g")  # two goals marked before the next label: both marks kept, each
+        _until(browser, lambda d: _attr(d, "yourgoal", "beacon") == "2", 10, "beacon 2")
+        _press(browser, "g")  # carried by a label in turn
+        _until(browser, lambda d: _attr(d, "yourgoal", "beacon") == "1", 10, "beacon 1")
+        _drive(browser, 3, "three labels carrying the two marks")
+        env["watch"].wait(Watch.stopped, 5, "the robot stops")
         _fresh(browser)
         _until(browser, lambda d: _int(d, "labels", "waiting") == 0
                and _int(d, "labels", "held") == _int(d, "labels", "given"), 30,
@@ -93,19 +99,20 @@ def test_the_person_marks_each_goal_reached_and_the_learner_learns_both_trees(en
     assert rc == 0, learner.output()
     with Journal.open(journal_path(out), readonly=True) as j:
         recs = list(j.standing())
-    assert len(recs) == given >= 16
+    assert len(recs) == given >= 19
     goals = [r.goal for r in recs]
     marks = [(k, r.reached) for k, r in enumerate(recs) if r.reached is not None]
     # the first label after each G carries the goal reached and is for the next one; the mark
     # given before the robot was put at a start is not carried (that goal was not reached)
-    assert [m for _, m in marks] == [1, 2], marks
-    k1, k2 = marks[0][0], marks[1][0]
+    assert [m for _, m in marks] == [1, 2, 1, 2], marks
+    k1, k2, k3, k4 = (k for k, _ in marks)
     assert set(goals[:k1]) == {1} and goals[k1] == 2 and set(goals[k1:k2]) == {2}
-    assert goals[k2] == 1 and set(goals[k2:]) == {1}
+    assert goals[k2] == 1 and set(goals[k2:k3]) == {1}
+    assert k4 == k3 + 1 and set(goals[k3:]) == {1}  # the two marks on two labels in a row
     assert all(r.seen is not None for r in recs)
     policy = load_policy(out)
     assert isinstance(policy, GoalPolicy) and DONE in policy.completion.classes_
-    assert policy.metadata["provenance"]["marks"] == 2
+    assert policy.metadata["provenance"]["marks"] == 4
     assert _errors(browser) == []
 
 

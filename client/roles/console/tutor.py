@@ -27,7 +27,7 @@ import math
 import os
 import re
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from typing import Protocol
 
 from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
@@ -76,10 +76,10 @@ class Robot:
         self.scans: OrderedDict[int, Scan] = OrderedDict()  # id -> the scan (labels carry it)
         # goals in order (docs/goals.md): the fiducial messages by the id of their tick's scan
         # (a label carries what was seen), the person's goal state (None: a behaviour without
-        # goals) and the goal they marked reached, carried by the next label
+        # goals) and the goals they marked reached, each carried by the next label in turn
         self.fiducials: OrderedDict[int, Fiducial] = OrderedDict()
         self.goals: GoalTracker | None = None
-        self.reached: int | None = None
+        self.reached: deque[int] = deque(maxlen=64)  # (a flood of G keeps the latest)
         self.last_scan: Scan | None = None
         self.state: State | None = None
         self.holder: Page | None = None
@@ -291,8 +291,8 @@ class Tutor:
             if r.goals.finished:  # every goal reached: the sequence again
                 r.goals.reset()
             goal = {"goal": r.goals.beacon, "seen": seen.items}
-            if r.reached is not None:
-                goal["reached"], r.reached = r.reached, None
+            if r.reached:
+                goal["reached"] = r.reached.popleft()
         pose = scan.truth if scan.truth is not None else scan.pose
         if r.policy is not None:  # what the tree would have done on this very scan
             try:
@@ -321,7 +321,7 @@ class Tutor:
             r.goals.reset()
         ts = r.last_scan.ts if r.last_scan is not None else None
         ev = r.goals.advance("the person marked it reached at the page", ts)
-        r.reached = ev["beacon"]
+        r.reached.append(ev["beacon"])
         if r.goals.finished:
             r.goals.reset()
         log.info("page #%d: robot %s reached goal %d (beacon %d); now %s", page.id, r.name,
@@ -335,7 +335,7 @@ class Tutor:
         """The robot is put somewhere (a start, an ask, a reset): from the first goal again."""
         if r.goals is not None:
             r.goals.reset()
-            r.reached = None
+            r.reached.clear()
             r.teach_dirty = True
 
     def _stop(self, r: Robot, why: str) -> None:

@@ -53,7 +53,9 @@ def test_a_bad_goals_table_is_named(table, field):
 
 
 def test_a_behaviour_with_goals_is_judged_by_the_goals_rule_and_only_it():
-    base = {"name": "x", "summary": "s", "perception": "around", "expert": {"name": "beacon-seeker"},
+    base = {"name": "x", "summary": "s", "expert": {"name": "beacon-seeker"},
+            "perception": {"beams": [0.0, 22.5, 45.0, 67.5, 90.0, 112.5, 135.0, 157.5, 180.0],
+                           "window": 11.25, "beacon": "goal"},
             "worlds": {"teach": ["goals-red-green"]}}
     b = parse_behaviour({**base, "goals": {"beacons": [1, 2]}, "success": {"goals": {}}})
     assert b.goals.beacons == (1, 2) and b.rules["goals"] == {"slack": 0.1}
@@ -228,14 +230,47 @@ def test_a_teacher_on_and_on_labels_the_goal_and_starts_again_after_the_last():
 
 
 def test_the_robot_put_elsewhere_is_told_by_a_jump_between_two_ticks():
+    """Farther than ``PUT`` beyond what the robot can drive in the time between the two
+    messages: consecutive ticks, or after a gap (a paused teacher) no false move."""
     from types import SimpleNamespace as Msg
 
     from client.behaviour.goals import PUT, Relocation
 
     r = Relocation()
-    assert not r.moved(Msg(truth=(1.0, 1.0, 0.0), pose=(0.0, 0.0, 0.0)))  # the first: no jump
-    assert not r.moved(Msg(truth=(1.0 + PUT * 0.9, 1.0, 0.0), pose=(5.0, 5.0, 0.0)))
-    assert r.moved(Msg(truth=(4.0, 1.0, 0.0), pose=(0.0, 0.0, 0.0)))
+    assert not r.moved(Msg(truth=(1.0, 1.0, 0.0), pose=(0.0, 0.0, 0.0), ts=0.0))  # the first
+    assert not r.moved(Msg(truth=(1.0 + PUT, 1.0, 0.0), pose=(5.0, 5.0, 0.0), ts=0.1))
+    assert r.moved(Msg(truth=(4.0, 1.0, 0.0), pose=(0.0, 0.0, 0.0), ts=0.2))
+    assert not r.moved(Msg(truth=(9.0, 1.0, 0.0), pose=(0.0, 0.0, 0.0), ts=20.2))  # 20 s later
     odom = Relocation()  # no true pose (a real robot): odometry, which a set_pose resets
-    odom.moved(Msg(truth=None, pose=(3.0, 2.0, 0.0)))
-    assert odom.moved(Msg(truth=None, pose=(0.0, 0.0, 0.0)))
+    odom.moved(Msg(truth=None, pose=(3.0, 2.0, 0.0), ts=1.0))
+    assert odom.moved(Msg(truth=None, pose=(0.0, 0.0, 0.0), ts=1.1))
+
+
+def test_one_spot_that_completes_every_goal_still_names_a_goal():
+    """A single goal (or the same beacon twice in a row): reached, the sequence again, and the
+    label still names the goal pursued, never none."""
+    expert = GoalExpert(parse_goals({"beacons": [5]}))
+    for _ in range(3):
+        goal, reached = expert.label_state({5: Sighting(5, 0.3, 0.0)})
+        assert goal == 5
+    assert reached == 5
+
+
+def test_a_beacon_named_twice_has_one_distance():
+    assert parse_goals({"beacons": [2, 1, 2], "within": [0.6, 0.6, 0.6]}).beacons == (2, 1, 2)
+    with pytest.raises(ValueError, match="beacon 2 is named twice with other distances"):
+        parse_goals({"beacons": [2, 1, 2], "within": [0.6, 0.6, 1.5]})
+
+
+def test_a_behaviour_with_goals_sees_the_goals_beacon_and_is_taught_by_the_seeker(tmp_path):
+    from client.behaviour.spec import behaviour as load
+
+    text = shipped()["red-green"].path.read_text()
+    bad = tmp_path / "wall.toml"
+    bad.write_text(text.replace('name = "beacon-seeker"', 'name = "wall-follower"'))
+    with pytest.raises(BehaviourError, match="expert.name.*beacon-seeker"):
+        load(bad)
+    blind = tmp_path / "blind.toml"
+    blind.write_text(text.replace('beacon = "goal"', 'beacon = 1'))
+    with pytest.raises(BehaviourError, match="perception.beacon"):
+        load(blind)
