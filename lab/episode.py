@@ -139,14 +139,15 @@ class EpisodeCollector:
                 ep.ids.append(s.id)
 
     def _on_state(self, data: bytes) -> None:
-        ep, raw = self.episode, self.raw
-        if ep is None:
+        if self.episode is None:
             return
         st = self.decoder.decode(State, data)
         if st is None:
             return
-        raw.stalls[round(st.ts, 6)] = bool(st.stall)
-        raw.drivers[round(st.ts, 6)] = st.driver
+        with self.lock:  # (``trim`` rebuilds the episode's states meanwhile)
+            raw = self.raw
+            raw.stalls[round(st.ts, 6)] = bool(st.stall)
+            raw.drivers[round(st.ts, 6)] = st.driver
 
     def _on_label(self, data: bytes) -> None:
         self.labels += 1
@@ -163,16 +164,17 @@ class EpisodeCollector:
             self.last_label_scan = None if act is None else act.scan_id
 
     def _on_cmd(self, data: bytes) -> None:
-        ep, raw = self.episode, self.raw
         c = self.decoder.decode(VelCmd, data)
         if c is None:
             return
         self.sources[c.source] = self.sources.get(c.source, 0) + 1
-        if ep is not None and c.scan_id is not None:
-            # the teacher outranks the controller (the server's arbitration)
-            old = raw.cmds.get(c.scan_id)
-            if old is None or old[0] != "teacher" or c.source == "teacher":
-                raw.cmds[c.scan_id] = (c.source, c.vx, c.va)
+        with self.lock:  # (``trim`` rebuilds the episode's commands meanwhile)
+            ep, raw = self.episode, self.raw
+            if ep is not None and c.scan_id is not None:
+                # the teacher outranks the controller (the server's arbitration)
+                old = raw.cmds.get(c.scan_id)
+                if old is None or old[0] != "teacher" or c.source == "teacher":
+                    raw.cmds[c.scan_id] = (c.source, c.vx, c.va)
 
     def _on_notice(self, data: bytes) -> None:
         n = self.decoder.decode(TreeNotice, data)
