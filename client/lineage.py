@@ -231,10 +231,10 @@ class Lineage:
                 self._create("person" if teacher == "person" else "script")
         have = getattr(self.learner, "goals", None)
         if goals is not None and have != goals:
-            raise ProcessError(
-                f"{self.out}: its tree learns {'no goals' if have is None else 'the goals ' + str(list(have.beacons))}, "
-                f"not the behaviour's {list(goals.beacons)} (within {list(goals.within)}): choose "
-                "another --out", EXIT_USAGE)
+            told = "no goals" if have is None else f"the goals {list(have.beacons)}"
+            raise ProcessError(f"{self.out}: its tree learns {told}, not the behaviour's "
+                               f"{list(goals.beacons)} (within {list(goals.within)}): choose "
+                               "another --out", EXIT_USAGE)
         if self.journal is not None:
             self._started()
         self.saved_applied = self.applied if self.out.exists() else -1
@@ -547,13 +547,12 @@ class Lineage:
                                   "a tree with goals learns labels that say the goal pursued "
                                   "and what the fiducial finder saw (rhbl teacher --behaviour "
                                   "of a behaviour with goals)")
-        if goals:
-            try:
-                for beacon in (step.goal, step.reached):
-                    if beacon is not None:
-                        self.learner.goals.index_of(beacon)
-            except ValueError as exc:
-                raise Refused("goal", f"label {seq} of teacher session {origin}: {exc}") from None
+        try:
+            for beacon in (step.goal, step.reached) if goals else ():
+                if beacon is not None:
+                    self.learner.goals.index_of(beacon)
+        except ValueError as exc:
+            raise Refused("goal", f"label {seq} of teacher session {origin}: {exc}") from None
         if self.undecided:
             self.choose(source)
         elif self._early:

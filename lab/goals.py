@@ -171,10 +171,10 @@ def _run(world: World, ep: Episode, expert: GoalExpert, learner: GoalLearner,
     for n in range(1, steps + 1):  # noqa: B007
         ranges, odom = world.scan(0), world.odom(0)
         seen = sightings(world)
-        c = learner.goals.completion_inputs(seen, expert.tracker.goal)
         ev = expert.see(seen, t=n * ep.dt)
         if expert.tracker.finished:  # the last goal reached: its mark, and no action
-            learner.observe_completion(c, True)
+            learner.observe_completion(learner.goals.completion_inputs(
+                seen, learner.goals.visits[-1]), True)
             break
         step = GoalStep(expert.tracker.beacon, None if ev is None else ev["beacon"], seen)
         if demo is not None:

@@ -560,16 +560,6 @@ class GoalLearner(DemonstrationLearner):
         policy = GoalPolicy.from_classifier(clf, str(path))
         return {"goals": policy.goals, "completion": policy.completion}
 
-    @classmethod
-    def from_metadata(cls, meta: Mapping) -> GoalLearner:
-        """A new goal learner as the one whose metadata (a lineage's journal header) this is:
-        its perception, actions, goals, task, rule and tree parameters; empty trees."""
-        rule = LearningRule.of(meta)
-        return cls(FeatureSpec.from_dict(meta["features"]), Goals.from_dict(meta["goals"]),
-                   ActionSet.from_dict(meta["actions"]), task=meta.get("task"),
-                   stride=rule.stride, min_delta=rule.min_delta, rule=rule,
-                   **(meta.get("tree_params") or {}))
-
 
 def resume_learner(path: str | Path, features: FeatureSpec | None = None
                    ) -> DemonstrationLearner:
@@ -583,15 +573,17 @@ def resume_learner(path: str | Path, features: FeatureSpec | None = None
 
 
 def learner_of(meta: Mapping) -> DemonstrationLearner:
-    """A new learner as the one whose metadata this is (a lineage's journal header), for the
-    scripted rule: a ``GoalLearner`` when it holds goals."""
-    if isinstance(meta.get("goals"), dict):
-        return GoalLearner.from_metadata(meta)
+    """A new learner (empty trees) as the one whose metadata this is (a lineage's journal
+    header: perception, actions, task, rule, tree parameters), for the scripted rule: a
+    ``GoalLearner`` when it holds goals."""
+    goals = meta.get("goals")
+    cls, kw = ((GoalLearner, {"goals": Goals.from_dict(goals)}) if isinstance(goals, dict)
+               else (DemonstrationLearner, {}))
     rule = LearningRule.of(meta)
-    return DemonstrationLearner(
-        FeatureSpec.from_dict(meta["features"]), ActionSet.from_dict(meta["actions"]),
-        task=meta.get("task"), stride=rule.stride, min_delta=rule.min_delta, rule=rule,
-        **(meta.get("tree_params") or {}))
+    return cls(FeatureSpec.from_dict(meta["features"]),
+               actions=ActionSet.from_dict(meta["actions"]), task=meta.get("task"),
+               stride=rule.stride, min_delta=rule.min_delta, rule=rule, **kw,
+               **(meta.get("tree_params") or {}))
 
 
 class GoalPolicy:

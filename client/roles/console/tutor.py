@@ -288,8 +288,6 @@ class Tutor:
                 log.debug("robot %s: no fiducial message of scan %d: not labelled", r.name,
                           scan.id)
                 return
-            if r.goals.finished:  # every goal reached: the sequence again
-                r.goals.reset()
             goal = {"goal": r.goals.beacon, "seen": seen.items}
             if r.reached:
                 goal["reached"] = r.reached.popleft()
@@ -317,12 +315,10 @@ class Tutor:
             return why
         if r.goals is None:
             return "the behaviour taught has no goals in order: no goal to mark reached"
-        if r.goals.finished:
-            r.goals.reset()
         ts = r.last_scan.ts if r.last_scan is not None else None
         ev = r.goals.advance("the person marked it reached at the page", ts)
         r.reached.append(ev["beacon"])
-        if r.goals.finished:
+        if r.goals.finished:  # (never left finished: after the last, the first again)
             r.goals.reset()
         log.info("page #%d: robot %s reached goal %d (beacon %d); now %s", page.id, r.name,
                  ev["visit"] + 1, ev["beacon"], r.goals.describe())
