@@ -208,3 +208,25 @@ def test_a_page_that_sends_without_reading_is_closed(consoles):
     # console may notice a while after the page stopped being read
     assert c.wait_for_line("reads nothing", 60 * PATIENCE), c.output()[-2000:]
     assert _get(c, "/") == 200
+
+
+def test_a_silent_page_that_answers_no_ping_is_closed(consoles):
+    """A page that neither sends nor reads (a laptop lid closed, a dead link) leaves the
+    heartbeat's ping unanswered: the console closes it and says why."""
+    c = consoles["open"]
+    n = len(c.output().splitlines())
+    s = _ws(c)
+    try:
+        def gone() -> bool:
+            return any("reads nothing (no answer to a ping" in ln
+                       for ln in c.output().splitlines()[n:])
+        eventually(gone, 60 * PATIENCE, "the console closing a page that answers no ping")
+        s.settimeout(30)
+        try:
+            while s.recv(65536):  # its hello, then the end of the connection
+                pass
+        except ConnectionResetError:
+            pass  # closed as well
+    finally:
+        s.close()
+    assert _get(c, "/") == 200

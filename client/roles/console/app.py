@@ -103,6 +103,7 @@ STALE = 0.5  # s of wall time without a ``drive`` from the page: its key is stal
 MAX_MESSAGE = 4096  # bytes of a page's message
 MODES = ("demonstrate", "watch", "correct")
 SEND_TIMEOUT = 5.0  # s a send to a page may wait: a page that does not read is closed
+HEARTBEAT = 5.0  # s between pings to a quiet page; one unanswered within half of it: closed
 MAX_ERRORS = 8  # error replies waiting for a page at most (the rest counted in one)
 # bytes the kernel may hold for a page's connection (its send buffer): on loopback it grows to
 # megabytes by itself, so a page that reads nothing would be found out only after minutes, and
@@ -140,6 +141,7 @@ class _Page:
         self.pending: dict[str, str] = {}  # kind -> latest JSON text
         self.errors = 0  # error replies waiting
         self.errors_dropped = 0  # beyond MAX_ERRORS, counted
+        self.unread = False  # closed because it read nothing
         self.wake = asyncio.Event()
 
     def push(self, kind: str, text: str) -> None:
@@ -560,7 +562,7 @@ class Console(Tutor):
                             f"{request.scheme}://{request.headers['Host']}")
         if said is not None:
             raise web.HTTPForbidden(text=f"rhbl console: {said[1]}\n")
-        ws = web.WebSocketResponse(heartbeat=5.0, max_msg_size=MAX_MESSAGE)
+        ws = web.WebSocketResponse(heartbeat=HEARTBEAT, max_msg_size=MAX_MESSAGE)
         await ws.prepare(request)
         sock = request.transport.get_extra_info("socket") if request.transport else None
         if sock is not None:  # what waits in the kernel for a page, bounded: a page that reads
@@ -597,6 +599,8 @@ class Console(Tutor):
                 await asyncio.sleep(0)
         finally:
             # the page closed, reloaded or lost its connection: its commands end now
+            if isinstance(ws.exception(), TimeoutError):  # no answer to the heartbeat's ping
+                self._close_unread(page, f"no answer to a ping within {HEARTBEAT / 2:g} s")
             self.pages.pop(page.id, None)
             for r in self.robots.values():
                 if r.holder is page:
@@ -628,15 +632,17 @@ class Console(Tutor):
                     try:
                         await asyncio.wait_for(page.ws.send_str(text), SEND_TIMEOUT)
                     except TimeoutError:
-                        self._close_unread(page)
+                        self._close_unread(page, f"a send waited {SEND_TIMEOUT:g} s")
                         return
 
-    def _close_unread(self, page: _Page) -> None:
-        """A page that reads nothing (its send waited ``SEND_TIMEOUT`` s): closed, its
-        commands end; a page reading again reconnects."""
+    def _close_unread(self, page: _Page, why: str) -> None:
+        """A page that reads nothing (a send waited ``SEND_TIMEOUT`` s, or it left a ping
+        unanswered): closed, its commands end; a page reading again reconnects."""
+        if page.unread:
+            return  # found out both ways: said once
+        page.unread = True
         self.stats["closed_unread"] += 1
-        log.warning("page #%d reads nothing (a send waited %g s): closing its connection",
-                    page.id, SEND_TIMEOUT)
+        log.warning("page #%d reads nothing (%s): closing its connection", page.id, why)
         transport = page.request.transport if page.request is not None else None
         if transport is not None:
             transport.abort()  # its unread bytes go; the receive loop ends, the robot stops
