@@ -191,27 +191,40 @@ def _goals_main(args, spec: WorldSpec, policy, b: Behaviour | None) -> int:
          args.guard_straight is not None),
         ("--guard-clearance", args.guard_clearance is not None)) if on]
     if given:
-        raise ValueError(f"{', '.join(given)}: not for a tree with goals yet (it is driven "
-                         "through the rule's guard or none: --guard/--no-guard; docs/goals.md)")
+        raise ValueError(f"{', '.join(given)}: not for a tree with goals yet (its trees are "
+                         "judged alone and, beside them, driven through the controller's guard; "
+                         "--no-guard: alone only; docs/goals.md)")
     b = get(policy.metadata.get("task")) if b is None else b
-    on = args.guard is not False  # a goal behaviour's tree: through the guard unless --no-guard
+    on = args.guard is not False  # beside the trees alone: the same episodes through the guard
     here = bool(args.record or args.plot)
     if here and (args.workers or args.cluster):
         raise ValueError("--record and --plot run the episodes in this process: leave out "
                          "--workers and --cluster")
-    with (contextlib.nullcontext() if here else practice.runner_from_args(args)) as runner, \
-            record_run(args.record, "rhbl evaluate") as tap:
-        report = evaluate_goals(spec, guarded(policy, on), b, episodes=args.episodes,
-                                seconds=args.seconds,
-                                seed=args.seed, on_step=None if tap is None else tap.step,
-                                keep_paths=bool(args.plot), runner=runner)
+    run = {"episodes": args.episodes, "seconds": args.seconds, "seed": args.seed}
+    with (contextlib.nullcontext() if here else practice.runner_from_args(args)) as runner:
+        with record_run(args.record, "rhbl evaluate") as tap:
+            report = evaluate_goals(spec, policy, b, on_step=None if tap is None else tap.step,
+                                    keep_paths=bool(args.plot), runner=runner, **run)
+        g = (evaluate_goals(spec, guarded(policy), b, runner=None if here else runner, **run)
+             if on else None)
     paths = report.pop("_paths", None)
+    report["judged"] = "the trees alone"
+    report["guarded"] = None if g is None else {
+        "success_rate": g["success_rate"], "success": g["success"],
+        "collisions": sum(e["collisions"] for e in g["learner"]), "loops": len(g["loops"])}
+    report["guard"] = None if g is None else g["guard"]
     print(format_goal_table(report))
-    g = report["guard"]
-    print("driven through the controller's guard (--no-guard: the trees alone): "
-          f"{g['overruled']} rotation reversals overruled, {g['avoided']} forward orders "
-          f"turned into a rotation (path check {g['clearance']:g} m)" if g else
-          "driven by the trees alone (--no-guard)")
+    if g is not None:
+        gd, gr = report["guarded"], report["guard"]
+        print(f"judged by the trees alone: {report['success_rate']:.0%} "
+              f"({sum(e['collisions'] for e in report['learner'])} collisions); driven through "
+              f"the controller's guard (rhbl controller; a safety layer, --no-guard: the trees "
+              f"alone only): {gd['success_rate']:.0%} ({gd['collisions']} collisions), the "
+              f"guard overruled {gr['overruled']} rotation reversals and turned "
+              f"{gr['avoided']} forward orders into a rotation (path check "
+              f"{gr['clearance']:g} m)")
+    else:
+        print("driven by the trees alone (--no-guard)")
     return _write(args, spec, report, paths)
 
 

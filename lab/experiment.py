@@ -209,7 +209,8 @@ def _goal_experiment(b: Behaviour, args, ev: list[str]) -> dict:
     recipe = recipe_from_args(recipe_of(b, args.paper), args)
     if args.world:
         recipe = recipe.replace(world=args.world)
-    rows = [run_goal_trial(b, args.seed + i, recipe, [recipe.world, *ev], episodes=args.episodes)
+    rows = [run_goal_trial(b, args.seed + i, recipe, [recipe.world, *ev], episodes=args.episodes,
+                           seconds=args.seconds)
             for i in range(args.trials)]
     print(f"\n{b.name}: {args.trials} trials")
     print(goal_experiment_table(b, rows))

@@ -401,10 +401,12 @@ def guarded(policy, on: bool = True):
 
 
 def run_goal_trial(b: Behaviour, seed: int, recipe: Recipe, worlds: list[str],
-                   episodes: int | None = None, guard: bool = True) -> dict:
+                   episodes: int | None = None, guard: bool = True,
+                   seconds: float | None = None) -> dict:
     """One trial of ``rhbl experiment`` for a goal behaviour: train both learners with
-    ``seed``, evaluate the goal learner and the reactive baseline in every world (both through
-    the controller's guard, ``guard``)."""
+    ``seed``, evaluate in every world the goal learner's trees alone (what was learned, the
+    figure judged), the reactive baseline's tree alone and, beside them (``guard``), the goal
+    learner through the controller's guard (a safety layer)."""
     from lab.behaviours import world_of
 
     t0 = time.perf_counter()
@@ -417,19 +419,24 @@ def run_goal_trial(b: Behaviour, seed: int, recipe: Recipe, worlds: list[str],
            "train_wall_s": round(time.perf_counter() - t0, 2), "worlds": {}}
     for w in worlds:
         spec = world_of(b, w)
-        rep = evaluate_goals(spec, guarded(policy, guard), b, episodes=episodes, seed=seed)
-        base = evaluate_goals(spec, guarded(reactive, guard), b, episodes=episodes, seed=seed)
-        alone = (evaluate_goals(spec, policy, b, episodes=episodes, seed=seed)["success_rate"]
-                 if guard else None)
+        rep = evaluate_goals(spec, policy, b, episodes=episodes, seed=seed, seconds=seconds)
+        base = evaluate_goals(spec, reactive, b, episodes=episodes, seed=seed,
+                              seconds=seconds)
+        g = (evaluate_goals(spec, guarded(policy), b, episodes=episodes, seed=seed,
+                            seconds=seconds)
+             if guard else None)
         out["worlds"][spec.name] = {
             "success_rate": rep["success_rate"], "reactive_success_rate": base["success_rate"],
-            "unguarded_success_rate": alone,
+            "guarded_success_rate": None if g is None else g["success_rate"],
+            "guard": None if g is None else g["guard"],
             "teacher_success_rate": rep["teacher_success_rate"],
             "goals_reached": [e["goals_reached"] for e in rep["learner"]],
             "reactive_goals_reached": [e["goals_reached"] for e in base["learner"]],
             "goals_total": rep["learner"][0]["goals_total"] if rep["learner"] else 0,
             "collisions": sum(e["collisions"] for e in rep["learner"]),
             "reactive_collisions": sum(e["collisions"] for e in base["learner"]),
+            "guarded_collisions": None if g is None else sum(e["collisions"]
+                                                             for e in g["learner"]),
             "episodes": rep["episodes"]}
     return out
 
@@ -448,16 +455,18 @@ def goal_experiment_table(b: Behaviour, rows: list[dict]) -> str:
         def mean(key: str, per=per) -> str:
             return f"{sum(p[key] for p in per) / len(per):.0%}"
 
-        alone = ("-" if per[0]["unguarded_success_rate"] is None
-                 else mean("unguarded_success_rate"))
+        guarded_ = ("-" if per[0]["guarded_success_rate"] is None
+                    else mean("guarded_success_rate"))
         out.append([w, kind, mean("success_rate"),
-                    " ".join(f"{p['success_rate']:.0%}" for p in per), alone,
+                    " ".join(f"{p['success_rate']:.0%}" for p in per),
                     mean("reactive_success_rate"), mean("teacher_success_rate"),
-                    sum(p["collisions"] for p in per), sum(p["reactive_collisions"] for p in per)])
-    return table(["world", "", "goal learner", "per trial", "goal learner, no guard",
-                  "reactive tree", "teacher", "collisions", "reactive collisions"], out,
+                    sum(p["collisions"] for p in per), sum(p["reactive_collisions"] for p in per),
+                    guarded_])
+    return table(["world", "", "goal learner", "per trial", "reactive tree", "teacher",
+                  "collisions", "reactive collisions", "goal learner through the guard"], out,
                  title=f"{b.name}: goals {_goal_line(b)}, {len(rows)} trials (success: the "
-                       f"goals reached in order, no collision, within {b.seconds:g} s)",
+                       f"goals reached in order, no collision, within {b.seconds:g} s; "
+                       f"the learned trees alone, the controller's guard beside them)",
                  notes=["trees per trial (action/completion/reactive nodes): " + ", ".join(
                      f"s{r['seed']} {r['nodes']}/{r['completion_nodes']}/{r['reactive_nodes']}"
                      for r in rows)])

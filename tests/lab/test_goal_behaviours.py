@@ -68,3 +68,20 @@ def test_rhbl_train_and_evaluate_take_a_behaviour_with_goals(tmp_path, capsys):
     assert "goals in order" in text and "episode 0: learner reached" in text
     data = json.loads(report.read_text())
     assert data["goals"]["beacons"] == [1, 2] and "goal_events" in data["learner"][0]
+
+
+def test_the_goal_experiment_judges_the_trees_alone_with_the_guard_beside(tmp_path, capsys):
+    """``rhbl experiment`` of a goal behaviour: the goal learner's trees and the reactive tree
+    are judged alone; the goal learner through the controller's guard is a column beside."""
+    out = tmp_path / "rows.json"
+    assert cli(["experiment", "red-green", "--trials", "1", "--train-seconds", "30", "--rounds",
+                "0", "--episodes", "2", "--seconds", "10", "--eval-world", "none",
+                "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "the learned trees alone, the controller's guard beside them" in printed
+    assert "goal learner through the guard" in printed
+    rows = json.loads(out.read_text())["red-green"]["rows"]
+    w = rows[0]["worlds"]["goals-red-green"]
+    assert w["episodes"] == 2 and len(w["goals_reached"]) == 2
+    assert 0 <= w["success_rate"] <= 1 and 0 <= w["guarded_success_rate"] <= 1
+    assert w["guard"]["clearance"] == 0.3  # the path check a goal tree is driven with

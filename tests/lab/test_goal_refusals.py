@@ -89,8 +89,8 @@ def test_evaluate_of_a_goal_tree_refuses_the_options_it_cannot_apply(tmp_path):
 
 @pytest.mark.slow
 def test_a_tree_with_goals_is_evaluated_on_a_pool_as_here(tmp_path):
-    """``rhbl evaluate --workers 2`` of a tree with goals (through the guard, as by default,
-    and alone) gives the report it gives in this process."""
+    """``rhbl evaluate --workers 2`` of a tree with goals (judged alone, with the guard's run
+    beside it by default, and alone only) gives the report it gives in this process."""
     import json
 
     tree = _goal_tree(tmp_path)
@@ -105,6 +105,12 @@ def test_a_tree_with_goals_is_evaluated_on_a_pool_as_here(tmp_path):
             reports.append(json.loads(out.read_text()))
         assert reports[0] == reports[1]
         assert reports[0]["episodes"] == 3 and len(reports[0]["learner"]) == 3
+        # judged by the trees alone; the guard's run beside it unless --no-guard
+        assert reports[0]["judged"] == "the trees alone"
+        if guard == "--guard":
+            assert len(reports[0]["guarded"]["success"]) == 3 and reports[0]["guard"]
+        else:
+            assert reports[0]["guarded"] is None and reports[0]["guard"] is None
 
 
 @pytest.mark.slow
