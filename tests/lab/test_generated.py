@@ -114,7 +114,8 @@ def test_a_goal_behaviour_is_corrected_in_generated_beacon_worlds_too():
 
     b = get("red-green")
     recipe = recipe_of(b).replace(seconds=20, segment=10.0, rounds=1, round_seconds=5.0,
-                                  round_scales=(), round_free=0, generator="beacons")
+                                  round_scales=(), round_free=0, round_generated=0,
+                                  generator="beacons")
     spec = resolve_world(b.teach[0])
     _, _, without = train_goals(spec, b, recipe, seed=1)
     _, _, with_two = train_goals(spec, b, recipe.replace(round_generated=2), seed=1)
