@@ -389,15 +389,14 @@ def format_goal_table(report: dict) -> str:
 
 
 def guarded(policy, on: bool = True):
-    """``policy`` driven as ``rhbl controller --guard`` drives a tree: through the rotation
-    guard with the path check (``client.behaviour.guard``, ``client.behaviour.rule.PATH_CHECK``);
-    ``on`` False: as it is. A goal behaviour's trees, and its reactive baseline's, are measured
-    so by default (docs/goals.md: without it, a tree that bounces between its rotations near a
-    corner stays there)."""
-    from client.behaviour.guard import RotationGuard
-    from client.behaviour.rule import PATH_CHECK
+    """``policy`` (a goal snapshot's ``GoalPolicy``) driven as ``rhbl controller`` drives it:
+    through the guard of its rule (``client.behaviour.guard.settings_for`` its metadata: the
+    loop hysteresis and the path check, ``client.behaviour.rule.for_goals``); ``on`` False:
+    as it is."""
+    from client.behaviour.guard import RotationGuard, settings_for
 
-    return RotationGuard.of(PATH_CHECK, policy) if on else policy
+    settings = settings_for(policy.metadata)
+    return RotationGuard.of(settings, policy) if on and settings.on else policy
 
 
 def run_goal_trial(b: Behaviour, seed: int, recipe: Recipe, worlds: list[str],

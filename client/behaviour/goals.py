@@ -48,7 +48,7 @@ from .actions import DEFAULT_ACTIONS, ActionSet
 from .features import BEACON_GOAL, FEATURES, FeatureSpec
 from .learning import DemonstrationLearner
 from .policies import Policy
-from .rule import LearningRule
+from .rule import SCRIPT, LearningRule, for_goals
 
 __all__ = [
     "DONE",
@@ -483,6 +483,7 @@ class GoalLearner(DemonstrationLearner):
                  *, completion=None, **kw):
         _check_goal_features(features)
         kw.setdefault("spawn", "winner")
+        kw["rule"] = for_goals(kw.get("rule") or SCRIPT)  # the guard's path check, stored
         super().__init__(features, actions, **kw)
         self.goals = goals
         self.completion_tree = (completion if completion is not None

@@ -68,7 +68,7 @@ def settings_for(metadata) -> GuardSettings:
     snapshot metadata): for a tree taught by hand the loop hysteresis and the path check
     (0.3 m), for the scripted teacher's the hysteresis alone (its demonstrations keep their
     own distance; docs/teaching.md: with the check its trees collided less but reached the
-    5-tier maze's goal less often)."""
+    5-tier maze's goal less often), for a tree with goals both (``rule.for_goals``)."""
     return LearningRule.of(metadata).guard
 
 

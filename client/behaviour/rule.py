@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 __all__ = ["GuardSettings", "LearningRule", "NeighbourEditing", "PATH_CHECK", "PERSON",
-           "ReactionAlignment", "SCRIPT", "rule_for"]
+           "ReactionAlignment", "SCRIPT", "for_goals", "rule_for"]
 
 EDITING_METHOD = "wilson-edited-knn"  # the editing's name in the metadata
 
@@ -209,8 +209,13 @@ class LearningRule:
         ``learning`` as ``to_dict`` wrote it, or, written before, the rule its ``learning``
         describes (``rule: person`` with its lag, k, copies, sigma and seed: the person rule
         with those, its guard with the path check; else the script rule with its stride and
-        min_delta)."""
-        meta = meta or {}
+        min_delta). A tree with goals (``metadata["goals"]``): ``for_goals`` of it, whenever it
+        was written."""
+        rule = cls._of(meta or {})
+        return for_goals(rule) if (meta or {}).get("goals") is not None else rule
+
+    @classmethod
+    def _of(cls, meta: Mapping) -> LearningRule:
         learning = dict(meta.get("learning") or {})
         tree = dict(meta.get("tree_params") or {})
         person = learning.get("rule") == "person"
@@ -249,6 +254,16 @@ PATH_CHECK = GuardSettings(clearance=0.3)
 PERSON = LearningRule("person", alignment=ReactionAlignment(), editing=NeighbourEditing(),
                       guard=PATH_CHECK, extend_above=20000)
 SCRIPT = LearningRule("script")  # the paper's: each label learned as it arrives; the loop guard
+
+
+def for_goals(rule: LearningRule) -> LearningRule:
+    """The rule a tree with goals learns and is driven by: ``rule`` with the guard's path check
+    (``PATH_CHECK``; on or off as ``rule`` says). A goal behaviour's trees of twelve inputs
+    graze a box they pass close by and bounce between rotations near corners they were not
+    shown; the controller drives them, and ``rhbl evaluate`` reports them beside the trees
+    alone, through this guard (docs/goals.md)."""
+    return dataclasses.replace(rule, guard=dataclasses.replace(
+        rule.guard, clearance=PATH_CHECK.clearance, lookahead=PATH_CHECK.lookahead))
 
 
 def rule_for(teacher: str) -> LearningRule:

@@ -42,7 +42,6 @@ when they cannot be had from that laser) and ``Odometry`` in, a ``Twist`` on ``c
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import logging
 import threading
 import time
@@ -54,7 +53,7 @@ from client.behaviour.actions import ActionSet
 from client.behaviour.features import FEATURES, FeatureSpec, PayloadReader
 from client.behaviour.goals import GoalPolicy, Relocation
 from client.behaviour.learning import IncompatibleSnapshotError, TreePolicy, check_compatible
-from client.behaviour.rule import PATH_CHECK, LearningRule
+from client.behaviour.rule import LearningRule
 from client.decision import Decider
 from client.player import PlayerClient
 from client.roles.common import ScanWatch, add_process_arguments, run_role, wait_for_server
@@ -245,12 +244,10 @@ class ControllerProcess:
         self.reader = None if self.args.ros2 else policy.features.reader()
 
     def _guard(self, policy: TreePolicy) -> None:
-        """The guard this tree is driven through: its rule's (a tree with goals: with the path
-        check, as rhbl evaluate measures it, docs/goals.md), the options given replacing parts
-        of it (``guard.settings``)."""
+        """The guard this tree is driven through: its rule's (``LearningRule.of`` its
+        metadata; a tree with goals: with the path check, ``rule.for_goals``), the options given
+        replacing parts of it (``guard.settings``)."""
         settings = guard.settings(self.args, policy.metadata)
-        if isinstance(policy, GoalPolicy) and self.args.guard_clearance is None:
-            settings = dataclasses.replace(settings, clearance=PATH_CHECK.clearance)
         self.guard.apply(settings)
         self.guarding = settings.on
 

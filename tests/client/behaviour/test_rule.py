@@ -74,3 +74,29 @@ def test_bad_rules_are_refused_naming_what_is_wrong():
         LearningRule.of({"learning": {"rule": "person", "editing": {"k": 5, "loud": 1}}})
     with pytest.raises(ValueError, match="edits its labels"):
         PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, rule=SCRIPT)
+
+
+def test_a_tree_with_goals_stores_and_reads_the_path_check(tmp_path):
+    """A goal learner's rule is the scripted one with the guard's path check, written in its
+    snapshot; a goal snapshot written before the rule said so (the script's guard stored) is
+    read with it too, and the rule's guard off stays off."""
+    import numpy as np
+
+    from client.behaviour.goals import GoalLearner, GoalPolicy, parse_goals
+    from client.behaviour.guard import settings_for
+    from client.behaviour.rule import PATH_CHECK, for_goals
+    from lab.behaviours import get
+
+    b = get("red-green")
+    learner = GoalLearner(b.features, parse_goals({"beacons": [1, 2]}), task="red-green")
+    assert learner.rule.guard.clearance == PATH_CHECK.clearance and not learner.rule.person
+    learner.observe_vector(np.full(b.features.dim, 0.5), "fwd")
+    learner.observe_completion(np.array([0.5, 0.5]), True)
+    meta = GoalPolicy.load(learner.save(tmp_path / "g.rhbl")).metadata
+    assert meta["learning"]["guard"]["clearance"] == PATH_CHECK.clearance
+    assert settings_for(meta) == PATH_CHECK
+    older = dict(meta, learning=SCRIPT.to_dict())  # as a goal snapshot of 2026-12-06 says
+    assert settings_for(older) == PATH_CHECK
+    off = dict(meta, learning=SCRIPT.replace(guard=False).to_dict())
+    assert not settings_for(off).on and for_goals(SCRIPT).guard == PATH_CHECK
+    assert settings_for({"learning": SCRIPT.to_dict()}).clearance == 0  # a tree without goals
