@@ -237,7 +237,7 @@ def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
 
     from client.behaviour.given import as_argument
     from lab.behaviours import get
-    from lab.children import Child, rhbl_argv
+    from lab.children import Child, rhbl_argv, stop_all
     from tests.conftest import _server_factory
 
     b = get(behaviour)
@@ -308,14 +308,11 @@ def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
         if record and (rc := rec.stop()) != 0:
             raise RuntimeError(f"the recorder exited {rc}:\n{rec.output()[-2000:]}")
     finally:
-        if browser is not None:
-            close_chromium(browser)
-        for c in reversed(children):
-            with contextlib.suppress(Exception):
-                c.stop()
-        for s in started:
-            with contextlib.suppress(Exception):
-                s.stop()
+        try:
+            if browser is not None:
+                close_chromium(browser)
+        finally:  # a second Ctrl-C here still leaves no child running
+            stop_all([*reversed(children), *started])
     result["teaching_wall_s"] = round(time.monotonic() - t_start, 1)
     stats = json.loads((work / "learner.json").read_text())
     result["labels_standing"] = stats.get("standing")

@@ -38,7 +38,8 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
-__all__ = ["Child", "free_port", "rhbl_argv", "rss_kib", "running", "without_file_override"]
+__all__ = ["Child", "free_port", "rhbl_argv", "rss_kib", "running", "stop_all",
+           "without_file_override"]
 
 log = logging.getLogger(__name__)
 
@@ -114,6 +115,24 @@ def _dying_with(parent: int, then: Callable[[], None] | None) -> Callable[[], No
         if then is not None:
             then()
     return preexec
+
+
+def stop_all(children: Sequence[Child]) -> None:
+    """Stop each child by PID, in the order given (``Child.stop``: its stop signal, then
+    SIGTERM and SIGKILL); one that fails to stop does not keep the rest running. A Ctrl-C while
+    they stop (the second of an impatient user) kills the rest at once, then goes on: no child
+    is left running."""
+    pending = list(children)
+    try:
+        while pending:
+            with contextlib.suppress(Exception):
+                pending[0].stop()
+            pending.pop(0)
+    except KeyboardInterrupt:
+        for c in pending:
+            with contextlib.suppress(Exception):
+                c.kill()
+        raise
 
 
 def rhbl_argv(*args: str) -> list[str]:

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from waiting import eventually, patience
 
-from lab.children import Child, free_port, rhbl_argv, running
+from lab.children import Child, free_port, rhbl_argv, running, stop_all
 
 
 def py(code: str) -> list[str]:
@@ -234,3 +234,24 @@ def test_a_child_started_to_die_with_its_parent_ends_when_the_parent_is_killed(t
         for pid in pids.values():
             if running(pid):
                 os.kill(pid, signal.SIGKILL)
+
+
+def test_stop_all_stops_every_child_and_a_ctrl_c_while_they_stop_kills_the_rest():
+    sleeper = [sys.executable, "-c", "import time; time.sleep(120)"]
+    calm = [Child(f"calm{k}", sleeper).start() for k in range(2)]
+    stop_all(calm)
+    assert all(c.poll() is not None for c in calm)
+
+    class Interrupted(Child):
+        """Its gentle stop is where the user's second Ctrl-C lands."""
+
+        def stop(self, sig=None, timeout=None):
+            if sig != signal.SIGKILL:
+                raise KeyboardInterrupt
+            return super().stop(sig, timeout)
+
+    first = Interrupted("first", sleeper).start()
+    rest = Child("rest", sleeper, stop_timeout=60.0).start()
+    with pytest.raises(KeyboardInterrupt):
+        stop_all([first, rest])
+    assert first.poll() == -signal.SIGKILL and rest.poll() == -signal.SIGKILL
