@@ -195,7 +195,7 @@ def _goals_main(args, spec: WorldSpec, policy, b: Behaviour | None) -> int:
                          "judged alone and, beside them, driven through the controller's guard; "
                          "--no-guard: alone only; docs/goals.md)")
     b = get(policy.metadata.get("task")) if b is None else b
-    on = args.guard is not False  # beside the trees alone: the same episodes through the guard
+    driven = guarded(policy, args.guard)  # beside the trees alone: through the rule's guard
     here = bool(args.record or args.plot)
     if here and (args.workers or args.cluster):
         raise ValueError("--record and --plot run the episodes in this process: leave out "
@@ -205,27 +205,37 @@ def _goals_main(args, spec: WorldSpec, policy, b: Behaviour | None) -> int:
         with record_run(args.record, "rhbl evaluate") as tap:
             report = evaluate_goals(spec, policy, b, on_step=None if tap is None else tap.step,
                                     keep_paths=bool(args.plot), runner=runner, **run)
-        g = (evaluate_goals(spec, guarded(policy), b, runner=None if here else runner, **run)
-             if on else None)
+        g = (evaluate_goals(spec, driven, b, runner=None if here else runner, **run)
+             if driven is not policy else None)
     paths = report.pop("_paths", None)
     report["judged"] = "the trees alone"
-    report["guarded"] = None if g is None else {
-        "success_rate": g["success_rate"], "success": g["success"],
-        "collisions": sum(e["collisions"] for e in g["learner"]), "loops": len(g["loops"])}
-    report["guard"] = None if g is None else g["guard"]
-    print(format_goal_table(report))
+    report["guard"] = report["guarded"] = None
     if g is not None:
-        gd, gr = report["guarded"], report["guard"]
-        print(f"judged by the trees alone: {report['success_rate']:.0%} "
-              f"({sum(e['collisions'] for e in report['learner'])} collisions); driven through "
-              f"the controller's guard (rhbl controller; a safety layer, --no-guard: the trees "
-              f"alone only): {gd['success_rate']:.0%} ({gd['collisions']} collisions), the "
-              f"guard overruled {gr['overruled']} rotation reversals and turned "
-              f"{gr['avoided']} forward orders into a rotation (path check "
-              f"{gr['clearance']:g} m)")
-    else:
-        print("driven by the trees alone (--no-guard)")
+        report["guard"] = g["guard"]
+        report["guarded"] = _guarded(g)
+    print(format_goal_table(report))
+    print(_beside(report, "trees") if g is not None else "driven by the trees alone")
     return _write(args, spec, report, paths)
+
+
+def _guarded(g: dict) -> dict:
+    """The guarded run's figures for the report (``guarded``)."""
+    return {"success_rate": g["success_rate"], "success": g["success"],
+            "collisions": sum(e["collisions"] for e in g["learner"]), "loops": len(g["loops"])}
+
+
+def _beside(report: dict, what: str) -> str:
+    """The line that says the judged figure (the ``what`` alone) and, beside it, the guarded
+    run and what the guard did."""
+    gd, gr = report["guarded"], report["guard"]
+    return (f"judged by the {what} alone: {report['success_rate']:.0%} "
+            f"({sum(e['collisions'] for e in report['learner'])} collisions); driven through "
+            f"the controller's guard as its rule says (rhbl controller; a safety layer, "
+            f"--no-guard: the {what} alone only): {gd['success_rate']:.0%} "
+            f"({gd['collisions']} collisions), the guard overruled {gr['overruled']} "
+            f"rotation reversals ({gr['straight_on']} of them driven straight on) and turned "
+            f"{gr['avoided']} forward orders into a rotation (path check "
+            f"{gr['clearance']:g} m)")
 
 
 def main(args) -> int:
@@ -268,20 +278,10 @@ def main(args) -> int:
     report["guard"] = report["guarded"] = None
     if settings.on:
         report["guard"] = {**dataclasses.asdict(settings), **guarded.interventions}
-        report["guarded"] = {"success_rate": g["success_rate"], "success": g["success"],
-                             "collisions": sum(e["collisions"] for e in g["learner"]),
-                             "loops": len(g["loops"])}
+        report["guarded"] = _guarded(g)
     print(format_table(report))
     if settings.on:
-        gd, gr = report["guarded"], report["guard"]
-        print(f"judged by the tree alone: {report['success_rate']:.0%} "
-              f"({sum(e['collisions'] for e in report['learner'])} collisions); driven through "
-              f"the controller's guard as its rule says (rhbl controller; a safety layer, "
-              f"--no-guard: the tree alone only): {gd['success_rate']:.0%} "
-              f"({gd['collisions']} collisions), the guard overruled {gr['overruled']} "
-              f"rotation reversals ({gr['straight_on']} of them driven straight on) and turned "
-              f"{gr['avoided']} forward orders into a rotation (path check "
-              f"{gr['clearance']:g} m)")
+        print(_beside(report, "tree"))
     return _write(args, spec, report, paths,
                   spheres=policy.classifier if args.spheres else None, dims=dims)
 

@@ -388,15 +388,19 @@ def format_goal_table(report: dict) -> str:
                   "success"], rows, title=title, notes=notes)
 
 
-def guarded(policy, on: bool = True):
+def guarded(policy, on: bool | None = None):
     """``policy`` (a goal snapshot's ``GoalPolicy``) driven as ``rhbl controller`` drives it:
     through the guard of its rule (``client.behaviour.guard.settings_for`` its metadata: the
-    loop hysteresis and the path check, ``client.behaviour.rule.for_goals``); ``on`` False:
-    as it is."""
+    loop hysteresis and the path check, ``client.behaviour.rule.for_goals``), if the rule has
+    it on (``on`` True: on whatever the rule says; False: ``policy`` as it is)."""
+    import dataclasses
+
     from client.behaviour.guard import RotationGuard, settings_for
 
     settings = settings_for(policy.metadata)
-    return RotationGuard.of(settings, policy) if on and settings.on else policy
+    if on is not None:
+        settings = dataclasses.replace(settings, on=bool(on))
+    return RotationGuard.of(settings, policy) if settings.on else policy
 
 
 def run_goal_trial(b: Behaviour, seed: int, recipe: Recipe, worlds: list[str],
@@ -421,9 +425,9 @@ def run_goal_trial(b: Behaviour, seed: int, recipe: Recipe, worlds: list[str],
         rep = evaluate_goals(spec, policy, b, episodes=episodes, seed=seed, seconds=seconds)
         base = evaluate_goals(spec, reactive, b, episodes=episodes, seed=seed,
                               seconds=seconds)
-        g = (evaluate_goals(spec, guarded(policy), b, episodes=episodes, seed=seed,
-                            seconds=seconds)
-             if guard else None)
+        driven = guarded(policy) if guard else policy
+        g = (evaluate_goals(spec, driven, b, episodes=episodes, seed=seed, seconds=seconds)
+             if driven is not policy else None)
         out["worlds"][spec.name] = {
             "success_rate": rep["success_rate"], "reactive_success_rate": base["success_rate"],
             "guarded_success_rate": None if g is None else g["success_rate"],

@@ -100,3 +100,11 @@ def test_a_tree_with_goals_stores_and_reads_the_path_check(tmp_path):
     off = dict(meta, learning=SCRIPT.replace(guard=False).to_dict())
     assert not settings_for(off).on and for_goals(SCRIPT).guard == PATH_CHECK
     assert settings_for({"learning": SCRIPT.to_dict()}).clearance == 0  # a tree without goals
+    # rhbl evaluate drives beside the trees alone through that guard, or none if it is off
+    from lab.goals import guarded
+
+    class Off:
+        metadata = off
+
+    tree = Off()
+    assert guarded(tree) is tree and guarded(tree, True).clearance == PATH_CHECK.clearance
