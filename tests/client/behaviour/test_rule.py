@@ -106,5 +106,8 @@ def test_a_tree_with_goals_stores_and_reads_the_path_check(tmp_path):
     class Off:
         metadata = off
 
+        def reset(self):
+            pass
+
     tree = Off()
     assert guarded(tree) is tree and guarded(tree, True).clearance == PATH_CHECK.clearance
