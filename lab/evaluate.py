@@ -205,7 +205,7 @@ def _goals_main(args, spec: WorldSpec, policy, b: Behaviour | None) -> int:
         with record_run(args.record, "rhbl evaluate") as tap:
             report = evaluate_goals(spec, policy, b, on_step=None if tap is None else tap.step,
                                     keep_paths=bool(args.plot), runner=runner, **run)
-        g = (evaluate_goals(spec, driven, b, runner=None if here else runner, **run)
+        g = (evaluate_goals(spec, driven, b, runner=runner, **run)  # (None: here)
              if driven is not policy else None)
     paths = report.pop("_paths", None)
     report["judged"] = "the trees alone"

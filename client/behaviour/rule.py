@@ -211,8 +211,8 @@ class LearningRule:
         with those, its guard with the path check; else the script rule with its stride and
         min_delta). A tree with goals (``metadata["goals"]``): ``for_goals`` of it, whenever it
         was written."""
-        rule = cls._of(meta or {})
-        return for_goals(rule) if (meta or {}).get("goals") is not None else rule
+        meta = meta or {}
+        return for_goals(cls._of(meta)) if meta.get("goals") is not None else cls._of(meta)
 
     @classmethod
     def _of(cls, meta: Mapping) -> LearningRule:
