@@ -72,6 +72,14 @@ def _plain_label(label: Any) -> Any:
     raise ValueError(f"labels must be str or int, got {label!r} of type {type(label).__name__}")
 
 
+def _plain_labels(y: Any) -> np.ndarray | None:
+    """``y`` when it is a one-dimensional numpy array of str or int labels (not bool), whose
+    labels need no check one by one; else None."""
+    if isinstance(y, np.ndarray) and y.ndim == 1 and y.dtype.kind in "Uiu":
+        return y
+    return None
+
+
 def _label_array(labels: list[Any]) -> np.ndarray:
     """A numpy array of labels that keeps their type (str array, int array, else object)."""
     if labels and all(isinstance(v, str) for v in labels):
@@ -385,22 +393,37 @@ class HypersphereClassifier:
         else:
             self._check_params()
         X = self._check_X(X)
-        y = list(np.asarray(y, dtype=object).reshape(-1)) if not isinstance(y, list) else y
-        if len(y) != X.shape[0]:
-            raise ValueError(f"X has {X.shape[0]} rows but y has {len(y)} labels")
-        y_idx_src = [_plain_label(v) for v in y]
+        plain = _plain_labels(y)  # a numpy array of str or int labels, as it is
+        if plain is None:
+            y = list(np.asarray(y, dtype=object).reshape(-1)) if not isinstance(y, list) else y
+            plain = [_plain_label(v) for v in y]
+        if len(plain) != X.shape[0]:
+            raise ValueError(f"X has {X.shape[0]} rows but y has {len(plain)} labels")
         if not fitted:
             root = self.default_label
             if root is None:
-                if not y_idx_src:
+                if not len(plain):
                     raise ValueError("default_label=None needs at least one training label")
-                root = y_idx_src[0]
+                root = _plain_label(plain[0])
             self._init_tree(X.shape[1], root)
         if classes is not None:
             for c in classes:
                 self._intern(c)
-        self._learn(X, [self._intern(label) for label in y_idx_src])
+        self._learn(X, self._intern_all(plain))
         return self
+
+    def _intern_all(self, labels) -> list[int]:
+        """The label index of each of ``labels`` (plain labels), new ones interned in order
+        of first appearance; a numpy array's in one pass over its distinct values."""
+        if not isinstance(labels, np.ndarray):
+            return [self._intern(label) for label in labels]
+        if not len(labels):
+            return []
+        values, first, inverse = np.unique(labels, return_index=True, return_inverse=True)
+        index = np.empty(len(values), dtype=np.int64)
+        for u in np.argsort(first, kind="stable"):
+            index[u] = self._intern(values[u].item())
+        return index[inverse.reshape(-1)].tolist()
 
     def learn_one(self, x: Any, label: Any) -> int:
         """Train on one vector. Returns the number of spheres spawned or relabelled (0 = no change).

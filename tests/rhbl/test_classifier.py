@@ -292,3 +292,22 @@ def test_single_query_cache_follows_training():
     assert clf.predict_one(q) == fresh.predict_one(q) == clf.predict([q])[0]
     clf.learn_one(q, "rot-left")  # spawn or relabel in place
     assert clf.predict_one(q) == "rot-left"
+
+
+@pytest.mark.parametrize("labels", [["b", "a", "c"], [7, 3, 9]])
+def test_labels_in_a_numpy_array_learn_as_a_list_does(labels):
+    """A numpy array of str or int labels is interned in one pass over its distinct values:
+    the same tree, classes in order of first appearance and labels of the same type as the
+    same labels given as a list."""
+    rng = np.random.default_rng(1)
+    X = rng.random((300, 3))
+    y = [labels[i] for i in rng.integers(0, 3, 300)]
+    a = HypersphereClassifier(spawn="winner").partial_fit(X, y)
+    b = HypersphereClassifier(spawn="winner").partial_fit(X, np.array(y))
+    assert a.tree_equal(b)
+    assert list(a.classes_) == list(b.classes_) == list(dict.fromkeys(y))
+    assert type(b.predict_one(X[0])) is type(labels[0])
+    b.partial_fit(X[:5], np.array(y[:5]))  # known labels only: no new class
+    assert list(b.classes_) == list(a.classes_)
+    with pytest.raises(ValueError, match="rows but y has"):
+        b.partial_fit(X[:4], np.array(y[:5]))
