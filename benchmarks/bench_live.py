@@ -59,7 +59,7 @@ class BruteIndex:
         self.X = np.asarray(X, dtype=np.float64)
         self.xx = np.einsum("ij,ij->i", self.X, self.X)
 
-    def query(self, Q: np.ndarray, k: int):
+    def query(self, Q: np.ndarray, k: int, workers: int = 1):
         n, out_d, out_i = len(self.X), [], []
         step = max(1, (1 << 22) // max(1, n))
         for s in range(0, len(Q), step):

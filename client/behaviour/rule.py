@@ -13,8 +13,10 @@ the tree (docs/teaching.md has the study behind each part):
   ``copies`` jittered copies of it the vote at their place. None: each label is learned as it
   arrives (the paper's rule).
 * ``tree``: the hypersphere tree's parameters (``rhbl.HypersphereClassifier``: spawn, ...),
-  learned from every edited vector in an order shuffled with ``seed``; past ``extend_above``
-  vectors (10,000 labels with their copies: 17 minutes of teaching) the tree is extended with
+  learned from every edited vector ``passes`` times (epochs), each time in another order
+  shuffled with ``seed`` (one pass leaves a share of the vectors answered otherwise than they
+  were labelled: a sphere spawned later covers them); past ``extend_above``
+  vectors (about 1,800 labels with their 10 copies: 3 minutes of teaching) the tree is extended with
   the vectors new or voted otherwise, and learned again at once when they grew by the
   alignment's ``regrow`` (None: always learned again at once).
 * ``stride``, ``min_delta``: the paper's rule's sample selection (``DemonstrationLearner``).
@@ -96,12 +98,15 @@ class NeighbourEditing:
     the other's is taken for confusions and left out); ``copies`` jittered copies of each
     (normal noise of ``sigma`` per feature) are learned with the vote at their place. ``k``
     and ``copies`` were chosen by an ablation over every behaviour without goals and the
-    development person models (``benchmarks/ablate_person_rule.py``; docs/teaching.md)."""
+    development person models (``benchmarks/ablate_person_rule.py``; docs/teaching.md). The
+    copies are the synthetic examples of model compression: the tree learns the neighbours'
+    vote over the space around the labels as well as at them, where the robot driving the tree
+    goes when it is a little off the person's path."""
 
-    k: int = 25
+    k: int = 15
     side_share: float = 2 / 3
-    copies: int = 4
-    sigma: float = 0.06
+    copies: int = 10
+    sigma: float = 0.15
 
     def __post_init__(self):
         if not (isinstance(self.k, int) and not isinstance(self.k, bool) and self.k >= 1):
@@ -154,9 +159,13 @@ class LearningRule:
     guard: GuardSettings = GuardSettings()
     seed: int = 0
     extend_above: int | None = None
+    passes: int = 1
 
     def __post_init__(self):
         object.__setattr__(self, "tree", dict(self.tree))
+        if not (isinstance(self.passes, int) and not isinstance(self.passes, bool)
+                and self.passes >= 1):
+            raise ValueError(f"passes must be an integer >= 1, got {self.passes!r}")
         if self.extend_above is not None and not (isinstance(self.extend_above, int)
                                                   and self.extend_above >= 0):
             raise ValueError(f"extend_above must be None or an integer >= 0 (vectors), got "
@@ -167,10 +176,14 @@ class LearningRule:
         if self.editing is not None and (self.stride != 1 or self.min_delta):
             raise ValueError("a rule that edits its labels learns every one (stride 1, "
                              "min_delta 0)")
+        if self.editing is None and self.passes != 1:
+            raise ValueError("passes are the person rule's (a tree built from every label); "
+                             "the script rule learns each label once, as it comes")
 
     def __hash__(self):
         return hash((self.name, self.alignment, self.editing, tuple(sorted(self.tree.items())),
-                     self.stride, self.min_delta, self.guard, self.seed, self.extend_above))
+                     self.stride, self.min_delta, self.guard, self.seed, self.extend_above,
+                     self.passes))
 
     @property
     def person(self) -> bool:
@@ -197,7 +210,8 @@ class LearningRule:
             a, e = self.alignment, self.editing
             # the flat keys readers of the earlier metadata know (lag, k, copies, sigma, vote)
             out.update(lag=a.lag, k=e.k, copies=e.copies, sigma=e.sigma, vote="sided",
-                       extend_above=self.extend_above, alignment=dataclasses.asdict(a),
+                       extend_above=self.extend_above, passes=self.passes,
+                       alignment=dataclasses.asdict(a),
                        editing={"method": EDITING_METHOD, **dataclasses.asdict(e)})
         else:
             out.update(stride=self.stride, min_delta=self.min_delta)
@@ -245,14 +259,16 @@ class LearningRule:
         extend = learning.get("extend_above", base.extend_above)
         return dataclasses.replace(base, alignment=alignment, editing=editing,
                                    tree=tree or base.tree, guard=guard, seed=seed,
-                                   extend_above=None if extend is None else int(extend))
+                                   extend_above=None if extend is None else int(extend),
+                                   # a tree written before passes were stored: one
+                                   passes=int(learning.get("passes", 1)))
 
 
 # The guard with its path check: a person's trees' (and a goal behaviour's, docs/goals.md)
 PATH_CHECK = GuardSettings(clearance=0.3)
 # The rules, chosen here (docs/teaching.md, "The learning rule", has the study behind them).
 PERSON = LearningRule("person", alignment=ReactionAlignment(), editing=NeighbourEditing(),
-                      guard=PATH_CHECK, extend_above=20000)
+                      guard=PATH_CHECK, extend_above=20000, passes=4)
 SCRIPT = LearningRule("script")  # the paper's: each label learned as it arrives; the loop guard
 
 

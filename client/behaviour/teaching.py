@@ -20,12 +20,16 @@ settings, one object) copes with it; this module is its code (docs/teaching.md h
   agree on the turning side (``sided_actions``), and ``copies`` jittered copies of it (normal
   noise of ``sigma``) with the vote at their place: a wrong key or a late release is outvoted
   by the labels around it, and the tree answers the states around the labels as their
-  neighbours vote, whatever the order it learned them in.
+  neighbours vote, whatever the order it learned them in (the copies are model compression's
+  synthetic examples: where the robot goes when it drives a little off the person's path).
+* **passes**: the tree learns the edited set the rule's ``passes`` times, each in another
+  shuffled order, until it answers nearly all of it as labelled.
 
 The vote is kept up to date as labels come (``PersonLearner``: a kd-tree over the labels;
 only the labels and copies whose ``k`` nearest a new label enters are voted again; the tree
-is then learned again from the voted vectors in the rule's shuffled order, which costs a
-fraction of a second at an hour of teaching: ``benchmarks/bench_live.py``).
+is then extended with the voted vectors in the rule's shuffled orders, and past
+``extend_above`` vectors learned again at once when they grew by an eighth:
+``benchmarks/bench_live.py`` measures both at an hour of teaching).
 
     shown = 812                                         # the scan the page displayed
     answered = answered_scan(shown, scans, lag=3)       # scans: id -> scan (with .pose)
@@ -83,6 +87,10 @@ def answered_scan(shown: int, scans: Mapping[int, object], lag: int = PERSON.ali
     return shown - lag
 
 
+# rows of a neighbours' search at least this many: searched by every core (scipy's workers)
+PARALLEL_QUERY = 20000
+
+
 def _kdtree(X: np.ndarray):
     from scipy.spatial import cKDTree
 
@@ -93,7 +101,9 @@ def _neighbours(tree, Q: np.ndarray, k: int, n: int) -> tuple[np.ndarray, np.nda
     """(distances, indices), each (len(Q), min(k, n)): the nearest rows of the ``n`` rows
     ``tree`` holds, nearest first (Euclidean)."""
     k = max(1, min(int(k), n))
-    d, i = tree.query(Q, k=k)
+    # a whole rebuild's rows (every label and its copies) on every core; a new label's few
+    # on this thread
+    d, i = tree.query(Q, k=k, workers=-1 if len(Q) >= PARALLEL_QUERY else 1)
     return d.reshape(len(Q), k), i.reshape(len(Q), k)
 
 
@@ -314,12 +324,12 @@ class _Edited:
 class PersonLearner(DemonstrationLearner):
     """A ``DemonstrationLearner`` for labels given by a person (see the module's docstring),
     learning by ``rule`` (a ``LearningRule`` that edits its labels; default
-    ``client.behaviour.rule.PERSON``); ``lag``, ``k``, ``copies``, ``sigma``, ``side_share``
-    and ``seed`` given here replace the rule's (``lag`` None: estimated).
+    ``client.behaviour.rule.PERSON``); ``lag``, ``k``, ``copies``, ``sigma``, ``side_share``,
+    ``seed`` and ``passes`` given here replace the rule's (``lag`` None: estimated).
 
     Every label offered (``observe``, ``observe_vector``) is kept; ``classifier`` is the tree
     of ``training_set``: every labelled vector and its copies with their edited labels,
-    learned in an order shuffled with the rule's seed (``**tree_params`` join the rule's
+    learned the rule's ``passes`` times, each in an order shuffled with the rule's seed (``**tree_params`` join the rule's
     tree parameters, default ``spawn="winner"``). It is brought up to date when labels came
     since it was last asked for: the lag re-estimated when the labels grew by the rule's
     ``regrow`` since the last estimate (a new lag: every vote again), else only the votes a
@@ -330,7 +340,7 @@ class PersonLearner(DemonstrationLearner):
                  rule: LearningRule = PERSON, lag=_KEEP, k: int | None = None,
                  copies: int | None = None, sigma: float | None = None,
                  side_share: float | None = None, seed: int | None = None,
-                 task: str | None = None, parent: str | None = None,
+                 passes: int | None = None, task: str | None = None, parent: str | None = None,
                  provenance: Mapping | None = None, **tree_params):
         import dataclasses
 
@@ -345,6 +355,8 @@ class PersonLearner(DemonstrationLearner):
             rule = rule.replace(lag=lag)
         if seed is not None:
             rule = rule.replace(seed=seed)
+        if passes is not None:
+            rule = rule.replace(passes=passes)
         rule = rule.replace(tree={"spawn": "winner", **rule.tree, **tree_params})
         self.rule = rule
         a, e = rule.alignment, rule.editing
@@ -518,15 +530,21 @@ class PersonLearner(DemonstrationLearner):
         if self._n == 0:
             return np.zeros((0, self.features.dim)), np.zeros(0, np.int64)
         rows, labels = self._update()
-        order = copy.deepcopy(self._rng).permutation(len(labels))
+        order = self._orders(len(labels))[0]
         return rows[order], labels[order]
 
+    def _orders(self, n: int) -> list[np.ndarray]:
+        """The rule's ``passes`` orders of ``n`` vectors, shuffled with its seed (the first:
+        ``training_set``'s); the same whatever the build."""
+        rng = copy.deepcopy(self._rng)
+        return [rng.permutation(n) for _ in range(self.rule.passes)]
+
     def _build(self):
-        """The tree of ``training_set``, learned in its order; past the rule's
-        ``extend_above`` vectors, the tree so far (a copy) extended with the vectors new or
-        voted otherwise since (in an order shuffled with the seed), learned again from every
-        vector once they grew by the alignment's ``regrow`` since it last was (or every vote
-        was taken again)."""
+        """The tree of ``training_set``, learned in the rule's ``passes`` orders; past the
+        rule's ``extend_above`` vectors, the tree so far (a copy) extended with the vectors
+        new or voted otherwise since (in ``passes`` orders shuffled with the seed), learned
+        again from every vector once they grew by the alignment's ``regrow`` since it last
+        was (or every vote was taken again)."""
         from rhbl import HypersphereClassifier
 
         names = np.array(self.actions.names)
@@ -540,13 +558,12 @@ class PersonLearner(DemonstrationLearner):
                 and not stale and len(labels) >= ext
                 and len(labels) < self._whole * (1.0 + self.rule.alignment.regrow)):
             clf = copy.deepcopy(self._clf)  # (a tree handed out before stays as it was)
-            todo = todo[copy.deepcopy(self._rng).permutation(len(todo))]
-            if len(todo):
-                clf.partial_fit(rows[todo], names[labels[todo]])
+            for order in self._orders(len(todo)) if len(todo) else []:
+                clf.partial_fit(rows[todo[order]], names[labels[todo[order]]])
             return clf
         clf = HypersphereClassifier(**{"default_label": names[0], **self.tree_params})
-        order = copy.deepcopy(self._rng).permutation(len(labels))
-        clf.partial_fit(rows[order], names[labels[order]])
+        for order in self._orders(len(labels)):
+            clf.partial_fit(rows[order], names[labels[order]])
         self._whole = len(labels)
         return clf
 

@@ -51,6 +51,7 @@ def test_a_snapshot_written_before_gets_the_rule_its_metadata_describes():
     rule = LearningRule.of(old_person)
     assert rule.person and rule.alignment.lag == 3 and rule.seed == 2
     assert rule.editing == NeighbourEditing(k=25, copies=0, sigma=0.05)
+    assert rule.passes == 1  # as it was written
     assert rule.guard == PERSON.guard  # a person's tree: the path check, as before
     old_script = {"learning": {"stride": 2, "min_delta": 0.0}, "tree_params": {"spawn": "all"}}
     rule = LearningRule.of(old_script)
@@ -74,6 +75,8 @@ def test_bad_rules_are_refused_naming_what_is_wrong():
         LearningRule.of({"learning": {"rule": "person", "editing": {"k": 5, "loud": 1}}})
     with pytest.raises(ValueError, match="edits its labels"):
         PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, rule=SCRIPT)
+    with pytest.raises(ValueError, match="passes are the person rule's"):
+        SCRIPT.replace(passes=2)
 
 
 def test_a_tree_with_goals_stores_and_reads_the_path_check(tmp_path):

@@ -155,6 +155,28 @@ def test_person_learner_copies_are_seeded_and_the_tree_saves(tmp_path):
     assert meta["provenance"]["vectors"] == 80
 
 
+def test_the_tree_learns_its_training_set_in_the_rules_passes():
+    """Each pass learns every edited vector again in another seeded order: after the rule's
+    passes the tree answers more of its own training set as labelled than after one (a vector
+    learned early is covered by a sphere spawned later), and the passes are stored."""
+    ranges, labels, _ = _walk(300, seed=3)
+    trees = {}
+    for passes in (1, PERSON.passes):
+        learner = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, passes=passes)
+        for r, lab in zip(ranges, labels, strict=True):
+            learner.observe(r, 0.0, lab)
+        X, y = learner.training_set()
+        names = np.array(learner.actions.names)
+        trees[passes] = (learner.classifier.predict(X) == names[y]).mean()
+        assert learner.metadata()["learning"]["passes"] == passes
+        assert LearningRule.of(learner.metadata()).passes == passes
+    assert PERSON.passes > 1
+    assert trees[PERSON.passes] > trees[1]
+    assert trees[PERSON.passes] >= 0.99
+    with pytest.raises(ValueError, match="passes must be an integer >= 1"):
+        PersonLearner(FEATURES["wall"], passes=0)
+
+
 def test_person_learner_rejects_bad_settings_and_labels():
     with pytest.raises(ValueError, match="k must be an integer >= 1"):
         PersonLearner(FEATURES["wall"], k=0)
