@@ -281,7 +281,6 @@ def test_lockstep_drive_into_wall_sets_stall_and_stops(start_server, client_conf
     with zenoh.open(client_config(srv.endpoint)) as s:
         lis = Listener(s)
         scan = lis.next_scan()
-        t_start = time.monotonic()
         ticks = 0
         stalled_x = None
         while ticks < 400:
@@ -292,11 +291,11 @@ def test_lockstep_drive_into_wall_sets_stall_and_stops(start_server, client_conf
             if st.stall:
                 stalled_x = st.truth[0]
                 break
-        rate = ticks / (time.monotonic() - t_start)
         assert stalled_x is not None, "never stalled"
         # the wall is at x = 10: robot radius 0.25 + wall half-thickness 0.02
         assert stalled_x == pytest.approx(10.0 - 0.27, abs=0.03)
-        assert rate > 30, f"lock-step ran only {rate:.0f} ticks/s"
+        # (how fast lock-step ticks is a benchmark's figure, not this test's: a loaded machine
+        # slows it; benchmarks/bench_record.py measures the lock-step rate)
         for _ in range(20):  # keep pushing: stays stalled, does not pass through
             drive(s, vx=0.5, scan_id=scan.id)
             scan = lis.next_scan()
