@@ -155,6 +155,11 @@ def _graph(session) -> set[str]:
             if r.ok is not None}
 
 
+def _zid(token: str) -> str:
+    """The zenoh session id in an rmw_zenoh liveliness token's key (its third chunk)."""
+    return token.split("/")[2]
+
+
 def _bridging(session, bus, *args) -> Child:
     """``_bridge(*args)``, once it bridges: its two cmd_vel subscriptions are in the graph and
     a LaserScan of its own /r0/scan publisher (the GID in the sample's attachment: XXH3-128 of
@@ -165,16 +170,25 @@ def _bridging(session, bus, *args) -> Child:
     eventually(lambda: [r for r in session.liveliness().get(keys.alive_key("server", "**"),
                                                             timeout=1.0) if r.ok is not None],
                30, "the server's token seen by the test's session")
-    before = _graph(session)
+    # the sessions already in the graph (another bridge of the same server: a module's): by
+    # their zenoh session ids, from two queries (a reply one query misses on a loaded machine
+    # must not make another bridge's tokens look like the new one's)
+    before = {_zid(k) for k in _graph(session) | _graph(session)}
     bridge = _bridge(*args)
+    eventually(lambda: [r for r in session.liveliness().get(keys.alive_key("ros2", "*"),
+                                                            timeout=1.0)
+                        if r.ok is not None and str(r.ok.key_expr).endswith(f"-{bridge.pid}")],
+               60, "the new bridge's process token (rhbl/alive/ros2/<robot>-<pid>)",
+               alive=[bridge])
 
     def new_tokens() -> list[str]:
-        return sorted(_graph(session) - before)
+        return sorted(k for k in _graph(session) if _zid(k) not in before)
 
     tokens = eventually(new_tokens, 60, "the new bridge's cmd_vel subscriptions and /r0/scan "
                         "publisher in the ROS 2 graph", alive=[bridge],
                         until=lambda new: sum("/MS/" in k and "cmd_vel" in k for k in new) >= 2
                         and any("/MP/" in k and "%r0%scan/" in k for k in new))
+    assert len({_zid(k) for k in tokens}) == 1, tokens  # one session: the new bridge's
     scan_token = next(k for k in tokens if "/MP/" in k and "%r0%scan/" in k)
     gid = xxhash.xxh3_128_intdigest(scan_token.encode()).to_bytes(16, "little")
     key = ros2_key(0, "/r0/scan", LASER_SCAN)
