@@ -329,8 +329,8 @@ class PersonLearner(DemonstrationLearner):
 
     Every label offered (``observe``, ``observe_vector``) is kept; ``classifier`` is the tree
     of ``training_set``: every labelled vector and its copies with their edited labels,
-    learned the rule's ``passes`` times, each in an order shuffled with the rule's seed (``**tree_params`` join the rule's
-    tree parameters, default ``spawn="winner"``). It is brought up to date when labels came
+    learned the rule's ``passes`` times, each in an order shuffled with the rule's seed
+    (``**tree_params`` join the rule's tree parameters, default ``spawn="winner"``). It is brought up to date when labels came
     since it was last asked for: the lag re-estimated when the labels grew by the rule's
     ``regrow`` since the last estimate (a new lag: every vote again), else only the votes a
     new label enters, then the tree learned again. Sample selection (``stride``,
@@ -530,14 +530,14 @@ class PersonLearner(DemonstrationLearner):
         if self._n == 0:
             return np.zeros((0, self.features.dim)), np.zeros(0, np.int64)
         rows, labels = self._update()
-        order = self._orders(len(labels))[0]
+        order = self._orders(len(labels), 1)[0]
         return rows[order], labels[order]
 
-    def _orders(self, n: int) -> list[np.ndarray]:
-        """The rule's ``passes`` orders of ``n`` vectors, shuffled with its seed (the first:
-        ``training_set``'s); the same whatever the build."""
+    def _orders(self, n: int, passes: int | None = None) -> list[np.ndarray]:
+        """The first ``passes`` (default: the rule's) of the rule's orders of ``n`` vectors,
+        shuffled with its seed (the first: ``training_set``'s); the same whatever the build."""
         rng = copy.deepcopy(self._rng)
-        return [rng.permutation(n) for _ in range(self.rule.passes)]
+        return [rng.permutation(n) for _ in range(self.rule.passes if passes is None else passes)]
 
     def _build(self):
         """The tree of ``training_set``, learned in the rule's ``passes`` orders; past the
