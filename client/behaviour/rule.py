@@ -15,9 +15,9 @@ the tree (docs/teaching.md has the study behind each part):
 * ``tree``: the hypersphere tree's parameters (``rhbl.HypersphereClassifier``: spawn, ...),
   learned from every edited vector ``passes`` times (epochs), each time in another order
   shuffled with ``seed`` (one pass leaves a share of the vectors answered otherwise than they
-  were labelled: a sphere spawned later covers them); past ``extend_above``
-  vectors (about 1,800 labels with their 10 copies: 3 minutes of teaching) the tree is extended with
-  the vectors new or voted otherwise, and learned again at once when they grew by the
+  were labelled: a sphere spawned later covers them); past ``extend_above`` vectors (about
+  1,800 labels with their 10 copies: 3 minutes of teaching) the tree is extended with the
+  vectors new or voted otherwise, and learned again at once when they grew by the
   alignment's ``regrow`` (None: always learned again at once).
 * ``stride``, ``min_delta``: the paper's rule's sample selection (``DemonstrationLearner``).
 * ``guard`` (``GuardSettings``): the controller's safety layer (``client.behaviour.guard``):

@@ -330,10 +330,10 @@ class PersonLearner(DemonstrationLearner):
     Every label offered (``observe``, ``observe_vector``) is kept; ``classifier`` is the tree
     of ``training_set``: every labelled vector and its copies with their edited labels,
     learned the rule's ``passes`` times, each in an order shuffled with the rule's seed
-    (``**tree_params`` join the rule's tree parameters, default ``spawn="winner"``). It is brought up to date when labels came
-    since it was last asked for: the lag re-estimated when the labels grew by the rule's
-    ``regrow`` since the last estimate (a new lag: every vote again), else only the votes a
-    new label enters, then the tree learned again. Sample selection (``stride``,
+    (``**tree_params`` join the rule's tree parameters, default ``spawn="winner"``). It is
+    brought up to date when labels came since it was last asked for: the lag re-estimated
+    when the labels grew by the rule's ``regrow`` since the last estimate (a new lag: every
+    vote again), else only the votes a new label enters, then the tree learned again. Sample selection (``stride``,
     ``min_delta``) does not apply: the vote needs every label."""
 
     def __init__(self, features: FeatureSpec, actions: ActionSet = DEFAULT_ACTIONS, *,

@@ -43,6 +43,7 @@ from lab.train import train  # noqa: E402
 from process.session import make_config  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.messages import MAX_VX, Scan, State  # noqa: E402
+from protocol.ros2.graph import LivelinessToken  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ros2_robot import (  # noqa: E402
@@ -156,8 +157,8 @@ def _graph(session) -> set[str]:
 
 
 def _zid(token: str) -> str:
-    """The zenoh session id in an rmw_zenoh liveliness token's key (its third chunk)."""
-    return token.split("/")[2]
+    """The zenoh session id in an rmw_zenoh liveliness token's key."""
+    return LivelinessToken.parse(token).zid
 
 
 def _bridging(session, bus, *args) -> Child:
