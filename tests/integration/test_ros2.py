@@ -151,8 +151,9 @@ def _bridge(endpoint: str, tmp: Path, name: str = "ros2", *extra: str) -> Child:
 
 
 def _graph(session) -> set[str]:
-    """The ROS 2 graph's liveliness tokens now (rmw_zenoh's, domain 0)."""
-    return {str(r.ok.key_expr) for r in session.liveliness().get("@ros2_lv/0/**", timeout=1.0)
+    """The ROS 2 graph's liveliness tokens now (rmw_zenoh's, domain 0). The query ends when the
+    router has answered; the timeout only bounds a router too busy to answer."""
+    return {str(r.ok.key_expr) for r in session.liveliness().get("@ros2_lv/0/**", timeout=10.0)
             if r.ok is not None}
 
 
@@ -161,11 +162,12 @@ def _zid(token: str) -> str:
     return LivelinessToken.parse(token).zid
 
 
-def _bridging(session, bus, *args) -> Child:
+def _bridging(session, bus, *args, others: tuple[Child, ...] = ()) -> Child:
     """``_bridge(*args)``, once it bridges: its two cmd_vel subscriptions are in the graph and
     a LaserScan of its own /r0/scan publisher (the GID in the sample's attachment: XXH3-128 of
-    that publisher's token) is on the bus, told apart from another bridge's of the same server
-    by the tokens that were there before it started."""
+    that publisher's token) is on the bus, told apart from the ``others`` bridges of the same
+    server by their zenoh session ids (and from any other session by the tokens that were there
+    before it started). The new bridge's session id becomes its ``zid``."""
     # a session opened a moment ago may answer a liveliness query with nothing yet: the
     # server's token seen first, then the graph as it is
     eventually(lambda: [r for r in session.liveliness().get(keys.alive_key("server", "**"),
@@ -174,7 +176,7 @@ def _bridging(session, bus, *args) -> Child:
     # the sessions already in the graph (another bridge of the same server: a module's): by
     # their zenoh session ids, from two queries (a reply one query misses on a loaded machine
     # must not make another bridge's tokens look like the new one's)
-    before = {_zid(k) for k in _graph(session) | _graph(session)}
+    before = {_zid(k) for k in _graph(session) | _graph(session)} | {b.zid for b in others}
     bridge = _bridge(*args)
     eventually(lambda: [r for r in session.liveliness().get(keys.alive_key("ros2", "*"),
                                                             timeout=1.0)
@@ -189,7 +191,9 @@ def _bridging(session, bus, *args) -> Child:
                         "publisher in the ROS 2 graph", alive=[bridge],
                         until=lambda new: sum("/MS/" in k and "cmd_vel" in k for k in new) >= 2
                         and any("/MP/" in k and "%r0%scan/" in k for k in new))
-    assert len({_zid(k) for k in tokens}) == 1, tokens  # one session: the new bridge's
+    zids = {_zid(k) for k in tokens}
+    assert len(zids) == 1, tokens  # one session: the new bridge's
+    bridge.zid = zids.pop()
     scan_token = next(k for k in tokens if "/MP/" in k and "%r0%scan/" in k)
     gid = xxhash.xxh3_128_intdigest(scan_token.encode()).to_bytes(16, "little")
     key = ros2_key(0, "/r0/scan", LASER_SCAN)
@@ -391,7 +395,7 @@ def test_a_twist_from_rosbags_moves_the_robot_and_the_watchdog_stops_it(bridged)
     assert after and all(abs(v) < 1e-5 for v in after)
 
 
-def test_malformed_cdr_on_cmd_vel_is_rejected_counted_and_moves_nothing(server, tmp_path):
+def test_malformed_cdr_on_cmd_vel_is_rejected_counted_and_moves_nothing(server, bridged, tmp_path):
     nan = _twist_cdr(float("nan"), 0.0)
     good = _twist_cdr(0.2, 0.0)
     bad = [b"", b"\x00\x01\x00\x00", b"garbage" * 3, good[:20], good + b"\x00" * 8,
@@ -400,7 +404,9 @@ def test_malformed_cdr_on_cmd_vel_is_rejected_counted_and_moves_nothing(server, 
                sec=1, nanosec=2)), CLOCK))]
     with zenoh.open(make_config(mode="client", connect=[server.endpoint])) as session:
         bus = Bus(session)
-        bridge = _bridging(session, bus, server.endpoint, tmp_path, "ros2-bad")
+        # the module's bridge runs beside this one
+        bridge = _bridging(session, bus, server.endpoint, tmp_path, "ros2-bad",
+                           others=(bridged[1],))
         key = ros2_key(0, "/r0/cmd_vel", TWIST)
         pub = session.declare_publisher(key)
         bus.wait(lambda: bus.states and bus.states[-1].driver == "")  # nobody drives now
