@@ -12,8 +12,14 @@ only the votes the new label enters, then the tree extended with what changed, p
 rule's ``extend_above`` vectors, else learned again at once), its median and worst, and its
 CPU time; the same for ``--batch`` labels at once (a snapshot every 2 s at 10 Hz: 20); the
 tree learned again at once from every vector; a new label at a growth point (past
-``extend_above``, once the labels grew by an eighth: the tree learned again at once and one
-lag's agreement of the lag estimated again); the whole lag estimate (at once below
+``extend_above``, once the labels grew by an eighth: one lag's agreement of the lag estimated
+again, and the tree learned again from every vector: beside, in a thread of its own, as the
+live learner does, the tree so far extended with the label meanwhile), then while it relearns
+``--batch`` labels every 2 s (10 a second, a snapshot every 2 s: ``rhbl learner``'s pace), each
+batch's build timed (their worst, and how many, the last the build that takes the relearned
+tree), how long the relearn took, and the growth point's label with the tree relearned in its
+place (as before); a label when the lag estimated again is another (every vote at it taken
+beside, the old lag's tree extended meanwhile); the whole lag estimate (at once below
 ``extend_above``); the whole rebuild with the kd-tree (a restart's recovery, or a
 new lag) and the rebuild of before
 (every vote again by numpy's brute-force search, as the learner did at every snapshot:
@@ -49,6 +55,8 @@ from client.behaviour.rule import PERSON  # noqa: E402
 from client.behaviour.teaching import PersonLearner, estimate_lag  # noqa: E402
 
 NAMES = np.array(DEFAULT_ACTIONS.names)
+MEANWHILE = 1000  # at most this many labels while a growth point's tree is relearned beside
+SNAPSHOT_EVERY = 2.0  # seconds: rhbl learner's --snapshot-every (a build each)
 
 
 class BruteIndex:
@@ -142,22 +150,27 @@ def main(argv=None) -> int:
         ap.error(f"--sizes {args.sizes!r}: expected label counts like 1000,6000")
     if not sizes or sizes[0] < 50 or args.repeat < 1 or args.batch < 1:
         ap.error("--sizes: each at least 50 labels; --repeat and --batch at least 1")
-    extra = args.repeat + args.batch
+    extra = args.repeat + 2 * args.batch + 2 + MEANWHILE
     W, y = demonstration(sizes[-1] + extra)
     print(f"a person's tree reflecting new labels (the person rule: k={PERSON.editing.k}, "
           f"sided vote, {PERSON.editing.copies} jittered copies a label, lag estimated over "
           f"0..{PERSON.alignment.max_lag}), seconds:")
     print("| labels | a new label: median | worst | median CPU | tree learned at once | "
-          f"{args.batch} new labels | a growth point's label | lag estimate | "
-          "whole rebuild (kd-tree) | "
+          f"{args.batch} new labels | a growth point's label | {args.batch} labels every 2 s while it "
+          "relearns: worst (builds) | relearn beside | a growth point's label, relearned in its place | "
+          "a new lag's label | "
+          "lag estimate | whole rebuild (kd-tree) | "
           "rebuild of before (brute force) | before / now | tree nodes | RSS MB | learner MB |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    live = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS)
+    print("|---" * 18 + "|")
+    live = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, background=True)
     have = 0
     for n in sizes:
         feed(live, W, y, have, n)
-        _ = live.classifier  # brought up to date: the session so far
-        have = n
+        _ = live.classifier  # brought up to date: the session so far, a relearn it began
+        live.wait_relearned()  # done (the labels below are timed alone)
+        feed(live, W, y, n, n + 1)
+        _ = live.classifier
+        have = n + 1
         one, cpu = [], []
         for _ in range(args.repeat):  # one new label at a time
             feed(live, W, y, have, have + 1)
@@ -168,12 +181,37 @@ def main(argv=None) -> int:
         feed(probe, W, y, have, have + args.batch)
         batch_s = timed(lambda p=probe: p.classifier)[0]
         del probe
-        growth = "-"
-        if live._long():  # a build at a growth point: the tree learned again at once, and
-            probe = copy.deepcopy(live)  # one lag's agreement of the estimate begun
-            probe._whole, probe._work = 1, (have, [])
+        growth = beside = meanwhile = at_once = new_lag = "-"
+        if live._long():  # a build at a growth point: one lag's agreement of the estimate
+            probe = copy.deepcopy(live)  # begun, and the tree learned again at once: beside
+            probe._whole, probe._work = 1, (have, [])  # (the live learner's) or in its place
+            sync = copy.deepcopy(probe)
+            sync.background = False
             feed(probe, W, y, have, have + 1)
             growth = f"{timed(lambda p=probe: p.classifier)[0]:.3f}"
+            t0, waits, k = time.perf_counter(), [], have + 1
+            while probe.relearning and k + args.batch <= have + 1 + MEANWHILE:
+                # labels meanwhile as they come: a snapshot's (--batch) every SNAPSHOT_EVERY s
+                if probe.wait_relearned(max(0.0, t0 + SNAPSHOT_EVERY * (len(waits) + 1)
+                                            - time.perf_counter())):
+                    break
+                feed(probe, W, y, k, k + args.batch)
+                k += args.batch
+                waits.append(timed(lambda p=probe: p.classifier)[0])
+            probe.wait_relearned()
+            beside = f"{time.perf_counter() - t0:.1f}"
+            feed(probe, W, y, k, k + args.batch)
+            waits.append(timed(lambda p=probe: p.classifier)[0])  # the relearned tree taken
+            meanwhile = f"{max(waits):.3f} ({len(waits)})"
+            feed(sync, W, y, have, have + 1)
+            at_once = f"{timed(lambda p=sync: p.classifier)[0]:.3f}"
+            del probe, sync
+            probe = copy.deepcopy(live)  # the lag estimated again is another: voted beside
+            n0, lag, agreement = probe._estimate
+            probe._estimate = (n0, (lag + 1) % (PERSON.alignment.max_lag + 1), agreement)
+            feed(probe, W, y, have, have + 1)
+            new_lag = f"{timed(lambda p=probe: p.classifier)[0]:.3f}"
+            probe.wait_relearned()  # (not beside the figures below)
             del probe
         Wn, yn = live._W[:have], live._y[:have]
         lag_s = timed(lambda Wn=Wn, yn=yn: estimate_lag(Wn, yn, PERSON.editing.k,
@@ -185,7 +223,8 @@ def main(argv=None) -> int:
             old_s, _ = full_rebuild(W, y, n, brute=True)
             old, ratio = f"{old_s:.3f}", f"{old_s / np.median(one):.0f}x"
         print(f"| {n} | {np.median(one):.3f} | {max(one):.3f} | {np.median(cpu):.3f} | "
-              f"{tree_s:.3f} | {batch_s:.3f} | {growth} | "
+              f"{tree_s:.3f} | {batch_s:.3f} | {growth} | {meanwhile} | {beside} | {at_once} | "
+              f"{new_lag} | "
               f"{lag_s:.3f} | {whole_s:.3f} | {old} | {ratio} | {nodes} | {rss_mb():.0f} | "
               f"{learner_mb(live):.1f} |", flush=True)
     return 0

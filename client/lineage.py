@@ -256,7 +256,7 @@ class Lineage:
             return GoalLearner(n["spec"], n["goals"], n["actions"], task=task, rule=chosen,
                                stride=n["stride"], min_delta=n["min_delta"], **n["params"])
         if chosen.person:
-            return PersonLearner(n["spec"], n["actions"], task=task,
+            return PersonLearner(n["spec"], n["actions"], task=task, background=True,
                                  rule=chosen.replace(lag=n["lag"]), **n["params"])
         return DemonstrationLearner(n["spec"], n["actions"], task=task, rule=chosen,
                                     stride=n["stride"], min_delta=n["min_delta"], **n["params"])
@@ -443,7 +443,8 @@ class Lineage:
         rule = LearningRule.of(meta)
         if rule.person:
             return PersonLearner.from_metadata(meta, FeatureSpec.from_dict(meta["features"]),
-                                               ActionSet.from_dict(meta["actions"]))
+                                               ActionSet.from_dict(meta["actions"]),
+                                               background=True)
         if header.get("parent") is not None:
             return _resume(header["parent"], None)
         return learner_of(meta)

@@ -28,7 +28,8 @@ settings, one object) copes with it; this module is its code (docs/teaching.md h
 The vote is kept up to date as labels come (``PersonLearner``: a kd-tree over the labels;
 only the labels and copies whose ``k`` nearest a new label enters are voted again; the tree
 is then extended with the voted vectors in the rule's shuffled orders, and past
-``extend_above`` vectors learned again at once when they grew by an eighth:
+``extend_above`` vectors learned again at once when they grew by an eighth: in the live
+learner (``background``) in a thread of its own while the tree so far is extended meanwhile;
 ``benchmarks/bench_live.py`` measures both at an hour of teaching).
 
     shown = 812                                         # the scan the page displayed
@@ -43,7 +44,10 @@ Pure (no zenoh, no I/O): the processes and the in-process study run this same co
 from __future__ import annotations
 
 import copy
+import logging
 import math
+import os
+import threading
 from collections.abc import Callable, Mapping
 
 import numpy as np
@@ -54,6 +58,9 @@ from .actions import DEFAULT_ACTIONS, ActionSet
 from .features import FeatureSpec
 from .learning import DemonstrationLearner
 from .rule import PERSON, LearningRule
+
+log = logging.getLogger(__name__)
+NICE = 10  # the work beside's thread's niceness (Linux: per thread): the builds come first
 
 __all__ = [
     "PersonLearner",
@@ -249,6 +256,22 @@ def smoothed_lag(raw) -> tuple[int, list[float]]:
     return int(np.argmax(smooth)), [float(v) for v in smooth]
 
 
+def _nearer(rows: np.ndarray, radius: np.ndarray, new: np.ndarray) -> np.ndarray:
+    """Which ``rows`` have one of the ``new`` labels within their ``radius`` (their ``k``-th
+    nearest's distance, ties included): in blocks of rows and of new labels, so that the
+    distances stay in the cache (a build's memory traffic, with a relearn beside)."""
+    near = np.zeros(len(rows), bool)
+    rr = np.einsum("ij,ij->i", rows, rows)
+    r2 = radius ** 2 * (1 + 1e-9) + 1e-12
+    for s in range(0, len(new), 64):
+        part = new[s:s + 64]
+        pp = np.einsum("ij,ij->i", part, part)
+        for b in range(0, len(rows), 8192):
+            d2 = rr[b:b + 8192, None] + pp[None, :] - 2.0 * rows[b:b + 8192] @ part.T
+            near[b:b + 8192] |= (d2 <= r2[b:b + 8192, None]).any(axis=1)
+    return near
+
+
 class _Edited:
     """The edited training set of a person's labels at one lag, kept up to date as labels
     come: the labelled vectors ``X`` and their jittered copies ``Q``, a kd-tree over ``X``,
@@ -281,14 +304,7 @@ class _Edited:
             again = np.arange(n + len(Q))
             self.fresh = True
         else:
-            new = X[old:]
-            rows = self.rows()
-            near = np.zeros(len(rows), bool)
-            for s in range(0, len(new), 64):  # rows whose k-th nearest is farther than a new label
-                part = new[s:s + 64]
-                d2 = (np.einsum("ij,ij->i", rows, rows)[:, None]
-                      + np.einsum("ij,ij->i", part, part)[None, :] - 2.0 * rows @ part.T)
-                near |= (d2 <= (self.radius[:, None] ** 2) * (1 + 1e-9) + 1e-12).any(axis=1)
+            near = _nearer(self.rows(), self.radius, X[old:])
             self.fresh = False
             again = np.concatenate([np.flatnonzero(near[:old]),
                                     np.arange(old, n),
@@ -321,6 +337,66 @@ class _Edited:
         return again
 
 
+class _Beside:
+    """``work(cancelled)`` run in a thread of its own (``PersonLearner``'s ``background``): its
+    ``result``, or the ``error`` it raised; ``cancel`` sets the event it is given. ``info``:
+    what the caller keeps with it (a relearn's ``size``; ``since``, the (labels, copies) new or
+    voted otherwise meanwhile, which its tree is extended with when it is taken)."""
+
+    def __init__(self, work: Callable[[threading.Event], object], **info):
+        self.since: list = []
+        self.result = None
+        self.error: BaseException | None = None
+        self.__dict__.update(info)
+        self._cancelled = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(work,), name="rhbl-beside",
+                                        daemon=True)
+        self._thread.start()
+
+    def _run(self, work) -> None:
+        try:
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), NICE)
+        except (AttributeError, OSError):  # not Linux: the thread runs at the process's
+            pass
+        try:
+            self.result = work(self._cancelled)
+        except Exception as exc:  # noqa: BLE001 - reported where it is taken
+            self.error = exc
+
+    def cancel(self) -> None:
+        self._cancelled.set()
+
+    def done(self) -> bool:
+        return not self._thread.is_alive()
+
+    def wait(self, timeout: float | None = None) -> bool:
+        self._thread.join(timeout)
+        return self.done()
+
+
+def _relearned(make: Callable, rows: np.ndarray, names: np.ndarray, orders: list):
+    """The work of a relearn beside: a new tree (``make()``) learned from ``rows`` labelled
+    ``names`` in each of ``orders`` (None when cancelled between passes)."""
+    def work(cancelled: threading.Event):
+        clf = make()
+        for order in orders:
+            if cancelled.is_set():
+                return None
+            clf.partial_fit(rows[order], names[order])
+        return clf
+    return work
+
+
+def _voted(lag: int, k: int, n_actions: int, edit: Callable, X: np.ndarray, Q: np.ndarray,
+           y: np.ndarray):
+    """The work of a vote beside at a new ``lag``: every row of ``X`` and ``Q`` voted."""
+    def work(cancelled: threading.Event) -> _Edited:
+        ed = _Edited(lag, k, n_actions, edit)
+        ed.update(X, Q, y)
+        return ed
+    return work
+
+
 class PersonLearner(DemonstrationLearner):
     """A ``DemonstrationLearner`` for labels given by a person (see the module's docstring),
     learning by ``rule`` (a ``LearningRule`` that edits its labels; default
@@ -333,15 +409,25 @@ class PersonLearner(DemonstrationLearner):
     (``**tree_params`` join the rule's tree parameters, default ``spawn="winner"``). It is
     brought up to date when labels came since it was last asked for: the lag re-estimated
     when the labels grew by the rule's ``regrow`` since the last estimate (a new lag: every
-    vote again), else only the votes a new label enters, then the tree learned again. Sample selection (``stride``,
-    ``min_delta``) does not apply: the vote needs every label."""
+    vote again), else only the votes a new label enters, then the tree learned again (past the
+    rule's ``extend_above`` vectors: extended with what changed, learned again at once when the
+    vectors grew by the alignment's ``regrow``). Sample selection (``stride``, ``min_delta``)
+    does not apply: the vote needs every label.
+
+    ``background`` (the live learner's): the tree learned again at once in a thread of its own,
+    from the training set as it was then, while each build extends the tree so far with what
+    changed; the relearned tree is taken, extended with what came meanwhile, at the first
+    build after it is done (``relearning``; ``wait_relearned``). A new label is in the next
+    tree within an extension's time at any size, but which builds get the relearned tree
+    depends on how fast it was learned: off (the default), every build is the same whatever
+    the machine."""
 
     def __init__(self, features: FeatureSpec, actions: ActionSet = DEFAULT_ACTIONS, *,
                  rule: LearningRule = PERSON, lag=_KEEP, k: int | None = None,
                  copies: int | None = None, sigma: float | None = None,
                  side_share: float | None = None, seed: int | None = None,
-                 passes: int | None = None, task: str | None = None, parent: str | None = None,
-                 provenance: Mapping | None = None, **tree_params):
+                 passes: int | None = None, background: bool = False, task: str | None = None,
+                 parent: str | None = None, provenance: Mapping | None = None, **tree_params):
         import dataclasses
 
         if not rule.person:
@@ -376,6 +462,10 @@ class PersonLearner(DemonstrationLearner):
         self._whole: int | None = None  # the vectors the tree was last learned from at once
         self._pending: list = []  # (labels, copies) new or voted otherwise since the last tree
         self._stale = True  # every vote was taken again since the last tree
+        self.background = bool(background)
+        self._job: _Beside | None = None  # the tree being learned again at once (background)
+        self._revote: _Beside | None = None  # every vote at a new lag (background)
+        self._tree_n = 0  # the labels the tree so far was built with
         self._clf = None
         self._built = -1
         super().__init__(features, actions, task=task, parent=parent, provenance=provenance,
@@ -481,9 +571,11 @@ class PersonLearner(DemonstrationLearner):
         _ = self.estimated_lag
         return list(self._estimate[2]) if self.lag is None else []
 
-    def _vectors(self) -> np.ndarray:
-        """The labelled vectors at the lag the tree is built with."""
-        return np.ascontiguousarray(self._W[:self._n, self.estimated_lag if self._lags > 1 else 0])
+    def _vectors(self, lag: int | None = None) -> np.ndarray:
+        """The labelled vectors at ``lag`` (default: the lag estimated)."""
+        if lag is None:
+            lag = self.estimated_lag
+        return np.ascontiguousarray(self._W[:self._n, lag if self._lags > 1 else 0])
 
     def labelled(self) -> tuple[np.ndarray, list[str]]:
         """The labels as given, in order: per label its features at lags 0..max_lag (the scan
@@ -510,9 +602,12 @@ class PersonLearner(DemonstrationLearner):
         """The training set, votes brought up to date (``_Edited``): (rows, edited labels)."""
         if self.lag is None:
             self._estimating(all_at_once=not self._long(), step=True)
-        X = self._vectors()
         y = self._y[:self._n]
         lag = self.estimated_lag
+        if (self.background and self._edited is not None and self._edited.lag != lag
+                and self._long()):
+            lag = self._revoting(lag, y)
+        X = self._vectors(lag)
         if self._edited is None or self._edited.lag != lag or self._edited.n > len(X):
             self._edited = _Edited(lag, self.k, len(self.actions), self._edit)  # all again
         ed = self._edited
@@ -522,6 +617,28 @@ class PersonLearner(DemonstrationLearner):
         self._stale |= ed.fresh
         self._pending.append((ed.changed[ed.changed < ed.n], ed.changed[ed.changed >= ed.n] - ed.n))
         return ed.rows(), ed.labels
+
+    def _revoting(self, lag: int, y: np.ndarray) -> int:
+        """With ``background``, a new ``lag`` estimated: every vote at it taken beside, the
+        lag the tree was built with kept meanwhile; returns the lag to build with now (the
+        new one once its votes are done: every vote was taken again)."""
+        job = self._revote
+        if job is not None and job.lag != lag:
+            job = self._revote = None  # estimated otherwise since: that vote is dropped
+        if job is None:
+            X = self._vectors(lag)
+            self._revote = _Beside(_voted(lag, self.k, len(self.actions), self._edit, X,
+                                          self._copies(X), y.copy()), lag=lag)
+            return self._edited.lag
+        if not job.done():
+            return self._edited.lag
+        self._revote = None
+        if job.result is None:  # it failed: voted again here, at once
+            log.error("voting a person's labels at lag %d failed: %r", lag, job.error)
+            self._edited = None
+        else:
+            self._edited, self._stale = job.result, True
+        return lag
 
     def training_set(self) -> tuple[np.ndarray, np.ndarray]:
         """``(X, y)`` the tree is built from: the labelled vectors with their edited labels,
@@ -544,43 +661,110 @@ class PersonLearner(DemonstrationLearner):
         rule's ``extend_above`` vectors, the tree so far (a copy) extended with the vectors
         new or voted otherwise since (in ``passes`` orders shuffled with the seed), learned
         again from every vector once they grew by the alignment's ``regrow`` since it last
-        was (or every vote was taken again)."""
+        was (or every vote was taken again): at once, or with ``background`` beside
+        (``_live``)."""
         from rhbl import HypersphereClassifier
 
         names = np.array(self.actions.names)
         if self._n == 0:
             return HypersphereClassifier(**{"default_label": names[0], **self.tree_params})
         rows, labels = self._update()
-        ext, n = self.rule.extend_above, self._edited.n
-        todo = np.unique(np.concatenate([np.concatenate([x, n + q]) for x, q in self._pending]))
-        stale, self._stale, self._pending = self._stale, False, []
-        if (ext is not None and self._clf is not None and self._whole is not None
-                and not stale and len(labels) >= ext
-                and len(labels) < self._whole * (1.0 + self.rule.alignment.regrow)):
-            clf = copy.deepcopy(self._clf)  # (a tree handed out before stays as it was)
-            for order in self._orders(len(todo)) if len(todo) else []:
-                clf.partial_fit(rows[todo[order]], names[labels[todo[order]]])
-            return clf
-        clf = HypersphereClassifier(**{"default_label": names[0], **self.tree_params})
-        for order in self._orders(len(labels)):
-            clf.partial_fit(rows[order], names[labels[order]])
-        self._whole = len(labels)
+        ext = self.rule.extend_above
+        pending, stale, self._stale, self._pending = self._pending, self._stale, False, []
+        extending = (ext is not None and self._clf is not None and self._whole is not None
+                     and len(labels) >= ext)
+        if extending and self.background:
+            clf = self._live(rows, labels, pending, stale)
+        elif (extending and not stale
+              and len(labels) < self._whole * (1.0 + self.rule.alignment.regrow)):
+            clf = self._extended(copy.deepcopy(self._clf), rows, labels, pending)
+        else:
+            clf = HypersphereClassifier(**{"default_label": names[0], **self.tree_params})
+            for order in self._orders(len(labels)):
+                clf.partial_fit(rows[order], names[labels[order]])
+            self._whole = len(labels)
+        self._tree_n = self._edited.n
         return clf
+
+    def _extended(self, clf, rows: np.ndarray, labels: np.ndarray, pending: list):
+        """``clf`` extended with the ``pending`` (labels, copies) (their rows in ``rows``),
+        in the rule's ``passes`` orders."""
+        n = self._edited.n
+        todo = np.unique(np.concatenate([np.zeros(0, np.int64)]
+                                        + [np.concatenate([x, n + q]) for x, q in pending]))
+        names = np.array(self.actions.names)
+        for order in self._orders(len(todo)) if len(todo) else []:
+            clf.partial_fit(rows[todo[order]], names[labels[todo[order]]])
+        return clf
+
+    def _live(self, rows: np.ndarray, labels: np.ndarray, pending: list, stale: bool):
+        """A build with ``background``: the relearned tree once it is done (extended with what
+        came since it began), else the tree so far extended with ``pending``; a relearn begun
+        when the vectors grew by ``regrow`` since the last (or every vote was taken again: the
+        one under way is cancelled, and meanwhile only the new labels are added to the tree
+        of the old votes)."""
+        from rhbl import HypersphereClassifier
+
+        job, names = self._job, np.array(self.actions.names)
+        if stale:
+            n, c, old = self._edited.n, self.copies, self._tree_n
+            pending = [(np.arange(old, n), np.arange(old * c, n * c))]
+            if job is not None:
+                job.cancel()
+                job = self._job = None
+        if job is not None and job.done():
+            self._job = None
+            if job.result is None:  # it failed: the tree so far stays, relearned at the next
+                log.error("relearning the person's tree failed: %r", job.error)  # growth
+                self._whole = job.size
+                clf = copy.deepcopy(self._clf)
+            else:
+                clf, self._whole, pending = job.result, job.size, job.since + pending
+        else:
+            clf = copy.deepcopy(self._clf)  # (a tree handed out before stays as it was)
+            if job is not None:
+                job.since += pending
+        if self._job is None and (stale or self._whole is None or len(labels)
+                                  >= self._whole * (1.0 + self.rule.alignment.regrow)):
+            tree = {"default_label": names[0], **self.tree_params}
+            self._job = _Beside(_relearned(lambda: HypersphereClassifier(**tree), rows.copy(),
+                                           names[labels], self._orders(len(labels))),
+                                size=len(labels))
+        return self._extended(clf, rows, labels, pending)
+
+    @property
+    def relearning(self) -> bool:
+        """Work beside (``background``: the votes at a new lag, or the tree learned again) is
+        under way, or done and not taken yet."""
+        return self._job is not None or self._revote is not None
+
+    def wait_relearned(self, timeout: float | None = None) -> bool:
+        """Wait until the work beside under way (if any) is done; True when none is under way
+        now (the next build takes it; a new lag's votes taken begin a relearn)."""
+        return all(j is None or j.wait(timeout) for j in (self._revote, self._job))
+
+    def __getstate__(self) -> dict:  # a copy has nothing under way beside: it begins its own
+        state = dict(self.__dict__)
+        state["_job"] = state["_revote"] = None
+        return state
 
     def metadata(self) -> dict:
         meta = super().metadata()
-        meta["learning"] = {**self.rule.to_dict(), "estimated_lag": self.estimated_lag}
+        lag = (self._edited.lag if self.background and self._edited is not None
+               else self.estimated_lag)  # (a new lag's votes beside: the tree's lag)
+        meta["learning"] = {**self.rule.to_dict(), "estimated_lag": lag}
         return meta
 
     @classmethod
     def from_metadata(cls, meta: Mapping, features: FeatureSpec, actions: ActionSet,
-                      parent: str | None = None) -> PersonLearner:
+                      parent: str | None = None, background: bool = False) -> PersonLearner:
         """An empty learner by the rule ``meta`` records (a snapshot's or a journal header's:
         ``LearningRule.of``): its labels are learned again from the journal."""
         rule = LearningRule.of(meta)
         if not rule.person:
             raise ValueError(f"not a person's tree: learning rule {rule.name!r}")
-        return cls(features, actions, rule=rule, task=meta.get("task"), parent=parent)
+        return cls(features, actions, rule=rule, task=meta.get("task"), parent=parent,
+                   background=background)
 
     def compact(self, *args, **kw):
         raise ValueError("a PersonLearner's tree is rebuilt from its labels: compact the "

@@ -30,7 +30,7 @@ def test_it_prints_a_row_per_size_and_refuses_bad_sizes(bench, capsys):
     rows = [r.split("|") for r in capsys.readouterr().out.splitlines()
             if r.startswith("| 1") or r.startswith("| 2")]
     assert [r[1].strip() for r in rows] == ["120", "200"]
-    assert all(float(r[2]) > 0 and r[11].strip().endswith("x") for r in rows)
+    assert all(float(r[2]) > 0 and r[15].strip().endswith("x") for r in rows)
     for bad in (["--sizes", "10"], ["--sizes", "a,b"], ["--repeat", "0"]):
         with pytest.raises(SystemExit) as exc:
             bench.main(bad)

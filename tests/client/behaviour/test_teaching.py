@@ -1,5 +1,6 @@
 """Learning from a person: the reaction lag, the neighbours' vote, the PersonLearner."""
 
+import copy
 import dataclasses
 import types
 
@@ -322,6 +323,76 @@ def test_past_extend_above_the_tree_is_extended_and_learned_again_at_each_growth
     learner.observe_vectors(rng.uniform(0.1, 0.4, (40, 5)), ["fwd"] * 40)  # 460 >= 400 * 1.125
     _ = learner.classifier
     assert learner._whole == 460  # grown by an eighth: learned again at once
+
+
+def test_in_the_background_a_growth_points_label_is_in_the_tree_before_the_relearn_ends():
+    """``background`` (the live learner's): at a growth point the build extends the tree so far
+    at once (the new labels are in it) and the tree is learned again beside; the next build
+    after that ends takes it, extended with what came meanwhile: then the same tree as a
+    learner that relearned at once. A copy has no relearn under way."""
+    rng = np.random.default_rng(2)
+    rule = PERSON.replace(extend_above=0, lag=0)
+    live, once = (PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, rule=rule, k=5, copies=2,
+                                background=b) for b in (True, False))
+    base = rng.uniform(0.1, 0.4, (400, 5))
+    for learner in (live, once):
+        learner.observe_vectors(base, ["fwd"] * 400)
+    assert live.classifier.tree_.equal(once.classifier.tree_)  # the first tree: at once
+    assert not live.relearning
+    corner = rng.uniform(0.8, 0.9, (60, 5))  # grown by an eighth, a place nobody showed
+    for learner in (live, once):
+        learner.observe_vectors(corner, ["rot-left"] * 60)
+    grown = live.classifier
+    assert live.relearning and live._whole == 1200  # (vectors: a label and its 2 copies)
+    assert set(map(str, grown.predict(corner))) == {"rot-left"}  # extended: the labels are in
+    assert copy.deepcopy(live)._job is None
+    assert live.wait_relearned(60)
+    last = rng.uniform(0.1, 0.4, (3, 5))
+    for learner in (live, once):
+        _ = learner.classifier  # (once: learned again at once here)
+        learner.observe_vectors(last, ["fwd-left"] * 3)
+    taken = live.classifier
+    assert not live.relearning and live._whole == once._whole == 1380
+    assert taken.tree_.equal(once.classifier.tree_)
+
+
+def test_in_the_background_a_new_lags_votes_are_taken_beside_and_the_old_lag_builds_meanwhile():
+    """``background``: when the lag estimated again differs, every vote at it is taken in a
+    thread of its own while the builds go on at the lag the tree was built with (the
+    snapshot's ``estimated_lag`` says so); once taken, the same edited training set as a
+    learner that voted at once, and the tree is learned again beside."""
+    W2, y2 = _delayed_labels(2, n=400)
+    W5, y5 = _delayed_labels(5, n=2000, seed=1)
+    rule = PERSON.replace(extend_above=0)
+    live, once = (PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, rule=rule, k=5, copies=1,
+                                background=b) for b in (True, False))
+
+    def give(W, y) -> None:
+        for learner in (live, once):
+            for w, label in zip(W, y, strict=True):
+                learner.observe_vector(w[0], NAMES[label], earlier=w[1:])
+
+    give(W2, y2)
+    _ = live.classifier
+    assert live._edited.lag == 2 and not live.relearning
+    give(W5[:1000], y5[:1000])
+    for t in range(1000, 2000):  # a label a build, until the lag estimated is another
+        give(W5[t:t + 1], y5[t:t + 1])
+        _ = live.classifier
+        if live._revote is not None:
+            break
+    new = live.estimated_lag
+    assert new > 2 and live._edited.lag == 2  # voted beside: lag 2 meanwhile
+    assert live.metadata()["learning"]["estimated_lag"] == 2
+    give(W5[t + 1:t + 3], y5[t + 1:t + 3])
+    _ = live.classifier  # (a build while it votes, maybe)
+    assert live.wait_relearned(60)
+    give(W5[t + 3:t + 4], y5[t + 3:t + 4])
+    _ = live.classifier  # the votes taken: a relearn begun beside
+    assert live._edited.lag == new and live._job is not None
+    assert live.metadata()["learning"]["estimated_lag"] == new
+    a, b = live.training_set(), once.training_set()
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
 
 
 def test_a_long_sessions_lag_is_estimated_again_one_lag_a_build():
