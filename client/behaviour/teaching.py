@@ -43,6 +43,7 @@ Pure (no zenoh, no I/O): the processes and the in-process study run this same co
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import logging
 import math
@@ -354,10 +355,8 @@ class _Beside:
         self._thread.start()
 
     def _run(self, work) -> None:
-        try:
+        with contextlib.suppress(AttributeError, OSError):  # not Linux: the process's
             os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), NICE)
-        except (AttributeError, OSError):  # not Linux: the thread runs at the process's
-            pass
         try:
             self.result = work(self._cancelled)
         except Exception as exc:  # noqa: BLE001 - reported where it is taken
