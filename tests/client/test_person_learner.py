@@ -141,6 +141,7 @@ def test_a_persons_lineage_is_rebuilt_from_its_whole_journal(tmp_path):
     out = tmp_path / "t.rhbl"
     core = Lineage(out, features="wall", teacher="person", lag=2)
     assert core.person and core.lag == 2 and isinstance(core.learner, PersonLearner)
+    assert core.learner.background  # the live learner relearns beside (docs/teaching.md)
     _feed(core, 60, seed=0)
     core.snapshot()
     _feed(core, 30, seed=1, start_id=60)
@@ -149,7 +150,7 @@ def test_a_persons_lineage_is_rebuilt_from_its_whole_journal(tmp_path):
     assert meta["learning"]["rule"] == "person" and meta["learning"]["lag"] == 2
     # "crash": the lineage keeps its rule (the default teacher is the script) and its lag
     again = Lineage(out, features="wall")
-    assert again.person and again.lag == 2
+    assert again.person and again.lag == 2 and again.learner.background
     assert again.replayed == 90 and again.applied == 90 and len(again.labels) == 90
     ref = Lineage(tmp_path / "ref.rhbl", features="wall", teacher="person", lag=2)
     _feed(ref, 60, seed=0)
