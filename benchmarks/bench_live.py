@@ -182,37 +182,9 @@ def main(argv=None) -> int:
         batch_s = timed(lambda p=probe: p.classifier)[0]
         del probe
         growth = beside = meanwhile = at_once = new_lag = "-"
-        if live._long():  # a build at a growth point: one lag's agreement of the estimate
-            probe = copy.deepcopy(live)  # begun, and the tree learned again at once: beside
-            probe._whole, probe._work = 1, (have, [])  # (the live learner's) or in its place
-            sync = copy.deepcopy(probe)
-            sync.background = False
-            feed(probe, W, y, have, have + 1)
-            growth = f"{timed(lambda p=probe: p.classifier)[0]:.3f}"
-            t0, waits, k = time.perf_counter(), [], have + 1
-            while probe.relearning and k + args.batch <= have + 1 + MEANWHILE:
-                # labels meanwhile as they come: a snapshot's (--batch) every SNAPSHOT_EVERY s
-                if probe.wait_relearned(max(0.0, t0 + SNAPSHOT_EVERY * (len(waits) + 1)
-                                            - time.perf_counter())):
-                    break
-                feed(probe, W, y, k, k + args.batch)
-                k += args.batch
-                waits.append(timed(lambda p=probe: p.classifier)[0])
-            probe.wait_relearned()
-            beside = f"{time.perf_counter() - t0:.1f}"
-            feed(probe, W, y, k, k + args.batch)
-            waits.append(timed(lambda p=probe: p.classifier)[0])  # the relearned tree taken
-            meanwhile = f"{max(waits):.3f} ({len(waits)})"
-            feed(sync, W, y, have, have + 1)
-            at_once = f"{timed(lambda p=sync: p.classifier)[0]:.3f}"
-            del probe, sync
-            probe = copy.deepcopy(live)  # the lag estimated again is another: voted beside
-            n0, lag, agreement = probe._estimate
-            probe._estimate = (n0, (lag + 1) % (PERSON.alignment.max_lag + 1), agreement)
-            feed(probe, W, y, have, have + 1)
-            new_lag = f"{timed(lambda p=probe: p.classifier)[0]:.3f}"
-            probe.wait_relearned()  # (not beside the figures below)
-            del probe
+        if live._long():
+            growth, meanwhile, beside, at_once = growth_point(live, W, y, have, args.batch)
+            new_lag = another_lag(live, W, y, have)
         Wn, yn = live._W[:have], live._y[:have]
         lag_s = timed(lambda Wn=Wn, yn=yn: estimate_lag(Wn, yn, PERSON.editing.k,
                                                         len(DEFAULT_ACTIONS)))[0]
@@ -228,6 +200,47 @@ def main(argv=None) -> int:
               f"{lag_s:.3f} | {whole_s:.3f} | {old} | {ratio} | {nodes} | {rss_mb():.0f} | "
               f"{learner_mb(live):.1f} |", flush=True)
     return 0
+
+
+def growth_point(live: PersonLearner, W, y, have: int, batch: int) -> tuple[str, ...]:
+    """A build at a growth point of (a copy of) ``live``: one lag's agreement of the estimate
+    begun, and the tree learned again from every vector beside (the live learner's): the
+    label's seconds; then ``batch`` labels every ``SNAPSHOT_EVERY`` s until the relearned tree
+    is taken: their worst build (and how many); how long the relearn took; and the label with
+    the tree learned again in its place (as before). The figures as printed."""
+    probe = copy.deepcopy(live)
+    probe._whole, probe._work = 1, (have, [])
+    sync = copy.deepcopy(probe)
+    sync.background = False
+    feed(probe, W, y, have, have + 1)
+    growth = timed(lambda: probe.classifier)[0]
+    t0, waits, k = time.perf_counter(), [], have + 1
+    while probe.relearning and k + batch <= have + 1 + MEANWHILE:
+        if probe.wait_relearned(max(0.0, t0 + SNAPSHOT_EVERY * (len(waits) + 1)
+                                    - time.perf_counter())):
+            break
+        feed(probe, W, y, k, k + batch)
+        k += batch
+        waits.append(timed(lambda: probe.classifier)[0])
+    probe.wait_relearned()
+    beside = time.perf_counter() - t0
+    feed(probe, W, y, k, k + batch)
+    waits.append(timed(lambda: probe.classifier)[0])  # the relearned tree taken
+    feed(sync, W, y, have, have + 1)
+    at_once = timed(lambda: sync.classifier)[0]
+    return f"{growth:.3f}", f"{max(waits):.3f} ({len(waits)})", f"{beside:.1f}", f"{at_once:.3f}"
+
+
+def another_lag(live: PersonLearner, W, y, have: int) -> str:
+    """A label's build in (a copy of) ``live`` when the lag estimated again is another: every
+    vote at it taken beside, the old lag's tree extended meanwhile (seconds, as printed)."""
+    probe = copy.deepcopy(live)
+    n0, lag, agreement = probe._estimate
+    probe._estimate = (n0, (lag + 1) % (PERSON.alignment.max_lag + 1), agreement)
+    feed(probe, W, y, have, have + 1)
+    seconds = timed(lambda: probe.classifier)[0]
+    probe.wait_relearned()  # (not beside the figures after it)
+    return f"{seconds:.3f}"
 
 
 def tree_only(learner: PersonLearner) -> float:

@@ -26,11 +26,17 @@ def test_the_search_of_before_finds_the_kd_trees_neighbours(bench):
 
 
 def test_it_prints_a_row_per_size_and_refuses_bad_sizes(bench, capsys):
-    assert bench.main(["--sizes", "120,200", "--repeat", "2", "--batch", "3"]) == 0
+    assert bench.main(["--sizes", "120,2000", "--repeat", "2", "--batch", "3",
+                       "--old-max", "200"]) == 0
     rows = [r.split("|") for r in capsys.readouterr().out.splitlines()
             if r.startswith("| 1") or r.startswith("| 2")]
-    assert [r[1].strip() for r in rows] == ["120", "200"]
-    assert all(float(r[2]) > 0 and r[15].strip().endswith("x") for r in rows)
+    assert [r[1].strip() for r in rows] == ["120", "2000"]
+    assert all(float(r[2]) > 0 for r in rows) and rows[0][15].strip().endswith("x")
+    short, long = ([c.strip() for c in r[7:12]] for r in rows)
+    assert short == ["-"] * 5  # below extend_above: no growth point to time
+    # past it: the growth point's label, the labels while it relearned (worst, builds), the
+    # relearn's seconds, the label relearned in its place, a new lag's label
+    assert all(float(c.split()[0]) >= 0 for c in long) and long[1].endswith(")")
     for bad in (["--sizes", "10"], ["--sizes", "a,b"], ["--repeat", "0"]):
         with pytest.raises(SystemExit) as exc:
             bench.main(bad)
