@@ -49,6 +49,7 @@ import logging
 import math
 import os
 import threading
+import time
 from collections.abc import Callable, Mapping
 
 import numpy as np
@@ -719,6 +720,9 @@ class PersonLearner(DemonstrationLearner):
                 clf = copy.deepcopy(self._clf)
             else:
                 clf, self._whole, pending = job.result, job.size, job.since + pending
+                log.info("took the tree learned again beside from %d vectors (%.1f s), "
+                         "extended with %d changes since", job.size,
+                         time.monotonic() - job.began, sum(len(x) + len(q) for x, q in pending))
         else:
             clf = copy.deepcopy(self._clf)  # (a tree handed out before stays as it was)
             if job is not None:
@@ -728,7 +732,7 @@ class PersonLearner(DemonstrationLearner):
             tree = {"default_label": names[0], **self.tree_params}
             self._job = _Beside(_relearned(lambda: HypersphereClassifier(**tree), rows.copy(),
                                            names[labels], self._orders(len(labels))),
-                                size=len(labels))
+                                size=len(labels), began=time.monotonic())
         return self._extended(clf, rows, labels, pending)
 
     @property
