@@ -104,3 +104,14 @@ def test_bad_flags_exit_2_before_opening_a_session(argv, said, tmp_path):
                        cwd=tmp_path,
                        timeout=60, env={**os.environ, "RHBL_LOG_LEVEL": "INFO"})
     assert r.returncode == 2 and said in r.stderr, r.stderr
+
+
+def test_home_before_the_world_is_known_says_so_and_how_long_to_wait():
+    """Home (or a start pose) before the simulator answered: the world is not known yet,
+    try again once the map is drawn; a world without start poses says that instead."""
+    from client.roles.console.tutor import Robot, _no_starts
+
+    r = Robot("r0")
+    assert "world is not known yet" in _no_starts(r) and "map is drawn" in _no_starts(r)
+    r.world = "{}"
+    assert _no_starts(r) == "the world gives no start poses"

@@ -43,6 +43,10 @@ def test_a_person_teaches_by_hand_with_one_command(browser, tmp_path):
         url = next(ln.split(" ", 1)[1] for ln in demo.lines if ln.startswith("console: "))
         _open(browser, url)
         _until(browser, lambda d: _attr(d, "learner", "up") == "1", 30, "a learner is up")
+        # Home once the map is drawn, as a person does (the demo's simulator may still be
+        # starting when the page opens: Home then says the world is not known yet)
+        _until(browser, lambda d: d.execute_script("return window.rhbl.view().starts.length"),
+               60, "the world's start poses on the page")
         _press(browser, "HOME")
         _until(browser, lambda d: "reset" in d.find_element("id", "info").text, 30, "reset")
         _keys(browser, ("down", "ARROW_UP"))

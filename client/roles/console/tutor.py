@@ -440,8 +440,7 @@ class Tutor:
             i = msg["start"]
             if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < len(r.starts):
                 return (f"'start' must be the number of a start pose of the world, 0.."
-                        f"{len(r.starts) - 1}, got {i!r}" if r.starts
-                        else "the world gives no start poses (no simulator?)")
+                        f"{len(r.starts) - 1}, got {i!r}" if r.starts else _no_starts(r))
             self._place(page, r, r.starts[i], f"start pose {i + 1}")
             return None
         pose = msg.get("pose")
@@ -458,7 +457,7 @@ class Tutor:
         if why:
             return why
         if not r.starts:
-            return "the world gives no start poses (no simulator?)"
+            return _no_starts(r)
         self._stop(r, "the scene is reset")
         r.teaching.stop()
         r.trouble.clear()
@@ -492,3 +491,11 @@ class Tutor:
 
     def _info(self, page: Page, text: str) -> None:
         page.push("info", json.dumps({"t": "info", "info": text}))
+
+
+def _no_starts(r: Robot) -> str:
+    """Why robot ``r`` cannot be put at a start pose: its world not known yet, or none given."""
+    if r.world is None:
+        return (f"robot {r.name}'s world is not known yet (its simulator has not answered; it "
+                f"is asked every few seconds): try again when the map is drawn")
+    return "the world gives no start poses"
