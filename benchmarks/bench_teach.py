@@ -703,9 +703,7 @@ def _evaluate_again(args) -> int:
     return 0
 
 
-def main(argv=None) -> int:
-    import people
-
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--behaviour", default="wall-following",
                     help="the behaviours taught: shipped names or files, comma-separated, or "
@@ -763,67 +761,52 @@ def main(argv=None) -> int:
                     help="no session: evaluate the trees of the runs a --json file holds again "
                          "with this checkout's rhbl evaluate (--world, --unseen, --eval-*), "
                          "print their table and, with --json, write it")
-    args = ap.parse_args(argv)
-    full = {"seeds": "0,1,2", "demo": MAX_DEMO, "correct": MAX_CORRECT,
-            "learners": "default,literal", "eval_episodes": None}
-    for k, v in (QUICK if args.quick else full).items():
-        if getattr(args, k) is None:
-            setattr(args, k, v)
-    if args.evaluate_again:
-        return _evaluate_again(args)
-    if args.table:
-        try:
-            runs = json.loads(Path(args.table).read_text())
-            if "--people" in (argv if argv is not None else sys.argv):
-                keep = set(_names(args.people, people))
-                runs = [r for r in runs if r["person"] in keep]
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            print(f"bench_teach: error: --table {args.table}: {exc}", file=sys.stderr)
-            return 2
-        print(table(runs))
-        return 0
-    try:
-        behaviours = _behaviours(args.behaviour)
-        names = _names(args.people, people)
-        for b in behaviours:  # every model can teach every behaviour asked for
-            for n in names:
-                people.person(n, b)
-        guards = tuple(x for x in args.guards.split(",") if x)
-        if not guards or any(g not in ("alone", "guard", "default") for g in guards):
-            raise ValueError(f"--guards: alone, guard or default, comma-separated, got "
-                             f"{args.guards!r}")
-        seeds = parse_seeds(args.seeds)
-        if not 0 < args.demo <= LIMIT_DEMO or not 0 < args.correct <= LIMIT_CORRECT:
-            raise ValueError(f"--demo must be in (0, {LIMIT_DEMO:g}] and --correct in "
-                             f"(0, {LIMIT_CORRECT:g}] seconds")
-        learners = [x for x in args.learners.split(",") if x]
-        if learners not in (["default"], ["default", "literal"]):
-            raise ValueError(f"--learners: default or default,literal (the literal baseline "
-                             f"learns the default run's labels), got {args.learners!r}")
-        if args.jobs not in (1, 2):
-            raise ValueError(f"--jobs must be 1 or 2, got {args.jobs}")
-        if (args.world or args.unseen) and len(behaviours) > 1:
-            raise ValueError("--world and --unseen name one behaviour's worlds: give one "
-                             "--behaviour with them")
-        unseen = None if args.unseen is None else [x for x in args.unseen.split(",") if x]
-        from lab.harness import resolve_world
+    return ap
 
-        for w in ([args.world] if args.world else []) + (unseen or []):
-            resolve_world(w)
-        if args.eval_episodes is not None and args.eval_episodes < 1:
-            raise ValueError("--eval-episodes must be >= 1")
-        if args.eval_seconds is not None and not args.eval_seconds > 0:
-            raise ValueError("--eval-seconds must be > 0")
-    except Exception as exc:  # noqa: BLE001 - one line, exit 2
-        print(f"bench_teach: error: {exc}", file=sys.stderr)
-        return 2
-    top = Path(args.workdir) if args.workdir else Path(tempfile.mkdtemp(prefix="rhbl-bench-teach-"))
-    literal = args.literal_args if "literal" in learners else None
-    runs_asked = [(b, n, s) for b in behaviours for n in names for s in seeds]
-    print(f"bench_teach: {len(behaviours)} behaviours x {len(names)} people x {len(seeds)} "
-          f"seeds, {args.jobs} at a time, {args.demo:g} s demonstrating + {args.correct:g} s "
-          f"correcting each, evaluated {' and '.join(guards)}"
-          f"{', with the literal baseline' if literal else ''}; logs in {top}", flush=True)
+
+def _checked(args, people) -> tuple:
+    """The sessions' plan from ``args``: (behaviours, people's names, guards, seeds, learners,
+    held-out worlds or None); raises ValueError (or what resolving a world raises) naming the
+    option that is wrong."""
+    behaviours = _behaviours(args.behaviour)
+    names = _names(args.people, people)
+    for b in behaviours:  # every model can teach every behaviour asked for
+        for n in names:
+            people.person(n, b)
+    guards = tuple(x for x in args.guards.split(",") if x)
+    if not guards or any(g not in ("alone", "guard", "default") for g in guards):
+        raise ValueError(f"--guards: alone, guard or default, comma-separated, got "
+                         f"{args.guards!r}")
+    seeds = parse_seeds(args.seeds)
+    if not 0 < args.demo <= LIMIT_DEMO or not 0 < args.correct <= LIMIT_CORRECT:
+        raise ValueError(f"--demo must be in (0, {LIMIT_DEMO:g}] and --correct in "
+                         f"(0, {LIMIT_CORRECT:g}] seconds")
+    learners = [x for x in args.learners.split(",") if x]
+    if learners not in (["default"], ["default", "literal"]):
+        raise ValueError(f"--learners: default or default,literal (the literal baseline "
+                         f"learns the default run's labels), got {args.learners!r}")
+    if args.jobs not in (1, 2):
+        raise ValueError(f"--jobs must be 1 or 2, got {args.jobs}")
+    if (args.world or args.unseen) and len(behaviours) > 1:
+        raise ValueError("--world and --unseen name one behaviour's worlds: give one "
+                         "--behaviour with them")
+    unseen = None if args.unseen is None else [x for x in args.unseen.split(",") if x]
+    from lab.harness import resolve_world
+
+    for w in ([args.world] if args.world else []) + (unseen or []):
+        resolve_world(w)
+    if args.eval_episodes is not None and args.eval_episodes < 1:
+        raise ValueError("--eval-episodes must be >= 1")
+    if args.eval_seconds is not None and not args.eval_seconds > 0:
+        raise ValueError("--eval-seconds must be > 0")
+    return behaviours, names, guards, seeds, learners, unseen
+
+
+def _teach_all(args, runs_asked: list, guards: tuple, literal: str | None, unseen, top: Path
+               ) -> list[dict]:
+    """Every session of ``runs_asked`` ((behaviour, person, seed)), ``args.jobs`` at a time,
+    each evaluated (``guards``; the literal baseline's tree too when ``literal``): every run's
+    figures, in the order asked, written to ``--json`` as they come."""
     results: list[dict] = []
     lock = threading.Lock()
 
@@ -886,6 +869,45 @@ def main(argv=None) -> int:
     results.sort(key=lambda r: (order.get((r.get("behaviour", "wall-following"), r["person"],
                                            r["seed"]), 0), r["learner"]))
     save()
+    return results
+
+
+def main(argv=None) -> int:
+    import people
+
+    ap = _parser()
+    args = ap.parse_args(argv)
+    full = {"seeds": "0,1,2", "demo": MAX_DEMO, "correct": MAX_CORRECT,
+            "learners": "default,literal", "eval_episodes": None}
+    for k, v in (QUICK if args.quick else full).items():
+        if getattr(args, k) is None:
+            setattr(args, k, v)
+    if args.evaluate_again:
+        return _evaluate_again(args)
+    if args.table:
+        try:
+            runs = json.loads(Path(args.table).read_text())
+            if "--people" in (argv if argv is not None else sys.argv):
+                keep = set(_names(args.people, people))
+                runs = [r for r in runs if r["person"] in keep]
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            print(f"bench_teach: error: --table {args.table}: {exc}", file=sys.stderr)
+            return 2
+        print(table(runs))
+        return 0
+    try:
+        behaviours, names, guards, seeds, learners, unseen = _checked(args, people)
+    except Exception as exc:  # noqa: BLE001 - one line, exit 2
+        print(f"bench_teach: error: {exc}", file=sys.stderr)
+        return 2
+    top = Path(args.workdir) if args.workdir else Path(tempfile.mkdtemp(prefix="rhbl-bench-teach-"))
+    literal = args.literal_args if "literal" in learners else None
+    runs_asked = [(b, n, s) for b in behaviours for n in names for s in seeds]
+    print(f"bench_teach: {len(behaviours)} behaviours x {len(names)} people x {len(seeds)} "
+          f"seeds, {args.jobs} at a time, {args.demo:g} s demonstrating + {args.correct:g} s "
+          f"correcting each, evaluated {' and '.join(guards)}"
+          f"{', with the literal baseline' if literal else ''}; logs in {top}", flush=True)
+    results = _teach_all(args, runs_asked, guards, literal, unseen, top)
     print(table(results))
     return 0 if all("error" not in r for r in results) else 1
 
