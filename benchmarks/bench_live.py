@@ -156,7 +156,7 @@ def main(argv=None) -> int:
           f"sided vote, {PERSON.editing.copies} jittered copies a label, lag estimated over "
           f"0..{PERSON.alignment.max_lag}), seconds:")
     print("| labels | a new label: median | worst | median CPU | tree learned at once | "
-          f"{args.batch} new labels | a growth point's label | {args.batch} labels every 2 s while it "
+          f"{args.batch} new labels | a growth point's label | {args.batch} labels every {SNAPSHOT_EVERY:g} s while it "
           "relearns: worst (builds) | relearn beside | a growth point's label, relearned in its place | "
           "a new lag's label | "
           "lag estimate | whole rebuild (kd-tree) | "

@@ -98,6 +98,8 @@ def answered_scan(shown: int, scans: Mapping[int, object], lag: int = PERSON.ali
 
 # rows of a neighbours' search at least this many: searched by every core (scipy's workers)
 PARALLEL_QUERY = 20000
+# rows a new label's distances are computed for at once (``_nearer``: 8192 x 64 fit the cache)
+ROW_BLOCK = 8192
 
 
 def _kdtree(X: np.ndarray):
@@ -268,9 +270,10 @@ def _nearer(rows: np.ndarray, radius: np.ndarray, new: np.ndarray) -> np.ndarray
     for s in range(0, len(new), 64):
         part = new[s:s + 64]
         pp = np.einsum("ij,ij->i", part, part)
-        for b in range(0, len(rows), 8192):
-            d2 = rr[b:b + 8192, None] + pp[None, :] - 2.0 * rows[b:b + 8192] @ part.T
-            near[b:b + 8192] |= (d2 <= r2[b:b + 8192, None]).any(axis=1)
+        for b in range(0, len(rows), ROW_BLOCK):
+            block = slice(b, b + ROW_BLOCK)
+            d2 = rr[block, None] + pp[None, :] - 2.0 * rows[block] @ part.T
+            near[block] |= (d2 <= r2[block, None]).any(axis=1)
     return near
 
 
@@ -342,11 +345,11 @@ class _Edited:
 class _Beside:
     """``work(cancelled)`` run in a thread of its own (``PersonLearner``'s ``background``): its
     ``result``, or the ``error`` it raised; ``cancel`` sets the event it is given. ``info``:
-    what the caller keeps with it (a relearn's ``size``; ``since``, the (labels, copies) new or
-    voted otherwise meanwhile, which its tree is extended with when it is taken)."""
+    what the caller keeps with it (a vote's ``lag``; a relearn's ``size``, when it ``began``
+    and ``since``, the (labels, copies) new or voted otherwise meanwhile, which its tree is
+    extended with when it is taken)."""
 
     def __init__(self, work: Callable[[threading.Event], object], **info):
-        self.since: list = []
         self.result = None
         self.error: BaseException | None = None
         self.__dict__.update(info)
@@ -732,7 +735,7 @@ class PersonLearner(DemonstrationLearner):
             tree = {"default_label": names[0], **self.tree_params}
             self._job = _Beside(_relearned(lambda: HypersphereClassifier(**tree), rows.copy(),
                                            names[labels], self._orders(len(labels))),
-                                size=len(labels), began=time.monotonic())
+                                size=len(labels), began=time.monotonic(), since=[])
         return self._extended(clf, rows, labels, pending)
 
     @property
