@@ -224,6 +224,60 @@ def _labels(page: Page) -> dict:
                                                           "withdrawn")}
 
 
+def _start_children(srv, b, work: Path, out: Path, extra: list[str], record: bool,
+                    children: list, result: dict):
+    """The session's processes beside the server: its recorder (``record``), its learner and
+    its console, each appended to ``children`` as it starts: ``(learner, recorder or None,
+    console)``."""
+    from browser import ConsoleProcess
+
+    from client.behaviour.given import as_argument
+    from lab.children import Child, rhbl_argv
+
+    rec = None
+    if record:  # every message of the session, before any label can be given
+        rec = Child("recorder", rhbl_argv("record", "--out", str(work / "session.mcap"),
+                                          "--connect", srv.endpoint), work, cwd=ROOT,
+                    stop_signal=signal.SIGINT, stop_timeout=60.0).start()
+        children.append(rec)
+        if not rec.wait_for_line("recording ", 60):
+            raise RuntimeError(f"the recorder did not start:\n{rec.output()[-2000:]}")
+        result["recording"] = str(work / "session.mcap")
+    lrn = Child("learner", rhbl_argv("learner", "--behaviour", as_argument(b), "--out", str(out),
+                                     "--snapshot-every", "1", "--stats",
+                                     str(work / "learner.json"), "--connect", srv.endpoint,
+                                     *extra), work, cwd=ROOT, stop_signal=signal.SIGINT,
+                stop_timeout=60.0).start()
+    children.append(lrn)
+    console = ConsoleProcess(srv.endpoint, "--stats", str(work / "console.json"),
+                             "--behaviour", as_argument(b))
+    children.append(console)
+    return lrn, rec, console
+
+
+def _correcting(page: Page, person, people, srv, b, work: Path, correct: float, children: list,
+                result: dict, log) -> None:
+    """The correcting part of a session: the controller drives the learner's tree and the
+    person corrects it for ``correct`` seconds; what they did and the page's marks go in
+    ``result``."""
+    from lab.children import Child, rhbl_argv
+
+    again = ["--goals-again"] if b.goals is not None else []
+    ctl = Child("controller", rhbl_argv("controller", "--from-learner", "--follow", *again,
+                                        "--connect", srv.endpoint), work, cwd=ROOT,
+                stop_signal=signal.SIGINT, stop_timeout=30.0).start()
+    children.append(ctl)
+    page.press("c")  # correct mode
+    page.until(lambda p: (p.view_raw() or {}).get("driver", "").startswith("controller"),
+               60, "the controller drives the learner's tree")
+    log(f"  {result['person']} seed {result['seed']}: correcting {correct:g} s")
+    result["correct"] = teach(page, person, people, correct, "correct")
+    result["loop_marks"] = int(page.data("trouble", "loops") or 0)
+    result["collision_marks"] = int(page.data("trouble", "collisions") or 0)
+    result["agreement"] = page.data("agreement", "value")
+    ctl.stop()
+
+
 def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
               behaviour: str = "wall-following", record: bool = False, learner_args: str = "",
               world: str | None = None, workdir: Path | None = None, log=print) -> dict:
@@ -233,11 +287,10 @@ def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
     record`` of the session too (``recording``), for the literal baseline (``literal_run``)."""
     import people
     import zenoh  # noqa: F401 - fail early without it
-    from browser import ConsoleProcess, chromium, close_chromium
+    from browser import chromium, close_chromium
 
-    from client.behaviour.given import as_argument
     from lab.behaviours import get
-    from lab.children import Child, rhbl_argv, stop_all
+    from lab.children import stop_all
     from tests.conftest import _server_factory
 
     b = get(behaviour)
@@ -255,23 +308,7 @@ def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
     t_start = time.monotonic()
     try:
         srv = _server_factory(started)(world)
-        if record:  # every message of the session, before any label can be given
-            rec = Child("recorder", rhbl_argv("record", "--out", str(work / "session.mcap"),
-                                              "--connect", srv.endpoint), work, cwd=ROOT,
-                        stop_signal=signal.SIGINT, stop_timeout=60.0).start()
-            children.append(rec)
-            if not rec.wait_for_line("recording ", 60):
-                raise RuntimeError(f"the recorder did not start:\n{rec.output()[-2000:]}")
-            result["recording"] = str(work / "session.mcap")
-        lrn = Child("learner", rhbl_argv("learner", "--behaviour", as_argument(b), "--out", str(out),
-                                         "--snapshot-every", "1", "--stats",
-                                         str(work / "learner.json"), "--connect", srv.endpoint,
-                                         *extra), work, cwd=ROOT, stop_signal=signal.SIGINT,
-                    stop_timeout=60.0).start()
-        children.append(lrn)
-        console = ConsoleProcess(srv.endpoint, "--stats", str(work / "console.json"),
-                                 "--behaviour", as_argument(b))
-        children.append(console)
+        lrn, rec, console = _start_children(srv, b, work, out, extra, record, children, result)
         url = console.wait_url()
         browser = chromium()
         page = Page(browser, url)
@@ -282,20 +319,7 @@ def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
         log(f"  {person_name} seed {seed}: demonstrating {demo:g} s")
         result["demonstrate"] = teach(page, person, people, demo, "demonstrate")
         result["labels_demonstrated"] = _labels(page)["given"]
-        again = ["--goals-again"] if b.goals is not None else []
-        ctl = Child("controller", rhbl_argv("controller", "--from-learner", "--follow", *again,
-                                            "--connect", srv.endpoint), work, cwd=ROOT,
-                    stop_signal=signal.SIGINT, stop_timeout=30.0).start()
-        children.append(ctl)
-        page.press("c")  # correct mode
-        page.until(lambda p: (p.view_raw() or {}).get("driver", "").startswith("controller"),
-                   60, "the controller drives the learner's tree")
-        log(f"  {person_name} seed {seed}: correcting {correct:g} s")
-        result["correct"] = teach(page, person, people, correct, "correct")
-        result["loop_marks"] = int(page.data("trouble", "loops") or 0)
-        result["collision_marks"] = int(page.data("trouble", "collisions") or 0)
-        result["agreement"] = page.data("agreement", "value")
-        ctl.stop()
+        _correcting(page, person, people, srv, b, work, correct, children, result, log)
         page.press("t")
         t_ack = time.monotonic()  # a learner behind its teacher catches up now: how long
         page.until(lambda p: _labels(p)["waiting"] == 0, 600, "every label acknowledged")
@@ -305,7 +329,7 @@ def teach_one(person_name: str, seed: int, demo: float, correct: float, *,
         rc = lrn.stop()
         if rc != 0:
             raise RuntimeError(f"the learner exited {rc}:\n{lrn.output()[-2000:]}")
-        if record and (rc := rec.stop()) != 0:
+        if rec is not None and (rc := rec.stop()) != 0:
             raise RuntimeError(f"the recorder exited {rc}:\n{rec.output()[-2000:]}")
     finally:
         try:
