@@ -100,9 +100,10 @@ def parse(argv: list[str]) -> tuple[str, argparse.Namespace]:
     top = _top_parser().parse_args(argv[:1] if argv and not argv[0].startswith("-") else argv)
     parser = build_parser(top.command)
     args = parser.parse_args(argv[1:])
-    args._outputs = [(a.option_strings[-1] if a.option_strings else a.dest, v)
-                     for a in parser._actions if getattr(a.type, "kind", "") == "output"
-                     for v in _values(getattr(args, a.dest, None))]
+    args._outputs, args._inputs = ([(a.option_strings[-1] if a.option_strings else a.dest, v)
+                                    for a in parser._actions if getattr(a.type, "kind", "") == kind
+                                    for v in _values(getattr(args, a.dest, None))]
+                                   for kind in ("output", "input"))
     return top.command, args
 
 
@@ -114,10 +115,15 @@ def _values(value) -> list[str]:
 
 def prepare_outputs(args: argparse.Namespace) -> None:
     """Make the folders of the output files given (``process.files``; FileRuleError, a
-    ValueError, when one cannot be made: /proc/nope passes the parse-time check as root)."""
+    ValueError, when one cannot be made: /proc/nope passes the parse-time check as root);
+    ValueError when an output is the very file an input option names (``--tree t --out t``)."""
     from process import files
 
     for option, path in getattr(args, "_outputs", []):
+        for given, read in getattr(args, "_inputs", []):  # never written over what it reads
+            if os.path.exists(path) and os.path.samefile(path, read):
+                raise ValueError(f"{option} {path}: is the file {given} reads; give another "
+                                 f"file (rhbl writes nothing over its own input)")
         files.check_output(path, option, make=True)
 
 

@@ -69,6 +69,30 @@ def test_bad_input_is_one_clear_line_not_a_traceback(tmp_path, argv, needle):
     assert needle in proc.stderr
 
 
+@pytest.mark.parametrize(
+    ("argv", "option", "given"),
+    [
+        (["refine", "--behaviour", "wall-following", "--tree", "{t}", "--out", "{t}"], "--out",
+         "--tree"),
+        (["compact", "--tree", "{t}", "--out", "{link}"], "--out", "--tree"),
+        (["evaluate", "--world", "room", "--tree", "{t}", "--json", "{t}"], "--json", "--tree"),
+        (["train", "--world", "room", "--resume", "{t}", "--out", "{link}"], "--out", "--resume"),
+        (["learner", "--resume", "{t}", "--out", "{t}"], "--out", "--resume"),
+    ],
+)
+def test_no_command_writes_over_a_file_it_reads(tmp_path, capsys, argv, option, given):
+    """``--tree t --out t`` (or a link to it) would replace the taught tree with what was made
+    from it: refused before any work, the file untouched."""
+    tree = tmp_path / "t.rhbl"
+    tree.write_bytes(b"a taught tree")
+    (tmp_path / "link.rhbl").symlink_to(tree)
+    argv = [a.format(t=tree, link=tmp_path / "link.rhbl") for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"rhbl {argv[0]}: error: {option} ") and f"is the file {given} reads" in err
+    assert tree.read_bytes() == b"a taught tree"
+
+
 def test_a_closed_stdout_pipe_ends_quietly(tmp_path):
     """`rhbl train ... | head -c 10`: the reader goes away; the snapshot is written, no error
     line or traceback, the SIGPIPE status."""
