@@ -270,6 +270,15 @@ def judged_goal_episode(spec: WorldSpec, b: Behaviour, policy, start, seconds: f
     return lm, tm, lt, tt
 
 
+def mismatch(b: Behaviour, tree: str, goal_tree: bool) -> str:
+    """What is wrong when a goal behaviour is given a reactive tree or the other way round."""
+    if goal_tree:
+        return (f"{tree} pursues goals in order (an action and a completion tree), but behaviour "
+                f"{b.name!r} has none: judge it by the behaviour it was taught")
+    return (f"behaviour {b.name!r} has goals in order, which {tree} (one reactive tree) "
+            f"cannot pursue: give a goal snapshot (rhbl train --behaviour {b.name})")
+
+
 def evaluate_goals(spec: WorldSpec, policy, b: Behaviour, episodes: int | None = None,
                    seconds: float | None = None, seed: int = 0, on_step: OnStep | None = None,
                    keep_paths: bool = False, runner=None) -> dict:
@@ -278,6 +287,8 @@ def evaluate_goals(spec: WorldSpec, policy, b: Behaviour, episodes: int | None =
     lists its goal changes (``goal_events``: when, which goal, the next one and why).
     ``runner`` (a ``lab.practice.Runner``): the episodes run there (the same results); not with
     ``on_step`` or ``keep_paths``, which run here."""
+    if b.goals is None:
+        raise ValueError(mismatch(b, "the snapshot", goal_tree=True))
     starts = spec.start_poses
     episodes = len(starts) if episodes is None else int(episodes)
     learner_eps, teacher_eps, paths = [], [], {"teacher": [], "learner": []}
@@ -337,7 +348,8 @@ def goal_notes(report: dict) -> list[str]:
 
 
 def is_goal_policy(policy) -> bool:
-    return isinstance(policy, GoalPolicy)
+    """Whether ``policy`` pursues goals in order: a ``GoalPolicy``, or one behind a guard."""
+    return isinstance(getattr(policy, "policy", policy), GoalPolicy)
 
 
 # ------------------------------------------------------------------ the commands' goal paths

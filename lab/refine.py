@@ -559,10 +559,9 @@ def main(args) -> int:
     policy = load_policy(args.tree)
     goals = isinstance(policy, GoalPolicy)
     if goals != (b.goals is not None):
-        raise ValueError(
-            f"{args.tree} holds a tree with goals in order, behaviour {b.name!r} has none"
-            if goals else f"behaviour {b.name!r} has goals in order ([goals]): {args.tree} "
-            f"holds a single tree (rhbl train --behaviour {b.name} makes its trees)")
+        from lab.goals import mismatch
+
+        raise ValueError(mismatch(b, args.tree, goals))
     if goals and (args.range_noise or args.odom_noise):
         raise ValueError("--range-noise/--odom-noise: a tree with goals in order practises "
                          "without noise")

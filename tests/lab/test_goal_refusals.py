@@ -33,13 +33,22 @@ def _goal_tree(tmp_path: Path) -> Path:
     return learner.save(tmp_path / "goals.rhbl")
 
 
-def test_refine_refuses_a_tree_of_the_other_kind(tmp_path):
+@pytest.mark.parametrize("command", ["refine", "evaluate"])
+def test_a_tree_of_the_other_kind_is_refused(tmp_path, command):
+    """A goal behaviour given one reactive tree, or a reactive behaviour given a goal
+    snapshot (by --behaviour or by the world's behaviour): one line, exit 2, before any
+    episode (rhbl evaluate raised an AttributeError from its first episode)."""
     single = Path(__file__).resolve().parents[1] / "rhbl" / "data" / "room-1200.rhbl"
-    for behaviour, tree, says in (
-            ("red-green", single, "'red-green' has goals in order ([goals])"),
-            ("wall-following", _goal_tree(tmp_path), "holds a tree with goals in order")):
-        r = _rhbl("refine", "--behaviour", behaviour, "--tree", str(tree), "--out",
-                  str(tmp_path / "t2.rhbl"))
+    out = (["--out", str(tmp_path / "t2.rhbl")] if command == "refine"
+           else ["--json", str(tmp_path / "t2.rhbl")])
+    cases = [(["--behaviour", "red-green"], single, "'red-green' has goals in order, which"),
+             (["--behaviour", "wall-following"], _goal_tree(tmp_path),
+              "pursues goals in order (an action and a completion tree), but behaviour "
+              "'wall-following' has none")]
+    if command == "evaluate":  # the world's behaviour: red-green's world
+        cases.append((["--world", "goals-red-green"], single, "'red-green' has goals in order"))
+    for given, tree, says in cases:
+        r = _rhbl(command, *given, "--tree", str(tree), *out)
         assert r.returncode == 2 and says in r.stderr, r.stderr
         assert "Traceback" not in r.stderr
         assert not (tmp_path / "t2.rhbl").exists()
