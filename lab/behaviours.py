@@ -23,7 +23,7 @@ from server import world_path
 from server.world import WorldSpec, load_world
 
 __all__ = ["add_arguments", "add_paper_argument", "behaviour_arg", "behaviour_for_world",
-           "describe", "get", "main", "recipe_of", "teaching_world", "to_dict", "world_of"]
+           "check", "describe", "get", "main", "recipe_of", "teaching_world", "to_dict", "world_of"]
 
 
 def get(name_or_path: str | Path | Behaviour) -> Behaviour:
@@ -155,9 +155,32 @@ def describe(b: Behaviour) -> str:
     return "\n".join(line for line in lines if line)
 
 
+def check(b: Behaviour) -> None:
+    """What the file says beyond its own fields, checked as a command that uses it would: its
+    recipe (``recipe_of``) and every world it names, loaded (BehaviourError or the world's
+    ValueError, naming what was wrong)."""
+    recipe_of(b)
+    for field, worlds in (("teach", b.teach), ("held_out", b.held_out)):
+        for w in worlds:
+            try:
+                spec = world_of(b, w)
+                if "goal" in b.rules and spec.goal is None:
+                    raise ValueError("it has no [goal], and the success rule asks for one")
+                if b.goals is not None:  # every beacon the goals name stands in it
+                    from lab.goals import targets
+
+                    targets(spec, b)
+            except BehaviourError:
+                raise
+            except ValueError as exc:
+                raise BehaviourError(f"{b.path or b.name}: field 'worlds.{field}': world {w!r}: "
+                                     f"{exc}") from None
+
+
 def main(args) -> int:
     if args.behaviour is not None:
         chosen = [get(args.behaviour)]
+        check(chosen[0])  # a file you wrote: its recipe and worlds too, before it is used
         print(describe(chosen[0]))
     else:
         chosen = list(shipped().values())

@@ -155,6 +155,33 @@ def test_a_malformed_behaviour_file_is_one_line_and_exit_2(tmp_path, capsys):
         assert "\n" not in err and f"{bad}: field 'success.dance': unknown rule" in err, err
 
 
+@pytest.mark.parametrize(("change", "says"), [
+    (("[success]", "[recipe]\nrounds = 1.5\n[success]"), "field 'recipe': recipe rounds must"),
+    (('held_out = ["eval-maze-3tier"', 'held_out = ["no-such-world"'), "world 'no-such-world'"),
+    (('held_out = ["eval-maze-3tier"', 'held_out = ["room"'),
+     "field 'worlds.held_out': world 'room': it has no [goal]"),
+])
+def test_rhbl_behaviours_checks_a_file_as_its_use_would(tmp_path, capsys, change, says):
+    """Showing a file checks its recipe and worlds too, as training or evaluating it would:
+    the error comes when the person writes the file, not minutes into a run."""
+    text = (shipped()["maze"].path).read_text()
+    assert change[0] in text
+    bad = tmp_path / "mine.toml"
+    bad.write_text(text.replace(change[0], change[1], 1))
+    assert main(["behaviours", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and err.startswith("rhbl behaviours: error: ") and says in err, err
+
+
+def test_a_goal_behaviour_file_names_only_beacons_its_worlds_have(tmp_path, capsys):
+    text = (shipped()["red-green"].path).read_text()
+    bad = tmp_path / "mine.toml"
+    bad.write_text(text.replace("beacons = [1, 2]", "beacons = [1, 7]", 1))
+    assert "beacons = [1, 7]" in bad.read_text()
+    assert main(["behaviours", str(bad)]) == 2
+    assert "names beacon 7, which world 'goals-red-green' does not have" in capsys.readouterr().err
+
+
 MINE = """
 name = "mine"
 summary = "the wall on the left, centred rooms and ground covered: a test's own behaviour"
