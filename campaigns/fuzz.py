@@ -935,27 +935,9 @@ def _bombs(work: Path) -> list[tuple[str, Path]]:
     return out
 
 
-def fuzz_recordings(per_file: int, seed: int = 0, workdir: Path | None = None
-                    ) -> list[KeyResult]:
-    """Recordings read by every reader (``RecordingReader``: inspect, replay, retraining):
-    bombs refused at once; the file cut at every byte (a prefix of the messages and a note,
-    never another exception); ``per_file`` mutations (a message list or one RecordingError
-    naming the file); crafted topics and log times given to ``rhbl replay``'s check (a plain
-    key of a robot only, one ValueError naming the file)."""
-    import logging
-
+def _recording_bombs(work: Path) -> KeyResult:
+    """Decompression bombs and oversized records: each refused at once, naming the file."""
     from client.recording.mcap_file import RecordingError, RecordingReader
-    from client.recording.replay import plan_replay
-    from protocol import keys
-
-    logging.getLogger("client.recording.mcap_file").setLevel(logging.ERROR)  # a line a cut
-    rng = random.Random(seed)
-    work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-mcap-"))
-    work.mkdir(parents=True, exist_ok=True)
-    good = work / "good.mcap"
-    payloads = _small_recording(good)
-    whole = good.read_bytes()
-    results = []
 
     bombs = KeyResult("recording: decompression bombs, oversized records")
     for what, path in _bombs(work):
@@ -971,7 +953,13 @@ def fuzz_recordings(per_file: int, seed: int = 0, workdir: Path | None = None
                 bombs.notes.append(f"{what}: {str(exc)[:100]}")
         except Exception as exc:  # noqa: BLE001 - the finding
             bombs.notes.append(f"{what}: {type(exc).__name__}: {str(exc)[:100]}")
-    results.append(bombs)
+    return bombs
+
+
+def _recording_cuts(work: Path, whole: bytes, payloads: list) -> KeyResult:
+    """The recording ``whole`` cut at every byte: a prefix of its messages (``payloads``) and
+    a note, or (inside the magic or the header) one RecordingError naming the file."""
+    from client.recording.mcap_file import RecordingError, RecordingReader
 
     cuts = KeyResult(f"recording cut at every byte ({len(whole)})")
     cut = work / "cut.mcap"
@@ -993,7 +981,14 @@ def fuzz_recordings(per_file: int, seed: int = 0, workdir: Path | None = None
             continue
         cuts.valid_sent += 1  # a prefix of the messages, and a note
         cuts.valid_processed += int(got == payloads[:len(got)] and len(reader.notes) == 1)
-    results.append(cuts)
+    return cuts
+
+
+def _recording_mutations(work: Path, whole: bytes, rng: random.Random,
+                         per_file: int) -> KeyResult:
+    """``per_file`` mutations of ``whole``: what is intact read, or one RecordingError naming
+    the file; never another exception, never a hang."""
+    from client.recording.mcap_file import RecordingError, RecordingReader
 
     mutated = KeyResult("recording mutated")
     target = work / "fuzzed.mcap"
@@ -1011,7 +1006,14 @@ def fuzz_recordings(per_file: int, seed: int = 0, workdir: Path | None = None
         except Exception as exc:  # noqa: BLE001 - the finding
             if len(mutated.notes) < 3:
                 mutated.notes.append(f"{type(exc).__name__}: {str(exc)[:120]}")
-    results.append(mutated)
+    return mutated
+
+
+def _replay_crafted(work: Path) -> KeyResult:
+    """Crafted topics given to ``rhbl replay``'s check (a plain key of a robot only, one
+    ValueError naming the file) and crafted log times (the replay span bounded)."""
+    from client.recording.replay import plan_replay
+    from protocol import keys
 
     crafted = KeyResult("replay: crafted topics and log times")
     scan = keys.scan_key("r0")
@@ -1040,8 +1042,27 @@ def fuzz_recordings(per_file: int, seed: int = 0, workdir: Path | None = None
         crafted.valid_sent += 1
         plan = plan_replay(p, None, 5.0)
         crafted.valid_processed += int(plan.messages == 2 and plan.span <= 5.0)
-    results.append(crafted)
-    return results
+    return crafted
+
+
+def fuzz_recordings(per_file: int, seed: int = 0, workdir: Path | None = None
+                    ) -> list[KeyResult]:
+    """Recordings read by every reader (``RecordingReader``: inspect, replay, retraining):
+    bombs refused at once; the file cut at every byte (a prefix of the messages and a note,
+    never another exception); ``per_file`` mutations (a message list or one RecordingError
+    naming the file); crafted topics and log times given to ``rhbl replay``'s check (a plain
+    key of a robot only, one ValueError naming the file)."""
+    import logging
+
+    logging.getLogger("client.recording.mcap_file").setLevel(logging.ERROR)  # a line a cut
+    rng = random.Random(seed)
+    work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-mcap-"))
+    work.mkdir(parents=True, exist_ok=True)
+    good = work / "good.mcap"
+    payloads = _small_recording(good)
+    whole = good.read_bytes()
+    return [_recording_bombs(work), _recording_cuts(work, whole, payloads),
+            _recording_mutations(work, whole, rng, per_file), _replay_crafted(work)]
 
 
 def _write_topics(path: Path, topics_times: list[tuple[str, int]]) -> None:
@@ -1224,6 +1245,80 @@ def _console_refused(line: bytes) -> bool:
             and 400 <= int(parts[1]) < 500)
 
 
+def _get(path: str, host: str | None, headers: str = "") -> bytes:
+    """An HTTP/1.1 GET of ``path`` (``host``: its Host header, None: none)."""
+    return (f"GET {path} HTTP/1.1\r\n" + (f"Host: {host}\r\n" if host is not None else "")
+            + headers + "\r\n").encode()
+
+
+def _console_kinds(rng: random.Random, op: int, sp: int,
+                   token: str) -> tuple[dict[str, Callable[[], bytes]], dict[str, Callable[[], bytes]]]:
+    """The hostile requests of ``fuzz_console`` by kind: to the console without a token (on
+    port ``op``), then to the one with ``token`` (on ``sp``)."""
+    here, there = f"127.0.0.1:{op}", f"127.0.0.1:{sp}"
+    static = ["/static/index.html", "/static/console.js", "/static/console.css",
+              "/static/index.html?token=" + token, "/?token=", "/"]
+    open_kinds: dict[str, Callable[[], bytes]] = {
+        "no Host": lambda: rng.choice([b"GET / HTTP/1.1\r\n\r\n", b"GET / HTTP/1.0\r\n\r\n",
+                                       b"GET /static/console.js HTTP/1.1\r\n\r\n",
+                                       b"GET /ws HTTP/1.1\r\nUpgrade: websocket\r\n\r\n"]),
+        "foreign Host": lambda: _get(rng.choice(["/", "/static/console.js", "/ws"]),
+                                     rng.choice(["attacker.example", "attacker.example:8080",
+                                                 "127.0.0.1.nip.io", "localhost.evil",
+                                                 "[::2]:1", "0.0.0.0", "10.0.0.1"])),
+        "5,000-character path": lambda: _get(rng.choice(["/", "/static/", "/ws/"])
+                                             + rng.choice("ab%.") * 5000, here),
+        "oversized header": lambda: _get("/", here, "X: " + "y" * rng.randint(
+            9000, 70_000) + "\r\n"),
+        "random bytes": lambda: os.urandom(rng.randint(1, 2000)) + b"\r\n\r\n",
+        "WebSocket upgrade, foreign Origin": lambda: _upgrade(
+            here, path="/ws", protocol=None, origin=rng.choice(
+                ["http://evil.example", "null", f"http://{here}.evil.example",
+                 f"https://{here}", "file://", f"http://localhost:{op}"])),
+    }
+    secured_kinds: dict[str, Callable[[], bytes]] = {
+        "static files and page without the token": lambda: _get(rng.choice(static), there),
+        "wrong token": lambda: _get(rng.choice(["/", "/static/console.js", "/ws"]) + "?token="
+                                    + rng.choice([token[:-1], token + "x", "%00", token.upper(),
+                                                  "a" * 5000]), there),
+    }
+    return open_kinds, secured_kinds
+
+
+def _nested_messages(rng: random.Random, op: int, per_kind: int, page) -> KeyResult:
+    """A page's message nested 2,000 deep, ``per_kind`` times: each refused on the WebSocket,
+    the page served after them (``page()``)."""
+    res = KeyResult("console: a page's message nested 2,000 deep")
+    for _ in range(per_kind):
+        res.sent += 1
+        open_, close = rng.choice([("[", "]"), ('{"t":', "}")])
+        res.rejected += int(_ws_refuses(op, open_ * 2000 + "0" + close * 2000,
+                                        "nested more than"))
+    res.valid_sent += 1
+    res.valid_processed += int(page())
+    return res
+
+
+def _header_never_finished(op: int, page) -> KeyResult:
+    """A header never finished: closed within --header-timeout (1 s), then still serving."""
+    import socket
+
+    res = KeyResult("console: header never finished")
+    with socket.create_connection(("127.0.0.1", op), timeout=30) as s:
+        s.sendall(b"GET / HTTP/1.1\r\nHost: " + f"127.0.0.1:{op}".encode() + b"\r\nX-Slow: ")
+        res.sent += 1
+        t0 = time.monotonic()
+        answer = b""
+        with contextlib.suppress(OSError):
+            while part := s.recv(4096):
+                answer += part
+        res.rejected += int(_console_refused(answer.split(b"\r\n", 1)[0])
+                            and time.monotonic() - t0 < 1 + 15)
+    res.valid_sent += 1
+    res.valid_processed += int(page())
+    return res
+
+
 def fuzz_console(per_kind: int, seed: int = 0, workdir: Path | None = None) -> list[KeyResult]:
     """Two real ``rhbl console`` processes (zenoh peers, no server needed): one on loopback
     without a token (``--header-timeout 1``), one with a token. Hostile requests, ``per_kind``
@@ -1235,7 +1330,6 @@ def fuzz_console(per_kind: int, seed: int = 0, workdir: Path | None = None) -> l
     request gets 200 (the positive control); both consoles alive at the end, no traceback, a
     bounded number of refusal lines (rate-limited)."""
     import secrets
-    import socket
 
     rng = random.Random(seed)
     work = Path(workdir or tempfile.mkdtemp(prefix="rhbl-fuzz-console-"))
@@ -1258,71 +1352,20 @@ def fuzz_console(per_kind: int, seed: int = 0, workdir: Path | None = None) -> l
         token = url.split("?token=", 1)[1].strip()
         t_start = time.monotonic()
         op, sp = ports["open"], ports["secured"]
-        here, there = f"127.0.0.1:{op}", f"127.0.0.1:{sp}"
 
-        def get(path: str, host: str | None, headers: str = "") -> bytes:
-            return (f"GET {path} HTTP/1.1\r\n" + (f"Host: {host}\r\n" if host is not None
-                                                  else "") + headers + "\r\n").encode()
+        def page(port: int, query: str = "", source: str = "127.0.0.1") -> bool:
+            return b" 200 " in _http(port, _get("/" + query, f"127.0.0.1:{port}"),
+                                     source=source)
 
-        def page(port: int, host: str, query: str = "", source: str = "127.0.0.1") -> bool:
-            return b" 200 " in _http(port, get("/" + query, host), source=source)
-
-        static = ["/static/index.html", "/static/console.js", "/static/console.css",
-                  "/static/index.html?token=" + token, "/?token=", "/"]
-        open_kinds: dict[str, Callable[[], bytes]] = {
-            "no Host": lambda: rng.choice([b"GET / HTTP/1.1\r\n\r\n", b"GET / HTTP/1.0\r\n\r\n",
-                                           b"GET /static/console.js HTTP/1.1\r\n\r\n",
-                                           b"GET /ws HTTP/1.1\r\nUpgrade: websocket\r\n\r\n"]),
-            "foreign Host": lambda: get(rng.choice(["/", "/static/console.js", "/ws"]),
-                                        rng.choice(["attacker.example", "attacker.example:8080",
-                                                    "127.0.0.1.nip.io", "localhost.evil",
-                                                    "[::2]:1", "0.0.0.0", "10.0.0.1"])),
-            "5,000-character path": lambda: get(rng.choice(["/", "/static/", "/ws/"])
-                                                + rng.choice("ab%.") * 5000, here),
-            "oversized header": lambda: get("/", here, "X: " + "y" * rng.randint(
-                9000, 70_000) + "\r\n"),
-            "random bytes": lambda: os.urandom(rng.randint(1, 2000)) + b"\r\n\r\n",
-            "WebSocket upgrade, foreign Origin": lambda: _upgrade(
-                here, path="/ws", protocol=None, origin=rng.choice(
-                    ["http://evil.example", "null", f"http://{here}.evil.example",
-                     f"https://{here}", "file://", f"http://localhost:{op}"])),
-        }
+        open_kinds, secured_kinds = _console_kinds(rng, op, sp, token)
         results += _bursts("console", op, open_kinds, per_kind, _console_refused,
-                           lambda: page(op, here))
-        secured_kinds: dict[str, Callable[[], bytes]] = {
-            "static files and page without the token": lambda: get(rng.choice(static), there),
-            "wrong token": lambda: get(rng.choice(["/", "/static/console.js", "/ws"]) + "?token="
-                                       + rng.choice([token[:-1], token + "x", "%00", token.upper(),
-                                                     "a" * 5000]), there),
-        }
+                           lambda: page(op))
         # the wrong tokens come from 127.0.0.1, which the console then throttles (429, a
         # refusal too); the right one, the positive control, from another loopback address
         results += _bursts("console", sp, secured_kinds, per_kind, _console_refused,
-                           lambda: page(sp, there, "?token=" + token, "127.0.0.2"))
-        res = KeyResult("console: a page's message nested 2,000 deep")
-        for _ in range(per_kind):
-            res.sent += 1
-            open_, close = rng.choice([("[", "]"), ('{"t":', "}")])
-            res.rejected += int(_ws_refuses(op, open_ * 2000 + "0" + close * 2000,
-                                             "nested more than"))
-        res.valid_sent += 1
-        res.valid_processed += int(page(op, here))
-        results.append(res)
-        # a header never finished: closed within --header-timeout (1 s), then still serving
-        res = KeyResult("console: header never finished")
-        with socket.create_connection(("127.0.0.1", op), timeout=30) as s:
-            s.sendall(b"GET / HTTP/1.1\r\nHost: " + here.encode() + b"\r\nX-Slow: ")
-            res.sent += 1
-            t0 = time.monotonic()
-            answer = b""
-            with contextlib.suppress(OSError):
-                while part := s.recv(4096):
-                    answer += part
-            res.rejected += int(_console_refused(answer.split(b"\r\n", 1)[0])
-                                and time.monotonic() - t0 < 1 + 15)
-        res.valid_sent += 1
-        res.valid_processed += int(page(op, here))
-        results.append(res)
+                           lambda: page(sp, "?token=" + token, "127.0.0.2"))
+        results.append(_nested_messages(rng, op, per_kind, lambda: page(op)))
+        results.append(_header_never_finished(op, lambda: page(op)))
         elapsed = time.monotonic() - t_start
         for name, kid in kids.items():  # 10 lines a 10 s window, then one summing up
             results.append(_alive(f"console ({name})", kid, "refused", elapsed, 12))
