@@ -158,6 +158,35 @@ def snapshot(learner: DemonstrationLearner) -> TreePolicy | None:
     return TreePolicy(copy.deepcopy(learner.classifier), learner.features, learner.actions)
 
 
+def _learn(learner, method: Method, scans: OrderedDict, shown: int, key: str) -> None:
+    """The person's label ``key`` given on scan ``shown``, learned as ``method`` pairs it:
+    with its own scan and the scans before it (``method.lag`` None: the lag estimated), or
+    with the scan ``method.lag`` before it."""
+    if method.lag is None:  # the label's own scan, and the scans before it
+        ranges, odom, _ = scans[shown]
+        earlier = []
+        for lag in range(1, PERSON.alignment.max_lag + 1):
+            sid = answered_scan(shown, scans, lag, pose=lambda s: s[2])
+            if sid == shown:
+                break
+            earlier.append(learner.features.extract(scans[sid][0], scans[sid][1][2]))
+        learner.observe(ranges, odom[2], key, earlier=earlier)
+    else:
+        ranges, odom, _ = scans[answered_scan(shown, scans, method.lag, pose=lambda s: s[2])]
+        learner.observe(ranges, odom[2], key)
+
+
+def _elsewhere(spec, world: World, where: str, rng) -> tuple | None:
+    """Where the person puts the robot (``teach``'s ``where``): anywhere in the free space
+    (``"free"``), a little off where it is (``"near"``), or None: the next start pose."""
+    if where == "free":
+        return free_pose(spec, rng)
+    if where == "near":
+        return sample_pose(spec, [world.pose(0)], rng, jitter=NEAR[0], turn=NEAR[1],
+                           clearance=NEAR[2])
+    return None
+
+
 def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float = 120.0,
           seed: int = 0, latency: float = 0.03, refresh: float = 2.0, guard: bool = False,
           restarts: tuple[float, float] = (0.0, 0.0), where: str = "starts",
@@ -201,10 +230,8 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
         if every > 0 and t > 0 and (t - moved_at >= every - 1e-9
                                     or (mode == "correct" and moved_at < demo)):
             moved_at, next_start = t, next_start + 1  # the next start pose (set_pose)
-            pose = (free_pose(spec, rng) if where == "free"
-                    else sample_pose(spec, [world.pose(0)], rng, jitter=NEAR[0], turn=NEAR[1],
-                                     clearance=NEAR[2]) if where == "near" else None)
-            world.set_pose(0, pose or starts[next_start % len(starts)])
+            world.set_pose(0, _elsewhere(spec, world, where, rng)
+                           or starts[next_start % len(starts)])
         scans[k] = (world.scan(0), world.odom(0), world.pose(0))
         while len(scans) > SCAN_MEMORY:
             scans.popitem(last=False)
@@ -213,19 +240,7 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
         key = person.observe(View(t=t, pose=scans[shown][2], walls=walls, mode=mode,
                                   driver=driver, action=action, scan_id=shown))
         if key is not None:
-            if method.lag is None:  # the label's own scan, and the scans before it
-                ranges, odom, _ = scans[shown]
-                earlier = []
-                for lag in range(1, PERSON.alignment.max_lag + 1):
-                    sid = answered_scan(shown, scans, lag, pose=lambda s: s[2])
-                    if sid == shown:
-                        break
-                    earlier.append(learner.features.extract(scans[sid][0], scans[sid][1][2]))
-                learner.observe(ranges, odom[2], key, earlier=earlier)
-            else:
-                ranges, odom, _ = scans[answered_scan(shown, scans, method.lag,
-                                                      pose=lambda s: s[2])]
-                learner.observe(ranges, odom[2], key)
+            _learn(learner, method, scans, shown, key)
             rec.labels += 1
             rec.wrong += person.wrong_now
             if mode == "correct":
@@ -434,7 +449,7 @@ def table(rows: list[dict], taught: str, unseen) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--models", default=",".join(DEV),
                     help=f"person models (dev: {', '.join(DEV)}; held out: {', '.join(HELD_OUT)}; "
@@ -479,6 +494,28 @@ def main(argv=None) -> int:
     ap.add_argument("--alone", action="store_true",
                     help="also print how each person model does driving by itself")
     ap.add_argument("--json", default=None, help="write every run here")
+    return ap
+
+
+def _print_tables(rows: list[dict], args, models: list[str], seeds, worlds: list[str]) -> None:
+    """The table of the sessions (and, as asked, of the tree alone and of each person alone)."""
+    print()
+    print(table(rows, worlds[0], worlds[1:]))
+    if args.bare and args.guard:
+        print()
+        print(table([dict(r, worlds=r["bare"], guard="tree alone, no guard") for r in rows],
+                    worlds[0], worlds[1:]))
+    if args.alone:
+        print()
+        print("| person alone (lab.evaluate's rule) | " + " | ".join(worlds) + " |")
+        print("|---|" + "---|" * len(worlds))
+        for model in models:
+            row = person_row(model, seeds, worlds)
+            print(f"| {model} | " + " | ".join(f"{100 * row[w]:.0f}%" for w in worlds) + " |")
+
+
+def main(argv=None) -> int:
+    ap = _parser()
     args = ap.parse_args(argv)
     models = [m for m in args.models.split(",") if m]
     for m in models:
@@ -512,19 +549,7 @@ def main(argv=None) -> int:
                       + f" | {r['nodes']} nodes, {r['labels']} labels ({r['corrections']} "
                         f"corrections, {r['takeovers']} takeovers), {r['wrong']} wrong, "
                         f"{r['wall_time']} s", flush=True)
-    print()
-    print(table(rows, worlds[0], worlds[1:]))
-    if args.bare and args.guard:
-        print()
-        print(table([dict(r, worlds=r["bare"], guard="tree alone, no guard") for r in rows],
-                    worlds[0], worlds[1:]))
-    if args.alone:
-        print()
-        print("| person alone (lab.evaluate's rule) | " + " | ".join(worlds) + " |")
-        print("|---|" + "---|" * len(worlds))
-        for model in models:
-            row = person_row(model, seeds, worlds)
-            print(f"| {model} | " + " | ".join(f"{100 * row[w]:.0f}%" for w in worlds) + " |")
+    _print_tables(rows, args, models, seeds, worlds)
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
     return 0
