@@ -141,6 +141,24 @@ def main() -> int:
     return 0
 
 
+def _timed(one_tick, one_direct, one_relay, n: int) -> tuple[dict[str, list[float]], int]:
+    """50 rounds to warm up, then ``n`` of the three paths interleaved: ({path: seconds},
+    scans lost)."""
+    for _ in range(50):  # warm up
+        one_tick(), one_direct(), one_relay()
+    times: dict[str, list[float]] = {k: [] for k in PATHS}
+    lost = 0
+    for _ in range(n):
+        (a, b), c, d = one_tick(), one_direct(), one_relay()
+        got = {"native": a, "direct": c, "relay": d, "bridge": b,
+               "added": None if a is None or b is None else b - a}
+        lost += (a is None) + (b is None) + (c is None) + (d is None)
+        for k, v in got.items():
+            if v is not None:
+                times[k].append(v)
+    return times, lost
+
+
 def _measure(endpoint: str, children: list[Child], probe: _Probe, n: int):
     """This process as the router (and the server) on ``endpoint``: start ``children`` (the
     bridge, the relay), then n scans of each kind, interleaved. Returns ({path: seconds},
@@ -202,19 +220,7 @@ def _measure(endpoint: str, children: list[Child], probe: _Probe, n: int):
             while one_tick()[1] is None or one_relay() is None:
                 if time.monotonic() > deadline:
                     raise SystemExit("bench_ros2: the bridge or the relay did not answer")
-            for _ in range(50):  # warm up
-                one_tick(), one_direct(), one_relay()
-            times: dict[str, list[float]] = {k: [] for k in PATHS}
-            lost = 0
-            for _ in range(n):
-                (a, b), c, d = one_tick(), one_direct(), one_relay()
-                got = {"native": a, "direct": c, "relay": d, "bridge": b,
-                       "added": None if a is None or b is None else b - a}
-                lost += (a is None) + (b is None) + (c is None) + (d is None)
-                for k, v in got.items():
-                    if v is not None:
-                        times[k].append(v)
-            return times, lost
+            return _timed(one_tick, one_direct, one_relay, n)
         finally:
             for c in children:
                 c.stop()
