@@ -371,6 +371,94 @@ def ask(task: EpisodeTask, result: dict, window: int, b) -> dict:
             "seed": int(task.seed), "why": why, "step": step, "pose": [round(v, 3) for v in pose]}
 
 
+def _sized(pr: _Practice, clf, max_nodes: int):
+    """The size step: ``clf`` pruned to ``max_nodes`` spheres (weakest link) against its own
+    actions on the states it visited in practice, then practised: (tree, states used)."""
+    X = np.concatenate([r["states"] for r in pr.results]).astype(np.float64)
+    y = np.concatenate([np.asarray(r["actions"][:len(r["states"])]) for r in pr.results])
+    clf = clf.compact(X, y, method="prune", max_nodes=max_nodes, class_weight="balanced",
+                      data="refine: the states it visited in practice, its own actions")
+    clf = _to_size(clf, X, max_nodes)
+    pr.results = pr.run(clf)
+    return clf, len(X)
+
+
+def _trials(pr: _Practice, clf, actions: list[str], blamed: Counter, where: list,
+            window: int, candidates: int, max_nodes: int | None) -> list:
+    """The repairs to try: each of the ``candidates`` most blamed spheres given every other
+    action, and (room left under ``max_nodes``) a sphere added at the failing states with
+    every other action; each ``(move, tree, the episodes it may change)``."""
+    trials = []
+    for s, _n in blamed.most_common(candidates):
+        idx = pr.using(s)
+        for a in actions:
+            if a != str(clf.classes_[clf.tree_.label[s]]):
+                trials.append((("relabel", s, a), relabelled(clf, s, a), idx))
+    if max_nodes is None or clf.node_count_ < max_nodes:
+        seen = set()
+        for i, k in where[::max(1, window // 3)][:candidates]:
+            x = pr.results[i]["states"][k]
+            if (i, k) in seen:
+                continue
+            seen.add((i, k))
+            now = pr.results[i]["actions"][k]
+            for a in actions:
+                if a != now:
+                    grown = added(clf, x, a)
+                    if grown.node_count_ > clf.node_count_:
+                        trials.append((("add", i, k, a), grown,
+                                       pr.reaching(grown, clf.node_count_)))
+    return trials
+
+
+def _best(pr: _Practice, trials: list, runner: Runner, left):
+    """The trial that raises the practice fitness most, ``(move, tree, episodes, results)``,
+    or None; batches of candidates, the time (``left()``) checked between them."""
+    best, best_fit = None, pr.fitness + 1e-9
+    step = max(1, 2 * runner.workers)  # candidates per batch: the time checked between
+    for at in range(0, len(trials), step):
+        if at and left() <= 0:
+            break
+        part = trials[at:at + step]
+        outs = pr.run_many([(c, idx) for _m, c, idx in part])
+        for (m, c, idx), out in zip(part, outs, strict=True):
+            f = pr.change(idx, out)
+            if f > best_fit:
+                best, best_fit = (m, c, idx, out), f
+    return best
+
+
+def _pruned(pr: _Practice, clf, prune: str, left):
+    """The prune step: every leaf tried at once (least used first), each kept out if the
+    fitness does not fall; removals whose episodes do not meet are independent, and kept
+    together; again until nothing goes or the time is up: (tree, leaves removed)."""
+    removed = 0
+    while left() > 0:
+        gone = _prune_pass(pr, clf, unused=prune == "all", left=left)
+        if not gone:
+            break
+        clf = without(clf, gone)
+        removed += len(gone)
+    return clf, removed
+
+
+def _first_practice(pr: _Practice, clf) -> int:
+    """The taught tree practised once; a start the behaviour's own expert fails from teaches
+    nothing, so it is left out (unless every one would be): how many were."""
+    pr.results = pr.run(clf)
+    fair = [i for i, r in enumerate(pr.results) if r["teacher"]["success"]]
+    dropped = len(pr.tasks) - len(fair)
+    if fair and dropped:
+        pr.tasks, pr.results = [pr.tasks[i] for i in fair], [pr.results[i] for i in fair]
+    return dropped
+
+
+def _standing(pr: _Practice, clf) -> dict:
+    """The practice fitness, the tree's size and the share of practice episodes met."""
+    return {"fitness": round(pr.fitness, 4), "nodes": int(clf.node_count_),
+            "success": round(np.mean([r["success"] for r in pr.results]), 4)}
+
+
 def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = None,
            budget: float = 600.0, seeds=(0,), scales=SCALES, window: int = 30,
            candidates: int = 6, prune: str = "used", say=None, validate: bool = True,
@@ -385,14 +473,8 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
     clf = policy.classifier
     pr = _Practice(b, policy, runner, _practice_tasks(b, seeds, scales, seconds, free, noise,
                                                       drawn))
-    pr.results = pr.run(clf)
-    # a start the behaviour's own expert fails from teaches nothing: left out
-    fair = [i for i, r in enumerate(pr.results) if r["teacher"]["success"]]
-    dropped = len(pr.tasks) - len(fair)
-    if fair and dropped:
-        pr.tasks, pr.results = [pr.tasks[i] for i in fair], [pr.results[i] for i in fair]
-    before = {"fitness": round(pr.fitness, 4), "nodes": int(clf.node_count_),
-              "success": round(np.mean([r["success"] for r in pr.results]), 4)}
+    dropped = _first_practice(pr, clf)
+    before = _standing(pr, clf)
     say(f"practice: {len(pr.tasks)} episodes ({', '.join(b.teach)}, scales 1"
         f"{''.join(f', {s:g}' for s in scales)}"
         f"{f'; {drawn[1]} {drawn[0]} drawn' if drawn and drawn[1] else ''}; "
@@ -408,15 +490,10 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
 
     # 1. size: weakest-link pruning against the tree's own actions where it drove
     if max_nodes is not None and clf.node_count_ > max_nodes:
-        X = np.concatenate([r["states"] for r in pr.results]).astype(np.float64)
-        y = np.concatenate([np.asarray(r["actions"][:len(r["states"])]) for r in pr.results])
-        clf = clf.compact(X, y, method="prune", max_nodes=max_nodes, class_weight="balanced",
-                          data="refine: the states it visited in practice, its own actions")
-        clf = _to_size(clf, X, max_nodes)
-        pr.results = pr.run(clf)
+        clf, visited = _sized(pr, clf, max_nodes)
         moves["pruned to size"] += 1
         say(f"size: pruned to {clf.node_count_} nodes against its own actions on "
-            f"{len(X)} visited states: fitness {pr.fitness:.2f}, "
+            f"{visited} visited states: fitness {pr.fitness:.2f}, "
             f"{time.perf_counter() - t0:.0f} s")
 
     # 2./3. repair, then prune; again while either changes something
@@ -425,39 +502,8 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
         changed = False
         while left() > 0 and not all(r["success"] for r in pr.results):
             blamed, where = _blame(pr, window, b)
-            trials = []
-            for s, _n in blamed.most_common(candidates):
-                idx = pr.using(s)
-                for a in actions:
-                    if a != str(clf.classes_[clf.tree_.label[s]]):
-                        trials.append((("relabel", s, a), relabelled(clf, s, a), idx))
-            if max_nodes is None or clf.node_count_ < max_nodes:
-                seen = set()
-                for i, k in where[::max(1, window // 3)][:candidates]:
-                    x = pr.results[i]["states"][k]
-                    if (i, k) in seen:
-                        continue
-                    seen.add((i, k))
-                    now = pr.results[i]["actions"][k]
-                    for a in actions:
-                        if a != now:
-                            grown = added(clf, x, a)
-                            if grown.node_count_ > clf.node_count_:
-                                trials.append((("add", i, k, a), grown,
-                                               pr.reaching(grown, clf.node_count_)))
-            if not trials:
-                break
-            best, best_fit = None, pr.fitness + 1e-9
-            step = max(1, 2 * runner.workers)  # candidates per batch: the time checked between
-            for at in range(0, len(trials), step):
-                if at and left() <= 0:
-                    break
-                part = trials[at:at + step]
-                outs = pr.run_many([(c, idx) for _m, c, idx in part])
-                for (m, c, idx), out in zip(part, outs, strict=True):
-                    f = pr.change(idx, out)
-                    if f > best_fit:
-                        best, best_fit = (m, c, idx, out), f
+            trials = _trials(pr, clf, actions, blamed, where, window, candidates, max_nodes)
+            best = _best(pr, trials, runner, left) if trials else None
             if best is None:
                 break
             m, clf, idx, out = best
@@ -469,22 +515,13 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
                 f"{pr.episodes} episodes, {time.perf_counter() - t0:.0f} s")
         if prune == "none":
             break
-        # prune: every leaf tried at once (least used first), each kept out if the fitness
-        # does not fall; removals whose episodes do not meet are independent, and kept together
-        removed = 0
-        while left() > 0:
-            gone = _prune_pass(pr, clf, unused=prune == "all", left=left)
-            if not gone:
-                break
-            clf = without(clf, gone)
-            removed += len(gone)
+        clf, removed = _pruned(pr, clf, prune, left)
         if removed:
             moves["pruned"] += removed
             changed = True
             say(f"prune: {removed} leaves removed: {clf.node_count_} nodes, fitness "
                 f"{pr.fitness:.2f}, {pr.episodes} episodes, {time.perf_counter() - t0:.0f} s")
-    after = {"fitness": round(pr.fitness, 4), "nodes": int(clf.node_count_),
-             "success": round(np.mean([r["success"] for r in pr.results]), 4)}
+    after = _standing(pr, clf)
     asks = [ask(t, r, window, b) for t, r in zip(pr.tasks, pr.results, strict=True)
             if not r["success"]]
     report = {"before": before, "after": after, "episodes": pr.episodes,
