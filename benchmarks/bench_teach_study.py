@@ -103,6 +103,28 @@ class Session:
     poses: list = field(default_factory=list)
     side: list = field(default_factory=list)   # right-hand wall distance (lab.metrics) per step
 
+    def labelled(self, wrong: bool, mode: str, in_control: bool) -> None:
+        """A label counted: a wrong key, a correction (a takeover when the controller was
+        driving) or a demonstration."""
+        self.labels += 1
+        self.wrong += wrong
+        if mode == "correct":
+            self.corrections += 1
+            self.takeovers += not in_control
+        else:
+            self.demo_labels += 1
+
+    def stepped(self, world, name: str | None) -> None:
+        """The world stepped with action ``name`` (None: stand), a new stall counted as a
+        collision, the pose kept."""
+        vx, va = DEFAULT_ACTIONS[name] if name else (0.0, 0.0)
+        world.set_command(0, vx, va)
+        world.step(DT)
+        stalled = world.stall(0)
+        if stalled and not (self.poses and self.poses[-1][3]):
+            self.collisions += 1
+        self.poses.append((*world.pose(0), stalled))
+
 
 @dataclass(frozen=True)
 class Method:
@@ -241,13 +263,7 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
                                   driver=driver, action=action, scan_id=shown))
         if key is not None:
             _learn(learner, method, scans, shown, key)
-            rec.labels += 1
-            rec.wrong += person.wrong_now
-            if mode == "correct":
-                rec.corrections += 1
-                rec.takeovers += not in_control
-            else:
-                rec.demo_labels += 1
+            rec.labelled(person.wrong_now, mode, in_control)
             in_control = True
         # the learner publishes its tree every ``refresh`` s, the controller swaps it in (an
         # incremental build depends on when it is built: built as often while demonstrating)
@@ -266,13 +282,7 @@ def teach(spec, person, method: Method, *, demo: float = 240.0, correct: float =
             driver = "controller" if name else ""
         else:
             name, driver = None, ""
-        vx, va = DEFAULT_ACTIONS[name] if name else (0.0, 0.0)
-        world.set_command(0, vx, va)
-        world.step(DT)
-        stalled = world.stall(0)
-        if stalled and not (rec.poses and rec.poses[-1][3]):
-            rec.collisions += 1
-        rec.poses.append((*world.pose(0), stalled))
+        rec.stepped(world, name)
         action = name
     return rec, learner
 
