@@ -121,7 +121,7 @@ def prepare_outputs(args: argparse.Namespace) -> None:
 
     for option, path in getattr(args, "_outputs", []):
         for given, read in getattr(args, "_inputs", []):  # never written over what it reads
-            if os.path.exists(path) and os.path.samefile(path, read):
+            if os.path.exists(path) and os.path.exists(read) and os.path.samefile(path, read):
                 raise ValueError(f"{option} {path}: is the file {given} reads; give another "
                                  f"file (rhbl writes nothing over its own input)")
         files.check_output(path, option, make=True)
