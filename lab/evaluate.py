@@ -67,10 +67,9 @@ def evaluate(spec: WorldSpec, policy: TreePolicy, episodes: int | None = None,
     results; not with ``on_step`` or ``keep_paths``, which run here."""
     taught = (getattr(policy, "metadata", None) or {}).get("task")
     b = behaviour_for_world(spec, taught) if behaviour is None else get(behaviour)
-    from lab.goals import is_goal_policy, mismatch
+    from lab.goals import check_kind
 
-    if (b.goals is not None) != is_goal_policy(policy):
-        raise ValueError(mismatch(b, "the tree", is_goal_policy(policy)))
+    check_kind(b, policy, "the tree")
     if "goal" in b.rules and spec.goal is None:
         raise ValueError(f"behaviour {b.name!r} is judged by a goal, but world {spec.name!r} "
                          "has no [goal]")

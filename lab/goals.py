@@ -279,6 +279,13 @@ def mismatch(b: Behaviour, tree: str, goal_tree: bool) -> str:
             f"cannot pursue: give a goal snapshot (rhbl train --behaviour {b.name})")
 
 
+def check_kind(b: Behaviour, policy, tree: str) -> None:
+    """ValueError (``mismatch``) unless ``policy`` pursues goals exactly when ``b`` has them
+    (``tree``: how the message names it)."""
+    if (b.goals is not None) != is_goal_policy(policy):
+        raise ValueError(mismatch(b, tree, is_goal_policy(policy)))
+
+
 def evaluate_goals(spec: WorldSpec, policy, b: Behaviour, episodes: int | None = None,
                    seconds: float | None = None, seed: int = 0, on_step: OnStep | None = None,
                    keep_paths: bool = False, runner=None) -> dict:

@@ -594,11 +594,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main(args) -> int:
     b = get(args.behaviour)
     policy = load_policy(args.tree)
-    goals = isinstance(policy, GoalPolicy)
-    if goals != (b.goals is not None):
-        from lab.goals import mismatch
+    from lab.goals import check_kind
 
-        raise ValueError(mismatch(b, args.tree, goals))
+    check_kind(b, policy, args.tree)  # a goal behaviour's tree has goals, and only its
+    goals = isinstance(policy, GoalPolicy)
     if goals and (args.range_noise or args.odom_noise):
         raise ValueError("--range-noise/--odom-noise: a tree with goals in order practises "
                          "without noise")
