@@ -1,6 +1,8 @@
 """RHBL beside the standard learners: the same demonstrations learned by the project's tree and
 by scikit-learn's k-nearest neighbours (k=1, k=5), decision tree and a small MLP (behaviour
 cloning), each then driven in closed loop in the behaviour's teaching and held-out worlds.
+``rhbl-vote`` is a study of this benchmark's own (``OrderVote``): five RHBL trees, each fitted on
+the same vectors in another order, answering by their majority.
 
 For each behaviour and seed the scripted expert teaches exactly as ``rhbl train --behaviour``
 does (``lab.train.train`` with the behaviour's recipe, ``lab.behaviours.recipe_of``), the learner
@@ -22,8 +24,8 @@ world. ``--quick``: a small run (60 s of demonstrations and one corrective round
 randomised world at most; one start pose per world for 20 s, the first held-out world only), to
 check that it runs.
 
-Model size: RHBL nodes (spheres), decision tree nodes, kNN stored vectors, MLP weights and
-biases.
+Model size: RHBL nodes (spheres; rhbl-vote: of its five trees together), decision tree nodes,
+kNN stored vectors, MLP weights and biases.
 
 ``--people calm,steady,...`` (or ``all``): also a session of each person model
 (``benchmarks/people.py``) teaching each ``--people-behaviour`` (default wall following, in the
@@ -59,10 +61,15 @@ from lab.evaluate import evaluate  # noqa: E402
 from lab.harness import make_learner  # noqa: E402
 from lab.report import table  # noqa: E402
 from lab.train import train  # noqa: E402
+from server import world_path  # noqa: E402
+from server.worldfile import load_world  # noqa: E402
 
+VOTERS = 5  # rhbl-vote's trees (chosen on development worlds: docs/studies/order-vote.md)
 # the learners, in the table's order: name -> what it is
 LEARNERS = {
     "rhbl": "the project's hypersphere tree, the recipe's parameters",
+    "rhbl-vote": f"{VOTERS} such trees, each fitted on the vectors in an order of its own "
+                 "(seeded), the majority of their answers (OrderVote)",
     "1-nn": "KNeighborsClassifier(n_neighbors=1)",
     "5-nn": "KNeighborsClassifier(n_neighbors=5)",
     "tree": "DecisionTreeClassifier(random_state=seed)",
@@ -77,6 +84,35 @@ QUICK = {"seconds": 60.0, "rounds": 1, "round_scales": (), "round_free": 0}
 SINGLE_QUERIES = 100   # queries timed one at a time, per repeat
 BATCH = 1000           # vectors in the batch query
 REPEATS = 5            # the prediction times are the best of these
+
+
+class OrderVote:
+    """Bagging by order: ``n`` RHBL trees with the recipe's parameters, each offered every
+    vector of ``(X, y)`` once in a random order of its own (RHBL's tree depends on the order it
+    learns in: that is each tree's diversity; a bootstrap sample of the vectors in their order
+    was tried and was not as good, docs/studies/order-vote.md), answering by the majority of
+    the trees (a tie: the answer of the first tree among the tied). A benchmark's learner, not
+    the product's: a snapshot holds one tree."""
+
+    def __init__(self, X: np.ndarray, y: np.ndarray, recipe, seed: int, n: int = VOTERS):
+        rng = np.random.default_rng(seed)
+        self.members = []
+        for _ in range(n):
+            order = rng.permutation(len(X))
+            fresh = make_learner(recipe)
+            fresh.observe_vectors(X[order], y[order])
+            self.members.append(fresh.classifier)
+        self.node_count_ = sum(int(m.node_count_) for m in self.members)
+        self.height_ = max(int(m.height_) for m in self.members)
+
+    def predict_one(self, x):
+        answers = [m.predict_one(x) for m in self.members]
+        counts = {a: answers.count(a) for a in answers}
+        top = max(counts.values())
+        return next(a for a in answers if counts[a] == top)
+
+    def predict(self, X: np.ndarray) -> np.ndarray:
+        return np.array([self.predict_one(x) for x in X])
 
 
 class PeerPolicy:
@@ -179,6 +215,12 @@ def fit(name: str, X: np.ndarray, y: np.ndarray, recipe, seed: int, learner):
         from client.behaviour.learning import TreePolicy
 
         return TreePolicy(clf, fresh.features, fresh.actions), seconds, fresh.nodes, clf
+    if name == "rhbl-vote":
+        model = OrderVote(X, y, recipe, seed)
+        seconds = time.perf_counter() - t0
+        policy = PeerPolicy(model, learner.features, learner.actions, model.node_count_,
+                            model.height_, model.predict_one)
+        return policy, seconds, model.node_count_, model
     make = {"1-nn": lambda: KNeighborsClassifier(n_neighbors=1),
             "5-nn": lambda: KNeighborsClassifier(n_neighbors=5),
             "tree": lambda: DecisionTreeClassifier(random_state=seed),
@@ -215,7 +257,7 @@ def prediction_times(name: str, model, X: np.ndarray, seed: int) -> tuple[float,
     ``BATCH`` (``predict``), on vectors drawn from ``X``; each the best of ``REPEATS``."""
     rng = np.random.default_rng(seed)
     rows = X[rng.integers(0, len(X), size=max(SINGLE_QUERIES, BATCH))]
-    one = model.predict_one if name == "rhbl" else (lambda x: model.predict(x.reshape(1, -1)))
+    one = model.predict_one if name.startswith("rhbl") else (lambda x: model.predict(x.reshape(1, -1)))
     one(rows[0])  # warm (a compiled kernel, a first call's set-up)
     single = batch = math.inf
     for _ in range(REPEATS):  # the best of a few: the least disturbed by a busy machine
@@ -253,14 +295,16 @@ def measured(b, name: str, policy, fit_s: float, size, model, X, seed: int, worl
             "exact_decider": getattr(policy, "exact", None)}
 
 
-def run_seed(b, seed: int, learners: list[str], quick: bool = False) -> dict:
+def run_seed(b, seed: int, learners: list[str], quick: bool = False,
+             held_out: list[str] | None = None) -> dict:
     """One seed of behaviour ``b``: the demonstrations, every learner fitted on them and driven
-    in the teaching and held-out worlds. Returns ``{"vectors", "trained_nodes", "learners":
-    {name: {...}}}``."""
+    in the teaching and held-out worlds (``held_out``: these worlds instead, names or files).
+    Returns ``{"vectors", "trained_nodes", "learners": {name: {...}}}``."""
     learner, X, y, recipe = demonstrations(b, seed, quick)
     out = {"seed": seed, "vectors": len(X), "trained_nodes": learner.nodes, "learners": {}}
     teach = list(b.teach)
-    held = list(b.held_out)[:1] if quick else list(b.held_out)
+    held = list(b.held_out if held_out is None else held_out)
+    held = held[:1] if quick else held
     for name in learners:
         policy, fit_s, size, model = fit(name, X, y, recipe, seed, learner)
         out["learners"][name] = measured(b, name, policy, fit_s, size, model, X, seed,
@@ -323,7 +367,8 @@ def run_person(model: str, seed: int, learners: list[str], quick: bool = False,
 
             policy, size, model_ = TreePolicy(clf, again.features, again.actions), again.nodes, clf
         else:
-            policy, fit_s, size, model_ = fit(name, X, y, None, seed, learner)
+            # rhbl-vote: the scripted rule's trees on the labels as paired, as the peers learn
+            policy, fit_s, size, model_ = fit(name, X, y, recipe_of(b), seed, learner)
         out["learners"][name] = measured(b, name, policy, fit_s, size, model_, X, seed,
                                          (list(b.teach), held), quick,
                                          f"person {model} seed {seed}")
@@ -511,6 +556,11 @@ def main(argv=None) -> int:
                     help="the behaviours the --people teach, comma-separated (default "
                          "wall-following; the right-hand wall's own models teach only that)")
     ap.add_argument("--quick", action="store_true", help="a small run (see above)")
+    ap.add_argument("--eval-world", action="append", default=None, metavar="WORLD",
+                    help="drive in this world (a name or file; repeatable) instead of each "
+                         "behaviour's held-out worlds: a development set of your own "
+                         "(rhbl generate rooms|mazes --seed S --out DIR), so that a choice is "
+                         "made without seeing the held-out worlds; not with --people")
     ap.add_argument("--json", default=None, help="write every measurement here")
     ap.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
                     help="measure nothing: print the tables of these --json files together "
@@ -518,6 +568,13 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if not args.from_json and not args.behaviour and not args.people:
         ap.error("nothing to measure: --behaviour is empty and no --people given")
+    if args.eval_world and args.people:
+        ap.error("--eval-world is for the scripted demonstrations, not with --people")
+    for w in args.eval_world or []:
+        try:
+            load_world(world_path(w))
+        except (OSError, ValueError) as exc:
+            ap.error(f"--eval-world {w}: {exc}")
     if args.people:
         sys.path.insert(0, str(ROOT / "benchmarks"))
         from people import person
@@ -540,7 +597,8 @@ def main(argv=None) -> int:
         b = get(bname)
         results[bname] = []
         for seed in args.seeds:
-            results[bname].append(run_seed(b, seed, args.learners, args.quick))
+            results[bname].append(run_seed(b, seed, args.learners, args.quick,
+                                           args.eval_world))
             if args.json:  # after every seed: a run stopped part-way keeps what it measured
                 _write(args.json, results, args, time.perf_counter() - t0)
     for bname, model in [] if args.from_json else [(bn, m) for bn in args.people_behaviour

@@ -20,10 +20,12 @@ def test_a_quick_run_drives_every_learner_and_prints_one_row_each(bench, tmp_pat
                        "--json", str(out)]) == 0
     text = capsys.readouterr().out
     rows = [line for line in text.splitlines() if line.startswith("| wall-following |")]
-    peer = [r for r in rows if r.count("|") == len(bench.HEADER) + 1]
+    peer = [r for r in rows if r.count("|") == len(bench.HEADER) + 1
+            and not r.split("|")[2].strip().endswith(")")]
     assert [r.split("|")[2].strip() for r in peer] == list(bench.LEARNERS)
     # the world table: the teaching world and the first held-out one, a column per learner
-    worlds = [r for r in rows if r.count("|") == len(bench.LEARNERS) + 4]
+    worlds = [r for r in rows if r.count("|") == len(bench.LEARNERS) + 4
+              and r.split("|")[2].strip().endswith(")")]
     assert [r.split("|")[2].strip() for r in worlds] == ["room (taught)",
                                                         "eval-room-jagged (held out)"]
     assert "rhbl refitted on the vectors = the tree rhbl train grew: yes" in text
@@ -45,6 +47,14 @@ def test_a_quick_run_drives_every_learner_and_prints_one_row_each(bench, tmp_pat
     assert bench.main(["--from-json", str(out), str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "wall-following seed 0 measured twice" in err[0]
+
+
+def test_eval_world_drives_in_the_worlds_given_instead_of_the_held_out_ones(bench, capsys):
+    assert bench.main(["--behaviour", "wall-following", "--seeds", "0", "--quick",
+                       "--learners", "rhbl-vote", "--eval-world", "eval-room-l"]) == 0
+    rows = [line.split("|")[2].strip() for line in capsys.readouterr().out.splitlines()
+            if line.startswith("| wall-following |") and line.count("|") == 5]
+    assert rows == ["room (taught)", "eval-room-l (held out)"]
 
 
 def test_a_peer_drives_with_the_features_and_actions_of_the_tree(bench):
@@ -69,6 +79,8 @@ def test_a_peer_drives_with_the_features_and_actions_of_the_tree(bench):
     (["--people", "nobody"], "unknown 'nobody'"),
     (["--people", "steady", "--people-behaviour", "wandering"], "right-hand wall only"),
     (["--behaviour", ""], "nothing to measure"),
+    (["--eval-world", "no-such-world"], "--eval-world no-such-world"),
+    (["--eval-world", "room", "--people", "steady"], "not with --people"),
 ])
 def test_bad_input_is_one_line_naming_it(bench, capsys, argv, says):
     with pytest.raises(SystemExit) as exc:
@@ -105,3 +117,28 @@ def test_several_person_models_are_pooled_in_rows_of_their_own(bench):
     rows = {r[0]: r for r in bench.summary_rows(pooled, ["rhbl"])}
     assert rows["wall-following by 2 people"][3] == "62% (5/8)"
     assert rows["wall-following by bang"][3] == "25% (1/4)"
+
+
+def test_the_order_vote_is_its_trees_majority_each_fitted_in_an_order_of_its_own(bench):
+    from lab.behaviours import get, recipe_of
+
+    recipe = recipe_of(get("wall-following"))
+    rng = np.random.default_rng(0)
+    X = rng.random((400, 5))
+    y = np.where(X[:, 0] + 0.2 * rng.standard_normal(400) > 0.5, "fwd", "rot-left")
+    vote = bench.OrderVote(X, y, recipe, seed=3)
+    assert len(vote.members) == bench.VOTERS
+    assert vote.node_count_ == sum(m.node_count_ for m in vote.members)
+    # the trees differ (the order is each one's own), and a seed gives the same trees again
+    sizes = [m.node_count_ for m in vote.members]
+    assert len(set(sizes)) > 1 or any(
+        (a.predict(X) != b.predict(X)).any() for a, b in zip(vote.members, vote.members[1:], strict=False))
+    again = bench.OrderVote(X, y, recipe, seed=3)
+    assert [m.node_count_ for m in again.members] == sizes
+    assert (again.predict(X) == vote.predict(X)).all()
+    # every answer is the majority of the members' answers (a tie: the first tree's side)
+    for x in X[:50]:
+        answers = [m.predict_one(x) for m in vote.members]
+        top = max(answers.count(a) for a in answers)
+        assert answers.count(vote.predict_one(x)) == top
+        assert vote.predict_one(x) == next(a for a in answers if answers.count(a) == top)
