@@ -25,7 +25,14 @@ import numpy as np
 
 from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
 from client.behaviour.features import DEFAULT_FEATURES, FEATURES, FeatureSpec
-from client.behaviour.goals import GoalLearner, Goals, GoalStep, learner_of, resume_learner
+from client.behaviour.goals import (
+    GoalLearner,
+    Goals,
+    GoalStep,
+    PersonGoalLearner,
+    learner_of,
+    resume_learner,
+)
 from client.behaviour.learning import (
     DemonstrationLearner,
     IncompatibleSnapshotError,
@@ -136,7 +143,10 @@ class LineageLock:
 def _replay(learner: DemonstrationLearner, rec) -> None:
     """Learn one journal record again (a person's label with the scans journaled before it, a
     goal behaviour's with its goal and what was seen)."""
-    if rec.earlier is not None and isinstance(learner, PersonLearner):
+    if rec.goal is not None and isinstance(learner, PersonGoalLearner):
+        learner.observe(rec.ranges, rec.yaw, rec.label,
+                        GoalStep.of(rec.goal, rec.reached, rec.seen), earlier=rec.earlier)
+    elif rec.earlier is not None and isinstance(learner, PersonLearner):
         learner.observe(rec.ranges, rec.yaw, rec.label, earlier=rec.earlier)
     elif rec.goal is not None and isinstance(learner, GoalLearner):
         learner.observe(rec.ranges, rec.yaw, rec.label,
@@ -248,11 +258,11 @@ class Lineage:
             return _resume(n["resume"], n["spec"])
         task = n["task"] or task_of_features(n["features"])
         chosen = rule_for(rule).replace(guard=n["guard"])
-        if n["goals"] is not None:  # goals in order: the scripted rule (docs/goals.md)
-            if chosen.person:
-                log.warning("a behaviour with goals learns a person's labels by the scripted "
-                            "rule (each label as it arrives: no lag estimate, no editing)")
-                chosen = rule_for("script").replace(guard=n["guard"])
+        if n["goals"] is not None and chosen.person:  # goals in order, a person's labels
+            return PersonGoalLearner(n["spec"], n["goals"], n["actions"], task=task,
+                                     background=True, rule=chosen.replace(lag=n["lag"]),
+                                     **n["params"])
+        if n["goals"] is not None:
             return GoalLearner(n["spec"], n["goals"], n["actions"], task=task, rule=chosen,
                                stride=n["stride"], min_delta=n["min_delta"], **n["params"])
         if chosen.person:
@@ -442,9 +452,9 @@ class Lineage:
         meta = header["meta"]
         rule = LearningRule.of(meta)
         if rule.person:
-            return PersonLearner.from_metadata(meta, FeatureSpec.from_dict(meta["features"]),
-                                               ActionSet.from_dict(meta["actions"]),
-                                               background=True)
+            cls = PersonGoalLearner if isinstance(meta.get("goals"), dict) else PersonLearner
+            return cls.from_metadata(meta, FeatureSpec.from_dict(meta["features"]),
+                                     ActionSet.from_dict(meta["actions"]), background=True)
         if header.get("parent") is not None:
             return _resume(header["parent"], None)
         return learner_of(meta)
@@ -560,7 +570,9 @@ class Lineage:
             self._journal_early()
         x = self.learner.vector(ranges, yaw, step if goals else None)
         back = None
-        if self.estimates:  # the scans before it, (ranges, yaw) nearest first: the lag's data
+        if self.estimates and goals:  # the scans before it with the label's goal and sighting
+            back = self.learner.earlier_vectors(earlier, step)
+        elif self.estimates:  # the scans before it, (ranges, yaw) nearest first: the lag's data
             back = np.zeros((len(earlier), len(x)), np.float32)
             for i, (r, a) in enumerate(earlier):
                 back[i] = self.learner.features.extract(r, a)
@@ -570,9 +582,10 @@ class Lineage:
         self._journaled(origin, seq)
         if self.beams is None:
             self.beams = len(ranges)
-        learned = (self.learner.observe(ranges, yaw, label, earlier=back) if self.estimates
-                   else self.learner.observe(ranges, yaw, label, step) if goals
-                   else self.learner.observe(ranges, yaw, label))
+        learned = (self.learner.observe(ranges, yaw, label, step, earlier=back) if goals
+                   and self.person else self.learner.observe(ranges, yaw, label, step) if goals
+                   else self.learner.observe(ranges, yaw, label, earlier=back)
+                   if self.estimates else self.learner.observe(ranges, yaw, label))
         self.applied += 1
         self.standing += 1
         return learned

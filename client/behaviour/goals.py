@@ -48,7 +48,8 @@ from .actions import DEFAULT_ACTIONS, ActionSet
 from .features import BEACON_GOAL, FEATURES, FeatureSpec
 from .learning import DemonstrationLearner
 from .policies import Policy
-from .rule import SCRIPT, LearningRule, for_goals
+from .rule import PERSON, SCRIPT, LearningRule, for_goals
+from .teaching import PersonLearner
 
 __all__ = [
     "DONE",
@@ -57,6 +58,7 @@ __all__ = [
     "GoalExpert",
     "GoalLearner",
     "GoalPolicy",
+    "PersonGoalLearner",
     "GoalStep",
     "GoalTracker",
     "Goals",
@@ -560,6 +562,62 @@ class GoalLearner(DemonstrationLearner):
         """The goals and the completion tree of a goal snapshot being resumed."""
         policy = GoalPolicy.from_classifier(clf, str(path))
         return {"goals": policy.goals, "completion": policy.completion}
+
+
+class PersonGoalLearner(GoalLearner, PersonLearner):
+    """A ``GoalLearner`` for labels given by a person (a key on the console's page, G when a
+    goal is reached): the action tree by the person rule (``PersonLearner``: the reaction lag,
+    estimated or fixed, each label voted by its nearest labels, jittered copies, passes), the
+    completion tree from the "reached" marks as every goal learner learns it. One rule for a
+    person's labels whatever the behaviour (``client.behaviour.rule.PERSON``); a label's
+    vector is the laser's and the pursued goal's beacon, and so are the scans shown before it
+    (``earlier``: with the lag estimated, each of them with the beacon seen at the label's own
+    scan, the goal and what the finder saw being the label's). ``rule`` (default ``PERSON``)
+    gets the goal behaviours' guard (``for_goals``); ``lag``, ``background`` and the tree
+    parameters as ``PersonLearner`` takes them. Sample selection (``stride``, ``min_delta``)
+    does not apply: the vote needs every label."""
+
+    def __init__(self, features: FeatureSpec, goals: Goals, actions: ActionSet = DEFAULT_ACTIONS,
+                 *, completion=None, rule: LearningRule = PERSON, **kw):
+        if not rule.person:
+            raise ValueError(f"a PersonGoalLearner learns by a rule that edits its labels, not "
+                             f"the {rule.name!r} rule")
+        super().__init__(features, goals, actions, completion=completion, rule=rule, **kw)
+
+    def earlier_vectors(self, earlier, step: GoalStep) -> np.ndarray:
+        """The vectors of the scans shown before a label (``earlier``: ``(ranges, yaw)``,
+        nearest first) with the label's goal and sighting (``step``): what the lag estimate
+        compares."""
+        out = np.zeros((len(earlier), self.features.dim), np.float32)
+        for i, (r, a) in enumerate(earlier):
+            out[i] = self.vector(r, a, step)
+        return out
+
+    def observe(self, ranges, yaw: float, label: str, step: GoalStep | None = None,
+                earlier=None) -> bool:
+        """One labelled scan with its ``GoalStep`` (the completion tree learns its mark) and,
+        with the lag estimated, the vectors of the scans shown before it (``earlier_vectors``).
+        Every label is kept: True."""
+        x = self.vector(ranges, yaw, step)  # (checks the step)
+        self._check_label(label)
+        g = step.goal if step.reached is None else step.reached
+        self.observe_completion(self.goals.completion_inputs(step.seen, self.goals.index_of(g)),
+                                step.reached is not None)
+        self.seen += 1
+        self._learn(x, label, earlier)
+        return True
+
+    @classmethod
+    def from_metadata(cls, meta: Mapping, features: FeatureSpec, actions: ActionSet,
+                      parent: str | None = None, background: bool = False
+                      ) -> PersonGoalLearner:
+        """An empty learner by the rule and goals ``meta`` records (a journal header's): its
+        labels are learned again from the journal."""
+        rule = LearningRule.of(meta)
+        if not rule.person:
+            raise ValueError(f"not a person's tree: learning rule {rule.name!r}")
+        return cls(features, Goals.from_dict(meta["goals"]), actions, rule=rule,
+                   task=meta.get("task"), parent=parent, background=background)
 
 
 def resume_learner(path: str | Path, features: FeatureSpec | None = None

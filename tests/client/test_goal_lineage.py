@@ -132,3 +132,53 @@ def test_a_goal_snapshot_is_extended_by_a_goal_learner(tmp_path):
     ext.close()
     p = load_policy(child)
     assert isinstance(p, GoalPolicy) and p.metadata["provenance"]["parent"] == str(parent)
+
+
+def test_a_persons_goal_lineage_learns_by_the_person_rule_and_a_restart_rebuilds_it(tmp_path):
+    """A person's labels of a behaviour with goals are learned by the person rule (one rule for
+    a person's labels whatever the behaviour): every label kept, each voted by its nearest, so
+    one wrong key among many is outvoted; the completion tree learns the marks; with the lag
+    estimated each label is journaled with the scans shown before it, as vectors with its goal's
+    beacon, and a restart rebuilds the same trees from the journal."""
+    from client.behaviour.goals import PersonGoalLearner
+
+    out = tmp_path / "rg.rhbl"
+    core = _lineage(out, teacher="person")  # --lag auto: estimated, the scans before each kept
+    assert isinstance(core.learner, PersonGoalLearner) and core.estimates
+    earlier = [(_ranges(1000 + j), 0.0) for j in range(3)]
+    for k in range(80):
+        label = "rot-left" if k == 79 else "fwd"  # one wrong key among 80, the last
+        core.learn(k, 0.1 * k, _ranges(k), 0.0, label, "s1", k, earlier=earlier, step=_step(k))
+    want = core.learner.policy()
+    x = core.learner.vector(_ranges(79), 0.0, _step(79))
+    assert want.classifier.predict_one(x) == "fwd"  # outvoted
+    assert want.metadata["learning"]["rule"] == "person"
+    assert want.metadata["provenance"]["marks"] == 8 and DONE in want.completion.classes_
+    with Journal.open(journal_path(out)) as j:
+        rec = list(j.records())[5]
+    assert rec.goal == _step(5).goal and rec.earlier.shape == (3, len(x))
+    assert np.allclose(rec.earlier[0], core.learner.vector(_ranges(1000), 0.0, _step(5)))
+    core.close()
+    again = _lineage(out, teacher="person")
+    assert isinstance(again.learner, PersonGoalLearner)
+    got = again.learner.policy()
+    assert got.classifier.tree_equal(want.classifier)
+    assert got.completion.tree_equal(want.completion)
+    again.snapshot()
+    again.close()
+    policy = load_policy(out)
+    assert isinstance(policy, GoalPolicy) and policy.metadata["learning"]["rule"] == "person"
+    assert policy.classifier.tree_equal(want.classifier)
+
+
+def test_the_scripted_rule_learns_the_wrong_key_a_person_rule_outvotes(tmp_path):
+    """The same labels from the scripted teacher: each learned as it arrives, the wrong key
+    carves its sphere (what the person rule is for)."""
+    core = _lineage(tmp_path / "rg.rhbl")
+    assert type(core.learner) is GoalLearner
+    for k in range(80):
+        core.learn(k, 0.1 * k, _ranges(k), 0.0, "rot-left" if k == 79 else "fwd", "s1", k,
+                   step=_step(k))
+    x = core.learner.vector(_ranges(79), 0.0, _step(79))
+    assert core.learner.policy().classifier.predict_one(x) == "rot-left"
+    core.close()
