@@ -315,7 +315,7 @@ class Lineage:
         withdrawals that came before it are journaled. Raises JournalError (call again)."""
         if not self.undecided:
             return
-        rule = "person" if by_person(source) and self._new["goals"] is None else "script"
+        rule = "person" if by_person(source) else "script"
         self._create(rule, f": the first label came from {source or 'an unnamed teacher'!r}, "
                            f"so it learns by the {'person' if rule == 'person' else 'scripted'}"
                            f" rule ({self.describe_rule() or 'each label as it arrives'})")

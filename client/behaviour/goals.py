@@ -22,6 +22,7 @@ of goals and the learning stays RHBL's (docs/goals.md has the design and why):
     c = goals.completion_inputs(sightings, tracker.goal)       # the completion tree's 2 inputs
     expert = BeaconSeeker(); expert.see(sightings.get(beacon)); expert.act(ranges, pose)
     learner = GoalLearner(b.features, goals)                  # both trees (beacon = "goal")
+    learner = PersonGoalLearner(b.features, goals)            # a person's labels: the person rule
     policy = learner.policy()  /  GoalPolicy.load(path)        # see(sightings), act(ranges, pose)
 
 A snapshot of a goal behaviour is the action tree's snapshot (``rhbl-tree``, msgpack) whose

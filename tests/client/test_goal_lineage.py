@@ -143,12 +143,15 @@ def test_a_persons_goal_lineage_learns_by_the_person_rule_and_a_restart_rebuilds
     from client.behaviour.goals import PersonGoalLearner
 
     out = tmp_path / "rg.rhbl"
-    core = _lineage(out, teacher="person")  # --lag auto: estimated, the scans before each kept
-    assert isinstance(core.learner, PersonGoalLearner) and core.estimates
+    core = _lineage(out, teacher="auto")  # the rule chosen by the first label's source
+    assert core.undecided
     earlier = [(_ranges(1000 + j), 0.0) for j in range(3)]
     for k in range(80):
         label = "rot-left" if k == 79 else "fwd"  # one wrong key among 80, the last
-        core.learn(k, 0.1 * k, _ranges(k), 0.0, label, "s1", k, earlier=earlier, step=_step(k))
+        core.learn(k, 0.1 * k, _ranges(k), 0.0, label, "s1", k, earlier=earlier,
+                   source="console", step=_step(k))
+    # a person at the console: the person rule, the lag estimated (the scans before each kept)
+    assert isinstance(core.learner, PersonGoalLearner) and core.estimates
     want = core.learner.policy()
     x = core.learner.vector(_ranges(79), 0.0, _step(79))
     assert want.classifier.predict_one(x) == "fwd"  # outvoted
