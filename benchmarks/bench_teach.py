@@ -46,7 +46,9 @@ right-hand wall's own, wall following only). The budget per run is at most 240 s
 plus 120 s correcting (real time). ``--quick``: 120 + 60 s, seed 0, 3 episodes per evaluated
 world, no literal baseline. ``--jobs 2`` runs two sessions at once, each with its own server,
 ports, console and browser (the views/s and frames/s columns say whether the machine kept up);
-``--jobs 1`` evaluates each run before the next starts.
+``--jobs 1`` evaluates each run before the next starts. SIGINT or SIGTERM stops it: each
+session under way ends its processes and its browser, the runs not begun are not begun, and
+it exits 1 (what was measured so far is in ``--json``).
 """
 
 from __future__ import annotations
@@ -82,6 +84,13 @@ QUICK = {"seeds": "0", "demo": 120.0, "correct": 60.0, "learners": "default",
          "eval_episodes": 3}
 UNSEEN = ("eval-room-jagged", "eval-room-l", "eval-room-ring")
 LITERAL = "--teacher script --spawn all"  # rhbl train --from-recording: the paper's rule
+# set by SIGINT or SIGTERM (``main``): the page loops end at their next view, each session
+# stops the processes and the browser it started, the runs not begun are not begun
+STOP = threading.Event()
+
+
+class Stopped(RuntimeError):
+    """The benchmark was told to stop (SIGINT or SIGTERM) while a person was at the page."""
 # the keys held for each action (the page combines them as a person's fingers do)
 ARROWS = {None: (), "fwd": ("ARROW_UP",), "fwd-left": ("ARROW_UP", "ARROW_LEFT"),
           "rot-left": ("ARROW_LEFT",), "fwd-right": ("ARROW_UP", "ARROW_RIGHT"),
@@ -155,10 +164,20 @@ class Page:
         from selenium.common.exceptions import TimeoutException
         from selenium.webdriver.support.ui import WebDriverWait
 
+        def ready(_driver) -> bool:
+            if STOP.is_set():
+                raise Stopped(f"stopped while waiting: {what}")
+            return pred(self)
+
         try:
-            WebDriverWait(self.b, timeout, poll_frequency=0.05).until(lambda d: pred(self))
+            WebDriverWait(self.b, timeout, poll_frequency=0.05).until(ready)
         except TimeoutException:
             raise RuntimeError(f"the page: not within {timeout:g} s: {what}") from None
+
+
+def _stopping() -> None:
+    if STOP.is_set():
+        raise Stopped("stopped by a signal while a person was at the page")
 
 
 def teach(page: Page, person, people, seconds: float, mode: str) -> dict:
@@ -170,6 +189,7 @@ def teach(page: Page, person, people, seconds: float, mode: str) -> dict:
     (``goals`` counts the sequences)."""
     v = None
     while v is None:
+        _stopping()
         v = page.view(people)
     t0, frames, keys_held, presses = v.t, 0, 0, 0
     goals, placed_at, marks = 0, -math.inf, 0
@@ -178,6 +198,7 @@ def teach(page: Page, person, people, seconds: float, mode: str) -> dict:
     last = None
     fps, next_fps = [], w0 + 1.0  # the page's own frame rate, read once a second
     while True:
+        _stopping()
         v = page.view(people)
         if v is None:
             continue
@@ -840,6 +861,8 @@ def _teach_all(args, runs_asked: list, guards: tuple, literal: str | None, unsee
                 Path(args.json).write_text(json.dumps(results, indent=1))
 
     def evaluated(r: dict) -> None:
+        if STOP.is_set():
+            return
         runs = [r]
         try:  # the reference: the person's own driving in the taught world
             r["person_alone"] = person_alone(r["behaviour"], r["person"], r["seed"], args.world,
@@ -867,6 +890,8 @@ def _teach_all(args, runs_asked: list, guards: tuple, literal: str | None, unsee
         save()
 
     def session(behaviour: str, name: str, seed: int) -> None:
+        if STOP.is_set():  # told to stop: the runs not begun are not begun
+            return
         try:
             r = teach_one(name, seed, args.demo, args.correct, behaviour=behaviour,
                           record=literal is not None, learner_args=args.learner_args,
@@ -931,7 +956,20 @@ def main(argv=None) -> int:
           f"seeds, {args.jobs} at a time, {args.demo:g} s demonstrating + {args.correct:g} s "
           f"correcting each, evaluated {' and '.join(guards)}"
           f"{', with the literal baseline' if literal else ''}; logs in {top}", flush=True)
-    results = _teach_all(args, runs_asked, guards, literal, unseen, top)
+    def _stop(signum, _frame) -> None:  # the sessions' threads see it and clean up
+        STOP.set()
+
+    STOP.clear()
+    old = {sig: signal.signal(sig, _stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        results = _teach_all(args, runs_asked, guards, literal, unseen, top)
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+    if STOP.is_set():
+        print("bench_teach: stopped by a signal; every process it started has ended",
+              file=sys.stderr, flush=True)
+        return 1
     print(table(results))
     return 0 if all("error" not in r for r in results) else 1
 

@@ -137,3 +137,68 @@ def test_a_model_of_the_right_hand_wall_teaches_nothing_else(bench, capsys):
     assert "no-such-behaviour" in capsys.readouterr().err
     assert bench.main(["--people", "nobody"]) == 2
     assert "unknown 'nobody'" in capsys.readouterr().err
+
+
+def _descendants(pid: int) -> set[int]:
+    """Every living process below ``pid`` (from /proc: each process's parent)."""
+    parents = {}
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                stat = (d / "stat").read_text()
+            except OSError:
+                continue
+            parents[int(d.name)] = int(stat.rsplit(")", 1)[1].split()[1])
+    out, todo = set(), [pid]
+    while todo:
+        p = todo.pop()
+        kids = [c for c, pp in parents.items() if pp == p]
+        out.update(kids)
+        todo.extend(kids)
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def test_a_stopped_benchmark_ends_every_process_it_started(bench, tmp_path):
+    """SIGTERM while a person is at the page: the session stops its server, learner, console
+    and browser, the runs not begun are not begun, and the benchmark exits 1 saying so."""
+    import signal
+    import subprocess
+
+    from browser import find_chromium, in_ci
+    from waiting import eventually, patience
+
+    found = find_chromium()
+    if isinstance(found, str):
+        if in_ci():
+            pytest.fail(f"CI=true and {found}")
+        pytest.skip(found)
+    root = Path(__file__).resolve().parents[2]
+    bench = subprocess.Popen(
+        [sys.executable, str(root / "benchmarks" / "bench_teach.py"), "--behaviour",
+         "wall-following", "--people", "calm,rushed", "--quick", "--workdir", str(tmp_path)],
+        cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        # the person is at the page: the learner journals their labels
+        eventually(lambda: (tmp_path / "wall-following-calm-0" / "tree.rhbl.journal").exists()
+                   or bench.poll() is not None, timeout=120, what="a label journaled")
+        assert bench.poll() is None, bench.communicate()
+        started = _descendants(bench.pid)
+        assert len(started) >= 4  # server, learner, console, the browser's driver and more
+        bench.send_signal(signal.SIGTERM)
+        _out, err = bench.communicate(timeout=patience(120))
+    finally:
+        if bench.poll() is None:
+            bench.kill()
+            bench.communicate()
+    assert bench.returncode == 1, err
+    assert "stopped by a signal; every process it started has ended" in err
+    assert not [p for p in started if _alive(p)]
+    assert not (tmp_path / "wall-following-rushed-0").exists()  # not begun
