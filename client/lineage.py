@@ -143,16 +143,13 @@ class LineageLock:
 def _replay(learner: DemonstrationLearner, rec) -> None:
     """Learn one journal record again (a person's label with the scans journaled before it, a
     goal behaviour's with its goal and what was seen)."""
-    if rec.goal is not None and isinstance(learner, PersonGoalLearner):
+    kw = ({"earlier": rec.earlier} if rec.earlier is not None
+          and isinstance(learner, PersonLearner) else {})
+    if rec.goal is not None and isinstance(learner, GoalLearner):
         learner.observe(rec.ranges, rec.yaw, rec.label,
-                        GoalStep.of(rec.goal, rec.reached, rec.seen), earlier=rec.earlier)
-    elif rec.earlier is not None and isinstance(learner, PersonLearner):
-        learner.observe(rec.ranges, rec.yaw, rec.label, earlier=rec.earlier)
-    elif rec.goal is not None and isinstance(learner, GoalLearner):
-        learner.observe(rec.ranges, rec.yaw, rec.label,
-                        GoalStep.of(rec.goal, rec.reached, rec.seen))
+                        GoalStep.of(rec.goal, rec.reached, rec.seen), **kw)
     else:
-        learner.observe(rec.ranges, rec.yaw, rec.label)
+        learner.observe(rec.ranges, rec.yaw, rec.label, **kw)
 
 
 class Lineage:
@@ -582,10 +579,9 @@ class Lineage:
         self._journaled(origin, seq)
         if self.beams is None:
             self.beams = len(ranges)
-        learned = (self.learner.observe(ranges, yaw, label, step, earlier=back) if goals
-                   and self.person else self.learner.observe(ranges, yaw, label, step) if goals
-                   else self.learner.observe(ranges, yaw, label, earlier=back)
-                   if self.estimates else self.learner.observe(ranges, yaw, label))
+        kw = {"earlier": back} if self.estimates else {}
+        learned = (self.learner.observe(ranges, yaw, label, step, **kw) if goals
+                   else self.learner.observe(ranges, yaw, label, **kw))
         self.applied += 1
         self.standing += 1
         return learned
