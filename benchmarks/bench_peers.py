@@ -537,7 +537,7 @@ def merged(paths: list[str]) -> tuple[dict, list[int], bool, list[str]]:
     return results, seeds, seen, [n for n in LEARNERS if n in learners]
 
 
-def main(argv=None) -> int:
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     behaviours = sorted(shipped())
@@ -565,7 +565,11 @@ def main(argv=None) -> int:
     ap.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
                     help="measure nothing: print the tables of these --json files together "
                          "(runs of other behaviours, made side by side)")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def _checked(ap: argparse.ArgumentParser, args) -> None:
+    """What the options say together (``ap.error``: one line, exit 2)."""
     if not args.from_json and not args.behaviour and not args.people:
         ap.error("nothing to measure: --behaviour is empty and no --people given")
     if args.eval_world and args.people:
@@ -585,6 +589,12 @@ def main(argv=None) -> int:
                     person(model, bname)
         except ValueError as exc:
             ap.error(f"--people: {exc}")
+
+
+def main(argv=None) -> int:
+    ap = _parser()
+    args = ap.parse_args(argv)
+    _checked(ap, args)
     t0 = time.perf_counter()
     results: dict[str, list[dict]] = {}
     if args.from_json:
