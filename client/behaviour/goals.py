@@ -510,12 +510,17 @@ class GoalLearner(DemonstrationLearner):
         (``step.reached``) or ``not-done`` for the goal pursued; the action tree the label for
         the goal pursued (the learner's sample selection, as ever). True when the action
         reached the tree."""
+        return self._offer(self._marked(ranges, yaw, label, step), label)
+
+    def _marked(self, ranges, yaw: float, label: str, step: GoalStep | None) -> np.ndarray:
+        """The action tree's vector of a labelled scan, the label checked and the completion
+        tree's mark (``done`` at the goal reached, ``not-done`` at the goal pursued) taken."""
         x = self.vector(ranges, yaw, step)  # (checks the step)
         self._check_label(label)
         g = step.goal if step.reached is None else step.reached
         self.observe_completion(self.goals.completion_inputs(step.seen, self.goals.index_of(g)),
                                 step.reached is not None)
-        return self._offer(x, label)
+        return x
 
     def observe_completion(self, c: np.ndarray, done: bool) -> None:
         """The goal beacon's inputs ``c`` at a step the teacher marked reached (``done``) or
@@ -599,11 +604,7 @@ class PersonGoalLearner(GoalLearner, PersonLearner):
         """One labelled scan with its ``GoalStep`` (the completion tree learns its mark) and,
         with the lag estimated, the vectors of the scans shown before it (``earlier_vectors``).
         Every label is kept: True."""
-        x = self.vector(ranges, yaw, step)  # (checks the step)
-        self._check_label(label)
-        g = step.goal if step.reached is None else step.reached
-        self.observe_completion(self.goals.completion_inputs(step.seen, self.goals.index_of(g)),
-                                step.reached is not None)
+        x = self._marked(ranges, yaw, label, step)
         self.seen += 1
         self._learn(x, label, earlier)
         return True
