@@ -87,14 +87,20 @@ LITERAL = "--teacher script --spawn all"  # rhbl train --from-recording: the pap
 # set by SIGINT or SIGTERM (``main``): the page loops end at their next view, each session
 # stops the processes and the browser it started, the runs not begun are not begun
 STOP = threading.Event()
-
-
-class Stopped(RuntimeError):
-    """The benchmark was told to stop (SIGINT or SIGTERM) while a person was at the page."""
 # the keys held for each action (the page combines them as a person's fingers do)
 ARROWS = {None: (), "fwd": ("ARROW_UP",), "fwd-left": ("ARROW_UP", "ARROW_LEFT"),
           "rot-left": ("ARROW_LEFT",), "fwd-right": ("ARROW_UP", "ARROW_RIGHT"),
           "rot-right": ("ARROW_RIGHT",)}
+
+
+class Stopped(RuntimeError):
+    """The benchmark was told to stop (SIGINT or SIGTERM) while a person was at the page."""
+
+
+def _stopping(doing: str = "while a person was at the page") -> None:
+    """Raise ``Stopped`` once ``STOP`` is set (the page loops and waits ask at each turn)."""
+    if STOP.is_set():
+        raise Stopped(f"stopped by a signal {doing}")
 
 
 class Page:
@@ -165,19 +171,13 @@ class Page:
         from selenium.webdriver.support.ui import WebDriverWait
 
         def ready(_driver) -> bool:
-            if STOP.is_set():
-                raise Stopped(f"stopped while waiting: {what}")
+            _stopping(f"while waiting: {what}")
             return pred(self)
 
         try:
             WebDriverWait(self.b, timeout, poll_frequency=0.05).until(ready)
         except TimeoutException:
             raise RuntimeError(f"the page: not within {timeout:g} s: {what}") from None
-
-
-def _stopping() -> None:
-    if STOP.is_set():
-        raise Stopped("stopped by a signal while a person was at the page")
 
 
 def teach(page: Page, person, people, seconds: float, mode: str) -> dict:
@@ -956,6 +956,7 @@ def main(argv=None) -> int:
           f"seeds, {args.jobs} at a time, {args.demo:g} s demonstrating + {args.correct:g} s "
           f"correcting each, evaluated {' and '.join(guards)}"
           f"{', with the literal baseline' if literal else ''}; logs in {top}", flush=True)
+
     def _stop(signum, _frame) -> None:  # the sessions' threads see it and clean up
         STOP.set()
 
