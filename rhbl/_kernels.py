@@ -190,10 +190,13 @@ def _candidates(table, x, eps, euclidean, stack, dstack, cand, cand_d):
 
 @_jit
 def learn(table, X, labels, start, n, height, eps, euclidean, winner_only, min_radius,
-          max_nodes, max_depth):
+          max_nodes, max_depth, caps, nearest):
     """Train on the rows ``start ..`` of ``X`` with label indices ``labels``, in order, as
     :meth:`rhbl.tree.SphereTree.learn` does one vector (``winner_only``: ``spawn="winner"``),
-    on a tree of ``n`` spheres and height ``height``.
+    on a tree of ``n`` spheres and height ``height``; a sphere spawned at row ``i`` has a radius
+    of at most ``caps[i]`` (``inf``: as large as its parent allows). ``nearest``
+    (``uncovered="nearest"``): a row that only the root encloses is answered by the sphere with
+    the nearest centre, and spawns a child of the root when that answer is not its label.
 
     Stops before a row whose spawns might not fit in the table's capacity. Returns the rows
     trained on, the number of spheres and the height after them, the spheres spawned and
@@ -223,10 +226,17 @@ def learn(table, X, labels, start, n, height, eps, euclidean, winner_only, min_r
             count = 1
         if n + count > capacity:
             break
+        root_answer = -1  # the answer for a row only the root encloses (nearest)
+        if nearest and n > 1 and count == 1 and cand[0] == 0:
+            best = np.inf
+            for i in range(1, n):
+                s = _distance(tf, i, x, False)
+                if s < best:
+                    best, root_answer = s, table[i, c_label]
         suppressed = False
         for j in range(count):
             p = cand[j]
-            if table[p, c_label] == a:
+            if (root_answer if root_answer >= 0 else table[p, c_label]) == a:
                 continue
             d = cand_d[j]
             if d <= eps:  # coincides with the centre: relabel in place
@@ -234,6 +244,8 @@ def learn(table, X, labels, start, n, height, eps, euclidean, winner_only, min_r
                 relabelled += 1
                 continue
             r = tf[p, rc] - d
+            if r > caps[row]:
+                r = caps[row]
             if r < 0.0:
                 r = 0.0
             depth = table[p, c_depth] + 1
@@ -462,7 +474,8 @@ def aot_exports() -> dict:
         "winners": (winners, f"void({_TABLE}, int64, {_ROWS}, float64, boolean, boolean, "
                              f"{_FLAT}, {_FLAT})"),
         "learn": (learn, f"UniTuple(int64, 6)({_TABLE}, {_ROWS}, {_FLAT}, int64, int64, int64, "
-                         "float64, boolean, boolean, float64, int64, int64)"),
+                         "float64, boolean, boolean, float64, int64, int64, "
+                         f"{_VECTOR}, boolean)"),
         "layout": (layout, f"void({_TABLE}, int64, {_FLAT}, {_FLAT}, {_FLAT})"),
     }
     for features in (0, *SPECIALISED):
@@ -484,7 +497,8 @@ def _warm_up() -> None:
     winner(table, 1, x, 1e-9, False)
     out = np.empty(1, dtype=np.int64)
     winners(table, 1, x[None, :], 1e-9, False, False, out, out.copy())
-    learn(table, x[None, :], np.zeros(1, dtype=np.int64), 0, 1, 0, 1e-9, False, False, 0.0, 1, 1)
+    learn(table, x[None, :], np.zeros(1, dtype=np.int64), 0, 1, 0, 1e-9, False, False, 0.0, 1, 1,
+          np.full(1, np.inf), False)
     search = np.empty(1 + 1 + SEARCH_INT_COLUMNS, dtype=np.int64)
     nodes = np.empty(1, dtype=np.int64)
     layout(table, 1, np.zeros(1, dtype=np.int64), search, nodes)

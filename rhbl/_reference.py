@@ -11,6 +11,7 @@ the tree (``tree._creation``, ``tree._preorder``) until the tree changes.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -119,6 +120,7 @@ def learn(
     min_radius: float = 0.0,
     max_nodes: int | None = None,
     max_depth: int | None = None,
+    max_radius: float = math.inf,
 ) -> tuple[int, int, bool]:
     """:meth:`rhbl.tree.SphereTree.learn` in numpy (the same rule); returns the spheres spawned
     and relabelled, and whether a growth limit suppressed a spawn."""
@@ -126,8 +128,14 @@ def learn(
     cands = _candidates(reach, parents)
     if spawn == "winner":
         radii, depth = tree._radii, tree._depth
-        w = min(cands, key=lambda i: (radii[i], -depth[i], i))
-        targets = [w] if tree._label[w] != label else []
+        cands = [min(cands, key=lambda i: (radii[i], -depth[i], i))]
+    n = tree.node_count
+    if tree.uncovered == "nearest" and n > 1 and cands == [0]:
+        # only the root encloses x: the nearest centre answers (the first of equals, as the
+        # kernel), and a wrong answer spawns a child of the root
+        sq = np.add.reduce(np.square(np.subtract(tree.centers_t()[:, 1:n], x[:, None])), axis=0)
+        answer = tree._label[int(np.argmin(sq)) + 1]
+        targets = [0] if answer != label else []
     else:
         targets = [c for c in cands if tree._label[c] != label]
     spawned = relabelled = 0
@@ -140,7 +148,7 @@ def learn(
             tree._changed()
             relabelled += 1
             continue
-        r = max(float(tree._radii[p]) - d, 0.0)
+        r = max(min(float(tree._radii[p]) - d, max_radius), 0.0)
         if (
             (min_radius and r < min_radius)
             or (max_nodes is not None and tree.node_count >= max_nodes)

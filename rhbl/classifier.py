@@ -14,6 +14,13 @@ The paper's algorithm (sections 3-5), in its default configuration:
 * Classification: among the spheres that enclose ``x`` and whose ancestors all enclose ``x``,
   the smallest radius wins; ties go to the deepest, then to the earliest created.
 
+A variant beside the paper's radius (``radius="margin"``, docs/rhbl.md): a child's radius is
+also at most the distance from its centre to the nearest vector of another label among the
+vectors it is trained on (the radius rule of restricted Coulomb energy networks and of
+data-dependent balls: a sphere reaches up to where the labels change, not as far as its parent
+allows); a vector that no sphere but the root encloses then takes the label of the sphere with
+the nearest centre (a nearest-prototype rule), in training as in classification.
+
 The spheres, spawning and the winner searches live in :class:`rhbl.tree.SphereTree` (the
 estimator's ``tree_``); this module holds the parameters, input checks and labels.
 
@@ -39,17 +46,19 @@ import numpy as np
 from . import snapshot
 from ._errors import NotFittedError, SnapshotError
 from .compaction import compact
-from .tree import _F64, ALGORITHMS, DISTANCES, SphereTree, Totals, load_kernels
+from .tree import _F64, ALGORITHMS, DISTANCES, SphereTree, Totals, load_kernels, margins
 
 _NDARRAY = np.ndarray  # (_F64: builtin dtypes are singletons; another float64 takes the checks)
 
-__all__ = ["HypersphereClassifier", "load", "loads"]
+__all__ = ["HypersphereClassifier", "load", "loads", "margins"]
 
 _SPAWNS = ("all", "winner")
+_RADII = ("parent", "margin")
 _PARAMS = (
     "default_label",
     "distance",
     "spawn",
+    "radius",
     "min_radius",
     "max_nodes",
     "max_depth",
@@ -61,6 +70,11 @@ _PARAMS = (
 # the parameters that shape the tree (saved in snapshots, compared by ``tree_equal``);
 # ``algorithm`` and ``compiled`` only choose how the same answers are computed
 _TREE_PARAMS = snapshot.PARAMS
+
+
+def _uncovered(radius: str) -> str:
+    """The tree's rule for vectors no sphere but the root encloses, for ``radius``."""
+    return "nearest" if radius == "margin" else "root"
 
 
 def _plain_label(label: Any) -> Any:
@@ -111,6 +125,14 @@ class HypersphereClassifier:
         ``"all"`` (the paper, literal): every candidate with a conflicting label spawns a child.
         ``"winner"``: only the candidate that classification would choose spawns, when its
         label differs (much smaller trees).
+    radius:
+        ``"parent"`` (the paper): a child's radius is ``r_parent - d(x, c_parent)``, as large
+        as its parent allows. ``"margin"``: in ``fit``, also at most the distance from ``x`` to
+        the nearest vector of another label in the data set fitted (``partial_fit`` and
+        ``learn_one`` extend a tree with the parent's bound alone); and a vector that no sphere
+        but the root encloses takes the label of the sphere whose centre is nearest, in
+        training as in classification (answered wrongly so, it spawns a child of the root).
+        Fixed once a tree exists.
     min_radius:
         Do not spawn spheres whose radius would be smaller than this (0 = no limit). A vector
         whose spawn is suppressed is counted in ``n_skipped_``.
@@ -155,6 +177,7 @@ class HypersphereClassifier:
         *,
         distance: str = "squared",
         spawn: str = "all",
+        radius: str = "parent",
         min_radius: float = 0.0,
         max_nodes: int | None = None,
         max_depth: int | None = None,
@@ -166,6 +189,7 @@ class HypersphereClassifier:
         self.default_label = default_label
         self.distance = distance
         self.spawn = spawn
+        self.radius = radius
         self.min_radius = min_radius
         self.max_nodes = max_nodes
         self.max_depth = max_depth
@@ -197,6 +221,8 @@ class HypersphereClassifier:
             raise ValueError(f"distance must be one of {DISTANCES}, got {self.distance!r}")
         if self.spawn not in _SPAWNS:
             raise ValueError(f"spawn must be one of {_SPAWNS}, got {self.spawn!r}")
+        if self.radius not in _RADII:
+            raise ValueError(f"radius must be one of {_RADII}, got {self.radius!r}")
         if not (isinstance(self.min_radius, int | float) and self.min_radius >= 0):
             raise ValueError(f"min_radius must be a number >= 0, got {self.min_radius!r}")
         if self.max_nodes is not None and (
@@ -226,6 +252,9 @@ class HypersphereClassifier:
                     f"{name}={getattr(self, name)!r} but the tree was grown with "
                     f"{getattr(tree, name)!r}"
                 )
+        if _uncovered(self.radius) != tree.uncovered:
+            raise ValueError(f"radius={self.radius!r} but the tree answers uncovered vectors "
+                             f"by {tree.uncovered!r}")
 
     # ------------------------------------------------------------------ state
     def _is_fitted(self) -> bool:
@@ -242,7 +271,8 @@ class HypersphereClassifier:
         self._labels: list[Any] = []
         self._label_index: dict[Any, int] = {}
         root = self._intern(root_label)
-        self.tree_ = SphereTree(n_features, root, distance=self.distance, eps=self.eps)
+        self.tree_ = SphereTree(n_features, root, distance=self.distance, eps=self.eps,
+                                uncovered=_uncovered(self.radius))
         self.n_features_in_ = int(n_features)
         self.n_seen_ = 0
         self.n_skipped_ = 0
@@ -268,7 +298,8 @@ class HypersphereClassifier:
         """
         if not isinstance(tree, SphereTree):
             raise ValueError(f"tree must be a SphereTree, got {type(tree).__name__}")
-        clf = cls(distance=tree.distance, eps=tree.eps)
+        clf = cls(distance=tree.distance, eps=tree.eps,
+                  radius="margin" if tree.uncovered == "nearest" else "parent")
         try:
             clf.set_params(**params)
             clf._check_params()
@@ -377,16 +408,22 @@ class HypersphereClassifier:
 
     # ------------------------------------------------------------------ training
     def fit(self, X: Any, y: Iterable[Any], classes: Iterable[Any] | None = None):
-        """Grow a fresh tree on ``(X, y)``, vectors in order. Returns ``self``."""
+        """Grow a fresh tree on ``(X, y)``, vectors in order (``radius="margin"``: each sphere
+        also bounded by its margin in ``(X, y)``). Returns ``self``."""
         self.tree_ = None
-        return self.partial_fit(X, y, classes=classes)
+        return self._fit(X, y, classes, self.radius == "margin")
 
     def partial_fit(self, X: Any, y: Iterable[Any], classes: Iterable[Any] | None = None):
-        """Extend the tree with ``(X, y)``, one vector at a time in order. Returns ``self``.
+        """Extend the tree with ``(X, y)``, one vector at a time in order (each new sphere
+        bounded by its parent only, whatever ``radius``: the same tree however the vectors are
+        cut into calls). Returns ``self``.
 
         ``classes`` optionally registers labels up front (scikit-learn compatibility); unseen
         labels are added as they appear anyway.
         """
+        return self._fit(X, y, classes, False)
+
+    def _fit(self, X: Any, y: Iterable[Any], classes: Iterable[Any] | None, margin: bool):
         fitted = self._is_fitted()
         if fitted:
             self._check_tree_params()
@@ -409,7 +446,8 @@ class HypersphereClassifier:
         if classes is not None:
             for c in classes:
                 self._intern(c)
-        self._learn(X, self._intern_all(plain))
+        labels = self._intern_all(plain)
+        self._learn(X, labels, margins(X, labels, self.distance) if margin else None)
         return self
 
     def _intern_all(self, labels) -> list[int]:
@@ -436,8 +474,9 @@ class HypersphereClassifier:
         totals = self._learn(X, [self._intern(label)])
         return totals.spawned + totals.relabelled
 
-    def _learn(self, X: np.ndarray, labels: list[int]) -> Totals:
-        """Train the tree on checked rows with label indices, in order; count them."""
+    def _learn(self, X: np.ndarray, labels: list[int], caps: np.ndarray | None = None) -> Totals:
+        """Train the tree on checked rows with label indices, in order (a sphere spawned at row
+        ``i`` at most ``caps[i]`` in radius); count them."""
         totals = self.tree_.learn_many(
             X,
             labels,
@@ -445,6 +484,7 @@ class HypersphereClassifier:
             min_radius=self.min_radius,
             max_nodes=self.max_nodes,
             max_depth=self.max_depth,
+            caps=caps,
             compiled=self.compiled,
         )
         self.n_seen_ += X.shape[0]
@@ -586,6 +626,8 @@ class HypersphereClassifier:
         tree = self.tree_
         params = {name: getattr(self, name) for name in _TREE_PARAMS}
         params["distance"], params["eps"] = tree.distance, tree.eps
+        if params["radius"] == "parent":  # the paper's: left out, as readers before it know
+            del params["radius"]
         return snapshot.Snapshot(
             params=params,
             labels=list(self._labels),
@@ -623,7 +665,8 @@ def loads(data: bytes, *, source: str = "<bytes>") -> HypersphereClassifier:
     except (ValueError, TypeError, OverflowError) as exc:
         raise SnapshotError(source, f"invalid parameters: {exc}") from None
     try:
-        tree = SphereTree.from_arrays(**snap.arrays, distance=clf.distance, eps=clf.eps)
+        tree = SphereTree.from_arrays(**snap.arrays, distance=clf.distance, eps=clf.eps,
+                                      uncovered=_uncovered(clf.radius))
         return HypersphereClassifier.from_tree(
             tree,
             snap.labels,

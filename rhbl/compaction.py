@@ -284,6 +284,11 @@ def compact(clf: HypersphereClassifier, X: Any, y: Any = None, *, method: str = 
     if max_nodes is not None and (not isinstance(max_nodes, int | np.integer) or max_nodes < 1):
         raise ValueError(f"max_nodes must be None or an int >= 1, got {max_nodes!r}")
     X, yi = _check(clf, X, y, need_y=method == "prune")
+    if clf.tree_.uncovered != "root":
+        raise ValueError("compaction keeps a tree's answers by the paper's rule (the smallest "
+                         "enclosing sphere); a tree with radius='margin' answers the vectors no "
+                         "sphere but the root encloses by the nearest centre, which it does not "
+                         "model")
     tree = _Tree(clf, X)
     before = (tree.n, tree.height())
     settings: dict[str, Any] = {}

@@ -3,7 +3,8 @@
 A snapshot is one msgpack map::
 
     {"format": "rhbl-tree", "version": 1,
-     "params": {default_label, distance, spawn, min_radius, max_nodes, max_depth, clip, eps},
+     "params": {default_label, distance, spawn, radius, min_radius, max_nodes, max_depth, clip,
+                eps},
      "n_features": n, "labels": [str | int, ...],            # label index -> label
      "centers": {"dtype": "<f8", "shape": [N, n], "data": bytes},
      "radii": {"dtype": "<f8", "shape": [N], ...},
@@ -50,7 +51,8 @@ FORMAT = "rhbl-tree"
 VERSION = 1
 # the parameters a snapshot stores, in the order written (the classifier's, but ``algorithm``:
 # the choice of winner search changes no answer, so it is not part of the tree)
-PARAMS = ("default_label", "distance", "spawn", "min_radius", "max_nodes", "max_depth", "clip", "eps")
+PARAMS = ("default_label", "distance", "spawn", "radius", "min_radius", "max_nodes", "max_depth",
+          "clip", "eps")
 # the tree's arrays a snapshot stores: field name -> (SphereTree.to_arrays name, dtype)
 _ARRAYS = {"centers": ("centers", "<f8"), "radii": ("radii", "<f8"), "parent": ("parent", "<i8"),
            "label_index": ("label", "<i8")}

@@ -32,12 +32,15 @@ import numpy as np
 
 from . import _layout, _reference
 
-__all__ = ["ALGORITHMS", "DISTANCES", "Growth", "SphereTree", "Totals", "load_kernels",
-           "threads"]
+__all__ = ["ALGORITHMS", "DISTANCES", "Growth", "SphereTree", "Totals", "UNCOVERED",
+           "load_kernels", "margins", "threads"]
 
 log = logging.getLogger(__name__)
 
 DISTANCES = ("squared", "euclidean")
+# what answers a vector that no sphere but the root encloses: the root, or the sphere whose
+# centre is nearest (the radii bounded by the margin: HypersphereClassifier(radius="margin"))
+UNCOVERED = ("root", "nearest")
 ALGORITHMS = ("auto", "brute", "descent")
 # no limit, for the kernels (which take integers)
 _UNLIMITED = 1 << 62
@@ -188,9 +191,14 @@ class SphereTree:
         ``"squared"`` or ``"euclidean"``: the distance used for radii and enclosure.
     eps:
         Tolerance of the enclosure test ``d <= r + eps`` and of "coincides with a centre".
+    uncovered:
+        ``"root"`` (the paper): a vector that no sphere but the root encloses is the root's;
+        ``"nearest"``: it is the sphere's with the nearest centre (the root left out), as a
+        nearest-prototype rule answers outside every prototype's reach, in training too (a
+        wrong answer there spawns a child of the root).
 
-    ``distance`` and ``eps`` are fixed for the life of the tree. The arrays ``centers``,
-    ``radii``, ``parent``, ``depth`` and ``label`` are read-only views of the first
+    ``distance``, ``eps`` and ``uncovered`` are fixed for the life of the tree. The arrays
+    ``centers``, ``radii``, ``parent``, ``depth`` and ``label`` are read-only views of the first
     ``node_count`` spheres; ``children[i]`` lists the children of sphere ``i`` in creation order.
 
     The spheres live in one table, a row per sphere (see :mod:`rhbl._kernels`): centre,
@@ -199,9 +207,14 @@ class SphereTree:
     reference instead (same results, slower; the tests and benchmarks compare the two).
     """
 
-    def __init__(self, n_features: int, root_label: int, *, distance: str, eps: float) -> None:
+    def __init__(self, n_features: int, root_label: int, *, distance: str, eps: float,
+                 uncovered: str = "root") -> None:
         if distance not in DISTANCES:
             raise ValueError(f"distance must be one of {DISTANCES}, got {distance!r}")
+        if uncovered not in UNCOVERED:
+            raise ValueError(f"uncovered must be one of {UNCOVERED}, got {uncovered!r}")
+        self.uncovered = uncovered
+        self._nearest_on = uncovered == "nearest"
         if not (isinstance(n_features, int | np.integer) and n_features >= 1):
             raise ValueError(f"need at least one feature, got {n_features}")
         _kernels()  # loaded once per process, before any tree needs them
@@ -245,7 +258,7 @@ class SphereTree:
         """Pickle (and ``copy.deepcopy``) the table, not its views or derived caches."""
         state = {k: v for k, v in self.__dict__.items() if k not in self._VIEWS}
         state.update(_creation=None, _preorder=None, _children=None, _search=None,
-                     _unchanged=0)
+                     _unchanged=0, _kd=None)
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -330,6 +343,7 @@ class SphereTree:
         *,
         distance: str,
         eps: float,
+        uncovered: str = "root",
     ) -> SphereTree:
         """A tree rebuilt from the arrays of :meth:`to_arrays` (``depth`` optional), checked.
 
@@ -360,7 +374,8 @@ class SphereTree:
             raise ValueError("label index out of range")
         if n > 1 and (radii[1:] > radii[parent[1:]]).any():
             raise ValueError("a child's radius exceeds its parent's")
-        tree = cls(centers.shape[1], int(label[0]), distance=distance, eps=eps)
+        tree = cls(centers.shape[1], int(label[0]), distance=distance, eps=eps,
+                   uncovered=uncovered)
         tree._allocate(max(64, n))
         tree._centers[:n] = centers
         tree._radii[:n] = radii
@@ -393,8 +408,10 @@ class SphereTree:
         links[by_parent[:-1][~is_last[:-1]], after] = by_parent[1:][~is_last[:-1]]
 
     def equal(self, other: SphereTree) -> bool:
-        """True if ``other`` has the same distance, eps and spheres (exactly)."""
-        if (self.distance, self.eps, self.node_count) != (other.distance, other.eps, other.node_count):
+        """True if ``other`` has the same distance, eps, rule for uncovered vectors and spheres
+        (exactly)."""
+        if ((self.distance, self.eps, self.uncovered, self.node_count)
+                != (other.distance, other.eps, other.uncovered, other.node_count)):
             return False
         a, b = self.to_arrays(), other.to_arrays()
         return all(np.array_equal(a[k], b[k]) for k in a)
@@ -431,6 +448,7 @@ class SphereTree:
         self._children = None
         self._search: _Search | None = None
         self._unchanged = 0  # single queries since the last change
+        self._kd = None  # the centres' k-d tree (uncovered="nearest"), built when first asked
 
     def learn(
         self,
@@ -441,6 +459,7 @@ class SphereTree:
         min_radius: float = 0.0,
         max_nodes: int | None = None,
         max_depth: int | None = None,
+        max_radius: float = math.inf,
         compiled: bool = True,
     ) -> Growth:
         """Train on one checked vector ``x`` with label index ``label``.
@@ -449,12 +468,17 @@ class SphereTree:
         whose label differs spawns a child, unless a limit suppresses it: the child's radius
         below ``min_radius`` (0 = none), ``max_nodes`` spheres reached, or the child deeper than
         ``max_depth``. A candidate whose centre is within ``eps`` of ``x`` is relabelled instead.
+        A child's radius is ``r_parent - d(x, c_parent)``, at most ``max_radius``. With
+        ``uncovered="nearest"`` a vector only the root encloses is answered by the nearest
+        centre (the first of equals), and spawns a child of the root when that is not ``label``.
         """
         if not compiled:
             return Growth(*_reference.learn(self, x, label, spawn=spawn, min_radius=min_radius,
-                                            max_nodes=max_nodes, max_depth=max_depth))
+                                            max_nodes=max_nodes, max_depth=max_depth,
+                                            max_radius=max_radius))
         t = self.learn_many(x.reshape(1, -1), np.array([label], dtype=np.int64), spawn=spawn,
-                            min_radius=min_radius, max_nodes=max_nodes, max_depth=max_depth)
+                            min_radius=min_radius, max_nodes=max_nodes, max_depth=max_depth,
+                            caps=np.full(1, float(max_radius)))
         return Growth(t.spawned, t.relabelled, t.skipped > 0)
 
     def learn_many(
@@ -466,16 +490,23 @@ class SphereTree:
         min_radius: float = 0.0,
         max_nodes: int | None = None,
         max_depth: int | None = None,
+        caps: np.ndarray | None = None,
         compiled: bool = True,
     ) -> Totals:
         """Train on the rows of a checked ``X`` in order, with label indices ``labels``: the
-        same tree as :meth:`learn` on each row, in one compiled call (``compiled=False``: a
-        loop over :meth:`learn` in numpy)."""
+        same tree as :meth:`learn` on each row (row ``i`` with ``max_radius=caps[i]``; None:
+        no bound), in one compiled call (``compiled=False``: a loop over :meth:`learn` in
+        numpy)."""
+        caps = (np.full(X.shape[0], np.inf) if caps is None
+                else np.array(caps, dtype=np.float64).reshape(-1))
+        if caps.shape != (X.shape[0],):
+            raise ValueError(f"caps must hold one radius per row ({X.shape[0]}), got "
+                             f"{caps.shape[0]}")
         if not compiled:
             spawned = relabelled = skipped = 0
-            for x, label in zip(X, np.asarray(labels).tolist(), strict=True):
+            for x, label, cap in zip(X, np.asarray(labels).tolist(), caps.tolist(), strict=True):
                 g = self.learn(x, label, spawn=spawn, min_radius=min_radius, max_nodes=max_nodes,
-                               max_depth=max_depth, compiled=False)
+                               max_depth=max_depth, max_radius=cap, compiled=False)
                 spawned, relabelled = spawned + g.spawned, relabelled + g.relabelled
                 skipped += g.suppressed
             return Totals(spawned, relabelled, skipped)
@@ -488,7 +519,7 @@ class SphereTree:
         while True:
             rows, self.node_count, self.height, s, r, k = _kernels().learn(
                 self._table, X, labels, start, self.node_count, self.height, self._eps,
-                self._euclidean, spawn == "winner", *limits)
+                self._euclidean, spawn == "winner", *limits, caps, self._nearest_on)
             spawned, relabelled, skipped = spawned + s, relabelled + r, skipped + k
             start += rows
             if start == X.shape[0]:
@@ -515,6 +546,12 @@ class SphereTree:
         vectorised ``sum((x - c)**2)`` over the features, in feature order), then the enclosing
         ones are walked in creation order in Python.
         """
+        node = self._enclosing_one(x, compiled)
+        return self._nearest(x) if node == 0 and self._nearest_on else node
+
+    def _enclosing_one(self, x: np.ndarray, compiled: bool) -> int:
+        """The smallest sphere enclosing ``x`` (the root when no other does): the paper's
+        winner."""
         if not compiled:
             return _reference.apply_one(self, x)
         flags = x.flags
@@ -528,6 +565,19 @@ class SphereTree:
                                          self._euclidean)
             search = self._search_table()
         return search.one(search.table, search.nodes, x, self._eps, self._euclidean)
+
+    def _nearest(self, X: np.ndarray) -> Any:
+        """The sphere (creation index, the root left out) whose centre is nearest to ``x`` (one
+        vector: an int) or to each row of ``X`` (an array); the root for a lone root. The
+        centres' k-d tree (scipy's) is built on the first call after a change."""
+        n = self.node_count
+        if n < 2:
+            return 0 if X.ndim == 1 else np.zeros(X.shape[0], dtype=np.int64)
+        if self._kd is None:
+            self._kd = _kd_tree(self._centers[1:n].copy())
+        if X.ndim == 1:
+            return int(self._kd.query(X, k=1)[1]) + 1
+        return self._kd.query(X, k=1)[1].astype(np.int64) + 1
 
     def _search_table(self) -> _Search:
         """The search table of the tree as it is (built now if the tree changed since)."""
@@ -552,6 +602,8 @@ class SphereTree:
             flags = x.flags
             if flags.c_contiguous and flags.writeable:  # apply_one's search, inlined
                 node = search.one(search.table, search.nodes, x, self._eps, self._euclidean)
+                if node == 0 and self._nearest_on:
+                    node = self._nearest(x)
                 return -1 if node < 0 else search.labels[node]
         node = self.apply_one(x, compiled=compiled)
         return -1 if node < 0 else self._table.item(node, self._label_column)
@@ -579,7 +631,12 @@ class SphereTree:
         ``PARALLEL_BATCH`` rows or more on the search table is cut into slices searched by
         :func:`threads` threads.
         """
-        return self._searched(X, algorithm, compiled)[0]
+        out = self._searched(X, algorithm, compiled)[0]
+        if self._nearest_on:
+            root = np.flatnonzero(out == 0)
+            if len(root):
+                out[root] = self._nearest(np.asarray(X, dtype=np.float64)[root])
+        return out
 
     def visits(self, X: np.ndarray, algorithm: str = "auto") -> np.ndarray:
         """How many spheres the compiled search computed the distance of, per row of ``X``
@@ -645,6 +702,27 @@ class SphereTree:
                 ) -> np.ndarray:
         """The label index of the winning sphere of each row of a checked ``X``."""
         return self._label[self.apply(X, algorithm, compiled=compiled)]
+
+
+def _kd_tree(points: np.ndarray) -> Any:
+    """scipy's k-d tree of ``points`` (scipy.spatial imported on first use: a third of a
+    second, which only ``radius="margin"`` pays)."""
+    return importlib.import_module("scipy.spatial").cKDTree(points)
+
+
+def margins(X: np.ndarray, labels: Any, distance: str = "squared") -> np.ndarray:
+    """Each row's margin: its distance to the nearest row of ``X`` with another label (in the
+    tree's units: squared for ``"squared"``), ``inf`` where every row has its label; one k-d
+    tree per label, over the rows of the other labels."""
+    labels = np.asarray(labels)
+    out = np.full(X.shape[0], np.inf)
+    for label in np.unique(labels):
+        mine = labels == label
+        if mine.all():
+            break
+        d, _ = _kd_tree(X[~mine]).query(X[mine], k=1)
+        out[mine] = d
+    return out * out if distance == "squared" else out
 
 
 def _queries(X: np.ndarray) -> np.ndarray:

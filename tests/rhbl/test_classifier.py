@@ -311,3 +311,110 @@ def test_labels_in_a_numpy_array_learn_as_a_list_does(labels):
     assert list(b.classes_) == list(a.classes_)
     with pytest.raises(ValueError, match="rows but y has"):
         b.partial_fit(X[:4], np.array(y[:5]))
+
+
+def _margin_tree(compiled=True, X=None, y=None, **params):
+    if X is None:
+        X, y = synthetic(1500, n=4, seed=3)
+    return HypersphereClassifier("fwd", spawn="winner", radius="margin", compiled=compiled,
+                                 **params).fit(X, y), X, y
+
+
+@pytest.mark.parametrize("distance", ["squared", "euclidean"])
+def test_margin_bounds_every_sphere_by_the_nearest_vector_of_another_label(distance):
+    """radius="margin": no sphere of a fit reaches past the nearest training vector of
+    another label (in the tree's units), and it is a smaller tree than the parent's radius
+    grows on the same vectors; the margins are those of a brute-force search."""
+    X, y = synthetic(1500, n=4, seed=3)
+    clf = HypersphereClassifier("fwd", spawn="winner", radius="margin",
+                                distance=distance).fit(X, y)
+    parent = HypersphereClassifier("fwd", spawn="winner", distance=distance).fit(X, y)
+    a = clf.tree_arrays()
+    d2 = ((a["centers"][1:, None, :] - X[None, :, :]) ** 2).sum(-1)
+    labels = clf.classes_[a["label"][1:]]
+    other = np.where(labels[:, None] != y[None, :], d2, np.inf).min(1)
+    bound = other if distance == "squared" else np.sqrt(other)
+    assert (a["radii"][1:] <= bound + 1e-12).all()
+    assert clf.node_count_ < parent.node_count_
+    idx = np.array([list(clf.classes_).index(v) for v in y])
+    brute = np.where(idx[:, None] != idx[None, :],
+                     ((X[:, None, :] - X[None, :, :]) ** 2).sum(-1), np.inf).min(1)
+    got = rhbl.tree.margins(X, idx, distance)
+    assert np.allclose(got, brute if distance == "squared" else np.sqrt(brute))
+    assert (rhbl.tree.margins(X, np.zeros(len(X), dtype=int)) == np.inf).all()
+
+
+def test_margin_tree_answers_uncovered_vectors_by_the_nearest_centre():
+    """Where no sphere but the root encloses a vector, a margin tree answers with the label of
+    the sphere whose centre is nearest (the root left out), in every search: one query, a
+    batch, the search table, the numpy reference; the decision path ends at that sphere."""
+    clf, X, y = _margin_tree()
+    ref, _, _ = _margin_tree(compiled=False, X=X, y=y)
+    assert clf.tree_equal(ref)
+    rng = np.random.default_rng(4)
+    Q = rng.random((3000, 4))
+    a = clf.tree_arrays()
+    centres, labels = a["centers"][1:], clf.classes_[a["label"][1:]]
+    paper = HypersphereClassifier.from_tree(rhbl.tree.SphereTree.from_arrays(
+        **a, distance="squared", eps=clf.eps), clf.classes_, default_label="fwd",
+        spawn="winner")
+    uncovered = paper.tree_.apply(Q) == 0
+    assert 0.05 < uncovered.mean() < 0.95  # both kinds are tested
+    nearest = labels[((Q[:, None, :] - centres[None]) ** 2).sum(-1).argmin(1)]
+    want = np.where(uncovered, nearest, paper.predict(Q))
+    assert (clf.predict(Q) == want).all()
+    assert (ref.predict(Q) == want).all()
+    assert [clf.predict_one(q) for q in Q[:100]] == list(want[:100])  # until the search table
+    assert [clf.predict_one(q) for q in Q[:100]] == list(want[:100])  # and on it
+    assert [ref.predict_one(q) for q in Q[:50]] == list(want[:50])
+    q = Q[np.flatnonzero(uncovered)[0]]
+    path = clf.decision_path(q)
+    assert path[0]["index"] == 0 and path[-1]["label"] == clf.predict_one(q)
+    assert (clf.predict(X) == y).mean() > 0.8
+
+
+@pytest.mark.parametrize("spawn", ["winner", "all"])
+def test_margin_is_a_property_of_fit_partial_fit_extends_by_the_parent(spawn):
+    """partial_fit (and learn_one) extend a margin tree with the parent's bound alone: the
+    same spheres however the vectors are cut into calls; and a margin tree learns by the rule
+    it answers by: right after a vector is learned the tree answers its label (the nearest
+    centre too, where only the root encloses it)."""
+    X, y = synthetic(800, n=3, seed=5)
+    margin = HypersphereClassifier("fwd", spawn=spawn, radius="margin")
+    for a in range(0, 800, 100):
+        margin.partial_fit(X[a:a + 100], y[a:a + 100])
+    whole = HypersphereClassifier("fwd", spawn=spawn, radius="margin").partial_fit(X, y)
+    assert whole.tree_equal(margin)
+    ref = HypersphereClassifier("fwd", spawn=spawn, radius="margin", compiled=False)
+    ref.partial_fit(X, y)
+    assert ref.tree_equal(margin)
+    fitted = HypersphereClassifier("fwd", spawn=spawn, radius="margin").fit(X, y)
+    assert not fitted.tree_equal(margin)
+    one = HypersphereClassifier("fwd", spawn=spawn, radius="margin").fit(X[:200], y[:200])
+    rng = np.random.default_rng(8)
+    for x in rng.random((60, 3)):
+        label = str(rng.choice(["fwd", "rot-left", "fwd-right"]))
+        one.learn_one(x, label)
+        assert one.predict_one(x) == label
+
+
+def test_margin_snapshots_and_parameter_checks(tmp_path):
+    """A margin tree's snapshot says so and loads answering as it did; the paper's radius is
+    left out of a snapshot (readers before the parameter read it); a tree cannot change its
+    radius rule, and a bad radius is named."""
+    clf, X, y = _margin_tree()
+    clf.save(tmp_path / "m.rhbl")
+    back = rhbl.load(tmp_path / "m.rhbl")
+    assert back.radius == "margin" and back.tree_equal(clf)
+    Q = np.random.default_rng(6).random((500, 4))
+    assert (back.predict(Q) == clf.predict(Q)).all()
+    plain = HypersphereClassifier("fwd").fit(X, y)
+    doc = rhbl.snapshot.decode(plain.to_bytes())
+    assert "radius" not in doc.params and rhbl.loads(plain.to_bytes()).radius == "parent"
+    with pytest.raises(ValueError, match="radius must be one of"):
+        HypersphereClassifier("a", radius="wide").fit([[0.5]], ["a"])
+    back.set_params(radius="parent")
+    with pytest.raises(ValueError, match="radius='parent' but the tree answers"):
+        back.partial_fit(X[:3], y[:3])
+    with pytest.raises(ValueError, match="compaction keeps a tree's answers by the paper's"):
+        clf.compact(X)

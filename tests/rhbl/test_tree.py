@@ -147,13 +147,15 @@ def test_snapshots_store_every_parameter_but_the_search():
 
 def test_modules_import_one_way():
     """_reference <- tree <- snapshot, compaction <- classifier: no import circle, and no import
-    hidden in a function; the kernels (numba) are the one module loaded on first use."""
+    hidden in a function; the kernels (numba) and scipy's k-d tree (radius="margin") are the
+    modules loaded on first use."""
     root = Path(rhbl.__file__).parent
     assert _imports(root / "_layout.py") == (set(), [])
     assert _imports(root / "_kernels.py") == ({"_layout"}, [])
     assert _imports(root / "_reference.py") == (set(), [])
     assert _imports(root / "tree.py") == ({"_layout", "_reference"}, [])
     assert 'importlib.import_module("._kernels", __package__)' in (root / "tree.py").read_text()
+    assert 'importlib.import_module("scipy.spatial")' in (root / "tree.py").read_text()
     assert _imports(root / "snapshot.py") == ({"_errors"}, [])
     assert _imports(root / "compaction.py") == ({"tree"}, [])
     assert _imports(root / "classifier.py") == ({"snapshot", "_errors", "tree", "compaction"}, [])
