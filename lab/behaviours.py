@@ -17,7 +17,7 @@ from pathlib import Path
 
 from client.behaviour.given import behaviour_arg  # --behaviour NAME|FILE: the processes' too
 from client.behaviour.spec import Behaviour, BehaviourError, behaviour, for_world, shipped
-from lab.recipe import RECIPES, Recipe
+from lab.recipe import OWN, RECIPES, Recipe
 from process import arguments, files
 from server import world_path
 from server.world import WorldSpec, load_world
@@ -65,7 +65,8 @@ def recipe_of(b: Behaviour, paper: bool = False) -> Recipe:
                                  f"goes with {' or '.join(RECIPES)})")
         return RECIPES[b.name]
     base = RECIPES.get(b.name) or RECIPES["wall-following"]
-    changes = {"round_worlds": b.teach[1:], **b.recipe}
+    own = OWN if b.goals is None else {}
+    changes = {"round_worlds": b.teach[1:], **own, **b.recipe}
     fields = {f.name for f in dataclasses.fields(Recipe)} - {"task", "world", "features"}
     for key, value in changes.items():
         if key not in fields:

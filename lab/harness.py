@@ -22,6 +22,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 from client.behaviour.actions import DEFAULT_ACTIONS, ActionSet
 from client.behaviour.learning import DemonstrationLearner, TreePolicy
 from client.behaviour.rule import rule_for
@@ -79,12 +81,27 @@ def make_learner(recipe: Recipe | str, actions: ActionSet = DEFAULT_ACTIONS, *,
     teacher's learning rule (``client.behaviour.rule.rule_for("script")``: the expert's labels
     learned as they arrive; recorded in the snapshot); a task name: its default recipe.
     ``record``: keep the vectors it learns (``learner.recorded()``); default: when the recipe
-    compacts (the step needs them)."""
+    compacts or bounds the spheres by the margin (those steps need them)."""
     recipe = recipe_for(recipe) if isinstance(recipe, str) else recipe
     return DemonstrationLearner(recipe.feature_spec(), actions, task=recipe.task,
                                 stride=recipe.stride, min_delta=recipe.min_delta,
-                                record=recipe.compact != "none" if record is None else record,
+                                record=(recipe.compact != "none" or recipe.radius == "margin"
+                                        if record is None else record),
                                 rule=rule_for("script"), **recipe.tree_params())
+
+
+def learned_from(recipe: Recipe, X: np.ndarray, y, actions: ActionSet = DEFAULT_ACTIONS
+                 ) -> DemonstrationLearner:
+    """A learner of ``recipe`` (``make_learner``) that has learned the vectors ``(X, y)`` in
+    order as ``rhbl train``'s learner ends having learned them: offered as they came, then,
+    with the recipe's radius "margin", learned again from all of them at once
+    (``DemonstrationLearner.relearn``). The same tree as the trained one, from its recorded
+    vectors (the peer benchmark fits RHBL so)."""
+    learner = make_learner(recipe, actions, record=recipe.radius == "margin")
+    learner.observe_vectors(X, y)
+    if recipe.radius == "margin":
+        learner.relearn()
+    return learner
 
 
 def step_world(world: World, ep: Episode, actions: ActionSet, name: str, side: str | None,

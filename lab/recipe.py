@@ -32,6 +32,7 @@ from process.arguments import checked_list
 __all__ = [
     "DEMO",
     "EVAL_SECONDS",
+    "OWN",
     "RECIPES",
     "Recipe",
     "add_recipe_arguments",
@@ -47,7 +48,8 @@ STARTS = ("default", "world", "free")
 GENERATORS = ("rooms", "mazes", "clutter", "beacons")  # lab.generated's kinds
 SPAWN = ("all", "winner")
 DISTANCE = ("squared", "euclidean")
-TREE_PARAMS = ("spawn", "distance", "min_radius", "max_nodes", "max_depth")
+RADIUS = ("parent", "margin")
+TREE_PARAMS = ("spawn", "distance", "radius", "min_radius", "max_nodes", "max_depth")
 # the compaction step's choices and the ``rhbl.compaction`` settings each one means
 COMPACT: dict[str, dict] = {
     "none": {}, "exact": {"method": "exact"}, "prune": {"method": "prune"},
@@ -66,6 +68,9 @@ class Recipe:
     # the tree (rhbl.HypersphereClassifier) and what the learner offers it
     spawn: str = "winner"
     distance: str | None = None
+    # "margin": the tree learned again at the end from every vector, each sphere bounded by the
+    # nearest vector of another label (rhbl's radius="margin"); None: the paper's radius
+    radius: str | None = None
     min_radius: float | None = None
     max_nodes: int | None = None
     max_depth: int | None = None
@@ -128,6 +133,8 @@ class Recipe:
             raise bad("spawn", f"one of {', '.join(SPAWN)}")
         if self.distance is not None and self.distance not in DISTANCE:
             raise bad("distance", f"one of {', '.join(DISTANCE)}")
+        if self.radius is not None and self.radius not in RADIUS:
+            raise bad("radius", f"one of {', '.join(RADIUS)}")
         for name in ("seconds", "segment", "round_seconds", "augment_scale"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
@@ -147,6 +154,10 @@ class Recipe:
             raise bad("stride", "an integer >= 1")
         if self.compact not in COMPACT:
             raise bad("compact", f"one of {', '.join(COMPACT)}")
+        if self.compact != "none" and self.radius == "margin":
+            raise ValueError(f"recipe compact {self.compact!r} keeps a tree's answers by the "
+                             "paper's rule: not with radius 'margin' (to compact: radius "
+                             "'parent', --radius parent)")
         n = self.compact_max_nodes
         if n is not None and (isinstance(n, bool) or not isinstance(n, int) or n < 1):
             raise bad("compact_max_nodes", "None or an integer >= 1")
@@ -203,9 +214,10 @@ class Recipe:
     def for_demo(self) -> Recipe:
         """The recipe ``rhbl demo`` runs over zenoh: this one with the task's ``DEMO`` changes,
         less what one server in one world cannot run (rounds in scaled copies, in other or
-        randomised worlds, from free-space poses)."""
+        randomised worlds, from free-space poses) and the margin radius (the learner process
+        learns each label as it comes: the paper's radius)."""
         return self.replace(round_scales=(), round_free=0, round_worlds=(), round_generated=0,
-                            **DEMO.get(self.task, {}))
+                            radius=None, **DEMO.get(self.task, {}))
 
 
 # The default recipe per task (docs/experiments.md "Current recipe" has the measurements
@@ -234,6 +246,13 @@ RECIPES: dict[str, Recipe] = {
 # in order from 17 of 24 starts, seeds 0-3, against 23 of 24 with 4: ``rhbl demo --scenario
 # goals --seed S --rounds 2|4``).
 DEMO: dict[str, dict] = {"maze": {"rounds": 4}}
+
+# What a behaviour's own recipe (``lab.behaviours.recipe_of``; not ``--paper``) changes from
+# the paper's scenario: the spheres bounded by the margin, the tree learned again from every
+# vector at the end (chosen on development rooms, mazes, left-hand rooms and cluttered rooms,
+# and the dead end's teaching world: docs/studies/margin-radius.md). A behaviour with goals
+# keeps the paper's radius (its two trees are not learned again at the end: not measured).
+OWN: dict = {"radius": "margin"}
 
 # Sim seconds of one evaluation episode per task (``rhbl evaluate``, the demo's final drives).
 EVAL_SECONDS: dict[str, float] = {"wall-following": 120.0, "maze": 240.0}
@@ -269,6 +288,9 @@ def per_task(values: dict[str, object]) -> str:
 def recipe_default(name: str, recipes: dict[str, Recipe] | None = None) -> str:
     """The help text's default of recipe field ``name``, generated from ``recipes``:
     ``"default: the recipe's (wall following 600, maze 600)"``."""
+    if name in OWN and recipes is None:
+        return (f"default: {OWN[name]} in a behaviour's own recipe (its file may say "
+                "otherwise), the paper's with --paper and for a behaviour with goals")
     values = {t: getattr(r, name) for t, r in (RECIPES if recipes is None else recipes).items()}
     if all(v is None for v in values.values()):
         return "default: the classifier's" if name in TREE_PARAMS else "default: none"
@@ -304,6 +326,10 @@ _FLAGS: list[tuple[str, str, dict, str]] = [
     ("--spawn", "spawn", {"choices": list(SPAWN)},
      "spawn rule ('all' is the paper's literal rule)"),
     ("--distance", "distance", {"choices": list(DISTANCE)}, "the tree's distance"),
+    ("--radius", "radius", {"choices": list(RADIUS)},
+     "a new sphere's radius: 'parent' (the paper's: as large as its parent allows) or "
+     "'margin' (also no farther than the nearest vector of another label: the tree learned "
+     "again from every vector at the end of training, docs/rhbl.md)"),
     ("--min-radius", "min_radius", {"type": arguments.non_negative_float},
      "the smallest sphere radius"),
     ("--max-nodes", "max_nodes", {"type": arguments.positive_int}, "cap on the tree size"),

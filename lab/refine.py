@@ -91,7 +91,7 @@ def _classifier(clf, centers, radii, parent, label, classes):
     from rhbl.tree import SphereTree
 
     tree = SphereTree.from_arrays(centers, radii, parent, label, distance=clf.distance,
-                                  eps=clf.eps)
+                                  eps=clf.eps, uncovered=clf.tree_.uncovered)
     params = {k: v for k, v in clf.get_params().items() if k not in ("distance", "eps")}
     return HypersphereClassifier.from_tree(tree, classes, n_seen=clf.n_seen_,
                                            n_skipped=clf.n_skipped_,
@@ -471,6 +471,11 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
     say = say or (lambda text: print(text, flush=True))
     actions = list(policy.actions.names)
     clf = policy.classifier
+    if (max_nodes is not None and clf.node_count_ > max_nodes
+            and clf.tree_.uncovered != "root"):
+        raise ValueError(f"--max-nodes {max_nodes} prunes by the paper's rule (rhbl.compaction): "
+                         "this tree has radius 'margin'; train it with --radius parent to "
+                         "refine it to a size")
     pr = _Practice(b, policy, runner, _practice_tasks(b, seeds, scales, seconds, free, noise,
                                                       drawn))
     dropped = _first_practice(pr, clf)

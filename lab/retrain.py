@@ -117,6 +117,10 @@ def retrain(paths, features: str | FeatureSpec = "wall", robots: list[str] | Non
         teacher = "person" if by_person(source) else "script"
         chose = f" (--teacher auto chose it: the first label came from {source!r})"
     if teacher == "person":
+        if params.get("radius", "parent") != "parent":
+            raise ValueError(f"the person rule{chose} keeps the paper's radius (its tree is "
+                             "rebuilt from its labels as they come): --radius margin is the "
+                             "script rule's (force --teacher script)")
         if record or stride != 1 or min_delta:
             raise ValueError(f"the person rule{chose} learns every label (no --stride) and its "
                              "tree is rebuilt from them (no --compact: compact the snapshot it "
@@ -190,7 +194,8 @@ def save_retrained(learner: DemonstrationLearner, stats: dict, out: str | Path) 
 
 # the flags of ``rhbl train`` a retraining uses (the features, the tree, a compaction on the
 # recordings' vectors); every other one drives a simulation and is refused with its name
-USES = ("out", "from_recording", "behaviour", "features", "spawn", "distance", "min_radius", "max_nodes",
+USES = ("out", "from_recording", "behaviour", "features", "spawn", "distance", "radius",
+        "min_radius", "max_nodes",
         "stride", "compact", "compact_max_nodes", "compact_max_error", "teacher", "lag")
 
 
@@ -202,7 +207,8 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
     if given:
         raise ValueError(f"{', '.join(given)} {'does' if len(given) == 1 else 'do'} not apply to "
                          f"--from-recording (no simulation runs: it learns the recordings' "
-                         f"labels; it takes --behaviour (its perception and name), --features, --spawn, --distance, --min-radius, "
+                         f"labels; it takes --behaviour (its perception and name), --features, --spawn, --distance, "
+                         f"--radius, --min-radius, "
                          f"--max-nodes, --stride, --compact with its --compact-max-*, --teacher "
                          f"and --lag)")
 
@@ -214,18 +220,26 @@ def train_main(args) -> int:
 
     check_args(build_parser("train"), args)
     tree = {k: v for k, v in (("spawn", args.spawn), ("distance", args.distance),
-                              ("min_radius", args.min_radius), ("max_nodes", args.max_nodes))
+                              ("radius", args.radius), ("min_radius", args.min_radius),
+                              ("max_nodes", args.max_nodes))
             if v is not None}
     compact = _compact_params(args)
+    margin = tree.get("radius") == "margin"
+    if margin and compact is not None:
+        raise ValueError("--compact keeps a tree's answers by the paper's rule: not with "
+                         "--radius margin")
     try:
         b = get(args.behaviour) if args.behaviour else None
         features = args.features or (b.features if b is not None else "wall")
         learner, stats = retrain(args.from_recording, features=features,
                                  task=None if b is None else b.name,
                                  stride=args.stride or 1, tree_params=tree,
-                                 record=compact is not None, teacher=args.teacher, lag=args.lag)
+                                 record=compact is not None or margin, teacher=args.teacher,
+                                 lag=args.lag)
     except RecordingError as exc:
         raise ValueError(str(exc)) from None
+    if margin:  # as rhbl train ends: learned again from every vector, bounded by the margin
+        learner.relearn()
     if stats["paired"] == 0:
         raise ValueError(f"no teacher labels paired with scans in {', '.join(args.from_recording)}: "
                          f"nothing to learn")

@@ -85,6 +85,9 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
     wheels while any beam is closer than ``takeover`` metres (as the server's arbitration lets a
     teacher override a controller), so a round never drives into a wall.
 
+    ``recipe.radius`` "margin": then the tree is learned again from every vector it learned
+    (``learner.relearn``: each sphere bounded by the nearest vector of another label among
+    them; ``learner.session["relearned"]``), unless the learner extends a tree of its own.
     ``recipe.compact`` (not "none") is the last step: the tree is compacted on every vector it
     learned (``learner.compact``; ``learner.session["compaction"]`` is the record). With
     ``recipe.compact_rounds`` it is compacted also after the demonstrations and after every
@@ -114,12 +117,14 @@ def train(spec: WorldSpec, learner: DemonstrationLearner, recipe: Recipe | None 
     round_stats, between = _rounds(spec, learner, policy, fixed, recipe, rounds, compact, ep,
                                    rng=rng, aug=aug, seed=seed, noise=noise, on_step=on_step,
                                    record=recorded(b), others=others, drawn=drawn)
+    relearned = recipe.radius == "margin" and learner.relearn()
     compaction = _last_compaction(spec, learner, recipe, compact, seed, policy, on_step, b)
     ep.wall_time = time.perf_counter() - t0
     learner.session = _session_record(
         spec, recipe, ep, seed=seed, given=start is not None, segment=segment,
         demo_vectors=demo_vectors, rounds=rounds, round_stats=round_stats, noise=noise,
         compaction=compaction, between=between, compacted=compact is not None)
+    learner.session["relearned"] = relearned
     return ep
 
 

@@ -265,6 +265,21 @@ class DemonstrationLearner:
             self._rec_y.extend(labels)
         return len(X)
 
+    def relearn(self) -> bool:
+        """The tree learned again, fresh, from every vector this learner recorded, in order, in
+        one ``fit`` (with ``radius="margin"``, each sphere bounded by its margin among all of
+        them; its metadata kept). False, the tree kept, when it holds more than the recorded
+        vectors (a tree this learner extends) or none were recorded."""
+        clf = self.classifier
+        if self._rec_x is None or not self._rec_x or clf.n_seen_ != len(self._rec_x):
+            return False
+        X, y = self.recorded()
+        fresh = type(clf)(**clf.get_params())
+        fresh.fit(X, y)
+        fresh.metadata = clf.metadata
+        self.classifier = fresh
+        return True
+
     def compact(self, method: str = "exact", *, data: str | None = None, **options) -> dict:
         """Replace the tree by its compaction (``rhbl.compaction``) on the recorded vectors (the
         learner must have been made with ``record=True``); ``options`` go to

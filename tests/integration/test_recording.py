@@ -475,9 +475,10 @@ def test_in_process_train_and_evaluate_record_and_retrain(tmp_path):
     assert kinds["world"] >= 1 and kinds["cmd"] == kinds["scan"]
     again = tmp_path / "again.rhbl"
     r = subprocess.run([sys.executable, "-m", "lab.cli", "train", "--from-recording", str(rec),
-                        "--features", "wall", "--out", str(again)],
+                        "--features", "wall", "--radius", "margin", "--out", str(again)],
                        cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stdout + r.stderr
+    assert load(tree).radius == load(again).radius == "margin"  # rhbl train's, learned again
     a, b = load(tree).tree_arrays(), load(again).tree_arrays()
     assert all(np.array_equal(a[k], b[k]) for k in a)
     ev = tmp_path / "eval.mcap"

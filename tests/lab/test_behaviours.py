@@ -16,7 +16,7 @@ from lab import metrics
 from lab.behaviours import behaviour_for_world, get, recipe_of, teaching_world, world_of
 from lab.cli import main
 from lab.harness import resolve_world
-from lab.recipe import RECIPES
+from lab.recipe import OWN, RECIPES
 from server.world import parse_world
 
 
@@ -113,12 +113,15 @@ def test_a_tree_in_a_world_no_behaviour_names_is_judged_by_its_own_task(tmp_path
 
 def test_the_recipe_of_a_behaviour():
     wall = get("wall-following")
-    # the behaviour's recipe: the paper's plus rounds in randomised rooms and free poses; the
-    # paper's Table I scenario (rhbl experiment --paper) is the recipe alone
+    # the behaviour's recipe: the paper's plus rounds in randomised rooms and free poses and
+    # the spheres bounded by the margin (OWN); the paper's Table I scenario (rhbl experiment
+    # --paper) is the recipe alone; a behaviour with goals keeps the paper's radius
     assert recipe_of(wall) == RECIPES["wall-following"].replace(round_generated=8,
-                                                                round_free=4)
+                                                                round_free=4, radius="margin")
     assert recipe_of(wall, paper=True) == RECIPES["wall-following"]
-    assert recipe_of(get("maze")) == RECIPES["maze"]
+    assert recipe_of(wall, paper=True).radius is None
+    assert recipe_of(get("maze")) == RECIPES["maze"].replace(**OWN)
+    assert recipe_of(get("red-green")).radius is None
     assert teaching_world(wall).name == "room"
 
 

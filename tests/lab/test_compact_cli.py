@@ -205,3 +205,11 @@ def test_a_recording_retrained_as_a_persons_labels(tmp_path, capsys):
     assert main(["train", "--from-recording", str(rec), "--out", str(tmp_path / "x.rhbl"),
                  "--teacher", "person", "--compact", "exact"]) == 2
     assert "no --compact" in capsys.readouterr().err
+    # the margin is the script rule's, and compaction keeps the paper's rule: both named
+    assert main(["train", "--from-recording", str(rec), "--out", str(tmp_path / "x.rhbl"),
+                 "--teacher", "person", "--radius", "margin"]) == 2
+    assert "--radius margin is the script rule's" in capsys.readouterr().err
+    assert main(["train", "--from-recording", str(rec), "--out", str(tmp_path / "x.rhbl"),
+                 "--teacher", "script", "--radius", "margin", "--compact", "exact"]) == 2
+    assert "not with --radius margin" in capsys.readouterr().err
+    assert not (tmp_path / "x.rhbl").exists()

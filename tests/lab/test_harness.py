@@ -92,8 +92,14 @@ def test_train_compacts_on_the_vectors_it_learned(tmp_path, capsys):
     # the CLI: --compact prune --compact-max-nodes N, recorded in the snapshot
     tree = tmp_path / "c.rhbl"
     assert cli(["train", "--behaviour", "wall-following", "--world", CORRIDOR, "--seconds", "20", "--rounds", "0", "--out",
-                str(tree), "--compact", "prune-balanced", "--compact-max-nodes", "5"]) == 0
+                str(tree), "--compact", "prune-balanced", "--compact-max-nodes", "5",
+                "--radius", "parent"]) == 0
     assert "compacted (prune) from" in capsys.readouterr().out
+    # the behaviour's own radius (the margin) is not compacted: named, nothing written
+    assert cli(["train", "--behaviour", "wall-following", "--world", CORRIDOR, "--seconds", "20",
+                "--rounds", "0", "--out", str(tmp_path / "m.rhbl"), "--compact", "exact"]) == 2
+    assert "--radius parent" in capsys.readouterr().err
+    assert not (tmp_path / "m.rhbl").exists()
     _, _, _, meta = load_snapshot(tree)
     assert meta["compaction"][-1]["nodes_after"] <= 5
     assert meta["compaction"][-1]["settings"]["class_weight"] == "balanced"
@@ -103,7 +109,7 @@ def test_train_compacts_on_the_vectors_it_learned(tmp_path, capsys):
 def test_experiment_reports_nodes_before_and_after_compaction(capsys):
     assert cli(["experiment", "wall-following", "--trials", "1", "--train-seconds", "20",
                 "--seconds", "10", "--episodes", "1", "--eval-world", "none", "--rounds", "0",
-                "--compact", "exact"]) == 0
+                "--compact", "exact", "--radius", "parent"]) == 0
     out = capsys.readouterr().out
     assert "before compaction" in out and "s0 " in out and " -> " in out
 
@@ -204,3 +210,42 @@ def test_compact_visits_redoes_the_last_compaction_with_held_out_states():
     assert rec["nodes_before"] == plain.session["compaction"]["nodes_before"]  # the same tree
     assert learner.nodes <= 3 and rec["nodes_after"] == learner.nodes
     assert learner.vectors == plain.vectors  # the visits learned nothing
+
+
+def test_a_behaviours_tree_is_learned_again_bounded_by_the_margin(tmp_path, capsys):
+    """rhbl train with a behaviour's own recipe (radius "margin") ends by learning the tree
+    again from every vector it learned, in one fit: the tree is the margin tree of its vectors
+    (what the peer benchmark refits, lab.harness.learned_from), not the one grown as they came;
+    a resumed learner keeps the tree it extends; --radius parent grows the paper's."""
+    from rhbl import HypersphereClassifier
+
+    from lab.behaviours import get, recipe_of
+    from lab.harness import learned_from
+
+    recipe = recipe_of(get("wall-following")).replace(seconds=20.0, rounds=1, round_seconds=5.0,
+                                                      round_generated=0, round_free=0)
+    assert recipe.radius == "margin"
+    learner = make_learner(recipe)
+    assert learner.recording  # the step needs the vectors
+    spec = resolve_world(CORRIDOR)
+    train(spec, learner, recipe, seed=0, behaviour=get("wall-following"))
+    assert learner.session["relearned"] is True and learner.classifier.radius == "margin"
+    X, y = learner.recorded()
+    params = learner.classifier.get_params()
+    grown = HypersphereClassifier(**params).partial_fit(X, y)  # as the vectors came
+    fitted = HypersphereClassifier(**params).fit(X, y)
+    assert learner.classifier.tree_equal(fitted) and not learner.classifier.tree_equal(grown)
+    assert learned_from(recipe, X, y).classifier.tree_equal(fitted)
+    assert fitted.node_count_ < HypersphereClassifier(**{**params, "radius": "parent"}).fit(
+        X, y).node_count_
+    tree = tmp_path / "m.rhbl"
+    learner.save(tree)
+    again = tmp_path / "again.rhbl"
+    assert cli(["train", "--world", CORRIDOR, "--behaviour", "wall-following", "--resume",
+                str(tree), "--start", "1,1,0", "--seconds", "5", "--out", str(again)]) == 0
+    resumed = load_snapshot(again)[0]
+    assert resumed.radius == "margin" and resumed.node_count_ >= learner.nodes
+    paper = tmp_path / "p.rhbl"
+    assert cli(["train", "--world", CORRIDOR, "--behaviour", "wall-following", "--seconds", "20",
+                "--rounds", "0", "--radius", "parent", "--out", str(paper)]) == 0
+    assert load_snapshot(paper)[0].radius == "parent"

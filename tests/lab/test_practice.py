@@ -315,3 +315,19 @@ def test_the_pool_s_workers_end_when_the_process_that_made_it_is_killed(tmp_path
         for pid in pids:
             if running(pid):
                 os.kill(pid, signal.SIGKILL)
+
+
+def test_refine_to_a_size_refuses_a_margin_tree_by_name(tmp_path, capsys):
+    """--max-nodes prunes by the paper's rule (rhbl.compaction): a tree bounded by the margin
+    (rhbl train's default for a behaviour) is refused, one line naming --radius parent, before
+    any episode runs; nothing is written."""
+    tree, out = tmp_path / "m.rhbl", tmp_path / "out.rhbl"
+    assert main(["train", "--behaviour", "wall-following", "--world", "corridor", "--seconds",
+                 "20", "--rounds", "0", "--out", str(tree)]) == 0
+    assert TreePolicy.load(tree).classifier.radius == "margin"
+    capsys.readouterr()
+    assert main(["refine", "--behaviour", "wall-following", "--tree", str(tree), "--out",
+                 str(out), "--max-nodes", "5", "--minutes", "0.2", "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "--radius parent" in err and "--max-nodes 5" in err, err
+    assert not out.exists()
