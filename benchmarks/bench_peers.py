@@ -8,8 +8,9 @@ For each behaviour and seed the scripted expert teaches exactly as ``rhbl train 
 does (``lab.train.train`` with the behaviour's recipe, ``lab.behaviours.recipe_of``), the learner
 keeping every vector it learned (``make_learner(recipe, record=True)``): those ``(X, y)``, the
 demonstrations and the corrective rounds' labels, are what every learner fits. RHBL is fitted
-again on them, in the same order, with the recipe's tree parameters (the same tree as the
-trained one: the table says so), so its learning time is measured as the others' are. Each model
+again on them, in the same order, with the recipe's tree parameters, as ``rhbl train`` ends
+(``lab.harness.learned_from``: the same tree as the trained one, the table says so), so its
+learning time is measured as the others' are. Each model
 drives through ``lab.evaluate.evaluate`` (what ``rhbl evaluate`` runs: the same start poses,
 time limit and success rule, the expert's episode beside it), with the same feature spec and
 action set, no guard for anyone.
@@ -58,7 +59,7 @@ sys.path.insert(0, str(ROOT))
 from client.behaviour.spec import shipped  # noqa: E402
 from lab.behaviours import get, recipe_of, world_of  # noqa: E402
 from lab.evaluate import evaluate  # noqa: E402
-from lab.harness import make_learner  # noqa: E402
+from lab.harness import learned_from, make_learner  # noqa: E402
 from lab.report import table  # noqa: E402
 from lab.train import train  # noqa: E402
 from server import world_path  # noqa: E402
@@ -99,9 +100,7 @@ class OrderVote:
         self.members = []
         for _ in range(n):
             order = rng.permutation(len(X))
-            fresh = make_learner(recipe)
-            fresh.observe_vectors(X[order], y[order])
-            self.members.append(fresh.classifier)
+            self.members.append(learned_from(recipe, X[order], y[order]).classifier)
         self.node_count_ = sum(int(m.node_count_) for m in self.members)
         self.height_ = max(int(m.height_) for m in self.members)
 
@@ -208,8 +207,7 @@ def fit(name: str, X: np.ndarray, y: np.ndarray, recipe, seed: int, learner):
 
     t0 = time.perf_counter()  # imports above: not part of a fit
     if name == "rhbl":
-        fresh = make_learner(recipe)
-        fresh.observe_vectors(X, y)
+        fresh = learned_from(recipe, X, y)
         clf = fresh.classifier
         seconds = time.perf_counter() - t0
         from client.behaviour.learning import TreePolicy
