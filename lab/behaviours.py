@@ -65,8 +65,7 @@ def recipe_of(b: Behaviour, paper: bool = False) -> Recipe:
                                  f"goes with {' or '.join(RECIPES)})")
         return RECIPES[b.name]
     base = RECIPES.get(b.name) or RECIPES["wall-following"]
-    own = OWN if b.goals is None else {}
-    changes = {"round_worlds": b.teach[1:], **own, **b.recipe}
+    changes = {"round_worlds": b.teach[1:], **OWN, **b.recipe}
     fields = {f.name for f in dataclasses.fields(Recipe)} - {"task", "world", "features"}
     for key, value in changes.items():
         if key not in fields:

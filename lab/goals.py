@@ -99,10 +99,15 @@ def train_goals(spec: WorldSpec, b: Behaviour, recipe: Recipe, *, seed: int = 0,
     ``round_seconds`` each, while the teacher labels every step: first in ``round_generated``
     randomised worlds of the kind ``generator`` names (``lab.generated``, drawn from the seed;
     "beacons" for goals), then in copies of the world scaled by each of ``round_scales``, then
-    in the world. The reactive learner learns the same labelled steps."""
+    in the world. The reactive learner learns the same labelled steps. With the recipe's
+    radius "margin" the action tree is then learned again from every vector, each sphere
+    bounded by its margin (``DemonstrationLearner.relearn``), and the reactive tree fitted so
+    (the completion tree keeps the paper's radius)."""
     _check(spec, b)
     actions = None
-    learner = GoalLearner(recipe.feature_spec(), b.goals, task=b.name, **recipe.tree_params())
+    margin = recipe.radius == "margin"
+    learner = GoalLearner(recipe.feature_spec(), b.goals, task=b.name, record=margin,
+                          **recipe.tree_params())
     reactive = ReactiveBeaconPolicy(recipe.feature_spec(), b.goals, **recipe.tree_params())
     expert = expert_of(b, actions)
     rng = np.random.default_rng(seed)
@@ -146,6 +151,8 @@ def train_goals(spec: WorldSpec, b: Behaviour, recipe: Recipe, *, seed: int = 0,
                      int(round(recipe.round_seconds / dt)), on_step=on_step,
                      driver=_frozen(learner), takeover=recipe.takeover)
     learner.flush()
+    if margin:  # as lab.train ends: the action tree learned again, bounded by the margin
+        learner.relearn()
     reactive.flush()
     ep.wall_time = time.perf_counter() - t0
     return learner, reactive, ep

@@ -249,9 +249,9 @@ DEMO: dict[str, dict] = {"maze": {"rounds": 4}}
 
 # What a behaviour's own recipe (``lab.behaviours.recipe_of``; not ``--paper``) changes from
 # the paper's scenario: the spheres bounded by the margin, the tree learned again from every
-# vector at the end (chosen on development rooms, mazes, left-hand rooms and cluttered rooms,
-# and the dead end's teaching world: docs/studies/margin-radius.md). A behaviour with goals
-# keeps the paper's radius (its two trees are not learned again at the end: not measured).
+# vector at the end (chosen on development rooms, mazes, left-hand rooms, cluttered rooms and
+# rooms with beacons, and the dead end's teaching world: docs/studies/margin-radius.md; the
+# behaviour file of remembered keeps the paper's radius).
 OWN: dict = {"radius": "margin"}
 
 # Sim seconds of one evaluation episode per task (``rhbl evaluate``, the demo's final drives).
@@ -290,7 +290,7 @@ def recipe_default(name: str, recipes: dict[str, Recipe] | None = None) -> str:
     ``"default: the recipe's (wall following 600, maze 600)"``."""
     if name in OWN and recipes is None:
         return (f"default: {OWN[name]} in a behaviour's own recipe (its file may say "
-                "otherwise), the paper's with --paper and for a behaviour with goals")
+                "otherwise: remembered's does), the paper's with --paper")
     values = {t: getattr(r, name) for t, r in (RECIPES if recipes is None else recipes).items()}
     if all(v is None for v in values.values()):
         return "default: the classifier's" if name in TREE_PARAMS else "default: none"

@@ -459,6 +459,14 @@ def _standing(pr: _Practice, clf) -> dict:
             "success": round(np.mean([r["success"] for r in pr.results]), 4)}
 
 
+def _check_sizable(clf, max_nodes: int | None) -> None:
+    """ValueError unless the size step (``_sized``: rhbl.compaction) can prune ``clf``."""
+    if max_nodes is not None and clf.node_count_ > max_nodes and clf.tree_.uncovered != "root":
+        raise ValueError(f"--max-nodes {max_nodes} prunes by the paper's rule (rhbl.compaction): "
+                         "this tree has radius 'margin'; train it with --radius parent to "
+                         "refine it to a size")
+
+
 def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = None,
            budget: float = 600.0, seeds=(0,), scales=SCALES, window: int = 30,
            candidates: int = 6, prune: str = "used", say=None, validate: bool = True,
@@ -471,11 +479,7 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
     say = say or (lambda text: print(text, flush=True))
     actions = list(policy.actions.names)
     clf = policy.classifier
-    if (max_nodes is not None and clf.node_count_ > max_nodes
-            and clf.tree_.uncovered != "root"):
-        raise ValueError(f"--max-nodes {max_nodes} prunes by the paper's rule (rhbl.compaction): "
-                         "this tree has radius 'margin'; train it with --radius parent to "
-                         "refine it to a size")
+    _check_sizable(clf, max_nodes)
     pr = _Practice(b, policy, runner, _practice_tasks(b, seeds, scales, seconds, free, noise,
                                                       drawn))
     dropped = _first_practice(pr, clf)

@@ -488,9 +488,9 @@ class GoalLearner(DemonstrationLearner):
         kw.setdefault("spawn", "winner")
         kw["rule"] = for_goals(kw.get("rule") or SCRIPT)  # the guard's path check, stored
         super().__init__(features, actions, **kw)
-        self.goals = goals
+        self.goals = goals  # (the completion tree: marks as they come, the paper's radius)
         self.completion_tree = (completion if completion is not None
-                                else _tree(NOT_DONE, self.tree_params))
+                                else _tree(NOT_DONE, {**self.tree_params, "radius": "parent"}))
         self._cx: list = []
         self._cy: list = []
         prov = kw.get("provenance") or {}
@@ -784,8 +784,13 @@ class ReactiveBeaconPolicy:
         self._y.append(label)
 
     def flush(self) -> None:
+        """Learn the vectors observed since; a margin tree's first flush fits them at once."""
         if self._x:
-            self.classifier.partial_fit(np.array(self._x), self._y)
+            fresh = getattr(self.classifier, "tree_", None) is None
+            if fresh and self.classifier.radius == "margin":
+                self.classifier.fit(np.array(self._x), self._y)
+            else:
+                self.classifier.partial_fit(np.array(self._x), self._y)
             self._x, self._y = [], []
 
     def act(self, ranges, pose) -> str:

@@ -115,13 +115,14 @@ def test_the_recipe_of_a_behaviour():
     wall = get("wall-following")
     # the behaviour's recipe: the paper's plus rounds in randomised rooms and free poses and
     # the spheres bounded by the margin (OWN); the paper's Table I scenario (rhbl experiment
-    # --paper) is the recipe alone; a behaviour with goals keeps the paper's radius
+    # --paper) is the recipe alone; a behaviour file may keep the paper's radius
     assert recipe_of(wall) == RECIPES["wall-following"].replace(round_generated=8,
                                                                 round_free=4, radius="margin")
     assert recipe_of(wall, paper=True) == RECIPES["wall-following"]
     assert recipe_of(wall, paper=True).radius is None
     assert recipe_of(get("maze")) == RECIPES["maze"].replace(**OWN)
-    assert recipe_of(get("red-green")).radius is None
+    assert recipe_of(get("red-green")).radius == "margin"
+    assert recipe_of(get("remembered")).radius == "parent"
     assert teaching_world(wall).name == "room"
 
 

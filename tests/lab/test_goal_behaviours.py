@@ -55,6 +55,28 @@ def test_a_short_training_run_gives_both_trees_and_a_report_of_goal_changes():
     assert rep["teacher"][0]["goals_total"] == 2
 
 
+def test_a_goal_behaviours_action_tree_is_learned_again_bounded_by_the_margin(tmp_path):
+    """With the radius "margin" the action tree is learned again from every vector at the end
+    (as rhbl train ends for a behaviour without goals) and the reactive baseline fitted so; the
+    completion tree learns its marks as they come, by the paper's radius."""
+    from rhbl import HypersphereClassifier
+
+    b = get("red-green")
+    spec = world_of(b, b.teach[0])
+    recipe = recipe_of(b).replace(seconds=60.0, rounds=1, round_seconds=5.0, round_generated=0,
+                                  round_scales=(), round_free=0, random_segment=0.0,
+                                  radius="margin")
+    learner, reactive, _ = train_goals(spec, b, recipe, seed=1)
+    X, y = learner.recorded()
+    params = learner.classifier.get_params()
+    assert params["radius"] == "margin"
+    assert learner.classifier.tree_equal(HypersphereClassifier(**params).fit(X, y))
+    assert learner.completion.radius == "parent" and learner.completion.node_count_ > 1
+    assert reactive.classifier.radius == "margin" and reactive.classifier.node_count_ > 1
+    policy = load_policy(learner.save(tmp_path / "g.msgpack"))
+    assert policy.classifier.radius == "margin" and policy.completion.radius == "parent"
+
+
 def test_rhbl_train_and_evaluate_take_a_behaviour_with_goals(tmp_path, capsys):
     out = tmp_path / "rg.msgpack"
     assert cli(["train", "--behaviour", "red-green", "--seconds", "60", "--rounds", "0",

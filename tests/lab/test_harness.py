@@ -217,10 +217,9 @@ def test_a_behaviours_tree_is_learned_again_bounded_by_the_margin(tmp_path, caps
     again from every vector it learned, in one fit: the tree is the margin tree of its vectors
     (what the peer benchmark refits, lab.harness.learned_from), not the one grown as they came;
     a resumed learner keeps the tree it extends; --radius parent grows the paper's."""
-    from rhbl import HypersphereClassifier
-
     from lab.behaviours import get, recipe_of
     from lab.harness import learned_from
+    from rhbl import HypersphereClassifier
 
     recipe = recipe_of(get("wall-following")).replace(seconds=20.0, rounds=1, round_seconds=5.0,
                                                       round_generated=0, round_free=0)
