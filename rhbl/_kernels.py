@@ -189,6 +189,18 @@ def _candidates(table, x, eps, euclidean, stack, dstack, cand, cand_d):
 
 
 @_jit
+def _nearest_label(tf, table, n, x, c_label):
+    """The label of the sphere (the root left out) whose centre is nearest to ``x``, the first
+    of equals (``uncovered="nearest"``)."""
+    best, label = np.inf, -1
+    for i in range(1, n):
+        d = _distance(tf, i, x, False)
+        if d < best:
+            best, label = d, table[i, c_label]
+    return label
+
+
+@_jit
 def learn(table, X, labels, start, n, height, eps, euclidean, winner_only, min_radius,
           max_nodes, max_depth, caps, nearest):
     """Train on the rows ``start ..`` of ``X`` with label indices ``labels``, in order, as
@@ -226,13 +238,9 @@ def learn(table, X, labels, start, n, height, eps, euclidean, winner_only, min_r
             count = 1
         if n + count > capacity:
             break
-        root_answer = -1  # the answer for a row only the root encloses (nearest)
-        if nearest and n > 1 and count == 1 and cand[0] == 0:
-            best = np.inf
-            for i in range(1, n):
-                s = _distance(tf, i, x, False)
-                if s < best:
-                    best, root_answer = s, table[i, c_label]
+        # the answer for a row only the root encloses: the nearest centre's label (nearest)
+        root_answer = (_nearest_label(tf, table, n, x, c_label)
+                       if nearest and n > 1 and count == 1 and cand[0] == 0 else -1)
         suppressed = False
         for j in range(count):
             p = cand[j]
