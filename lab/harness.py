@@ -97,7 +97,7 @@ def learned_from(recipe: Recipe, X: np.ndarray, y, actions: ActionSet = DEFAULT_
     with the recipe's radius "margin", learned again from all of them at once
     (``DemonstrationLearner.relearn``). The same tree as the trained one, from its recorded
     vectors (the peer benchmark fits RHBL so)."""
-    learner = make_learner(recipe, actions, record=recipe.radius == "margin")
+    learner = make_learner(recipe, actions)  # (it records what the margin's relearn needs)
     learner.observe_vectors(X, y)
     if recipe.radius == "margin":
         learner.relearn()

@@ -50,7 +50,7 @@ from .tree import _F64, ALGORITHMS, DISTANCES, SphereTree, Totals, load_kernels,
 
 _NDARRAY = np.ndarray  # (_F64: builtin dtypes are singletons; another float64 takes the checks)
 
-__all__ = ["HypersphereClassifier", "load", "loads", "margins"]
+__all__ = ["HypersphereClassifier", "load", "loads"]
 
 _SPAWNS = ("all", "winner")
 _RADII = ("parent", "margin")

@@ -784,13 +784,12 @@ class ReactiveBeaconPolicy:
         self._y.append(label)
 
     def flush(self) -> None:
-        """Learn the vectors observed since; a margin tree's first flush fits them at once."""
+        """Learn the vectors observed since: the first flush fits them (a margin tree bounded
+        by their margins), later ones extend the tree."""
         if self._x:
             fresh = getattr(self.classifier, "tree_", None) is None
-            if fresh and self.classifier.radius == "margin":
-                self.classifier.fit(np.array(self._x), self._y)
-            else:
-                self.classifier.partial_fit(np.array(self._x), self._y)
+            learn = self.classifier.fit if fresh else self.classifier.partial_fit
+            learn(np.array(self._x), self._y)
             self._x, self._y = [], []
 
     def act(self, ranges, pose) -> str:
