@@ -2,7 +2,8 @@
 by scikit-learn's k-nearest neighbours (k=1, k=5), decision tree and a small MLP (behaviour
 cloning), each then driven in closed loop in the behaviour's teaching and held-out worlds.
 ``rhbl-vote`` is a study of this benchmark's own (``OrderVote``): five RHBL trees, each fitted on
-the same vectors in another order, answering by their majority.
+the same vectors in another order, answering by their majority. ``rhbl-script`` (not run by
+default) is for a person's labels: the scripted teacher's rule on them as paired, not edited.
 
 For each behaviour and seed the scripted expert teaches exactly as ``rhbl train --behaviour``
 does (``lab.train.train`` with the behaviour's recipe, ``lab.behaviours.recipe_of``), the learner
@@ -69,6 +70,8 @@ VOTERS = 5  # rhbl-vote's trees (chosen on development worlds: docs/studies/orde
 # the learners, in the table's order: name -> what it is
 LEARNERS = {
     "rhbl": "the project's hypersphere tree, the recipe's parameters",
+    "rhbl-script": "on a person's labels: the scripted teacher's rule (the behaviour's own "
+                   "recipe, the margin radius) on the labels as paired, not edited",
     "rhbl-vote": f"{VOTERS} such trees, each fitted on the vectors in an order of its own "
                  "(seeded), the majority of their answers (OrderVote)",
     "1-nn": "KNeighborsClassifier(n_neighbors=1)",
@@ -76,6 +79,7 @@ LEARNERS = {
     "tree": "DecisionTreeClassifier(random_state=seed)",
     "mlp": "MLPClassifier(hidden_layer_sizes=(32, 32), max_iter=300, random_state=seed)",
 }
+DEFAULT = [n for n in LEARNERS if n != "rhbl-script"]  # (a study's: for a person's labels)
 # the person models of benchmarks/people.py (their names; the module is loaded when used): a
 # person for any behaviour (people.ANY), then the right-hand wall's own (wall following only)
 PEOPLE_MODELS = ["calm", "rushed", "lapsing", "arcless", "tapping", "heavy", "muddled",
@@ -206,7 +210,7 @@ def fit(name: str, X: np.ndarray, y: np.ndarray, recipe, seed: int, learner):
     from sklearn.tree import DecisionTreeClassifier
 
     t0 = time.perf_counter()  # imports above: not part of a fit
-    if name == "rhbl":
+    if name in ("rhbl", "rhbl-script"):
         fresh = learned_from(recipe, X, y)
         clf = fresh.classifier
         seconds = time.perf_counter() - t0
@@ -542,8 +546,9 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--behaviour", type=_names(behaviours, "behaviour", empty=True),
                     default=behaviours,
                     help=f"comma-separated shipped behaviours (default: all: {','.join(behaviours)})")
-    ap.add_argument("--learners", type=_names(list(LEARNERS), "learners"), default=list(LEARNERS),
-                    help=f"comma-separated (default: all: {','.join(LEARNERS)})")
+    ap.add_argument("--learners", type=_names(list(LEARNERS), "learners"), default=DEFAULT,
+                    help=f"comma-separated, of {','.join(LEARNERS)} (default: "
+                         f"{','.join(DEFAULT)})")
     ap.add_argument("--seeds", type=_seeds, default=[0, 1, 2], help="training seeds (default 0,1,2)")
     ap.add_argument("--people", type=_names(PEOPLE_MODELS, "people", every=True), default=[],
                     help="also these person models' sessions teaching each --people-behaviour "

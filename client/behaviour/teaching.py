@@ -381,13 +381,24 @@ def _relearned(make: Callable, rows: np.ndarray, names: np.ndarray, orders: list
     """The work of a relearn beside: a new tree (``make()``) learned from ``rows`` labelled
     ``names`` in each of ``orders`` (None when cancelled between passes)."""
     def work(cancelled: threading.Event):
-        clf = make()
-        for order in orders:
-            if cancelled.is_set():
-                return None
-            clf.partial_fit(rows[order], names[order])
-        return clf
+        return _learned_whole(make(), rows, names, orders, cancelled)
     return work
+
+
+def _learned_whole(clf, rows: np.ndarray, names: np.ndarray, orders: list,
+                   cancelled: threading.Event | None = None):
+    """``clf`` (a fresh tree) learned from ``rows`` labelled ``names`` in each of ``orders``,
+    one pass after another; with ``radius="margin"`` the passes in one ``fit`` (each sphere
+    bounded by its margin among every vector). None when ``cancelled`` between passes."""
+    if getattr(clf, "radius", "parent") == "margin":
+        every = np.concatenate(orders)
+        return None if cancelled is not None and cancelled.is_set() else clf.fit(
+            rows[every], names[every])
+    for order in orders:
+        if cancelled is not None and cancelled.is_set():
+            return None
+        clf.partial_fit(rows[order], names[order])
+    return clf
 
 
 def _voted(lag: int, k: int, n_actions: int, edit: Callable, X: np.ndarray, Q: np.ndarray,
@@ -682,9 +693,9 @@ class PersonLearner(DemonstrationLearner):
               and len(labels) < self._whole * (1.0 + self.rule.alignment.regrow)):
             clf = self._extended(copy.deepcopy(self._clf), rows, labels, pending)
         else:
-            clf = HypersphereClassifier(**{"default_label": names[0], **self.tree_params})
-            for order in self._orders(len(labels)):
-                clf.partial_fit(rows[order], names[labels[order]])
+            clf = _learned_whole(
+                HypersphereClassifier(**{"default_label": names[0], **self.tree_params}),
+                rows, names[labels], self._orders(len(labels)))
             self._whole = len(labels)
         self._tree_n = self._edited.n
         return clf

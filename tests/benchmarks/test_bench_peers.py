@@ -22,9 +22,9 @@ def test_a_quick_run_drives_every_learner_and_prints_one_row_each(bench, tmp_pat
     rows = [line for line in text.splitlines() if line.startswith("| wall-following |")]
     peer = [r for r in rows if r.count("|") == len(bench.HEADER) + 1
             and not r.split("|")[2].strip().endswith(")")]
-    assert [r.split("|")[2].strip() for r in peer] == list(bench.LEARNERS)
+    assert [r.split("|")[2].strip() for r in peer] == bench.DEFAULT
     # the world table: the teaching world and the first held-out one, a column per learner
-    worlds = [r for r in rows if r.count("|") == len(bench.LEARNERS) + 4
+    worlds = [r for r in rows if r.count("|") == len(bench.DEFAULT) + 4
               and r.split("|")[2].strip().endswith(")")]
     assert [r.split("|")[2].strip() for r in worlds] == ["room (taught)",
                                                         "eval-room-jagged (held out)"]

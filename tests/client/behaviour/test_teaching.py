@@ -178,6 +178,32 @@ def test_the_tree_learns_its_training_set_in_the_rules_passes():
         PersonLearner(FEATURES["wall"], passes=0)
 
 
+def test_a_margin_trees_passes_are_learned_in_one_fit():
+    """``radius="margin"`` (a study's variant, docs/studies/people-for-every-behaviour.md): the
+    rule's passes are one ``fit`` of the orders one after another, so every sphere is bounded
+    by its margin among all the edited vectors (``partial_fit`` would bound by the parent
+    only)."""
+    from rhbl import HypersphereClassifier
+
+    ranges, labels, _ = _walk(200, seed=5)
+    learner = PersonLearner(FEATURES["wall"], DEFAULT_ACTIONS, radius="margin")
+    for r, lab in zip(ranges, labels, strict=True):
+        learner.observe(r, 0.0, lab)
+    tree = learner.classifier
+    rows, y = learner._update()
+    names = np.array(learner.actions.names)
+    every = np.concatenate(learner._orders(len(y)))
+    expect = HypersphereClassifier(default_label=names[0], spawn="winner", radius="margin").fit(
+        rows[every], names[y[every]])
+    parent = HypersphereClassifier(default_label=names[0], spawn="winner", radius="margin")
+    for order in learner._orders(len(y)):
+        parent.partial_fit(rows[order], names[y[order]])
+    assert tree.get_params()["radius"] == "margin"
+    assert tree.node_count_ == expect.node_count_
+    assert (tree.predict(rows) == expect.predict(rows)).all()
+    assert tree.node_count_ != parent.node_count_
+
+
 def test_person_learner_rejects_bad_settings_and_labels():
     with pytest.raises(ValueError, match="k must be an integer >= 1"):
         PersonLearner(FEATURES["wall"], k=0)
