@@ -330,6 +330,52 @@ def wall_run(args) -> bool:
     return ok1 and ok2
 
 
+MARGIN_TRAIN = ["train", "--behaviour", "wall-following", "--seed", "0"]
+
+
+def margin_run(args) -> None:
+    """One query of a margin tree (``radius="margin"``, ``rhbl train --behaviour``'s default):
+    where only the root encloses a query, the sphere with the nearest centre answers, found
+    by the compiled kernel (``predict_one``) or by scipy's k-d tree of the centres (the batch
+    path, and one query's before the kernel); scikit-learn's 1-NN on the same centres beside.
+    Queries near the centres (mostly enclosed) and uniform in the cube (mostly not)."""
+    from rhbl import load
+    from sklearn.neighbors import KNeighborsClassifier
+
+    if args.margin_tree:
+        clf = load(args.margin_tree)
+    else:
+        with tempfile.TemporaryDirectory() as tmp:
+            out = Path(tmp) / "wall.rhbl"
+            subprocess.run([*rhbl_command(), *MARGIN_TRAIN, "--out", str(out)], check=True,
+                           stdout=subprocess.DEVNULL)
+            clf = load(out)
+    tree = clf.tree_
+    if clf.get_params().get("radius") != "margin":
+        raise SystemExit(f"--margin-tree: {args.margin_tree} is not a margin tree")
+    rng = np.random.default_rng(2)
+    sets = {"near the centres": near(tree.centers, args.single, seed=2),
+            "uniform in the cube": rng.random((args.single, clf.n_features_in_))}
+    knn = KNeighborsClassifier(n_neighbors=1, algorithm="kd_tree").fit(
+        tree.centers[1:], tree.label[1:])
+    tree._nearest(next(iter(sets.values())))  # the k-d tree built before timing
+
+    def by_kd(x):  # predict_one as it was: the k-d tree for a query only the root encloses
+        node = tree._enclosing_one(x, True)
+        return tree.label[tree._nearest(x) if node == 0 else node]
+
+    print(f"\n== a margin tree (`rhbl {' '.join(MARGIN_TRAIN)}`): {clf.node_count_} spheres, "
+          f"height {clf.height_}, {clf.n_features_in_} features; one query, microseconds")
+    print(f"{'queries':<22} {'only the root':>13} {'rhbl':>8} {'rhbl, k-d':>10} {'1-NN kd':>9}")
+    for name, Q in sets.items():
+        root = float(np.mean(tree._searched(Q, "auto", True)[0] == 0))
+        want = [by_kd(q) for q in Q]
+        assert [clf.classes_.tolist().index(clf.predict_one(q)) for q in Q] == want
+        times = [per_call_us(f, Q, args.repeat) for f in
+                 (clf.predict_one, by_kd, lambda q: knn.predict(q[None, :]))]
+        print(f"{name:<22} {root:>13.0%} {times[0]:>8.1f} {times[1]:>10.1f} {times[2]:>9.1f}")
+
+
 def noisy(m: int, n: int, flip: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Vectors labelled by the nearest of 5 prototypes, a fraction ``flip`` of labels random
     (noisy teaching: trees grow past the number of vectors)."""
@@ -497,6 +543,11 @@ def main(argv: list[str] | None = None) -> int:
                         help="the wall tree to measure (default: train it with rhbl train)")
     parser.add_argument("--wall-only", action="store_true",
                         help="only the wall tree's section (the issue's targets)")
+    parser.add_argument("--margin-tree", default=None, metavar="SNAPSHOT",
+                        help="the margin tree to measure (default: train it with rhbl train "
+                             "--behaviour wall-following)")
+    parser.add_argument("--margin-only", action="store_true",
+                        help="only the margin tree's section (one query)")
     parser.add_argument("--repeat", type=int, default=None, metavar="N",
                         help="passes and batch calls, best of N (default 3; --quick 1)")
     args = parser.parse_args(argv)
@@ -517,11 +568,15 @@ def main(argv: list[str] | None = None) -> int:
           f"{sklearn.__version__}, python {sys.version.split()[0]}; one query = best of "
           f"{args.repeat} passes over {args.single} queries, mean per call; batches = best of "
           f"{args.repeat} calls")
+    if args.margin_only:
+        margin_run(args)
+        return 0
     ok = wall_run(args)
     if args.wall_only:
         return 0 if (ok or not args.check) else 1
     scaling_run(args)
     startup_run(args)
+    margin_run(args)
 
     sets = [("synthetic 5 features, 5 actions", *synthetic(m_syn, 5, seed=1), "fwd")]
     for name in ("iris", "wine", "breast-cancer"):

@@ -43,7 +43,8 @@ from ._layout import (
 
 log = logging.getLogger(__name__)
 
-__all__ = ["aot_exports", "layout", "learn", "load", "search_kernels", "winner", "winners"]
+__all__ = ["aot_exports", "layout", "learn", "load", "nearest", "search_kernels", "winner",
+           "winners"]
 
 
 def _jit(func):
@@ -189,15 +190,30 @@ def _candidates(table, x, eps, euclidean, stack, dstack, cand, cand_d):
 
 
 @_jit
-def _nearest_label(tf, table, n, x, c_label):
-    """The label of the sphere (the root left out) whose centre is nearest to ``x``, the first
-    of equals (``uncovered="nearest"``)."""
-    best, label = np.inf, -1
+def _nearest(tf, n, x):
+    """The sphere (the root left out) whose centre is nearest to ``x`` among the first ``n``,
+    the first of equals (``uncovered="nearest"``); the root when it is alone."""
+    best, node = np.inf, 0
     for i in range(1, n):
         d = _distance(tf, i, x, False)
         if d < best:
-            best, label = d, table[i, c_label]
-    return label
+            best, node = d, i
+    return node
+
+
+@_jit
+def _nearest_label(tf, table, n, x, c_label):
+    """The label of the sphere (the root left out) whose centre is nearest to ``x``."""
+    node = _nearest(tf, n, x)
+    return table[node, c_label] if node > 0 else -1
+
+
+@_jit
+def nearest(table, n, x):
+    """The sphere (the root left out) whose centre is nearest to one query among the first
+    ``n`` spheres, the first of equals (the root when it is alone): one uncovered query of a
+    tree with ``uncovered="nearest"``, as the training rule finds it."""
+    return _nearest(table.view(np.float64), n, x)
 
 
 @_jit
@@ -479,6 +495,7 @@ def aot_exports() -> dict:
     ``search_many_<count>``, the general ones ``search_one`` and ``search_many``."""
     exports = {
         "winner": (winner, f"int64({_TABLE}, int64, {_VECTOR}, float64, boolean)"),
+        "nearest": (nearest, f"int64({_TABLE}, int64, {_VECTOR})"),
         "winners": (winners, f"void({_TABLE}, int64, {_ROWS}, float64, boolean, boolean, "
                              f"{_FLAT}, {_FLAT})"),
         "learn": (learn, f"UniTuple(int64, 6)({_TABLE}, {_ROWS}, {_FLAT}, int64, int64, int64, "
@@ -503,6 +520,7 @@ def _warm_up() -> None:
     table.view(np.float64)[0, :2] = (0.5, 0.25)
     x = np.full(1, 0.5)
     winner(table, 1, x, 1e-9, False)
+    nearest(table, 1, x)
     out = np.empty(1, dtype=np.int64)
     winners(table, 1, x[None, :], 1e-9, False, False, out, out.copy())
     learn(table, x[None, :], np.zeros(1, dtype=np.int64), 0, 1, 0, 1e-9, False, False, 0.0, 1, 1,
@@ -522,7 +540,7 @@ def load() -> None:
     except OSError as e:  # the cache folder took the index, not the code (disk full, ...)
         log.warning("cannot cache the tree's compiled code (%s): compiled in this process", e)
         for kernel in (_distance, _better, _descend, _brute, winner, winners, _candidates,
-                       learn, layout, _query_order, _descend_flat, _search_one, _search_many,
-                       search_one, search_many):
+                       _nearest, _nearest_label, nearest, learn, layout, _query_order,
+                       _descend_flat, _search_one, _search_many, search_one, search_many):
             kernel._cache.disable()
         _warm_up()

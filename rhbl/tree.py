@@ -70,7 +70,7 @@ class _Kernels:
         self.origin = origin
         self._module = module
         self.winner, self.winners, self.learn = module.winner, module.winners, module.learn
-        self.layout = module.layout
+        self.layout, self.nearest = module.layout, module.nearest
 
     @functools.cache  # noqa: B019 (one instance per process)
     def search(self, features: int) -> tuple[Any, Any]:
@@ -547,7 +547,10 @@ class SphereTree:
         ones are walked in creation order in Python.
         """
         node = self._enclosing_one(x, compiled)
-        return self._nearest(x) if node == 0 and self._nearest_on else node
+        if node == 0 and self._nearest_on:
+            return self._nearest(x, compiled and x.dtype is _F64 and x.flags.c_contiguous
+                                 and x.flags.writeable)
+        return node
 
     def _enclosing_one(self, x: np.ndarray, compiled: bool) -> int:
         """The smallest sphere enclosing ``x`` (the root when no other does): the paper's
@@ -566,13 +569,17 @@ class SphereTree:
             search = self._search_table()
         return search.one(search.table, search.nodes, x, self._eps, self._euclidean)
 
-    def _nearest(self, X: np.ndarray) -> Any:
+    def _nearest(self, X: np.ndarray, compiled: bool = False) -> Any:
         """The sphere (creation index, the root left out) whose centre is nearest to ``x`` (one
-        vector: an int) or to each row of ``X`` (an array); the root for a lone root. The
-        centres' k-d tree (scipy's) is built on the first call after a change."""
+        vector: an int) or to each row of ``X`` (an array); the root for a lone root. One
+        vector ``compiled`` (a float64 vector the kernels take): every centre in the compiled
+        kernel, the first of equals as training finds it (a few microseconds); else the
+        centres' k-d tree (scipy's), built on the first call after a change."""
         n = self.node_count
         if n < 2:
             return 0 if X.ndim == 1 else np.zeros(X.shape[0], dtype=np.int64)
+        if compiled and X.ndim == 1:
+            return _kernels().nearest(self._table, n, X)
         if self._kd is None:
             self._kd = _kd_tree(self._centers[1:n].copy())
         if X.ndim == 1:
@@ -603,7 +610,7 @@ class SphereTree:
             if flags.c_contiguous and flags.writeable:  # apply_one's search, inlined
                 node = search.one(search.table, search.nodes, x, self._eps, self._euclidean)
                 if node == 0 and self._nearest_on:
-                    node = self._nearest(x)
+                    node = self._nearest(x, True)
                 return -1 if node < 0 else search.labels[node]
         node = self.apply_one(x, compiled=compiled)
         return -1 if node < 0 else self._table.item(node, self._label_column)
