@@ -370,7 +370,10 @@ def margin_run(args) -> None:
     for name, Q in sets.items():
         root = float(np.mean(tree._searched(Q, "auto", True)[0] == 0))
         want = [by_kd(q) for q in Q]
-        assert [clf.classes_.tolist().index(clf.predict_one(q)) for q in Q] == want
+        got = [clf.classes_.tolist().index(clf.predict_one(q)) for q in Q]
+        if got != want:  # both take the first of equally near centres
+            raise SystemExit(f"{name}: the kernel and the k-d tree answered "
+                             f"{sum(a != b for a, b in zip(got, want))} queries otherwise")
         times = [per_call_us(f, Q, args.repeat) for f in
                  (clf.predict_one, by_kd, lambda q: knn.predict(q[None, :]))]
         print(f"{name:<22} {root:>13.0%} {times[0]:>8.1f} {times[1]:>10.1f} {times[2]:>9.1f}")

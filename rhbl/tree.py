@@ -49,6 +49,9 @@ _UNLIMITED = 1 << 62
 # the node table (a tree that changes between queries, as in a corrective round, never pays
 # for a table it would use once)
 _TABLE_AFTER = 32
+# uncovered="nearest": a second centre this near the first (relatively) in a k-d tree query is
+# a tie to be settled by searching every centre (SphereTree._nearest)
+_NEAR_TIE = 1e-9
 _F64 = np.dtype(np.float64)
 # set to "jit" to use numba's kernels even where kernels compiled ahead of time are installed
 # (the tests and benchmarks compare the two)
@@ -546,11 +549,11 @@ class SphereTree:
         vectorised ``sum((x - c)**2)`` over the features, in feature order), then the enclosing
         ones are walked in creation order in Python.
         """
+        flags = x.flags
+        if compiled and not (x.dtype is _F64 and flags.c_contiguous and flags.writeable):
+            x = np.array(x, dtype=np.float64)  # what the kernels take (a fresh, writable copy)
         node = self._enclosing_one(x, compiled)
-        if node == 0 and self._nearest_on:
-            return self._nearest(x, compiled and x.dtype is _F64 and x.flags.c_contiguous
-                                 and x.flags.writeable)
-        return node
+        return self._nearest(x, compiled) if node == 0 and self._nearest_on else node
 
     def _enclosing_one(self, x: np.ndarray, compiled: bool) -> int:
         """The smallest sphere enclosing ``x`` (the root when no other does): the paper's
@@ -571,10 +574,13 @@ class SphereTree:
 
     def _nearest(self, X: np.ndarray, compiled: bool = False) -> Any:
         """The sphere (creation index, the root left out) whose centre is nearest to ``x`` (one
-        vector: an int) or to each row of ``X`` (an array); the root for a lone root. One
-        vector ``compiled`` (a float64 vector the kernels take): every centre in the compiled
-        kernel, the first of equals as training finds it (a few microseconds); else the
-        centres' k-d tree (scipy's), built on the first call after a change."""
+        vector: an int) or to each row of ``X`` (an array), the first of equals (the lowest
+        index, as training finds it); the root for a lone root. One vector ``compiled`` (a
+        float64 vector the kernels take): every centre in the compiled kernel (a few
+        microseconds). Else the centres' k-d tree (scipy's, built on the first call after a
+        change) names the two nearest; where the second is as near as the first (to a relative
+        ``_NEAR_TIE``: a tie, or one the k-d tree's arithmetic may order otherwise), every
+        centre is searched, its squared distance summed in feature order as the kernel does."""
         n = self.node_count
         if n < 2:
             return 0 if X.ndim == 1 else np.zeros(X.shape[0], dtype=np.int64)
@@ -582,9 +588,20 @@ class SphereTree:
             return _kernels().nearest(self._table, n, X)
         if self._kd is None:
             self._kd = _kd_tree(self._centers[1:n].copy())
-        if X.ndim == 1:
-            return int(self._kd.query(X, k=1)[1]) + 1
-        return self._kd.query(X, k=1)[1].astype(np.int64) + 1
+        Q = np.asarray(X, dtype=np.float64).reshape(-1, self.n_features)
+        k = min(2, n - 1)
+        dist, idx = self._kd.query(Q, k=k)
+        dist, idx = dist.reshape(len(Q), k), idx.reshape(len(Q), k)
+        out = idx[:, 0].astype(np.int64) + 1
+        if k == 2:
+            C = self._centers[1:n]
+            for row in np.flatnonzero(dist[:, 1] <= dist[:, 0] * (1.0 + _NEAR_TIE)):
+                d = np.zeros(n - 1)
+                for j in range(self.n_features):  # the kernel's sum, in feature order
+                    t = C[:, j] - Q[row, j]
+                    d += t * t
+                out[row] = int(np.argmin(d)) + 1  # (argmin: the first of equals)
+        return int(out[0]) if X.ndim == 1 else out
 
     def _search_table(self) -> _Search:
         """The search table of the tree as it is (built now if the tree changed since)."""

@@ -389,11 +389,14 @@ def _learned_whole(clf, rows: np.ndarray, names: np.ndarray, orders: list,
                    cancelled: threading.Event | None = None):
     """``clf`` (a fresh tree) learned from ``rows`` labelled ``names`` in each of ``orders``,
     one pass after another; with ``radius="margin"`` the passes in one ``fit`` (each sphere
-    bounded by its margin among every vector). None when ``cancelled`` between passes."""
+    bounded by its margin among every vector). None when ``cancelled`` between passes (the
+    margin's one ``fit``: before or after it)."""
     if getattr(clf, "radius", "parent") == "margin":
+        if cancelled is not None and cancelled.is_set():
+            return None
         every = np.concatenate(orders)
-        return None if cancelled is not None and cancelled.is_set() else clf.fit(
-            rows[every], names[every])
+        clf.fit(rows[every], names[every])
+        return None if cancelled is not None and cancelled.is_set() else clf
     for order in orders:
         if cancelled is not None and cancelled.is_set():
             return None

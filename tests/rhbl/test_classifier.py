@@ -373,6 +373,38 @@ def test_margin_tree_answers_uncovered_vectors_by_the_nearest_centre():
     assert (clf.predict(X) == y).mean() > 0.8
 
 
+def test_every_search_of_a_margin_tree_takes_the_first_of_equally_near_centres():
+    """Queries on a grid among centres on a grid tie between centres exactly; one query (the
+    compiled kernel), a batch (the k-d tree's candidates), the numpy reference and a read-only
+    or float32 query all answer the first of the equally near (the lowest creation index), as
+    training does."""
+    rng = np.random.default_rng(7)
+    X = np.round(rng.random((800, 3)) * 10) / 10
+    y = np.where(X[:, 0] + X[:, 1] > 1.0, "a", np.where(X[:, 2] > 0.5, "b", "c"))
+    clf = HypersphereClassifier(default_label="a", spawn="winner", radius="margin").fit(X, y)
+    ref = HypersphereClassifier(default_label="a", spawn="winner", radius="margin",
+                                compiled=False).fit(X, y)
+    assert clf.tree_equal(ref)
+    Q = np.round(rng.random((3000, 3)) * 20) / 20
+    tree = clf.tree_
+    n = tree.node_count
+    C = tree.centers[1:n]
+    d = ((C[None, :, :] - Q[:, None, :]) ** 2).sum(-1)
+    first = d.argmin(1) + 1
+    uncovered = tree._searched(Q, "auto", True)[0] == 0
+    ties = ((d == d.min(1, keepdims=True)).sum(1) > 1) & uncovered
+    assert ties.sum() > 20  # the grid makes ties among the uncovered queries
+    assert (tree.apply(Q)[uncovered] == first[uncovered]).all()
+    assert [tree.apply_one(q) for q in Q[uncovered][:200]] == list(first[uncovered][:200])
+    assert (ref.tree_.apply(Q) == tree.apply(Q)).all()
+    assert (clf.predict(Q) == np.array([clf.predict_one(q) for q in Q])).all()
+    frozen = Q.copy()
+    frozen.flags.writeable = False
+    assert [clf.predict_one(q) for q in frozen[:300]] == list(clf.predict(Q[:300]))
+    Q32 = Q[:200].astype(np.float32)
+    assert [tree.apply_one(q) for q in Q32] == list(tree.apply(Q32.astype(np.float64)))
+
+
 @pytest.mark.parametrize("spawn", ["winner", "all"])
 def test_margin_is_a_property_of_fit_partial_fit_extends_by_the_parent(spawn):
     """partial_fit (and learn_one) extend a margin tree with the parent's bound alone: the
