@@ -20,7 +20,7 @@ import numpy as np
 # an rhbl.tree.SphereTree: tree.py imports this module, so it is named here, never imported
 SphereTree = Any
 
-__all__ = ["apply", "apply_one", "learn"]
+__all__ = ["apply", "apply_one", "learn", "nearest"]
 
 # "auto" tests every (query, sphere) pair at once for trees of at most this many spheres and
 # descends the tree for larger ones
@@ -133,8 +133,7 @@ def learn(
     if tree.uncovered == "nearest" and n > 1 and cands == [0]:
         # only the root encloses x: the nearest centre answers (the first of equals, as the
         # kernel), and a wrong answer spawns a child of the root
-        sq = np.add.reduce(np.square(np.subtract(tree.centers_t()[:, 1:n], x[:, None])), axis=0)
-        answer = tree._label[int(np.argmin(sq)) + 1]
+        answer = tree._label[nearest(tree, x)]
         targets = [0] if answer != label else []
     else:
         targets = [c for c in cands if tree._label[c] != label]
@@ -159,6 +158,15 @@ def learn(
         tree._add(x, r, p, label)
         spawned += 1
     return spawned, relabelled, suppressed
+
+
+def nearest(tree: SphereTree, x: np.ndarray) -> int:
+    """The sphere (the root left out) whose centre is nearest to ``x``, the first of equals:
+    ``sum((c - x)**2)`` over the features in feature order, as the kernel sums it (a tree of
+    at least two spheres)."""
+    n = tree.node_count
+    sq = np.add.reduce(np.square(np.subtract(tree.centers_t()[:, 1:n], x[:, None])), axis=0)
+    return int(np.argmin(sq)) + 1
 
 
 def _build_creation(tree: SphereTree) -> _CreationLayout:

@@ -594,13 +594,8 @@ class SphereTree:
         dist, idx = dist.reshape(len(Q), k), idx.reshape(len(Q), k)
         out = idx[:, 0].astype(np.int64) + 1
         if k == 2:
-            C = self._centers[1:n]
             for row in np.flatnonzero(dist[:, 1] <= dist[:, 0] * (1.0 + _NEAR_TIE)):
-                d = np.zeros(n - 1)
-                for j in range(self.n_features):  # the kernel's sum, in feature order
-                    t = C[:, j] - Q[row, j]
-                    d += t * t
-                out[row] = int(np.argmin(d)) + 1  # (argmin: the first of equals)
+                out[row] = _reference.nearest(self, Q[row])
         return int(out[0]) if X.ndim == 1 else out
 
     def _search_table(self) -> _Search:
