@@ -33,7 +33,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": ("lab.evaluate", "in simulation: run a tree (and the behaviour's scripted expert) from a world's start poses, judged by its success rule"),
     "compact": ("lab.compact", "make an existing tree smaller, keeping its behaviour on its data"),
     "refine": ("lab.refine", "improve a taught tree by practice in simulation, judged by its behaviour's success rule"),
-    "generate": ("lab.generated", "draw random world files (rooms, mazes, clutter, beacons) to teach or test on"),
+    "generate": ("lab.generated", "draw random world files (rooms, mazes, clutter, beacons, corridors, dead ends, doorways) to teach, practise or test on"),
     "experiment": ("lab.experiment", "repeat train-then-evaluate over seeds; the paper's Table I"),
     "record": ("client.recording.record", "record every message of the robots' keys into an MCAP file"),
     "replay": ("client.recording.replay", "republish a recording's sensor stream on zenoh with its timing"),

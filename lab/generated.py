@@ -1,6 +1,7 @@
-"""Randomised teaching worlds (domain randomisation): rooms, tiered mazes and cluttered rooms
-drawn at random from a seed, for corrective rounds in worlds nobody drew, so that what a tree
-is taught does not hang on the few shapes of its teaching worlds.
+"""Randomised teaching worlds (domain randomisation): rooms, tiered mazes, cluttered rooms, rooms
+with beacons, winding corridors, dead ends and rooms joined by doorways drawn at random from a
+seed, for corrective rounds and practice in worlds nobody drew, so that what a tree is taught
+does not hang on the few shapes of its teaching worlds.
 
     spec = generate("rooms", rng, side="right")   # a server.world.WorldSpec, in memory
     specs = generated("rooms", 4, seed)           # a training run's: the same for the same seed
@@ -24,6 +25,19 @@ uniformly from the ranges below (no range was chosen on a held-out world):
   depth, from the top or the bottom wall, 2.5 m apart), up to two blocks (0.6-1.4 m sides)
   against a side wall or in the open, and the beacons 1, 2 and 3 (red, green, blue) at least
   0.9 m from every wall and 3 m from each other: for behaviours with goals (docs/goals.md).
+* ``corridors``: a winding corridor in a loop, its centre line an ellipse of 4.5-7.5 x 3-5 m
+  with two to four waves of up to 12% of its radius, 1.0-2.4 m wide (two widths drawn, the
+  width changing smoothly between them along it: the teaching world's 1.2-2.0 m, widened).
+* ``dead-ends``: a square hall of 3.5-5.5 m with two to four blind corridors off the middles
+  of its walls, 1.0-2.2 m wide and 3-5.5 m long; the start poses in them facing their ends; the
+  goal the middle of the hall.
+* ``doorways``: three to five rooms of 3.2-4.8 m in a row 3.8-5.5 m deep, joined by doorways
+  of 1.2-1.8 m at the top, the middle or the bottom of each wall; the start poses in the first
+  room within 1.2 m of a wall; the goal by the far wall of the last.
+
+The ranges of the last three widen those of their behaviour's teaching world; the scripted
+experts succeed from most, not all, of their start poses (a practice episode the expert fails
+is left out; ``rhbl refine`` says so).
 """
 
 from __future__ import annotations
@@ -39,7 +53,7 @@ from server.world import WorldSpec, parse_world
 
 __all__ = ["KINDS", "add_arguments", "draw", "generate", "generated", "main", "to_toml"]
 
-KINDS = ("rooms", "mazes", "clutter", "beacons")
+KINDS = ("rooms", "mazes", "clutter", "beacons", "corridors", "dead-ends", "doorways")
 CLEAR = 0.7  # m from a wall to a start pose
 
 
@@ -192,6 +206,14 @@ def _to_rect(x: float, y: float, rect: tuple[float, float, float, float]) -> flo
     return math.hypot(max(x0 - x, 0.0, x - x1), max(y0 - y, 0.0, y - y1))
 
 
+def _to_segments(points: np.ndarray, segs: np.ndarray) -> np.ndarray:
+    """The distance from each of ``points`` (N, 2) to the nearest of ``segs`` (S, 4)."""
+    a, b = segs[None, :, :2], segs[None, :, 2:]
+    ab, ap = b - a, points[:, None, :] - a
+    t = np.clip(np.sum(ap * ab, axis=2) / np.maximum(np.sum(ab * ab, axis=2), 1e-12), 0.0, 1.0)
+    return np.min(np.linalg.norm(ap - t[..., None] * ab, axis=2), axis=1)
+
+
 def _clearance(x: float, y: float, rects: list[tuple[float, float, float, float]], w: float,
                h: float) -> float:
     """Distance from (x, y) to the nearest of the room's walls and the rectangles standing in
@@ -249,7 +271,112 @@ def _beacons(rng, side: str) -> dict:
                         for i, (x, y) in enumerate(beacons)]}
 
 
-_MAKERS = {"rooms": _room, "mazes": _maze, "clutter": _clutter, "beacons": _beacons}
+def _corridor(rng, side: str) -> dict:
+    """A winding corridor in a loop: its centre line an ellipse of 4.5-7.5 x 3-5 m whose radius
+    bulges and dips with two to four waves, its width between two values drawn from 1.0-2.4 m,
+    changing smoothly along it. Start poses on the centre line or 0.2 of the width off it,
+    heading along the corridor either way."""
+    a, b = _u(rng, 4.5, 7.5), _u(rng, 3.0, 5.0)
+    waves = [(int(k), _u(rng, 0.0, 0.12), _u(rng, 0.0, math.tau))
+             for k in rng.choice([2, 3, 4], size=int(rng.integers(1, 3)), replace=False)]
+    w0 = _u(rng, 1.0, 1.8)
+    w1 = _u(rng, w0, min(w0 + 0.8, 2.4))
+    m, psi = int(rng.integers(1, 4)), _u(rng, 0.0, math.tau)
+    t = np.linspace(0.0, math.tau, 96, endpoint=False)
+    r = 1.0 + sum(e * np.cos(k * t + f) for k, e, f in waves)
+    c = np.stack([a * r * np.cos(t), b * r * np.sin(t)], axis=1)
+    d = np.roll(c, -1, axis=0) - np.roll(c, 1, axis=0)  # the tangent, counter-clockwise
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    out = np.stack([d[:, 1], -d[:, 0]], axis=1)  # the outward normal
+    width = w0 + (w1 - w0) * 0.5 * (1.0 + np.sin(m * t + psi))
+    outer, inner = c + out * (width / 2)[:, None], c - out * (width / 2)[:, None]
+    segs = np.concatenate([np.concatenate([p, np.roll(p, -1, axis=0)], axis=1)
+                           for p in (outer, inner)])
+    if np.any(_to_segments(c, segs) < 0.9 * width / 2):  # a bend too tight: the walls fold
+        raise ValueError("a bend tighter than the corridor's width")
+    lo = np.minimum(outer.min(axis=0), inner.min(axis=0)) - 0.5
+    outer, inner, c = outer - lo, inner - lo, c - lo
+    walls = [{"closed": True, "points": [[round(float(x), 3), round(float(y), 3)] for x, y in p]}
+             for p in (outer, inner)]
+    starts = []
+    for i in rng.choice(len(t), size=5, replace=False):
+        off = (_u(rng, -1.0, 1.0) * max(0.0, min(0.2 * width[i], width[i] / 2 - 0.5))
+               if rng.random() < 0.5 else 0.0)
+        p = c[i] + out[i] * off
+        yaw = math.atan2(d[i, 1], d[i, 0]) + (math.pi if rng.random() < 0.5 else 0.0)
+        yaw = math.atan2(math.sin(yaw), math.cos(yaw))
+        starts.append([round(float(p[0]), 3), round(float(p[1]), 3), round(yaw, 4)])
+    return {"robot": {"pose": starts[0], "starts": starts[1:]}, "walls": walls}
+
+
+def _dead_end(rng, side: str) -> dict:
+    """A square hall of 3.5-5.5 m with two to four blind corridors, each off the middle of its
+    own wall, 1.0-2.2 m wide and 3-5.5 m long; every start pose inside a corridor facing its
+    blind end (1.5 m from it or more, a little off its line and slanted); the goal the middle of
+    the hall, straight out of every corridor's mouth."""
+    hall = _u(rng, 3.5, 5.5)
+    half = hall / 2
+    sides = sorted(int(k) for k in rng.choice(4, size=int(rng.integers(2, 5)), replace=False))
+    pts: list[tuple[float, float]] = []
+    starts = []
+    for k in range(4):  # the hall's walls counter-clockwise from the bottom; (x, y) about its middle
+        ang = -math.pi / 2 + k * math.pi / 2  # the direction out through this wall
+        u, v = np.array([math.cos(ang), math.sin(ang)]), np.array([-math.sin(ang), math.cos(ang)])
+        corner = u * half - v * half
+        pts.append(tuple(corner))
+        if k in sides:
+            w, length = _u(rng, 1.0, min(2.2, hall - 1.0)), _u(rng, 3.0, 5.5)
+            pts += [tuple(u * half - v * w / 2), tuple(u * (half + length) - v * w / 2),
+                    tuple(u * (half + length) + v * w / 2), tuple(u * half + v * w / 2)]
+            for _ in range(2):
+                ahead = _u(rng, 1.5, length - 0.3)  # from the blind end
+                lateral = _u(rng, -1.0, 1.0) * min(0.15, w / 2 - 0.5)
+                p = u * (half + length - ahead) + v * lateral
+                yaw = ang + _u(rng, -1.0, 1.0) * min(0.25, 0.2 * w)
+                yaw = math.atan2(math.sin(yaw), math.cos(yaw))
+                starts.append([round(float(p[0]) + 10.0, 3), round(float(p[1]) + 10.0, 3),
+                               round(yaw, 4)])
+    walls = [{"closed": True, "points": [[round(x + 10.0, 3), round(y + 10.0, 3)]
+                                         for x, y in _dedup(pts)]}]
+    return {"robot": {"pose": starts[0], "starts": starts[1:]}, "walls": walls,
+            "goal": {"center": [10.0, 10.0], "radius": 0.75}}
+
+
+def _doorways(rng, side: str) -> dict:
+    """Three to five rooms in a row, each 3.2-4.8 m long, the row 3.8-5.5 m deep, joined by
+    doorways of 1.2-1.8 m at the top, the middle or the bottom of each wall between them; every
+    wall joined to the outer one, so that keeping the wall on the robot's right leads through
+    every doorway in turn. Start poses in the first room within 1.2 m of a wall, facing every
+    way; the goal 0.7 m from the far wall of the last room."""
+    rooms, h = int(rng.integers(3, 6)), _u(rng, 3.8, 5.5)
+    xs = np.cumsum([_u(rng, 3.2, 4.8) for _ in range(rooms)])
+    length = float(xs[-1])
+    walls = [{"closed": True, "points": [[0, 0], [round(length, 3), 0],
+                                         [round(length, 3), round(h, 3)], [0, round(h, 3)]]}]
+    for x in xs[:-1]:
+        gap = _u(rng, 1.2, 1.8)
+        where = str(rng.choice(["top", "middle", "bottom"]))
+        y0 = {"bottom": 0.0, "middle": (h - gap) / 2, "top": h - gap}[where]
+        x = round(float(x), 3)
+        if y0 > 0:
+            walls.append({"points": [[x, 0], [x, round(y0, 3)]]})
+        if y0 + gap < h:
+            walls.append({"points": [[x, round(y0 + gap, 3)], [x, round(h, 3)]]})
+    first = float(xs[0])
+    starts = []
+    for _ in range(400):
+        if len(starts) >= 5:
+            break
+        x, y = _u(rng, 0.6, first - 0.6), _u(rng, 0.6, h - 0.6)
+        if (min(x, first - x, y, h - y) <= 1.2
+                and all(math.hypot(x - p, y - q) > 0.8 for p, q, _ in starts)):
+            starts.append([round(x, 3), round(y, 3), round(_u(rng, -math.pi, math.pi), 4)])
+    return {"robot": {"pose": starts[0], "starts": starts[1:]}, "walls": walls,
+            "goal": {"center": [round(length - 0.7, 3), round(h / 2, 3)], "radius": 0.75}}
+
+
+_MAKERS = {"rooms": _room, "mazes": _maze, "clutter": _clutter, "beacons": _beacons,
+           "corridors": _corridor, "dead-ends": _dead_end, "doorways": _doorways}
 
 
 def draw(kind: str, rng: np.random.Generator, side: str = "right",
@@ -316,8 +443,10 @@ def to_toml(data: dict) -> str:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("kind", choices=list(KINDS),
                         help="rooms (walls to follow), mazes (tiered, with a goal), clutter "
-                             "(boxes and pillars to wander among) or beacons (a room with "
-                             "partitions and the beacons 1-3, for goals)")
+                             "(boxes and pillars to wander among), beacons (a room with "
+                             "partitions and the beacons 1-3, for goals), corridors (winding "
+                             "loops), dead-ends (a hall with blind corridors, a goal) or "
+                             "doorways (rooms in a row, a goal in the last)")
     parser.add_argument("--count", type=arguments.positive_int, default=8)
     parser.add_argument("--seed", type=arguments.seed, default=0,
                         help="the same seed draws the same worlds (a training run of seed S "

@@ -26,6 +26,7 @@ import math
 from dataclasses import dataclass
 
 from client.behaviour.features import FEATURES, FeatureSpec
+from lab.generated import KINDS
 from process import arguments
 from process.arguments import checked_list
 
@@ -45,7 +46,7 @@ __all__ = [
 ]
 
 STARTS = ("default", "world", "free")
-GENERATORS = ("rooms", "mazes", "clutter", "beacons")  # lab.generated's kinds
+GENERATORS = KINDS  # the kinds of randomised world lab.generated draws
 SPAWN = ("all", "winner")
 DISTANCE = ("squared", "euclidean")
 RADIUS = ("parent", "margin")

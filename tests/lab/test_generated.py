@@ -44,8 +44,28 @@ def test_the_same_seed_draws_the_same_valid_worlds(kind):
             assert spec.inside(pose[0], pose[1]) and spec.clearance(pose[0], pose[1]) > 0.45
             world.reset(poses=[pose])
             assert float(np.min(world.scan(0))) > 0.3  # in the free space, walls in view
-        if kind == "mazes":
+        if kind in ("mazes", "dead-ends", "doorways"):
             assert spec.goal is not None and spec.inside(*spec.goal.center)
+            assert spec.clearance(*spec.goal.center) > 0.5
+
+
+@pytest.mark.parametrize("behaviour,kind", [("corridor-centring", "corridors"),
+                                            ("dead-end", "dead-ends"), ("doorways", "doorways")])
+def test_a_behaviours_expert_succeeds_in_the_worlds_its_generator_draws(behaviour, kind):
+    from client.behaviour.actions import DEFAULT_ACTIONS
+    from lab import metrics
+    from lab.harness import DT
+    from lab.practice import teacher_episode
+
+    b = get(behaviour)
+    assert recipe_of(b).generator == kind  # the behaviour's file names its kind of world
+    spec = generated(kind, 1, seed=0)[0]
+    done = []
+    for start in spec.start_poses:
+        m = teacher_episode(spec, b, DEFAULT_ACTIONS, start, b.seconds, 0, 0.0, 0.0,
+                            DT).metrics(spec.goal, b.rules)
+        done.append(metrics.judge(b.rules, m, None))
+    assert sum(done) >= len(done) - 1, (spec.name, done)
 
 
 @pytest.mark.parametrize("side", ["right", "left"])
