@@ -26,8 +26,9 @@ uniformly from the ranges below (no range was chosen on a held-out world):
   against a side wall or in the open, and the beacons 1, 2 and 3 (red, green, blue) at least
   0.9 m from every wall and 3 m from each other: for behaviours with goals (docs/goals.md).
 * ``corridors``: a winding corridor in a loop, its centre line an ellipse of 4.5-7.5 x 3-5 m
-  with two to four waves of up to 12% of its radius, 1.0-2.4 m wide (two widths drawn, the
-  width changing smoothly between them along it: the teaching world's 1.2-2.0 m, widened).
+  bulging and dipping with one or two waves (2-4 periods round it, 4-18% of its radius; drawn
+  again where a bend is too tight for the width), 1.0-2.4 m wide (two widths drawn, the width
+  changing smoothly between them along it: the teaching world's 1.2-2.0 m, widened).
 * ``dead-ends``: a square hall of 3.5-5.5 m with two to four blind corridors off the middles
   of its walls, 1.0-2.2 m wide and 3-5.5 m long; the start poses in them facing their ends; the
   goal the middle of the hall.
@@ -273,11 +274,11 @@ def _beacons(rng, side: str) -> dict:
 
 def _corridor(rng, side: str) -> dict:
     """A winding corridor in a loop: its centre line an ellipse of 4.5-7.5 x 3-5 m whose radius
-    bulges and dips with two to four waves, its width between two values drawn from 1.0-2.4 m,
+    bulges and dips with one or two waves (2-4 periods round it), its width between two values drawn from 1.0-2.4 m,
     changing smoothly along it. Start poses on the centre line or 0.2 of the width off it,
     heading along the corridor either way."""
     a, b = _u(rng, 4.5, 7.5), _u(rng, 3.0, 5.0)
-    waves = [(int(k), _u(rng, 0.0, 0.12), _u(rng, 0.0, math.tau))
+    waves = [(int(k), _u(rng, 0.04, 0.18), _u(rng, 0.0, math.tau))
              for k in rng.choice([2, 3, 4], size=int(rng.integers(1, 3)), replace=False)]
     w0 = _u(rng, 1.0, 1.8)
     w1 = _u(rng, w0, min(w0 + 0.8, 2.4))
@@ -290,10 +291,15 @@ def _corridor(rng, side: str) -> dict:
     out = np.stack([d[:, 1], -d[:, 0]], axis=1)  # the outward normal
     width = w0 + (w1 - w0) * 0.5 * (1.0 + np.sin(m * t + psi))
     outer, inner = c + out * (width / 2)[:, None], c - out * (width / 2)[:, None]
+    d1 = (np.roll(c, -1, axis=0) - np.roll(c, 1, axis=0)) / 2  # the centre line's curvature
+    d2 = np.roll(c, -1, axis=0) - 2 * c + np.roll(c, 1, axis=0)
+    bend = np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) / np.linalg.norm(d1, axis=1) ** 3
+    if np.any(bend * (width / 2 + 0.4) > 1.0):  # the wall inside a bend: a radius under 0.4 m
+        raise ValueError("a bend tighter than the corridor's width")
     segs = np.concatenate([np.concatenate([p, np.roll(p, -1, axis=0)], axis=1)
                            for p in (outer, inner)])
-    if np.any(_to_segments(c, segs) < 0.9 * width / 2):  # a bend too tight: the walls fold
-        raise ValueError("a bend tighter than the corridor's width")
+    if np.any(_to_segments(c, segs) < 0.95 * width / 2):  # the walls come close elsewhere
+        raise ValueError("the corridor's walls come closer than its width")
     lo = np.minimum(outer.min(axis=0), inner.min(axis=0)) - 0.5
     outer, inner, c = outer - lo, inner - lo, c - lo
     walls = [{"closed": True, "points": [[round(float(x), 3), round(float(y), 3)] for x, y in p]}
