@@ -274,9 +274,9 @@ def _beacons(rng, side: str) -> dict:
 
 def _corridor(rng, side: str) -> dict:
     """A winding corridor in a loop: its centre line an ellipse of 4.5-7.5 x 3-5 m whose radius
-    bulges and dips with one or two waves (2-4 periods round it), its width between two values drawn from 1.0-2.4 m,
-    changing smoothly along it. Start poses on the centre line or 0.2 of the width off it,
-    heading along the corridor either way."""
+    bulges and dips with one or two waves (2-4 periods round it), its width between two values
+    drawn from 1.0-2.4 m, changing smoothly along it. Start poses on the centre line or up to
+    0.2 of the width off it (0.5 m from the walls at least), heading along it either way."""
     a, b = _u(rng, 4.5, 7.5), _u(rng, 3.0, 5.0)
     waves = [(int(k), _u(rng, 0.04, 0.18), _u(rng, 0.0, math.tau))
              for k in rng.choice([2, 3, 4], size=int(rng.integers(1, 3)), replace=False)]
