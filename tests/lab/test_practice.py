@@ -165,6 +165,21 @@ def test_refine_on_a_tiny_budget_writes_a_tree_that_drives_with_its_lineage(tmp_
     assert json.loads(report.read_text())["after"] == lineage["after"]
 
 
+def test_the_size_step_leaves_room_for_repairs_that_add_spheres():
+    from lab.behaviours import get
+    from lab.refine import refine
+
+    policy = TreePolicy.load(WALL_TREE)
+    assert policy.classifier.node_count_ > 40
+    with Runner(workers=1) as runner:
+        clf, report = refine(get("wall-following"), policy, runner, max_nodes=40, room=6,
+                             budget=1.0, scales=(), seconds=10.0, validate=False,
+                             say=lambda text: None)
+    assert report["sized"]["nodes"] == 34 and report["room"] == 6
+    assert report["sized"]["nodes"] <= clf.node_count_ <= 40
+    assert report["after"]["nodes"] == clf.node_count_
+
+
 def test_refine_moves_keep_an_rhbl_tree():
     from lab.refine import added, leaves, relabelled, without
 
