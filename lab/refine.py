@@ -386,6 +386,19 @@ def _sized(pr: _Practice, clf, max_nodes: int):
     return clf, len(X)
 
 
+def _size_step(pr: _Practice, clf, max_nodes: int | None, room: int, moves: Counter, say,
+               t0: float):
+    """The size step for a tree larger than ``max_nodes``: pruned to ``max_nodes - room``
+    (``_sized``), said and counted: (tree, its standing; None when it was small enough)."""
+    if max_nodes is None or clf.node_count_ <= max_nodes:
+        return clf, None
+    clf, visited = _sized(pr, clf, max(1, max_nodes - room))
+    moves["pruned to size"] += 1
+    say(f"size: pruned to {clf.node_count_} nodes against its own actions on {visited} visited "
+        f"states: fitness {pr.fitness:.2f}, {time.perf_counter() - t0:.0f} s")
+    return clf, _standing(pr, clf)
+
+
 def _trials(pr: _Practice, clf, actions: list[str], blamed: Counter, where: list,
             window: int, candidates: int, max_nodes: int | None) -> list:
     """The repairs to try: each of the ``candidates`` most blamed spheres given every other
@@ -498,19 +511,12 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
         f" fitness {before['fitness']:.2f}, success {before['success']:.0%}, "
         f"{before['nodes']} nodes")
     moves: Counter = Counter()
-    sized = None  # the size step's result
 
     def left() -> float:
         return budget - (time.perf_counter() - t0)
 
     # 1. size: weakest-link pruning against the tree's own actions where it drove
-    if max_nodes is not None and clf.node_count_ > max_nodes:
-        clf, visited = _sized(pr, clf, max(1, max_nodes - room))
-        moves["pruned to size"] += 1
-        sized = _standing(pr, clf)
-        say(f"size: pruned to {clf.node_count_} nodes against its own actions on "
-            f"{visited} visited states: fitness {pr.fitness:.2f}, "
-            f"{time.perf_counter() - t0:.0f} s")
+    clf, sized = _size_step(pr, clf, max_nodes, room, moves, say, t0)
 
     # 2./3. repair, then prune; again while either changes something
     changed = True
