@@ -286,13 +286,12 @@ def _corridor(rng, side: str) -> dict:
     t = np.linspace(0.0, math.tau, 96, endpoint=False)
     r = 1.0 + sum(e * np.cos(k * t + f) for k, e, f in waves)
     c = np.stack([a * r * np.cos(t), b * r * np.sin(t)], axis=1)
-    d = np.roll(c, -1, axis=0) - np.roll(c, 1, axis=0)  # the tangent, counter-clockwise
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d1 = (np.roll(c, -1, axis=0) - np.roll(c, 1, axis=0)) / 2  # the tangent, counter-clockwise
+    d = d1 / np.linalg.norm(d1, axis=1, keepdims=True)
     out = np.stack([d[:, 1], -d[:, 0]], axis=1)  # the outward normal
     width = w0 + (w1 - w0) * 0.5 * (1.0 + np.sin(m * t + psi))
     outer, inner = c + out * (width / 2)[:, None], c - out * (width / 2)[:, None]
-    d1 = (np.roll(c, -1, axis=0) - np.roll(c, 1, axis=0)) / 2  # the centre line's curvature
-    d2 = np.roll(c, -1, axis=0) - 2 * c + np.roll(c, 1, axis=0)
+    d2 = np.roll(c, -1, axis=0) - 2 * c + np.roll(c, 1, axis=0)  # the centre line's curvature
     bend = np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) / np.linalg.norm(d1, axis=1) ** 3
     if np.any(bend * (width / 2 + 0.4) > 1.0):  # the wall inside a bend: a radius under 0.4 m
         raise ValueError("a bend tighter than the corridor's width")
