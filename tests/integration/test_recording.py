@@ -94,12 +94,23 @@ def wait_recorded(path: Path, kind: str = "scan", timeout: float = 30.0) -> None
                timeout, f"a {kind} recorded in {path}", every=0.1, ignore=(RecordingError,))
 
 
-def is_slice(part: list[bytes], whole: list[bytes]) -> bool:
-    """``part`` is a contiguous run of ``whole`` (the same payloads, bit for bit, in order)."""
+def same_run(part: list[bytes], whole: list[bytes], lost: float = 0.02) -> bool:
+    """``part`` is ``whole``'s run over the same stretch of time: the payloads both hold are
+    the same bytes in the same order, and at most ``lost`` of either side is missing from the
+    other. A publication sent with congestion control DROP (scans, states) may be dropped on
+    one subscriber's path and not the other's when the machine is loaded; what a subscriber
+    did receive must be recorded bit for bit. (Every payload here is unique: it holds its
+    ``seq``.)"""
     if not part:
         return True
-    starts = [i for i, x in enumerate(whole) if x == part[0]]
-    return any(whole[i:i + len(part)] == part for i in starts)
+    where = {x: i for i, x in enumerate(whole)}
+    at = [where[x] for x in part if x in where]
+    if not at or any(b <= a for a, b in zip(at, at[1:])):
+        return False  # nothing in common, or out of order
+    allowed = max(1, int(lost * len(part)))
+    only_part = len(part) - len(at)
+    only_whole = (at[-1] - at[0] + 1) - len(at)
+    return only_part <= allowed and only_whole <= allowed
 
 
 def protobuf_class(schema_name: str, descriptor_set: bytes):
@@ -160,7 +171,8 @@ def test_record_keeps_every_message_and_viewer_channels_decode(start_server, pro
                 viewer[channel.topic].append((schema, channel, m))
         assert summary.statistics.message_count == (sum(map(len, recorded.values()))
                                                     + sum(map(len, viewer.values())))
-    # every message bit for bit: the recorder's run of each key is the tap's run
+    # every message bit for bit: the recorder's run of each key is the tap's run (a dropped
+    # best-effort publication aside: same_run)
     bus_keys = [k for k in recorded if not k.startswith("rhbl/alive/")]
     assert keys.scan_key("r0") in bus_keys and teacher_key in bus_keys
     assert keys.cmd_vel_key("r0", source="teacher") in bus_keys
@@ -169,7 +181,7 @@ def test_record_keeps_every_message_and_viewer_channels_decode(start_server, pro
         if k.endswith("/get_world"):
             continue  # a query reply, not a publication: the tap cannot see it
         payloads = [m.data for m in recorded[k]]
-        assert is_slice(payloads, tap.got[k]), f"{k}: recorded payloads differ from the bus"
+        assert same_run(payloads, tap.got[k]), f"{k}: recorded payloads differ from the bus"
     # the teacher's labels and commands: all of them
     assert [m.data for m in recorded[teacher_key]] == tap.got[teacher_key]
     assert len(recorded[teacher_key]) == labels
@@ -231,7 +243,7 @@ def test_sigkilled_recorder_file_reads_up_to_its_last_chunk(start_server, procs,
         except (McapError, EOFError):
             pass  # the unfinished tail
     assert len(got) > 20
-    assert is_slice(got, tap.got[keys.scan_key("r0")])
+    assert same_run(got, tap.got[keys.scan_key("r0")])
     # our tools read it too and say it was not closed
     r = subprocess.run([sys.executable, "-m", "lab.cli", "inspect", str(out)], cwd=ROOT,
                        capture_output=True, text=True, timeout=60)
