@@ -89,12 +89,19 @@ def session(bname: str, model: str, method: str, seed: int, guard: bool = True,
     clf, rep = practise(b, policy, runner, budget=refine * 60.0, validate=False,
                         say=lambda text: None, **(practice or {}))
     better = TreePolicy(clf, learner.features, learner.actions)
-    drawn = (practice or {}).get("drawn")
-    more = f" +{drawn[1]} drawn" if drawn and drawn[1] else ""
+    more = _refined_tag(practice)
     return [row, {**row, "method": f"{row['method']} refined {refine:g} min{more}",
                   "nodes": int(clf.node_count_), "worlds": judge(b, better, seed, episodes),
                   "refinement": {k: rep[k] for k in ("before", "after", "episodes", "moves")},
                   "seconds": round(time.perf_counter() - t1, 1)}]
+
+
+def _refined_tag(practice: dict | None) -> str:
+    """What a refined variant's name says of its practice keywords beyond the minutes."""
+    practice = practice or {}
+    drawn, val = practice.get("drawn"), practice.get("validation")
+    return (f" +{drawn[1]} drawn" if drawn and drawn[1] else "") + (
+        f" +{val} validation" if val else "")
 
 
 def variant(method: str, guard: bool = True, demo: float = 240.0, correct: float = 120.0) -> str:
@@ -139,6 +146,16 @@ def tables(rows: list[dict]) -> str:
             "session)\n" + table(head, body))
 
 
+def _practice_of(args, bname: str) -> dict:
+    """``lab.refine.refine``'s practice keywords for behaviour ``bname`` from the flags."""
+    practice = {}
+    if args.refine_generated or args.refine_validation:
+        practice["drawn"] = (recipe_of(get(bname)).generator, args.refine_generated)
+    if args.refine_validation:
+        practice["validation"] = args.refine_validation
+    return practice
+
+
 def run_all(args, behaviours, people, methods, seeds, rows: list) -> tuple[list, dict]:
     """Every session not in ``rows`` yet (they are appended, and written to ``--json`` as they
     come): (the variants' names, the rows each variant's session writes)."""
@@ -146,16 +163,15 @@ def run_all(args, behaviours, people, methods, seeds, rows: list) -> tuple[list,
 
     done = {(r["behaviour"], r["person"], r["method"], r["seed"]) for r in rows}
     named = [variant(m, args.teach_guard, args.demo, args.correct) for m in methods]
-    drawn = f" +{args.refine_generated} drawn" if args.refine_generated else ""
-    rows_of = {n: [n] + ([f"{n} refined {args.refine:g} min{drawn}"] if args.refine > 0 else [])
+    tag = _refined_tag(_practice_of(args, behaviours[0]) if behaviours else None)
+    rows_of = {n: [n] + ([f"{n} refined {args.refine:g} min{tag}"] if args.refine > 0 else [])
                for n in named}  # the rows a session of each variant writes
     todo = [(b, p, seed, m, name) for b in behaviours for p in people for seed in seeds
             for m, name in zip(methods, named, strict=True)
             if not all((b, p, n, seed) in done for n in rows_of[name])]
     with Runner() as runner:
         for b, p, seed, m, _name in todo:
-            practice = ({"drawn": (recipe_of(get(b)).generator, args.refine_generated)}
-                        if args.refine_generated else None)
+            practice = _practice_of(args, b)
             for r in session(b, p, m, seed, guard=args.teach_guard, demo=args.demo,
                              correct=args.correct, refine=args.refine, runner=runner,
                              practice=practice):
@@ -194,6 +210,9 @@ def main(argv=None) -> int:
                     help="also refine each session's tree by practice for this many minutes "
                          "(rhbl refine's defaults, on every core) and judge it again: a "
                          "variant named '... refined N min' beside the session's")
+    ap.add_argument("--refine-validation", type=int, default=0, metavar="N",
+                    help="with --refine: N more drawn worlds no move may do worse in (rhbl "
+                         "refine --validation N); the variant is named '... +N validation'")
     ap.add_argument("--refine-generated", type=int, default=0, metavar="N",
                     help="with --refine: practise also in N worlds drawn by the behaviour's "
                          "generator (rhbl refine --generated N); the variant is named "

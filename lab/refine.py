@@ -68,6 +68,7 @@ __all__ = ["add_arguments", "ask", "fitness", "main", "refine"]
 
 SCALES = (0.85, 1.2)
 PRACTICE_SEED = 500  # the drawn practice worlds' (training runs draw with their own seeds)
+VALIDATION_SEED = 501  # the drawn validation worlds' (never practised in)
 PRUNE = ("all", "used", "none")
 ROOM = 10  # spheres the size step leaves under --max-nodes for repairs that add (docs/practice.md)
 
@@ -131,45 +132,55 @@ def without(clf, spheres):
                        arr["label"][keep], [str(v) for v in clf.classes_])
 
 
-def _prune_pass(pr, clf, unused: bool = True, left=None) -> list[int]:
+def _prune_pass(pr, clf, unused: bool = True, left=None, val=None) -> list[int]:
     """One pass of closed-loop leaf pruning on ``pr`` (its results become those of ``clf``
     without the leaves returned): each leaf removed alone, all in one batch; kept out when
     the fitness does not fall and its episodes (before and after) meet no other kept-out
     leaf's. ``unused``: also the leaves no episode reached (else they stay); ``left()``: the
-    seconds left (the leaves not tried when it is up stay)."""
+    seconds left (the leaves not tried when it is up stay); ``val``: a validation set
+    (``_Practice``) whose fitness must not fall either (its results follow)."""
     use = Counter()
     for r in pr.results:
         use.update(r["winners"].tolist())
     order = sorted(leaves(clf), key=lambda s: (use.get(s, 0), -s))
-    trials = [(s, idx) for s in order if (idx := pr.using(s)) or unused]
-    outs, step = [], max(8, 4 * pr.runner.workers)
+    trials = [(s, idx, val.using(s) if val else []) for s in order
+              if (idx := pr.using(s)) or unused]
+    outs, vouts, step = [], [], max(8, 4 * pr.runner.workers)
     for at in range(0, len(trials), step):
         if at and left is not None and left() <= 0:
             trials = trials[:at]
             break
-        outs += pr.run_many([(without(clf, s), idx) for s, idx in trials[at:at + step]])
-    fit = pr.fitness
+        part = trials[at:at + step]
+        outs += pr.run_many([(without(clf, s), idx) for s, idx, _v in part])
+        vouts += (val.run_many([(without(clf, s), v) for s, _i, v in part]) if val
+                  else [[] for _ in part])
+    sets = [(pr, 1), (val, 2)] if val else [(pr, 1)]
     gone, touched, seen = [], set(), set()  # removed; their episodes; spheres those now use
-    for (s, idx), out in zip(trials, outs, strict=True):
-        if pr.change(idx, out) < fit - 1e-9 or touched & set(idx) or s in seen:
+    for (s, idx, vidx), out, vout in zip(trials, outs, vouts, strict=True):
+        pairs = [(pr, idx, out)] + ([(val, vidx, vout)] if val else [])
+        if any(q.change(i, o) < q.fitness - 1e-9 for q, i, o in pairs):
+            continue
+        if touched & {(1, i) for i in idx} | touched & {(2, i) for i in vidx} or s in seen:
             continue
         now = set()
-        for r in out:  # the single-removal tree's indices, as the tree's
-            w = r["winners"]
-            r["winners"] = np.where(w >= s, w + 1, w).astype(np.int32)  # -1 stays
-            now.update(r["winners"].tolist())
+        for _q, _i, o in pairs:
+            for r in o:  # the single-removal tree's indices, as the tree's
+                w = r["winners"]
+                r["winners"] = np.where(w >= s, w + 1, w).astype(np.int32)  # -1 stays
+                now.update(r["winners"].tolist())
         if now & set(gone):
             continue
         gone.append(s)
-        touched.update(idx)
+        touched.update({(1, i) for i in idx} | {(2, i) for i in vidx})
         seen |= now
-        fit = fit - sum(score(pr.results[i]) for i in idx) + sum(map(score, out))
-        pr.keep(idx, out)
+        for q, i, o in pairs:
+            q.keep(i, o)
     if gone:
         new = np.cumsum(~np.isin(np.arange(clf.node_count_), gone)) - 1
-        for r in pr.results:
-            w = r["winners"]
-            r["winners"] = np.where(w < 0, -1, new[np.maximum(w, 0)]).astype(np.int32)
+        for q, _tag in sets:
+            for r in q.results:
+                w = r["winners"]
+                r["winners"] = np.where(w < 0, -1, new[np.maximum(w, 0)]).astype(np.int32)
     return sorted(gone)
 
 
@@ -272,18 +283,20 @@ class _Practice:
 
 
 def _practice_tasks(b, seeds, scales, seconds=None, free: int = 0, noise=(0.0, 0.0),
-                    drawn: tuple[str, int] | None = None) -> list[EpisodeTask]:
-    """Every start pose of each teaching world, as it is and scaled by each of ``scales``, and
-    ``free`` poses in its free space (``server.world.free_pose``, drawn with seed 100 + the
-    scale's place: not the poses the tree was taught from), each with every seed; ``drawn`` =
-    (kind, count): also every start pose of ``count`` worlds ``lab.generated`` draws of that
-    kind (with ``PRACTICE_SEED``, not a training run's seed), as they are."""
+                    drawn: tuple[str, int] | None = None, drawn_seed: int = PRACTICE_SEED,
+                    teach: bool = True) -> list[EpisodeTask]:
+    """Every start pose of each teaching world (``teach``), as it is and scaled by each of
+    ``scales``, and ``free`` poses in its free space (``server.world.free_pose``, drawn with
+    seed 100 + the scale's place: not the poses the tree was taught from), each with every
+    seed; ``drawn`` = (kind, count): also every start pose of ``count`` worlds
+    ``lab.generated`` draws of that kind (with ``drawn_seed``: ``PRACTICE_SEED``, not a
+    training run's seed), as they are."""
     from server.world import free_pose
 
     name = str(b.path) if b.path else b.name
-    worlds = [(w, scale) for w in b.teach for scale in (1.0, *scales)]
+    worlds = [(w, scale) for w in (b.teach if teach else ()) for scale in (1.0, *scales)]
     if drawn is not None and drawn[1] > 0:
-        worlds += [(drawn_name(drawn[0], PRACTICE_SEED, i, b.band_side or "right"), 1.0)
+        worlds += [(drawn_name(drawn[0], drawn_seed, i, b.band_side or "right"), 1.0)
                    for i in range(drawn[1])]
     out = []
     for j, (w, scale) in enumerate(worlds):
@@ -427,30 +440,55 @@ def _trials(pr: _Practice, clf, actions: list[str], blamed: Counter, where: list
     return trials
 
 
-def _best(pr: _Practice, trials: list, runner: Runner, left):
+def _best(pr: _Practice, trials: list, runner: Runner, left, val=None, clf=None):
     """The trial that raises the practice fitness most, ``(move, tree, episodes, results)``,
-    or None; batches of candidates, the time (``left()``) checked between them."""
-    best, best_fit = None, pr.fitness + 1e-9
+    or None; batches of candidates, the time (``left()``) checked between them. With a
+    validation set ``val``: the best of those that raise it and do not lower ``val``'s
+    (``_validated``; ``clf``: the tree they change)."""
+    better = []  # (fitness, place, trial, results)
     step = max(1, 2 * runner.workers)  # candidates per batch: the time checked between
     for at in range(0, len(trials), step):
         if at and left() <= 0:
             break
         part = trials[at:at + step]
         outs = pr.run_many([(c, idx) for _m, c, idx in part])
-        for (m, c, idx), out in zip(part, outs, strict=True):
+        for k, ((m, c, idx), out) in enumerate(zip(part, outs, strict=True)):
             f = pr.change(idx, out)
-            if f > best_fit:
-                best, best_fit = (m, c, idx, out), f
-    return best
+            if f > pr.fitness + 1e-9:
+                better.append((f, at + k, (m, c, idx, out)))
+    better = [t for _f, _k, t in sorted(better, key=lambda b: (-b[0], b[1]))]
+    if val is None or not better:
+        return better[0] if better else None
+    return _validated(val, better, clf, step, left)
 
 
-def _pruned(pr: _Practice, clf, prune: str, left):
+def _validated(val: _Practice, better: list, clf, step: int, left):
+    """The first of ``better`` (best first) that does not lower the validation set's fitness,
+    its results kept in ``val``; None if none (or the time is up). A move is driven on the
+    validation episodes it can change only (a relabelled sphere: those it decided a step of;
+    a sphere added: those with a step inside it)."""
+    for at in range(0, len(better), step):
+        if at and left() <= 0:
+            break
+        part = better[at:at + step]
+        vidx = [val.using(m[1]) if m[0] == "relabel" else val.reaching(c, clf.node_count_)
+                for m, c, _i, _o in part]
+        outs = val.run_many([(c, v) for (_m, c, _i, _o), v in zip(part, vidx, strict=True)])
+        for t, v, out in zip(part, vidx, outs, strict=True):
+            if val.change(v, out) >= val.fitness - 1e-9:
+                val.keep(v, out)
+                return t
+    return None
+
+
+def _pruned(pr: _Practice, clf, prune: str, left, val=None):
     """The prune step: every leaf tried at once (least used first), each kept out if the
-    fitness does not fall; removals whose episodes do not meet are independent, and kept
-    together; again until nothing goes or the time is up: (tree, leaves removed)."""
+    fitness (and ``val``'s) does not fall; removals whose episodes do not meet are
+    independent, and kept together; again until nothing goes or the time is up: (tree, leaves
+    removed)."""
     removed = 0
     while left() > 0:
-        gone = _prune_pass(pr, clf, unused=prune == "all", left=left)
+        gone = _prune_pass(pr, clf, unused=prune == "all", left=left, val=val)
         if not gone:
             break
         clf = without(clf, gone)
@@ -487,12 +525,13 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
            budget: float = 600.0, seeds=(0,), scales=SCALES, window: int = 30,
            candidates: int = 6, prune: str = "used", say=None, validate: bool = True,
            seconds: float | None = None, free: int = 0, noise=(0.0, 0.0),
-           drawn: tuple[str, int] | None = None, room: int = ROOM):
+           drawn: tuple[str, int] | None = None, room: int = ROOM, validation: int = 0):
     """``policy``'s tree refined by practice (the module's docstring): ``(classifier,
     report)``. ``seconds``: each episode's length (default: the behaviour's time limit);
     ``drawn`` = (kind, count): practise also in that many worlds drawn at random; ``room``:
     the size step prunes to ``max_nodes - room`` spheres (at least 1), leaving room for repairs
-    that add spheres."""
+    that add spheres; ``validation``: that many more worlds of the drawn kind (another seed)
+    whose fitness no repair or removal may lower (never practised in)."""
     t0 = time.perf_counter()
     say = say or (lambda text: print(text, flush=True))
     actions = list(policy.actions.names)
@@ -502,6 +541,13 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
                                                       drawn))
     dropped = _first_practice(pr, clf)
     before = _standing(pr, clf)
+    val = None
+    if validation:
+        kind = drawn[0] if drawn else recipe_of(b).generator
+        val = _Practice(b, policy, runner, _practice_tasks(
+            b, seeds, (), seconds, 0, noise, drawn=(kind, validation),
+            drawn_seed=VALIDATION_SEED, teach=False))
+        _first_practice(val, clf)
     say(f"practice: {len(pr.tasks)} episodes ({', '.join(b.teach)}, scales 1"
         f"{''.join(f', {s:g}' for s in scales)}"
         f"{f'; {drawn[1]} {drawn[0]} drawn' if drawn and drawn[1] else ''}; "
@@ -517,6 +563,13 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
 
     # 1. size: weakest-link pruning against the tree's own actions where it drove
     clf, sized = _size_step(pr, clf, max_nodes, room, moves, say, t0)
+    if val is not None:
+        if sized is not None:
+            val.results = val.run(clf)
+        val_before = _standing(val, clf)
+        say(f"validation: {len(val.tasks)} episodes in {validation} drawn worlds (seed "
+            f"{VALIDATION_SEED}, never practised in): fitness {val_before['fitness']:.2f}, "
+            f"success {val_before['success']:.0%}; a move that lowers it is not kept")
 
     # 2./3. repair, then prune; again while either changes something
     changed = True
@@ -525,7 +578,7 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
         while left() > 0 and not all(r["success"] for r in pr.results):
             blamed, where = _blame(pr, window, b)
             trials = _trials(pr, clf, actions, blamed, where, window, candidates, max_nodes)
-            best = _best(pr, trials, runner, left) if trials else None
+            best = _best(pr, trials, runner, left, val, clf) if trials else None
             if best is None:
                 break
             m, clf, idx, out = best
@@ -533,11 +586,12 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
             moves[m[0]] += 1
             changed = True
             say(f"repair: {m[0]} {m[1:]}: fitness {pr.fitness:.2f}, success "
-                f"{np.mean([r['success'] for r in pr.results]):.0%}, {clf.node_count_} nodes, "
+                f"{np.mean([r['success'] for r in pr.results]):.0%}"
+                f"{f' (validation {val.fitness:.2f})' if val else ''}, {clf.node_count_} nodes, "
                 f"{pr.episodes} episodes, {time.perf_counter() - t0:.0f} s")
         if prune == "none":
             break
-        clf, removed = _pruned(pr, clf, prune, left)
+        clf, removed = _pruned(pr, clf, prune, left, val)
         if removed:
             moves["pruned"] += removed
             changed = True
@@ -555,6 +609,10 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
               "asks": asks, "max_nodes": max_nodes, "room": room if max_nodes else None,
               "sized": sized,
               "prune": prune, "height": int(clf.height_)}
+    if val is not None:
+        report["validation"] = {"worlds": validation, "seed": VALIDATION_SEED,
+                                "episodes": len(val.tasks), "before": val_before,
+                                "after": _standing(val, clf)}
     if validate:
         report["worlds_before"] = _held_out(b, policy.classifier, policy, runner, 0, seconds)
         report["worlds_after"] = _held_out(b, clf, policy, runner, 0, seconds)
@@ -599,6 +657,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--generator", choices=list(GENERATORS), default=None,
                         help="the kind of world --generated draws (default: the behaviour's "
                              "recipe's generator)")
+    parser.add_argument("--validation", type=arguments.non_negative_int, default=0,
+                        metavar="N",
+                        help="N more worlds drawn by --generator (seed "
+                             f"{VALIDATION_SEED}), never practised in: a repair or a removal "
+                             "that lowers their fitness is not kept (default 0: none)")
     parser.add_argument("--range-noise", type=arguments.non_negative_float, default=0.0,
                         help="practise with this laser noise (server option; the seeds then "
                              "differ; the validation runs without)")
@@ -636,7 +699,7 @@ def main(args) -> int:
                              scales=tuple(f for f in args.scales if f != 1.0), free=args.free,
                              prune=args.prune, noise=(args.range_noise, args.odom_noise),
                              drawn=(args.generator or recipe_of(b).generator, args.generated),
-                             room=args.room)
+                             room=args.room, validation=args.validation)
     record = {"parent": str(args.tree), "parent_sha256": hashlib.sha256(raw).hexdigest(),
               "behaviour": b.name, **report}  # with the asks: the console shows them
     meta = dict(clf.metadata)
@@ -653,6 +716,9 @@ def main(args) -> int:
         print(f"  the tree is worse than its parent on the practice set: --max-nodes "
               f"{args.max_nodes} cost more than the repairs gave back in the time (more "
               f"--minutes, or a larger --max-nodes)")
+    if v := report.get("validation"):
+        print(f"  validation ({v['worlds']} drawn worlds, never practised in): success "
+              f"{v['before']['success']:.0%} -> {v['after']['success']:.0%}")
     for w in wb:
         tag = "taught" if w in b.teach else "held out"
         print(f"  {w} ({tag}): success {wb[w]:.0%} -> {wa[w]:.0%}")

@@ -214,6 +214,85 @@ def test_a_prune_pass_leaves_the_results_of_the_pruned_tree():
         assert a["winners"].tolist() == b["winners"].tolist()
 
 
+def _validation_set(runner, policy, worlds: int = 2, seconds: float = 8.0):
+    """A validation set as ``refine(validation=N)`` makes it, practised by ``policy``."""
+    from lab.behaviours import get
+    from lab.refine import VALIDATION_SEED, _Practice, _practice_tasks
+
+    b = get("wall-following")
+    val = _Practice(b, policy, runner, _practice_tasks(
+        b, (0,), (), seconds=seconds, drawn=("rooms", worlds), drawn_seed=VALIDATION_SEED,
+        teach=False))
+    val.results = val.run(policy.classifier)
+    return val
+
+
+def test_the_validation_set_is_drawn_worlds_only_with_their_own_seed():
+    from lab.behaviours import get
+    from lab.practice import DRAWN
+    from lab.refine import PRACTICE_SEED, VALIDATION_SEED, _practice_tasks
+
+    b = get("wall-following")
+    tasks = _practice_tasks(b, (0,), (0.85,), drawn=("rooms", 2), drawn_seed=VALIDATION_SEED,
+                            teach=False)
+    assert tasks and all(t.world.startswith(f"{DRAWN}:rooms:{VALIDATION_SEED}:") for t in tasks)
+    practised = {t.world for t in _practice_tasks(b, (0,), (), drawn=("rooms", 2))}
+    assert practised.isdisjoint(t.world for t in tasks)
+    assert VALIDATION_SEED != PRACTICE_SEED
+
+
+@pytest.mark.slow
+def test_a_move_that_lowers_the_validation_fitness_is_not_kept():
+    """``_validated`` keeps the best move that leaves the validation set no worse: a tree that
+    only drives forward (offered as a relabel of the validation episodes' busiest sphere) is
+    refused and leaves the validation results as they were; the tree itself passes."""
+    from collections import Counter
+
+    import numpy as np
+
+    from lab.refine import _classifier, _validated
+
+    policy = TreePolicy.load(WALL_TREE)
+    clf = policy.classifier
+    arr, classes = clf.tree_arrays(), [str(c) for c in clf.classes_]
+    forward = _classifier(clf, arr["centers"], arr["radii"], arr["parent"],
+                          np.full_like(arr["label"], classes.index("fwd")), classes)
+    with Runner(workers=1) as runner:
+        val = _validation_set(runner, policy)
+        before, results = val.fitness, list(val.results)
+        busiest, _n = Counter(w for r in val.results for w in r["winners"].tolist()
+                              if w >= 0).most_common(1)[0]
+        bad = (("relabel", busiest, "fwd"), forward, [], [])
+        assert _validated(val, [bad], clf, 2, lambda: 60.0) is None
+        assert val.fitness == before and val.results == results
+        same = (("relabel", busiest, "x"), clf, [], [])
+        assert _validated(val, [bad, same], clf, 2, lambda: 60.0) is same
+    assert val.fitness == pytest.approx(before)
+
+
+@pytest.mark.slow
+def test_a_prune_pass_with_a_validation_set_leaves_both_sets_results_of_the_pruned_tree():
+    from lab.behaviours import get
+    from lab.refine import _Practice, _practice_tasks, _prune_pass, without
+
+    policy = TreePolicy.load(WALL_TREE)
+    with Runner(workers=1) as runner:
+        pr = _Practice(get("wall-following"), policy, runner,
+                       _practice_tasks(get("wall-following"), (0,), (), seconds=8.0))
+        pr.results = pr.run(policy.classifier)
+        val = _validation_set(runner, policy)
+        fit, vfit = pr.fitness, val.fitness
+        gone = _prune_pass(pr, policy.classifier, val=val)
+        assert gone
+        pruned = without(policy.classifier, gone)
+        fresh, vfresh = pr.run(pruned), val.run(pruned)
+    assert pr.fitness >= fit - 1e-9 and val.fitness >= vfit - 1e-9
+    for got, kept in ((fresh, pr.results), (vfresh, val.results)):
+        assert _judged(got) == _judged(kept)
+        for a, b in zip(got, kept, strict=True):
+            assert a["winners"].tolist() == b["winners"].tolist()
+
+
 @pytest.mark.slow
 def test_a_sphere_added_changes_only_the_episodes_it_reaches():
     from lab.behaviours import get
