@@ -664,7 +664,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "that lowers their fitness is not kept (default 0: none)")
     parser.add_argument("--range-noise", type=arguments.non_negative_float, default=0.0,
                         help="practise with this laser noise (server option; the seeds then "
-                             "differ; the validation runs without)")
+                             "differ; the held-out worlds are judged without)")
     parser.add_argument("--odom-noise", type=arguments.non_negative_float, default=0.0,
                         help="practise with this odometry noise (server option)")
     parser.add_argument("--prune", choices=PRUNE, default="used",
