@@ -521,6 +521,40 @@ def _check_sizable(clf, max_nodes: int | None) -> None:
                          "refine it to a size")
 
 
+def _validation_set(b, policy, runner: Runner, clf, n: int, kind: str, seeds, seconds,
+                    noise) -> _Practice:
+    """Every start pose of ``n`` worlds of ``kind`` drawn with ``VALIDATION_SEED`` (never
+    practised in), driven by ``clf`` (those the expert fails from left out)."""
+    val = _Practice(b, policy, runner, _practice_tasks(
+        b, seeds, (), seconds, 0, noise, drawn=(kind, n), drawn_seed=VALIDATION_SEED,
+        teach=False))
+    _first_practice(val, clf)
+    return val
+
+
+def _repairs(pr: _Practice, clf, b, left, val, moves: Counter, say, t0: float, *,
+             window: int, candidates: int, max_nodes: int | None):
+    """The repair step, again while a repair raises the practice fitness (and leaves
+    ``val``'s no lower) and the time lasts: (tree, whether one was kept)."""
+    changed = False
+    actions = list(pr.policy.actions.names)
+    while left() > 0 and not all(r["success"] for r in pr.results):
+        blamed, where = _blame(pr, window, b)
+        trials = _trials(pr, clf, actions, blamed, where, window, candidates, max_nodes)
+        best = _best(pr, trials, pr.runner, left, val, clf) if trials else None
+        if best is None:
+            break
+        m, clf, idx, out = best
+        pr.keep(idx, out)
+        moves[m[0]] += 1
+        changed = True
+        say(f"repair: {m[0]} {m[1:]}: fitness {pr.fitness:.2f}, success "
+            f"{np.mean([r['success'] for r in pr.results]):.0%}"
+            f"{f' (validation {val.fitness:.2f})' if val else ''}, {clf.node_count_} nodes, "
+            f"{pr.episodes} episodes, {time.perf_counter() - t0:.0f} s")
+    return clf, changed
+
+
 def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = None,
            budget: float = 600.0, seeds=(0,), scales=SCALES, window: int = 30,
            candidates: int = 6, prune: str = "used", say=None, validate: bool = True,
@@ -534,20 +568,12 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
     whose fitness no repair or removal may lower (never practised in)."""
     t0 = time.perf_counter()
     say = say or (lambda text: print(text, flush=True))
-    actions = list(policy.actions.names)
     clf = policy.classifier
     _check_sizable(clf, max_nodes)
     pr = _Practice(b, policy, runner, _practice_tasks(b, seeds, scales, seconds, free, noise,
                                                       drawn))
     dropped = _first_practice(pr, clf)
     before = _standing(pr, clf)
-    val = None
-    if validation:
-        kind = drawn[0] if drawn else recipe_of(b).generator
-        val = _Practice(b, policy, runner, _practice_tasks(
-            b, seeds, (), seconds, 0, noise, drawn=(kind, validation),
-            drawn_seed=VALIDATION_SEED, teach=False))
-        _first_practice(val, clf)
     say(f"practice: {len(pr.tasks)} episodes ({', '.join(b.teach)}, scales 1"
         f"{''.join(f', {s:g}' for s in scales)}"
         f"{f'; {drawn[1]} {drawn[0]} drawn' if drawn and drawn[1] else ''}; "
@@ -563,9 +589,11 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
 
     # 1. size: weakest-link pruning against the tree's own actions where it drove
     clf, sized = _size_step(pr, clf, max_nodes, room, moves, say, t0)
-    if val is not None:
-        if sized is not None:
-            val.results = val.run(clf)
+    val = None
+    if validation:
+        val = _validation_set(b, policy, runner, clf, validation,
+                              drawn[0] if drawn else recipe_of(b).generator, seeds, seconds,
+                              noise)
         val_before = _standing(val, clf)
         say(f"validation: {len(val.tasks)} episodes in {validation} drawn worlds (seed "
             f"{VALIDATION_SEED}, never practised in): fitness {val_before['fitness']:.2f}, "
@@ -574,21 +602,8 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
     # 2./3. repair, then prune; again while either changes something
     changed = True
     while changed and left() > 0:
-        changed = False
-        while left() > 0 and not all(r["success"] for r in pr.results):
-            blamed, where = _blame(pr, window, b)
-            trials = _trials(pr, clf, actions, blamed, where, window, candidates, max_nodes)
-            best = _best(pr, trials, runner, left, val, clf) if trials else None
-            if best is None:
-                break
-            m, clf, idx, out = best
-            pr.keep(idx, out)
-            moves[m[0]] += 1
-            changed = True
-            say(f"repair: {m[0]} {m[1:]}: fitness {pr.fitness:.2f}, success "
-                f"{np.mean([r['success'] for r in pr.results]):.0%}"
-                f"{f' (validation {val.fitness:.2f})' if val else ''}, {clf.node_count_} nodes, "
-                f"{pr.episodes} episodes, {time.perf_counter() - t0:.0f} s")
+        clf, changed = _repairs(pr, clf, b, left, val, moves, say, t0, window=window,
+                                candidates=candidates, max_nodes=max_nodes)
         if prune == "none":
             break
         clf, removed = _pruned(pr, clf, prune, left, val)

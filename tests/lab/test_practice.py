@@ -150,7 +150,7 @@ def test_refine_on_a_tiny_budget_writes_a_tree_that_drives_with_its_lineage(tmp_
     out, report = tmp_path / "refined.rhbl", tmp_path / "refine.json"
     assert main(["refine", "--behaviour", "wall-following", "--tree", str(WALL_TREE),
                  "--out", str(out), "--seconds", "15", "--scales", "none", "--minutes",
-                 "0.5", "--workers", "2", "--json", str(report)]) == 0
+                 "0.5", "--workers", "2", "--validation", "1", "--json", str(report)]) == 0
     policy = TreePolicy.load(out)  # loads, with its features and actions
     b = get("wall-following")
     rep = evaluate(teaching_world(b), policy, episodes=1, seconds=5, behaviour=b)
@@ -163,6 +163,9 @@ def test_refine_on_a_tiny_budget_writes_a_tree_that_drives_with_its_lineage(tmp_
     assert lineage["after"]["fitness"] >= lineage["before"]["fitness"]
     assert set(lineage["worlds_after"]) == {"room", *b.held_out}
     assert json.loads(report.read_text())["after"] == lineage["after"]
+    val = lineage["validation"]  # one drawn world of seed 501, no worse after than before
+    assert val["worlds"] == 1 and val["episodes"] >= 1
+    assert val["after"]["fitness"] >= val["before"]["fitness"]
 
 
 def test_the_size_step_leaves_room_for_repairs_that_add_spheres():
@@ -217,14 +220,10 @@ def test_a_prune_pass_leaves_the_results_of_the_pruned_tree():
 def _validation_set(runner, policy, worlds: int = 2, seconds: float = 8.0):
     """A validation set as ``refine(validation=N)`` makes it, practised by ``policy``."""
     from lab.behaviours import get
-    from lab.refine import VALIDATION_SEED, _Practice, _practice_tasks
+    from lab.refine import _validation_set as made
 
-    b = get("wall-following")
-    val = _Practice(b, policy, runner, _practice_tasks(
-        b, (0,), (), seconds=seconds, drawn=("rooms", worlds), drawn_seed=VALIDATION_SEED,
-        teach=False))
-    val.results = val.run(policy.classifier)
-    return val
+    return made(get("wall-following"), policy, runner, policy.classifier, worlds, "rooms", (0,),
+                seconds, (0.0, 0.0))
 
 
 def test_the_validation_set_is_drawn_worlds_only_with_their_own_seed():
