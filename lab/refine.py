@@ -35,6 +35,10 @@ radii, labels and parents; nothing else):
    the practice set. A leaf no episode reached stays: removing it changes nothing the practice
    set can see, and those were what the held-out rooms lost (docs/studies/refine-by-practice.md).
 
+With ``validation`` (``--validation N``) N more worlds of the drawn kind, drawn with another
+seed and never practised in, guard steps 2 and 3: a repair or a removal that lowers their
+fitness is not kept (reduced-error pruning's validation set).
+
 The snapshot's ``metadata["refinement"]`` records the lineage: the parent file and its sha256,
 the fitness (and success rate) before and after on the practice set and on the held-out worlds,
 the episodes run, the moves kept, the time; ``"asks"`` the practice episodes it could not fix
@@ -154,7 +158,6 @@ def _prune_pass(pr, clf, unused: bool = True, left=None, val=None) -> list[int]:
         outs += pr.run_many([(without(clf, s), idx) for s, idx, _v in part])
         vouts += (val.run_many([(without(clf, s), v) for s, _i, v in part]) if val
                   else [[] for _ in part])
-    sets = [(pr, 1), (val, 2)] if val else [(pr, 1)]
     gone, touched, seen = [], set(), set()  # removed; their episodes; spheres those now use
     for (s, idx, vidx), out, vout in zip(trials, outs, vouts, strict=True):
         pairs = [(pr, idx, out)] + ([(val, vidx, vout)] if val else [])
@@ -177,7 +180,7 @@ def _prune_pass(pr, clf, unused: bool = True, left=None, val=None) -> list[int]:
             q.keep(i, o)
     if gone:
         new = np.cumsum(~np.isin(np.arange(clf.node_count_), gone)) - 1
-        for q, _tag in sets:
+        for q in [pr, val] if val else [pr]:
             for r in q.results:
                 w = r["winners"]
                 r["winners"] = np.where(w < 0, -1, new[np.maximum(w, 0)]).astype(np.int32)
