@@ -158,12 +158,13 @@ def _prune_pass(pr, clf, unused: bool = True, left=None, val=None) -> list[int]:
         outs += pr.run_many([(without(clf, s), idx) for s, idx, _v in part])
         vouts += (val.run_many([(without(clf, s), v) for s, _i, v in part]) if val
                   else [[] for _ in part])
-    gone, touched, seen = [], set(), set()  # removed; their episodes; spheres those now use
+    gone, seen = [], set()  # removed; the spheres their episodes now use
+    touched = [set(), set()]  # the episodes of the removals kept: practice's, validation's
     for (s, idx, vidx), out, vout in zip(trials, outs, vouts, strict=True):
         pairs = [(pr, idx, out)] + ([(val, vidx, vout)] if val else [])
-        if any(q.change(i, o) < q.fitness - 1e-9 for q, i, o in pairs):
+        if any(q.change(i, o) < q.fitness - 1e-9 for q, i, o in pairs) or s in seen:
             continue
-        if touched & {(1, i) for i in idx} | touched & {(2, i) for i in vidx} or s in seen:
+        if any(t & set(i) for t, (_q, i, _o) in zip(touched, pairs, strict=False)):
             continue
         now = set()
         for _q, _i, o in pairs:
@@ -174,9 +175,9 @@ def _prune_pass(pr, clf, unused: bool = True, left=None, val=None) -> list[int]:
         if now & set(gone):
             continue
         gone.append(s)
-        touched.update({(1, i) for i in idx} | {(2, i) for i in vidx})
         seen |= now
-        for q, i, o in pairs:
+        for t, (q, i, o) in zip(touched, pairs, strict=False):  # one pair without validation
+            t.update(i)
             q.keep(i, o)
     if gone:
         new = np.cumsum(~np.isin(np.arange(clf.node_count_), gone)) - 1
@@ -275,6 +276,11 @@ class _Practice:
                     out.append(i)
                     break
         return out
+
+    def changed_by(self, move: tuple, tree, old: int) -> list[int]:
+        """The episodes a repair ``move`` (giving ``tree``, from a tree of ``old`` spheres)
+        can change: a relabelled sphere's (``using``), an added sphere's (``reaching``)."""
+        return self.using(move[1]) if move[0] == "relabel" else self.reaching(tree, old)
 
     def change(self, idx: list[int], new: list) -> float:
         """The fitness with the episodes ``idx`` replaced by ``new``."""
@@ -474,8 +480,7 @@ def _validated(val: _Practice, better: list, clf, step: int, left):
         if at and left() <= 0:
             break
         part = better[at:at + step]
-        vidx = [val.using(m[1]) if m[0] == "relabel" else val.reaching(c, clf.node_count_)
-                for m, c, _i, _o in part]
+        vidx = [val.changed_by(m, c, clf.node_count_) for m, c, _i, _o in part]
         outs = val.run_many([(c, v) for (_m, c, _i, _o), v in zip(part, vidx, strict=True)])
         for t, v, out in zip(part, vidx, outs, strict=True):
             if val.change(v, out) >= val.fitness - 1e-9:
