@@ -383,9 +383,7 @@ class Runner:
         results: list = [None] * len(tasks)
         todo = list(range(len(tasks)))
         for attempt in range(self.retries + 1):
-            if self._pool is None:
-                self._pool = self._new_pool()
-            futures = {self._pool.submit(run_episode, tasks[i]): i for i in todo}
+            futures = self._submit(tasks, todo)
             lost = []
             for fut in cf.as_completed(futures):
                 i = futures[fut]
@@ -403,6 +401,20 @@ class Runner:
             if attempt == self.retries:
                 break
         raise RuntimeError(f"{len(todo)} episodes lost their worker {self.retries + 1} times")
+
+    def _submit(self, tasks: list[EpisodeTask], todo: list[int]) -> dict:
+        """The futures of ``tasks[i]`` for ``i`` in ``todo`` on the pool; a pool a worker left
+        while it was idle (between maps: nothing of it was lost) is replaced first."""
+        for _ in range(2):
+            if self._pool is None:
+                self._pool = self._new_pool()
+            try:
+                return {self._pool.submit(run_episode, tasks[i]): i for i in todo}
+            except cf.process.BrokenProcessPool:
+                log.warning("a worker process died between runs: a new pool")
+                self._pool.shutdown(wait=False, cancel_futures=True)
+                self._pool = None
+        raise RuntimeError("the pool's workers died as they started, twice")
 
     def close(self) -> None:
         if self._pool is not None:

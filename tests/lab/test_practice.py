@@ -83,8 +83,15 @@ def test_the_pool_gives_the_serial_results(serial):
 
 
 @pytest.mark.slow
-def test_a_pool_worker_killed_loses_no_episode(serial):
-    tasks = _tasks()
+def _cpu_seconds(pid: int) -> float:
+    """The CPU time process ``pid`` has used (user and system), from /proc."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def test_a_pool_worker_killed_loses_no_episode():
+    tasks = _tasks(seconds=300.0, n=24)  # long enough to be killed in the middle of
+    serial = _judged([run_episode(t) for t in tasks])
     with Runner(workers=2) as runner:
         runner.map(tasks[:2])  # the pool's processes are up
         pids = runner.worker_pids()
@@ -92,13 +99,30 @@ def test_a_pool_worker_killed_loses_no_episode(serial):
         import threading
 
         got: dict = {}
+        before = _cpu_seconds(pids[0])
         t = threading.Thread(target=lambda: got.update(r=runner.map(tasks)))
         t.start()
+        # killed while it runs an episode of this map (its CPU time grows), not before
+        eventually(lambda: _cpu_seconds(pids[0]) > before + 0.05,
+                   what=f"worker {pids[0]} running an episode")
         os.kill(pids[0], signal.SIGKILL)
         t.join(timeout=120)
         assert not t.is_alive()
         assert runner.rerun >= 1
         assert _judged(got["r"]) == serial
+
+
+def test_a_pool_worker_that_died_between_runs_loses_nothing(serial):
+    tasks = _tasks()
+    with Runner(workers=2) as runner:
+        runner.map(tasks[:2])
+        pid = runner.worker_pids()[0]
+        os.kill(pid, signal.SIGKILL)  # idle: the pool breaks, no episode of it is lost
+        eventually(lambda: not Path(f"/proc/{pid}").exists()
+                   or Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z",
+                   what=f"worker {pid} gone")
+        assert _judged(runner.map(tasks)) == serial
+        assert pid not in runner.worker_pids()
 
 
 @pytest.fixture(scope="module")
