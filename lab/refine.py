@@ -235,8 +235,12 @@ class _Practice:
         return [dataclasses.replace(t, tree=data) for t in (self.tasks if tasks is None
                                                             else tasks)]
 
-    def run(self, clf, idx=None) -> list:
-        tasks = self.with_tree(clf, None if idx is None else [self.tasks[i] for i in idx])
+    def run(self, clf, idx=None, tasks=None) -> list:
+        """``clf``'s results on the practice set (``idx``: those episodes; ``tasks``: these
+        episodes instead)."""
+        if tasks is None:
+            tasks = None if idx is None else [self.tasks[i] for i in idx]
+        tasks = self.with_tree(clf, tasks)
         self.episodes += len(tasks)
         return self.runner.map(tasks)
 
@@ -293,20 +297,20 @@ class _Practice:
 
 def _practice_tasks(b, seeds, scales, seconds=None, free: int = 0, noise=(0.0, 0.0),
                     drawn: tuple[str, int] | None = None, drawn_seed: int = PRACTICE_SEED,
-                    teach: bool = True) -> list[EpisodeTask]:
+                    teach: bool = True, first: int = 0) -> list[EpisodeTask]:
     """Every start pose of each teaching world (``teach``), as it is and scaled by each of
     ``scales``, and ``free`` poses in its free space (``server.world.free_pose``, drawn with
     seed 100 + the scale's place: not the poses the tree was taught from), each with every
     seed; ``drawn`` = (kind, count): also every start pose of ``count`` worlds
     ``lab.generated`` draws of that kind (with ``drawn_seed``: ``PRACTICE_SEED``, not a
-    training run's seed), as they are."""
+    training run's seed), as they are, from the ``first``-th."""
     from server.world import free_pose
 
     name = str(b.path) if b.path else b.name
     worlds = [(w, scale) for w in (b.teach if teach else ()) for scale in (1.0, *scales)]
     if drawn is not None and drawn[1] > 0:
         worlds += [(drawn_name(drawn[0], drawn_seed, i, b.band_side or "right"), 1.0)
-                   for i in range(drawn[1])]
+                   for i in range(first, first + drawn[1])]
     out = []
     for j, (w, scale) in enumerate(worlds):
         spec = practice.task_world(name, w, float(scale))
@@ -396,11 +400,17 @@ def ask(task: EpisodeTask, result: dict, window: int, b) -> dict:
             "seed": int(task.seed), "why": why, "step": step, "pose": [round(v, 3) for v in pose]}
 
 
+def _visited(pr: _Practice) -> tuple[np.ndarray, np.ndarray]:
+    """The states the practice episodes visited and the tree's own actions there."""
+    X = np.concatenate([r["states"] for r in pr.results]).astype(np.float64)
+    y = np.concatenate([np.asarray(r["actions"][:len(r["states"])]) for r in pr.results])
+    return X, y
+
+
 def _sized(pr: _Practice, clf, max_nodes: int):
     """The size step: ``clf`` pruned to ``max_nodes`` spheres (weakest link) against its own
     actions on the states it visited in practice, then practised: (tree, states used)."""
-    X = np.concatenate([r["states"] for r in pr.results]).astype(np.float64)
-    y = np.concatenate([np.asarray(r["actions"][:len(r["states"])]) for r in pr.results])
+    X, y = _visited(pr)
     clf = clf.compact(X, y, method="prune", max_nodes=max_nodes, class_weight="balanced",
                       data="refine: the states it visited in practice, its own actions")
     clf = _to_size(clf, X, max_nodes)
@@ -408,16 +418,39 @@ def _sized(pr: _Practice, clf, max_nodes: int):
     return clf, len(X)
 
 
+def schedule(nodes: int, target: int, steps: int) -> list[int]:
+    """The sizes of gradual pruning: ``steps`` sizes from ``nodes`` down to ``target``, each the
+    same fraction of the one before (geometric), the last ``target``."""
+    if steps < 1:
+        raise ValueError(f"steps must be >= 1, got {steps}")
+    sizes = [round(nodes * (target / nodes) ** (k / steps)) for k in range(1, steps)]
+    return sorted({n for n in sizes if target < n < nodes}, reverse=True) + [target]
+
+
 def _size_step(pr: _Practice, clf, max_nodes: int | None, room: int, moves: Counter, say,
-               t0: float):
+               t0: float, *, steps: int = 1, repair=None):
     """The size step for a tree larger than ``max_nodes``: pruned to ``max_nodes - room``
-    (``_sized``), said and counted: (tree, its standing; None when it was small enough)."""
+    (``_sized``), said and counted: (tree, its standing; None when it was small enough). With
+    ``steps`` > 1, gradual pruning (as a network is pruned and fine-tuned in turns): the
+    spheres that change no action on the visited states removed (exact compaction: the
+    practice episodes stay as they were), then pruned to each size of ``schedule`` from there
+    in turn, and ``repair(tree, max_nodes, phases)`` -> tree
+    between (``phases``: the repair phases left, this one and the caller's after the last)."""
     if max_nodes is None or clf.node_count_ <= max_nodes:
         return clf, None
-    clf, visited = _sized(pr, clf, max(1, max_nodes - room))
-    moves["pruned to size"] += 1
-    say(f"size: pruned to {clf.node_count_} nodes against its own actions on {visited} visited "
-        f"states: fitness {pr.fitness:.2f}, {time.perf_counter() - t0:.0f} s")
+    if steps > 1:  # the spheres that change no action where it drove go first, at no cost
+        clf = clf.compact(_visited(pr)[0], method="exact",
+                          data="refine: the states it visited in practice")
+        say(f"size: {clf.node_count_} nodes change an action on the visited states")
+    sizes = schedule(clf.node_count_, max(1, max_nodes - room), steps)
+    for k, size in enumerate(sizes):
+        clf, visited = _sized(pr, clf, size)
+        moves["pruned to size"] += 1
+        say(f"size{f' {k + 1}/{len(sizes)}' if len(sizes) > 1 else ''}: pruned to "
+            f"{clf.node_count_} nodes against its own actions on {visited} visited states: "
+            f"fitness {pr.fitness:.2f}, {time.perf_counter() - t0:.0f} s")
+        if repair is not None and k < len(sizes) - 1:
+            clf = repair(clf, size + room, len(sizes) - k)
     return clf, _standing(pr, clf)
 
 
@@ -504,6 +537,20 @@ def _pruned(pr: _Practice, clf, prune: str, left, val=None):
     return clf, removed
 
 
+def _more_worlds(pr: _Practice, clf, b, kind: str, first: int, n: int, seeds, seconds, free,
+                 noise) -> int:
+    """``n`` more drawn worlds of ``kind`` (the ``first``-th on, ``PRACTICE_SEED``) joined to
+    the practice set with ``clf``'s results (those the expert fails from left out): how many
+    episodes joined."""
+    tasks = _practice_tasks(b, seeds, (), seconds, free, noise, drawn=(kind, n), teach=False,
+                            first=first)
+    results = pr.run(clf, tasks=tasks)
+    fair = [i for i, r in enumerate(results) if r["teacher"]["success"]]
+    pr.tasks += [tasks[i] for i in fair]
+    pr.results += [results[i] for i in fair]
+    return len(fair)
+
+
 def _first_practice(pr: _Practice, clf) -> int:
     """The taught tree practised once; a start the behaviour's own expert fails from teaches
     nothing, so it is left out (unless every one would be): how many were."""
@@ -567,13 +614,18 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
            budget: float = 600.0, seeds=(0,), scales=SCALES, window: int = 30,
            candidates: int = 6, prune: str = "used", say=None, validate: bool = True,
            seconds: float | None = None, free: int = 0, noise=(0.0, 0.0),
-           drawn: tuple[str, int] | None = None, room: int = ROOM, validation: int = 0):
+           drawn: tuple[str, int] | None = None, room: int = ROOM, validation: int = 0,
+           size_steps: int = 1, more: int = 0):
     """``policy``'s tree refined by practice (the module's docstring): ``(classifier,
     report)``. ``seconds``: each episode's length (default: the behaviour's time limit);
     ``drawn`` = (kind, count): practise also in that many worlds drawn at random; ``room``:
     the size step prunes to ``max_nodes - room`` spheres (at least 1), leaving room for repairs
     that add spheres; ``validation``: that many more worlds of the drawn kind (another seed)
-    whose fitness no repair or removal may lower (never practised in)."""
+    whose fitness no repair or removal may lower (never practised in); ``size_steps``: the
+    size step in that many prunings with repairs between (gradual pruning; the validation
+    set guards the repairs after the last); ``more``: while time is left and every practice
+    episode succeeds, that many more worlds of the drawn kind join the practice set (and
+    repairs go on)."""
     t0 = time.perf_counter()
     say = say or (lambda text: print(text, flush=True))
     clf = policy.classifier
@@ -596,7 +648,14 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
         return budget - (time.perf_counter() - t0)
 
     # 1. size: weakest-link pruning against the tree's own actions where it drove
-    clf, sized = _size_step(pr, clf, max_nodes, room, moves, say, t0)
+    def between(tree, nodes: int, phases: int):
+        end = time.perf_counter() + left() / phases  # a share of the time left
+        return _repairs(pr, tree, b, lambda: min(left(), end - time.perf_counter()), None,
+                        moves, say, t0, window=window, candidates=candidates,
+                        max_nodes=nodes)[0]
+
+    clf, sized = _size_step(pr, clf, max_nodes, room, moves, say, t0, steps=size_steps,
+                            repair=between)
     val = None
     if validation:
         val = _validation_set(b, policy, runner, clf, validation,
@@ -607,30 +666,44 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
             f"{VALIDATION_SEED}, never practised in): fitness {val_before['fitness']:.2f}, "
             f"success {val_before['success']:.0%}; a move that lowers it is not kept")
 
-    # 2./3. repair, then prune; again while either changes something
+    # 2./3. repair, then prune; again while either changes something (and, with ``more``,
+    # while more drawn worlds find a failure to repair)
+    kind = drawn[0] if drawn else recipe_of(b).generator
+    drawn_n = drawn[1] if drawn else 0
     changed = True
-    while changed and left() > 0:
-        clf, changed = _repairs(pr, clf, b, left, val, moves, say, t0, window=window,
-                                candidates=candidates, max_nodes=max_nodes)
-        if prune == "none":
-            break
-        clf, removed = _pruned(pr, clf, prune, left, val)
-        if removed:
-            moves["pruned"] += removed
-            changed = True
-            say(f"prune: {removed} leaves removed: {clf.node_count_} nodes, fitness "
-                f"{pr.fitness:.2f}, {pr.episodes} episodes, {time.perf_counter() - t0:.0f} s")
+    while left() > 0:
+        if not changed:
+            if not more or not all(r["success"] for r in pr.results):
+                break
+            joined = _more_worlds(pr, clf, b, kind, drawn_n, more, seeds, seconds, free, noise)
+            drawn_n += more
+            moves["worlds drawn"] += more
+            say(f"practice met: {more} more {kind} drawn ({joined} episodes), success "
+                f"{np.mean([r['success'] for r in pr.results]):.0%}, "
+                f"{time.perf_counter() - t0:.0f} s")
+        # repairs go on until none helps: again only once pruning changed the tree
+        clf = _repairs(pr, clf, b, left, val, moves, say, t0, window=window,
+                       candidates=candidates, max_nodes=max_nodes)[0]
+        changed = False
+        if prune != "none":
+            clf, removed = _pruned(pr, clf, prune, left, val)
+            if removed:
+                moves["pruned"] += removed
+                changed = True
+                say(f"prune: {removed} leaves removed: {clf.node_count_} nodes, fitness "
+                    f"{pr.fitness:.2f}, {pr.episodes} episodes, "
+                    f"{time.perf_counter() - t0:.0f} s")
     after = _standing(pr, clf)
     asks = [ask(t, r, window, b) for t, r in zip(pr.tasks, pr.results, strict=True)
             if not r["success"]]
     report = {"before": before, "after": after, "episodes": pr.episodes,
               "practice": {"worlds": list(b.teach), "scales": [1.0, *scales],
-                           "drawn": list(drawn) if drawn and drawn[1] else None,
+                           "drawn": [kind, drawn_n] if drawn_n else None, "more": more,
                            "seeds": list(seeds), "free": free, "noise": list(noise), "episodes": len(pr.tasks),
                            "left_out": dropped},
               "moves": dict(moves), "seconds": round(time.perf_counter() - t0, 1),
               "asks": asks, "max_nodes": max_nodes, "room": room if max_nodes else None,
-              "sized": sized,
+              "sized": sized, "size_steps": size_steps,
               "prune": prune, "height": int(clf.height_)}
     if val is not None:
         report["validation"] = {"worlds": validation, "seed": VALIDATION_SEED,
@@ -659,6 +732,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--room", type=arguments.non_negative_int, default=ROOM, metavar="N",
                         help=f"with --max-nodes: prune to N spheres fewer first, so that repairs "
                              f"may add spheres where the pruned tree fails (default {ROOM})")
+    parser.add_argument("--size-steps", type=arguments.positive_int, default=1, metavar="N",
+                        help="with --max-nodes: prune in N steps, each to the same fraction of "
+                             "the size before, with repairs between (gradual pruning; default "
+                             "1: at once)")
     parser.add_argument("--minutes", type=arguments.positive_float, default=10.0,
                         help="stop improving after this many minutes (default 10)")
     parser.add_argument("--seeds", type=arguments.positive_int, default=1,
@@ -680,6 +757,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--generator", choices=list(GENERATORS), default=None,
                         help="the kind of world --generated draws (default: the behaviour's "
                              "recipe's generator)")
+    parser.add_argument("--more", type=arguments.non_negative_int, default=0, metavar="N",
+                        help="while time is left and every practice episode succeeds, draw N "
+                             "more worlds by --generator into the practice set and go on "
+                             "(default 0: stop there)")
     parser.add_argument("--validation", type=arguments.non_negative_int, default=0,
                         metavar="N",
                         help="N more worlds drawn by --generator (seed "
@@ -722,7 +803,8 @@ def main(args) -> int:
                              scales=tuple(f for f in args.scales if f != 1.0), free=args.free,
                              prune=args.prune, noise=(args.range_noise, args.odom_noise),
                              drawn=(args.generator or recipe_of(b).generator, args.generated),
-                             room=args.room, validation=args.validation)
+                             room=args.room, validation=args.validation,
+                             size_steps=args.size_steps, more=args.more)
     record = {"parent": str(args.tree), "parent_sha256": hashlib.sha256(raw).hexdigest(),
               "behaviour": b.name, **report}  # with the asks: the console shows them
     meta = dict(clf.metadata)
