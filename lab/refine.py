@@ -35,6 +35,11 @@ radii, labels and parents; nothing else):
    the practice set. A leaf no episode reached stays: removing it changes nothing the practice
    set can see, and those were what the held-out rooms lost (docs/studies/refine-by-practice.md).
 
+With ``more`` (``--more N``), once every practice episode succeeds and time is left, N more
+worlds of the drawn kind (the next ones of ``PRACTICE_SEED``) join the practice set, and the
+repairs go on there: a practice set the tree has met teaches it nothing more, so the time
+left goes to worlds it may still fail in.
+
 With ``validation`` (``--validation N``) N more worlds of the drawn kind, drawn with another
 seed and never practised in, guard steps 2 and 3: a repair or a removal that lowers their
 fitness is not kept (reduced-error pruning's validation set).
@@ -418,39 +423,16 @@ def _sized(pr: _Practice, clf, max_nodes: int):
     return clf, len(X)
 
 
-def schedule(nodes: int, target: int, steps: int) -> list[int]:
-    """The sizes of gradual pruning: ``steps`` sizes from ``nodes`` down to ``target``, each the
-    same fraction of the one before (geometric), the last ``target``."""
-    if steps < 1:
-        raise ValueError(f"steps must be >= 1, got {steps}")
-    sizes = [round(nodes * (target / nodes) ** (k / steps)) for k in range(1, steps)]
-    return sorted({n for n in sizes if target < n < nodes}, reverse=True) + [target]
-
-
 def _size_step(pr: _Practice, clf, max_nodes: int | None, room: int, moves: Counter, say,
-               t0: float, *, steps: int = 1, repair=None):
+               t0: float):
     """The size step for a tree larger than ``max_nodes``: pruned to ``max_nodes - room``
-    (``_sized``), said and counted: (tree, its standing; None when it was small enough). With
-    ``steps`` > 1, gradual pruning (as a network is pruned and fine-tuned in turns): the
-    spheres that change no action on the visited states removed (exact compaction: the
-    practice episodes stay as they were), then pruned to each size of ``schedule`` from there
-    in turn, and ``repair(tree, max_nodes, phases)`` -> tree
-    between (``phases``: the repair phases left, this one and the caller's after the last)."""
+    (``_sized``), said and counted: (tree, its standing; None when it was small enough)."""
     if max_nodes is None or clf.node_count_ <= max_nodes:
         return clf, None
-    if steps > 1:  # the spheres that change no action where it drove go first, at no cost
-        clf = clf.compact(_visited(pr)[0], method="exact",
-                          data="refine: the states it visited in practice")
-        say(f"size: {clf.node_count_} nodes change an action on the visited states")
-    sizes = schedule(clf.node_count_, max(1, max_nodes - room), steps)
-    for k, size in enumerate(sizes):
-        clf, visited = _sized(pr, clf, size)
-        moves["pruned to size"] += 1
-        say(f"size{f' {k + 1}/{len(sizes)}' if len(sizes) > 1 else ''}: pruned to "
-            f"{clf.node_count_} nodes against its own actions on {visited} visited states: "
-            f"fitness {pr.fitness:.2f}, {time.perf_counter() - t0:.0f} s")
-        if repair is not None and k < len(sizes) - 1:
-            clf = repair(clf, size + room, len(sizes) - k)
+    clf, visited = _sized(pr, clf, max(1, max_nodes - room))
+    moves["pruned to size"] += 1
+    say(f"size: pruned to {clf.node_count_} nodes against its own actions on {visited} visited "
+        f"states: fitness {pr.fitness:.2f}, {time.perf_counter() - t0:.0f} s")
     return clf, _standing(pr, clf)
 
 
@@ -590,8 +572,7 @@ def _validation_set(b, policy, runner: Runner, clf, n: int, kind: str, seeds, se
 def _repairs(pr: _Practice, clf, b, left, val, moves: Counter, say, t0: float, *,
              window: int, candidates: int, max_nodes: int | None):
     """The repair step, again while a repair raises the practice fitness (and leaves
-    ``val``'s no lower) and the time lasts: (tree, whether one was kept)."""
-    changed = False
+    ``val``'s no lower) and the time lasts: the tree."""
     actions = list(pr.policy.actions.names)
     while left() > 0 and not all(r["success"] for r in pr.results):
         blamed, where = _blame(pr, window, b)
@@ -602,12 +583,11 @@ def _repairs(pr: _Practice, clf, b, left, val, moves: Counter, say, t0: float, *
         m, clf, idx, out = best
         pr.keep(idx, out)
         moves[m[0]] += 1
-        changed = True
         say(f"repair: {m[0]} {m[1:]}: fitness {pr.fitness:.2f}, success "
             f"{np.mean([r['success'] for r in pr.results]):.0%}"
             f"{f' (validation {val.fitness:.2f})' if val else ''}, {clf.node_count_} nodes, "
             f"{pr.episodes} episodes, {time.perf_counter() - t0:.0f} s")
-    return clf, changed
+    return clf
 
 
 def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = None,
@@ -615,17 +595,15 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
            candidates: int = 6, prune: str = "used", say=None, validate: bool = True,
            seconds: float | None = None, free: int = 0, noise=(0.0, 0.0),
            drawn: tuple[str, int] | None = None, room: int = ROOM, validation: int = 0,
-           size_steps: int = 1, more: int = 0):
+           more: int = 0):
     """``policy``'s tree refined by practice (the module's docstring): ``(classifier,
     report)``. ``seconds``: each episode's length (default: the behaviour's time limit);
     ``drawn`` = (kind, count): practise also in that many worlds drawn at random; ``room``:
     the size step prunes to ``max_nodes - room`` spheres (at least 1), leaving room for repairs
     that add spheres; ``validation``: that many more worlds of the drawn kind (another seed)
-    whose fitness no repair or removal may lower (never practised in); ``size_steps``: the
-    size step in that many prunings with repairs between (gradual pruning; the validation
-    set guards the repairs after the last); ``more``: while time is left and every practice
-    episode succeeds, that many more worlds of the drawn kind join the practice set (and
-    repairs go on)."""
+    whose fitness no repair or removal may lower (never practised in); ``more``: while time
+    is left and every practice episode succeeds, that many more worlds of the drawn kind join
+    the practice set (and repairs go on)."""
     t0 = time.perf_counter()
     say = say or (lambda text: print(text, flush=True))
     clf = policy.classifier
@@ -648,14 +626,7 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
         return budget - (time.perf_counter() - t0)
 
     # 1. size: weakest-link pruning against the tree's own actions where it drove
-    def between(tree, nodes: int, phases: int):
-        end = time.perf_counter() + left() / phases  # a share of the time left
-        return _repairs(pr, tree, b, lambda: min(left(), end - time.perf_counter()), None,
-                        moves, say, t0, window=window, candidates=candidates,
-                        max_nodes=nodes)[0]
-
-    clf, sized = _size_step(pr, clf, max_nodes, room, moves, say, t0, steps=size_steps,
-                            repair=between)
+    clf, sized = _size_step(pr, clf, max_nodes, room, moves, say, t0)
     val = None
     if validation:
         val = _validation_set(b, policy, runner, clf, validation,
@@ -683,7 +654,7 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
                 f"{time.perf_counter() - t0:.0f} s")
         # repairs go on until none helps: again only once pruning changed the tree
         clf = _repairs(pr, clf, b, left, val, moves, say, t0, window=window,
-                       candidates=candidates, max_nodes=max_nodes)[0]
+                       candidates=candidates, max_nodes=max_nodes)
         changed = False
         if prune != "none":
             clf, removed = _pruned(pr, clf, prune, left, val)
@@ -703,7 +674,7 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
                            "left_out": dropped},
               "moves": dict(moves), "seconds": round(time.perf_counter() - t0, 1),
               "asks": asks, "max_nodes": max_nodes, "room": room if max_nodes else None,
-              "sized": sized, "size_steps": size_steps,
+              "sized": sized,
               "prune": prune, "height": int(clf.height_)}
     if val is not None:
         report["validation"] = {"worlds": validation, "seed": VALIDATION_SEED,
@@ -732,10 +703,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--room", type=arguments.non_negative_int, default=ROOM, metavar="N",
                         help=f"with --max-nodes: prune to N spheres fewer first, so that repairs "
                              f"may add spheres where the pruned tree fails (default {ROOM})")
-    parser.add_argument("--size-steps", type=arguments.positive_int, default=1, metavar="N",
-                        help="with --max-nodes: prune in N steps, each to the same fraction of "
-                             "the size before, with repairs between (gradual pruning; default "
-                             "1: at once)")
     parser.add_argument("--minutes", type=arguments.positive_float, default=10.0,
                         help="stop improving after this many minutes (default 10)")
     parser.add_argument("--seeds", type=arguments.positive_int, default=1,
@@ -804,7 +771,7 @@ def main(args) -> int:
                              prune=args.prune, noise=(args.range_noise, args.odom_noise),
                              drawn=(args.generator or recipe_of(b).generator, args.generated),
                              room=args.room, validation=args.validation,
-                             size_steps=args.size_steps, more=args.more)
+                             more=args.more)
     record = {"parent": str(args.tree), "parent_sha256": hashlib.sha256(raw).hexdigest(),
               "behaviour": b.name, **report}  # with the asks: the console shows them
     meta = dict(clf.metadata)

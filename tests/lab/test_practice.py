@@ -207,37 +207,6 @@ def test_the_size_step_leaves_room_for_repairs_that_add_spheres():
     assert report["after"]["nodes"] == clf.node_count_
 
 
-def test_gradual_pruning_prunes_to_each_size_of_its_schedule_with_repairs_between():
-    from collections import Counter
-
-    from lab.behaviours import get
-    from lab.refine import _Practice, _practice_tasks, _size_step, _visited, schedule
-
-    assert schedule(6909, 45, 3) == [1290, 241, 45]  # each size the same fraction of the last
-    assert schedule(100, 98, 5) == [99, 98]  # never a size twice
-    assert schedule(500, 45, 1) == [45]
-    policy = TreePolicy.load(WALL_TREE)
-    b = get("wall-following")
-    calls = []
-
-    def repair(tree, nodes, phases):
-        calls.append((tree.node_count_, nodes, phases))
-        return tree
-
-    with Runner(workers=1) as runner:
-        pr = _Practice(b, policy, runner, _practice_tasks(b, (0,), (), 20.0))
-        pr.results = pr.run(policy.classifier)
-        used = policy.classifier.compact(_visited(pr)[0], method="exact").node_count_
-        clf, standing = _size_step(pr, policy.classifier, 40, 6, Counter(), lambda text: None,
-                                   0.0, steps=3, repair=repair)
-    sizes = schedule(used, 34, 3)  # from the spheres that change an action where it drove
-    assert len(sizes) == 3
-    # pruned to each size but the last, then repaired (room above it), the phases counted down
-    assert calls == [(n, n + 6, 3 - k) for k, n in enumerate(sizes[:-1])]
-    assert clf.node_count_ == standing["nodes"] == 34
-    assert _judged(pr.results) == _judged(pr.run(clf))  # the practice results: the final tree's
-
-
 def test_more_drawn_worlds_join_the_practice_set_once_it_is_met():
     from lab.behaviours import get
     from lab.practice import drawn_name
