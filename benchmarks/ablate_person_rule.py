@@ -99,9 +99,9 @@ def session(bname: str, model: str, method: str, seed: int, guard: bool = True,
 def _refined_tag(practice: dict | None) -> str:
     """What a refined variant's name says of its practice keywords beyond the minutes."""
     practice = practice or {}
-    drawn, val = practice.get("drawn"), practice.get("validation")
+    drawn, val, more = practice.get("drawn"), practice.get("validation"), practice.get("more")
     return (f" +{drawn[1]} drawn" if drawn and drawn[1] else "") + (
-        f" +{val} validation" if val else "")
+        f" +{more} more" if more else "") + (f" +{val} validation" if val else "")
 
 
 def variant(method: str, guard: bool = True, demo: float = 240.0, correct: float = 120.0) -> str:
@@ -149,8 +149,10 @@ def tables(rows: list[dict]) -> str:
 def _practice_of(args, bname: str) -> dict:
     """``lab.refine.refine``'s practice keywords for behaviour ``bname`` from the flags."""
     practice = {}
-    if args.refine_generated or args.refine_validation:
+    if args.refine_generated or args.refine_validation or args.refine_more:
         practice["drawn"] = (recipe_of(get(bname)).generator, args.refine_generated)
+    if args.refine_more:
+        practice["more"] = args.refine_more
     if args.refine_validation:
         practice["validation"] = args.refine_validation
     return practice
@@ -217,6 +219,9 @@ def main(argv=None) -> int:
                     help="with --refine: practise also in N worlds drawn by the behaviour's "
                          "generator (rhbl refine --generated N); the variant is named "
                          "'... refined M min +N drawn'")
+    ap.add_argument("--refine-more", type=int, default=0, metavar="N",
+                    help="with --refine: N more drawn worlds each time the practice set is met "
+                         "(rhbl refine --more N); the variant is named '... +N more'")
     ap.add_argument("--json", default=None, help="write every session here (and resume from it)")
     ap.add_argument("--table", default=None, metavar="JSON",
                     help="run nothing: print the tables of a --json file")

@@ -75,3 +75,14 @@ def test_wrong_arguments_are_named_and_exit_2(ablate, capsys, argv, says):
     with pytest.raises(SystemExit) as exc:
         ablate.main(argv)
     assert exc.value.code == 2 and says in capsys.readouterr().err
+
+
+def test_the_practice_flags_reach_refine_and_name_the_variant(ablate):
+    import argparse
+
+    args = argparse.Namespace(refine_generated=4, refine_validation=0, refine_more=6)
+    practice = ablate._practice_of(args, "wall-following")
+    assert practice == {"drawn": ("rooms", 4), "more": 6}
+    assert ablate._refined_tag(practice) == " +4 drawn +6 more"
+    args = argparse.Namespace(refine_generated=0, refine_validation=0, refine_more=0)
+    assert ablate._practice_of(args, "wall-following") == {}
