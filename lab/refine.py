@@ -35,10 +35,11 @@ radii, labels and parents; nothing else):
    the practice set. A leaf no episode reached stays: removing it changes nothing the practice
    set can see, and those were what the held-out rooms lost (docs/studies/refine-by-practice.md).
 
-With ``more`` (``--more N``), once every practice episode succeeds and time is left, N more
-worlds of the drawn kind (the next ones of ``PRACTICE_SEED``) join the practice set, and the
-repairs go on there: a practice set the tree has met teaches it nothing more, so the time
-left goes to worlds it may still fail in.
+With ``more`` (``--more N``), once no repair raises the fitness (every practice episode
+succeeds, or none of the failures can be repaired) and time is left, N more worlds of the
+drawn kind (the next ones of ``PRACTICE_SEED``) join the practice set, and the repairs go on
+there, until the time is up: a practice set the tree has met, or cannot do better in, teaches
+it nothing more, so the time left goes to worlds that may.
 
 With ``validation`` (``--validation N``) N more worlds of the drawn kind, drawn with another
 seed and never practised in, guard steps 2 and 3: a repair or a removal that lowers their
@@ -602,8 +603,8 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
     the size step prunes to ``max_nodes - room`` spheres (at least 1), leaving room for repairs
     that add spheres; ``validation``: that many more worlds of the drawn kind (another seed)
     whose fitness no repair or removal may lower (never practised in); ``more``: while time
-    is left and every practice episode succeeds, that many more worlds of the drawn kind join
-    the practice set (and repairs go on)."""
+    is left and no repair helps, that many more worlds of the drawn kind join the practice set
+    (and repairs go on)."""
     t0 = time.perf_counter()
     say = say or (lambda text: print(text, flush=True))
     clf = policy.classifier
@@ -638,18 +639,18 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
             f"success {val_before['success']:.0%}; a move that lowers it is not kept")
 
     # 2./3. repair, then prune; again while either changes something (and, with ``more``,
-    # while more drawn worlds find a failure to repair)
+    # with more drawn worlds while the time lasts)
     kind = drawn[0] if drawn else recipe_of(b).generator
     drawn_n = drawn[1] if drawn else 0
     changed = True
     while left() > 0:
         if not changed:
-            if not more or not all(r["success"] for r in pr.results):
+            if not more:
                 break
             joined = _more_worlds(pr, clf, b, kind, drawn_n, more, seeds, seconds, free, noise)
             drawn_n += more
             moves["worlds drawn"] += more
-            say(f"practice met: {more} more {kind} drawn ({joined} episodes), success "
+            say(f"no repair left to make: {more} more {kind} drawn ({joined} episodes), success "
                 f"{np.mean([r['success'] for r in pr.results]):.0%}, "
                 f"{time.perf_counter() - t0:.0f} s")
         # repairs go on until none helps: again only once pruning changed the tree
@@ -725,9 +726,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the kind of world --generated draws (default: the behaviour's "
                              "recipe's generator)")
     parser.add_argument("--more", type=arguments.non_negative_int, default=0, metavar="N",
-                        help="while time is left and every practice episode succeeds, draw N "
-                             "more worlds by --generator into the practice set and go on "
-                             "(default 0: stop there)")
+                        help="while time is left and no repair helps (the practice set met, "
+                             "or its failures beyond repair), draw N more worlds by --generator "
+                             "into the practice set and go on (default 0: stop there)")
     parser.add_argument("--validation", type=arguments.non_negative_int, default=0,
                         metavar="N",
                         help="N more worlds drawn by --generator (seed "
