@@ -339,8 +339,9 @@ def margin_run(args) -> None:
     by the compiled kernel (``predict_one``) or by scipy's k-d tree of the centres (the batch
     path, and one query's before the kernel); scikit-learn's 1-NN on the same centres beside.
     Queries near the centres (mostly enclosed) and uniform in the cube (mostly not)."""
-    from rhbl import load
     from sklearn.neighbors import KNeighborsClassifier
+
+    from rhbl import load
 
     if args.margin_tree:
         clf = load(args.margin_tree)
@@ -372,8 +373,9 @@ def margin_run(args) -> None:
         want = [by_kd(q) for q in Q]
         got = [clf.classes_.tolist().index(clf.predict_one(q)) for q in Q]
         if got != want:  # both take the first of equally near centres
-            raise SystemExit(f"{name}: the kernel and the k-d tree answered "
-                             f"{sum(a != b for a, b in zip(got, want))} queries otherwise")
+            wrong = sum(a != b for a, b in zip(got, want, strict=True))
+            raise SystemExit(f"{name}: the kernel and the k-d tree answered {wrong} queries "
+                             "otherwise")
         times = [per_call_us(f, Q, args.repeat) for f in
                  (clf.predict_one, by_kd, lambda q: knn.predict(q[None, :]))]
         print(f"{name:<22} {root:>13.0%} {times[0]:>8.1f} {times[1]:>10.1f} {times[2]:>9.1f}")

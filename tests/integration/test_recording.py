@@ -105,7 +105,7 @@ def same_run(part: list[bytes], whole: list[bytes], lost: float = 0.02) -> bool:
         return True
     where = {x: i for i, x in enumerate(whole)}
     at = [where[x] for x in part if x in where]
-    if not at or any(b <= a for a, b in zip(at, at[1:])):
+    if not at or any(b <= a for a, b in zip(at, at[1:], strict=False)):
         return False  # nothing in common, or out of order
     allowed = max(1, int(lost * len(part)))
     only_part = len(part) - len(at)
