@@ -46,9 +46,9 @@ from lab.harness import DT, OnStep, drive, recorded
 from process import arguments
 from server.world import WorldSpec
 
-__all__ = ["EpisodeTask", "Runner", "add_arguments", "cluster_address", "cores", "judged_episode",
-           "teacher_episode",
-           "run_episode", "run_episodes", "runner_from_args", "tree_bytes"]
+__all__ = ["PRACTICE_SEED", "EpisodeTask", "Runner", "add_arguments", "cluster_address", "cores",
+           "judged_episode", "practice_tasks", "teacher_episode", "run_episode", "run_episodes",
+           "runner_from_args", "tree_bytes"]
 
 log = logging.getLogger(__name__)
 
@@ -130,6 +130,7 @@ def _behaviour(name: str):
 
 
 DRAWN = "drawn"  # a task's world drawn at random: ``drawn:<kind>:<seed>:<i>:<side>``
+PRACTICE_SEED = 500  # the drawn practice worlds' (training runs draw with their own seeds)
 
 
 def drawn_name(kind: str, seed: int, i: int, side: str = "right") -> str:
@@ -152,6 +153,38 @@ def task_world(behaviour: str, world: str, scale: float = 1.0):
     else:
         spec = world_of(_behaviour(behaviour), world)
     return spec if scale == 1.0 else spec.scaled(scale)
+
+
+def practice_tasks(b, seeds, scales, seconds=None, free: int = 0, noise=(0.0, 0.0),
+                   drawn: tuple[str, int] | None = None, drawn_seed: int = PRACTICE_SEED,
+                   teach: bool = True, first: int = 0) -> list[EpisodeTask]:
+    """``rhbl refine``'s practice set, the tree left out (``b``: a ``Behaviour``): every start
+    pose of each teaching world (``teach``), as it is and scaled by each of ``scales``, and
+    ``free`` poses in its free space (``server.world.free_pose``, drawn with
+    seed 100 + the scale's place: not the poses the tree was taught from), each with every
+    seed; ``drawn`` = (kind, count): also every start pose of ``count`` worlds
+    ``lab.generated`` draws of that kind (with ``drawn_seed``: ``PRACTICE_SEED``, not a
+    training run's seed), as they are, from the ``first``-th."""
+    from server.world import free_pose
+
+    name = str(b.path) if b.path else b.name
+    worlds = [(w, scale) for w in (b.teach if teach else ()) for scale in (1.0, *scales)]
+    if drawn is not None and drawn[1] > 0:
+        worlds += [(drawn_name(drawn[0], drawn_seed, i, b.band_side or "right"), 1.0)
+                   for i in range(first, first + drawn[1])]
+    out = []
+    for j, (w, scale) in enumerate(worlds):
+        spec = task_world(name, w, float(scale))
+        rng = np.random.default_rng(100 + (j % (1 + len(scales))))  # 100 + the scale's place
+        poses = list(spec.start_poses)
+        poses += [tuple(p) for p in (free_pose(spec, rng) for _ in range(free)) if p]
+        for k, start in enumerate(poses):
+            for seed in seeds:
+                out.append(EpisodeTask(name, w, b"", tuple(float(v) for v in start),
+                                       seed=seed * 1000 + k, seconds=seconds,
+                                       range_noise=noise[0], odom_noise=noise[1],
+                                       trace=True, scale=float(scale)))
+    return out
 
 
 class _Tracing:

@@ -70,14 +70,13 @@ from client.behaviour.goals import GoalPolicy, load_policy
 from client.behaviour.learning import TreePolicy
 from lab import practice
 from lab.behaviours import behaviour_arg, get, recipe_of, world_of
-from lab.practice import EpisodeTask, Runner, drawn_name
+from lab.practice import PRACTICE_SEED, EpisodeTask, Runner, practice_tasks
 from lab.recipe import GENERATORS, parse_scales
 from process import arguments, files
 
 __all__ = ["add_arguments", "ask", "fitness", "main", "refine"]
 
 SCALES = (0.85, 1.2)
-PRACTICE_SEED = 500  # the drawn practice worlds' (training runs draw with their own seeds)
 VALIDATION_SEED = 501  # the drawn validation worlds' (never practised in)
 PRUNE = ("all", "used", "none")
 ROOM = 10  # spheres the size step leaves under --max-nodes for repairs that add (docs/practice.md)
@@ -301,37 +300,6 @@ class _Practice:
             self.results[i] = r
 
 
-def _practice_tasks(b, seeds, scales, seconds=None, free: int = 0, noise=(0.0, 0.0),
-                    drawn: tuple[str, int] | None = None, drawn_seed: int = PRACTICE_SEED,
-                    teach: bool = True, first: int = 0) -> list[EpisodeTask]:
-    """Every start pose of each teaching world (``teach``), as it is and scaled by each of
-    ``scales``, and ``free`` poses in its free space (``server.world.free_pose``, drawn with
-    seed 100 + the scale's place: not the poses the tree was taught from), each with every
-    seed; ``drawn`` = (kind, count): also every start pose of ``count`` worlds
-    ``lab.generated`` draws of that kind (with ``drawn_seed``: ``PRACTICE_SEED``, not a
-    training run's seed), as they are, from the ``first``-th."""
-    from server.world import free_pose
-
-    name = str(b.path) if b.path else b.name
-    worlds = [(w, scale) for w in (b.teach if teach else ()) for scale in (1.0, *scales)]
-    if drawn is not None and drawn[1] > 0:
-        worlds += [(drawn_name(drawn[0], drawn_seed, i, b.band_side or "right"), 1.0)
-                   for i in range(first, first + drawn[1])]
-    out = []
-    for j, (w, scale) in enumerate(worlds):
-        spec = practice.task_world(name, w, float(scale))
-        rng = np.random.default_rng(100 + (j % (1 + len(scales))))  # 100 + the scale's place
-        poses = list(spec.start_poses)
-        poses += [tuple(p) for p in (free_pose(spec, rng) for _ in range(free)) if p]
-        for k, start in enumerate(poses):
-            for seed in seeds:
-                out.append(EpisodeTask(name, w, b"", tuple(float(v) for v in start),
-                                       seed=seed * 1000 + k, seconds=seconds,
-                                       range_noise=noise[0], odom_noise=noise[1],
-                                       trace=True, scale=float(scale)))
-    return out
-
-
 def _with(policy, clf):
     """``policy`` (a ``TreePolicy``, or a ``GoalPolicy``: its completion tree and goals kept)
     with the (action) tree ``clf``."""
@@ -505,11 +473,11 @@ def _validated(val: _Practice, better: list, clf, step: int, left):
     return None
 
 
-def _pruned(pr: _Practice, clf, prune: str, left, val=None):
+def _pruned(pr: _Practice, clf, prune: str, left, val, moves: Counter, say, t0: float):
     """The prune step: every leaf tried at once (least used first), each kept out if the
     fitness (and ``val``'s) does not fall; removals whose episodes do not meet are
-    independent, and kept together; again until nothing goes or the time is up: (tree, leaves
-    removed)."""
+    independent, and kept together; again until nothing goes or the time is up; said and
+    counted: (tree, leaves removed)."""
     removed = 0
     while left() > 0:
         gone = _prune_pass(pr, clf, unused=prune == "all", left=left, val=val)
@@ -517,6 +485,10 @@ def _pruned(pr: _Practice, clf, prune: str, left, val=None):
             break
         clf = without(clf, gone)
         removed += len(gone)
+    if removed:
+        moves["pruned"] += removed
+        say(f"prune: {removed} leaves removed: {clf.node_count_} nodes, fitness "
+            f"{pr.fitness:.2f}, {pr.episodes} episodes, {time.perf_counter() - t0:.0f} s")
     return clf, removed
 
 
@@ -525,7 +497,7 @@ def _more_worlds(pr: _Practice, clf, b, kind: str, first: int, n: int, seeds, se
     """``n`` more drawn worlds of ``kind`` (the ``first``-th on, ``PRACTICE_SEED``) joined to
     the practice set with ``clf``'s results (those the expert fails from left out): how many
     episodes joined."""
-    tasks = _practice_tasks(b, seeds, (), seconds, free, noise, drawn=(kind, n), teach=False,
+    tasks = practice_tasks(b, seeds, (), seconds, free, noise, drawn=(kind, n), teach=False,
                             first=first)
     results = pr.run(clf, tasks=tasks)
     fair = [i for i, r in enumerate(results) if r["teacher"]["success"]]
@@ -545,10 +517,22 @@ def _first_practice(pr: _Practice, clf) -> int:
     return dropped
 
 
+def _practice_set(b, scales, drawn, free: int, seeds) -> str:
+    """What the practice set is made of, in words."""
+    return (f"{', '.join(b.teach)}, scales 1{''.join(f', {s:g}' for s in scales)}"
+            f"{f'; {drawn[1]} {drawn[0]} drawn' if drawn and drawn[1] else ''}; "
+            f"{free} free-space starts each; {len(seeds)} seed(s)")
+
+
+def _success(pr: _Practice) -> float:
+    """The share of the set's episodes met."""
+    return float(np.mean([r["success"] for r in pr.results]))
+
+
 def _standing(pr: _Practice, clf) -> dict:
     """The practice fitness, the tree's size and the share of practice episodes met."""
     return {"fitness": round(pr.fitness, 4), "nodes": int(clf.node_count_),
-            "success": round(np.mean([r["success"] for r in pr.results]), 4)}
+            "success": round(_success(pr), 4)}
 
 
 def _check_sizable(clf, max_nodes: int | None) -> None:
@@ -560,13 +544,16 @@ def _check_sizable(clf, max_nodes: int | None) -> None:
 
 
 def _validation_set(b, policy, runner: Runner, clf, n: int, kind: str, seeds, seconds,
-                    noise) -> _Practice:
+                    noise, say) -> _Practice:
     """Every start pose of ``n`` worlds of ``kind`` drawn with ``VALIDATION_SEED`` (never
-    practised in), driven by ``clf`` (those the expert fails from left out)."""
-    val = _Practice(b, policy, runner, _practice_tasks(
+    practised in), driven by ``clf`` (those the expert fails from left out); said."""
+    val = _Practice(b, policy, runner, practice_tasks(
         b, seeds, (), seconds, 0, noise, drawn=(kind, n), drawn_seed=VALIDATION_SEED,
         teach=False))
     _first_practice(val, clf)
+    say(f"validation: {len(val.tasks)} episodes in {n} drawn worlds (seed {VALIDATION_SEED}, "
+        f"never practised in): fitness {val.fitness:.2f}, success {_success(val):.0%}; a move "
+        "that lowers it is not kept")
     return val
 
 
@@ -585,7 +572,7 @@ def _repairs(pr: _Practice, clf, b, left, val, moves: Counter, say, t0: float, *
         pr.keep(idx, out)
         moves[m[0]] += 1
         say(f"repair: {m[0]} {m[1:]}: fitness {pr.fitness:.2f}, success "
-            f"{np.mean([r['success'] for r in pr.results]):.0%}"
+            f"{_success(pr):.0%}"
             f"{f' (validation {val.fitness:.2f})' if val else ''}, {clf.node_count_} nodes, "
             f"{pr.episodes} episodes, {time.perf_counter() - t0:.0f} s")
     return clf
@@ -609,18 +596,13 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
     say = say or (lambda text: print(text, flush=True))
     clf = policy.classifier
     _check_sizable(clf, max_nodes)
-    pr = _Practice(b, policy, runner, _practice_tasks(b, seeds, scales, seconds, free, noise,
+    pr = _Practice(b, policy, runner, practice_tasks(b, seeds, scales, seconds, free, noise,
                                                       drawn))
     dropped = _first_practice(pr, clf)
     before = _standing(pr, clf)
-    say(f"practice: {len(pr.tasks)} episodes ({', '.join(b.teach)}, scales 1"
-        f"{''.join(f', {s:g}' for s in scales)}"
-        f"{f'; {drawn[1]} {drawn[0]} drawn' if drawn and drawn[1] else ''}; "
-        f"{free} free-space starts each; "
-        f"{len(seeds)} seed(s); {dropped} left out: the expert fails there) on "
-        f"{runner.describe()}:"
-        f" fitness {before['fitness']:.2f}, success {before['success']:.0%}, "
-        f"{before['nodes']} nodes")
+    say(f"practice: {len(pr.tasks)} episodes ({_practice_set(b, scales, drawn, free, seeds)}; "
+        f"{dropped} left out: the expert fails there) on {runner.describe()}: fitness "
+        f"{before['fitness']:.2f}, success {before['success']:.0%}, {before['nodes']} nodes")
     moves: Counter = Counter()
 
     def left() -> float:
@@ -628,20 +610,14 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
 
     # 1. size: weakest-link pruning against the tree's own actions where it drove
     clf, sized = _size_step(pr, clf, max_nodes, room, moves, say, t0)
-    val = None
-    if validation:
-        val = _validation_set(b, policy, runner, clf, validation,
-                              drawn[0] if drawn else recipe_of(b).generator, seeds, seconds,
-                              noise)
-        val_before = _standing(val, clf)
-        say(f"validation: {len(val.tasks)} episodes in {validation} drawn worlds (seed "
-            f"{VALIDATION_SEED}, never practised in): fitness {val_before['fitness']:.2f}, "
-            f"success {val_before['success']:.0%}; a move that lowers it is not kept")
+    kind = drawn[0] if drawn else recipe_of(b).generator
+    drawn_n = drawn[1] if drawn else 0
+    val = _validation_set(b, policy, runner, clf, validation, kind, seeds, seconds, noise,
+                          say) if validation else None
+    val_before = _standing(val, clf) if val else None
 
     # 2./3. repair, then prune; again while either changes something (and, with ``more``,
     # with more drawn worlds while the time lasts)
-    kind = drawn[0] if drawn else recipe_of(b).generator
-    drawn_n = drawn[1] if drawn else 0
     changed = True
     while left() > 0:
         if not changed:
@@ -650,29 +626,23 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
             joined = _more_worlds(pr, clf, b, kind, drawn_n, more, seeds, seconds, free, noise)
             drawn_n += more
             moves["worlds drawn"] += more
-            say(f"no repair left to make: {more} more {kind} drawn ({joined} episodes), success "
-                f"{np.mean([r['success'] for r in pr.results]):.0%}, "
-                f"{time.perf_counter() - t0:.0f} s")
+            say(f"no repair left to make: {more} more {kind} drawn ({joined} episodes), "
+                f"success {_success(pr):.0%}, {time.perf_counter() - t0:.0f} s")
         # repairs go on until none helps: again only once pruning changed the tree
         clf = _repairs(pr, clf, b, left, val, moves, say, t0, window=window,
                        candidates=candidates, max_nodes=max_nodes)
         changed = False
         if prune != "none":
-            clf, removed = _pruned(pr, clf, prune, left, val)
-            if removed:
-                moves["pruned"] += removed
-                changed = True
-                say(f"prune: {removed} leaves removed: {clf.node_count_} nodes, fitness "
-                    f"{pr.fitness:.2f}, {pr.episodes} episodes, "
-                    f"{time.perf_counter() - t0:.0f} s")
+            clf, removed = _pruned(pr, clf, prune, left, val, moves, say, t0)
+            changed = removed > 0
     after = _standing(pr, clf)
     asks = [ask(t, r, window, b) for t, r in zip(pr.tasks, pr.results, strict=True)
             if not r["success"]]
     report = {"before": before, "after": after, "episodes": pr.episodes,
               "practice": {"worlds": list(b.teach), "scales": [1.0, *scales],
                            "drawn": [kind, drawn_n] if drawn_n else None, "more": more,
-                           "seeds": list(seeds), "free": free, "noise": list(noise), "episodes": len(pr.tasks),
-                           "left_out": dropped},
+                           "seeds": list(seeds), "free": free, "noise": list(noise),
+                           "episodes": len(pr.tasks), "left_out": dropped},
               "moves": dict(moves), "seconds": round(time.perf_counter() - t0, 1),
               "asks": asks, "max_nodes": max_nodes, "room": room if max_nodes else None,
               "sized": sized,

@@ -209,13 +209,13 @@ def test_the_size_step_leaves_room_for_repairs_that_add_spheres():
 
 def test_more_drawn_worlds_join_the_practice_set_once_it_is_met():
     from lab.behaviours import get
-    from lab.practice import drawn_name
-    from lab.refine import PRACTICE_SEED, _more_worlds, _Practice, _practice_tasks, refine
+    from lab.practice import PRACTICE_SEED, drawn_name, practice_tasks
+    from lab.refine import _more_worlds, _Practice, refine
 
     policy = TreePolicy.load(WALL_TREE)
     b = get("wall-following")
     with Runner(workers=1) as runner:
-        pr = _Practice(b, policy, runner, _practice_tasks(b, (0,), (), 5.0, drawn=("rooms", 1)))
+        pr = _Practice(b, policy, runner, practice_tasks(b, (0,), (), 5.0, drawn=("rooms", 1)))
         pr.results = pr.run(policy.classifier)
         assert all(r["success"] for r in pr.results)  # met: 5 s from every start
         n = len(pr.tasks)
@@ -250,12 +250,13 @@ def test_a_prune_pass_leaves_the_results_of_the_pruned_tree():
     """The leaves kept out together give exactly the episodes each gave alone (credit is
     only ever taken from episodes in which a sphere decided)."""
     from lab.behaviours import get
-    from lab.refine import _Practice, _practice_tasks, _prune_pass, without
+    from lab.practice import practice_tasks
+    from lab.refine import _Practice, _prune_pass, without
 
     policy = TreePolicy.load(WALL_TREE)
     with Runner(workers=1) as runner:
         pr = _Practice(get("wall-following"), policy, runner,
-                       _practice_tasks(get("wall-following"), (0,), (), seconds=8.0))
+                       practice_tasks(get("wall-following"), (0,), (), seconds=8.0))
         pr.results = pr.run(policy.classifier)
         gone = _prune_pass(pr, policy.classifier)
         assert gone
@@ -277,14 +278,14 @@ def _validation_set(runner, policy, worlds: int = 2, seconds: float = 8.0):
 
 def test_the_validation_set_is_drawn_worlds_only_with_their_own_seed():
     from lab.behaviours import get
-    from lab.practice import DRAWN
-    from lab.refine import PRACTICE_SEED, VALIDATION_SEED, _practice_tasks
+    from lab.practice import DRAWN, PRACTICE_SEED, practice_tasks
+    from lab.refine import VALIDATION_SEED
 
     b = get("wall-following")
-    tasks = _practice_tasks(b, (0,), (0.85,), drawn=("rooms", 2), drawn_seed=VALIDATION_SEED,
+    tasks = practice_tasks(b, (0,), (0.85,), drawn=("rooms", 2), drawn_seed=VALIDATION_SEED,
                             teach=False)
     assert tasks and all(t.world.startswith(f"{DRAWN}:rooms:{VALIDATION_SEED}:") for t in tasks)
-    practised = {t.world for t in _practice_tasks(b, (0,), (), drawn=("rooms", 2))}
+    practised = {t.world for t in practice_tasks(b, (0,), (), drawn=("rooms", 2))}
     assert practised.isdisjoint(t.world for t in tasks)
     assert VALIDATION_SEED != PRACTICE_SEED
 
@@ -321,12 +322,13 @@ def test_a_move_that_lowers_the_validation_fitness_is_not_kept():
 @pytest.mark.slow
 def test_a_prune_pass_with_a_validation_set_leaves_both_sets_results_of_the_pruned_tree():
     from lab.behaviours import get
-    from lab.refine import _Practice, _practice_tasks, _prune_pass, without
+    from lab.practice import practice_tasks
+    from lab.refine import _Practice, _prune_pass, without
 
     policy = TreePolicy.load(WALL_TREE)
     with Runner(workers=1) as runner:
         pr = _Practice(get("wall-following"), policy, runner,
-                       _practice_tasks(get("wall-following"), (0,), (), seconds=8.0))
+                       practice_tasks(get("wall-following"), (0,), (), seconds=8.0))
         pr.results = pr.run(policy.classifier)
         val = _validation_set(runner, policy)
         fit, vfit = pr.fitness, val.fitness
@@ -344,13 +346,14 @@ def test_a_prune_pass_with_a_validation_set_leaves_both_sets_results_of_the_prun
 @pytest.mark.slow
 def test_a_sphere_added_changes_only_the_episodes_it_reaches():
     from lab.behaviours import get
-    from lab.refine import _Practice, _practice_tasks, added
+    from lab.practice import practice_tasks
+    from lab.refine import _Practice, added
 
     policy = TreePolicy.load(WALL_TREE)
     clf = policy.classifier
     with Runner(workers=1) as runner:
         pr = _Practice(get("wall-following"), policy, runner,
-                       _practice_tasks(get("wall-following"), (0,), (), seconds=8.0))
+                       practice_tasks(get("wall-following"), (0,), (), seconds=8.0))
         pr.results = pr.run(clf)
         r = pr.results[0]
         k = len(r["actions"]) // 2
@@ -394,11 +397,10 @@ def test_a_failure_refinement_cannot_fix_asks_from_before_it_went_wrong():
 def test_practice_in_drawn_worlds_names_each_so_any_worker_draws_it_again():
     from lab.behaviours import get
     from lab.generated import generated
-    from lab.practice import drawn_name, task_world
-    from lab.refine import PRACTICE_SEED, _practice_tasks
+    from lab.practice import PRACTICE_SEED, drawn_name, practice_tasks, task_world
 
     b = get("left-wall")
-    tasks = _practice_tasks(b, (0,), (), drawn=("rooms", 2))
+    tasks = practice_tasks(b, (0,), (), drawn=("rooms", 2))
     drawn = [t for t in tasks if t.world.startswith("drawn:")]
     want = generated("rooms", 2, PRACTICE_SEED, "left")
     assert {t.world for t in drawn} == {drawn_name("rooms", PRACTICE_SEED, i, "left")
@@ -407,7 +409,7 @@ def test_practice_in_drawn_worlds_names_each_so_any_worker_draws_it_again():
     for i, w in enumerate(want):
         spec = task_world("left-wall", drawn_name("rooms", PRACTICE_SEED, i, "left"))
         assert spec.walls == w.walls and spec.start_poses == w.start_poses
-    assert len(tasks) - len(drawn) == len(_practice_tasks(b, (0,), ()))
+    assert len(tasks) - len(drawn) == len(practice_tasks(b, (0,), ()))
     r = run_episode(EpisodeTask("left-wall", drawn[0].world, tree_bytes(
         TreePolicy.load(WALL_TREE)), drawn[0].start, seconds=3.0))
     assert r["steps"] == 30
