@@ -544,7 +544,7 @@ def _check_sizable(clf, max_nodes: int | None) -> None:
 
 
 def _validation_set(b, policy, runner: Runner, clf, n: int, kind: str, seeds, seconds,
-                    noise, say) -> _Practice:
+                    noise, say=lambda text: None) -> _Practice:
     """Every start pose of ``n`` worlds of ``kind`` drawn with ``VALIDATION_SEED`` (never
     practised in), driven by ``clf`` (those the expert fails from left out); said."""
     val = _Practice(b, policy, runner, practice_tasks(
