@@ -498,7 +498,7 @@ def _more_worlds(pr: _Practice, clf, b, kind: str, first: int, n: int, seeds, se
     the practice set with ``clf``'s results (those the expert fails from left out): how many
     episodes joined."""
     tasks = practice_tasks(b, seeds, (), seconds, free, noise, drawn=(kind, n), teach=False,
-                            first=first)
+                           first=first)
     results = pr.run(clf, tasks=tasks)
     fair = [i for i, r in enumerate(results) if r["teacher"]["success"]]
     pr.tasks += [tasks[i] for i in fair]
@@ -562,7 +562,7 @@ def _repairs(pr: _Practice, clf, b, left, val, moves: Counter, say, t0: float, *
     """The repair step, again while a repair raises the practice fitness (and leaves
     ``val``'s no lower) and the time lasts: the tree."""
     actions = list(pr.policy.actions.names)
-    while left() > 0 and not all(r["success"] for r in pr.results):
+    while left() > 0 and _success(pr) < 1.0:
         blamed, where = _blame(pr, window, b)
         trials = _trials(pr, clf, actions, blamed, where, window, candidates, max_nodes)
         best = _best(pr, trials, pr.runner, left, val, clf) if trials else None
@@ -571,8 +571,7 @@ def _repairs(pr: _Practice, clf, b, left, val, moves: Counter, say, t0: float, *
         m, clf, idx, out = best
         pr.keep(idx, out)
         moves[m[0]] += 1
-        say(f"repair: {m[0]} {m[1:]}: fitness {pr.fitness:.2f}, success "
-            f"{_success(pr):.0%}"
+        say(f"repair: {m[0]} {m[1:]}: fitness {pr.fitness:.2f}, success {_success(pr):.0%}"
             f"{f' (validation {val.fitness:.2f})' if val else ''}, {clf.node_count_} nodes, "
             f"{pr.episodes} episodes, {time.perf_counter() - t0:.0f} s")
     return clf
@@ -597,7 +596,7 @@ def refine(b, policy: TreePolicy, runner: Runner, *, max_nodes: int | None = Non
     clf = policy.classifier
     _check_sizable(clf, max_nodes)
     pr = _Practice(b, policy, runner, practice_tasks(b, seeds, scales, seconds, free, noise,
-                                                      drawn))
+                                                     drawn))
     dropped = _first_practice(pr, clf)
     before = _standing(pr, clf)
     say(f"practice: {len(pr.tasks)} episodes ({_practice_set(b, scales, drawn, free, seeds)}; "
